@@ -1,0 +1,35 @@
+// Collision backends: AABBs + broad phase + narrow phase, producing the contact arrays of a step.
+// Native is our binning broad phase with the analytic/MPR narrow phase (the algorithms the GPU runs);
+// Bullet is Bullet's own CPU pipeline (btCollisionDispatcher, GJK/EPA), kept as the reference.
+#pragma once
+
+#include <memory>
+
+#include "broadphase.h"
+#include "data.h"
+
+namespace dvi {
+
+struct SystemConfig;
+
+struct CollisionTimes {
+  double aabbs = 0, broad = 0, narrow = 0;  // seconds
+  int64_t pairs = 0;
+  BroadPhaseStats broad_stats;
+};
+
+class CollisionDetector {
+ public:
+  virtual ~CollisionDetector() = default;
+  virtual const char* name() const = 0;
+  // Reads bodies.{pos, rot, flags}, shapes.shape, shapes.hull_points; writes shapes.aabb and the
+  // geometric fields of `out` (shape_a/b, body_a/b, normal, pa, pb, dist, key). The system fills mu and
+  // size afterwards. Contacts are ordered by (shape_a, shape_b, feature) whatever the thread count.
+  virtual void detect(const BodyArrays& bodies, ShapeArrays& shapes, const SystemConfig& config,
+                      ContactArrays& out, CollisionTimes& times) = 0;
+};
+
+std::unique_ptr<CollisionDetector> makeNativeCollision(const BroadPhaseSettings& settings);
+std::unique_ptr<CollisionDetector> makeBulletCollision();
+
+}  // namespace dvi

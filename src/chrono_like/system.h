@@ -1,0 +1,155 @@
+// The DVI system: owns the flat arrays of one simulation and runs the time step as a list of named
+// stages (DESIGN §2, §3; the stage list follows Box2D v3's b2SolverStageType). The profiler, the run
+// summary and docs/ARCHITECTURE.md use the same names.
+//
+// One step of size h:
+//   v_free = v + h M^-1 f                       (IntegrateForces: gravity, external, gyroscopic)
+//   contacts = narrow(broad(AABBs))             (ComputeAabbs, BroadPhase, NarrowPhase)
+//   solve the CCP  (N g + r) in -Y° ⊥ g in Y    (BuildRows, WarmStart, Solve)
+//   v+ = v_free + M^-1 D g                      (IntegrateVelocities)
+//   q+ = q + h v+, rotations by the exponential map   (IntegratePositions)
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "broadphase.h"
+#include "data.h"
+#include "errors.h"
+#include "solver.h"
+
+namespace dvi {
+
+enum class StageType : int {
+  IntegrateForces = 0,  // v_free from gravity, applied forces and the gyroscopic torque
+  ComputeAabbs,
+  BroadPhase,
+  NarrowPhase,
+  BuildRows,            // Jacobians D, right-hand side r
+  WarmStart,            // last step's impulses matched by persistent contact keys
+  Solve,                // CCP iterations
+  IntegrateVelocities,  // v+ = v_free + M^-1 D g
+  IntegratePositions,   // q+ by the exponential map
+  Count
+};
+constexpr int kStageCount = int(StageType::Count);
+const char* stageName(StageType s);
+
+enum class CollisionBackend { Native, Bullet };
+enum class FrictionCombine { Product, Min, Average };  // Product is Bullet's rule
+
+struct SystemConfig {
+  real dt = real(1e-3);
+  Vec3 gravity{0, real(-9.81), 0};
+  SolverType solver = SolverType::APGD;
+  SolverSettings solver_settings;
+  int threads = 0;                  // OpenMP threads; 0 = OpenMP's default
+  real envelope_rel = real(0.05);   // collision envelope as a fraction of the smaller shape's size
+  real recovery_rel = real(10);     // largest penetration-recovery speed: recovery_rel x size per second
+  FrictionCombine friction_combine = FrictionCombine::Product;
+  CollisionBackend collision = CollisionBackend::Native;
+  BroadPhaseSettings broadphase;
+  bool warm_start = true;
+  bool gyroscopic = true;           // omega x I omega for bodies with non-spherical inertia
+};
+
+// A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.
+struct ShapeDesc {
+  Shape shape{};
+  std::vector<Vec3> hull;
+};
+
+struct BodyDesc {
+  Vec3 pos{0, 0, 0};
+  Quat rot{1, 0, 0, 0};
+  Vec3 vel{0, 0, 0};
+  Vec3 omega{0, 0, 0};
+  real mass = 1;                  // 0 with kBodyFixed or kBodyKinematic
+  Vec3 inertia{1, 1, 1};          // principal moments, body frame
+  real friction = real(0.5);
+  uint8_t flags = 0;
+  bool has_gravity = false;       // use `gravity` instead of the system's
+  Vec3 gravity{0, 0, 0};
+  std::vector<ShapeDesc> shapes;
+};
+
+// Helpers that fill a ShapeDesc in the canonical orientation (axis Y) at a local pose.
+ShapeDesc makeSphere(real r, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makeBox(Vec3 half, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makeCylinder(real r, real half_height, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makeCapsule(real r, real half_length, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makeCone(real r, real height, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makeEllipsoid(Vec3 semi_axes, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makeConvexHull(std::vector<Vec3> points, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+ShapeDesc makePlane(Vec3 normal, real d);
+
+struct StepStats {
+  int64_t contacts = 0;
+  int64_t pairs = 0;
+  real max_penetration = 0;  // largest -dist over contacts after the solve's input (>= 0)
+  int iterations = 0;
+  real residual = 0;
+  std::array<double, kStageCount> stage_seconds{};  // wall time of each stage in this step
+  std::array<bool, kStageCount> stage_ran{};
+};
+
+class CollisionDetector;  // narrow + broad phase backend (native or Bullet's)
+class ContactProblem;
+
+class System {
+ public:
+  explicit System(SystemConfig config = {});
+  virtual ~System();
+  System(const System&) = delete;
+  System& operator=(const System&) = delete;
+
+  // Adds a body; validates it (finite numbers, mass >= 0, positive shape dimensions) and throws
+  // InputError naming the problem. Returns the body index.
+  int addBody(const BodyDesc& desc);
+
+  virtual void step();                 // one step of config().dt
+  void advance(int steps) { for (int i = 0; i < steps; ++i) step(); }
+
+  const SystemConfig& config() const { return config_; }
+  SystemConfig& mutableConfig() { return config_; }
+  const BodyArrays& bodies() const { return bodies_; }
+  BodyArrays& mutableBodies() { return bodies_; }
+  const ShapeArrays& shapes() const { return shapes_; }
+  const ContactArrays& contacts() const { return contacts_; }
+  const std::vector<real>& impulses() const { return gamma_; }  // 3 per contact, last step
+  const StepStats& lastStats() const { return stats_; }
+  double time() const { return time_; }
+  int64_t stepCount() const { return steps_; }
+  virtual std::string backendName() const { return "cpu"; }
+  virtual std::string deviceName() const;
+
+  // Contact force on each contact in the last step (impulse / dt), world frame, acting on body B.
+  Vec3 contactForce(size_t k) const;
+  // Sum of the hash of every body's state, for determinism tests (bitwise).
+  uint64_t stateHash() const;
+
+ protected:
+  // The stages; a GPU subclass overrides them with device versions.
+  virtual void integrateForces();
+  virtual void detectCollisions();  // ComputeAabbs + BroadPhase + NarrowPhase
+  virtual void buildAndSolve();     // BuildRows + WarmStart + Solve
+  virtual void integrate();         // IntegrateVelocities + IntegratePositions
+
+  SystemConfig config_;
+  BodyArrays bodies_;
+  ShapeArrays shapes_;
+  ContactArrays contacts_;
+  std::vector<real> gamma_;                 // impulses of this step, 3 per contact
+  std::vector<uint64_t> prev_keys_;         // sorted keys of last step's contacts
+  std::vector<real> prev_gamma_;            // their impulses
+  std::vector<Vec3> v_free_, w_free_;       // velocities after forces
+  std::unique_ptr<CollisionDetector> collision_;
+  std::unique_ptr<ContactProblem> problem_;
+  StepStats stats_;
+  double time_ = 0;
+  int64_t steps_ = 0;
+};
+
+}  // namespace dvi
