@@ -1,0 +1,30 @@
+// The Bullet bridge: btRigidBody + btCollisionShape -> System bodies, and results written back.
+// Supported shapes: sphere, box, cylinder X/Y/Z, capsule X/Y/Z, cone X/Y/Z, convex hull, multi-sphere
+// (a single non-uniformly scaled sphere becomes an ellipsoid), compound of convex children, static
+// plane. Anything else is refused with an InputError naming the shape type.
+#pragma once
+
+#include <vector>
+
+#include "system.h"
+
+class btRigidBody;
+class btCollisionShape;
+
+namespace dvi {
+
+// Converts a Bullet body into a BodyDesc: pose of the centre of mass, velocities, mass and principal
+// inertia from the body (Bullet's own values), friction from the body, flags (static / kinematic),
+// collision group and mask from its broadphase proxy when it has one.
+BodyDesc bodyDescFromBullet(const btRigidBody& body);
+
+// Converts a collision shape (recursively for compounds) into shape records at `local` in the body frame.
+void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, std::vector<ShapeDesc>& out);
+
+// Adds every body to the system in order; returns the system index of each.
+std::vector<int> importBullet(System& system, const std::vector<btRigidBody*>& bodies);
+
+// Writes transform (through the motion state when present) and velocities back to Bullet.
+void writeBackToBullet(const System& system, const std::vector<int>& indices, const std::vector<btRigidBody*>& bodies);
+
+}  // namespace dvi
