@@ -1,0 +1,38 @@
+#include "data.h"
+
+namespace dvi {
+
+void BodyArrays::resize(size_t n) {
+  pos.resize(n);
+  rot.resize(n, Quat{1, 0, 0, 0});
+  vel.resize(n);
+  omega.resize(n);
+  inv_mass.resize(n);
+  inv_inertia.resize(n);
+  force.resize(n);
+  torque.resize(n);
+  gravity.resize(n);
+  friction.resize(n);
+  flags.resize(n);
+  shape_start.resize(n);
+  shape_count.resize(n);
+  size.resize(n);
+}
+
+void ContactArrays::resize(size_t n) {
+  shape_a.resize(n);
+  shape_b.resize(n);
+  body_a.resize(n);
+  body_b.resize(n);
+  normal.resize(n);
+  pa.resize(n);
+  pb.resize(n);
+  dist.resize(n);
+  mu.resize(n);
+  size.resize(n);
+  key.resize(n);
+}
+
+void ContactArrays::clear() { resize(0); }
+
+}  // namespace dvi
