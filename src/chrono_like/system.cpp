@@ -1,0 +1,309 @@
+#include "system.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <numeric>
+#include <sstream>
+
+#include "collision.h"
+#include "contact_problem.h"
+#include "integrate.h"
+
+namespace dvi {
+
+const char* stageName(StageType s) {
+  switch (s) {
+    case StageType::IntegrateForces: return "IntegrateForces";
+    case StageType::ComputeAabbs: return "ComputeAabbs";
+    case StageType::BroadPhase: return "BroadPhase";
+    case StageType::NarrowPhase: return "NarrowPhase";
+    case StageType::BuildRows: return "BuildRows";
+    case StageType::WarmStart: return "WarmStart";
+    case StageType::Solve: return "Solve";
+    case StageType::IntegrateVelocities: return "IntegrateVelocities";
+    case StageType::IntegratePositions: return "IntegratePositions";
+    default: return "?";
+  }
+}
+
+namespace {
+
+// Runs `body` and records its wall time under stage `s`.
+template <class F>
+void timed(StepStats& stats, StageType s, F&& body) {
+  double t0 = omp_get_wtime();
+  body();
+  stats.stage_seconds[int(s)] += omp_get_wtime() - t0;
+  stats.stage_ran[int(s)] = true;
+}
+
+bool finite(real x) { return std::isfinite(x); }
+bool finite(Quat q) { return finite(q.w) && finite(q.x) && finite(q.y) && finite(q.z); }
+
+// Smallest half-dimension of a shape: scales its envelope and recovery speed. Planes have none.
+real shapeSize(const Shape& s) {
+  switch (s.type) {
+    case ShapeType::Sphere: return s.dims.x;
+    case ShapeType::Cylinder: return fmin(s.dims.x, s.dims.y);
+    case ShapeType::Capsule: return s.dims.x;
+    case ShapeType::Cone: return fmin(s.dims.x, real(0.5) * s.dims.y);
+    case ShapeType::Plane: return real(1e30);
+    default: return minComponent(s.dims);
+  }
+}
+
+void validateShape(const ShapeDesc& d, int body_index) {
+  const Shape& s = d.shape;
+  auto fail = [&](const std::string& what) {
+    throw InputError("body " + std::to_string(body_index) + ": " + shapeTypeName(s.type) + " shape " + what);
+  };
+  if (int(s.type) < 0 || s.type >= ShapeType::Count) throw InputError("body " + std::to_string(body_index) + ": unsupported shape type");
+  if (!isFinite(s.dims) || !isFinite(s.local.p) || !finite(s.local.q) || !finite(s.plane_d)) fail("has a non-finite dimension or pose");
+  switch (s.type) {
+    case ShapeType::Sphere:
+      if (!(s.dims.x > 0)) fail("has a non-positive radius " + std::to_string(s.dims.x));
+      break;
+    case ShapeType::Cylinder:
+    case ShapeType::Cone:
+      if (!(s.dims.x > 0) || !(s.dims.y > 0)) fail("has a non-positive radius or height");
+      break;
+    case ShapeType::Capsule:
+      if (!(s.dims.x > 0) || s.dims.y < 0) fail("has a non-positive radius or negative length");
+      break;
+    case ShapeType::Box:
+    case ShapeType::Ellipsoid:
+      if (!(minComponent(s.dims) > 0)) fail("has a non-positive dimension");
+      break;
+    case ShapeType::ConvexHull:
+      if (d.hull.size() < 4) fail("needs at least 4 points, got " + std::to_string(d.hull.size()));
+      for (const Vec3& p : d.hull)
+        if (!isFinite(p)) fail("has a non-finite point");
+      break;
+    case ShapeType::Plane:
+      if (std::fabs(length(s.dims) - 1) > real(1e-6)) fail("normal is not a unit vector");
+      break;
+    default: break;
+  }
+}
+
+}  // namespace
+
+System::System(SystemConfig config) : config_(config), problem_(std::make_unique<ContactProblem>()) {
+  if (!(config_.dt > 0) || !std::isfinite(config_.dt)) throw InputError("time step dt must be positive, got " + std::to_string(config_.dt));
+  if (config_.solver_settings.max_iterations < 0) throw InputError("solver iterations must be >= 0");
+  collision_ = config_.collision == CollisionBackend::Native ? makeNativeCollision(config_.broadphase)
+                                                            : makeBulletCollision();
+}
+
+System::~System() = default;
+
+std::string System::deviceName() const {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line, model = "CPU";
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) {
+      model = line.substr(line.find(':') + 2);
+      break;
+    }
+  int threads = config_.threads > 0 ? config_.threads : omp_get_max_threads();
+  return model + " (" + std::to_string(threads) + " threads)";
+}
+
+int System::addBody(const BodyDesc& d) {
+  const int index = int(bodies_.count());
+  auto fail = [&](const std::string& what) { throw InputError("body " + std::to_string(index) + ": " + what); };
+  if (!isFinite(d.pos)) fail("non-finite position");
+  if (!finite(d.rot)) fail("non-finite rotation");
+  if (!isFinite(d.vel) || !isFinite(d.omega)) fail("non-finite velocity");
+  if (!std::isfinite(d.mass)) fail("non-finite mass");
+  if (d.mass < 0) fail("negative mass " + std::to_string(d.mass));
+  const bool immovable = (d.flags & (kBodyFixed | kBodyKinematic)) != 0;
+  if (!immovable && d.mass == 0) fail("zero mass on a dynamic body (use a fixed body for static geometry)");
+  if (!immovable && !(minComponent(d.inertia) > 0 && isFinite(d.inertia))) fail("non-positive or non-finite inertia");
+  if (!std::isfinite(d.friction) || d.friction < 0) fail("negative or non-finite friction");
+  if (d.shapes.empty()) fail("has no collision shape");
+  for (const ShapeDesc& s : d.shapes) validateShape(s, index);
+  real qn = std::sqrt(d.rot.w * d.rot.w + d.rot.x * d.rot.x + d.rot.y * d.rot.y + d.rot.z * d.rot.z);
+  if (!(qn > 0)) fail("zero rotation quaternion");
+
+  const size_t n = bodies_.count();
+  bodies_.resize(n + 1);
+  bodies_.pos[n] = d.pos;
+  bodies_.rot[n] = normalized(d.rot);
+  bodies_.vel[n] = (d.flags & kBodyFixed) ? Vec3{0, 0, 0} : d.vel;
+  bodies_.omega[n] = (d.flags & kBodyFixed) ? Vec3{0, 0, 0} : d.omega;
+  bodies_.inv_mass[n] = immovable ? 0 : 1 / d.mass;
+  bodies_.inv_inertia[n] = immovable ? Vec3{0, 0, 0} : Vec3{1 / d.inertia.x, 1 / d.inertia.y, 1 / d.inertia.z};
+  bodies_.force[n] = bodies_.torque[n] = Vec3{0, 0, 0};
+  bodies_.gravity[n] = d.has_gravity ? d.gravity : config_.gravity;
+  bodies_.friction[n] = d.friction;
+  bodies_.flags[n] = d.flags;
+  bodies_.shape_start[n] = int32_t(shapes_.count());
+  bodies_.shape_count[n] = int32_t(d.shapes.size());
+  real body_size = real(1e30);
+  for (const ShapeDesc& sd : d.shapes) {
+    Shape s = sd.shape;
+    s.body = int32_t(n);
+    s.local.q = normalized(s.local.q);
+    if (s.type == ShapeType::ConvexHull) {
+      s.hull_start = int32_t(shapes_.hull_points.size());
+      s.hull_count = int32_t(sd.hull.size());
+      shapes_.hull_points.insert(shapes_.hull_points.end(), sd.hull.begin(), sd.hull.end());
+    }
+    if (!(s.size > 0)) s.size = shapeSize(s);
+    if (s.group == 0 && s.mask == 0) s.group = 1, s.mask = -1;
+    body_size = fmin(body_size, s.size);
+    shapes_.shape.push_back(s);
+  }
+  bodies_.size[n] = body_size;
+  shapes_.aabb.resize(shapes_.count());
+  return index;
+}
+
+void System::step() {
+  stats_ = StepStats{};
+  const int threads = config_.threads > 0 ? config_.threads : omp_get_max_threads();
+  omp_set_num_threads(threads);
+
+  timed(stats_, StageType::IntegrateForces, [&] { integrateForces(); });
+  detectCollisions();
+  buildAndSolve();
+  integrate();
+  time_ += config_.dt;
+  ++steps_;
+}
+
+void System::integrateForces() {
+  const int64_t n = int64_t(bodies_.count());
+  v_free_.resize(size_t(n));
+  w_free_.resize(size_t(n));
+  const real h = config_.dt;
+  const bool gyro = config_.gyroscopic;
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i)
+    integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i],
+                        bodies_.inv_inertia[i], bodies_.force[i], bodies_.torque[i], bodies_.gravity[i],
+                        bodies_.flags[i], gyro, h, v_free_[i], w_free_[i]);
+}
+
+void System::detectCollisions() {
+  CollisionTimes t;
+  collision_->detect(bodies_, shapes_, config_, contacts_, t);
+  stats_.stage_seconds[int(StageType::ComputeAabbs)] = t.aabbs;
+  stats_.stage_seconds[int(StageType::BroadPhase)] = t.broad;
+  stats_.stage_seconds[int(StageType::NarrowPhase)] = t.narrow;
+  stats_.stage_ran[int(StageType::ComputeAabbs)] = stats_.stage_ran[int(StageType::BroadPhase)] =
+      stats_.stage_ran[int(StageType::NarrowPhase)] = true;
+  stats_.pairs = t.pairs;
+  stats_.contacts = int64_t(contacts_.count());
+}
+
+void System::buildAndSolve() {
+  const int64_t nc = int64_t(contacts_.count());
+  gamma_.assign(size_t(3 * nc), real(0));
+  if (nc == 0) {
+    prev_keys_.clear();
+    prev_gamma_.clear();
+    return;
+  }
+  timed(stats_, StageType::BuildRows, [&] {
+    real max_pen = 0;
+    const FrictionCombine rule = config_.friction_combine;
+#pragma omp parallel for schedule(static) reduction(max : max_pen)
+    for (int64_t k = 0; k < nc; ++k) {
+      real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
+      contacts_.mu[k] = rule == FrictionCombine::Product ? fa * fb
+                        : rule == FrictionCombine::Min   ? fmin(fa, fb)
+                                                         : real(0.5) * (fa + fb);
+      contacts_.size[k] = fmin(shapes_.shape[contacts_.shape_a[k]].size, shapes_.shape[contacts_.shape_b[k]].size);
+      max_pen = fmax(max_pen, -contacts_.dist[k]);
+    }
+    stats_.max_penetration = max_pen;
+    ContactProblemSettings ps;
+    ps.dt = config_.dt;
+    ps.recovery_rel = config_.recovery_rel;
+    ps.threads = omp_get_max_threads();
+    problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps);
+  });
+  if (config_.warm_start && !prev_keys_.empty()) {
+    timed(stats_, StageType::WarmStart, [&] {
+#pragma omp parallel for schedule(static)
+      for (int64_t k = 0; k < nc; ++k) {
+        auto it = std::lower_bound(prev_keys_.begin(), prev_keys_.end(), contacts_.key[k]);
+        if (it != prev_keys_.end() && *it == contacts_.key[k]) {
+          size_t j = size_t(it - prev_keys_.begin());
+          for (int r = 0; r < 3; ++r) gamma_[3 * k + r] = prev_gamma_[3 * j + r];
+        }
+      }
+    });
+  }
+  timed(stats_, StageType::Solve, [&] {
+    SolverStats s;
+    switch (config_.solver) {
+      case SolverType::Jacobi: s = solveJacobi(*problem_, gamma_.data(), config_.solver_settings); break;
+      case SolverType::GaussSeidel: s = problem_->solveGaussSeidel(gamma_.data(), config_.solver_settings); break;
+      case SolverType::APGD: s = solveApgd(*problem_, gamma_.data(), config_.solver_settings); break;
+      case SolverType::BB: s = solveBB(*problem_, gamma_.data(), config_.solver_settings); break;
+    }
+    stats_.iterations = s.iterations;
+    stats_.residual = s.residual;
+  });
+  // Keep this step's impulses, sorted by key, for the next step's warm start.
+  std::vector<size_t> order(size_t(nc));
+  std::iota(order.begin(), order.end(), size_t(0));
+  if (!std::is_sorted(contacts_.key.begin(), contacts_.key.end()))
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return contacts_.key[a] < contacts_.key[b]; });
+  prev_keys_.resize(size_t(nc));
+  prev_gamma_.resize(size_t(3 * nc));
+  for (size_t i = 0; i < size_t(nc); ++i) {
+    prev_keys_[i] = contacts_.key[order[i]];
+    for (int r = 0; r < 3; ++r) prev_gamma_[3 * i + r] = gamma_[3 * order[i] + r];
+  }
+}
+
+void System::integrate() {
+  const int64_t n = int64_t(bodies_.count());
+  timed(stats_, StageType::IntegrateVelocities, [&] {
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < n; ++i) {
+      bodies_.vel[i] = v_free_[i];
+      bodies_.omega[i] = w_free_[i];
+    }
+    if (!contacts_.count()) return;
+    problem_->applyImpulses(gamma_.data(), bodies_.vel.data(), bodies_.omega.data());
+  });
+  timed(stats_, StageType::IntegratePositions, [&] {
+    const real h = config_.dt;
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < n; ++i) {
+      integrateBodyPosition(bodies_.pos[i], bodies_.rot[i], bodies_.vel[i], bodies_.omega[i], bodies_.flags[i], h);
+      bodies_.force[i] = bodies_.torque[i] = Vec3{0, 0, 0};
+    }
+  });
+}
+
+Vec3 System::contactForce(size_t k) const {
+  Vec3 u, w;
+  tangentBasis(contacts_.normal[k], u, w);
+  const real* g = &gamma_[3 * k];
+  return (contacts_.normal[k] * g[0] + u * g[1] + w * g[2]) / config_.dt;
+}
+
+uint64_t System::stateHash() const {
+  uint64_t h = 1469598103934665603ull;  // FNV-1a (Fowler, Noll, Vo)
+  auto mix = [&](const void* p, size_t bytes) {
+    const unsigned char* c = static_cast<const unsigned char*>(p);
+    for (size_t i = 0; i < bytes; ++i) h = (h ^ c[i]) * 1099511628211ull;
+  };
+  mix(bodies_.pos.data(), bodies_.pos.size() * sizeof(Vec3));
+  mix(bodies_.rot.data(), bodies_.rot.size() * sizeof(Quat));
+  mix(bodies_.vel.data(), bodies_.vel.size() * sizeof(Vec3));
+  mix(bodies_.omega.data(), bodies_.omega.size() * sizeof(Vec3));
+  return h;
+}
+
+}  // namespace dvi
