@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Installs dvisim's build dependencies from Debian 12's packages, only those missing.
+# Needs root (or sudo). Safe to run again: it does nothing when everything is present.
+set -euo pipefail
+pkgs=(build-essential cmake pkg-config libbullet-dev libbullet-extras-dev libeigen3-dev catch2
+      nlohmann-json3-dev libcli11-dev python3 python3-matplotlib)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+echo "dvisim: installing ${missing[*]}"
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
