@@ -1,0 +1,216 @@
+// The Bullet bridge (bullet_import.h): btRigidBody + btCollisionShape -> BodyDesc, and back.
+//
+// Dimensions follow what Bullet collides with:
+//  - box and cylinder: Bullet stores the dimensions minus the margin and adds the margin back in its
+//    support function, so the full extents are getHalfExtentsWithMargin();
+//  - sphere, capsule and multi-sphere: the radius is the whole shape (the margin is inside it);
+//  - cone and convex hull: the user's geometry (getRadius/getHeight, the scaled points). Bullet grows
+//    them by the margin on the outside; we take the geometry as given, without that shell.
+// Axis-symmetric shapes are canonical along +Y here; Bullet's X and Z variants become a child pose
+// rotated so that the record's +Y maps onto Bullet's up axis (a cone keeps its apex at +height/2).
+#include "bullet_import.h"
+
+#include <btBulletDynamicsCommon.h>
+#include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
+
+#include <cmath>
+#include <string>
+
+namespace dvi {
+
+namespace {
+
+Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
+btVector3 toBt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
+Quat fromBt(const btQuaternion& q) { return Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())}; }
+btQuaternion toBt(Quat q) { return btQuaternion(btScalar(q.x), btScalar(q.y), btScalar(q.z), btScalar(q.w)); }
+Pose fromBt(const btTransform& t) { return Pose{fromBt(t.getOrigin()), fromBt(t.getRotation())}; }
+
+// Rotation taking the canonical axis +Y onto Bullet's up axis (0 = X, 1 = Y, 2 = Z).
+Quat upAxisRotation(int up) {
+  const real h = std::sqrt(real(0.5));
+  switch (up) {
+    case 0: return Quat{h, 0, 0, -h};  // -90 deg about Z: +Y -> +X
+    case 2: return Quat{h, h, 0, 0};   // +90 deg about X: +Y -> +Z
+    default: return Quat{1, 0, 0, 0};
+  }
+}
+
+Pose withUpAxis(const Pose& local, int up) { return Pose{local.p, local.q * upAxisRotation(up)}; }
+
+bool uniform(const btVector3& s) {
+  const btScalar m = std::fabs(s.x());
+  return std::fabs(std::fabs(s.y()) - m) <= 1e-6f * m && std::fabs(std::fabs(s.z()) - m) <= 1e-6f * m;
+}
+
+}  // namespace
+
+void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, std::vector<ShapeDesc>& out) {
+  switch (shape.getShapeType()) {
+    case SPHERE_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btSphereShape&>(shape);
+      out.push_back(makeSphere(real(s.getRadius()), local));
+      return;
+    }
+    case BOX_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btBoxShape&>(shape);
+      out.push_back(makeBox(fromBt(s.getHalfExtentsWithMargin()), local));
+      return;
+    }
+    case CYLINDER_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btCylinderShape&>(shape);
+      const int up = s.getUpAxis();
+      const btVector3 he = s.getHalfExtentsWithMargin();
+      const real radius = real(up == 0 ? he.y() : he.x());
+      out.push_back(makeCylinder(radius, real(he[up]), withUpAxis(local, up)));
+      return;
+    }
+    case CAPSULE_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btCapsuleShape&>(shape);
+      const int up = s.getUpAxis();
+      out.push_back(makeCapsule(real(s.getRadius()), real(s.getHalfHeight()), withUpAxis(local, up)));
+      return;
+    }
+    case CONE_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btConeShape&>(shape);
+      const int up = s.getConeUpIndex();
+      out.push_back(makeCone(real(s.getRadius()), real(s.getHeight()), withUpAxis(local, up)));
+      return;
+    }
+    case CONVEX_HULL_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btConvexHullShape&>(shape);
+      std::vector<Vec3> pts;
+      pts.reserve(size_t(s.getNumPoints()));
+      for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
+      out.push_back(makeConvexHull(std::move(pts), local));
+      return;
+    }
+    case MULTI_SPHERE_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btMultiSphereShape&>(shape);
+      const btVector3 scale = s.getLocalScaling();
+      const bool round = uniform(scale);
+      for (int i = 0; i < s.getSphereCount(); ++i) {
+        const Vec3 center = fromBt(s.getSpherePosition(i) * scale);
+        const Pose p{transformPoint(local, center), local.q};
+        const real r = real(s.getSphereRadius(i));
+        // A sphere scaled non-uniformly is an ellipsoid (Bullet scales the radius per axis).
+        if (round)
+          out.push_back(makeSphere(r * real(std::fabs(scale.x())), p));
+        else
+          out.push_back(makeEllipsoid(vabs(fromBt(scale)) * r, p));
+      }
+      return;
+    }
+    case COMPOUND_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btCompoundShape&>(shape);
+      for (int i = 0; i < s.getNumChildShapes(); ++i) {
+        const btCollisionShape* child = s.getChildShape(i);
+        if (!child) continue;
+        appendShapesFromBullet(*child, compose(local, fromBt(s.getChildTransform(i))), out);
+      }
+      return;
+    }
+    case STATIC_PLANE_PROXYTYPE: {
+      const auto& s = static_cast<const btStaticPlaneShape&>(shape);
+      // The plane in the body frame: n.x <= c becomes (R n).x <= c + (R n).p after the pose.
+      const Vec3 n = normalized(fromBt(s.getPlaneNormal()));
+      const Vec3 nw = rotate(local.q, n);
+      out.push_back(makePlane(nw, real(s.getPlaneConstant()) + dot(nw, local.p)));
+      return;
+    }
+    default:
+      throw InputError(std::string("unsupported collision shape: ") + shape.getName());
+  }
+}
+
+BodyDesc bodyDescFromBullet(const btRigidBody& body) {
+  BodyDesc d;
+  const btTransform& t = body.getCenterOfMassTransform();
+  d.pos = fromBt(t.getOrigin());
+  d.rot = fromBt(t.getRotation());
+  d.vel = fromBt(body.getLinearVelocity());
+  d.omega = fromBt(body.getAngularVelocity());
+  d.friction = real(body.getFriction());
+  d.flags = 0;
+  if (body.isStaticObject() || body.getInvMass() == 0) {
+    d.flags = body.isKinematicObject() ? kBodyKinematic : kBodyFixed;
+  }
+  if (body.isKinematicObject()) d.flags = kBodyKinematic;
+  if (d.flags) {
+    d.mass = 0;
+    d.inertia = Vec3{0, 0, 0};
+  } else {
+    d.mass = real(1) / real(body.getInvMass());
+    // An inverse inertia of 0 (an axis Bullet keeps from turning) is an infinite moment: stored as a
+    // huge finite one so that the system's inverse is ~0 and still finite.
+    const btVector3 inv = body.getInvInertiaDiagLocal();
+    auto moment = [](btScalar x) { return x > 0 ? real(1) / real(x) : real(1e30); };
+    d.inertia = Vec3{moment(inv.x()), moment(inv.y()), moment(inv.z())};
+  }
+  // Bullet overwrites a body's gravity with the world's unless the body opts out.
+  d.gravity = fromBt(body.getGravity());
+  d.has_gravity = (body.getFlags() & BT_DISABLE_WORLD_GRAVITY) != 0;
+
+  const btCollisionShape* shape = body.getCollisionShape();
+  if (!shape) throw InputError("rigid body without a collision shape");
+  appendShapesFromBullet(*shape, Pose{{0, 0, 0}, {1, 0, 0, 0}}, d.shapes);
+  if (d.shapes.empty()) throw InputError(std::string("collision shape has no convex children: ") + shape->getName());
+
+  int16_t group = 1, mask = -1;
+  if (const btBroadphaseProxy* proxy = body.getBroadphaseHandle()) {
+    group = int16_t(proxy->m_collisionFilterGroup);
+    mask = int16_t(proxy->m_collisionFilterMask);
+  }
+  for (ShapeDesc& s : d.shapes) {
+    s.shape.group = group;
+    s.shape.mask = mask;
+  }
+  return d;
+}
+
+std::vector<int> importBullet(System& system, const std::vector<btRigidBody*>& bodies) {
+  std::vector<int> ids;
+  ids.reserve(bodies.size());
+  const Vec3 g = system.config().gravity;
+  for (size_t i = 0; i < bodies.size(); ++i) {
+    if (!bodies[i]) throw InputError("rigid body " + std::to_string(i) + " is null");
+    BodyDesc d;
+    try {
+      d = bodyDescFromBullet(*bodies[i]);
+    } catch (const InputError& e) {
+      throw InputError("rigid body " + std::to_string(i) + ": " + e.what());
+    }
+    // A body living in a world whose gravity differs from the system's keeps its own (Bullet allows
+    // per-body gravity). A body never added to a world has zero gravity in Bullet and takes the system's.
+    if (!d.has_gravity && bodies[i]->getBroadphaseHandle()) {
+      const Vec3 diff = d.gravity - g;
+      if (length(diff) > real(1e-6) * (length(g) + 1)) d.has_gravity = true;
+    }
+    ids.push_back(system.addBody(d));
+  }
+  return ids;
+}
+
+void writeBackToBullet(const System& system, const std::vector<int>& indices, const std::vector<btRigidBody*>& bodies) {
+  const BodyArrays& b = system.bodies();
+  const size_t n = std::min(indices.size(), bodies.size());
+  for (size_t i = 0; i < n; ++i) {
+    btRigidBody* body = bodies[i];
+    const int k = indices[i];
+    if (!body || k < 0 || size_t(k) >= b.count()) continue;
+    btTransform t;
+    t.setOrigin(toBt(b.pos[size_t(k)]));
+    t.setRotation(toBt(b.rot[size_t(k)]));
+    body->setCenterOfMassTransform(t);
+    body->setInterpolationWorldTransform(t);
+    if (btMotionState* ms = body->getMotionState()) ms->setWorldTransform(t);
+    if (!body->isStaticObject()) {
+      body->setLinearVelocity(toBt(b.vel[size_t(k)]));
+      body->setAngularVelocity(toBt(b.omega[size_t(k)]));
+      body->setInterpolationLinearVelocity(toBt(b.vel[size_t(k)]));
+      body->setInterpolationAngularVelocity(toBt(b.omega[size_t(k)]));
+    }
+  }
+}
+
+}  // namespace dvi
