@@ -1,0 +1,89 @@
+// Particle charge models of the CES: induction on the drum, corona (field) charging, charge relaxation
+// through the drum contact, brush discharge. All lengths are particle radii r (m), fields in V/m,
+// charges in C. Pure DVI_HD functions (host and device).
+#pragma once
+
+#include <cmath>
+
+#include "ces/ces_constants.h"
+#include "chrono_like/math.h"
+
+namespace dvi {
+namespace ces {
+
+// Induced charge of a conducting sphere of radius r resting on a grounded electrode in a field whose
+// component along the electrode's outward normal is En (signed):
+//     q = (2/3) pi^3 eps0 r^2 En   (= (pi^2/6) * 4 pi eps0 r^2 En, about 1.645 * 4 pi eps0 r^2 En).
+// N. J. Félici, "Forces et charges de petits objets en contact avec une électrode affectée d'un champ
+// électrique", Revue Générale de l'Électricité 75 (1966) 1145-1160; also N. N. Lebedev, I. P.
+// Skal'skaya, Sov. Phys. Tech. Phys. 7 (1962) 268. The sign is that of the surface charge
+// eps0 E.n of the electrode, so the Coulomb force q E lifts the particle off the drum.
+DVI_HD real feliciCharge(real r, real En) {
+  return real(2) / real(3) * kPi * kPi * kPi * kEps0 * r * r * En;
+}
+// Vector form: n is the unit outward normal of the drum at the contact.
+DVI_HD real feliciCharge(real r, Vec3 E, Vec3 n) { return feliciCharge(r, dot(E, n)); }
+
+// Pauthenier's field-charging factor p = 3 eps_r / (eps_r + 2) (p -> 3 for a conductor, eps_r -> inf).
+DVI_HD real pauthenierFactor(real eps_r) {
+  if (std::isinf(eps_r)) return real(3);
+  return real(3) * eps_r / (eps_r + real(2));
+}
+
+// Pauthenier saturation charge (magnitude) of a sphere of radius r in a corona (ionised) field of
+// magnitude E:  q_s = 4 pi eps0 r^2 E p,  p = 3 eps_r/(eps_r + 2).
+// M. M. Pauthenier, M. Moreau-Hanot, "La charge des particules sphériques dans un champ ionisé",
+// J. Phys. Radium 3 (1932) 590-613; H. J. White, "Industrial Electrostatic Precipitation",
+// Addison-Wesley 1963, ch. 5. The sign is the polarity of the corona ions (that of the corona
+// electrode's potential): the caller multiplies by it.
+DVI_HD real pauthenierSaturationCharge(real r, real E, real eps_r) {
+  return real(4) * kPi * kEps0 * r * r * std::fabs(E) * pauthenierFactor(eps_r);
+}
+
+// Pauthenier's charging time constant tau_c = 4 eps0 / (N0 e mu) for ion number density N0 (1/m^3)
+// and ion mobility mu (m^2/(V s)) (Pauthenier & Moreau-Hanot 1932; White 1963, eq. 5.8).
+DVI_HD real pauthenierTimeConstant(real ionDensity, real ionMobility) {
+  return real(4) * kEps0 / (ionDensity * kElementaryCharge * ionMobility);
+}
+
+// Field charging in a constant field: dq/dt = (q_s / tau_c)(1 - q/q_s)^2, whose solution from q = 0 is
+// q(t) = q_s t / (t + tau_c) (Pauthenier & Moreau-Hanot 1932). Exact update over a step h of the
+// magnitude q (0 <= q): the equivalent time t0 = tau_c q / (q_s - q), then q(t0 + h). q >= q_s does not
+// change (field charging stops at saturation); tau_c <= 0 means instantaneous saturation.
+DVI_HD real pauthenierChargeUpdate(real q, real qs, real h, real tau_c) {
+  if (q >= qs) return q;
+  if (!(tau_c > real(0))) return qs;
+  // q(t0 + h) = qs (t0 + h)/(t0 + h + tau_c) with t0 = tau_c q/(qs - q); rearranged to avoid the
+  // division by qs - q: q_new = qs (tau_c q + h (qs - q)) / (tau_c qs + h (qs - q)).
+  const real d = qs - q;
+  return qs * (tau_c * q + h * d) / (tau_c * qs + h * d);
+}
+
+// Charge relaxation time of a material of relative permittivity eps_r and conductivity sigma (S/m):
+// tau = eps / sigma = eps0 eps_r / sigma (H. A. Haus, J. R. Melcher, "Electromagnetic Fields and
+// Energy", Prentice Hall 1989, §7.7; J. R. Melcher, "Continuum Electromechanics", MIT Press 1981,
+// §5.9). sigma <= 0 (a perfect insulator) gives tau = infinity.
+DVI_HD real relaxationTime(real eps_r, real sigma) {
+  if (!(sigma > real(0))) return real(INFINITY);
+  return kEps0 * eps_r / sigma;
+}
+
+// Exponential relaxation of a charge q toward q_inf with time constant tau (dq/dt = -(q - q_inf)/tau,
+// Haus & Melcher §7.7), advanced exactly over a step h with q_inf held constant:
+//     q(t + h) = q_inf + (q - q_inf) exp(-h/tau).
+// tau = 0: immediate (q_inf); tau = infinity: unchanged (q).
+// On the drum: q_inf = 0 for a corona-charged particle losing its charge to the grounded drum, or the
+// Félici charge for a (semi-)conducting particle charging by induction.
+DVI_HD real relaxCharge(real q, real q_inf, real h, real tau) {
+  if (!(tau > real(0))) return q_inf;
+  if (std::isinf(tau)) return q;
+  return q_inf + (q - q_inf) * std::exp(-h / tau);
+}
+
+// Brush discharge: a particle in contact with the grounded brush relaxes toward zero charge with the
+// brush contact time constant tau_brush (relaxCharge with q_inf = 0; tau_brush = 0 removes the charge at
+// once, the usual idealisation of a grounded conductive brush).
+DVI_HD real brushDischarge(real q, real h, real tau_brush) { return relaxCharge(q, real(0), h, tau_brush); }
+
+}  // namespace ces
+}  // namespace dvi
