@@ -124,6 +124,11 @@ class System {
   int64_t stepCount() const { return steps_; }
   virtual std::string backendName() const { return "cpu"; }
   virtual std::string deviceName() const;
+  // Backends that keep state elsewhere (the GPU system) copy it into the host arrays here; bodies(),
+  // contacts() and impulses() are current only after it. No-op on the CPU.
+  virtual void syncToHost() {}
+  // The host body arrays were edited through mutableBodies(): a device backend re-uploads them.
+  virtual void markHostDirty() {}
 
   // Contact force on each contact in the last step (impulse / dt), world frame, acting on body B.
   Vec3 contactForce(size_t k) const;

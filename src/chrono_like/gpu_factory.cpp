@@ -1,0 +1,30 @@
+#include "gpu_factory.h"
+
+#if defined(DVISIM_HAVE_CUDA)
+#include "gpu/gpu_info.h"
+#include "gpu/gpu_system.h"
+#endif
+
+namespace dvi {
+
+bool gpuAvailable(std::string* name) {
+#if defined(DVISIM_HAVE_CUDA)
+  return gpu::queryDevice(name);
+#else
+  if (name) *name = "this build has no CUDA backend";
+  return false;
+#endif
+}
+
+std::unique_ptr<System> makeGpuSystem(const SystemConfig& config) {
+#if defined(DVISIM_HAVE_CUDA)
+  std::string why;
+  if (!gpu::queryDevice(&why)) throw InputError("--backend gpu: " + why);
+  return std::make_unique<GpuSystem>(config);
+#else
+  (void)config;
+  throw InputError("--backend gpu: this build has no CUDA backend");
+#endif
+}
+
+}  // namespace dvi

@@ -1,0 +1,21 @@
+// Entry points to the GPU backend that link in every build: without CUDA, gpuAvailable() is false and
+// makeGpuSystem() throws InputError, so the CLI and the C++ API need no #ifdef (`--backend gpu` on a
+// machine without a device fails with a clear message; `--backend auto` picks the CPU).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "system.h"
+
+namespace dvi {
+
+// True when this build has the CUDA backend and a device is usable. *name gets the device name, or the
+// reason there is none.
+bool gpuAvailable(std::string* name = nullptr);
+
+// The GPU system (src/gpu/gpu_system.h). Throws InputError when the build has no CUDA backend or no
+// device is present.
+std::unique_ptr<System> makeGpuSystem(const SystemConfig& config);
+
+}  // namespace dvi

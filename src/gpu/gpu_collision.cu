@@ -1,0 +1,483 @@
+// ComputeAabbs, BroadPhase and NarrowPhase on the device. The per-element work is the DVI_HD code of
+// narrowphase.h and broadphase_kernels.h (the functions BroadPhaseBins and NativeCollision call on the
+// CPU); between the kernels run CUB scans, radix sorts and run-length encodings, the GPU form of the CPU's
+// count -> scan -> write -> sort -> encode passes. The pair list comes out sorted by (a, b) and the contacts
+// by (shape_a, shape_b, feature), exactly as on the CPU.
+#include <cuda_runtime.h>
+
+#include <cfloat>
+#include <cmath>
+#include <stdexcept>
+
+#include "chrono_like/broadphase_kernels.h"
+#include "chrono_like/narrowphase.h"
+#include "gpu/cub_call.cuh"
+#include "gpu/gpu_state.cuh"
+
+namespace dvi::gpu {
+
+namespace {
+
+__global__ void aabbKernel(int n, const Shape* shapes, const Vec3* pos, const Quat* rot, const Vec3* hull,
+                           real envelope_rel, Aabb* out) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const Shape s = shapes[i];
+  const Pose body{pos[s.body], rot[s.body]};
+  out[i] = shapeAabb(s, shapeWorldPose(body, s), hull, envelope_rel * s.size);
+}
+
+// ---- broad phase: classification and grid (the rule of broadphase.h, on the device) ----
+
+__global__ void extentKernel(int n, const Shape* shapes, const Aabb* box, real* ext) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  ext[i] = (shapes[i].type == ShapeType::Plane || aabbUnbounded(box[i])) ? real(-1) : aabbMaxSide(box[i]);
+}
+
+__global__ void toDoubleKernel(int n, const real* in, double* out) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n) out[i] = double(in[i]);
+}
+
+// First index in sorted[0, n) whose value is > x (strict=true) or >= x (strict=false).
+__device__ int searchSorted(const real* sorted, int n, real x, bool strict) {
+  int lo = 0, hi = n;
+  while (lo < hi) {
+    const int mid = (lo + hi) / 2;
+    if (strict ? !(x < sorted[mid]) : sorted[mid] < x) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+// Bin edge before the max_bins growth: median of the bounded extents, mean of those <= large_factor x
+// median, capped so that at most max_large bounded shapes are treated apart (as BroadPhaseBins::run).
+__global__ void edgeKernel(int n, const real* se, const double* prefix, BroadPhaseSettings s, BroadParams* p) {
+  const int first = searchSorted(se, n, real(0), false);  // entries < 0 are the unbounded shapes
+  const int cnt = n - first;
+  real edge = 0;
+  if (cnt > 0) {
+    const real median = se[first + cnt / 2];
+    const real cut = s.large_factor * median;
+    const int upper = searchSorted(se, n, cut, true);
+    const double sum = prefix[upper - 1] - (first > 0 ? prefix[first - 1] : 0.0);
+    const int c = upper - first;
+    edge = c > 0 ? real(double(s.bin_size_factor) * sum / double(c)) : real(0);
+    if (edge > real(0)) {
+      const real thr = s.large_factor * edge;
+      const int big = n - searchSorted(se, n, thr, true);
+      const int max_large = s.max_large > 0 ? s.max_large : 0;
+      if (big > max_large) edge = se[n - 1 - max_large] / s.large_factor;
+    }
+  }
+  p->edge = edge;
+}
+
+__global__ void classifyKernel(int n, const real* ext, const Aabb* box, BroadPhaseSettings s, const BroadParams* p,
+                               int32_t* is_binned, Aabb* bound_in) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i > n) return;
+  if (i == n) {  // sentinel for the exclusive scan
+    is_binned[n] = 0;
+    return;
+  }
+  const real edge = p->edge;
+  const real thr = s.large_factor * edge;
+  const bool large = ext[i] < real(0) || (edge > real(0) && ext[i] > thr);
+  is_binned[i] = large ? 0 : 1;
+  bound_in[i] = large ? Aabb{{real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)}, {-real(FLT_MAX), -real(FLT_MAX), -real(FLT_MAX)}}
+                      : box[i];
+}
+
+__global__ void splitKernel(int n, const int32_t* is_binned, const int32_t* pos, int32_t* binned, int32_t* large) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  if (is_binned[i]) binned[pos[i]] = i;
+  else large[i - pos[i]] = i;
+}
+
+struct AabbMerge {
+  __device__ Aabb operator()(const Aabb& a, const Aabb& b) const {
+    return Aabb{vmin(a.lo, b.lo), vmax(a.hi, b.hi)};
+  }
+};
+
+__device__ double gridDimsDev(Vec3 ext, double edge, double dims[3]) {
+  const double e[3] = {double(ext.x), double(ext.y), double(ext.z)};
+  double total = 1;
+  for (int d = 0; d < 3; ++d) {
+    dims[d] = fmax(1.0, ceil(e[d] / edge));
+    total *= dims[d];
+  }
+  return total;
+}
+
+__global__ void gridKernel(int n, const int32_t* pos, const Aabb* bounds, BroadPhaseSettings s, BroadParams* p) {
+  const int nb = pos[n];
+  p->binned = nb;
+  p->large = n - nb;
+  p->bins = 0;
+  p->grid = BinGrid{{0, 0, 0}, real(1), {1, 1, 1}};
+  p->bounds = Aabb{{0, 0, 0}, {0, 0, 0}};
+  if (nb == 0) return;
+  const Aabb b = *bounds;
+  p->bounds = b;
+  const Vec3 span = b.hi - b.lo;
+  real edge = p->edge;
+  if (!(edge > real(0)) || !isfinite(double(edge))) {
+    const double m = double(maxComponent(span));
+    edge = m > 0 ? real(m / cbrt(double(nb))) : real(1);
+  }
+  const long long mb = s.max_bins < 2147483647LL ? s.max_bins : 2147483647LL;
+  const double max_bins = double(mb > 1 ? mb : 1);
+  double dims[3];
+  double e = double(edge);
+  double total = gridDimsDev(span, e, dims);
+  while (total > max_bins) {
+    e *= fmax(1.0001, cbrt(total / max_bins));
+    total = gridDimsDev(span, e, dims);
+  }
+  p->edge = real(e);
+  p->grid.origin = b.lo;
+  p->grid.inv_edge = real(1) / real(e);
+  for (int d = 0; d < 3; ++d) p->grid.n[d] = int32_t(dims[d]);
+  p->bins = int64_t(total);
+}
+
+// ---- broad phase: entries ----
+
+__global__ void entryCountKernel(int nb, const int32_t* binned, const Aabb* box, const BroadParams* p,
+                                 uint64_t* count) {
+  const int j = blockIdx.x * blockDim.x + threadIdx.x;
+  if (j > nb) return;
+  count[j] = j < nb ? uint64_t(aabbBinCount(p->grid, box[binned[j]])) : 0;
+}
+
+__global__ void entryWriteKernel(int nb, const int32_t* binned, const Aabb* box, const BroadParams* p,
+                                 const uint64_t* off, uint32_t* bin, int32_t* shape) {
+  const int j = blockIdx.x * blockDim.x + threadIdx.x;
+  if (j >= nb) return;
+  const uint64_t o = off[j];
+  aabbWriteBins(p->grid, box[binned[j]], binned[j], bin + o, shape + o);
+}
+
+// ---- broad phase: pairs. Slot s of the count/write passes is
+//   [0, ne)            run s of the sorted bins (when s < number of runs): pairs inside that bin
+//   [ne, ne+nb)        binned shape s-ne against every large shape that can touch the binned region
+//   [ne+nb, ne+nb+nl)  large shape against the large shapes after it
+
+struct PairSlots {
+  int64_t ne;
+  int32_t nb, nl;
+  const int32_t* num_runs;
+  const uint32_t* run_bin;
+  const int32_t* run_start;
+  const int32_t* entry_shape;
+  const int32_t* binned;
+  const int32_t* large;
+  const Shape* shapes;
+  const Aabb* box;
+  const uint8_t* flags;
+  const BroadParams* p;
+};
+
+// Visits the pairs of slot s in a fixed order; emit(a, b) with a < b.
+template <class Emit>
+__device__ void visitSlot(const PairSlots& S, int64_t s, Emit&& emit) {
+  if (s < S.ne) {
+    if (s >= *S.num_runs) return;
+    const int32_t s0 = S.run_start[s], s1 = S.run_start[s + 1];
+    const uint32_t bin = S.run_bin[s];
+    const BinGrid g = S.p->grid;
+    for (int32_t i = s0; i < s1; ++i) {
+      const int32_t a = S.entry_shape[i];
+      for (int32_t j = i + 1; j < s1; ++j) {
+        const int32_t b = S.entry_shape[j];
+        if (binPairTest(g, bin, a, b, S.shapes, S.box, S.flags)) emit(a, b);
+      }
+    }
+  } else if (s < S.ne + S.nb) {
+    const int32_t a = S.binned[s - S.ne];
+    const Aabb bounds = S.p->bounds;
+    for (int32_t k = 0; k < S.nl; ++k) {
+      const int32_t l = S.large[k];
+      if (!aabbOverlap(S.box[l], bounds)) continue;  // cannot touch any binned shape
+      if (directPairTest(a, l, S.shapes, S.box, S.flags)) emit(a < l ? a : l, a < l ? l : a);
+    }
+  } else {
+    const int32_t i = int32_t(s - S.ne - S.nb);
+    const int32_t a = S.large[i];
+    for (int32_t k = i + 1; k < S.nl; ++k)
+      if (directPairTest(a, S.large[k], S.shapes, S.box, S.flags)) emit(a, S.large[k]);
+  }
+}
+
+__global__ void pairCountKernel(PairSlots S, int64_t slots, uint64_t* count) {
+  const int64_t s = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (s > slots) return;
+  uint64_t c = 0;
+  if (s < slots) visitSlot(S, s, [&](int32_t, int32_t) { ++c; });
+  count[s] = c;
+}
+
+__global__ void pairWriteKernel(PairSlots S, int64_t slots, const uint64_t* off, uint64_t* keys) {
+  const int64_t s = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (s >= slots) return;
+  uint64_t w = off[s];
+  visitSlot(S, s, [&](int32_t a, int32_t b) { keys[w++] = (uint64_t(uint32_t(a)) << 32) | uint32_t(b); });
+}
+
+// ---- narrow phase ----
+
+struct NarrowArgs {
+  const uint64_t* pairs;
+  const Shape* shapes;
+  const Vec3* pos;
+  const Quat* rot;
+  const Vec3* hull;
+  real envelope_rel;
+};
+
+__device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& b, ContactPoint* pts) {
+  const uint64_t key = A.pairs[i];
+  a = int32_t(key >> 32);
+  b = int32_t(key & 0xFFFFFFFFu);
+  const Shape sa = A.shapes[a];
+  const Shape sb = A.shapes[b];
+  const Pose wa = shapeWorldPose(Pose{A.pos[sa.body], A.rot[sa.body]}, sa);
+  const Pose wb = shapeWorldPose(Pose{A.pos[sb.body], A.rot[sb.body]}, sb);
+  const real envelope = A.envelope_rel * fmin(sa.size, sb.size);
+  return collideShapes(sa, wa, sb, wb, A.hull, envelope, pts);
+}
+
+__global__ void narrowCountKernel(NarrowArgs A, int64_t np, int64_t* count, ContactPoint* first) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i > np) return;
+  if (i == np) {
+    count[np] = 0;
+    return;
+  }
+  ContactPoint pts[kMaxContactsPerPair];
+  int32_t a, b;
+  const int n = collidePair(A, i, a, b, pts);
+  count[i] = n;
+  if (n >= 1) first[i] = pts[0];
+}
+
+struct ContactOut {
+  int32_t *shape_a, *shape_b, *body_a, *body_b;
+  Vec3 *normal, *pa, *pb;
+  real* dist;
+  uint64_t* key;
+};
+
+__global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count, const int64_t* off,
+                                  const ContactPoint* first, ContactOut out) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= np) return;
+  const int64_t n = count[i];
+  if (n == 0) return;
+  ContactPoint pts[kMaxContactsPerPair];
+  int32_t a, b;
+  if (n == 1) {
+    const uint64_t key = A.pairs[i];
+    a = int32_t(key >> 32);
+    b = int32_t(key & 0xFFFFFFFFu);
+    pts[0] = first[i];
+  } else {
+    collidePair(A, i, a, b, pts);  // deterministic: the same points as the count pass
+  }
+  const int32_t ba = A.shapes[a].body, bb = A.shapes[b].body;
+  int64_t k = off[i];
+  for (int j = 0; j < int(n); ++j, ++k) {
+    out.shape_a[k] = a;
+    out.shape_b[k] = b;
+    out.body_a[k] = ba;
+    out.body_b[k] = bb;
+    out.normal[k] = pts[j].normal;
+    out.pa[k] = pts[j].pa;
+    out.pb[k] = pts[j].pb;
+    out.dist[k] = pts[j].dist;
+    out.key[k] = contactKey(a, b, pts[j].feature);
+  }
+}
+
+}  // namespace
+
+void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
+  const int n = int(d.shapes.count);
+  if (n == 0) return;
+  aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(n, d.shapes.shape.data(), d.bodies.pos.data(),
+                                                     d.bodies.rot.data(), d.shapes.hull.data(), cfg.envelope_rel,
+                                                     d.shapes.aabb.data());
+  DVI_CUDA_LAUNCH("aabbKernel");
+}
+
+void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats) {
+  const int n = int(d.shapes.count);
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
+  d.pairs = 0;
+  if (n < 2) return;
+  const BroadPhaseSettings s = cfg.broadphase;
+  const Aabb* box = d.shapes.aabb.data();
+  const Shape* shapes = d.shapes.shape.data();
+
+  // 1. classification and grid
+  B.params.resize(1);
+  B.ext.resize(n);
+  B.ext_sorted.resize(n);
+  B.ext_prefix.resize(n);
+  extentKernel<<<blocksFor(n), kBlock, 0, st>>>(n, shapes, box, B.ext.data());
+  DVI_CUDA_LAUNCH("extentKernel");
+  cubRun(d, "cub::DeviceRadixSort::SortKeys (extents)", [&](void* t, size_t& b) {
+    return cub::DeviceRadixSort::SortKeys(t, b, B.ext.data(), B.ext_sorted.data(), n, 0, int(sizeof(real) * 8), st);
+  });
+  toDoubleKernel<<<blocksFor(n), kBlock, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data());
+  DVI_CUDA_LAUNCH("toDoubleKernel");
+  cubRun(d, "cub::DeviceScan::InclusiveSum (extents)", [&](void* t, size_t& b) {
+    return cub::DeviceScan::InclusiveSum(t, b, B.ext_prefix.data(), B.ext_prefix.data(), n, st);
+  });
+  edgeKernel<<<1, 1, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data(), s, B.params.data());
+  DVI_CUDA_LAUNCH("edgeKernel");
+  B.entry_shape.resize(n + 1);  // reused as the binned flags (n + 1 for the scan)
+  B.counts_sel.resize(n + 1);
+  B.bound_in.resize(n + 1);
+  classifyKernel<<<blocksFor(n + 1), kBlock, 0, st>>>(n, B.ext.data(), box, s, B.params.data(), B.entry_shape.data(),
+                                                      B.bound_in.data());
+  DVI_CUDA_LAUNCH("classifyKernel");
+  cubRun(d, "cub::DeviceScan::ExclusiveSum (binned flags)", [&](void* t, size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, B.entry_shape.data(), B.counts_sel.data(), n + 1, st);
+  });
+  B.binned.resize(n);
+  B.large.resize(n);
+  splitKernel<<<blocksFor(n), kBlock, 0, st>>>(n, B.entry_shape.data(), B.counts_sel.data(), B.binned.data(),
+                                               B.large.data());
+  DVI_CUDA_LAUNCH("splitKernel");
+  const Aabb empty{{real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)}, {-real(FLT_MAX), -real(FLT_MAX), -real(FLT_MAX)}};
+  cubRun(d, "cub::DeviceReduce::Reduce (bounds)", [&](void* t, size_t& b) {
+    return cub::DeviceReduce::Reduce(t, b, B.bound_in.data(), B.bound_in.data() + n, n, AabbMerge{}, empty, st);
+  });
+  gridKernel<<<1, 1, 0, st>>>(n, B.counts_sel.data(), B.bound_in.data() + n, s, B.params.data());
+  DVI_CUDA_LAUNCH("gridKernel");
+  const BroadParams P = d.readValue(B.params.data());
+  const int nb = P.binned, nl = P.large;
+
+  // 2. count -> scan -> write (bin, shape) entries -> sort by bin -> run-length encode
+  int64_t ne = 0;
+  B.num_runs.resize(1);
+  DVI_CUDA(cudaMemsetAsync(B.num_runs.data(), 0, sizeof(int32_t), st));
+  if (nb > 1) {
+    B.entry_count.resize(nb + 1);
+    B.entry_off.resize(nb + 1);
+    entryCountKernel<<<blocksFor(nb + 1), kBlock, 0, st>>>(nb, B.binned.data(), box, B.params.data(),
+                                                           B.entry_count.data());
+    DVI_CUDA_LAUNCH("entryCountKernel");
+    cubRun(d, "cub::DeviceScan::ExclusiveSum (bin entries)", [&](void* t, size_t& b) {
+      return cub::DeviceScan::ExclusiveSum(t, b, B.entry_count.data(), B.entry_off.data(), nb + 1, st);
+    });
+    ne = int64_t(d.readValue(B.entry_off.data() + nb));
+    if (ne > int64_t(INT32_MAX))
+      throw std::length_error("GPU broad phase: " + std::to_string(ne) + " bin entries exceed 2^31");
+    B.entry_bin.resize(ne);
+    B.entry_bin_sorted.resize(ne);
+    B.entry_shape.resize(ne);
+    B.entry_shape_sorted.resize(ne);
+    entryWriteKernel<<<blocksFor(nb), kBlock, 0, st>>>(nb, B.binned.data(), box, B.params.data(), B.entry_off.data(),
+                                                       B.entry_bin.data(), B.entry_shape.data());
+    DVI_CUDA_LAUNCH("entryWriteKernel");
+    const int bits = bitsFor(uint64_t(P.bins > 0 ? P.bins - 1 : 0));
+    cubRun(d, "cub::DeviceRadixSort::SortPairs (bin entries)", [&](void* t, size_t& b) {
+      return cub::DeviceRadixSort::SortPairs(t, b, B.entry_bin.data(), B.entry_bin_sorted.data(), B.entry_shape.data(),
+                                             B.entry_shape_sorted.data(), int(ne), 0, bits, st);
+    });
+    B.run_bin.resize(ne);
+    B.run_len.resize(ne + 1);
+    B.run_start.resize(ne + 1);
+    DVI_CUDA(cudaMemsetAsync(B.run_len.data(), 0, sizeof(int32_t) * size_t(ne + 1), st));
+    cubRun(d, "cub::DeviceRunLengthEncode::Encode (bins)", [&](void* t, size_t& b) {
+      return cub::DeviceRunLengthEncode::Encode(t, b, B.entry_bin_sorted.data(), B.run_bin.data(), B.run_len.data(),
+                                                B.num_runs.data(), int(ne), st);
+    });
+    cubRun(d, "cub::DeviceScan::ExclusiveSum (bin starts)", [&](void* t, size_t& b) {
+      return cub::DeviceScan::ExclusiveSum(t, b, B.run_len.data(), B.run_start.data(), int(ne + 1), st);
+    });
+  }
+
+  // 3. pairs: count -> scan -> write -> sort by (a, b)
+  const int64_t slots = ne + nb + nl;
+  B.pair_count.resize(slots + 1);
+  B.pair_off.resize(slots + 1);
+  PairSlots S{ne,
+              nb,
+              nl,
+              B.num_runs.data(),
+              B.run_bin.data(),
+              B.run_start.data(),
+              B.entry_shape_sorted.data(),
+              B.binned.data(),
+              B.large.data(),
+              shapes,
+              box,
+              d.bodies.flags.data(),
+              B.params.data()};
+  if (nb <= 1) S.ne = 0;
+  pairCountKernel<<<blocksFor(slots + 1), kBlock, 0, st>>>(S, slots, B.pair_count.data());
+  DVI_CUDA_LAUNCH("pairCountKernel");
+  cubRun(d, "cub::DeviceScan::ExclusiveSum (pairs)", [&](void* t, size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, B.pair_count.data(), B.pair_off.data(), slots + 1, st);
+  });
+  const int64_t np = int64_t(d.readValue(B.pair_off.data() + slots));
+  B.pair_key.resize(np);
+  B.pair_key_sorted.resize(np);
+  if (np > 0) {
+    pairWriteKernel<<<blocksFor(slots), kBlock, 0, st>>>(S, slots, B.pair_off.data(), B.pair_key.data());
+    DVI_CUDA_LAUNCH("pairWriteKernel");
+    const int end_bit = 32 + bitsFor(uint64_t(n - 1));
+    cubRun(d, "cub::DeviceRadixSort::SortKeys (pairs)", [&](void* t, size_t& b) {
+      return cub::DeviceRadixSort::SortKeys(t, b, B.pair_key.data(), B.pair_key_sorted.data(), np, 0, end_bit, st);
+    });
+  }
+  d.pairs = np;
+  if (stats) {
+    *stats = BroadPhaseStats{};
+    stats->bins = P.bins;
+    stats->bin_entries = ne;
+    stats->large_shapes = nl;
+    stats->pairs = np;
+    stats->bin_edge = P.edge;
+    stats->occupied_bins = nb > 1 ? d.readValue(B.num_runs.data()) : (nb == 1 ? 1 : 0);
+    for (int k = 0; k < 3; ++k) stats->grid[k] = P.grid.n[k];
+  }
+}
+
+void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
+  const int64_t np = d.pairs;
+  cudaStream_t st = d.stream;
+  NarrowScratch& N = d.narrow;
+  if (np == 0) {
+    d.contacts.resize(0);
+    return;
+  }
+  N.count.resize(np + 1);
+  N.off.resize(np + 1);
+  N.first.resize(np);
+  NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
+               d.shapes.hull.data(), cfg.envelope_rel};
+  narrowCountKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data());
+  DVI_CUDA_LAUNCH("narrowCountKernel");
+  cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
+  });
+  const int64_t nc = d.readValue(N.off.data() + np);
+  d.contacts.resize(size_t(nc));
+  if (nc == 0) return;
+  DeviceContacts& c = d.contacts;
+  ContactOut out{c.shape_a.data(), c.shape_b.data(), c.body_a.data(), c.body_b.data(), c.normal.data(),
+                 c.pa.data(),      c.pb.data(),      c.dist.data(),   c.key.data()};
+  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), N.first.data(), out);
+  DVI_CUDA_LAUNCH("narrowWriteKernel");
+}
+
+}  // namespace dvi::gpu

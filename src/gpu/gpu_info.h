@@ -1,0 +1,12 @@
+// Device discovery for the GPU backend (CUDA builds only; the always-linked entry points are in
+// chrono_like/gpu_factory.h).
+#pragma once
+
+#include <string>
+
+namespace dvi::gpu {
+
+// True when a CUDA device can be used; its name (and memory) go to *name when given.
+bool queryDevice(std::string* name);
+
+}  // namespace dvi::gpu

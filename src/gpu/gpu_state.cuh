@@ -1,0 +1,148 @@
+// Device mirrors of the System's flat arrays and the scratch of every stage (internal to src/gpu).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "chrono_like/broadphase.h"
+#include "chrono_like/data.h"
+#include "chrono_like/jacobian.h"
+#include "chrono_like/system.h"
+#include "gpu/device_buffer.h"
+
+namespace dvi::gpu {
+
+constexpr int kBlock = 256;
+inline unsigned blocksFor(int64_t n, int block = kBlock) { return unsigned((n + block - 1) / block); }
+
+struct DeviceBodies {
+  DeviceBuffer<Vec3> pos{"body pos"}, vel{"body vel"}, omega{"body omega"}, inv_inertia{"body inv_inertia"},
+      force{"body force"}, torque{"body torque"}, gravity{"body gravity"}, v_free{"body v_free"},
+      w_free{"body w_free"};
+  DeviceBuffer<Quat> rot{"body rot"};
+  DeviceBuffer<real> inv_mass{"body inv_mass"}, friction{"body friction"};
+  DeviceBuffer<uint8_t> flags{"body flags"};
+  DeviceBuffer<BodyInverseMass> inv{"body world inverse mass"};
+  DeviceBuffer<BodyDelta> delta{"body velocity change"};
+  size_t count = 0;
+};
+
+struct DeviceShapes {
+  DeviceBuffer<Shape> shape{"shapes"};
+  DeviceBuffer<Vec3> hull{"hull points"};
+  DeviceBuffer<Aabb> aabb{"shape aabbs"};
+  size_t count = 0;
+};
+
+struct DeviceContacts {
+  DeviceBuffer<int32_t> shape_a{"contact shape_a"}, shape_b{"contact shape_b"}, body_a{"contact body_a"},
+      body_b{"contact body_b"};
+  DeviceBuffer<Vec3> normal{"contact normal"}, pa{"contact pa"}, pb{"contact pb"};
+  DeviceBuffer<real> dist{"contact dist"}, mu{"contact mu"}, size{"contact size"};
+  DeviceBuffer<uint64_t> key{"contact key"};
+  size_t count = 0;
+  void resize(size_t n) {
+    shape_a.resize(n); shape_b.resize(n); body_a.resize(n); body_b.resize(n);
+    normal.resize(n); pa.resize(n); pb.resize(n); dist.resize(n); mu.resize(n); size.resize(n); key.resize(n);
+    count = n;
+  }
+};
+
+// Parameters the broad phase derives on the device and reads back once per step (a few dozen bytes).
+struct BroadParams {
+  BinGrid grid;
+  Aabb bounds;
+  real edge;       // bin edge used for the large/binned split (before the max_bins growth)
+  int32_t binned;  // shapes binned
+  int32_t large;   // shapes treated apart
+  int64_t bins;
+};
+
+struct BroadScratch {
+  DeviceBuffer<real> ext{"broad extents"}, ext_sorted{"broad sorted extents"};
+  DeviceBuffer<double> ext_prefix{"broad extent prefix sums"};
+  DeviceBuffer<uint8_t> is_binned{"broad binned flags"}, is_large{"broad large flags"};
+  DeviceBuffer<Aabb> bound_in{"broad bounds input"};
+  DeviceBuffer<int32_t> binned{"broad binned list"}, large{"broad large list"}, counts_sel{"broad select counts"};
+  DeviceBuffer<uint64_t> entry_count{"broad entry counts"}, entry_off{"broad entry offsets"};
+  DeviceBuffer<uint32_t> entry_bin{"broad entry bins"}, entry_bin_sorted{"broad sorted entry bins"};
+  DeviceBuffer<int32_t> entry_shape{"broad entry shapes"}, entry_shape_sorted{"broad sorted entry shapes"};
+  DeviceBuffer<uint32_t> run_bin{"broad run bins"};
+  DeviceBuffer<int32_t> run_len{"broad run lengths"}, run_start{"broad run starts"}, num_runs{"broad run count"};
+  DeviceBuffer<uint64_t> pair_count{"broad pair counts"}, pair_off{"broad pair offsets"};
+  DeviceBuffer<uint64_t> pair_key{"broad pair keys"}, pair_key_sorted{"broad sorted pair keys"};
+  DeviceBuffer<BroadParams> params{"broad params"};
+  DeviceBuffer<int64_t> tests{"broad bin pair tests"};
+};
+
+struct NarrowScratch {
+  DeviceBuffer<int64_t> count{"narrow counts"};
+  DeviceBuffer<int64_t> off{"narrow offsets"};
+  DeviceBuffer<ContactPoint> first{"narrow first points"};
+};
+
+struct SolverScratch {
+  DeviceBuffer<ContactJacobian> jac{"contact jacobians"};
+  DeviceBuffer<real> rhs{"ccp rhs"}, block_inv{"ccp block inverses"}, block_step{"ccp block steps"};
+  DeviceBuffer<real> gamma{"ccp gamma"}, prev_gamma{"ccp previous gamma"};
+  DeviceBuffer<uint64_t> prev_key{"ccp previous keys"};
+  // body -> contact adjacency (CSR): entries (2k + side) sorted by body, offsets per body
+  DeviceBuffer<uint32_t> adj_key{"adjacency keys"}, adj_key_sorted{"adjacency sorted keys"};
+  DeviceBuffer<int32_t> adj_val{"adjacency values"}, adj_val_sorted{"adjacency sorted values"};
+  DeviceBuffer<int32_t> adj_off{"adjacency offsets"};
+  DeviceBuffer<int32_t> order{"key order"}, order_sorted{"sorted key order"};
+  // solver vectors
+  DeviceBuffer<real> v0{"solver vector 0"}, v1{"solver vector 1"}, v2{"solver vector 2"}, v3{"solver vector 3"},
+      v4{"solver vector 4"}, v5{"solver vector 5"}, v6{"solver vector 6"};
+  DeviceBuffer<double> partial{"reduction partials"};
+  DeviceBuffer<double> scalars{"reduction results"};
+};
+
+struct DeviceState {
+  cudaStream_t stream = nullptr;
+  DeviceBodies bodies;
+  DeviceShapes shapes;
+  DeviceContacts contacts;
+  BroadScratch broad;
+  NarrowScratch narrow;
+  SolverScratch solver;
+  ByteBuffer cub_temp{"CUB temporary storage"};
+  DeviceBuffer<double> step_scalars{"step scalars"};
+  double* host_scalars = nullptr;  // pinned, for single-value read-backs
+  int64_t pairs = 0;
+  cudaEvent_t ev[kStageCount + 1] = {};
+  size_t prev_count = 0;  // contacts of the previous step (warm start source)
+  real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)
+  bool keys_unsorted = false;
+
+  // Reads `n` doubles from device memory into host_scalars (one synchronisation).
+  const double* readScalars(const double* dev, int n);
+  template <class T>
+  T readValue(const T* dev) {
+    T v;
+    DVI_CUDA(cudaMemcpyAsync(&v, dev, sizeof(T), cudaMemcpyDeviceToHost, stream));
+    DVI_CUDA(cudaStreamSynchronize(stream));
+    return v;
+  }
+  size_t bytes() const;
+};
+
+// Stages (one .cu each), called by GpuSystem.
+void computeAabbs(DeviceState& d, const SystemConfig& cfg);
+void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats);
+void narrowPhase(DeviceState& d, const SystemConfig& cfg);
+
+struct DeviceCcpResult {
+  int iterations = 0;
+  real residual = 0;
+};
+// Builds rows (Jacobians, rhs, block inverses, the adjacency) for the current contacts.
+void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration);
+void warmStart(DeviceState& d, bool enabled);
+DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg);
+void keepImpulsesForWarmStart(DeviceState& d);
+// v = v_free + M^-1 D gamma for every body (and positions), the IntegrateVelocities/Positions stages.
+void applyImpulsesToBodies(DeviceState& d, const real* gamma);
+
+}  // namespace dvi::gpu

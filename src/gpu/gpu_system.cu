@@ -1,0 +1,253 @@
+// GpuSystem: the step on the device. Upload on the first step and after addBody()/markHostDirty(); host
+// copies only in syncToHost().
+#include "gpu/gpu_system.h"
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+
+#include "chrono_like/integrate.h"
+#include "gpu/cuda_check.h"
+#include "gpu/gpu_info.h"
+#include "gpu/gpu_state.cuh"
+
+namespace dvi {
+
+namespace gpu {
+
+const double* DeviceState::readScalars(const double* dev, int n) {
+  DVI_CUDA(cudaMemcpyAsync(host_scalars, dev, sizeof(double) * size_t(n), cudaMemcpyDeviceToHost, stream));
+  DVI_CUDA(cudaStreamSynchronize(stream));
+  return host_scalars;
+}
+
+size_t DeviceState::bytes() const {
+  size_t b = 0;
+  auto add = [&](const auto& buf) { b += buf.capacity() * sizeof(*buf.data()); };
+  add(bodies.pos); add(bodies.vel); add(bodies.omega); add(bodies.inv_inertia); add(bodies.force);
+  add(bodies.torque); add(bodies.gravity); add(bodies.v_free); add(bodies.w_free); add(bodies.rot);
+  add(bodies.inv_mass); add(bodies.friction); add(bodies.flags); add(bodies.inv); add(bodies.delta);
+  add(shapes.shape); add(shapes.hull); add(shapes.aabb);
+  add(contacts.shape_a); add(contacts.shape_b); add(contacts.body_a); add(contacts.body_b);
+  add(contacts.normal); add(contacts.pa); add(contacts.pb); add(contacts.dist); add(contacts.mu);
+  add(contacts.size); add(contacts.key);
+  add(broad.ext); add(broad.ext_sorted); add(broad.ext_prefix); add(broad.is_binned); add(broad.is_large);
+  add(broad.bound_in); add(broad.binned); add(broad.large); add(broad.entry_count); add(broad.entry_off);
+  add(broad.entry_bin); add(broad.entry_bin_sorted); add(broad.entry_shape); add(broad.entry_shape_sorted);
+  add(broad.run_bin); add(broad.run_len); add(broad.run_start); add(broad.pair_count); add(broad.pair_off);
+  add(broad.pair_key); add(broad.pair_key_sorted);
+  add(narrow.count); add(narrow.off); add(narrow.first);
+  add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
+  add(solver.prev_gamma); add(solver.prev_key); add(solver.adj_key); add(solver.adj_key_sorted);
+  add(solver.adj_val); add(solver.adj_val_sorted); add(solver.adj_off);
+  add(solver.v0); add(solver.v1); add(solver.v2); add(solver.v3); add(solver.v4); add(solver.v5); add(solver.v6);
+  add(cub_temp);
+  return b;
+}
+
+namespace {
+
+__global__ void integrateForcesKernel(int n, const Vec3* vel, const Vec3* omega, const Quat* rot,
+                                      const real* inv_mass, const Vec3* inv_inertia, const Vec3* force,
+                                      const Vec3* torque, const Vec3* gravity, const uint8_t* flags, bool gyro,
+                                      real h, Vec3* v_free, Vec3* w_free) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  integrateBodyForces(vel[i], omega[i], rot[i], inv_mass[i], inv_inertia[i], force[i], torque[i], gravity[i],
+                      flags[i], gyro, h, v_free[i], w_free[i]);
+}
+
+__global__ void integratePositionsKernel(int n, Vec3* pos, Quat* rot, const Vec3* vel, const Vec3* omega,
+                                         const uint8_t* flags, real h, Vec3* force, Vec3* torque) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  Vec3 x = pos[i];
+  Quat q = rot[i];
+  integrateBodyPosition(x, q, vel[i], omega[i], flags[i], h);
+  pos[i] = x;
+  rot[i] = q;
+  force[i] = Vec3{0, 0, 0};
+  torque[i] = Vec3{0, 0, 0};
+}
+
+}  // namespace
+}  // namespace gpu
+
+using namespace gpu;
+
+GpuSystem::GpuSystem(SystemConfig config) : System(config), d_(std::make_unique<DeviceState>()) {
+  std::string why;
+  if (!queryDevice(&why)) throw InputError("GPU backend: " + why);
+  DVI_CUDA(cudaStreamCreateWithFlags(&d_->stream, cudaStreamNonBlocking));
+  for (auto& e : d_->ev) DVI_CUDA(cudaEventCreate(&e));
+  DVI_CUDA(cudaMallocHost(&d_->host_scalars, 64 * sizeof(double)));
+  d_->step_scalars.resize(16);
+}
+
+GpuSystem::~GpuSystem() {
+  if (!d_) return;
+  for (auto& e : d_->ev)
+    if (e) cudaEventDestroy(e);
+  if (d_->host_scalars) cudaFreeHost(d_->host_scalars);
+  if (d_->stream) cudaStreamDestroy(d_->stream);
+}
+
+std::string GpuSystem::deviceName() const {
+  std::string name;
+  queryDevice(&name);
+  return name;
+}
+
+size_t GpuSystem::deviceBytes() const { return d_->bytes(); }
+
+void GpuSystem::uploadIfNeeded() {
+  if (!host_dirty_ && uploaded_bodies_ == bodies_.count()) return;
+  // After a host edit everything is uploaded; otherwise only the bodies (and their shapes) appended by
+  // addBody() since the last upload, so device state that was never synced back is not overwritten.
+  const size_t first_body = host_dirty_ ? 0 : uploaded_bodies_;
+  const size_t first_shape = host_dirty_ ? 0 : d_->shapes.count;
+  const size_t first_hull = host_dirty_ ? 0 : d_->shapes.hull.size();
+  cudaStream_t s = d_->stream;
+  DeviceBodies& b = d_->bodies;
+  b.pos.uploadTail(bodies_.pos, first_body, s);
+  b.rot.uploadTail(bodies_.rot, first_body, s);
+  b.vel.uploadTail(bodies_.vel, first_body, s);
+  b.omega.uploadTail(bodies_.omega, first_body, s);
+  b.inv_mass.uploadTail(bodies_.inv_mass, first_body, s);
+  b.inv_inertia.uploadTail(bodies_.inv_inertia, first_body, s);
+  b.force.uploadTail(bodies_.force, first_body, s);
+  b.torque.uploadTail(bodies_.torque, first_body, s);
+  b.gravity.uploadTail(bodies_.gravity, first_body, s);
+  b.friction.uploadTail(bodies_.friction, first_body, s);
+  b.flags.uploadTail(bodies_.flags, first_body, s);
+  b.count = bodies_.count();
+  b.v_free.resize(b.count);
+  b.w_free.resize(b.count);
+  b.inv.resize(b.count);
+  b.delta.resize(b.count);
+  DeviceShapes& sh = d_->shapes;
+  sh.shape.uploadTail(shapes_.shape, first_shape, s);
+  sh.hull.uploadTail(shapes_.hull_points, first_hull, s);
+  sh.aabb.resizeKeep(shapes_.count());
+  sh.count = shapes_.count();
+  DVI_CUDA(cudaStreamSynchronize(s));  // the host vectors may change after we return
+  uploaded_bodies_ = bodies_.count();
+  host_dirty_ = false;
+}
+
+void GpuSystem::step() {
+  stats_ = StepStats{};
+  uploadIfNeeded();
+  cudaEvent_t* ev = d_->ev;
+  DVI_CUDA(cudaEventRecord(ev[0], d_->stream));
+  integrateForces();
+  DVI_CUDA(cudaEventRecord(ev[1], d_->stream));
+  detectCollisions();  // records ev[2..4]
+  buildAndSolve();     // records ev[5..7]
+  integrate();         // records ev[8..9]
+  DVI_CUDA(cudaEventSynchronize(ev[kStageCount]));
+  for (int s = 0; s < kStageCount; ++s) {
+    float ms = 0;
+    DVI_CUDA(cudaEventElapsedTime(&ms, ev[s], ev[s + 1]));
+    stats_.stage_seconds[s] = double(ms) * 1e-3;
+  }
+  time_ += config_.dt;
+  ++steps_;
+}
+
+void GpuSystem::integrateForces() {
+  DeviceBodies& b = d_->bodies;
+  const int n = int(b.count);
+  stats_.stage_ran[int(StageType::IntegrateForces)] = true;
+  if (n == 0) return;
+  integrateForcesKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(
+      n, b.vel.data(), b.omega.data(), b.rot.data(), b.inv_mass.data(), b.inv_inertia.data(), b.force.data(),
+      b.torque.data(), b.gravity.data(), b.flags.data(), config_.gyroscopic, config_.dt, b.v_free.data(),
+      b.w_free.data());
+  DVI_CUDA_LAUNCH("integrateForcesKernel");
+}
+
+void GpuSystem::detectCollisions() {
+  cudaEvent_t* ev = d_->ev;
+  computeAabbs(*d_, config_);
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::ComputeAabbs) + 1], d_->stream));
+  broadPhase(*d_, config_, nullptr);
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::BroadPhase) + 1], d_->stream));
+  narrowPhase(*d_, config_);
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::NarrowPhase) + 1], d_->stream));
+  stats_.stage_ran[int(StageType::ComputeAabbs)] = stats_.stage_ran[int(StageType::BroadPhase)] =
+      stats_.stage_ran[int(StageType::NarrowPhase)] = true;
+  stats_.pairs = d_->pairs;
+  stats_.contacts = int64_t(d_->contacts.count);
+}
+
+void GpuSystem::buildAndSolve() {
+  cudaEvent_t* ev = d_->ev;
+  const size_t nc = d_->contacts.count;
+  d_->solver.gamma.resize(3 * nc);
+  if (nc == 0) {
+    d_->prev_count = 0;
+    for (int s : {int(StageType::BuildRows), int(StageType::WarmStart), int(StageType::Solve)})
+      DVI_CUDA(cudaEventRecord(ev[s + 1], d_->stream));
+    return;
+  }
+  real max_pen = 0;
+  buildRows(*d_, config_, &max_pen);
+  stats_.max_penetration = max_pen;
+  stats_.stage_ran[int(StageType::BuildRows)] = true;
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
+  const bool warm = config_.warm_start && d_->prev_count > 0;
+  warmStart(*d_, warm);
+  stats_.stage_ran[int(StageType::WarmStart)] = warm;
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
+  DeviceCcpResult r = solveCcp(*d_, config_);
+  stats_.iterations = r.iterations;
+  stats_.residual = r.residual;
+  stats_.stage_ran[int(StageType::Solve)] = true;
+  keepImpulsesForWarmStart(*d_);
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::Solve) + 1], d_->stream));
+}
+
+void GpuSystem::integrate() {
+  cudaEvent_t* ev = d_->ev;
+  DeviceBodies& b = d_->bodies;
+  const int n = int(b.count);
+  // IntegrateVelocities: v = v_free + M^-1 D gamma (the gather of the Schur product).
+  if (n > 0) applyImpulsesToBodies(*d_, d_->contacts.count ? d_->solver.gamma.data() : nullptr);
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegrateVelocities) + 1], d_->stream));
+  if (n > 0) {
+    integratePositionsKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(n, b.pos.data(), b.rot.data(), b.vel.data(),
+                                                                      b.omega.data(), b.flags.data(), config_.dt,
+                                                                      b.force.data(), b.torque.data());
+    DVI_CUDA_LAUNCH("integratePositionsKernel");
+  }
+  DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegratePositions) + 1], d_->stream));
+  stats_.stage_ran[int(StageType::IntegrateVelocities)] = stats_.stage_ran[int(StageType::IntegratePositions)] = true;
+}
+
+void GpuSystem::syncToHost() {
+  uploadIfNeeded();  // bodies added since the last step: the host copy is the current one
+  cudaStream_t s = d_->stream;
+  const DeviceBodies& b = d_->bodies;
+  b.pos.download(bodies_.pos, b.count, s);
+  b.rot.download(bodies_.rot, b.count, s);
+  b.vel.download(bodies_.vel, b.count, s);
+  b.omega.download(bodies_.omega, b.count, s);
+  d_->shapes.aabb.download(shapes_.aabb, d_->shapes.count, s);
+  const DeviceContacts& c = d_->contacts;
+  const size_t nc = c.count;
+  c.shape_a.download(contacts_.shape_a, nc, s);
+  c.shape_b.download(contacts_.shape_b, nc, s);
+  c.body_a.download(contacts_.body_a, nc, s);
+  c.body_b.download(contacts_.body_b, nc, s);
+  c.normal.download(contacts_.normal, nc, s);
+  c.pa.download(contacts_.pa, nc, s);
+  c.pb.download(contacts_.pb, nc, s);
+  c.dist.download(contacts_.dist, nc, s);
+  c.mu.download(contacts_.mu, nc, s);
+  c.size.download(contacts_.size, nc, s);
+  c.key.download(contacts_.key, nc, s);
+  d_->solver.gamma.download(gamma_, 3 * nc, s);
+}
+
+}  // namespace dvi

@@ -1,0 +1,69 @@
+// The GPU system: a System whose per-step arrays live on the device (DESIGN §2, issue 3).
+//
+// The host arrays of System (bodies_, shapes_, contacts_, gamma_) are the upload source and the download
+// target only: the step reads and writes device mirrors (structure of arrays, the same layout), and the
+// host copies are refreshed by syncToHost() alone, never inside the step loop. Bodies added with addBody()
+// (and host edits announced by markHostDirty()) are uploaded at the start of the next step.
+//
+// Each stage is a sequence of kernels that call the same DVI_HD per-element functions as the CPU backend:
+//   IntegrateForces      integrate.h: integrateBodyForces
+//   ComputeAabbs         narrowphase.h: shapeAabb
+//   BroadPhase           broadphase_kernels.h: aabbBinCount/aabbWriteBins/binPairTest/directPairTest, with CUB
+//                        scans, radix sorts and run-length encoding between them
+//   NarrowPhase          narrowphase.h: collideShapes (count + scan + write; contacts come out ordered by
+//                        (shape_a, shape_b, feature) = by persistent key, as on the CPU)
+//   BuildRows            jacobian.h: makeContactJacobian, makeBodyInverseMass, contactBias, contactDiagonalBlock
+//   WarmStart            binary search of each key in last step's sorted keys
+//   Solve                APGD / Jacobi / BB with the matrix-free Schur product: per-body gather over a
+//                        body -> contact CSR (accumulateContactImpulse), then per-contact D^T dv
+//                        (contactRelativeVelocity); cone.h: projectCone
+//   IntegrateVelocities  the same gather; IntegratePositions integrate.h: integrateBodyPosition
+//
+// Scalars that size buffers or steer a solver (counts, dot products) are read back as single values; no
+// array crosses the bus during a step.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "chrono_like/system.h"
+
+namespace dvi {
+
+namespace gpu {
+struct DeviceState;  // device mirrors and scratch (gpu_state.cuh)
+}
+
+class GpuSystem : public System {
+ public:
+  explicit GpuSystem(SystemConfig config = {});
+  ~GpuSystem() override;
+
+  void step() override;
+  std::string backendName() const override { return "gpu"; }
+  std::string deviceName() const override;
+
+  // Copies body state (pos, rot, vel, omega), shape AABBs, the contacts and their impulses of the last step
+  // to the host arrays that bodies(), shapes(), contacts() and impulses() return.
+  void syncToHost() override;
+  // The host body arrays were edited (mutableBodies()): upload them before the next step.
+  void markHostDirty() override { host_dirty_ = true; }
+
+  // Device memory held by this system's buffers, bytes.
+  size_t deviceBytes() const;
+
+ protected:
+  void integrateForces() override;
+  void detectCollisions() override;
+  void buildAndSolve() override;
+  void integrate() override;
+
+ private:
+  void uploadIfNeeded();
+
+  std::unique_ptr<gpu::DeviceState> d_;
+  size_t uploaded_bodies_ = 0;
+  bool host_dirty_ = true;
+};
+
+}  // namespace dvi
