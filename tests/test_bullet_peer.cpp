@@ -106,6 +106,20 @@ TEST_CASE("BulletPeer: length_scale 100, a 1 cm sphere rests at the right height
   CHECK(peer.lastStats().max_penetration < margin_scene);
 }
 
+TEST_CASE("BulletPeer: a kinematic body moves with its velocity, in scene units", "[bullet]") {
+  BulletScene scene;
+  btRigidBody* k = scene.add(scene.keep(new btBoxShape(btVector3(0.1f, 0.1f, 0.1f))), 0, btVector3(0, 1, 0));
+  k->setCollisionFlags(k->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+  k->setLinearVelocity(btVector3(0.5f, 0, 0));
+  BulletPeerSettings st;
+  st.length_scale = 100;
+  BulletPeer peer(scene.list(), st);
+  for (int i = 0; i < 200; ++i) peer.step();
+  CHECK(std::abs(peer.position(0).x - 0.1) < 1e-5);
+  CHECK(std::abs(peer.position(0).y - 1) < 1e-5);  // no gravity on a kinematic body
+  CHECK(std::abs(peer.velocity(0).x - 0.5) < 1e-4);
+}
+
 TEST_CASE("BulletPeer: every supported shape clones; unsupported ones are refused by name", "[bullet]") {
   BulletScene scene;
   scene.add(scene.keep(new btStaticPlaneShape(btVector3(0, 1, 0), 0)), 0, btVector3(0, 0, 0));

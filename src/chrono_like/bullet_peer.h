@@ -4,7 +4,10 @@
 // Bullet's tolerances are absolute lengths (0.04 m margin, 0.02 m contact breaking threshold), so scenes
 // of centimetre particles are given to it in scaled units: with length_scale = 100 every length is
 // multiplied by 100 on the way in (positions, shape dimensions, gravity, velocities) and divided on the
-// way out; the peer reports in the scene's units.
+// way out; the peer reports in the scene's units. Masses, angular velocities, friction, restitution and
+// damping are copied unchanged, inertia is scaled by length_scale^2, and collision margins are left at
+// Bullet's defaults for the scaled shapes (what a user running Bullet in those units gets). Kinematic
+// bodies move with their velocity (the copies have no motion state to read a new pose from).
 #pragma once
 
 #include <memory>
