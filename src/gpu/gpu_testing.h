@@ -1,0 +1,19 @@
+// Host-callable wrappers around single device kernels, for the [gpu] tests (CUDA builds only): they run one
+// DVI_HD function over arrays on the device so a test can compare it with the same function on the host.
+#pragma once
+
+#include <vector>
+
+#include "chrono_like/contact.h"
+#include "chrono_like/shape.h"
+
+namespace dvi::gpu {
+
+// For each i: collideShapes(a[i], wa[i], b[i], wb[i], hull, envelope[i]) on the device. out gets
+// kMaxContactsPerPair points per pair, counts the number of valid points of each.
+void collidePairsOnDevice(const std::vector<Shape>& a, const std::vector<Pose>& wa, const std::vector<Shape>& b,
+                          const std::vector<Pose>& wb, const std::vector<Vec3>& hull,
+                          const std::vector<real>& envelope, std::vector<int>& counts,
+                          std::vector<ContactPoint>& out);
+
+}  // namespace dvi::gpu
