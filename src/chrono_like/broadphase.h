@@ -1,8 +1,11 @@
 // Broad phase by uniform spatial binning (Mazhar, Heyn, Negrut, "A scalable parallel method for large
 // collision detection problems", Multibody System Dynamics 26, 2011):
-//   count AABB-bin overlaps -> exclusive scan -> write (bin, shape) pairs -> sort by bin -> encode bin
-//   starts -> test the shapes inside each bin, keeping a pair only in the bin that holds the minimum
-//   corner of the two boxes' intersection (so no pair is reported twice).
+//   count AABB-bin overlaps -> exclusive scan -> write (bin, shape) pairs -> sort by bin -> bin runs ->
+//   test the shapes inside each bin, keeping a pair only in the bin that holds the minimum corner of the two
+//   boxes' intersection (so no pair is reported twice).
+// CPU variant of the last step: each binned shape walks its own bins from its place in the bin's run and
+// tests the shapes after it (the same pairs as a per-bin double loop), so each shape's pairs come out
+// together and the output needs no global sort: chunks of shapes are concatenated in order.
 // Large shapes (ground, walls, drum: AABB much larger than a bin, and every plane) are not binned: they
 // are tested against every binned shape's AABB directly, so one huge box does not flood the bins.
 #pragma once
@@ -10,6 +13,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "broadphase_kernels.h"
 #include "data.h"
 #include "hd.h"
 
@@ -19,10 +23,21 @@ struct ShapePair {
   int32_t a, b;  // shape indices, a < b
 };
 
+// Bin edge (documented rule): the median m of the largest AABB side over all bounded shapes (planes and
+// unbounded boxes excluded) locates the typical particle; the mean of the sides <= large_factor * m (so the
+// drum, walls and bins do not inflate it) is the "mean extent", and edge = bin_size_factor * mean extent.
+// Large shapes: planes, unbounded or non-finite boxes, and bounded boxes whose largest side exceeds
+// large_factor * edge. They are tested directly against every binned shape, which costs
+// (large shapes) x (binned shapes) box tests; so when more than max_large bounded shapes exceed that
+// threshold the edge grows until at most max_large of them do (a bimodal mix of many big and many small
+// particles is then binned with a coarser grid instead of flooding the direct path).
+// The grid spans the binned shapes' bounds; when it would exceed max_bins bins, the edge grows until it
+// does not.
 struct BroadPhaseSettings {
   real bin_size_factor = real(2);  // bin edge = factor x mean AABB extent of the binned shapes
   real large_factor = real(8);     // a shape larger than large_factor bin edges is treated apart
   int64_t max_bins = int64_t(1) << 24;
+  int32_t max_large = 64;          // most bounded (non-plane) shapes treated apart
 };
 
 struct BroadPhaseStats {
@@ -31,18 +46,13 @@ struct BroadPhaseStats {
   int32_t large_shapes = 0;
   int64_t pairs = 0;
   real bin_edge = 0;
+  int64_t occupied_bins = 0;  // bins holding at least one entry
+  int64_t bin_pair_tests = 0; // shape pairs tested inside bins (the dominant cost)
+  int32_t grid[3] = {0, 0, 0};
 };
 
-// True when the two shapes may collide at all: different bodies, not both immovable, groups match.
-DVI_HD bool pairAllowed(const Shape& a, const Shape& b, uint8_t flags_a, uint8_t flags_b) {
-  const uint8_t immovable = kBodyFixed | kBodyKinematic;
-  return a.body != b.body && !((flags_a & immovable) && (flags_b & immovable)) && groupsCollide(a, b);
-}
-
-DVI_HD bool aabbOverlap(const Aabb& a, const Aabb& b) {
-  return a.lo.x <= b.hi.x && b.lo.x <= a.hi.x && a.lo.y <= b.hi.y && b.lo.y <= a.hi.y && a.lo.z <= b.hi.z &&
-         b.lo.z <= a.hi.z;
-}
+// pairAllowed(shape_a, shape_b, flags_a, flags_b) and aabbOverlap(a, b), like every per-element step of
+// the binned broad phase, live in broadphase_kernels.h (DVI_HD, shared with the GPU kernels).
 
 // CPU (OpenMP) implementation. Output pairs are sorted by (a, b), whatever the thread count.
 class BroadPhaseBins {
@@ -53,10 +63,21 @@ class BroadPhaseBins {
            BroadPhaseStats* stats = nullptr);
 
  private:
+  void sortEntriesByBin(uint32_t max_key);
+
   BroadPhaseSettings settings_;
-  // scratch reused between steps (no allocation in the step loop once warm)
-  std::vector<int32_t> binned_, large_, counts_, offsets_, entry_bin_, entry_shape_, bin_start_;
-  std::vector<std::vector<ShapePair>> per_thread_;
+  // scratch reused between steps (no allocation in the step loop once warm, except growth)
+  std::vector<real> extent_, extent_sel_;
+  std::vector<double> block_sum_;
+  std::vector<int64_t> block_cnt_, hist_, lh_count_, lh_cursor_, lh_total_, ll_count_, chunk_off_, large_off_;
+  std::vector<int32_t> binned_, large_, large_active_, counts_, offsets_, entry_shape_, entry_perm_,
+      entry_perm_tmp_, entry_pos_, sorted_shape_, chunk_begin_;
+  std::vector<uint8_t> entry_mask_, sorted_mask_;
+  std::vector<uint32_t> entry_bin_, entry_bin_tmp_;
+  std::vector<std::vector<ShapePair>> chunk_pairs_;  // pairs (s, b) found from the binned shapes of a chunk
+  std::vector<std::vector<int32_t>> cand_;           // per-thread candidates of one bin
+  std::vector<std::vector<int64_t>> lhc_local_;      // per-thread (large, binned) counts of one chunk
+  std::vector<ShapePair> large_large_;               // pairs of two large shapes, sorted
 };
 
 // O(n^2) reference used by tests as the oracle.
