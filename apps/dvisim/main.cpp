@@ -1,0 +1,370 @@
+// dvisim: runs a scene with the DVI engine (CPU, GPU when present) or with Bullet's own solver.
+//
+//   dvisim run [SCENE] [--backend auto|cpu|gpu|bullet] [--collision native|bullet]
+//              [--solver jacobi|gs|apgd|bb] [--iterations N] [--dt H] [--time T | --steps N]
+//              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR]
+//
+// Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <btBulletDynamicsCommon.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include "chrono_like/bullet_import.h"
+#include "chrono_like/bullet_peer.h"
+#include "chrono_like/gpu_factory.h"
+#include "chrono_like/output.h"
+#include "chrono_like/scene.h"
+#include "chrono_like/system.h"
+
+namespace {
+
+using dvi::InputError;
+using Clock = std::chrono::steady_clock;
+
+struct Options {
+  std::string scene;
+  std::string backend = "auto";
+  std::string collision;
+  std::string solver;
+  std::string iterations, dt, time, steps, threads, frames;
+  std::vector<std::string> sets;
+  std::string out = "dvisim-out";
+};
+
+std::string oneLine(std::string s) {
+  for (char& c : s)
+    if (c == '\n' || c == '\r') c = ' ';
+  while (!s.empty() && s.back() == ' ') s.pop_back();
+  return s;
+}
+
+double parseReal(const std::string& opt, const std::string& v) {
+  char* end = nullptr;
+  const double x = std::strtod(v.c_str(), &end);
+  if (v.empty() || *end || !std::isfinite(x)) throw InputError(opt + ": expected a finite number, got '" + v + "'");
+  return x;
+}
+
+long long parseInt(const std::string& opt, const std::string& v, long long lo, long long hi) {
+  char* end = nullptr;
+  const long long x = std::strtoll(v.c_str(), &end, 10);
+  if (v.empty() || *end) throw InputError(opt + ": expected an integer, got '" + v + "'");
+  if (x < lo || x > hi)
+    throw InputError(opt + ": must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v);
+  return x;
+}
+
+void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
+  std::string list;
+  for (const char* c : choices) {
+    if (v == c) return;
+    list += std::string(list.empty() ? "" : "|") + c;
+  }
+  throw InputError("unknown " + opt.substr(2) + " '" + v + "' (expected " + list + ")");
+}
+
+// Progress bar with ETA on stderr, only when stderr is a terminal.
+class Progress {
+ public:
+  explicit Progress(int64_t total) : total_(total), on_(total > 0 && ::isatty(2)), t0_(Clock::now()), last_(t0_) {}
+  void update(int64_t done) {
+    if (!on_) return;
+    const auto now = Clock::now();
+    if (done < total_ && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    const double el = std::chrono::duration<double>(now - t0_).count();
+    const double frac = double(done) / double(total_);
+    const double eta = done > 0 ? el * (1 - frac) / frac : 0;
+    const int width = 30, fill = int(frac * width);
+    std::string bar(size_t(fill), '=');
+    bar.resize(size_t(width), ' ');
+    std::fprintf(stderr, "\r[%s] %3d%%  %lld/%lld steps  ETA %.1f s ", bar.c_str(), int(frac * 100), (long long)done,
+                 (long long)total_, eta);
+    std::fflush(stderr);
+  }
+  void finish() {
+    if (on_) std::fprintf(stderr, "\r\033[K");
+  }
+
+ private:
+  int64_t total_;
+  bool on_;
+  Clock::time_point t0_, last_;
+};
+
+// Characteristic size of each body (for the frames), from the Bullet shapes.
+std::vector<dvi::real> bodySizes(const std::vector<btRigidBody*>& bodies) {
+  std::vector<dvi::real> s(bodies.size(), 0);
+  for (size_t i = 0; i < bodies.size(); ++i) {
+    try {
+      const dvi::BodyDesc d = dvi::bodyDescFromBullet(*bodies[i]);
+      dvi::real m = dvi::real(1e30);
+      for (const auto& sh : d.shapes) m = std::fmin(m, sh.shape.size);
+      s[i] = m;
+    } catch (const std::exception&) {
+      btVector3 c;
+      btScalar r = 0;
+      bodies[i]->getCollisionShape()->getBoundingSphere(c, r);
+      s[i] = dvi::real(r);
+    }
+  }
+  return s;
+}
+
+// Bullet's tolerances are absolute lengths: scale the scene so the smallest moving body is >= ~0.5 units.
+dvi::real autoLengthScale(const std::vector<btRigidBody*>& bodies, const std::vector<dvi::real>& sizes) {
+  dvi::real smallest = dvi::real(1e30);
+  for (size_t i = 0; i < bodies.size(); ++i)
+    if (!bodies[i]->isStaticOrKinematicObject() && sizes[i] > 0) smallest = std::fmin(smallest, sizes[i]);
+  if (!(smallest < dvi::real(0.5))) return 1;
+  return dvi::real(std::pow(10.0, std::ceil(std::log10(0.5 / double(smallest)))));
+}
+
+// Steps at which frames are written: N frames spread evenly over [0, steps], ending at the last step.
+std::vector<int64_t> frameSteps(int frames, int64_t steps) {
+  std::vector<int64_t> f;
+  if (frames <= 0) return f;
+  if (frames == 1) return {steps};
+  for (int k = 0; k < frames; ++k) f.push_back(int64_t(std::llround(double(k) * double(steps) / double(frames - 1))));
+  return f;
+}
+
+int run(const Options& o) {
+  // Validate the command line before doing any work.
+  requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu", "bullet"});
+  if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
+  if (!o.solver.empty()) requireOneOf("--solver", o.solver, {"jacobi", "gs", "apgd", "bb"});
+  if (!o.time.empty() && !o.steps.empty()) throw InputError("--time and --steps are mutually exclusive");
+  std::optional<double> dt, time;
+  if (!o.dt.empty()) {
+    dt = parseReal("--dt", o.dt);
+    if (!(*dt > 0)) throw InputError("--dt: the time step must be > 0, got " + o.dt);
+  }
+  if (!o.time.empty()) {
+    time = parseReal("--time", o.time);
+    if (*time < 0) throw InputError("--time: must be >= 0, got " + o.time);
+  }
+
+  dvi::Scene scene = dvi::Scene::load(o.scene, o.sets);
+  dvi::SceneSettings& st = scene.settings;
+  if (dt) st.dt = dvi::real(*dt);
+  if (time) st.time = dvi::real(*time), st.steps = -1;
+  if (!o.steps.empty()) st.steps = parseInt("--steps", o.steps, 0, 1LL << 40);
+  if (!o.iterations.empty()) st.iterations = int(parseInt("--iterations", o.iterations, 0, 1000000));
+  if (!o.threads.empty()) st.threads = int(parseInt("--threads", o.threads, 0, 4096));
+  if (!o.frames.empty()) st.frames = int(parseInt("--frames", o.frames, 0, 1000000));
+  if (!o.solver.empty()) st.solver = o.solver;
+  if (!o.collision.empty()) st.collision = o.collision;
+  const int64_t steps = st.stepCount();
+
+  // Backend.
+  std::string backend = o.backend, gpu_name;
+  const bool have_gpu = dvi::gpuAvailable(&gpu_name);
+  if (backend == "auto") {
+    backend = have_gpu ? "gpu" : "cpu";
+    std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
+  }
+  if (backend == "gpu" && !have_gpu)
+    throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
+
+  std::error_code ec;
+  std::filesystem::create_directories(o.out, ec);
+  if (ec || !std::filesystem::is_directory(o.out))
+    throw InputError("--out " + o.out + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+
+  const std::vector<btRigidBody*>& bodies = scene.bodies();
+  const std::vector<dvi::real> sizes = bodySizes(bodies);
+  std::printf("scene: %s (%zu bodies), %lld steps of %g s\n", scene.name.c_str(), bodies.size(), (long long)steps,
+              double(st.dt));
+  std::fflush(stdout);
+
+#ifdef _OPENMP
+  const int threads = st.threads > 0 ? st.threads : omp_get_max_threads();
+#else
+  const int threads = 1;
+#endif
+
+  nlohmann::json summary;
+  summary["scene"] = scene.source;
+  summary["scene_name"] = scene.name;
+  summary["bodies"] = bodies.size();
+  summary["dt"] = st.dt;
+  summary["steps"] = steps;
+  summary["threads"] = threads;
+  summary["frames"] = 0;
+
+  std::vector<dvi::BodyState> state(bodies.size());
+  dvi::FrameWriter frames(o.out);
+  const std::vector<int64_t> frame_at = frameSteps(st.frames, steps);
+  size_t next_frame = 0;
+  Progress progress(steps);
+  double wall = 0;
+
+  if (backend == "bullet") {
+    dvi::BulletPeerSettings ps;
+    ps.dt = st.dt;
+    ps.gravity = st.gravity;
+    ps.solver_iterations = o.iterations.empty() ? st.bullet_iterations : std::max(1, st.iterations);
+    ps.length_scale = st.bullet_length_scale > 0 ? st.bullet_length_scale : autoLengthScale(bodies, sizes);
+    dvi::BulletPeer peer(bodies, ps);
+    auto collect = [&] {
+      for (size_t i = 0; i < bodies.size(); ++i)
+        state[i] = dvi::BodyState{peer.position(i), peer.rotation(i), peer.velocity(i), peer.angularVelocity(i), sizes[i]};
+    };
+    int64_t contacts = 0;
+    dvi::real max_pen = 0;
+    for (int64_t k = 0;; ++k) {
+      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+        collect();
+        frames.write(double(k) * double(st.dt), state);
+        ++next_frame;
+      }
+      if (k == steps) break;
+      const auto t0 = Clock::now();
+      peer.step();
+      wall += std::chrono::duration<double>(Clock::now() - t0).count();
+      contacts += peer.lastStats().contacts;
+      max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
+      progress.update(k + 1);
+    }
+    progress.finish();
+    collect();
+    summary["backend"] = "bullet";
+    summary["device"] = "Bullet " + std::to_string(btGetVersion()) + " btDiscreteDynamicsWorld (CPU, 1 thread)";
+    summary["solver"] = "bullet-si";
+    summary["collision"] = "bullet";
+    summary["iterations_mean"] = ps.solver_iterations;
+    summary["residual_final"] = nullptr;
+    summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
+    summary["max_penetration"] = max_pen;
+    summary["bullet_length_scale"] = ps.length_scale;
+    summary["stages"] = {"bullet"};
+    summary["stage_seconds"] = {{"bullet", wall}};
+    summary["threads"] = 1;
+  } else {
+    const dvi::SystemConfig cfg = dvi::systemConfigFromSettings(st);
+    std::unique_ptr<dvi::System> sys =
+        backend == "gpu" ? dvi::makeGpuSystem(cfg) : std::make_unique<dvi::System>(cfg);
+    const std::vector<int> ids = dvi::importBullet(*sys, bodies);
+    auto collect = [&] {
+      const dvi::BodyArrays& b = sys->bodies();
+      for (size_t i = 0; i < ids.size(); ++i) {
+        const size_t k = size_t(ids[i]);
+        state[i] = dvi::BodyState{b.pos[k], b.rot[k], b.vel[k], b.omega[k], b.size[k]};
+      }
+    };
+    int64_t contacts = 0, iterations = 0;
+    dvi::real max_pen = 0, residual = 0;
+    std::array<double, dvi::kStageCount> stage_s{};
+    std::array<bool, dvi::kStageCount> stage_ran{};
+    for (int64_t k = 0;; ++k) {
+      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+        collect();
+        frames.write(double(k) * double(st.dt), state);
+        ++next_frame;
+      }
+      if (k == steps) break;
+      const auto t0 = Clock::now();
+      sys->step();
+      wall += std::chrono::duration<double>(Clock::now() - t0).count();
+      const dvi::StepStats& s = sys->lastStats();
+      contacts += s.contacts;
+      iterations += s.iterations;
+      max_pen = std::fmax(max_pen, s.max_penetration);
+      residual = s.residual;
+      for (int i = 0; i < dvi::kStageCount; ++i) {
+        stage_s[size_t(i)] += s.stage_seconds[size_t(i)];
+        stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
+      }
+      progress.update(k + 1);
+    }
+    progress.finish();
+    collect();
+    summary["backend"] = sys->backendName();
+    summary["device"] = sys->deviceName();
+    summary["solver"] = st.solver;
+    summary["collision"] = st.collision;
+    summary["iterations_mean"] = steps > 0 ? double(iterations) / double(steps) : 0.0;
+    summary["residual_final"] = residual;
+    summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
+    summary["max_penetration"] = max_pen;
+    summary["stages"] = nlohmann::json::array();
+    summary["stage_seconds"] = nlohmann::json::object();
+    for (int i = 0; i < dvi::kStageCount; ++i) {
+      if (!stage_ran[size_t(i)]) continue;
+      const char* name = dvi::stageName(dvi::StageType(i));
+      summary["stages"].push_back(name);
+      summary["stage_seconds"][name] = stage_s[size_t(i)];
+    }
+  }
+  summary["sim_time"] = double(steps) * double(st.dt);
+  summary["wall_time_s"] = wall;
+  summary["ms_per_step"] = steps > 0 ? 1000.0 * wall / double(steps) : 0.0;
+  summary["frames"] = frames.count();
+
+  const std::string out = o.out;
+  dvi::writeBodiesCsv(out + "/bodies.csv", state);
+  dvi::writeSummary(out + "/summary.json", summary);
+  std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", out.c_str(),
+              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "", wall,
+              steps > 0 ? 1000.0 * wall / double(steps) : 0.0);
+  return 0;
+}
+
+int fail(int code, const std::string& msg) {
+  std::fflush(stdout);
+  std::fprintf(stderr, "dvisim: error: %s\n", oneLine(msg).c_str());
+  return code;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
+  app.require_subcommand(1);
+  Options o;
+  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene (.json or .bullet; the embedded default without one)");
+  run_cmd->add_option("scene", o.scene, "Scene file: .json (scenes/schema/scene.schema.json) or .bullet");
+  run_cmd->add_option("--backend", o.backend, "auto|cpu|gpu|bullet (default auto)");
+  run_cmd->add_option("--collision", o.collision, "native|bullet");
+  run_cmd->add_option("--solver", o.solver, "jacobi|gs|apgd|bb");
+  run_cmd->add_option("--iterations", o.iterations, "Solver iterations per step");
+  run_cmd->add_option("--dt", o.dt, "Time step in seconds");
+  run_cmd->add_option("--time", o.time, "Simulated time in seconds");
+  run_cmd->add_option("--steps", o.steps, "Number of steps");
+  run_cmd->add_option("--threads", o.threads, "OpenMP threads (0: default)");
+  run_cmd->add_option("--frames", o.frames, "Number of VTK frames to write");
+  run_cmd->add_option("--set", o.sets, "Override a scene value by dotted key, e.g. settings.dt=1e-4 (repeatable)")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help
+    return fail(2, e.what());
+  }
+  try {
+    return run(o);
+  } catch (const InputError& e) {
+    return fail(2, e.what());
+  } catch (const std::exception& e) {
+    return fail(1, e.what());
+  }
+}

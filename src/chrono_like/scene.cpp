@@ -1,0 +1,1004 @@
+// Scenes: JSON (our schema, scenes/schema/scene.schema.json), .bullet files and the embedded default.
+// See scene.h. Everything here validates before it builds: a bad input is an InputError naming the
+// file, the key path and the value, never a crash inside Bullet.
+#include "scene.h"
+
+#include <btBulletDynamicsCommon.h>
+#include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
+#include <LinearMath/btConvexHullComputer.h>
+#include <btBulletWorldImporter.h>
+#include <BulletFileLoader/btBulletFile.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+namespace dvi {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+// ---------------------------------------------------------------------------------------------------
+// Validation helpers
+// ---------------------------------------------------------------------------------------------------
+namespace {
+
+std::string describe(const json& v) {
+  std::string s = v.dump();
+  if (s.size() > 48) s = s.substr(0, 45) + "...";
+  return s;
+}
+
+const char* typeName(const json& v) {
+  if (v.is_null()) return "null";
+  if (v.is_boolean()) return "boolean";
+  if (v.is_number()) return "number";
+  if (v.is_string()) return "string";
+  if (v.is_array()) return "array";
+  return "object";
+}
+
+std::string num(double x) {
+  std::ostringstream o;
+  o.precision(10);
+  o << x;
+  return o.str();
+}
+
+// Reports problems as "<origin>: <path>: <what>".
+struct Check {
+  std::string origin;
+
+  [[noreturn]] void fail(const std::string& path, const std::string& what) const {
+    throw InputError(origin + ": " + (path.empty() ? std::string() : path + ": ") + what);
+  }
+
+  const json& object(const json& v, const std::string& path) const {
+    if (!v.is_object()) fail(path, std::string("expected an object, got ") + typeName(v) + " " + describe(v));
+    return v;
+  }
+  const json& array(const json& v, const std::string& path) const {
+    if (!v.is_array()) fail(path, std::string("expected an array, got ") + typeName(v) + " " + describe(v));
+    return v;
+  }
+  void keys(const json& o, const std::string& path, std::initializer_list<const char*> allowed) const {
+    for (auto it = o.begin(); it != o.end(); ++it) {
+      bool ok = false;
+      for (const char* a : allowed) ok = ok || it.key() == a;
+      if (!ok) {
+        std::string list;
+        for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
+        fail(path.empty() ? it.key() : path + "." + it.key(), "unknown key (allowed: " + list + ")");
+      }
+    }
+  }
+  double number(const json& v, const std::string& path) const {
+    if (!v.is_number())
+      fail(path, std::string("expected a finite number, got ") + typeName(v) + " " + describe(v));
+    const double x = v.get<double>();
+    if (!std::isfinite(x)) fail(path, "non-finite number " + describe(v));
+    return x;
+  }
+  double positive(const json& v, const std::string& path) const {
+    const double x = number(v, path);
+    if (!(x > 0)) fail(path, "must be > 0, got " + num(x));
+    return x;
+  }
+  double nonNegative(const json& v, const std::string& path) const {
+    const double x = number(v, path);
+    if (x < 0) fail(path, "must be >= 0, got " + num(x));
+    return x;
+  }
+  int64_t integer(const json& v, const std::string& path, int64_t lo, int64_t hi) const {
+    const double x = number(v, path);
+    if (x != std::floor(x)) fail(path, "expected an integer, got " + describe(v));
+    if (x < double(lo) || x > double(hi))
+      fail(path, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + describe(v));
+    return int64_t(x);
+  }
+  bool boolean(const json& v, const std::string& path) const {
+    if (!v.is_boolean()) fail(path, std::string("expected true or false, got ") + typeName(v) + " " + describe(v));
+    return v.get<bool>();
+  }
+  std::string string(const json& v, const std::string& path) const {
+    if (!v.is_string()) fail(path, std::string("expected a string, got ") + typeName(v) + " " + describe(v));
+    return v.get<std::string>();
+  }
+  std::string oneOf(const json& v, const std::string& path, std::initializer_list<const char*> choices) const {
+    const std::string s = string(v, path);
+    std::string list;
+    for (const char* c : choices) {
+      if (s == c) return s;
+      list += std::string(list.empty() ? "" : "|") + c;
+    }
+    fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
+  }
+  Vec3 vec3(const json& v, const std::string& path) const {
+    if (!v.is_array() || v.size() != 3)
+      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    return Vec3{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]"))};
+  }
+  Vec3 positiveVec3(const json& v, const std::string& path) const {
+    Vec3 x = vec3(v, path);
+    const real c[3] = {x.x, x.y, x.z};
+    for (int i = 0; i < 3; ++i)
+      if (!(c[i] > 0)) fail(path + "[" + std::to_string(i) + "]", "must be > 0, got " + num(c[i]));
+    return x;
+  }
+  Quat rotation(const json& v, const std::string& path) const {
+    if (v.is_array()) {
+      if (v.size() != 4) fail(path, "expected a quaternion [w, x, y, z] or {axis, angle_deg}, got " + describe(v));
+      Quat q{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]")),
+             real(number(v[3], path + "[3]"))};
+      const real n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+      if (!(n > 0) || !std::isfinite(n)) fail(path, "quaternion has zero length");
+      return normalized(q);
+    }
+    if (v.is_object()) {
+      keys(v, path, {"axis", "angle_deg", "angle"});
+      if (!v.contains("axis")) fail(path + ".axis", "missing");
+      const Vec3 axis = vec3(v["axis"], path + ".axis");
+      if (!(length(axis) > 0)) fail(path + ".axis", "has zero length");
+      if (v.contains("angle_deg") == v.contains("angle")) fail(path, "give exactly one of angle_deg, angle (radians)");
+      const real angle = v.contains("angle") ? real(number(v["angle"], path + ".angle"))
+                                             : real(number(v["angle_deg"], path + ".angle_deg") * M_PI / 180.0);
+      return quatFromAxisAngle(axis, angle);
+    }
+    fail(path, std::string("expected a quaternion [w, x, y, z] or {axis, angle_deg}, got ") + describe(v));
+  }
+};
+
+btVector3 bt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
+btQuaternion bt(Quat q) { return btQuaternion(btScalar(q.x), btScalar(q.y), btScalar(q.z), btScalar(q.w)); }
+
+// Deterministic random numbers (SplitMix64), identical on every platform and standard library.
+struct Rng {
+  uint64_t s;
+  uint64_t next() {
+    uint64_t z = (s += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  }
+  double uniform() { return double(next() >> 11) * (1.0 / 9007199254740992.0); }  // [0, 1)
+  double uniform(double a, double b) { return a + (b - a) * uniform(); }
+};
+
+// Uniformly distributed rotation (Shoemake's method).
+Quat randomRotation(Rng& r) {
+  const double u1 = r.uniform(), u2 = r.uniform() * 2 * M_PI, u3 = r.uniform() * 2 * M_PI;
+  const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
+  return normalized(Quat{real(b * std::cos(u3)), real(a * std::sin(u2)), real(a * std::cos(u2)), real(b * std::sin(u3))});
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------------
+// Owned Bullet objects
+// ---------------------------------------------------------------------------------------------------
+namespace {
+
+// btBulletWorldImporter that records the file's world gravity and lets us find the body made from a
+// given rigid-body record (to restore what the stock importer drops: velocities, flags, gravity).
+class SceneImporter : public btBulletWorldImporter {
+ public:
+  SceneImporter() : btBulletWorldImporter(nullptr) {}
+  void setDynamicsWorldInfo(const btVector3& gravity, const btContactSolverInfo&) override {
+    gravity_ = gravity;
+    has_world_ = true;
+  }
+  btCollisionObject* bodyFor(const void* record) {
+    btCollisionObject** p = m_bodyMap.find(btHashPtr(record));
+    return p ? *p : nullptr;
+  }
+  btVector3 gravity_{0, btScalar(-9.81), 0};
+  bool has_world_ = false;
+};
+
+}  // namespace
+
+struct Scene::Owned {
+  std::vector<std::unique_ptr<btCollisionShape>> shapes;  // children before their compounds
+  std::vector<std::unique_ptr<btMotionState>> motion_states;
+  std::vector<std::unique_ptr<btRigidBody>> bodies;
+  std::unique_ptr<SceneImporter> importer;
+
+  ~Owned() {
+    bodies.clear();
+    motion_states.clear();
+    // Compounds reference their children: delete them first (they were created after the children).
+    while (!shapes.empty()) shapes.pop_back();
+    if (importer) importer->deleteAllData();
+  }
+};
+
+Scene::Scene() : owned_(std::make_unique<Owned>()) {}
+Scene::Scene(Scene&&) noexcept = default;
+Scene& Scene::operator=(Scene&&) noexcept = default;
+Scene::~Scene() = default;
+
+// ---------------------------------------------------------------------------------------------------
+// Settings
+// ---------------------------------------------------------------------------------------------------
+
+int64_t SceneSettings::stepCount() const {
+  if (steps >= 0) return steps;
+  return int64_t(std::llround(double(time) / double(dt)));
+}
+
+SystemConfig systemConfigFromSettings(const SceneSettings& s) {
+  SystemConfig c;
+  c.dt = s.dt;
+  c.gravity = s.gravity;
+  if (s.solver == "jacobi") c.solver = SolverType::Jacobi;
+  else if (s.solver == "gs") c.solver = SolverType::GaussSeidel;
+  else if (s.solver == "bb") c.solver = SolverType::BB;
+  else c.solver = SolverType::APGD;
+  c.solver_settings.max_iterations = s.iterations;
+  c.solver_settings.tolerance = s.tolerance;
+  c.threads = s.threads;
+  c.envelope_rel = s.envelope_rel;
+  c.recovery_rel = s.recovery_rel;
+  c.friction_combine = s.friction_combine == "min"       ? FrictionCombine::Min
+                       : s.friction_combine == "average" ? FrictionCombine::Average
+                                                         : FrictionCombine::Product;
+  c.collision = s.collision == "bullet" ? CollisionBackend::Bullet : CollisionBackend::Native;
+  c.warm_start = s.warm_start;
+  return c;
+}
+
+SceneSettings parseSceneSettings(const json& j, const std::string& origin, const std::string& path) {
+  Check c{origin};
+  SceneSettings s;
+  c.object(j, path);
+  c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "tolerance", "gravity", "friction_combine",
+                   "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
+                   "bullet_length_scale", "bullet_iterations"});
+  auto at = [&](const char* k) { return path + "." + k; };
+  if (j.contains("dt")) s.dt = real(c.positive(j["dt"], at("dt")));
+  if (j.contains("steps") && j.contains("time")) c.fail(path, "give either steps or time, not both");
+  if (j.contains("steps")) s.steps = c.integer(j["steps"], at("steps"), 0, int64_t(1) << 40);
+  if (j.contains("time")) s.time = real(c.nonNegative(j["time"], at("time")));
+  if (j.contains("solver")) s.solver = c.oneOf(j["solver"], at("solver"), {"jacobi", "gs", "apgd", "bb"});
+  if (j.contains("iterations")) s.iterations = int(c.integer(j["iterations"], at("iterations"), 0, 1000000));
+  if (j.contains("tolerance")) s.tolerance = real(c.nonNegative(j["tolerance"], at("tolerance")));
+  if (j.contains("gravity")) s.gravity = c.vec3(j["gravity"], at("gravity"));
+  if (j.contains("friction_combine"))
+    s.friction_combine = c.oneOf(j["friction_combine"], at("friction_combine"), {"product", "min", "average"});
+  if (j.contains("envelope_rel")) s.envelope_rel = real(c.nonNegative(j["envelope_rel"], at("envelope_rel")));
+  if (j.contains("recovery_rel")) s.recovery_rel = real(c.positive(j["recovery_rel"], at("recovery_rel")));
+  if (j.contains("collision")) s.collision = c.oneOf(j["collision"], at("collision"), {"native", "bullet"});
+  if (j.contains("threads")) s.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
+  if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
+  if (j.contains("warm_start")) s.warm_start = c.boolean(j["warm_start"], at("warm_start"));
+  if (j.contains("bullet_length_scale"))
+    s.bullet_length_scale = real(c.nonNegative(j["bullet_length_scale"], at("bullet_length_scale")));
+  if (j.contains("bullet_iterations"))
+    s.bullet_iterations = int(c.integer(j["bullet_iterations"], at("bullet_iterations"), 1, 1000000));
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// --set KEY=VALUE on a JSON document
+// ---------------------------------------------------------------------------------------------------
+namespace {
+
+void applyOverride(json& doc, const std::string& assignment) {
+  const size_t eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw InputError("--set " + assignment + ": expected KEY=VALUE (e.g. settings.dt=1e-4)");
+  const std::string key = assignment.substr(0, eq), text = assignment.substr(eq + 1);
+  json value;
+  try {
+    value = json::parse(text);
+  } catch (const json::exception&) {
+    value = text;  // a bare word is a string (e.g. settings.solver=gs)
+  }
+  std::vector<std::string> parts;
+  std::stringstream ss(key);
+  for (std::string p; std::getline(ss, p, '.');) {
+    if (p.empty()) throw InputError("--set " + key + ": empty key component");
+    parts.push_back(p);
+  }
+  json* cur = &doc;
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const std::string& p = parts[i];
+    const bool last = i + 1 == parts.size();
+    if (cur->is_array()) {
+      char* end = nullptr;
+      const long idx = std::strtol(p.c_str(), &end, 10);
+      if (*end || idx < 0 || size_t(idx) >= cur->size())
+        throw InputError("--set " + key + ": no element '" + p + "' (array of " + std::to_string(cur->size()) + ")");
+      cur = &(*cur)[size_t(idx)];
+    } else if (cur->is_object()) {
+      if (!cur->contains(p)) {
+        if (!last && i == 0 && p == "settings") (*cur)[p] = json::object();
+        else if (!last) throw InputError("--set " + key + ": unknown key '" + p + "'");
+      }
+      cur = &(*cur)[p];
+    } else {
+      throw InputError("--set " + key + ": '" + parts[i - 1] + "' is not an object or array");
+    }
+  }
+  *cur = value;
+  // steps and time are alternatives: setting one drops the other.
+  if (key == "settings.steps" && doc["settings"].contains("time")) doc["settings"].erase("time");
+  if (key == "settings.time" && doc["settings"].contains("steps")) doc["settings"].erase("steps");
+}
+
+}  // namespace
+
+void Scene::applySettingOverride(const std::string& assignment) {
+  const std::string key = assignment.substr(0, assignment.find('='));
+  if (key.rfind("settings.", 0) != 0)
+    throw InputError("--set " + key + ": unknown key (only settings.* apply to a " + format + " scene)");
+  json doc = json::object();
+  doc["settings"] = settings_json_;
+  applyOverride(doc, assignment);
+  settings = parseSceneSettings(doc["settings"], "--set " + key);
+  settings_json_ = doc["settings"];
+}
+
+// ---------------------------------------------------------------------------------------------------
+// JSON scenes: shapes, bodies, generators
+// ---------------------------------------------------------------------------------------------------
+namespace {
+
+struct BuiltShape {
+  btCollisionShape* shape = nullptr;
+  double volume = 0;
+  double bound = 0;  // bounding radius about the shape origin
+  bool plane = false;
+};
+
+double hullVolume(const std::vector<btVector3>& pts) {
+  btConvexHullComputer hull;
+  hull.compute(&pts[0].x(), int(sizeof(btVector3)), int(pts.size()), 0, 0);
+  double vol = 0;
+  for (int f = 0; f < hull.faces.size(); ++f) {
+    const btConvexHullComputer::Edge* e0 = &hull.edges[hull.faces[f]];
+    const btVector3 a = hull.vertices[e0->getSourceVertex()];
+    const btConvexHullComputer::Edge* e = e0->getNextEdgeOfFace();
+    int guard = 0;
+    while (e->getTargetVertex() != e0->getSourceVertex() && guard++ < 100000) {
+      const btVector3 b = hull.vertices[e->getSourceVertex()], c = hull.vertices[e->getTargetVertex()];
+      vol += double(a.dot(b.cross(c))) / 6.0;
+      e = e->getNextEdgeOfFace();
+    }
+  }
+  return std::fabs(vol);
+}
+
+// A margin for Bullet's collision of the shape (Bullet's default 0.04 is an absolute length, far too
+// large for centimetre bodies): 5% of the shape's smallest half-dimension, at most Bullet's default.
+btScalar marginFor(double size) { return btScalar(std::min(0.04, 0.05 * size)); }
+
+class Builder {
+ public:
+  Builder(const Check& c, Scene::Owned& o) : c_(c), o_(o) {}
+
+  BuiltShape shape(const json& j, const std::string& path, bool in_compound = false) {
+    c_.object(j, path);
+    if (!j.contains("type")) c_.fail(path + ".type", "missing shape type");
+    const std::string type = c_.oneOf(j["type"], path + ".type",
+        {"sphere", "box", "cylinder", "capsule", "cone", "ellipsoid", "convex_hull", "plane", "compound"});
+    auto need = [&](const char* k) -> const json& {
+      if (!j.contains(k)) c_.fail(path + "." + k, std::string("missing (required for a ") + type + ")");
+      return j[k];
+    };
+    auto at = [&](const char* k) { return path + "." + k; };
+    auto axisOf = [&]() -> int {
+      if (!j.contains("axis")) return 1;
+      const std::string a = c_.oneOf(j["axis"], at("axis"), {"x", "y", "z"});
+      return a == "x" ? 0 : a == "y" ? 1 : 2;
+    };
+    BuiltShape b;
+    if (type == "sphere") {
+      c_.keys(j, path, {"type", "radius"});
+      const double r = c_.positive(need("radius"), at("radius"));
+      b.shape = keep(new btSphereShape(btScalar(r)));
+      b.volume = 4.0 / 3.0 * M_PI * r * r * r;
+      b.bound = r;
+    } else if (type == "box") {
+      c_.keys(j, path, {"type", "half_extents"});
+      const Vec3 h = c_.positiveVec3(need("half_extents"), at("half_extents"));
+      auto* s = new btBoxShape(bt(h));
+      s->setMargin(marginFor(minComponent(h)));
+      b.shape = keep(s);
+      b.volume = 8.0 * h.x * h.y * h.z;
+      b.bound = length(h);
+    } else if (type == "cylinder") {
+      c_.keys(j, path, {"type", "radius", "half_height", "axis"});
+      const double r = c_.positive(need("radius"), at("radius"));
+      const double hh = c_.positive(need("half_height"), at("half_height"));
+      const int axis = axisOf();
+      btCylinderShape* s = axis == 0   ? new btCylinderShapeX(btVector3(btScalar(hh), btScalar(r), btScalar(r)))
+                           : axis == 1 ? new btCylinderShape(btVector3(btScalar(r), btScalar(hh), btScalar(r)))
+                                       : static_cast<btCylinderShape*>(
+                                             new btCylinderShapeZ(btVector3(btScalar(r), btScalar(r), btScalar(hh))));
+      s->setMargin(marginFor(std::min(r, hh)));
+      b.shape = keep(s);
+      b.volume = M_PI * r * r * 2 * hh;
+      b.bound = std::sqrt(r * r + hh * hh);
+    } else if (type == "capsule") {
+      c_.keys(j, path, {"type", "radius", "half_height", "axis"});
+      const double r = c_.positive(need("radius"), at("radius"));
+      const double hh = c_.nonNegative(need("half_height"), at("half_height"));
+      const int axis = axisOf();
+      const btScalar R = btScalar(r), H = btScalar(2 * hh);
+      btCapsuleShape* s = axis == 0   ? new btCapsuleShapeX(R, H)
+                          : axis == 1 ? new btCapsuleShape(R, H)
+                                      : static_cast<btCapsuleShape*>(new btCapsuleShapeZ(R, H));
+      b.shape = keep(s);
+      b.volume = M_PI * r * r * 2 * hh + 4.0 / 3.0 * M_PI * r * r * r;
+      b.bound = r + hh;
+    } else if (type == "cone") {
+      c_.keys(j, path, {"type", "radius", "height", "axis"});
+      const double r = c_.positive(need("radius"), at("radius"));
+      const double h = c_.positive(need("height"), at("height"));
+      const int axis = axisOf();
+      const btScalar R = btScalar(r), H = btScalar(h);
+      btConeShape* s = axis == 0   ? new btConeShapeX(R, H)
+                       : axis == 1 ? new btConeShape(R, H)
+                                   : static_cast<btConeShape*>(new btConeShapeZ(R, H));
+      s->setMargin(marginFor(std::min(r, 0.5 * h)));
+      b.shape = keep(s);
+      b.volume = M_PI * r * r * h / 3.0;
+      b.bound = std::sqrt(r * r + 0.25 * h * h);
+    } else if (type == "ellipsoid") {
+      c_.keys(j, path, {"type", "semi_axes"});
+      const Vec3 a = c_.positiveVec3(need("semi_axes"), at("semi_axes"));
+      // Bullet has no ellipsoid: a unit multi-sphere scaled per axis, which the importer reads back
+      // as an ellipsoid.
+      const btVector3 center(0, 0, 0);
+      const btScalar one = 1;
+      auto* s = new btMultiSphereShape(&center, &one, 1);
+      s->setMargin(marginFor(minComponent(a)));
+      s->setLocalScaling(bt(a));
+      b.shape = keep(s);
+      b.volume = 4.0 / 3.0 * M_PI * a.x * a.y * a.z;
+      b.bound = maxComponent(a);
+    } else if (type == "convex_hull") {
+      c_.keys(j, path, {"type", "points"});
+      const json& p = c_.array(need("points"), at("points"));
+      if (p.size() < 4) c_.fail(at("points"), "a convex hull needs at least 4 points, got " + std::to_string(p.size()));
+      std::vector<btVector3> pts;
+      Vec3 lo{1e30, 1e30, 1e30}, hi{-1e30, -1e30, -1e30};
+      for (size_t i = 0; i < p.size(); ++i) {
+        const Vec3 v = c_.vec3(p[i], at("points") + "[" + std::to_string(i) + "]");
+        pts.push_back(bt(v));
+        lo = vmin(lo, v);
+        hi = vmax(hi, v);
+        b.bound = std::max(b.bound, double(length(v)));
+      }
+      b.volume = hullVolume(pts);
+      if (!(b.volume > 1e-12 * std::pow(double(maxComponent(hi - lo)), 3)))
+        c_.fail(at("points"), "points are coplanar (the hull has zero volume)");
+      auto* s = new btConvexHullShape(&pts[0].x(), int(pts.size()), int(sizeof(btVector3)));
+      s->setMargin(marginFor(0.5 * minComponent(hi - lo)));
+      b.shape = keep(s);
+    } else if (type == "plane") {
+      c_.keys(j, path, {"type", "normal", "offset"});
+      if (in_compound) c_.fail(path, "a plane cannot be a compound child");
+      const Vec3 n = c_.vec3(need("normal"), at("normal"));
+      if (!(length(n) > 0)) c_.fail(at("normal"), "has zero length");
+      const double d = j.contains("offset") ? c_.number(j["offset"], at("offset")) : 0.0;
+      b.shape = keep(new btStaticPlaneShape(bt(normalized(n)), btScalar(d / length(n))));
+      b.plane = true;
+      b.bound = INFINITY;
+    } else {  // compound
+      c_.keys(j, path, {"type", "children"});
+      const json& ch = c_.array(need("children"), at("children"));
+      if (ch.empty()) c_.fail(at("children"), "a compound needs at least one child");
+      std::vector<std::pair<btTransform, btCollisionShape*>> kids;
+      for (size_t i = 0; i < ch.size(); ++i) {
+        const std::string cp = at("children") + "[" + std::to_string(i) + "]";
+        c_.object(ch[i], cp);
+        c_.keys(ch[i], cp, {"shape", "position", "rotation"});
+        if (!ch[i].contains("shape")) c_.fail(cp + ".shape", "missing");
+        BuiltShape k = shape(ch[i]["shape"], cp + ".shape", true);
+        const Vec3 pos = ch[i].contains("position") ? c_.vec3(ch[i]["position"], cp + ".position") : Vec3{0, 0, 0};
+        const Quat q = ch[i].contains("rotation") ? c_.rotation(ch[i]["rotation"], cp + ".rotation") : Quat{1, 0, 0, 0};
+        kids.push_back({btTransform(bt(q), bt(pos)), k.shape});
+        b.volume += k.volume;
+        b.bound = std::max(b.bound, double(length(pos)) + k.bound);
+      }
+      auto* s = new btCompoundShape(true, int(kids.size()));
+      for (auto& k : kids) s->addChildShape(k.first, k.second);
+      b.shape = keep(s);
+    }
+    return b;
+  }
+
+  btCollisionShape* keep(btCollisionShape* s) {
+    o_.shapes.emplace_back(s);
+    return s;
+  }
+
+  struct BodySpec {
+    BuiltShape shape;
+    double mass = 1;
+    Vec3 pos{0, 0, 0}, vel{0, 0, 0}, omega{0, 0, 0};
+    Quat rot{1, 0, 0, 0};
+    double friction = 0.5;
+    bool kinematic = false;
+    bool has_gravity = false;
+    Vec3 gravity{0, 0, 0};
+  };
+
+  btRigidBody* body(const BodySpec& s, const std::string& path) {
+    const bool fixed = s.kinematic || s.mass == 0;
+    if (s.shape.plane && !fixed) c_.fail(path + ".mass", "a plane must be static (mass 0), got " + num(s.mass));
+    const btScalar mass = fixed ? btScalar(0) : btScalar(s.mass);
+    btVector3 inertia(0, 0, 0);
+    if (!fixed) s.shape.shape->calculateLocalInertia(mass, inertia);
+    const btTransform t(bt(s.rot), bt(s.pos));
+    auto* ms = new btDefaultMotionState(t);
+    o_.motion_states.emplace_back(ms);
+    btRigidBody::btRigidBodyConstructionInfo info(mass, ms, s.shape.shape, inertia);
+    info.m_friction = btScalar(s.friction);
+    auto* rb = new btRigidBody(info);
+    o_.bodies.emplace_back(rb);
+    if (s.kinematic) {
+      rb->setCollisionFlags(rb->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+      rb->setActivationState(DISABLE_DEACTIVATION);
+    }
+    if (!fixed || s.kinematic) {
+      rb->setLinearVelocity(bt(s.vel));
+      rb->setAngularVelocity(bt(s.omega));
+    }
+    if (s.has_gravity) {
+      rb->setFlags(rb->getFlags() | BT_DISABLE_WORLD_GRAVITY);
+      rb->setGravity(bt(s.gravity));
+    }
+    return rb;
+  }
+
+  // Reads mass or density (mass from the shape's volume).
+  double massOf(const json& j, const std::string& path, double volume, bool plane) {
+    if (j.contains("mass") && j.contains("density")) c_.fail(path, "give either mass or density, not both");
+    if (j.contains("density")) {
+      const double rho = c_.nonNegative(j["density"], path + ".density");
+      if (plane && rho > 0) c_.fail(path + ".density", "a plane must be static (density 0)");
+      return rho * volume;
+    }
+    if (j.contains("mass")) return c_.nonNegative(j["mass"], path + ".mass");
+    return plane ? 0.0 : 1.0;
+  }
+
+  void plainBody(const json& j, const std::string& path, Scene& scene, std::vector<std::string>& names,
+                 std::vector<btRigidBody*>& out) {
+    c_.keys(j, path, {"name", "shape", "mass", "density", "position", "rotation", "velocity", "angular_velocity",
+                      "friction", "kinematic", "gravity"});
+    (void)scene;
+    if (!j.contains("shape")) c_.fail(path + ".shape", "missing");
+    BodySpec s;
+    s.shape = shape(j["shape"], path + ".shape");
+    s.mass = massOf(j, path, s.shape.volume, s.shape.plane);
+    if (j.contains("position")) s.pos = c_.vec3(j["position"], path + ".position");
+    if (j.contains("rotation")) s.rot = c_.rotation(j["rotation"], path + ".rotation");
+    if (j.contains("velocity")) s.vel = c_.vec3(j["velocity"], path + ".velocity");
+    if (j.contains("angular_velocity")) s.omega = c_.vec3(j["angular_velocity"], path + ".angular_velocity");
+    if (j.contains("friction")) s.friction = c_.nonNegative(j["friction"], path + ".friction");
+    if (j.contains("kinematic")) s.kinematic = c_.boolean(j["kinematic"], path + ".kinematic");
+    if (j.contains("gravity")) {
+      s.has_gravity = true;
+      s.gravity = c_.vec3(j["gravity"], path + ".gravity");
+    }
+    std::string name = j.contains("name") ? c_.string(j["name"], path + ".name") : "body" + std::to_string(out.size());
+    out.push_back(body(s, path));
+    names.push_back(name);
+  }
+
+  // Scales every length of a shape description (used for multidisperse generators).
+  static json scaled(const json& shape, double f) {
+    json s = shape;
+    for (const char* k : {"radius", "half_height", "height"})
+      if (s.contains(k) && s[k].is_number()) s[k] = s[k].get<double>() * f;
+    for (const char* k : {"half_extents", "semi_axes"})
+      if (s.contains(k) && s[k].is_array())
+        for (auto& x : s[k])
+          if (x.is_number()) x = x.get<double>() * f;
+    if (s.contains("points") && s["points"].is_array())
+      for (auto& p : s["points"])
+        if (p.is_array())
+          for (auto& x : p)
+            if (x.is_number()) x = x.get<double>() * f;
+    if (s.contains("children") && s["children"].is_array())
+      for (auto& c : s["children"])
+        if (c.is_object()) {
+          if (c.contains("shape")) c["shape"] = scaled(c["shape"], f);
+          if (c.contains("position") && c["position"].is_array())
+            for (auto& x : c["position"])
+              if (x.is_number()) x = x.get<double>() * f;
+        }
+    return s;
+  }
+
+  void generator(const json& g, const std::string& path, std::vector<std::string>& names,
+                 std::vector<btRigidBody*>& out) {
+    c_.object(g, path);
+    c_.keys(g, path, {"type", "name", "count", "footprint", "counts", "origin", "spacing", "jitter", "seed", "shape",
+                      "shapes", "scale", "mass", "density", "friction", "velocity", "angular_velocity",
+                      "random_rotation"});
+    if (!g.contains("type")) c_.fail(path + ".type", "missing generator type");
+    const std::string type = c_.oneOf(g["type"], path + ".type", {"grid", "pile"});
+    auto at = [&](const char* k) { return path + "." + k; };
+    const std::string prefix = g.contains("name") ? c_.string(g["name"], at("name")) : type;
+
+    // Shape mixture: one "shape", or "shapes": [{shape, weight}].
+    struct Entry {
+      json shape;
+      double weight;
+      std::string path;
+    };
+    std::vector<Entry> mix;
+    if (g.contains("shape") == g.contains("shapes")) c_.fail(path, "give exactly one of shape, shapes");
+    if (g.contains("shape")) {
+      mix.push_back({g["shape"], 1.0, at("shape")});
+    } else {
+      const json& arr = c_.array(g["shapes"], at("shapes"));
+      if (arr.empty()) c_.fail(at("shapes"), "needs at least one entry");
+      for (size_t i = 0; i < arr.size(); ++i) {
+        const std::string ep = at("shapes") + "[" + std::to_string(i) + "]";
+        c_.object(arr[i], ep);
+        c_.keys(arr[i], ep, {"shape", "weight"});
+        if (!arr[i].contains("shape")) c_.fail(ep + ".shape", "missing");
+        const double w = arr[i].contains("weight") ? c_.positive(arr[i]["weight"], ep + ".weight") : 1.0;
+        mix.push_back({arr[i]["shape"], w, ep + ".shape"});
+      }
+    }
+    double smin = 1, smax = 1;
+    if (g.contains("scale")) {
+      if (g["scale"].is_array()) {
+        if (g["scale"].size() != 2) c_.fail(at("scale"), "expected a number or [min, max], got " + describe(g["scale"]));
+        smin = c_.positive(g["scale"][0], at("scale") + "[0]");
+        smax = c_.positive(g["scale"][1], at("scale") + "[1]");
+        if (smax < smin) c_.fail(at("scale"), "max < min");
+      } else {
+        smin = smax = c_.positive(g["scale"], at("scale"));
+      }
+    }
+    const bool random_rot = g.contains("random_rotation") ? c_.boolean(g["random_rotation"], at("random_rotation"))
+                                                          : type == "pile";
+    // Validate every entry once and measure the largest extent at the largest scale: the bounding
+    // radius when bodies turn at random, the half extent of the axis-aligned box otherwise.
+    double bound = 0;
+    for (const Entry& e : mix) {
+      BuiltShape b = shape(scaled(e.shape, smax), e.path);
+      if (b.plane) c_.fail(e.path, "a generator cannot make planes");
+      if (random_rot) {
+        bound = std::max(bound, b.bound);
+      } else {
+        btVector3 lo, hi;
+        btTransform id;
+        id.setIdentity();
+        b.shape->getAabb(id, lo, hi);
+        for (int k = 0; k < 3; ++k) bound = std::max({bound, double(-lo[k]), double(hi[k])});
+      }
+    }
+    const double jitter = g.contains("jitter") ? c_.nonNegative(g["jitter"], at("jitter")) : 0.0;
+    if (jitter >= 0.5) c_.fail(at("jitter"), "must be < 0.5 (a fraction of the spacing), got " + num(jitter));
+    const double min_spacing = 2 * bound / (1 - 2 * jitter);
+    double spacing = 1.05 * min_spacing;
+    if (g.contains("spacing")) {
+      spacing = c_.positive(g["spacing"], at("spacing"));
+      if (spacing < min_spacing * (1 - 1e-6))
+        c_.fail(at("spacing"), num(spacing) + " is too small: bodies of bounding radius " + num(bound) +
+                                   " with jitter " + num(jitter) + " need at least " + num(min_spacing));
+    }
+    const Vec3 origin = g.contains("origin") ? c_.vec3(g["origin"], at("origin")) : Vec3{0, 0, 0};
+    int64_t nx = 1, ny = 1, nz = 1, count = 0;
+    if (type == "grid") {
+      if (g.contains("count") || g.contains("footprint")) c_.fail(path, "a grid takes counts [nx, ny, nz], not count/footprint");
+      if (!g.contains("counts")) c_.fail(at("counts"), "missing (required for a grid)");
+      const json& cn = g["counts"];
+      if (!cn.is_array() || cn.size() != 3) c_.fail(at("counts"), "expected [nx, ny, nz], got " + describe(cn));
+      nx = c_.integer(cn[0], at("counts") + "[0]", 1, 1 << 20);
+      ny = c_.integer(cn[1], at("counts") + "[1]", 1, 1 << 20);
+      nz = c_.integer(cn[2], at("counts") + "[2]", 1, 1 << 20);
+      count = nx * ny * nz;
+    } else {
+      if (g.contains("counts")) c_.fail(at("counts"), "a pile takes count and footprint, not counts");
+      if (!g.contains("count")) c_.fail(at("count"), "missing (required for a pile)");
+      count = c_.integer(g["count"], at("count"), 1, int64_t(1) << 26);
+      double fx = spacing * 10, fz = spacing * 10;
+      if (g.contains("footprint")) {
+        const json& f = g["footprint"];
+        if (!f.is_array() || f.size() != 2) c_.fail(at("footprint"), "expected [width_x, width_z], got " + describe(f));
+        fx = c_.positive(f[0], at("footprint") + "[0]");
+        fz = c_.positive(f[1], at("footprint") + "[1]");
+      }
+      nx = std::max<int64_t>(1, int64_t(std::floor(fx / spacing)));
+      nz = std::max<int64_t>(1, int64_t(std::floor(fz / spacing)));
+      ny = (count + nx * nz - 1) / (nx * nz);
+    }
+    if (count > (int64_t(1) << 26)) c_.fail(path, "too many bodies (" + std::to_string(count) + ")");
+    Rng rng{g.contains("seed") ? uint64_t(c_.integer(g["seed"], at("seed"), 0, int64_t(1) << 53)) : 1u};
+    const double friction = g.contains("friction") ? c_.nonNegative(g["friction"], at("friction")) : 0.5;
+    const Vec3 vel = g.contains("velocity") ? c_.vec3(g["velocity"], at("velocity")) : Vec3{0, 0, 0};
+    const Vec3 omega = g.contains("angular_velocity") ? c_.vec3(g["angular_velocity"], at("angular_velocity")) : Vec3{0, 0, 0};
+    if (g.contains("mass") && g.contains("density")) c_.fail(path, "give either mass or density, not both");
+    const bool by_density = g.contains("density");
+    const double mass = g.contains("mass") ? c_.positive(g["mass"], at("mass")) : 1.0;
+    const double rho = by_density ? c_.positive(g["density"], at("density")) : 0.0;
+    double wsum = 0;
+    for (const Entry& e : mix) wsum += e.weight;
+
+    std::map<size_t, BuiltShape> shared;  // one Bullet shape per mixture entry when the scale is fixed
+    for (int64_t i = 0; i < count; ++i) {
+      const int64_t ix = i % nx, iz = (i / nx) % nz, iy = i / (nx * nz);
+      double pick = rng.uniform() * wsum;
+      size_t e = 0;
+      while (e + 1 < mix.size() && pick >= mix[e].weight) pick -= mix[e++].weight;
+      const double f = smin == smax ? smin : rng.uniform(smin, smax);
+      BodySpec s;
+      if (smin == smax) {
+        auto it = shared.find(e);
+        if (it == shared.end()) it = shared.emplace(e, shape(scaled(mix[e].shape, f), mix[e].path)).first;
+        s.shape = it->second;
+      } else {
+        s.shape = shape(scaled(mix[e].shape, f), mix[e].path);
+      }
+      const double jx = rng.uniform(-jitter, jitter), jy = rng.uniform(-jitter, jitter), jz = rng.uniform(-jitter, jitter);
+      s.pos = origin + Vec3{real((ix + 0.5 + jx) * spacing), real((iy + 0.5 + jy) * spacing), real((iz + 0.5 + jz) * spacing)};
+      s.rot = random_rot ? randomRotation(rng) : Quat{1, 0, 0, 0};
+      s.mass = by_density ? rho * s.shape.volume : mass;
+      s.friction = friction;
+      s.vel = vel;
+      s.omega = omega;
+      out.push_back(body(s, path));
+      names.push_back(prefix + "_" + std::to_string(i));
+    }
+  }
+
+ private:
+  const Check& c_;
+  Scene::Owned& o_;
+};
+
+std::string readFile(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw InputError(path + ": no such file");
+  if (fs::is_directory(path, ec)) throw InputError(path + ": is a directory, not a scene file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  if (f.bad()) throw InputError(path + ": read error");
+  return ss.str();
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+}  // namespace
+
+Scene Scene::fromJsonText(const std::string& text, const std::string& origin, const std::vector<std::string>& overrides) {
+  Check c{origin};
+  if (text.find_first_not_of(" \t\r\n") == std::string::npos) c.fail("", "file is empty");
+  json doc;
+  try {
+    doc = json::parse(text);
+  } catch (const json::exception& e) {
+    std::string what = e.what();
+    const size_t p = what.find("] ");
+    if (p != std::string::npos) what = what.substr(p + 2);
+    if (what.find("overflow") != std::string::npos) what += " (non-finite numbers are not allowed)";
+    c.fail("", "malformed JSON: " + what);
+  }
+  c.object(doc, "(document)");
+  for (const std::string& o : overrides) applyOverride(doc, o);
+  c.keys(doc, "", {"$schema", "name", "description", "settings", "bodies"});
+
+  Scene scene;
+  scene.source = origin;
+  scene.format = "json";
+  scene.name = doc.contains("name") ? c.string(doc["name"], "name") : fs::path(origin).stem().string();
+  if (doc.contains("description")) c.string(doc["description"], "description");
+  scene.settings_json_ = doc.contains("settings") ? doc["settings"] : json::object();
+  scene.settings = parseSceneSettings(scene.settings_json_, origin);
+
+  if (!doc.contains("bodies")) c.fail("bodies", "missing (a scene needs at least one body)");
+  const json& bodies = c.array(doc["bodies"], "bodies");
+  Builder b(c, *scene.owned_);
+  for (size_t i = 0; i < bodies.size(); ++i) {
+    const std::string path = "bodies[" + std::to_string(i) + "]";
+    c.object(bodies[i], path);
+    if (bodies[i].contains("generator")) {
+      c.keys(bodies[i], path, {"generator"});
+      b.generator(bodies[i]["generator"], path + ".generator", scene.names_, scene.bodies_);
+    } else {
+      b.plainBody(bodies[i], path, scene, scene.names_, scene.bodies_);
+    }
+  }
+  if (scene.bodies_.empty()) c.fail("bodies", "the scene has no bodies");
+  return scene;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// .bullet files
+// ---------------------------------------------------------------------------------------------------
+namespace {
+
+// Walks the file's block structure before Bullet's parser sees it (the parser trusts the lengths it
+// reads and crashes on garbage): header "BULLETf"/"BULLETd", pointer size, endianness, 3-digit version,
+// then blocks of (code, length, old pointer, SDNA index, count) + data, one of them the DNA ("DNA1").
+void checkBulletFile(const std::string& buf, const std::string& path) {
+  auto fail = [&](const std::string& what) { throw InputError(path + ": " + what); };
+  if (buf.empty()) fail("file is empty");
+  if (buf.size() < 12 || buf.compare(0, 6, "BULLET") != 0)
+    fail("not a .bullet file (no BULLET header)");
+  if (buf[6] != 'f' && buf[6] != 'd') fail("not a .bullet file (bad precision byte)");
+  if (buf[7] != '-' && buf[7] != '_') fail("not a .bullet file (bad pointer-size byte)");
+  if (buf[8] != 'v' && buf[8] != 'V') fail("not a .bullet file (bad endianness byte)");
+  for (int i = 9; i < 12; ++i)
+    if (!std::isdigit(static_cast<unsigned char>(buf[size_t(i)]))) fail("not a .bullet file (bad version)");
+  const size_t ptr = buf[7] == '-' ? 8 : 4;
+  const bool swap = buf[8] == 'V';
+  const size_t head = 4 + 4 + ptr + 4 + 4;
+  auto read32 = [&](size_t at) {
+    uint32_t v;
+    std::memcpy(&v, buf.data() + at, 4);
+    if (swap) v = (v >> 24) | ((v >> 8) & 0xff00u) | ((v << 8) & 0xff0000u) | (v << 24);
+    return v;
+  };
+  size_t at = 12, blocks = 0, bodies = 0;
+  bool dna = false;
+  while (at < buf.size()) {
+    if (buf.size() - at < head)
+      fail("truncated or corrupt .bullet file (incomplete block header at byte " + std::to_string(at) + ")");
+    const std::string code = buf.substr(at, 4);
+    if (code == "ENDB") break;
+    const int32_t len = int32_t(read32(at + 4));
+    if (len < 0 || size_t(len) > buf.size() - at - head)
+      fail("truncated or corrupt .bullet file (block '" + std::string(code.c_str()) + "' at byte " +
+           std::to_string(at) + " runs past the end of the file)");
+    if (code == "DNA1") {
+      dna = true;
+      if (len < 8 || buf.compare(at + head, 4, "SDNA") != 0) fail("corrupt .bullet file (bad DNA block)");
+    }
+    if (code == "RBDY") ++bodies;
+    at += head + size_t(len);
+    ++blocks;
+  }
+  if (!dna) fail("truncated or corrupt .bullet file (no DNA block)");
+  if (bodies == 0) fail("the .bullet file holds no rigid bodies");
+}
+
+btVector3 vec(const btVector3FloatData& d) {
+  btVector3 v;
+  v.deSerializeFloat(d);
+  return v;
+}
+btVector3 vec(const btVector3DoubleData& d) {
+  btVector3 v;
+  v.deSerializeDouble(d);
+  return v;
+}
+
+template <class Data>
+void restoreBodyState(btRigidBody* rb, const Data* d, const btVector3& world_gravity) {
+  const btVector3 v = vec(d->m_linearVelocity), w = vec(d->m_angularVelocity), g = vec(d->m_gravity);
+  const int flags = d->m_collisionObjectData.m_collisionFlags;
+  if (flags & btCollisionObject::CF_KINEMATIC_OBJECT) {
+    rb->setCollisionFlags(rb->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+    rb->setActivationState(DISABLE_DEACTIVATION);
+  }
+  if (!rb->isStaticObject() || rb->isKinematicObject()) {
+    rb->setLinearVelocity(v);
+    rb->setAngularVelocity(w);
+  }
+  if ((g - world_gravity).length() > 1e-5f * (world_gravity.length() + 1)) {
+    rb->setFlags(rb->getFlags() | BT_DISABLE_WORLD_GRAVITY);
+    rb->setGravity(g);
+  } else {
+    rb->setGravity(world_gravity);
+  }
+}
+
+}  // namespace
+
+Scene Scene::fromBulletFile(const std::string& path, const std::vector<std::string>& overrides) {
+  std::string buf = readFile(path);
+  checkBulletFile(buf, path);
+
+  Scene scene;
+  scene.source = path;
+  scene.format = "bullet";
+  scene.name = fs::path(path).stem().string();
+  scene.owned_->importer = std::make_unique<SceneImporter>();
+  SceneImporter& imp = *scene.owned_->importer;
+
+  std::vector<char> mem(buf.begin(), buf.end());
+  bParse::btBulletFile file(mem.data(), int(mem.size()));
+  if (!(file.getFlags() & bParse::FD_OK)) throw InputError(path + ": not a readable .bullet file");
+  if (!imp.loadFileFromMemory(&file)) throw InputError(path + ": Bullet's importer could not read the file");
+
+  const bool dbl = (file.getFlags() & bParse::FD_DOUBLE_PRECISION) != 0;
+  for (int i = 0; i < file.m_rigidBodies.size(); ++i) {
+    btRigidBody* rb = btRigidBody::upcast(imp.bodyFor(file.m_rigidBodies[i]));
+    if (!rb) continue;
+    if (dbl)
+      restoreBodyState(rb, reinterpret_cast<const btRigidBodyDoubleData*>(file.m_rigidBodies[i]), imp.gravity_);
+    else
+      restoreBodyState(rb, reinterpret_cast<const btRigidBodyFloatData*>(file.m_rigidBodies[i]), imp.gravity_);
+  }
+  const int n = imp.getNumRigidBodies();
+  if (n == 0) throw InputError(path + ": the .bullet file holds no rigid bodies Bullet's importer can read");
+  if (n != file.m_rigidBodies.size())
+    throw InputError(path + ": " + std::to_string(file.m_rigidBodies.size() - n) + " of " +
+                     std::to_string(file.m_rigidBodies.size()) + " rigid bodies have shapes Bullet's importer cannot read");
+  for (int i = 0; i < n; ++i) {
+    btRigidBody* rb = btRigidBody::upcast(imp.getRigidBodyByIndex(i));
+    if (!rb) throw InputError(path + ": object " + std::to_string(i) + " is not a rigid body");
+    scene.bodies_.push_back(rb);
+    const char* nm = imp.getNameForPointer(rb);
+    scene.names_.push_back(nm ? nm : "body" + std::to_string(i));
+  }
+  scene.settings = SceneSettings{};
+  scene.settings.gravity = Vec3{real(imp.gravity_.x()), real(imp.gravity_.y()), real(imp.gravity_.z())};
+  scene.settings_json_ = json::object();
+  scene.settings_json_["gravity"] = {scene.settings.gravity.x, scene.settings.gravity.y, scene.settings.gravity.z};
+  for (const std::string& o : overrides) scene.applySettingOverride(o);
+  return scene;
+}
+
+Scene Scene::load(const std::string& path, const std::vector<std::string>& overrides) {
+  if (path.empty()) {
+    Scene s = fromJsonText(defaultSceneJson(), "<default>", overrides);
+    s.source = "<default>";
+    s.format = "default";
+    return s;
+  }
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext != ".json" && ext != ".bullet") {
+    std::error_code ec;
+    if (!fs::exists(path, ec)) throw InputError(path + ": no such file");
+    throw InputError(path + ": unknown scene file extension '" + ext + "' (expected .json or .bullet)");
+  }
+  if (ext == ".bullet") return fromBulletFile(path, overrides);
+  return fromJsonText(readFile(path), path, overrides);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// The embedded default: 2,000 mixed particles of 1-2 cm (spheres, boxes, cylinders, capsules,
+// ellipsoids, cones, tetrahedra; sizes x0.8..1.2) dropped from a jittered lattice into a 0.5 m x 0.5 m
+// box; they settle in about a second.
+// ---------------------------------------------------------------------------------------------------
+const char* Scene::defaultSceneJson() {
+  return R"JSON({
+  "name": "default-pile",
+  "description": "Granular pile: 2000 mixed particles of 1-2 cm falling into a 0.5 m box",
+  "settings": { "dt": 0.001, "time": 1.0, "solver": "apgd", "iterations": 50, "gravity": [0, -9.81, 0],
+                "friction_combine": "product" },
+  "bodies": [
+    { "name": "ground", "shape": { "type": "plane", "normal": [0, 1, 0], "offset": 0 }, "mass": 0, "friction": 0.7 },
+    { "name": "wall_px", "shape": { "type": "box", "half_extents": [0.01, 0.3, 0.27] }, "mass": 0, "position": [ 0.26, 0.3, 0], "friction": 0.7 },
+    { "name": "wall_nx", "shape": { "type": "box", "half_extents": [0.01, 0.3, 0.27] }, "mass": 0, "position": [-0.26, 0.3, 0], "friction": 0.7 },
+    { "name": "wall_pz", "shape": { "type": "box", "half_extents": [0.27, 0.3, 0.01] }, "mass": 0, "position": [0, 0.3,  0.26], "friction": 0.7 },
+    { "name": "wall_nz", "shape": { "type": "box", "half_extents": [0.27, 0.3, 0.01] }, "mass": 0, "position": [0, 0.3, -0.26], "friction": 0.7 },
+    { "generator": {
+        "type": "pile", "name": "particle", "count": 2000, "footprint": [0.49, 0.49], "origin": [-0.245, 0.002, -0.245],
+        "jitter": 0.05, "seed": 42, "scale": [0.8, 1.2], "density": 2500, "friction": 0.7,
+        "shapes": [
+          { "weight": 3, "shape": { "type": "sphere", "radius": 0.007 } },
+          { "weight": 1, "shape": { "type": "box", "half_extents": [0.006, 0.005, 0.004] } },
+          { "weight": 1, "shape": { "type": "cylinder", "radius": 0.005, "half_height": 0.006 } },
+          { "weight": 1, "shape": { "type": "capsule", "radius": 0.004, "half_height": 0.004 } },
+          { "weight": 1, "shape": { "type": "ellipsoid", "semi_axes": [0.008, 0.006, 0.005] } },
+          { "weight": 0.5, "shape": { "type": "cone", "radius": 0.006, "height": 0.012 } },
+          { "weight": 0.5, "shape": { "type": "convex_hull",
+              "points": [[0.007, 0.007, 0.007], [-0.007, -0.007, 0.007], [-0.007, 0.007, -0.007], [0.007, -0.007, -0.007]] } }
+        ] } }
+  ]
+})JSON";
+}
+
+}  // namespace dvi
