@@ -5,11 +5,21 @@
 // +n and A along -n. For contact k with tangents (u, w) = tangentBasis(n):
 //   D_k^T v = [n; u; w] . (vB + wB x rB - vA - wA x rA),  rA = pa - xA, rB = pb - xB
 //   b_k     = (max(dist/h, -v_rec), 0, 0)   with v_rec = recovery_rel * size (speed relative to body size)
+//
+// Layout (double; see jacobian.h), per contact: ContactJacobian 104 B (n, u, rA, rB, a, b), r 24 B, mu 8 B,
+// eta 8 B, N_kk^-1 48 B, 2 adjacency entries 8 B = 200 B; per body: BodyInverseMass 56 B, BodyDelta 48 B,
+// CSR offset 4 B. One Schur product reads per contact about 2 x (104 + 24 + 4) B in the per-body gather
+// (pass a) and 104 + 24 B plus two BodyDelta gathers in the per-contact pass (b).
+//
+// Fixed and kinematic bodies (inverse mass and inertia 0) take no part in the Schur product (their
+// velocity change is 0) but their v_free enters r.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "data.h"
+#include "jacobian.h"
 #include "solver.h"
 
 namespace dvi {
@@ -17,28 +27,56 @@ namespace dvi {
 struct ContactProblemSettings {
   real dt = real(1e-3);
   real recovery_rel = real(10);  // largest separating speed asked for a penetration: recovery_rel x size per s
-  int threads = 1;
+  int threads = 0;               // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads())
 };
 
 class ContactProblem final : public CcpProblem {
  public:
-  // Reads bodies.{pos, inv_mass, inv_inertia, rot}, contacts.*, and the free velocities (after external
-  // forces, before contact impulses). Writes the Jacobian blocks, r and the body -> contact adjacency.
+  // Reads bodies.{pos, inv_mass, inv_inertia, rot, flags}, contacts.*, and the free velocities (after
+  // external forces, before contact impulses). Writes the Jacobian blocks, r and the body -> contact
+  // adjacency.
   void build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,
              const ContactProblemSettings& settings);
 
   int size() const override;
   const real* rhs() const override;
+  // y = D^T (M^-1 (D x)) in two deterministic parallel passes. Uses an internal body buffer: do not call
+  // schur, applyImpulses or solveGaussSeidel of one problem from two threads at once.
   void schur(const real* x, real* y) const override;
   void project(real* x) const override;
   void applyBlockInverse(const real* x, real* y) const override;
   int threads() const override;
+  const real* frictionCoefficients() const override { return mu_.data(); }
+  const real* blockSteps() const override { return eta_.data(); }
+  real maxDiagonal() const override { return max_diag_; }
 
   // Velocity change of every body from impulses gamma: dv = M^-1 D gamma (adds into dv, dw).
   void applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const;
 
   // Projected Gauss-Seidel, the sequential CPU reference solver.
   SolverStats solveGaussSeidel(real* gamma, const SolverSettings& s) const;
+
+  // Read access for tests and the GPU upload.
+  const std::vector<ContactJacobian>& jacobians() const { return jac_; }
+  const std::vector<BodyInverseMass>& bodyInverseMasses() const { return inv_; }
+
+ private:
+  // Pass (a): delta_[i] = M_i^-1 sum over the contacts of body i of D_ki x_k, for the active bodies.
+  void gatherBodyDeltas(const real* x) const;
+
+  int threads_ = 1;
+  int64_t nc_ = 0;                       // contacts
+  real max_diag_ = 1;
+  std::vector<ContactJacobian> jac_;     // per contact
+  std::vector<real> rhs_;                // 3 per contact
+  std::vector<real> mu_;                 // per contact
+  std::vector<real> eta_;                // per contact: scalar block step
+  std::vector<real> binv_;               // 6 per contact: N_kk^-1, symmetric
+  std::vector<BodyInverseMass> inv_;     // per body
+  std::vector<int32_t> adj_start_;       // CSR over the active bodies: entries of active body j are
+  std::vector<int32_t> adj_;             //   adj_[adj_start_[j] .. adj_start_[j+1]), each 2 k + side
+  std::vector<int32_t> active_;          // bodies that can move and touch at least one contact
+  mutable std::vector<BodyDelta> delta_; // per body; zero for bodies that are not active
 };
 
 }  // namespace dvi

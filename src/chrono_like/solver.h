@@ -1,14 +1,22 @@
 // CCP solvers (DESIGN §3). A solver sees only the Schur product y = N x (N = D^T M^-1 D, never formed),
-// the projection onto the product of friction cones, the right-hand side r and, for Jacobi, the
-// inverse of N's 3x3 diagonal blocks (Chrono::Multicore's ChSolverMulticore interface). It does not know
-// how contacts were assembled, so the same solver code serves the CPU and GPU problems.
+// the friction cones, the right-hand side r and the per-contact block scalings (Chrono::Multicore's
+// ChSolverMulticore interface). It does not know how contacts were assembled, so the same solver code
+// serves the CPU and GPU problems.
 //
 //   min 1/2 g^T N g + r^T g   over g in Y = product of cones {(gn, gu, gw): sqrt(gu^2+gw^2) <= mu gn}
 //
 // Error measure common to every solver: the projected-gradient residual
-//   res(g) = || (g - P(g - a (N g + r))) / a ||   with a fixed a (settings.residual_alpha)
+//   res(g) = || (g - P(g - a (N g + r))) / a ||_2,   a = settings.residual_alpha / p.maxDiagonal()
+// i.e. a fixed fraction of the largest diagonal entry of N, so a N is dimensionless and the residual is a
+// velocity (m/s) whatever the masses (a fixed a in kg would mean a N ~ 100 for mm grains and ~1e-6 for a
+// drum). For a small fraction (default 1e-4) it approaches the norm of the gradient projected on the
+// tangent cone of Y at g: the contact velocity error of the contacts that push or stick.
+//
+// Determinism: every reduction sums fixed blocks of contacts (kReduceBlock) and then the block partials in
+// order, so results are bitwise identical for any thread count.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -20,20 +28,35 @@ enum class SolverType { Jacobi, GaussSeidel, APGD, BB };
 const char* solverName(SolverType t);
 bool parseSolver(const std::string& s, SolverType& out);
 
+// How Jacobi and Gauss-Seidel scale a block's gradient.
+//  Scalar:     g_k <- P(g_k - w eta_k (N g + r)_k), eta_k = 1 / (Gershgorin bound of N_kk). One scalar per
+//              contact, so the fixed points are exactly the CCP's solutions (default).
+//  Inverse3x3: g_k <- P(g_k - w N_kk^-1 (N g + r)_k), the Chrono-style block Jacobi. The Euclidean
+//              projection of an N_kk^-1-scaled step has other fixed points than the CCP wherever a contact
+//              slides (on the cone surface) or separates with a tangential pull, and it is not a descent
+//              step: on random frictional scenes (tests) both Jacobi and Gauss-Seidel diverge with it. Use
+//              it only for frictionless or sticking contacts; kept for comparison with Chrono.
+enum class BlockScaling { Scalar, Inverse3x3 };
+
 struct SolverSettings {
   int max_iterations = 50;
   real tolerance = real(0);      // stop when the residual falls below it (0: run all iterations)
   real jacobi_omega = real(0.3); // Jacobi over-relaxation with block scaling (Chrono's default 0.3..1)
   real gs_omega = real(1.0);     // Gauss-Seidel relaxation
-  real residual_alpha = real(1e-4);  // a in the residual; scaled by the problem (see CcpProblem)
+  real residual_alpha = real(1e-4);  // a in the residual, as a fraction of 1 / max diag(N) (see above)
   bool record_history = false;   // keep the residual of every iteration
+  BlockScaling block_scaling = BlockScaling::Scalar;  // Jacobi and Gauss-Seidel
 };
 
 struct SolverStats {
   int iterations = 0;
   real residual = 0;
-  std::vector<real> history;  // residual after each iteration when record_history
+  std::vector<real> history;  // when record_history: [0] the projected warm start's residual, [i] after
+                              // iteration i (iterations + 1 entries)
 };
+
+// Contacts per block of every deterministic reduction (3 reals each).
+constexpr int kReduceBlock = 1024;
 
 // The operator interface a solver works on. Vectors are plain arrays of size() reals, laid out in blocks
 // of 3 per contact (normal, tangent u, tangent w).
@@ -46,15 +69,55 @@ class CcpProblem {
   virtual void project(real* x) const = 0;               // x <- P_Y(x)
   virtual void applyBlockInverse(const real* x, real* y) const = 0;  // y = B^-1 x, B = block diag of N
   virtual int threads() const { return 1; }
+
+  // Friction coefficient of every contact (size() / 3 of them): the solvers project block by block with
+  // cone.h inside their fused loops.
+  virtual const real* frictionCoefficients() const = 0;
+  // Scalar step eta_k of every contact (size() / 3): 1 / (Gershgorin bound of the diagonal block N_kk).
+  virtual const real* blockSteps() const = 0;
+  // Largest diagonal entry of N (scales the residual's alpha).
+  virtual real maxDiagonal() const = 0;
 };
 
-// Projected gradient residual, shared by every solver and the tests.
+// The alpha the residual uses for this problem: s.residual_alpha / p.maxDiagonal().
+real residualAlpha(const CcpProblem& p, const SolverSettings& s);
+
+// Projected gradient residual, shared by every solver and the tests. scratch is resized as needed.
 real ccpResidual(const CcpProblem& p, const real* gamma, real alpha, std::vector<real>& scratch);
 
-// Each solver improves gamma in place (it arrives warm-started).
+// Each solver improves gamma in place (it arrives warm-started; it is projected first). Scratch vectors
+// live in a per-thread workspace that keeps its capacity between solves, so iterations never allocate.
 SolverStats solveJacobi(const CcpProblem& p, real* gamma, const SolverSettings& s);
 SolverStats solveApgd(const CcpProblem& p, real* gamma, const SolverSettings& s);
 SolverStats solveBB(const CcpProblem& p, real* gamma, const SolverSettings& s);
+
+namespace detail {
+// Deterministic reduction of M sums over nc contacts: body(k, acc) adds contact k's terms to acc[0..M);
+// each fixed block of kReduceBlock contacts is summed in order, then the block partials in order, so the
+// result does not depend on the thread count. part is scratch (grown as needed, never shrunk).
+template <int M, class Body>
+void blockReduce(int64_t nc, int threads, std::vector<double>& part, double* out, Body body) {
+  const int64_t nblk = (nc + kReduceBlock - 1) / kReduceBlock;
+  if (int64_t(part.size()) < nblk * M) part.resize(size_t(nblk * M));
+  double* pp = part.data();
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int64_t bl = 0; bl < nblk; ++bl) {
+    double acc[M];
+    for (int m = 0; m < M; ++m) acc[m] = 0;
+    const int64_t k1 = (bl + 1) * kReduceBlock < nc ? (bl + 1) * kReduceBlock : nc;
+    for (int64_t k = bl * kReduceBlock; k < k1; ++k) {
+      double c[M];  // per-contact terms first, so acc stays in registers across the stores of body
+      for (int m = 0; m < M; ++m) c[m] = 0;
+      body(k, c);
+      for (int m = 0; m < M; ++m) acc[m] += c[m];
+    }
+    for (int m = 0; m < M; ++m) pp[bl * M + m] = acc[m];
+  }
+  for (int m = 0; m < M; ++m) out[m] = 0;
+  for (int64_t bl = 0; bl < nblk; ++bl)
+    for (int m = 0; m < M; ++m) out[m] += pp[bl * M + m];
+}
+}  // namespace detail
 
 // Projected Gauss-Seidel needs row access, which only the contact problem provides; see contact_problem.h.
 

@@ -1,0 +1,64 @@
+// Euclidean projection onto one friction cone (DESIGN §3), a per-element DVI_HD operation shared by the
+// CPU solvers and, later, the CUDA kernels.
+//
+//   K_mu = {(gn, gu, gw) : sqrt(gu^2 + gw^2) <= mu gn}          (a second-order cone, half-angle atan(mu))
+//   K_mu° = {(gn, gt) : mu |gt| <= -gn}                          (its polar cone)
+//
+// Reference: the closed form is the projection onto a second-order cone written in the (gn, |gt|) plane,
+// as used by Anitescu & Tasora, "An iterative approach for cone complementarity problems for nonsmooth
+// dynamics", Comput. Optim. Appl. 47 (2010), and Tasora & Anitescu, CMAME 200 (2011). With gt = |(gu, gw)|:
+//   gt <= mu gn          inside K: unchanged
+//   mu gt <= -gn         inside the polar cone: projects to the apex 0
+//   otherwise            onto the boundary ray (1, mu) of the (gn, gt) half plane:
+//                        gn' = (mu gt + gn) / (mu^2 + 1),  gt' = mu gn'  along the same tangent direction.
+// mu = 0 is the frictionless case: gt' = 0, gn' = max(gn, 0). It is exact: x = P_K(x) + P_K°(x) with the two
+// parts orthogonal (Moreau), which the tests check.
+#pragma once
+
+#include <cmath>
+
+#include "hd.h"
+
+namespace dvi {
+
+DVI_HD void projectCone(real mu, real& gn, real& gu, real& gw) {
+  if (!(mu > real(0))) {  // frictionless (mu <= 0 treated as 0)
+    gu = real(0);
+    gw = real(0);
+    gn = gn > real(0) ? gn : real(0);
+    return;
+  }
+  // The two tests on squares (no square root on the common inside / separated paths):
+  // gt <= mu gn  <=>  gn >= 0 and gt^2 <= mu^2 gn^2;   mu gt <= -gn  <=>  gn <= 0 and mu^2 gt^2 <= gn^2.
+  const real t2 = gu * gu + gw * gw;
+  const real mu2 = mu * mu, gn2 = gn * gn;
+  if (gn >= real(0) && t2 <= mu2 * gn2) return;  // inside (covers gt = 0 with gn >= 0)
+  if (gn <= real(0) && mu2 * t2 <= gn2) {        // polar cone (covers gt = 0 with gn < 0)
+    gn = real(0);
+    gu = real(0);
+    gw = real(0);
+    return;
+  }
+  // Here gt > 0 and mu gt + gn > 0.
+  const real gt = std::sqrt(t2);
+  const real n = (mu * gt + gn) / (mu2 + real(1));
+  const real s = mu * n / gt;
+  gn = n;
+  gu *= s;
+  gw *= s;
+}
+
+// Projects the block g[0..2] = (gn, gu, gw) in place.
+DVI_HD void projectConeBlock(real mu, real* g) { projectCone(mu, g[0], g[1], g[2]); }
+
+// Squared contribution of one contact to the projected-gradient residual (DESIGN §3):
+// |(g - P(g - a grad)) / a|^2 for the block g with gradient grad = (N g + r)_k.
+// inv_a = 1 / a is passed too, to keep divisions out of the solvers' loops.
+DVI_HD real projectedGradientResidual2(real mu, const real* g, const real* grad, real a, real inv_a) {
+  real t0 = g[0] - a * grad[0], t1 = g[1] - a * grad[1], t2 = g[2] - a * grad[2];
+  projectCone(mu, t0, t1, t2);
+  const real e0 = (g[0] - t0) * inv_a, e1 = (g[1] - t1) * inv_a, e2 = (g[2] - t2) * inv_a;
+  return e0 * e0 + e1 * e1 + e2 * e2;
+}
+
+}  // namespace dvi

@@ -1,0 +1,230 @@
+// Assembly of the contact CCP and its matrix-free operators (DESIGN §3; layout in contact_problem.h and
+// jacobian.h). The per-element work is in jacobian.h and cone.h, shared with the CUDA kernels.
+#include "contact_problem.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "cone.h"
+
+namespace dvi {
+
+namespace {
+bool movable(const BodyInverseMass& B) {
+  return B.m != 0 || B.I[0] != 0 || B.I[1] != 0 || B.I[2] != 0 || B.I[3] != 0 || B.I[4] != 0 || B.I[5] != 0;
+}
+}  // namespace
+
+void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
+                           const Vec3* w_free, const ContactProblemSettings& settings) {
+  threads_ = settings.threads > 0 ? settings.threads : omp_get_max_threads();
+  const int T = threads_;
+  const int64_t nb = int64_t(bodies.count());
+  nc_ = int64_t(contacts.count());
+  const int64_t nc = nc_;
+  jac_.resize(size_t(nc));
+  rhs_.resize(size_t(3 * nc));
+  mu_.resize(size_t(nc));
+  eta_.resize(size_t(nc));
+  binv_.resize(size_t(6 * nc));
+  inv_.resize(size_t(nb));
+  delta_.assign(size_t(nb), BodyDelta{{0, 0, 0}, {0, 0, 0}});
+
+  const bool have_flags = bodies.flags.size() == size_t(nb);
+#pragma omp parallel for schedule(static) num_threads(T)
+  for (int64_t i = 0; i < nb; ++i) {
+    const bool fixed = have_flags && (bodies.flags[i] & (kBodyFixed | kBodyKinematic));
+    inv_[i] = fixed ? BodyInverseMass{0, {0, 0, 0, 0, 0, 0}}
+                    : makeBodyInverseMass(bodies.inv_mass[i], bodies.inv_inertia[i], bodies.rot[i]);
+  }
+
+  const real h = settings.dt;
+  real max_diag = 0;
+#pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
+  for (int64_t k = 0; k < nc; ++k) {
+    const int32_t a = contacts.body_a[k], b = contacts.body_b[k];
+    const ContactJacobian J =
+        makeContactJacobian(contacts.normal[k], contacts.pa[k], contacts.pb[k], bodies.pos[a], bodies.pos[b], a, b);
+    jac_[k] = J;
+    real* rk = rhs_.data() + 3 * k;
+    contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
+    rk[0] += contactBias(contacts.dist[k], h, settings.recovery_rel, contacts.size[k]);
+    mu_[k] = contacts.mu[k];
+    real N[6];
+    contactDiagonalBlock(J, inv_[a], inv_[b], N);
+    invertSymmetric3(N, binv_.data() + 6 * k);
+    eta_[k] = blockStepFromDiagonal(N);
+    max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
+  }
+  max_diag_ = max_diag > 0 ? max_diag : real(1);
+
+  // Body -> contact adjacency (CSR over the bodies that can move and touch a contact); entries 2 k + side,
+  // listed in increasing k, so the gather in schur() sums in a fixed order.
+  std::vector<int32_t> count(size_t(nb) + 1, 0);
+  for (int64_t k = 0; k < nc; ++k) {
+    const ContactJacobian& J = jac_[k];
+    if (movable(inv_[J.a])) ++count[J.a];
+    if (movable(inv_[J.b])) ++count[J.b];
+  }
+  active_.clear();
+  adj_start_.clear();
+  std::vector<int32_t> fill(size_t(nb), 0);
+  int32_t total = 0;
+  for (int64_t i = 0; i < nb; ++i) {
+    if (count[i] == 0) continue;
+    active_.push_back(int32_t(i));
+    adj_start_.push_back(total);
+    fill[i] = total;
+    total += count[i];
+  }
+  adj_start_.push_back(total);
+  adj_.resize(size_t(total));
+  for (int64_t k = 0; k < nc; ++k) {
+    const ContactJacobian& J = jac_[k];
+    if (movable(inv_[J.a])) adj_[fill[J.a]++] = int32_t(2 * k);
+    if (movable(inv_[J.b])) adj_[fill[J.b]++] = int32_t(2 * k + 1);
+  }
+}
+
+int ContactProblem::size() const { return int(3 * nc_); }
+const real* ContactProblem::rhs() const { return rhs_.data(); }
+int ContactProblem::threads() const { return threads_; }
+
+void ContactProblem::gatherBodyDeltas(const real* x) const {
+  const int64_t na = int64_t(active_.size());
+#pragma omp parallel for schedule(static) num_threads(threads_)
+  for (int64_t j = 0; j < na; ++j) {
+    const int32_t i = active_[j];
+    Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) {
+      const int32_t ent = adj_[e];
+      const int32_t k = ent >> 1;
+      accumulateContactImpulse(jac_[k], ent & 1, x + 3 * int64_t(k), F, Tq);
+    }
+    delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
+  }
+}
+
+void ContactProblem::schur(const real* x, real* y) const {
+  gatherBodyDeltas(x);  // pass (a): per body, a gather
+  const int64_t nc = nc_;
+  const BodyDelta* dl = delta_.data();
+#pragma omp parallel for schedule(static) num_threads(threads_)
+  for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact
+    const ContactJacobian& J = jac_[k];
+    const BodyDelta& A = dl[J.a];
+    const BodyDelta& B = dl[J.b];
+    contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
+  }
+}
+
+void ContactProblem::project(real* x) const {
+  const int64_t nc = nc_;
+#pragma omp parallel for schedule(static) num_threads(threads_)
+  for (int64_t k = 0; k < nc; ++k) projectConeBlock(mu_[k], x + 3 * k);
+}
+
+void ContactProblem::applyBlockInverse(const real* x, real* y) const {
+  const int64_t nc = nc_;
+#pragma omp parallel for schedule(static) num_threads(threads_)
+  for (int64_t k = 0; k < nc; ++k) {
+    const Vec3 v = symMul(binv_.data() + 6 * k, Vec3{x[3 * k], x[3 * k + 1], x[3 * k + 2]});
+    y[3 * k] = v.x;
+    y[3 * k + 1] = v.y;
+    y[3 * k + 2] = v.z;
+  }
+}
+
+void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {
+  gatherBodyDeltas(gamma);
+  const int64_t na = int64_t(active_.size());
+#pragma omp parallel for schedule(static) num_threads(threads_)
+  for (int64_t j = 0; j < na; ++j) {
+    const int32_t i = active_[j];
+    dv[i] += delta_[i].v;
+    dw[i] += delta_[i].w;
+  }
+}
+
+// Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
+// CMAME 200 (2011)): sweep the contacts in order; for contact k
+//   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
+// with dv = M^-1 D g kept up to date, so each block costs O(1). S_k = eta_k I3 (Scalar, default) or
+// N_kk^-1 (Inverse3x3). dv is formed exactly from the warm start; the history uses the maintained dv, the
+// final residual a fresh Schur product.
+SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
+  SolverStats st;
+  const int64_t nc = nc_;
+  if (nc == 0) return st;
+  const real a = residualAlpha(*this, s), inv_a = real(1) / a;
+  const real w = s.gs_omega;
+  const bool full = s.block_scaling == BlockScaling::Inverse3x3;
+  std::vector<double> part;
+  project(gamma);
+  gatherBodyDeltas(gamma);  // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
+  BodyDelta* dl = delta_.data();
+  auto residualFromDeltas = [&]() {
+    double sum;
+    detail::blockReduce<1>(nc, threads_, part, &sum, [&](int64_t k, double* acc) {
+      const ContactJacobian& J = jac_[k];
+      real y[3];
+      contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+      for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
+      acc[0] += projectedGradientResidual2(mu_[k], gamma + 3 * k, y, a, inv_a);
+    });
+    return real(std::sqrt(sum));
+  };
+  real res = residualFromDeltas();
+  if (s.record_history) st.history.push_back(res);
+  if (!(s.tolerance > 0 && res < s.tolerance)) {
+    for (int it = 0; it < s.max_iterations; ++it) {
+      for (int64_t k = 0; k < nc; ++k) {
+        const ContactJacobian& J = jac_[k];
+        real* g = gamma + 3 * k;
+        real y[3];
+        contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+        for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
+        real gn[3];
+        if (full) {
+          const Vec3 sy = symMul(binv_.data() + 6 * k, Vec3{y[0], y[1], y[2]});
+          gn[0] = g[0] - w * sy.x;
+          gn[1] = g[1] - w * sy.y;
+          gn[2] = g[2] - w * sy.z;
+        } else {
+          const real t = w * eta_[k];
+          for (int j = 0; j < 3; ++j) gn[j] = g[j] - t * y[j];
+        }
+        projectConeBlock(mu_[k], gn);
+        const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
+        g[0] = gn[0];
+        g[1] = gn[1];
+        g[2] = gn[2];
+        if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
+        for (int side = 0; side < 2; ++side) {
+          const int32_t i = side ? J.b : J.a;
+          const BodyInverseMass& M = inv_[i];
+          if (!movable(M)) continue;
+          Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+          accumulateContactImpulse(J, side, dg, F, Tq);
+          const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
+          dl[i].v += d.v;
+          dl[i].w += d.w;
+        }
+      }
+      ++st.iterations;
+      const bool need = s.record_history || s.tolerance > 0;
+      if (need) {
+        res = residualFromDeltas();
+        if (s.record_history) st.history.push_back(res);
+        if (s.tolerance > 0 && res < s.tolerance) break;
+      }
+    }
+  }
+  std::vector<real> scratch;
+  st.residual = ccpResidual(*this, gamma, a, scratch);
+  return st;
+}
+
+}  // namespace dvi

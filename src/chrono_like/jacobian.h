@@ -1,0 +1,182 @@
+// Per-contact Jacobian blocks of the contact CCP and the per-element operations on them (DESIGN §3),
+// written once as DVI_HD functions: the OpenMP loops of contact_problem.cpp call them, and so will the
+// CUDA kernels.
+//
+// Contact k between bodies A and B, normal n from A to B, tangents (u, w), w = n x u (right-handed),
+// lever arms rA = pa - xA, rB = pb - xB. The 6-by-3 Jacobian blocks (columns d_j in {n, u, w}) are
+//   D_kB = [ d_j ; rB x d_j ],   D_kA = -[ d_j ; rA x d_j ]
+// so D_k^T v = [n; u; w] . ((vB + wB x rB) - (vA + wA x rA)) is the relative velocity at the contact.
+//
+// Compact storage. Instead of the 2 x 3 angular parts r x d_j (18 reals) and their M^-1 images (18 more)
+// Chrono::Multicore keeps, a contact stores n, u, rA, rB (12 reals); w = n x u and the cross products are
+// recomputed in registers (a few flops against 288 bytes of memory traffic). The impulse g of a contact
+// acts on body B as the force P = n gn + u gu + w gw at rB, i.e. (P, rB x P), and on A as minus that at
+// rA, so M^-1 D x is formed per body as dv = m^-1 sum P, dw = I^-1_world sum r x P: the world inverse
+// inertia (6 reals, symmetric) is applied once per body, not once per contact.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "hd.h"
+#include "math.h"
+
+namespace dvi {
+
+// Hot per-contact record read by every Schur product: 104 bytes in double (52 in float).
+struct ContactJacobian {
+  Vec3 n;        // normal, unit, from A to B
+  Vec3 u;        // first tangent (tangentBasis(n)); the second is w = n x u
+  Vec3 rA, rB;   // contact points relative to the centres of mass of A and B, world
+  int32_t a, b;  // body indices
+};
+
+// Inverse mass of one body in world coordinates: 56 bytes in double. Zero for fixed and kinematic bodies.
+struct BodyInverseMass {
+  real m;     // inverse mass
+  real I[6];  // world inverse inertia R diag(invI) R^T, symmetric: xx, yy, zz, xy, xz, yz
+};
+
+// Velocity change of one body: 48 bytes in double.
+struct BodyDelta {
+  Vec3 v, w;
+};
+
+// Symmetric 3x3 stored as [00, 11, 22, 01, 02, 12].
+DVI_HD Vec3 symMul(const real* S, Vec3 x) {
+  return Vec3{S[0] * x.x + S[3] * x.y + S[4] * x.z, S[3] * x.x + S[1] * x.y + S[5] * x.z,
+              S[4] * x.x + S[5] * x.y + S[2] * x.z};
+}
+
+DVI_HD Vec3 contactW(const ContactJacobian& J) { return cross(J.n, J.u); }
+
+DVI_HD ContactJacobian makeContactJacobian(Vec3 normal, Vec3 pa, Vec3 pb, Vec3 xA, Vec3 xB, int32_t a,
+                                           int32_t b) {
+  ContactJacobian J;
+  Vec3 u, w;
+  tangentBasis(normal, u, w);
+  J.n = normal;
+  J.u = u;
+  J.rA = pa - xA;
+  J.rB = pb - xB;
+  J.a = a;
+  J.b = b;
+  return J;
+}
+
+// World inverse inertia R diag(d) R^T of a body with principal inverse inertia d and rotation q.
+DVI_HD BodyInverseMass makeBodyInverseMass(real inv_mass, Vec3 d, Quat q) {
+  Mat33 R = matFromQuat(q);
+  BodyInverseMass B;
+  B.m = inv_mass;
+  auto e = [&](Vec3 ri, Vec3 rj) { return ri.x * d.x * rj.x + ri.y * d.y * rj.y + ri.z * d.z * rj.z; };
+  B.I[0] = e(R.r0, R.r0);
+  B.I[1] = e(R.r1, R.r1);
+  B.I[2] = e(R.r2, R.r2);
+  B.I[3] = e(R.r0, R.r1);
+  B.I[4] = e(R.r0, R.r2);
+  B.I[5] = e(R.r1, R.r2);
+  return B;
+}
+
+// y = D_k^T [vA wA vB wB]: the (n, u, w) components of the relative velocity at the contact.
+DVI_HD void contactRelativeVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, Vec3 vB, Vec3 wB, real* y) {
+  const Vec3 rel = (vB + cross(wB, J.rB)) - (vA + cross(wA, J.rA));
+  y[0] = dot(J.n, rel);
+  y[1] = dot(J.u, rel);
+  y[2] = dot(contactW(J), rel);
+}
+
+// Adds the generalised impulse of contact k on one of its bodies (side 0 = A, 1 = B) to (F, T):
+// F += s P, T += s r x P with P = n g0 + u g1 + w g2 and s = -1 on A, +1 on B.
+DVI_HD void accumulateContactImpulse(const ContactJacobian& J, int side, const real* g, Vec3& F, Vec3& T) {
+  const Vec3 P = J.n * g[0] + J.u * g[1] + contactW(J) * g[2];
+  if (side) {
+    F += P;
+    T += cross(J.rB, P);
+  } else {
+    F -= P;
+    T -= cross(J.rA, P);
+  }
+}
+
+// dv = m^-1 F, dw = I^-1 T.
+DVI_HD BodyDelta bodyDeltaFromImpulse(const BodyInverseMass& B, Vec3 F, Vec3 T) {
+  return BodyDelta{F * B.m, symMul(B.I, T)};
+}
+
+// Diagonal block N_kk = D_k^T M^-1 D_k (symmetric, [00, 11, 22, 01, 02, 12]). The linear parts give
+// (mA + mB) I3 because (n, u, w) is orthonormal; the angular parts (r x d_i)^T I^-1 (r x d_j) of each side.
+DVI_HD void contactDiagonalBlock(const ContactJacobian& J, const BodyInverseMass& A, const BodyInverseMass& B,
+                                 real* N) {
+  const Vec3 d[3] = {J.n, J.u, contactW(J)};
+  const real m = A.m + B.m;
+  Vec3 ca[3], cb[3], ia[3], ib[3];
+  for (int j = 0; j < 3; ++j) {
+    ca[j] = cross(J.rA, d[j]);
+    cb[j] = cross(J.rB, d[j]);
+    ia[j] = symMul(A.I, ca[j]);
+    ib[j] = symMul(B.I, cb[j]);
+  }
+  auto e = [&](int i, int j) { return dot(ca[i], ia[j]) + dot(cb[i], ib[j]); };
+  N[0] = m + e(0, 0);
+  N[1] = m + e(1, 1);
+  N[2] = m + e(2, 2);
+  N[3] = e(0, 1);
+  N[4] = e(0, 2);
+  N[5] = e(1, 2);
+}
+
+// Inverse of a symmetric positive semi-definite 3x3 block, by the adjugate. A singular block (a contact
+// between two bodies that cannot move, or a degenerate lever arm) is regularised by adding 1e-10 of its
+// largest diagonal entry to the diagonal; an all-zero block (both bodies fixed) gets a zero inverse so
+// block-scaled solvers leave that contact alone.
+DVI_HD void invertSymmetric3(const real* N, real* Bi) {
+  real s = fmax(N[0], fmax(N[1], N[2]));
+  if (!(s > real(0))) {
+    for (int i = 0; i < 6; ++i) Bi[i] = real(0);
+    return;
+  }
+  real a = N[0], b = N[1], c = N[2], d = N[3], e = N[4], f = N[5];
+  real c00 = b * c - f * f, c01 = e * f - d * c, c02 = d * f - b * e;
+  real det = a * c00 + d * c01 + e * c02;
+  if (!(det > real(1e-12) * s * s * s)) {
+    const real eps = real(1e-10) * s;
+    a += eps;
+    b += eps;
+    c += eps;
+    c00 = b * c - f * f;
+    c01 = e * f - d * c;
+    c02 = d * f - b * e;
+    det = a * c00 + d * c01 + e * c02;
+  }
+  const real inv = real(1) / det;
+  Bi[0] = c00 * inv;
+  Bi[1] = (a * c - e * e) * inv;
+  Bi[2] = (a * b - d * d) * inv;
+  Bi[3] = c01 * inv;
+  Bi[4] = c02 * inv;
+  Bi[5] = (d * e - a * f) * inv;
+}
+
+// Scalar step of one contact block: 1 / (Gershgorin bound of lambda_max(N_kk)) <= 1 / lambda_max. A
+// scalar (the same for the three rows) keeps the fixed points of g <- P(g - eta (N g + r)) those of the
+// CCP, because a positive multiple of a normal-cone vector stays in the normal cone (Tasora & Anitescu,
+// CMAME 200 (2011), who use 3 / trace(N_kk)); the Gershgorin bound keeps each block step below 1 / L_k so
+// the block Gauss-Seidel update decreases the objective. Zero for a zero block.
+DVI_HD real blockStepFromDiagonal(const real* N) {
+  const real g0 = fabs(N[0]) + fabs(N[3]) + fabs(N[4]);
+  const real g1 = fabs(N[1]) + fabs(N[3]) + fabs(N[5]);
+  const real g2 = fabs(N[2]) + fabs(N[4]) + fabs(N[5]);
+  const real g = fmax(g0, fmax(g1, g2));
+  return g > real(0) ? real(1) / g : real(0);
+}
+
+// b_k normal entry: dist / h, with the separating speed a penetration asks for clamped to v_rec.
+DVI_HD real contactBias(real dist, real h, real recovery_rel, real size) {
+  const real b = dist / h;
+  const real lo = -recovery_rel * size;
+  return b > lo ? b : lo;
+}
+
+}  // namespace dvi
