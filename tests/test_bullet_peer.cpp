@@ -433,3 +433,42 @@ TEST_CASE("Bullet collision: compounds map children to shapes; filters as pairAl
   f.detect();
   CHECK(f.contacts.count() == 0);
 }
+
+TEST_CASE("Bullet collision backend inside System: resting heights as the native backend", "[bullet]") {
+  for (CollisionBackend be : {CollisionBackend::Native, CollisionBackend::Bullet}) {
+    SystemConfig c;
+    c.collision = be;
+    c.dt = 1e-3;
+    c.threads = 1;  // 4 bodies: OpenMP barriers would cost more than the step on a loaded 2-core host
+    System s(c);
+    BodyDesc g;
+    g.flags = kBodyFixed;
+    g.mass = 0;
+    g.inertia = {0, 0, 0};
+    g.shapes.push_back(makePlane({0, 1, 0}, 0));
+    s.addBody(g);
+    BodyDesc sphere;
+    sphere.pos = {0, 0.05, 0};
+    sphere.inertia = {4e-5, 4e-5, 4e-5};
+    sphere.shapes.push_back(makeSphere(0.01));
+    s.addBody(sphere);
+    BodyDesc box;
+    box.pos = {0.1, 0.03, 0};
+    box.inertia = {1e-4, 1e-4, 1e-4};
+    box.shapes.push_back(makeBox({0.02, 0.01, 0.02}));
+    s.addBody(box);
+    BodyDesc pair;  // two spheres on one body (a compound in Bullet)
+    pair.pos = {0.2, 0.05, 0};
+    pair.inertia = {1e-4, 1e-4, 1e-4};
+    pair.shapes.push_back(makeSphere(0.01, Pose{{-0.01, 0, 0}, {1, 0, 0, 0}}));
+    pair.shapes.push_back(makeSphere(0.01, Pose{{0.01, 0, 0}, {1, 0, 0, 0}}));
+    s.addBody(pair);
+    s.advance(1000);
+    INFO((be == CollisionBackend::Bullet ? "bullet" : "native"));
+    for (size_t i = 1; i <= 3; ++i) {
+      CHECK(std::abs(s.bodies().pos[i].y - 0.01) < 2e-4);  // 2% of the size
+      CHECK(length(s.bodies().vel[i]) < 1e-3);
+    }
+    CHECK(s.lastStats().max_penetration < 2e-4);
+  }
+}
