@@ -253,7 +253,7 @@ void System::buildAndSolve() {
     stats_.residual = s.residual;
   });
   // Keep this step's impulses, sorted by key, for the next step's warm start.
-  std::vector<size_t> order(size_t(nc));
+  std::vector<size_t> order(static_cast<size_t>(nc));
   std::iota(order.begin(), order.end(), size_t(0));
   if (!std::is_sorted(contacts_.key.begin(), contacts_.key.end()))
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return contacts_.key[a] < contacts_.key[b]; });
