@@ -147,7 +147,8 @@ TEST_CASE("GPU scaling benchmark: sphere pile, GPU vs CPU backend", "[.][gpu_ben
   }
   const std::string date = shell("date -u +%Y-%m-%dT%H:%M:%SZ");
   const std::string day = shell("date -u +%Y%m%d-%H%M%S");
-  std::string commit = shell(("git -C " + std::string(DVISIM_SOURCE_DIR) + " rev-parse --short HEAD 2>/dev/null").c_str());
+  std::string commit = std::getenv("DVISIM_COMMIT") ? std::getenv("DVISIM_COMMIT") : "";
+  if (commit.empty()) commit = shell(("git -C " + std::string(DVISIM_SOURCE_DIR) + " rev-parse --short HEAD 2>/dev/null").c_str());
   if (commit.empty()) commit = "unknown";
   const std::string cpu_name = System(cfg).deviceName();
   std::ostringstream md, csv;

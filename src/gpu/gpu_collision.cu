@@ -159,7 +159,7 @@ __global__ void entryWriteKernel(int nb, const int32_t* binned, const Aabb* box,
   const int j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= nb) return;
   const uint64_t o = off[j];
-  aabbWriteBins(p->grid, box[binned[j]], binned[j], bin + o, shape + o);
+  aabbWriteBins(p->grid, box[binned[j]], binned[j], bin + o, shape + o, nullptr);
 }
 
 // ---- broad phase: pairs. Slot s of the count/write passes is

@@ -247,7 +247,7 @@ struct ResidualF {
   real a;
   __device__ void operator()(int64_t k, double* acc) const {
     real grad[3] = {Nx[3 * k] + r[3 * k], Nx[3 * k + 1] + r[3 * k + 1], Nx[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += projectedGradientResidual2(mu[k], x + 3 * k, grad, a);
+    acc[0] += projectedGradientResidual2(mu[k], x + 3 * k, grad, a, real(1) / a);
   }
 };
 
@@ -260,7 +260,7 @@ struct JacobiScalarF {
   __device__ void operator()(int64_t k, double* acc) const {
     const real* g = cur + 3 * k;
     real grad[3] = {Ng[3 * k] + r[3 * k], Ng[3 * k + 1] + r[3 * k + 1], Ng[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += projectedGradientResidual2(mu[k], g, grad, a);
+    acc[0] += projectedGradientResidual2(mu[k], g, grad, a, real(1) / a);
     if (!last) {
       const real t = w * eta[k];
       real* x = next + 3 * k;
@@ -280,7 +280,7 @@ struct JacobiInverseF {
   __device__ void operator()(int64_t k, double* acc) const {
     real grad[3];
     for (int j = 0; j < 3; ++j) grad[j] = Ng[3 * k + j] + r[3 * k + j];
-    acc[0] += projectedGradientResidual2(mu[k], cur + 3 * k, grad, a);
+    acc[0] += projectedGradientResidual2(mu[k], cur + 3 * k, grad, a, real(1) / a);
     if (!last) {
       const Vec3 sg = symMul(binv + 6 * k, Vec3{grad[0], grad[1], grad[2]});
       real* x = next + 3 * k;
@@ -324,7 +324,7 @@ struct ApgdTestF {
       acc[3] += double(Ny + r[i]) * (gn[i] - gc[i]);
       grad_n[j] = Nn[i] + r[i];
     }
-    acc[2] += projectedGradientResidual2(mu[k], gn + 3 * k, grad_n, a);
+    acc[2] += projectedGradientResidual2(mu[k], gn + 3 * k, grad_n, a, real(1) / a);
   }
 };
 
@@ -340,7 +340,7 @@ struct BbInitF {  // g += r; f; residual
       gk[j] += r[3 * k + j];
       acc[1] += 0.5 * double(xk[j]) * (gk[j] + r[3 * k + j]);
     }
-    acc[0] += projectedGradientResidual2(mu[k], xk, gk, a);
+    acc[0] += projectedGradientResidual2(mu[k], xk, gk, a, real(1) / a);
   }
 };
 struct BbDirF {  // d = P(x - alpha g) - x; g^T d, d^T d
@@ -379,7 +379,7 @@ struct BbUpdateF {
     }
     projectConeBlock(mu[k], xk);
     for (int j = 0; j < 3; ++j) acc[1] += 0.5 * double(xk[j]) * (gk[j] + r[3 * k + j]);
-    acc[0] += projectedGradientResidual2(mu[k], xk, gk, a);
+    acc[0] += projectedGradientResidual2(mu[k], xk, gk, a, real(1) / a);
   }
 };
 

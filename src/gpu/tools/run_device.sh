@@ -34,7 +34,7 @@ for m in $MODES; do
     tests) $TESTS "[gpu]" -d yes 2>&1 | tee "$OUT/tests.log" ;;
     bench) DVISIM_BENCH_OUT=$OUT $TESTS "[gpu_bench]" 2>&1 | tee "$OUT/bench.log" ;;
     sanitize)
-      DVISIM_BENCH_SIZES=2000 compute-sanitizer --tool memcheck $TESTS "GPU system runs every solver*" 2>&1 | tail -20 | tee "$OUT/memcheck.log"
-      compute-sanitizer --tool racecheck $TESTS "GPU system runs every solver*" 2>&1 | tail -20 | tee "$OUT/racecheck.log" ;;
+      timeout 200 compute-sanitizer --tool memcheck --error-exitcode 9 $TESTS "GPU system runs every solver*" > "$OUT/memcheck.log" 2>&1; echo "memcheck rc=$?"; tail -5 "$OUT/memcheck.log"
+      timeout 200 compute-sanitizer --tool racecheck --error-exitcode 9 $TESTS "GPU system runs every solver*" > "$OUT/racecheck.log" 2>&1; echo "racecheck rc=$?"; tail -5 "$OUT/racecheck.log" ;;
   esac
 done
