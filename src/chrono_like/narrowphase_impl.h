@@ -1,0 +1,405 @@
+// Narrow phase implementation (included at the end of narrowphase.h): support mappings, AABBs, the closed-form
+// pairs and the dispatcher; MPR (mpr.h) for every other convex pair, box-box in collide_box.h.
+// Every function is inline host+device code: no allocation, no recursion, fixed-size local arrays only.
+//
+// Pairs are collided in a canonical order (lower ShapeType first, so a plane is always second); the result of
+// collideShapes(a, b) with a.type > b.type is the canonical result with normals negated and points swapped.
+//
+// Closed form: sphere-sphere, sphere-box, sphere-cylinder, sphere-capsule, capsule-capsule, box-box (SAT +
+// clipping), and every convex shape against a plane (sphere, ellipsoid, box, cylinder, capsule, cone, hull).
+// MPR: all remaining pairs (ellipsoid, cone and hull with anything but a plane; box-cylinder, box-capsule,
+// cylinder-cylinder, cylinder-capsule, ...).
+#pragma once
+
+#include "collide_box.h"
+#include "contact.h"
+#include "math.h"
+#include "mpr.h"
+#include "shape.h"
+#include "support.h"
+
+namespace dvi {
+
+// ---------------------------------------------------------------------------------------------------------
+// AABB
+// ---------------------------------------------------------------------------------------------------------
+
+// Extents of the rotated primitives: for a box, e_i = sum_j |R_ij| h_j; for a disc of radius r with unit
+// normal a, e_i = r sqrt(1 - a_i^2); for an ellipsoid with semi-axes s, e_i = sqrt(sum_j (R_ij s_j)^2)
+// (support of x^T (R S^2 R^T)^-1 x <= 1 along the world axis i).
+DVI_HD Aabb shapeAabb(const Shape& s, const Pose& world, const Vec3* hull_points, real envelope) {
+  const Vec3 c = world.p;
+  Vec3 e{0, 0, 0};
+  switch (s.type) {
+    case ShapeType::Sphere: e = Vec3{s.dims.x, s.dims.x, s.dims.x}; break;
+    case ShapeType::Ellipsoid: {
+      Mat33 R = matFromQuat(world.q);
+      e = Vec3{length(mul(R.r0, s.dims)), length(mul(R.r1, s.dims)), length(mul(R.r2, s.dims))};
+      break;
+    }
+    case ShapeType::Box: {
+      Mat33 R = matFromQuat(world.q);
+      e = Vec3{dot(vabs(R.r0), s.dims), dot(vabs(R.r1), s.dims), dot(vabs(R.r2), s.dims)};
+      break;
+    }
+    case ShapeType::Cylinder:
+    case ShapeType::Capsule: {
+      Vec3 a = rotate(world.q, Vec3{0, 1, 0});
+      Vec3 ax = vabs(a) * s.dims.y;
+      if (s.type == ShapeType::Capsule) {
+        e = ax + Vec3{s.dims.x, s.dims.x, s.dims.x};
+      } else {
+        Vec3 disc{std::sqrt(std::fmax(real(0), 1 - a.x * a.x)), std::sqrt(std::fmax(real(0), 1 - a.y * a.y)),
+                  std::sqrt(std::fmax(real(0), 1 - a.z * a.z))};
+        e = ax + disc * s.dims.x;
+      }
+      break;
+    }
+    case ShapeType::Cone: {
+      Vec3 a = rotate(world.q, Vec3{0, 1, 0});
+      real hh = real(0.5) * s.dims.y;
+      Vec3 apex = c + a * hh, base = c - a * hh;
+      Vec3 disc = Vec3{std::sqrt(std::fmax(real(0), 1 - a.x * a.x)), std::sqrt(std::fmax(real(0), 1 - a.y * a.y)),
+                       std::sqrt(std::fmax(real(0), 1 - a.z * a.z))} *
+                  s.dims.x;
+      Vec3 env{envelope, envelope, envelope};
+      return Aabb{vmin(apex, base - disc) - env, vmax(apex, base + disc) + env};
+    }
+    case ShapeType::ConvexHull: {
+      Mat33 R = matFromQuat(world.q);
+      Vec3 lo{0, 0, 0}, hi{0, 0, 0};
+      for (int i = 0; i < s.hull_count; ++i) {
+        Vec3 p = R * hull_points[s.hull_start + i];
+        lo = i == 0 ? p : vmin(lo, p);
+        hi = i == 0 ? p : vmax(hi, p);
+      }
+      Vec3 env{envelope, envelope, envelope};
+      return Aabb{c + lo - env, c + hi + env};
+    }
+    case ShapeType::Plane:
+    default: return Aabb{Vec3{real(-1e30), real(-1e30), real(-1e30)}, Vec3{real(1e30), real(1e30), real(1e30)}};
+  }
+  e += Vec3{envelope, envelope, envelope};
+  return Aabb{c - e, c + e};
+}
+
+namespace np {
+
+// ---------------------------------------------------------------------------------------------------------
+// Closed-form pairs. Each writes contacts with normals from its first to its second argument.
+// ---------------------------------------------------------------------------------------------------------
+
+// Sphere-sphere: n = (cb - ca)/|cb - ca|, dist = |cb - ca| - ra - rb.
+DVI_HD int collideSphereSphere(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                               ContactPoint* out) {
+  Vec3 d = wb.p - wa.p;
+  real rs = a.dims.x + b.dims.x;
+  real l2 = length2(d);
+  real lim = rs + envelope;
+  if (l2 >= lim * lim) return 0;
+  real l = std::sqrt(l2);
+  Vec3 n = l > real(0) ? d / l : Vec3{1, 0, 0};
+  setContact(out[0], n, wa.p + n * a.dims.x, wb.p - n * b.dims.x, l - rs, 0);
+  return 1;
+}
+
+// Sphere (a) against a convex solid whose closest point q to the centre and outward normal nb (from the
+// solid toward the centre) are known, and signed distance sd of the centre to the solid's surface
+// (negative inside). Normal a->b is -nb.
+DVI_HD int sphereAgainst(const Vec3& c, real r, Vec3 q, Vec3 nb, real sd, real envelope, ContactPoint* out) {
+  real dist = sd - r;
+  if (!(dist < envelope)) return 0;
+  setContact(out[0], -nb, c - nb * r, q, dist, 0);
+  return 1;
+}
+
+// Sphere-box: closest point of the box to the centre (clamp in the box frame); centre inside: nearest face.
+DVI_HD int collideSphereBox(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                            ContactPoint* out) {
+  const Vec3 e = b.dims;
+  Vec3 cl = rotateInv(wb.q, wa.p - wb.p);
+  Vec3 q{clampr(cl.x, -e.x, e.x), clampr(cl.y, -e.y, e.y), clampr(cl.z, -e.z, e.z)};
+  Vec3 d = cl - q;
+  real l2 = length2(d);
+  Vec3 nl;
+  real sd;
+  if (l2 > real(0)) {
+    real l = std::sqrt(l2);
+    if (l - a.dims.x >= envelope) return 0;
+    nl = d / l;
+    sd = l;
+  } else {  // centre inside: leave through the nearest face
+    real gx = e.x - std::fabs(cl.x), gy = e.y - std::fabs(cl.y), gz = e.z - std::fabs(cl.z);
+    if (gx <= gy && gx <= gz) {
+      nl = Vec3{sgn1(cl.x), 0, 0};
+      q.x = sgn1(cl.x) * e.x;
+      sd = -gx;
+    } else if (gy <= gz) {
+      nl = Vec3{0, sgn1(cl.y), 0};
+      q.y = sgn1(cl.y) * e.y;
+      sd = -gy;
+    } else {
+      nl = Vec3{0, 0, sgn1(cl.z)};
+      q.z = sgn1(cl.z) * e.z;
+      sd = -gz;
+    }
+  }
+  return sphereAgainst(wa.p, a.dims.x, transformPoint(wb, q), rotate(wb.q, nl), sd, envelope, out);
+}
+
+// Sphere-cylinder: closest point of the solid cylinder (clamp radius and height); inside: nearest of side/cap.
+DVI_HD int collideSphereCylinder(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                                 ContactPoint* out) {
+  const real R = b.dims.x, H = b.dims.y;
+  Vec3 cl = rotateInv(wb.q, wa.p - wb.p);
+  real rho = std::sqrt(cl.x * cl.x + cl.z * cl.z);
+  Vec3 u = rho > real(0) ? Vec3{cl.x / rho, 0, cl.z / rho} : Vec3{1, 0, 0};
+  Vec3 nl, q;
+  real sd;
+  if (rho <= R && std::fabs(cl.y) <= H) {
+    real gr = R - rho, gy = H - std::fabs(cl.y);
+    if (gr < gy) {
+      nl = u;
+      q = u * R + Vec3{0, cl.y, 0};
+      sd = -gr;
+    } else {
+      nl = Vec3{0, sgn1(cl.y), 0};
+      q = Vec3{cl.x, sgn1(cl.y) * H, cl.z};
+      sd = -gy;
+    }
+  } else {
+    q = u * std::fmin(rho, R) + Vec3{0, clampr(cl.y, -H, H), 0};
+    Vec3 d = cl - q;
+    sd = length(d);
+    if (sd - a.dims.x >= envelope) return 0;
+    nl = d / sd;
+  }
+  return sphereAgainst(wa.p, a.dims.x, transformPoint(wb, q), rotate(wb.q, nl), sd, envelope, out);
+}
+
+// A unit vector normal to v.
+DVI_HD Vec3 anyPerpendicular(Vec3 v) {
+  Vec3 u, w;
+  tangentBasis(normalized(v), u, w);
+  return u;
+}
+
+// Sphere-capsule: closest point of the capsule's segment to the centre.
+DVI_HD int collideSphereCapsule(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                                ContactPoint* out) {
+  Vec3 ax = rotate(wb.q, Vec3{0, 1, 0});
+  real t = clampr(dot(wa.p - wb.p, ax), -b.dims.y, b.dims.y);
+  Vec3 q = wb.p + ax * t;
+  Vec3 d = wa.p - q;  // from capsule core to sphere centre
+  real l = length(d);
+  real dist = l - a.dims.x - b.dims.x;
+  if (!(dist < envelope)) return 0;
+  Vec3 nb = l > real(0) ? d / l : anyPerpendicular(ax);
+  setContact(out[0], -nb, wa.p - nb * a.dims.x, q + nb * b.dims.x, dist, 0);
+  return 1;
+}
+
+// Contact between a point qa on A's core and qb on B's core, with radii ra, rb; `fallback` a normal to use
+// when the cores touch.
+DVI_HD bool sweptPointContact(Vec3 qa, Vec3 qb, real ra, real rb, Vec3 fallback, real envelope, int feature,
+                              ContactPoint& c) {
+  Vec3 d = qb - qa;
+  real l = length(d);
+  real dist = l - ra - rb;
+  if (!(dist < envelope)) return false;
+  Vec3 n = l > real(1e-14) ? d / l : fallback;
+  setContact(c, n, qa + n * ra, qb - n * rb, dist, feature);
+  return true;
+}
+
+// Capsule-capsule: closest points of the two core segments. Nearly parallel overlapping segments (lying
+// side by side) get the two ends of their overlap as extra points (features 1, 2) so they rest stably.
+DVI_HD int collideCapsuleCapsule(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                                 ContactPoint* out) {
+  Vec3 axA = rotate(wa.q, Vec3{0, 1, 0}), axB = rotate(wb.q, Vec3{0, 1, 0});
+  Vec3 p1 = wa.p - axA * a.dims.y, d1 = axA * (2 * a.dims.y);
+  Vec3 p2 = wb.p - axB * b.dims.y, d2 = axB * (2 * b.dims.y);
+  real s, t;
+  closestSegmentSegment(p1, d1, p2, d2, s, t);
+  Vec3 qa = p1 + d1 * s, qb = p2 + d2 * t;
+  // Fallback normal when the cores intersect: perpendicular to both axes, oriented a -> b.
+  Vec3 fb = cross(axA, axB);
+  if (length2(fb) < real(1e-12)) fb = anyPerpendicular(axA);
+  fb = normalized(fb);
+  if (dot(fb, wb.p - wa.p) < 0) fb = -fb;
+  int m = 0;
+  if (sweptPointContact(qa, qb, a.dims.x, b.dims.x, fb, envelope, 0, out[m])) ++m;
+  if (m == 0) return 0;
+  real la = dot(d1, d1), lb = dot(d2, d2);
+  real sn = length2(cross(axA, axB));
+  if (la > real(0) && lb > real(0) && sn < real(1e-4)) {  // |sin angle| < 1e-2
+    real s0 = dot(p2 - p1, d1) / la, s1 = dot(p2 + d2 - p1, d1) / la;
+    real lo = std::fmax(real(0), std::fmin(s0, s1)), hi = std::fmin(real(1), std::fmax(s0, s1));
+    if (hi - lo > real(1e-3)) {
+      for (int k = 0; k < 2; ++k) {
+        Vec3 pa = p1 + d1 * (k == 0 ? lo : hi);
+        real tt = clampr(dot(pa - p2, d2) / lb, 0, 1);
+        if (sweptPointContact(pa, p2 + d2 * tt, a.dims.x, b.dims.x, fb, envelope, 1 + k, out[m])) ++m;
+      }
+    }
+  }
+  return m;
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Shape (a) against a plane (b). Plane normal np (pointing out of the solid), offset pd; the contact normal
+// a -> b is -np; a point x of a gives dist = dot(np, x) - pd, pb = its projection on the plane.
+// ---------------------------------------------------------------------------------------------------------
+
+DVI_HD bool planePoint(Vec3 x, real r, Vec3 pn, real pd, real envelope, int feature, ContactPoint& c) {
+  real h = dot(pn, x) - pd;
+  real dist = h - r;
+  if (!(dist < envelope)) return false;
+  setContact(c, -pn, x - pn * r, x - pn * h, dist, feature);
+  return true;
+}
+
+// Two unit vectors u, v spanning the plane normal to axis ax: u toward the deepest direction -pn projected on
+// that plane, or, when the axis is within ~1e-3 rad of the plane normal (standing on a cap), the shape's own
+// local X axis, so the rim points and their features stay fixed on the body while it rests.
+DVI_HD void rimFrame(Vec3 ax, Vec3 xaxis, Vec3 pn, Vec3& u, Vec3& v) {
+  Vec3 w = pn * real(-1) + ax * dot(pn, ax);
+  real rho = length(w);
+  u = rho > real(1e-3) ? w / rho : xaxis;
+  v = cross(ax, u);
+}
+
+DVI_HD int collideConvexPlane(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                              real envelope, ContactPoint* out) {
+  Vec3 pn;
+  real pd;
+  worldPlane(b, wb, pn, pd);
+  int m = 0;
+  switch (a.type) {
+    case ShapeType::Sphere: m += planePoint(wa.p, a.dims.x, pn, pd, envelope, 0, out[m]); break;
+    case ShapeType::Ellipsoid: {  // support point along -n
+      Vec3 x = transformPoint(wa, supportLocal(a, rotateInv(wa.q, -pn), hull_points));
+      m += planePoint(x, 0, pn, pd, envelope, 0, out[m]);
+      break;
+    }
+    case ShapeType::Box: {  // every vertex within the envelope; feature = vertex index
+      Mat33 R = matFromQuat(wa.q);
+      for (int i = 0; i < 8; ++i) {
+        Vec3 l{(i & 1) ? a.dims.x : -a.dims.x, (i & 2) ? a.dims.y : -a.dims.y, (i & 4) ? a.dims.z : -a.dims.z};
+        m += planePoint(wa.p + R * l, 0, pn, pd, envelope, i, out[m]);
+      }
+      break;
+    }
+    case ShapeType::Capsule: {  // both segment ends with the radius
+      Vec3 ax = rotate(wa.q, Vec3{0, 1, 0});
+      m += planePoint(wa.p - ax * a.dims.y, a.dims.x, pn, pd, envelope, 0, out[m]);
+      m += planePoint(wa.p + ax * a.dims.y, a.dims.x, pn, pd, envelope, 1, out[m]);
+      break;
+    }
+    case ShapeType::Cylinder: {  // 4 rim points per cap; feature = cap * 4 + k
+      Mat33 R = matFromQuat(wa.q);
+      Vec3 ax = column(R, 1), u, v;
+      rimFrame(ax, column(R, 0), pn, u, v);
+      u *= a.dims.x;
+      v *= a.dims.x;
+      for (int cap = 0; cap < 2; ++cap) {
+        Vec3 cc = wa.p + ax * (cap == 0 ? -a.dims.y : a.dims.y);
+        m += planePoint(cc + u, 0, pn, pd, envelope, cap * 4 + 0, out[m]);
+        m += planePoint(cc + v, 0, pn, pd, envelope, cap * 4 + 1, out[m]);
+        m += planePoint(cc - u, 0, pn, pd, envelope, cap * 4 + 2, out[m]);
+        m += planePoint(cc - v, 0, pn, pd, envelope, cap * 4 + 3, out[m]);
+      }
+      break;
+    }
+    case ShapeType::Cone: {  // apex (feature 0) and 4 base rim points (1..4)
+      Mat33 R = matFromQuat(wa.q);
+      Vec3 ax = column(R, 1), u, v;
+      real hh = real(0.5) * a.dims.y;
+      m += planePoint(wa.p + ax * hh, 0, pn, pd, envelope, 0, out[m]);
+      rimFrame(ax, column(R, 0), pn, u, v);
+      u *= a.dims.x;
+      v *= a.dims.x;
+      Vec3 cc = wa.p - ax * hh;
+      m += planePoint(cc + u, 0, pn, pd, envelope, 1, out[m]);
+      m += planePoint(cc + v, 0, pn, pd, envelope, 2, out[m]);
+      m += planePoint(cc - u, 0, pn, pd, envelope, 3, out[m]);
+      m += planePoint(cc - v, 0, pn, pd, envelope, 4, out[m]);
+      break;
+    }
+    case ShapeType::ConvexHull: {
+      // Vertices within the envelope, the kMaxContactsPerPair deepest, kept in vertex order; feature = rank.
+      Mat33 R = matFromQuat(wa.q);
+      int idx[kMaxContactsPerPair];
+      real hv[kMaxContactsPerPair];
+      int cnt = 0;
+      for (int i = 0; i < a.hull_count; ++i) {
+        real h = dot(pn, wa.p + R * hull_points[a.hull_start + i]) - pd;
+        if (!(h < envelope)) continue;
+        if (cnt < kMaxContactsPerPair) {
+          idx[cnt] = i;
+          hv[cnt] = h;
+          ++cnt;
+        } else {  // replace the shallowest kept vertex if this one is deeper
+          int w = 0;
+          for (int k = 1; k < cnt; ++k)
+            if (hv[k] > hv[w]) w = k;
+          if (h < hv[w]) {
+            for (int k = w; k + 1 < cnt; ++k) {  // keep vertex order
+              idx[k] = idx[k + 1];
+              hv[k] = hv[k + 1];
+            }
+            idx[cnt - 1] = i;
+            hv[cnt - 1] = h;
+          }
+        }
+      }
+      for (int k = 0; k < cnt; ++k)
+        m += planePoint(wa.p + R * hull_points[a.hull_start + idx[k]], 0, pn, pd, envelope, k, out[m]);
+      break;
+    }
+    default: break;
+  }
+  return m;
+}
+
+// Canonical order: a.type <= b.type.
+DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                          real envelope, ContactPoint* out) {
+  if (b.type == ShapeType::Plane) {
+    if (a.type == ShapeType::Plane) return 0;
+    return collideConvexPlane(a, wa, b, wb, hull_points, envelope, out);
+  }
+  switch (a.type) {
+    case ShapeType::Sphere:
+      switch (b.type) {
+        case ShapeType::Sphere: return collideSphereSphere(a, wa, b, wb, envelope, out);
+        case ShapeType::Box: return collideSphereBox(a, wa, b, wb, envelope, out);
+        case ShapeType::Cylinder: return collideSphereCylinder(a, wa, b, wb, envelope, out);
+        case ShapeType::Capsule: return collideSphereCapsule(a, wa, b, wb, envelope, out);
+        default: break;
+      }
+      break;
+    case ShapeType::Box:
+      if (b.type == ShapeType::Box) return collideBoxBox(a, wa, b, wb, envelope, out);
+      break;
+    case ShapeType::Capsule:
+      if (b.type == ShapeType::Capsule) return collideCapsuleCapsule(a, wa, b, wb, envelope, out);
+      break;
+    default: break;
+  }
+  return collideMpr(a, wa, b, wb, hull_points, envelope, out);
+}
+
+}  // namespace np
+
+DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                         real envelope, ContactPoint* out) {
+  if (a.type == ShapeType::Sphere && b.type == ShapeType::Sphere)  // the hot path
+    return np::collideSphereSphere(a, wa, b, wb, envelope, out);
+  if (int(a.type) <= int(b.type)) return np::collideOrdered(a, wa, b, wb, hull_points, envelope, out);
+  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out);
+  np::flipContacts(out, m);
+  return m;
+}
+
+}  // namespace dvi
