@@ -697,7 +697,7 @@ DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   switch (cfg.solver) {
     case SolverType::Jacobi: return solveJacobiDevice(d, p, gamma, cfg.solver_settings);
     case SolverType::BB: return solveBBDevice(d, p, gamma, cfg.solver_settings);
-    case SolverType::GaussSeidel:  // sequential by nature: the GPU runs APGD in its place
+    case SolverType::GaussSeidel:  // refused by GpuSystem's constructor
     case SolverType::APGD:
     default: return solveApgdDevice(d, p, gamma, cfg.solver_settings);
   }

@@ -78,6 +78,8 @@ using namespace gpu;
 GpuSystem::GpuSystem(SystemConfig config) : System(config), d_(std::make_unique<DeviceState>()) {
   std::string why;
   if (!queryDevice(&why)) throw InputError("GPU backend: " + why);
+  if (config_.solver == SolverType::GaussSeidel)
+    throw InputError("GPU backend: Gauss-Seidel is sequential; use jacobi, apgd or bb on the GPU");
   DVI_CUDA(cudaStreamCreateWithFlags(&d_->stream, cudaStreamNonBlocking));
   for (auto& e : d_->ev) DVI_CUDA(cudaEventCreate(&e));
   DVI_CUDA(cudaMallocHost(&d_->host_scalars, 64 * sizeof(double)));
