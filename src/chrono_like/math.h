@@ -38,11 +38,11 @@ DVI_HD Vec3 cross(Vec3 a, Vec3 b) {
 }
 DVI_HD real length2(Vec3 a) { return dot(a, a); }
 DVI_HD real length(Vec3 a) { return std::sqrt(dot(a, a)); }
-DVI_HD Vec3 vmin(Vec3 a, Vec3 b) { return {fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z)}; }
-DVI_HD Vec3 vmax(Vec3 a, Vec3 b) { return {fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z)}; }
-DVI_HD Vec3 vabs(Vec3 a) { return {fabs(a.x), fabs(a.y), fabs(a.z)}; }
-DVI_HD real maxComponent(Vec3 a) { return fmax(a.x, fmax(a.y, a.z)); }
-DVI_HD real minComponent(Vec3 a) { return fmin(a.x, fmin(a.y, a.z)); }
+DVI_HD Vec3 vmin(Vec3 a, Vec3 b) { return {std::fmin(a.x, b.x), std::fmin(a.y, b.y), std::fmin(a.z, b.z)}; }
+DVI_HD Vec3 vmax(Vec3 a, Vec3 b) { return {std::fmax(a.x, b.x), std::fmax(a.y, b.y), std::fmax(a.z, b.z)}; }
+DVI_HD Vec3 vabs(Vec3 a) { return {std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)}; }
+DVI_HD real maxComponent(Vec3 a) { return std::fmax(a.x, std::fmax(a.y, a.z)); }
+DVI_HD real minComponent(Vec3 a) { return std::fmin(a.x, std::fmin(a.y, a.z)); }
 DVI_HD Vec3 normalized(Vec3 a) {
   real l = length(a);
   return l > real(0) ? a / l : Vec3{real(1), real(0), real(0)};
