@@ -161,6 +161,13 @@ struct BulletWorldFixture {
     }
     ptrs.back()->setLinearVelocity(btVector3(0.5f, 1.5f, -0.25f));
     ptrs.back()->setAngularVelocity(btVector3(0, 2, 0));
+    // A kinematic paddle and a body with its own gravity.
+    add(keep(new btBoxShape(btVector3(0.05f, 0.2f, 0.5f))), 0, btVector3(-2, 0.2f, 0));
+    ptrs.back()->setCollisionFlags(ptrs.back()->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+    ptrs.back()->setActivationState(DISABLE_DEACTIVATION);
+    ptrs.back()->setLinearVelocity(btVector3(0.3f, 0, 0));
+    add(keep(new btSphereShape(0.1f)), 1, btVector3(-3, 1, 0));
+    ptrs.back()->setGravity(btVector3(0, -1, 0));
   }
   ~BulletWorldFixture() {
     for (auto& b : bodies) world.removeRigidBody(b.get());
@@ -572,6 +579,19 @@ TEST_CASE("Bullet files: every supported shape survives Bullet's serializer and 
   CHECK(shapesOf(14)[0].shape.type == ShapeType::Ellipsoid);
   CHECK(shapesOf(15).size() == 3);
   CHECK(bodyDescFromBullet(*scene.bodies()[0]).flags == kBodyFixed);
+  CHECK(bodyDescFromBullet(*scene.bodies()[16]).flags == kBodyKinematic);
+  CHECK(bodyDescFromBullet(*scene.bodies()[16]).vel.x == Approx(0.3));
+  // Per-body gravity survives the file, and the system gets it from the original bodies too.
+  {
+    System from_file, from_world;
+    importBullet(from_file, scene.bodies());
+    importBullet(from_world, w.ptrs);
+    CHECK(from_file.bodies().gravity[17].y == Approx(-1));
+    CHECK(from_world.bodies().gravity[17].y == Approx(-1));
+    CHECK(from_file.bodies().gravity[1].y == Approx(-9.81));
+    CHECK(from_world.bodies().gravity[1].y == Approx(-9.81));
+    CHECK(from_file.bodies().flags[16] == kBodyKinematic);
+  }
 
   for (const char* backend : {"cpu", "bullet"}) {
     INFO(backend);

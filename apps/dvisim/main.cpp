@@ -262,6 +262,7 @@ int run(const Options& o) {
         backend == "gpu" ? dvi::makeGpuSystem(cfg) : std::make_unique<dvi::System>(cfg);
     const std::vector<int> ids = dvi::importBullet(*sys, bodies);
     auto collect = [&] {
+      sys->syncToHost();  // a device backend copies its state into the host arrays
       const dvi::BodyArrays& b = sys->bodies();
       for (size_t i = 0; i < ids.size(); ++i) {
         const size_t k = size_t(ids[i]);

@@ -144,8 +144,4 @@ void FrameWriter::write(double time, const std::vector<BodyState>& bodies) {
   writeFileAtomic(dir_ + "/frames.pvd", pvd);
 }
 
-void writeSummary(const std::string& path, const nlohmann::json& summary) {
-  writeFileAtomic(path, summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
-}
-
 }  // namespace dvi

@@ -45,7 +45,10 @@ class FrameWriter {
   std::vector<std::pair<double, std::string>> entries_;
 };
 
-// summary.json, pretty-printed.
-void writeSummary(const std::string& path, const nlohmann::json& summary);
+// summary.json, pretty-printed. Inline, so that no nlohmann::json crosses the library boundary (its
+// ABI tag changes with the header version a consumer happens to include).
+inline void writeSummary(const std::string& path, const nlohmann::json& summary) {
+  writeFileAtomic(path, summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
+}
 
 }  // namespace dvi

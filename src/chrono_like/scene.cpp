@@ -969,24 +969,24 @@ Scene Scene::load(const std::string& path, const std::vector<std::string>& overr
 
 // ---------------------------------------------------------------------------------------------------
 // The embedded default: 2,000 mixed particles of 1-2 cm (spheres, boxes, cylinders, capsules,
-// ellipsoids, cones, tetrahedra; sizes x0.8..1.2) dropped from a jittered lattice into a 0.5 m x 0.5 m
-// box; they settle in about a second.
+// ellipsoids, cones, tetrahedra; sizes x0.8..1.2) dropped at 1 m/s from a jittered lattice into a
+// 0.3 m x 0.3 m box; they land within 0.4 s and settle in about a second.
 // ---------------------------------------------------------------------------------------------------
 const char* Scene::defaultSceneJson() {
   return R"JSON({
   "name": "default-pile",
-  "description": "Granular pile: 2000 mixed particles of 1-2 cm falling into a 0.5 m box",
+  "description": "Granular pile: 2000 mixed particles of 1-2 cm falling into a 0.3 m box",
   "settings": { "dt": 0.001, "time": 1.0, "solver": "apgd", "iterations": 50, "gravity": [0, -9.81, 0],
                 "friction_combine": "product" },
   "bodies": [
     { "name": "ground", "shape": { "type": "plane", "normal": [0, 1, 0], "offset": 0 }, "mass": 0, "friction": 0.7 },
-    { "name": "wall_px", "shape": { "type": "box", "half_extents": [0.01, 0.3, 0.27] }, "mass": 0, "position": [ 0.26, 0.3, 0], "friction": 0.7 },
-    { "name": "wall_nx", "shape": { "type": "box", "half_extents": [0.01, 0.3, 0.27] }, "mass": 0, "position": [-0.26, 0.3, 0], "friction": 0.7 },
-    { "name": "wall_pz", "shape": { "type": "box", "half_extents": [0.27, 0.3, 0.01] }, "mass": 0, "position": [0, 0.3,  0.26], "friction": 0.7 },
-    { "name": "wall_nz", "shape": { "type": "box", "half_extents": [0.27, 0.3, 0.01] }, "mass": 0, "position": [0, 0.3, -0.26], "friction": 0.7 },
+    { "name": "wall_px", "shape": { "type": "box", "half_extents": [0.01, 0.6, 0.17] }, "mass": 0, "position": [ 0.16, 0.6, 0], "friction": 0.7 },
+    { "name": "wall_nx", "shape": { "type": "box", "half_extents": [0.01, 0.6, 0.17] }, "mass": 0, "position": [-0.16, 0.6, 0], "friction": 0.7 },
+    { "name": "wall_pz", "shape": { "type": "box", "half_extents": [0.17, 0.6, 0.01] }, "mass": 0, "position": [0, 0.6,  0.16], "friction": 0.7 },
+    { "name": "wall_nz", "shape": { "type": "box", "half_extents": [0.17, 0.6, 0.01] }, "mass": 0, "position": [0, 0.6, -0.16], "friction": 0.7 },
     { "generator": {
-        "type": "pile", "name": "particle", "count": 2000, "footprint": [0.49, 0.49], "origin": [-0.245, 0.002, -0.245],
-        "jitter": 0.05, "seed": 42, "scale": [0.8, 1.2], "density": 2500, "friction": 0.7,
+        "type": "pile", "name": "particle", "count": 2000, "footprint": [0.295, 0.295], "origin": [-0.1475, 0.002, -0.1475],
+        "jitter": 0.05, "seed": 42, "scale": [0.8, 1.2], "density": 2500, "friction": 0.7, "velocity": [0, -1, 0],
         "shapes": [
           { "weight": 3, "shape": { "type": "sphere", "radius": 0.007 } },
           { "weight": 1, "shape": { "type": "box", "half_extents": [0.006, 0.005, 0.004] } },
