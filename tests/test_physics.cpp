@@ -161,6 +161,7 @@ TEST_CASE("the final state hashes the same with 1 and 2 OpenMP threads", "[physi
     SystemConfig cfg;
     cfg.dt = real(1e-3);
     cfg.threads = threads;
+    cfg.min_bodies_per_thread = 1;  // force the threads on this small scene
     cfg.solver = SolverType::APGD;
     cfg.solver_settings.max_iterations = 30;
     System sys(cfg);

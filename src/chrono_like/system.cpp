@@ -109,8 +109,14 @@ std::string System::deviceName() const {
       model = line.substr(line.find(':') + 2);
       break;
     }
-  int threads = config_.threads > 0 ? config_.threads : omp_get_max_threads();
-  return model + " (" + std::to_string(threads) + " threads)";
+  return model + " (" + std::to_string(effectiveThreads()) + " threads)";
+}
+
+int System::effectiveThreads() const {
+  const int requested = config_.threads > 0 ? config_.threads : omp_get_num_procs();
+  const int64_t per = std::max(1, config_.min_bodies_per_thread);
+  const int64_t useful = std::max<int64_t>(1, int64_t(bodies_.count()) / per);
+  return int(std::min<int64_t>(requested, useful));
 }
 
 int System::addBody(const BodyDesc& d) {
@@ -166,13 +172,15 @@ int System::addBody(const BodyDesc& d) {
 
 void System::step() {
   stats_ = StepStats{};
-  const int threads = config_.threads > 0 ? config_.threads : omp_get_max_threads();
-  omp_set_num_threads(threads);
+  // The stages read omp_get_max_threads(); the caller's setting is restored after the step.
+  const int caller_threads = omp_get_max_threads();
+  omp_set_num_threads(effectiveThreads());
 
   timed(stats_, StageType::IntegrateForces, [&] { integrateForces(); });
   detectCollisions();
   buildAndSolve();
   integrate();
+  omp_set_num_threads(caller_threads);
   time_ += config_.dt;
   ++steps_;
 }

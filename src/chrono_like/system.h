@@ -46,6 +46,8 @@ struct SystemConfig {
   SolverType solver = SolverType::APGD;
   SolverSettings solver_settings;
   int threads = 0;                  // OpenMP threads; 0 = OpenMP's default
+  int min_bodies_per_thread = 2000; // fewer bodies than this per thread: use fewer threads (a small scene
+                                    // costs more in OpenMP barriers than it gains; 1 forces all threads)
   real envelope_rel = real(0.05);   // collision envelope as a fraction of the smaller shape's size
   real recovery_rel = real(10);     // largest penetration-recovery speed: recovery_rel x size per second
   FrictionCombine friction_combine = FrictionCombine::Product;
@@ -124,6 +126,8 @@ class System {
   int64_t stepCount() const { return steps_; }
   virtual std::string backendName() const { return "cpu"; }
   virtual std::string deviceName() const;
+  // Threads the CPU stages use for the current scene: config().threads, reduced for small scenes.
+  int effectiveThreads() const;
   // Backends that keep state elsewhere (the GPU system) copy it into the host arrays here; bodies(),
   // contacts() and impulses() are current only after it. No-op on the CPU.
   virtual void syncToHost() {}
