@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -510,5 +511,93 @@ TEST_CASE("solvers are bitwise identical with 1 and 2 threads", "[solver]") {
       // (Inverse3x3 may diverge on frictional problems, see solver.h: only determinism is checked for it)
       if (bs == BlockScaling::Scalar) CHECK(a.history.back() < a.history.front());
     }
+  }
+}
+
+namespace {
+// Objective f(g) = 1/2 g^T N g + r^T g through the problem's operator.
+double objective(const CcpProblem& p, const std::vector<real>& g) {
+  std::vector<real> Ng(g.size());
+  p.schur(g.data(), Ng.data());
+  double f = 0;
+  for (size_t i = 0; i < g.size(); ++i) f += 0.5 * double(g[i]) * Ng[i] + double(p.rhs()[i]) * g[i];
+  return f;
+}
+}  // namespace
+
+TEST_CASE("disparate scales: no solver ends worse than its warm start or zero, residual drops", "[solver]") {
+  // A mixed mm-grain pile as the narrow phase gives it: heavy and tiny bodies (inverse inertia 1e3 .. 1e8),
+  // lever arms up to 20 x the body size (contact points off the surface), so diag(N) spans ~5 decades,
+  // and a warm start from "last step" whose friction points the wrong way (rotated tangent bases).
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> U(0, 1);
+  Scene s;
+  addBody(s, {0, 0, 0}, quatIdentity(), 0, {0, 0, 0}, true);
+  const int nb = 120;
+  for (int i = 1; i < nb; ++i) {
+    const bool tiny = i % 3 == 0;
+    const real m = tiny ? real(5e-4) : real(0.05), I = tiny ? real(1e-8) : real(1e-4);
+    int b = addBody(s, {U(rng) * 0.1, U(rng) * 0.1, U(rng) * 0.1}, randomQuat(rng), m, {I, I * 1.5, I * 0.7});
+    s.vf[b] = {0.1 * (U(rng) - 0.5), -0.05, 0.1 * (U(rng) - 0.5)};
+    s.wf[b] = {U(rng) - 0.5, U(rng) - 0.5, U(rng) - 0.5};
+  }
+  std::vector<real> warm;
+  for (int k = 0; k < 400; ++k) {
+    const int b = 1 + int(U(rng) * (nb - 1));
+    int a = U(rng) < 0.2 ? 0 : std::max(0, b - 1 - int(U(rng) * 6));
+    if (a == b) a = 0;
+    const Vec3 n = randomUnit(rng);
+    const real arm = b % 3 == 0 && U(rng) < 0.2 ? real(0.1) : real(0.004);  // a few off-surface points
+    const Vec3 pb = s.bodies.pos[b] + randomUnit(rng) * arm;
+    const Vec3 pa = pb + n * real(0.002 * U(rng));  // penetrating (dist < 0)
+    addContact(s, a, b, n, pa, pb, real(0.2 + 0.4 * U(rng)), real(0.004));
+    const real gn = real(2e-3 * U(rng));  // stale: about 100 x the impulses this step needs
+    warm.insert(warm.end(), {gn, real(0.5 * gn * (U(rng) - 0.5)), real(0.5 * gn * (U(rng) - 0.5))});
+  }
+  s.ps.dt = 1e-3;
+  s.ps.recovery_rel = 10;
+  s.ps.threads = 2;
+  ContactProblem cp;
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  CHECK(cp.threads() == 1);  // a small problem runs serially
+  std::vector<real> pw = warm;
+  cp.project(pw.data());
+  const double fw = objective(cp, pw);
+  SolverSettings st;  // the defaults the system uses: 50 iterations
+  std::vector<real> scratch;
+  const real alpha = residualAlpha(cp, st);
+  const real rw = ccpResidual(cp, pw.data(), alpha, scratch);
+  for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
+    INFO(solverName(t));
+    std::vector<real> g = warm;
+    SolverStats r = runSolver(t, cp, g.data(), st);
+    const double f = objective(cp, g);
+    const real res = ccpResidual(cp, g.data(), alpha, scratch);
+    INFO("f warm " << fw << " f out " << f << " res warm " << rw << " res out " << res);
+    CHECK(f <= fw);
+    CHECK(f <= 0);  // no worse than the zero impulse: the solver injects no energy (before the fix: > 0)
+    CHECK(res < real(1e-3) * rw);  // before the fix: 2e-3 .. 7e-3 (step set by the stiffest contact)
+    CHECK(r.residual == Approx(res).epsilon(1e-9));
+  }
+}
+
+TEST_CASE("solvers stop on non-finite values with SolverError", "[solver]") {
+  Scene s = randomScene(3, 10, 20);
+  s.vf[3].x = std::numeric_limits<real>::quiet_NaN();
+  ContactProblem cp;
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
+    INFO(solverName(t));
+    std::vector<real> g(size_t(cp.size()), 0);
+    CHECK_THROWS_AS(runSolver(t, cp, g.data(), SolverSettings{}), SolverError);
+  }
+  Scene s2 = randomScene(3, 10, 20);
+  ContactProblem cp2;
+  cp2.build(s2.bodies, s2.contacts, s2.vf.data(), s2.wf.data(), s2.ps);
+  for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
+    INFO("warm " << solverName(t));
+    std::vector<real> g(size_t(cp2.size()), 0);
+    g[4] = std::numeric_limits<real>::infinity();
+    CHECK_THROWS_AS(runSolver(t, cp2, g.data(), SolverSettings{}), SolverError);
   }
 }

@@ -12,6 +12,17 @@
 namespace dvi {
 
 namespace {
+// |D_kjc|_{M_c^-1} = sqrt(m_c + (r_c x d_j)^T I_c^-1 (r_c x d_j)) for side c (0 = A, 1 = B) and d_j in
+// (n, u, w): out[3 c + j]. These are the square roots of each body's share of the diagonal of N_kk.
+void contactColumnNorms(const ContactJacobian& J, const BodyInverseMass& A, const BodyInverseMass& B, real* out) {
+  const Vec3 d[3] = {J.n, J.u, contactW(J)};
+  for (int j = 0; j < 3; ++j) {
+    const Vec3 ca = cross(J.rA, d[j]), cb = cross(J.rB, d[j]);
+    out[j] = std::sqrt(std::max(real(0), A.m + dot(ca, symMul(A.I, ca))));
+    out[3 + j] = std::sqrt(std::max(real(0), B.m + dot(cb, symMul(B.I, cb))));
+  }
+}
+
 bool movable(const BodyInverseMass& B) {
   return B.m != 0 || B.I[0] != 0 || B.I[1] != 0 || B.I[2] != 0 || B.I[3] != 0 || B.I[4] != 0 || B.I[5] != 0;
 }
@@ -29,6 +40,9 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   mu_.resize(size_t(nc));
   eta_.resize(size_t(nc));
   binv_.resize(size_t(6 * nc));
+  jeta_.resize(size_t(nc));
+  colnorm_.resize(size_t(6 * nc));
+  rowsum_.resize(size_t(3 * nc));
   inv_.resize(size_t(nb));
   delta_.assign(size_t(nb), BodyDelta{{0, 0, 0}, {0, 0, 0}});
 
@@ -56,6 +70,11 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     contactDiagonalBlock(J, inv_[a], inv_[b], N);
     invertSymmetric3(N, binv_.data() + 6 * k);
     eta_[k] = blockStepFromDiagonal(N);
+    contactColumnNorms(J, inv_[a], inv_[b], colnorm_.data() + 6 * k);
+    real* rs = rowsum_.data() + 3 * k;  // absolute row sums of N_kk itself
+    rs[0] = std::fabs(N[0]) + std::fabs(N[3]) + std::fabs(N[4]);
+    rs[1] = std::fabs(N[1]) + std::fabs(N[3]) + std::fabs(N[5]);
+    rs[2] = std::fabs(N[2]) + std::fabs(N[4]) + std::fabs(N[5]);
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
   max_diag_ = max_diag > 0 ? max_diag : real(1);
@@ -86,6 +105,36 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     if (movable(inv_[J.a])) adj_[fill[J.a]++] = int32_t(2 * k);
     if (movable(inv_[J.b])) adj_[fill[J.b]++] = int32_t(2 * k + 1);
   }
+
+  // Jacobi steps (solver.h: jacobiSteps): row (k, i) of N has absolute sum <= |row i of N_kk| + sum over
+  // the two bodies c of contact k of |D_kic|_{M^-1} (Q_c - q_kc), Q_c = sum over the contacts l of c and
+  // j of |D_ljc|_{M^-1}, q_kc contact k's own share (Cauchy-Schwarz in the M_c^-1 inner product for the
+  // other contacts' blocks), so t_k = 1 / max_i of that bound gives rho(diag(t) N) <= 1. A contact that
+  // shares no body gets the block step eta_k.
+  bodyq_.assign(size_t(nb), real(0));
+  const int64_t na = int64_t(active_.size());
+#pragma omp parallel for schedule(static) num_threads(T)
+  for (int64_t j = 0; j < na; ++j) {
+    real q = 0;
+    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) {
+      const int32_t ent = adj_[e];
+      const real* cn = colnorm_.data() + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
+      q += cn[0] + cn[1] + cn[2];
+    }
+    bodyq_[size_t(active_[j])] = q;
+  }
+#pragma omp parallel for schedule(static) num_threads(T)
+  for (int64_t k = 0; k < nc; ++k) {
+    const real* cn = colnorm_.data() + 6 * k;
+    const real* rs = rowsum_.data() + 3 * k;
+    const real qa = std::max(real(0), bodyq_[size_t(jac_[k].a)] - (cn[0] + cn[1] + cn[2]));
+    const real qb = std::max(real(0), bodyq_[size_t(jac_[k].b)] - (cn[3] + cn[4] + cn[5]));
+    real g = 0;
+    for (int i = 0; i < 3; ++i) g = std::max(g, rs[i] + cn[i] * qa + cn[3 + i] * qb);
+    jeta_[k] = g > 0 ? real(1) / g : real(0);
+  }
+  // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
+  if (nc < kSerialContacts) threads_ = 1;
 }
 
 int ContactProblem::size() const { return int(3 * nc_); }
@@ -94,7 +143,7 @@ int ContactProblem::threads() const { return threads_; }
 
 void ContactProblem::gatherBodyDeltas(const real* x) const {
   const int64_t na = int64_t(active_.size());
-#pragma omp parallel for schedule(static) num_threads(threads_)
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t j = 0; j < na; ++j) {
     const int32_t i = active_[j];
     Vec3 F{0, 0, 0}, Tq{0, 0, 0};
@@ -111,7 +160,7 @@ void ContactProblem::schur(const real* x, real* y) const {
   gatherBodyDeltas(x);  // pass (a): per body, a gather
   const int64_t nc = nc_;
   const BodyDelta* dl = delta_.data();
-#pragma omp parallel for schedule(static) num_threads(threads_)
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact
     const ContactJacobian& J = jac_[k];
     const BodyDelta& A = dl[J.a];
@@ -122,13 +171,13 @@ void ContactProblem::schur(const real* x, real* y) const {
 
 void ContactProblem::project(real* x) const {
   const int64_t nc = nc_;
-#pragma omp parallel for schedule(static) num_threads(threads_)
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t k = 0; k < nc; ++k) projectConeBlock(mu_[k], x + 3 * k);
 }
 
 void ContactProblem::applyBlockInverse(const real* x, real* y) const {
   const int64_t nc = nc_;
-#pragma omp parallel for schedule(static) num_threads(threads_)
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t k = 0; k < nc; ++k) {
     const Vec3 v = symMul(binv_.data() + 6 * k, Vec3{x[3 * k], x[3 * k + 1], x[3 * k + 2]});
     y[3 * k] = v.x;
@@ -140,7 +189,7 @@ void ContactProblem::applyBlockInverse(const real* x, real* y) const {
 void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {
   gatherBodyDeltas(gamma);
   const int64_t na = int64_t(active_.size());
-#pragma omp parallel for schedule(static) num_threads(threads_)
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t j = 0; j < na; ++j) {
     const int32_t i = active_[j];
     dv[i] += delta_[i].v;

@@ -27,7 +27,8 @@ namespace dvi {
 struct ContactProblemSettings {
   real dt = real(1e-3);
   real recovery_rel = real(10);  // largest separating speed asked for a penetration: recovery_rel x size per s
-  int threads = 0;               // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads())
+  int threads = 0;               // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
+                                 // under kSerialContacts contacts solve serially (threads() == 1).
 };
 
 class ContactProblem final : public CcpProblem {
@@ -48,6 +49,7 @@ class ContactProblem final : public CcpProblem {
   int threads() const override;
   const real* frictionCoefficients() const override { return mu_.data(); }
   const real* blockSteps() const override { return eta_.data(); }
+  const real* jacobiSteps() const override { return jeta_.data(); }
   real maxDiagonal() const override { return max_diag_; }
 
   // Velocity change of every body from impulses gamma: dv = M^-1 D gamma (adds into dv, dw).
@@ -72,6 +74,10 @@ class ContactProblem final : public CcpProblem {
   std::vector<real> mu_;                 // per contact
   std::vector<real> eta_;                // per contact: scalar block step
   std::vector<real> binv_;               // 6 per contact: N_kk^-1, symmetric
+  std::vector<real> jeta_;               // per contact: Jacobi step (coupling-aware Gershgorin bound)
+  std::vector<real> colnorm_;            // 6 per contact: M^-1 norms of the Jacobian columns (build only)
+  std::vector<real> rowsum_;             // 3 per contact: absolute row sums of N_kk (build only)
+  std::vector<real> bodyq_;              // per body: sum of its contacts' column norms (build only)
   std::vector<BodyInverseMass> inv_;     // per body
   std::vector<int32_t> adj_start_;       // CSR over the active bodies: entries of active body j are
   std::vector<int32_t> adj_;             //   adj_[adj_start_[j] .. adj_start_[j+1]), each 2 k + side

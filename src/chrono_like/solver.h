@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,12 @@
 namespace dvi {
 
 enum class SolverType { Jacobi, GaussSeidel, APGD, BB };
+
+// Raised when a solver meets a non-finite value (NaN or inf in r, N x or an iterate): the step stops with
+// this error instead of propagating NaN into the bodies.
+struct SolverError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 const char* solverName(SolverType t);
 bool parseSolver(const std::string& s, SolverType& out);
 
@@ -41,7 +48,10 @@ enum class BlockScaling { Scalar, Inverse3x3 };
 struct SolverSettings {
   int max_iterations = 50;
   real tolerance = real(0);      // stop when the residual falls below it (0: run all iterations)
-  real jacobi_omega = real(0.3); // Jacobi over-relaxation with block scaling (Chrono's default 0.3..1)
+  // Jacobi relaxation. With Scalar scaling the step is omega / (Gershgorin row bound of the whole N), so
+  // any omega in (0, 1] decreases the objective at every iteration (omega < 2 converges); with Inverse3x3
+  // Chrono's 0.3 is the usual choice.
+  real jacobi_omega = real(1.0);
   real gs_omega = real(1.0);     // Gauss-Seidel relaxation
   real residual_alpha = real(1e-4);  // a in the residual, as a fraction of 1 / max diag(N) (see above)
   bool record_history = false;   // keep the residual of every iteration
@@ -57,6 +67,9 @@ struct SolverStats {
 
 // Contacts per block of every deterministic reduction (3 reals each).
 constexpr int kReduceBlock = 1024;
+// Problems with fewer contacts run serially (no OpenMP parallel region: the barriers dominate small
+// problems). Results are bitwise identical either way.
+constexpr int64_t kSerialContacts = 2048;
 
 // The operator interface a solver works on. Vectors are plain arrays of size() reals, laid out in blocks
 // of 3 per contact (normal, tangent u, tangent w).
@@ -74,7 +87,13 @@ class CcpProblem {
   // cone.h inside their fused loops.
   virtual const real* frictionCoefficients() const = 0;
   // Scalar step eta_k of every contact (size() / 3): 1 / (Gershgorin bound of the diagonal block N_kk).
+  // APGD and BB use diag(eta_k I3) as their (cone-preserving) diagonal preconditioner.
   virtual const real* blockSteps() const = 0;
+  // Scalar Jacobi step of every contact (size() / 3): 1 / (an upper bound of the largest absolute row sum
+  // of N over the rows of contact k, coupling to every other contact included), so that the spectral
+  // radius of diag(step) N is <= 1 and the Jacobi update is a descent step. The default (blockSteps())
+  // ignores the coupling and is only safe for problems whose contacts do not share bodies.
+  virtual const real* jacobiSteps() const { return blockSteps(); }
   // Largest diagonal entry of N (scales the residual's alpha).
   virtual real maxDiagonal() const = 0;
 };
@@ -85,7 +104,13 @@ real residualAlpha(const CcpProblem& p, const SolverSettings& s);
 // Projected gradient residual, shared by every solver and the tests. scratch is resized as needed.
 real ccpResidual(const CcpProblem& p, const real* gamma, real alpha, std::vector<real>& scratch);
 
-// Each solver improves gamma in place (it arrives warm-started; it is projected first). Scratch vectors
+// Each solver improves gamma in place (it arrives warm-started). The warm start w is projected and then
+// scaled along its ray to s w, s = argmin_{s >= 0} f(s w) = max(0, -r^T w / w^T N w) (no extra Schur
+// product), so the start is never worse than both the warm start and zero: a warm start from a previous
+// step's impulses on changed contact geometry cannot inject energy. APGD and BB work in the metric of
+// the diagonal preconditioner diag(eta_k I3) (cone-preserving: eta_k is one scalar per contact), so
+// contacts whose N entries differ by many orders of magnitude (mm grains, long lever arms) all progress.
+// On a NaN or inf they throw SolverError. Scratch vectors
 // live in a per-thread workspace that keeps its capacity between solves, so iterations never allocate.
 SolverStats solveJacobi(const CcpProblem& p, real* gamma, const SolverSettings& s);
 SolverStats solveApgd(const CcpProblem& p, real* gamma, const SolverSettings& s);
@@ -100,7 +125,7 @@ void blockReduce(int64_t nc, int threads, std::vector<double>& part, double* out
   const int64_t nblk = (nc + kReduceBlock - 1) / kReduceBlock;
   if (int64_t(part.size()) < nblk * M) part.resize(size_t(nblk * M));
   double* pp = part.data();
-#pragma omp parallel for schedule(static) num_threads(threads)
+#pragma omp parallel for schedule(static) num_threads(threads) if (threads > 1)
   for (int64_t bl = 0; bl < nblk; ++bl) {
     double acc[M];
     for (int m = 0; m < M; ++m) acc[m] = 0;
