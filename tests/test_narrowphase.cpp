@@ -920,3 +920,144 @@ TEST_CASE("every pair: deep overlap and coincident centres give finite contacts;
       }
     }
 }
+
+// Regression (off-surface MPR points in the mixed pile): for every MPR pair, random penetrating poses down to
+// 50 % of the smaller size. The reported pa must lie on A's surface: on A's support plane along n (within a
+// small tolerance), and inside A (checked through the support function: dot(pa, d) <= h_A(d) for many
+// directions d, which for a convex A is containment; this also bounds pa by A's bounding sphere); pb likewise
+// on B with -n. dot(pb - pa, n) == dist, and the depth is h(n) for the reported normal and close to the
+// brute-force minimum penetration (MPR may settle on a face of the Minkowski difference that is not the
+// nearest: bounded at 2 % of the smaller size for these deep poses, and never deeper than the true minimum
+// over directions by construction).
+TEST_CASE("MPR pairs: contact points lie on both surfaces (deep penetrations included)", "[narrowphase]") {
+  const int kSamples = 150;
+  std::vector<Vec3> pts;
+  pts.reserve(200000);
+  Rng rng(21);
+  Vec3 dirs[256];
+  for (int i = 0; i < 256; ++i) {
+    double z = 1 - 2 * (i + 0.5) / 256, r = std::sqrt(1 - z * z), ph = i * kPi * (3 - std::sqrt(5.0));
+    dirs[i] = Vec3{r * std::cos(ph), r * std::sin(ph), z};
+  }
+  auto h = [&](const Shape& s, const Pose& w, Vec3 d) {
+    return dot(transformPoint(w, supportLocal(s, rotateInv(w.q, d), pts.data())), d);
+  };
+  // Largest violation of dot(p, d) <= h(d) over the sample directions and the given one.
+  auto outside = [&](const Shape& s, const Pose& w, Vec3 p, Vec3 extra) {
+    double worst = dot(p, extra) - h(s, w, extra);
+    for (const Vec3& d : dirs) worst = std::max(worst, dot(p, d) - h(s, w, d));
+    return worst;
+  };
+  double worstPlane = 0, worstOut = 0, worstDepth = 0;
+  int checked = 0;
+  for (int ia = 0; ia < 7; ++ia)
+    for (int ib = ia; ib < 7; ++ib) {
+      ShapeType ta = kConvexTypes[ia], tb = kConvexTypes[ib];
+      bool closedForm = ta == ShapeType::Sphere && (tb == ShapeType::Sphere || tb == ShapeType::Box ||
+                                                    tb == ShapeType::Cylinder || tb == ShapeType::Capsule);
+      closedForm = closedForm || (ta == tb && (ta == ShapeType::Box || ta == ShapeType::Capsule));
+      if (closedForm) continue;
+      std::string name = std::string(shapeTypeName(ta)) + "-" + shapeTypeName(tb);
+      double pPlane = 0, pOut = 0, pDepth = 0;
+      for (int it = 0; it < kSamples; ++it) {
+        Pair A = randomShape(ta, rng, pts), B = randomShape(tb, rng, pts);
+        // flat faces meeting face to face are the hard case for the tangential placement: every 3rd sample
+        // shares the orientation
+        Quat qa = rng.rot(), qb = it % 3 == 0 ? qa : rng.rot();
+        Vec3 u = it % 3 == 0 ? rotate(qa, Vec3{0, 1, 0}) : rng.dir();
+        Vec3 c0{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)};
+        Pose pa = pose(c0, qa);
+        auto at = [&](double t) { return pose(c0 + u * t, qb); };
+        double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
+        for (int k = 0; k < 30; ++k) {
+          double mid = 0.5 * (lo + hi);
+          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0) lo = mid;
+          else hi = mid;
+        }
+        double size = std::min(A.s.size, B.s.size);
+        Pose pb = at(0.5 * (lo + hi) - rng.uni(0.0, 0.5) * size);
+        double env = 0.1 * size;
+        ContactPoint c[kMaxContactsPerPair];
+        bool swap = it % 2 == 1;
+        int m = swap ? collideShapes(B.s, pb, A.s, pa, pts.data(), env, c)
+                     : collideShapes(A.s, pa, B.s, pb, pts.data(), env, c);
+        if (swap) np::flipContacts(c, m);
+        INFO(name << " sample " << it << " swap " << swap);
+        REQUIRE(m == 1);
+        checkConsistent(c, m, env);
+        const ContactPoint& k = c[0];
+        Vec3 n = k.normal;
+        // on the support planes
+        double ga = std::fabs(dot(k.pa, n) - h(A.s, pa, n)), gb = std::fabs(dot(k.pb, -n) - h(B.s, pb, -n));
+        double oa = outside(A.s, pa, k.pa, n), ob = outside(B.s, pb, k.pb, -n);
+        INFO("plane gaps " << ga << " " << gb << " outside " << oa << " " << ob << " dist " << k.dist);
+        CHECK(ga < 1e-9 * (1 + size));
+        CHECK(gb < 1e-9 * (1 + size));
+        CHECK(oa < 1e-7);
+        CHECK(ob < 1e-7);
+        CHECK(length(k.pa - transformPoint(pa, Vec3{0, 0, 0})) <= boundingRadius(A.s, pts.data()) + 1e-7);
+        CHECK(length(k.pb - transformPoint(pb, Vec3{0, 0, 0})) <= boundingRadius(B.s, pts.data()) + 1e-7);
+        // depth: h(n) for the reported normal, and near the brute-force minimum
+        double hn = h(A.s, pa, n) + h(B.s, pb, -n);
+        CHECK(k.dist == Approx(-hn).margin(1e-9));
+        Vec3 hints[1] = {n}, nor;
+        double orc = oracleSignedDistance(A.s, pa, B.s, pb, pts.data(), hints, 1, &nor);
+        INFO("ours " << k.dist << " oracle " << orc << " size " << size);
+        CHECK(orc - k.dist > -1e-9);
+        CHECK(orc - k.dist < 0.02 * size);
+        pPlane = std::max({pPlane, ga, gb});
+        pOut = std::max({pOut, oa, ob});
+        pDepth = std::max(pDepth, (orc - k.dist) / size);
+        ++checked;
+      }
+      std::printf("  deep %-24s plane gap %.1e  outside %.1e  (oracle-ours)/size %.1e\n", name.c_str(), pPlane, pOut,
+                  pDepth);
+      worstPlane = std::max(worstPlane, pPlane), worstOut = std::max(worstOut, pOut);
+      worstDepth = std::max(worstDepth, pDepth);
+    }
+  std::printf("  deep, all MPR pairs, %d samples: plane gap %.1e  outside %.1e  (oracle-ours)/size %.1e\n", checked,
+              worstPlane, worstOut, worstDepth);
+}
+
+// CPU and GPU builds round dot products differently (FMA contraction, order): where support points tie on a
+// flat feature the choice must follow a fixed rule within a tolerance, not the sign of a rounding error.
+TEST_CASE("support ties on flat features are broken deterministically", "[narrowphase]") {
+  const double e = 1e-17;
+  Shape B = box(0.5, 0.25, 0.3);
+  CHECK(length(supportLocal(B, Vec3{e, 1, -e}, nullptr) - supportLocal(B, Vec3{-e, 1, e}, nullptr)) == 0);
+  CHECK(length(supportLocal(B, Vec3{e, 1, -e}, nullptr) - Vec3{0.5, 0.25, 0.3}) == 0);  // + side on a tie
+  Shape C = cylinder(0.3, 0.5);
+  CHECK(length(supportLocal(C, Vec3{e, -1, -e}, nullptr) - Vec3{0, -0.5, 0}) == 0);  // cap centre
+  CHECK(length(supportLocal(C, Vec3{-e, -1, e}, nullptr) - Vec3{0, -0.5, 0}) == 0);
+  Shape K = cone(0.3, 0.8);
+  CHECK(length(supportLocal(K, Vec3{e, -1, e}, nullptr) - Vec3{0, -0.4, 0}) == 0);  // base centre
+  // hull: a square face of four points (and one below); any direction within rounding of the face normal
+  // gives the lowest index of the face
+  std::vector<Vec3> pts = {{0, -1, 0}, {1, 1, 1}, {-1, 1, 1}, {-1, 1, -1}, {1, 1, -1}};
+  Shape H = hull(0, 5);
+  for (int k = 0; k < 8; ++k) {
+    Vec3 d{(k & 1) ? e : -e, 1 + ((k & 4) ? 1e-16 : 0), (k & 2) ? e : -e};
+    CHECK(length(supportLocal(H, d, pts.data()) - pts[1]) == 0);
+  }
+  // MPR contacts of flat faces: a cylinder standing on a box and a hull resting on it, poses perturbed by
+  // rounding-sized amounts, give the same contact point (within 1e-12), and it lies under the cylinder.
+  ContactPoint c0[kMaxContactsPerPair], c1[kMaxContactsPerPair];
+  Shape slab = box(1, 0.1, 1);
+  for (int k = 0; k < 2; ++k) {
+    Pose pc0 = pose(Vec3{0.2, 0.1 + 0.5 - 0.01, -0.1}), pc1 = pc0;
+    pc1.p.x += 1e-16;
+    pc1.q = quatFromAxisAngle(Vec3{1, 0, -1}, 1e-16);
+    const Shape& S = k == 0 ? C : H;
+    if (k == 1) pc0.p.y = pc1.p.y = 0.1 + 1 - 0.01;
+    int m0 = collideShapes(slab, pose(Vec3{0, 0, 0}), S, pc0, pts.data(), 0.02, c0);
+    int m1 = collideShapes(slab, pose(Vec3{0, 0, 0}), S, pc1, pts.data(), 0.02, c1);
+    REQUIRE(m0 == 1);
+    REQUIRE(m1 == 1);
+    CHECK(c0[0].dist == Approx(-0.01).margin(1e-9));
+    CHECK(angleDeg(c0[0].normal, Vec3{0, 1, 0}) < 1e-6);
+    CHECK(length(c0[0].pa - c1[0].pa) < 1e-12);
+    CHECK(length(c0[0].pb - c1[0].pb) < 1e-12);
+    CHECK(c0[0].pa.y == Approx(0.1).margin(1e-12));  // on the slab's top face
+    if (k == 0) CHECK(length(Vec3{c0[0].pa.x - 0.2, 0, c0[0].pa.z + 0.1}) <= 0.3 + 1e-12);  // under the cylinder
+  }
+}

@@ -16,9 +16,14 @@
 //
 // Envelope: MPR only answers for overlapping shapes. To get points for shapes that are apart but closer than
 // the collision envelope e, A is swept by a sphere of radius e (A' = A + ball(e), i.e. its support gets
-// + e * d/|d|); B' = B. The depth of the true shapes along n is then h(n) - e, the signed distance is
-// e - h(n) and A's surface point is A'-point - e n. Spheres and capsules are evaluated as point/segment
-// cores plus their radius, which is added to the same sweep term (exact, and smooth for MPR).
+// + e * d/|d|); B' = B. The depth of the true shapes along n is then h(n) - e and the signed distance is
+// e - h(n). Spheres and capsules are evaluated as point/segment cores plus their radius (exact, and smooth
+// for MPR). Portal vertices keep the support points of the true A and B (envelope excluded).
+//
+// Contact points (mprContactPoints): pa is taken on A's support face along n and pb on B's along -n, each the
+// point of that face nearest a contact-region point (the portal witness), so both lie on their surfaces and
+// dot(pb - pa, n) = e - h(n) exactly. (Averaging the two portal witnesses and offsetting them by +-dist/2 along
+// n, or taking the raw supports along a box face normal, put points up to a bounding radius off the shapes.)
 //
 // Accuracy: plain MPR reports the boundary point where the ray from the centres leaves M, whose normal need
 // not be the minimum-translation direction. We therefore re-run the portal search up to kMprPasses - 1 more
@@ -53,7 +58,8 @@ struct MprShape {
   Mat33 R;      // world rotation
   Vec3 p;       // world position of the shape frame
   Vec3 center;  // world interior point
-  real sweep;   // sphere-swept radius added to the core support
+  real sweep;   // the shape's own sweep radius (sphere, capsule) added to the core support
+  real env;     // the envelope sweep (A only): A' = A + ball(env)
 };
 
 DVI_HD MprShape makeMprShape(const Shape& s, const Pose& w, const Vec3* hull_points, real extra_sweep) {
@@ -62,10 +68,12 @@ DVI_HD MprShape makeMprShape(const Shape& s, const Pose& w, const Vec3* hull_poi
   m.R = matFromQuat(w.q);
   m.p = w.p;
   m.center = w.p + m.R * interiorPointLocal(s, hull_points);
-  m.sweep = sweepRadius(s) + extra_sweep;
+  m.sweep = sweepRadius(s);
+  m.env = extra_sweep;
   return m;
 }
 
+// Support point of the true shape (its own sweep included, the envelope not).
 DVI_HD Vec3 mprSupport(const MprShape& m, Vec3 d, const Vec3* hull_points) {
   Vec3 c = m.p + m.R * supportCoreLocal(*m.s, mulTransposed(m.R, d), hull_points);
   if (m.sweep > real(0)) {
@@ -75,51 +83,37 @@ DVI_HD Vec3 mprSupport(const MprShape& m, Vec3 d, const Vec3* hull_points) {
   return c;
 }
 
+// Support value of the true shape along d.
+DVI_HD real mprSupportValue(const MprShape& m, Vec3 d, const Vec3* hull_points) {
+  return dot(mprSupport(m, d, hull_points), d);
+}
+
+// The point of the true shape's support face along d nearest to the world point t (see supportNearLocal),
+// moved onto the exact support plane (a shift within the tie tolerance).
+DVI_HD Vec3 mprSurfacePoint(const MprShape& m, Vec3 d, Vec3 t, const Vec3* hull_points) {
+  Vec3 dl = mulTransposed(m.R, d);
+  Vec3 x = m.p + m.R * supportNearLocal(*m.s, dl, mulTransposed(m.R, t - m.p), hull_points);
+  return x + d * (mprSupportValue(m, d, hull_points) - dot(x, d));
+}
+
 struct MprVert {
-  Vec3 v, a, b;  // v = a - b
+  Vec3 v, a, b;  // v = a' - b with a' = a + env d/|d|; a on the true A, b on B
 };
 
 DVI_HD void mprSupportM(const MprShape& A, const MprShape& B, Vec3 d, const Vec3* hull_points, MprVert& o) {
   o.a = mprSupport(A, d, hull_points);
   o.b = mprSupport(B, -d, hull_points);
   o.v = o.a - o.b;
+  if (A.env > real(0)) {
+    real l = length(d);
+    if (l > real(0)) o.v += d * (A.env / l);
+  }
 }
 
 struct MprResult {
-  Vec3 n;     // unit, from A to B
-  Vec3 pa;    // on A' (swept) surface
-  Vec3 pb;    // on B' surface
-  real depth; // h(n) = penetration of A' and B' along n
+  Vec3 n;        // unit, from A to B
+  real depth;    // h(n) = penetration of A' and B' along n
 };
-
-// Witness points: the origin projected on the portal plane, in barycentric coordinates of the portal
-// (clamped into the triangle), applied to the A and B support points of the portal vertices.
-DVI_HD void mprWitness(const MprVert& V1, const MprVert& V2, const MprVert& V3, Vec3 n, Vec3& pa, Vec3& pb) {
-  Vec3 p = n * dot(n, V1.v);
-  Vec3 e1 = V2.v - V1.v, e2 = V3.v - V1.v, q = p - V1.v;
-  real d00 = dot(e1, e1), d01 = dot(e1, e2), d11 = dot(e2, e2), d20 = dot(q, e1), d21 = dot(q, e2);
-  real den = d00 * d11 - d01 * d01;
-  real l1 = 1, l2 = 0, l3 = 0;
-  if (den > real(1e-12) * d00 * d11) {
-    l2 = (d11 * d20 - d01 * d21) / den;
-    l3 = (d00 * d21 - d01 * d20) / den;
-    l1 = real(1) - l2 - l3;
-    l1 = std::fmax(l1, real(0));
-    l2 = std::fmax(l2, real(0));
-    l3 = std::fmax(l3, real(0));
-    real s = l1 + l2 + l3;
-    if (s > real(0)) {
-      l1 /= s;
-      l2 /= s;
-      l3 /= s;
-    } else {
-      l1 = 1;
-      l2 = l3 = 0;
-    }
-  }
-  pa = V1.a * l1 + V2.a * l2 + V3.a * l3;
-  pb = V1.b * l1 + V2.b * l2 + V3.b * l3;
-}
 
 // One MPR pass with interior point v0 of M. Returns false when the origin is found outside M.
 DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* hull_points, MprResult& res) {
@@ -135,8 +129,6 @@ DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* h
     // v0, origin and v1 collinear: the ray leaves M at v1, along -v0.
     res.n = normalized(-v0);
     res.depth = dot(V1.v, res.n);
-    res.pa = V1.a;
-    res.pb = V1.b;
     return true;
   }
   mprSupportM(A, B, n, hull_points, V2);
@@ -174,7 +166,6 @@ DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* h
       if (!hit) return false;
       res.n = pn;
       res.depth = h4;
-      mprWitness(V1, V2, V3, pn, res.pa, res.pb);
       return true;
     }
     Vec3 w = cross(v0, V4.v);
@@ -193,7 +184,6 @@ DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* h
   mprSupportM(A, B, pn, hull_points, V4);
   res.n = pn;
   res.depth = dot(V4.v, pn);
-  mprWitness(V1, V2, V3, pn, res.pa, res.pb);
   return true;
 }
 
@@ -220,12 +210,29 @@ DVI_HD void mprTryDirection(const MprShape& A, const MprShape& B, const Vec3* hu
   if (r.depth < best.depth) best = r;
 }
 
+// Contact points of the final normal n: pa on A's support face along n and pb on B's along -n, so both lie on
+// their shape's surface and dot(pb - pa, n) = -h_A(n) - h_B(-n), the signed distance of the true shapes along
+// n. Where a support face is flat (box face, cap, base, hull face) the point is placed by alternating
+// projections between the two faces, started from the midpoint of the shapes' interior points: it lands in
+// (or near) the overlap of the two faces seen along n. The start and every projection depend continuously on
+// the poses, never on the MPR portal (whose final triangle can change with the rounding of its branch tests),
+// so CPU and GPU builds agree.
+DVI_HD void mprContactPoints(const MprShape& A, const MprShape& B, Vec3 n, const Vec3* hull_points, Vec3& pa,
+                             Vec3& pb) {
+  Vec3 t = (A.center + B.center) * real(0.5);
+  pa = mprSurfacePoint(A, n, t, hull_points);
+  pb = mprSurfacePoint(B, -n, pa, hull_points);
+  pa = mprSurfacePoint(A, n, pb, hull_points);
+  pb = mprSurfacePoint(B, -n, pa, hull_points);
+}
+
 // Contact of two convex shapes through MPR (see the header comment). Writes at most one point.
 //
 // MPR's fixed points are faces of M whose plane holds the origin's projection, not necessarily the nearest
-// one. Two cheap global steps guard against the wrong face: the known face normals of boxes, cylinder caps
-// and cone bases are evaluated, and for convex hulls (whose faces are not stored) MPR is restarted along the
-// two most promising of the 12 frame axes (+-x, +-y, +-z of both shapes).
+// one, least of all for deep penetrations. Global candidates guard against the wrong face (see the block
+// below): known face normals, side normals, axis cross products, the centre line and, for hulls, the frame
+// axes are evaluated exactly by h(n) and MPR is restarted from the best; deep hull pairs also restart from
+// the normal tilted four ways.
 DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                       real envelope, ContactPoint* out) {
   MprShape A = makeMprShape(a, wa, hull_points, envelope);
@@ -235,31 +242,83 @@ DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose
   MprResult best;
   if (!mprPass(A, B, v0, hull_points, best)) return 0;
   mprRefine(A, B, hull_points, best);
+  // Global candidates for the normal (MPR's fixed point holds the origin's projection, not necessarily the
+  // nearest face of M, most of all for deep penetrations): face normals (box faces, cylinder caps, cone base),
+  // side normals of cylinders and cones toward the other shape, cross products of the edge and axis
+  // directions, the centre line, and for hulls (faces not stored) the frame axes. Each is evaluated exactly
+  // by h(n); a face normal that beats MPR is kept (with MPR restarted along it), and MPR is restarted from the
+  // two best candidates of all.
   {
-    Vec3 cand[8];
-    int nc = 0;
+    Vec3 cand[40];
+    int nc = 0, nface = 0;
+    Vec3 ax[2][3];
+    int nax[2] = {0, 0};
     const MprShape* sh[2] = {&A, &B};
     for (int k = 0; k < 2; ++k) {
       ShapeType t = sh[k]->s->type;
       if (t == ShapeType::Box) {
-        cand[nc++] = column(sh[k]->R, 0);
-        cand[nc++] = column(sh[k]->R, 1);
-        cand[nc++] = column(sh[k]->R, 2);
+        for (int j = 0; j < 3; ++j) ax[k][nax[k]++] = cand[nc++] = column(sh[k]->R, j);
       } else if (t == ShapeType::Cylinder || t == ShapeType::Cone) {
-        cand[nc++] = column(sh[k]->R, 1);
+        ax[k][nax[k]++] = cand[nc++] = column(sh[k]->R, 1);
+      } else if (t == ShapeType::Capsule) {
+        ax[k][nax[k]++] = column(sh[k]->R, 1);
       }
     }
-    real bh = best.depth;
-    Vec3 bn{0, 0, 0};
+    nface = nc;
+    for (int k = 0; k < 2; ++k) {  // side normals toward the other shape's centre
+      ShapeType t = sh[k]->s->type;
+      if (t != ShapeType::Cylinder && t != ShapeType::Cone && t != ShapeType::Capsule) continue;
+      Vec3 y = column(sh[k]->R, 1);
+      Vec3 w = sh[1 - k]->center - sh[k]->center;
+      w -= y * dot(w, y);
+      real lw = length(w);
+      if (!(lw > real(0))) continue;
+      w = w / lw;
+      cand[nc++] = w;
+      if (t == ShapeType::Cone) {  // generator normal: (2 hh, R) in (radial, axis) coordinates
+        real R = sh[k]->s->dims.x, H = sh[k]->s->dims.y;
+        cand[nc++] = normalized(w * H + y * R);
+      }
+    }
+    for (int i = 0; i < nax[0]; ++i)
+      for (int j = 0; j < nax[1]; ++j) {
+        Vec3 c = cross(ax[0][i], ax[1][j]);
+        real lc = length(c);
+        if (lc > real(1e-6)) cand[nc++] = c / lc;
+      }
+    {
+      Vec3 cc = B.center - A.center;
+      real lc = length(cc);
+      if (lc > real(0)) cand[nc++] = cc / lc;
+    }
+    if (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull)
+      for (int k = 0; k < 2; ++k)
+        for (int j = 0; j < 3; ++j) cand[nc++] = column(sh[k]->R, j);
+    constexpr int kTop = 4;
+    real bh = best.depth, th[kTop];
+    Vec3 bn{0, 0, 0}, td[kTop];
+    for (int i = 0; i < kTop; ++i) {
+      th[i] = real(1e30);
+      td[i] = Vec3{0, 0, 0};
+    }
     for (int i = 0; i < nc; ++i) {
       for (int sgn = -1; sgn <= 1; sgn += 2) {
         Vec3 n = cand[i] * real(sgn);
         MprVert V;
         mprSupportM(A, B, n, hull_points, V);
         real h = dot(V.v, n);
-        if (h < bh) {
+        if (i < nface && h < bh) {
           bh = h;
           bn = n;
+        }
+        if (h < th[kTop - 1]) {  // insert into the sorted list of the kTop smallest
+          int j = kTop - 1;
+          for (; j > 0 && h < th[j - 1]; --j) {
+            th[j] = th[j - 1];
+            td[j] = td[j - 1];
+          }
+          th[j] = h;
+          td[j] = n;
         }
       }
     }
@@ -268,49 +327,32 @@ DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose
       mprTryDirection(A, B, hull_points, bn, r);
       if (r.depth <= bh * (real(1) + real(1e-9))) {
         best = r;
-      } else {  // keep the face normal; points from the supports along it
-        MprVert V;
-        mprSupportM(A, B, bn, hull_points, V);
+      } else {  // keep the face normal
         best.n = bn;
         best.depth = bh;
-        best.pa = V.a;
-        best.pb = V.b;
+      }
+    }
+    const int ntry = (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) ? kTop : 2;
+    for (int i = 0; i < ntry; ++i)
+      if (th[i] > real(0) && th[i] < real(1e30)) mprTryDirection(A, B, hull_points, td[i], best);
+    // Deep hull penetrations (faces of M unknown, many local fixed points): restarts from the current normal
+    // tilted by ~35 degrees toward four tangent directions.
+    if ((a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) &&
+        best.depth - A.env > real(0.1) * std::fmin(a.size, b.size)) {
+      Vec3 n0 = best.n, u, w;
+      tangentBasis(n0, u, w);
+      for (int k = 0; k < 4; ++k) {
+        Vec3 t = (k & 1) ? w : u;
+        mprTryDirection(A, B, hull_points, normalized(n0 + t * real((k & 2) ? -0.7 : 0.7)), best);
       }
     }
   }
-  if (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) {
-    Vec3 d1{0, 0, 0}, d2{0, 0, 0};
-    real h1 = real(1e30), h2 = real(1e30);
-    for (int k = 0; k < 12; ++k) {
-      const MprShape& S = k < 6 ? A : B;
-      Vec3 d = column(S.R, (k % 6) / 2) * ((k & 1) ? real(-1) : real(1));
-      MprVert V;
-      mprSupportM(A, B, d, hull_points, V);
-      real h = dot(V.v, d);
-      if (h < h1) {
-        h2 = h1;
-        d2 = d1;
-        h1 = h;
-        d1 = d;
-      } else if (h < h2) {
-        h2 = h;
-        d2 = d;
-      }
-    }
-    if (h1 > real(0) && h1 < real(1e30)) mprTryDirection(A, B, hull_points, d1, best);
-    if (h2 > real(0) && h2 < real(1e30)) mprTryDirection(A, B, hull_points, d2, best);
-  }
-  real dist = envelope - best.depth;
+  if (!(best.depth > real(0))) return 0;
+  Vec3 pa, pb;
+  mprContactPoints(A, B, best.n, hull_points, pa, pb);
+  real dist = dot(pb - pa, best.n);
   if (!(dist < envelope)) return 0;
-  Vec3 pa = best.pa - best.n * envelope;
-  Vec3 mid = (pa + best.pb) * real(0.5);
-  ContactPoint& c = out[0];
-  c.normal = best.n;
-  c.pa = mid - best.n * (real(0.5) * dist);
-  c.pb = mid + best.n * (real(0.5) * dist);
-  c.dist = dist;
-  c.feature = 0;
-  c.pad_ = 0;
+  setContact(out[0], best.n, pa, pb, dist, 0);
   return 1;
 }
 

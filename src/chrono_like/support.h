@@ -61,10 +61,23 @@ DVI_HD Vec3 interiorPointLocal(const Shape& s, const Vec3* hull_points) {
   return c / real(s.hull_count);
 }
 
+// Tie tolerance of the support mappings, relative to |d| (max-norm) times the shape's extent. Where several
+// points tie on a flat feature (box face or edge, cylinder cap or side line, cone base or generator, hull face)
+// the choice must not hang on the last bit of a dot product, which differs between CPU and GPU builds (FMA
+// contraction, evaluation order): within the tolerance the rule is fixed -- a box or capsule takes the +
+// side of a zero component, a cylinder or cone the cap centre for an axial direction, a cone the apex over
+// the rim, a hull the lowest vertex index.
+constexpr real kSupportTieTol = sizeof(real) == 8 ? real(1e-9) : real(2e-6);
+
+DVI_HD real maxAbs3(Vec3 d) { return std::fmax(std::fabs(d.x), std::fmax(std::fabs(d.y), std::fabs(d.z))); }
+DVI_HD real sgnTol(real x, real tol) { return x < -tol ? real(-1) : real(1); }  // sign, +1 within the tolerance
+
 }  // namespace np
 
 // Support functions h(d) = argmax_{x in S} d.x of the primitives, in the shape frame. d need not be unit.
+// Ties are broken by the deterministic rules above.
 DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
+  const real tol = np::kSupportTieTol * np::maxAbs3(d);
   switch (s.type) {
     case ShapeType::Sphere: {
       real l = length(d);
@@ -77,38 +90,46 @@ DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
       return den > real(0) ? a2d / den : Vec3{s.dims.x, 0, 0};
     }
     case ShapeType::Box:
-      return Vec3{np::sgn1(d.x) * s.dims.x, np::sgn1(d.y) * s.dims.y, np::sgn1(d.z) * s.dims.z};
+      return Vec3{np::sgnTol(d.x, tol) * s.dims.x, np::sgnTol(d.y, tol) * s.dims.y, np::sgnTol(d.z, tol) * s.dims.z};
     case ShapeType::Cylinder: {
       real rho = std::sqrt(d.x * d.x + d.z * d.z);
-      real y = np::sgn1(d.y) * s.dims.y;
-      return rho > real(0) ? Vec3{s.dims.x * d.x / rho, y, s.dims.x * d.z / rho} : Vec3{0, y, 0};
+      real y = np::sgnTol(d.y, tol) * s.dims.y;
+      return rho > tol ? Vec3{s.dims.x * d.x / rho, y, s.dims.x * d.z / rho} : Vec3{0, y, 0};
     }
     case ShapeType::Capsule: {
       real l = length(d);
-      Vec3 c{0, np::sgn1(d.y) * s.dims.y, 0};
+      Vec3 c{0, np::sgnTol(d.y, tol) * s.dims.y, 0};
       return l > real(0) ? c + d * (s.dims.x / l) : c;
     }
     case ShapeType::Cone: {
-      // Apex (0, h/2, 0) or the base rim point toward d; whichever is further along d.
+      // Apex (0, h/2, 0) or the base rim point toward d; whichever is further along d (the apex on a tie).
       real hh = real(0.5) * s.dims.y;
       real rho = std::sqrt(d.x * d.x + d.z * d.z);
       real apex = d.y * hh;
       real rim = s.dims.x * rho - d.y * hh;
-      if (apex >= rim) return Vec3{0, hh, 0};
-      return rho > real(0) ? Vec3{s.dims.x * d.x / rho, -hh, s.dims.x * d.z / rho} : Vec3{0, -hh, 0};
+      if (apex >= rim - tol * (s.dims.x + hh)) return Vec3{0, hh, 0};
+      return rho > tol ? Vec3{s.dims.x * d.x / rho, -hh, s.dims.x * d.z / rho} : Vec3{0, -hh, 0};
     }
     case ShapeType::ConvexHull: {
+      // Lowest index among the points within the tolerance of the maximum: a later point replaces the
+      // current best only when it is clearly further (the values differ by rounding between builds).
       const Vec3* p = hull_points + s.hull_start;
+      if (s.hull_count <= 0) return Vec3{0, 0, 0};
       int best = 0;
       real bd = dot(p[0], d);
+      const real htol = tol * (np::maxAbs3(p[0]) + s.size);
       for (int i = 1; i < s.hull_count; ++i) {
         real v = dot(p[i], d);
-        if (v > bd) {
+        if (v > bd + htol) {
           bd = v;
           best = i;
         }
       }
-      return s.hull_count > 0 ? p[best] : Vec3{0, 0, 0};
+      // The chain above may stop on a point that is within the tolerance of another that is higher still
+      // (two steps of less than htol each): settle on the lowest index within htol of the final maximum.
+      for (int i = 0; i < best; ++i)
+        if (dot(p[i], d) >= bd - htol) return p[i];
+      return p[best];
     }
     case ShapeType::Plane:  // unbounded: no support; a point on the plane
     default: return s.dims * s.plane_d;
@@ -117,8 +138,104 @@ DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
 
 DVI_HD Vec3 np::supportCoreLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
   if (s.type == ShapeType::Sphere) return Vec3{0, 0, 0};
-  if (s.type == ShapeType::Capsule) return Vec3{0, np::sgn1(d.y) * s.dims.y, 0};
+  if (s.type == ShapeType::Capsule) return Vec3{0, np::sgnTol(d.y, np::kSupportTieTol * np::maxAbs3(d)) * s.dims.y, 0};
   return supportLocal(s, d, hull_points);
 }
 
+namespace np {
+
+// A support point of the whole shape (sweep radius included) in local direction d, chosen on the support
+// face F(d) (points within the tie tolerance of the maximum) as the point nearest `t`: F(d) is a box face,
+// edge or vertex (clamp the free coordinates), a cylinder cap disc, side line or rim point, a cone base disc,
+// generator or point, a capsule side line, a hull face polygon (approximately: Frank-Wolfe steps), or one
+// point of a curved surface. Used for contact points: on the surface by construction, and near t.
+DVI_HD Vec3 supportNearLocal(const Shape& s, Vec3 d, Vec3 t, const Vec3* hull_points) {
+  const real l = length(d);
+  if (!(l > real(0))) return supportLocal(s, d, hull_points);
+  const Vec3 u = d / l;
+  const real tol = kSupportTieTol;
+  switch (s.type) {
+    case ShapeType::Box: {
+      const Vec3 e = s.dims;
+      return Vec3{std::fabs(u.x) <= tol ? clampr(t.x, -e.x, e.x) : sgn1(u.x) * e.x,
+                  std::fabs(u.y) <= tol ? clampr(t.y, -e.y, e.y) : sgn1(u.y) * e.y,
+                  std::fabs(u.z) <= tol ? clampr(t.z, -e.z, e.z) : sgn1(u.z) * e.z};
+    }
+    case ShapeType::Capsule: {
+      real y = std::fabs(u.y) <= tol ? clampr(t.y, -s.dims.y, s.dims.y) : sgn1(u.y) * s.dims.y;
+      return Vec3{0, y, 0} + u * s.dims.x;
+    }
+    case ShapeType::Cylinder: {
+      const real R = s.dims.x, H = s.dims.y;
+      real rho = std::sqrt(u.x * u.x + u.z * u.z);
+      if (rho <= tol) {  // cap disc: t clamped into it
+        real tr = std::sqrt(t.x * t.x + t.z * t.z);
+        real f = tr > R ? R / tr : real(1);
+        return Vec3{t.x * f, sgn1(u.y) * H, t.z * f};
+      }
+      real y = std::fabs(u.y) <= tol ? clampr(t.y, -H, H) : sgn1(u.y) * H;  // side line or rim point
+      return Vec3{R * u.x / rho, y, R * u.z / rho};
+    }
+    case ShapeType::Cone: {
+      const real R = s.dims.x, hh = real(0.5) * s.dims.y;
+      real rho = std::sqrt(u.x * u.x + u.z * u.z);
+      if (rho <= tol && u.y < 0) {  // base disc
+        real tr = std::sqrt(t.x * t.x + t.z * t.z);
+        real f = tr > R ? R / tr : real(1);
+        return Vec3{t.x * f, -hh, t.z * f};
+      }
+      real apex = u.y * hh, rim = R * rho - u.y * hh;
+      if (rho > tol && std::fabs(apex - rim) <= tol * (R + hh)) {  // generator: nearest point of the segment
+        Vec3 a{0, hh, 0}, b{R * u.x / rho, -hh, R * u.z / rho};
+        Vec3 ab = b - a;
+        real w = clampr(dot(t - a, ab) / dot(ab, ab), 0, 1);
+        return a + ab * w;
+      }
+      return supportLocal(s, d, hull_points);
+    }
+    case ShapeType::ConvexHull: {
+      // Nearest point to t of the support face conv(T), T = the points within the tie tolerance of the
+      // maximum, by Frank-Wolfe steps (exact line search) from the nearest point of T: continuous in t and
+      // the pose, and on the face by construction (a convex combination of its points).
+      const Vec3* p = hull_points + s.hull_start;
+      if (s.hull_count <= 0) return Vec3{0, 0, 0};
+      Vec3 sp = supportLocal(s, d, hull_points);
+      const real hmax = dot(sp, u);
+      const real htol = tol * (maxAbs3(sp) + s.size);
+      Vec3 x = sp;
+      real bd = length2(sp - t);
+      for (int i = 0; i < s.hull_count; ++i) {
+        if (dot(p[i], u) < hmax - htol) continue;
+        real dd = length2(p[i] - t);
+        if (dd < bd) {
+          bd = dd;
+          x = p[i];
+        }
+      }
+      for (int it = 0; it < 24; ++it) {
+        Vec3 g = x - t;
+        int sbest = -1;
+        real sv = 0;
+        for (int i = 0; i < s.hull_count; ++i) {
+          if (dot(p[i], u) < hmax - htol) continue;
+          real v = dot(p[i], g);
+          if (sbest < 0 || v < sv) {
+            sv = v;
+            sbest = i;
+          }
+        }
+        if (sbest < 0) break;
+        Vec3 e = p[sbest] - x;
+        real ee = length2(e);
+        real gap = -dot(g, e);
+        if (!(ee > real(0)) || gap <= real(1e-12) * (length2(g) + ee)) break;
+        x += e * clampr(gap / ee, 0, 1);
+      }
+      return x;
+    }
+    default: return supportLocal(s, d, hull_points);  // sphere, ellipsoid: a single point
+  }
+}
+
+}  // namespace np
 }  // namespace dvi
