@@ -46,7 +46,7 @@ struct SystemConfig {
   SolverType solver = SolverType::APGD;
   SolverSettings solver_settings;
   int threads = 0;                  // OpenMP threads; 0 = OpenMP's default
-  int min_bodies_per_thread = 2000; // fewer bodies than this per thread: use fewer threads (a small scene
+  int min_bodies_per_thread = 256;  // fewer bodies than this per thread: use fewer threads (a small scene
                                     // costs more in OpenMP barriers than it gains; 1 forces all threads)
   real envelope_rel = real(0.05);   // collision envelope as a fraction of the smaller shape's size
   real recovery_rel = real(10);     // largest penetration-recovery speed: recovery_rel x size per second
