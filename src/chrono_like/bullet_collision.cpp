@@ -62,19 +62,6 @@ btTransform toBt(const Pose& p) {
   return btTransform(btQuaternion(btScalar(p.q.x), btScalar(p.q.y), btScalar(p.q.z), btScalar(p.q.w)), toBt(p.p));
 }
 
-const char* typeName(ShapeType t) {
-  switch (t) {
-    case ShapeType::Sphere: return "sphere";
-    case ShapeType::Ellipsoid: return "ellipsoid";
-    case ShapeType::Box: return "box";
-    case ShapeType::Cylinder: return "cylinder";
-    case ShapeType::Capsule: return "capsule";
-    case ShapeType::Cone: return "cone";
-    case ShapeType::ConvexHull: return "convex hull";
-    case ShapeType::Plane: return "plane";
-    default: return "unknown";
-  }
-}
 
 // Characteristic length of a shape: Shape::size when set, else the smallest half-dimension; a plane has
 // no size (infinite), so a pair with a plane uses the other shape's size.
@@ -310,7 +297,7 @@ btCollisionShape* BulletCollision::makeShape(const Shape& s, const std::vector<V
     }
     case ShapeType::Plane: out = new btStaticPlaneShape(toBt(s.dims), btScalar(s.plane_d)); break;
     default:
-      throw InputError(std::string("Bullet collision: unsupported shape type '") + typeName(s.type) + "' (" +
+      throw InputError(std::string("Bullet collision: unsupported shape type '") + shapeTypeName(s.type) + "' (" +
                        std::to_string(int(s.type)) + ")");
   }
   owned_shapes_.emplace_back(out);
