@@ -215,6 +215,26 @@ int run(const Options& o) {
   Progress progress(steps);
   double wall = 0;
 
+  // Steps either backend: writes the due frames (through `collect`), times `stepOnce`, then lets
+  // `afterStep` gather its statistics. One loop for both, so frames and timing cannot differ.
+  auto runSteps = [&](auto&& collect, auto&& stepOnce, auto&& afterStep) {
+    for (int64_t k = 0;; ++k) {
+      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+        collect();
+        frames.write(double(k) * double(st.dt), state);
+        ++next_frame;
+      }
+      if (k == steps) break;
+      const auto t0 = Clock::now();
+      stepOnce();
+      wall += std::chrono::duration<double>(Clock::now() - t0).count();
+      afterStep();
+      progress.update(k + 1);
+    }
+    progress.finish();
+    collect();
+  };
+
   if (backend == "bullet") {
     dvi::BulletPeerSettings ps;
     ps.dt = st.dt;
@@ -228,22 +248,10 @@ int run(const Options& o) {
     };
     int64_t contacts = 0;
     dvi::real max_pen = 0;
-    for (int64_t k = 0;; ++k) {
-      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
-        collect();
-        frames.write(double(k) * double(st.dt), state);
-        ++next_frame;
-      }
-      if (k == steps) break;
-      const auto t0 = Clock::now();
-      peer.step();
-      wall += std::chrono::duration<double>(Clock::now() - t0).count();
+    runSteps(collect, [&] { peer.step(); }, [&] {
       contacts += peer.lastStats().contacts;
       max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
-      progress.update(k + 1);
-    }
-    progress.finish();
-    collect();
+    });
     summary["backend"] = "bullet";
     summary["device"] = "Bullet " + std::to_string(btGetVersion()) + " btDiscreteDynamicsWorld (CPU, 1 thread)";
     summary["solver"] = "bullet-si";
@@ -273,16 +281,7 @@ int run(const Options& o) {
     dvi::real max_pen = 0, residual = 0;
     std::array<double, dvi::kStageCount> stage_s{};
     std::array<bool, dvi::kStageCount> stage_ran{};
-    for (int64_t k = 0;; ++k) {
-      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
-        collect();
-        frames.write(double(k) * double(st.dt), state);
-        ++next_frame;
-      }
-      if (k == steps) break;
-      const auto t0 = Clock::now();
-      sys->step();
-      wall += std::chrono::duration<double>(Clock::now() - t0).count();
+    runSteps(collect, [&] { sys->step(); }, [&] {
       const dvi::StepStats& s = sys->lastStats();
       contacts += s.contacts;
       iterations += s.iterations;
@@ -292,10 +291,7 @@ int run(const Options& o) {
         stage_s[size_t(i)] += s.stage_seconds[size_t(i)];
         stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
       }
-      progress.update(k + 1);
-    }
-    progress.finish();
-    collect();
+    });
     summary["backend"] = sys->backendName();
     summary["device"] = sys->deviceName();
     summary["solver"] = st.solver;
