@@ -12,6 +12,7 @@
 #pragma once
 
 #include "collide_box.h"
+#include "collide_triangle.h"
 #include "contact.h"
 #include "math.h"
 #include "mpr.h"
@@ -75,6 +76,16 @@ DVI_HD Aabb shapeAabb(const Shape& s, const Pose& world, const Vec3* hull_points
       }
       Vec3 env{envelope, envelope, envelope};
       return Aabb{c + lo - env, c + hi + env};
+    }
+    case ShapeType::Triangle: {
+      Vec3 lo{0, 0, 0}, hi{0, 0, 0};
+      for (int i = 0; i < 3; ++i) {
+        Vec3 p = transformPoint(world, np::triangleVertexLocal(s, i));
+        lo = i == 0 ? p : vmin(lo, p);
+        hi = i == 0 ? p : vmax(hi, p);
+      }
+      Vec3 env{envelope, envelope, envelope};
+      return Aabb{lo - env, hi + env};
     }
     case ShapeType::Plane:
     default: return Aabb{Vec3{real(-1e30), real(-1e30), real(-1e30)}, Vec3{real(1e30), real(1e30), real(1e30)}};
@@ -365,6 +376,10 @@ DVI_HD int collideConvexPlane(const Shape& a, const Pose& wa, const Shape& b, co
 // Canonical order: a.type <= b.type.
 DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                           real envelope, ContactPoint* out) {
+  if (b.type == ShapeType::Triangle) {  // static geometry: never against a plane or another triangle
+    if (a.type == ShapeType::Plane || a.type == ShapeType::Triangle) return 0;
+    return collideConvexTriangle(a, wa, b, wb, hull_points, envelope, out);
+  }
   if (b.type == ShapeType::Plane) {
     if (a.type == ShapeType::Plane) return 0;
     return collideConvexPlane(a, wa, b, wb, hull_points, envelope, out);

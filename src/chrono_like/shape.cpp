@@ -12,6 +12,7 @@ const char* shapeTypeName(ShapeType t) {
     case ShapeType::Cone: return "cone";
     case ShapeType::ConvexHull: return "convex_hull";
     case ShapeType::Plane: return "plane";
+    case ShapeType::Triangle: return "triangle";
     default: return "unknown";
   }
 }

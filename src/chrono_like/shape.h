@@ -20,6 +20,8 @@ enum class ShapeType : int32_t {
   Cone,        // dims.x = base radius, dims.y = height; apex at +height/2, base at -height/2 (as btConeShape)
   ConvexHull,  // points hull_points[hull_start .. hull_start+hull_count) in the shape frame
   Plane,       // static half-space {x : dot(n, x) <= d} in the shape frame: dims = unit normal n, plane_d = d
+  Triangle,    // static environment triangle (collide_triangle.h): centroid at the origin, face normal +Y,
+               // vertices (dims.x, 0, dims.y), (dims.z, 0, plane_d) and minus their sum
   Count
 };
 
@@ -60,6 +62,11 @@ DVI_HD real boundingRadius(const Shape& s, const Vec3* hull_points) {
       real r2 = 0;
       for (int i = 0; i < s.hull_count; ++i) r2 = fmax(r2, length2(hull_points[s.hull_start + i]));
       return std::sqrt(r2);
+    }
+    case ShapeType::Triangle: {  // vertices as in collide_triangle.h (centroid at the origin)
+      const real a = s.dims.x * s.dims.x + s.dims.y * s.dims.y, b = s.dims.z * s.dims.z + s.plane_d * s.plane_d;
+      const real cx = s.dims.x + s.dims.z, cz = s.dims.y + s.plane_d;
+      return std::sqrt(fmax(fmax(a, b), cx * cx + cz * cz));
     }
     default: return real(0);
   }

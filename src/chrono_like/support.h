@@ -131,6 +131,13 @@ DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
         if (dot(p[i], d) >= bd - htol) return p[i];
       return p[best];
     }
+    case ShapeType::Triangle: {  // vertices as in collide_triangle.h; the lowest index on a tie
+      const Vec3 p0{s.dims.x, 0, s.dims.y}, p1{s.dims.z, 0, s.plane_d}, p2 = -(p0 + p1);
+      const real d0 = dot(p0, d), d1 = dot(p1, d), d2 = dot(p2, d);
+      const real ttol = tol * (np::maxAbs3(p0) + np::maxAbs3(p1) + s.size);
+      if (d0 >= d1 - ttol && d0 >= d2 - ttol) return p0;
+      return d1 >= d2 - ttol ? p1 : p2;
+    }
     case ShapeType::Plane:  // unbounded: no support; a point on the plane
     default: return s.dims * s.plane_d;
   }
@@ -232,6 +239,33 @@ DVI_HD Vec3 supportNearLocal(const Shape& s, Vec3 d, Vec3 t, const Vec3* hull_po
         x += e * clampr(gap / ee, 0, 1);
       }
       return x;
+    }
+    case ShapeType::Triangle: {  // the support face: a vertex, an edge or the whole triangle, nearest t
+      const Vec3 p[3] = {Vec3{s.dims.x, 0, s.dims.y}, Vec3{s.dims.z, 0, s.plane_d},
+                         -(Vec3{s.dims.x, 0, s.dims.y} + Vec3{s.dims.z, 0, s.plane_d})};
+      real h[3], hmax = real(-1e300);
+      for (int i = 0; i < 3; ++i) hmax = std::fmax(hmax, h[i] = dot(p[i], u));
+      const real htol = tol * (maxAbs3(p[0]) + maxAbs3(p[1]) + s.size);
+      int on[3], k = 0;
+      for (int i = 0; i < 3; ++i)
+        if (h[i] >= hmax - htol) on[k++] = i;
+      if (k == 1) return p[on[0]];
+      if (k == 2) {
+        Vec3 ab = p[on[1]] - p[on[0]];
+        real l2 = dot(ab, ab);
+        return l2 > real(0) ? p[on[0]] + ab * clampr(dot(t - p[on[0]], ab) / l2, 0, 1) : p[on[0]];
+      }
+      // The whole face: t projected on the plane (y = 0) and clamped into the triangle by edges.
+      Vec3 q{t.x, 0, t.z};
+      for (int i = 0; i < 3; ++i) {
+        Vec3 e = p[(i + 1) % 3] - p[i];
+        Vec3 inward = cross(Vec3{0, 1, 0}, e);
+        if (dot(inward, q - p[i]) < 0) {  // outside this edge: nearest point of the edge
+          real l2 = dot(e, e);
+          q = l2 > real(0) ? p[i] + e * clampr(dot(q - p[i], e) / l2, 0, 1) : p[i];
+        }
+      }
+      return q;
     }
     default: return supportLocal(s, d, hull_points);  // sphere, ellipsoid: a single point
   }

@@ -1,0 +1,117 @@
+// Triangles: static environment geometry (Bullet's btBvhTriangleMeshShape, btHeightfieldTerrainShape), one
+// Shape record per triangle, collided against any convex shape. Host and device code.
+//
+// Record layout (no hull points needed, so System::addBody stores it like any primitive): the shape frame has
+// its origin at the triangle's centroid and its Y axis along the face normal (b - a) x (c - a); the vertices
+// lie in the frame's XZ plane at
+//   p0 = (dims.x, 0, dims.y),  p1 = (dims.z, 0, plane_d),  p2 = -(p0 + p1)
+// (the centroid is the origin, so four numbers fix the triangle in its frame). Shape::size is the inradius.
+//
+// Triangles are two-sided, as in Bullet: the face normal used is the one on the side of the other shape's
+// centre. Contacts (collideConvexTriangle):
+//  1. Face axis: the depth of the convex shape below the triangle's plane along the face normal; when the
+//     shape is farther than the envelope in front of the plane (or behind it beyond the back), no contact.
+//  2. MPR on the pair (the triangle's support mapping is its three vertices) gives the signed distance and
+//     normal of the deepest feature pair.
+//  3. When the face axis is within a small tolerance of MPR's answer (the shape lies on the face), the
+//     contacts are the convex shape's plane contacts against the triangle's plane (box corners, cylinder rim
+//     points, hull vertices, ...) whose foot lies inside the triangle: several points per pair, so a box rests
+//     flat on a mesh as it does on a plane. Otherwise (or when no foot lies inside), MPR's single point: an
+//     edge or vertex contact.
+#pragma once
+
+#include "contact.h"
+#include "math.h"
+#include "mpr.h"
+#include "shape.h"
+#include "support.h"
+
+namespace dvi {
+namespace np {
+
+DVI_HD int collideConvexPlane(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                              real envelope, ContactPoint* out);
+
+// Vertex i (0, 1, 2) of a Triangle record, in the shape frame.
+DVI_HD Vec3 triangleVertexLocal(const Shape& s, int i) {
+  const Vec3 p0{s.dims.x, 0, s.dims.y}, p1{s.dims.z, 0, s.plane_d};
+  return i == 0 ? p0 : (i == 1 ? p1 : -(p0 + p1));
+}
+
+// Barycentric test of point x (in the triangle's plane) against triangle (a, b, c) with unit normal n,
+// allowing `tol` (a length) outside each edge.
+DVI_HD bool insideTriangle(Vec3 x, Vec3 a, Vec3 b, Vec3 c, Vec3 n, real tol) {
+  const Vec3 v[3] = {a, b, c};
+  for (int i = 0; i < 3; ++i) {
+    Vec3 e = v[(i + 1) % 3] - v[i];
+    real le = length(e);
+    if (!(le > real(0))) return false;
+    // inward edge normal (n x e) / |e|: distance of x inside the edge
+    if (dot(cross(n, e), x - v[i]) / le < -tol) return false;
+  }
+  return true;
+}
+
+// Nearest point of segment [a, b] to t.
+DVI_HD Vec3 nearestOnSegment(Vec3 a, Vec3 b, Vec3 t) {
+  Vec3 ab = b - a;
+  real l2 = dot(ab, ab);
+  if (!(l2 > real(0))) return a;
+  return a + ab * clampr(dot(t - a, ab) / l2, 0, 1);
+}
+
+// Nearest point of triangle (a, b, c) to t (Ericson, Real-Time Collision Detection, 5.1.5).
+DVI_HD Vec3 nearestOnTriangle(Vec3 a, Vec3 b, Vec3 c, Vec3 t) {
+  Vec3 n = cross(b - a, c - a);
+  real n2 = dot(n, n);
+  if (!(n2 > real(0))) return nearestOnSegment(a, b, t);
+  Vec3 q = t - n * (dot(t - a, n) / n2);  // projection on the plane
+  if (insideTriangle(q, a, b, c, n / std::sqrt(n2), real(0))) return q;
+  Vec3 best = nearestOnSegment(a, b, t);
+  Vec3 c1 = nearestOnSegment(b, c, t), c2 = nearestOnSegment(c, a, t);
+  if (length2(c1 - t) < length2(best - t)) best = c1;
+  if (length2(c2 - t) < length2(best - t)) best = c2;
+  return best;
+}
+
+// Convex shape a (any type but Plane and Triangle) against triangle b. Normals from a to b.
+DVI_HD int collideConvexTriangle(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                                 real envelope, ContactPoint* out) {
+  const Vec3 v0 = transformPoint(wb, triangleVertexLocal(b, 0));
+  const Vec3 v1 = transformPoint(wb, triangleVertexLocal(b, 1));
+  const Vec3 v2 = transformPoint(wb, triangleVertexLocal(b, 2));
+  const Vec3 nw = rotate(wb.q, Vec3{0, 1, 0});  // winding normal
+  Vec3 nf = nw;
+  // The side of a's centre (two-sided triangle).
+  const Vec3 ca = wa.p + rotate(wa.q, interiorPointLocal(a, hull_points));
+  if (dot(ca - v0, nf) < 0) nf = -nf;
+  // 1. Face axis: lowest point of a along -nf.
+  const Vec3 low = transformPoint(wa, supportLocal(a, rotateInv(wa.q, -nf), hull_points));
+  const real face_dist = dot(low - v0, nf);
+  if (!(face_dist < envelope)) return 0;
+  // 2. MPR (signed distance and normal of the deepest feature pair).
+  ContactPoint mpr[1];
+  if (collideMpr(a, wa, b, wb, hull_points, envelope, mpr) == 0) return 0;
+  // 3. Face contacts when the face axis is (nearly) the best one.
+  const real tol = real(0.02) * a.size;
+  if (face_dist >= mpr[0].dist - tol) {
+    Shape pl = b;
+    pl.type = ShapeType::Plane;
+    pl.dims = nf;  // plane {x : dot(nf, x) <= dot(nf, v0)}, solid behind the face
+    pl.plane_d = dot(nf, v0);
+    const Pose id{{0, 0, 0}, {1, 0, 0, 0}};
+    ContactPoint pts[kMaxContactsPerPair];
+    const int n = collideConvexPlane(a, wa, pl, id, hull_points, envelope, pts);
+    const real edge_tol = real(1e-9) * (length(v1 - v0) + length(v2 - v0));
+    int m = 0;
+    for (int k = 0; k < n; ++k)
+      if (insideTriangle(pts[k].pb, v0, v1, v2, nw, edge_tol)) out[m++] = pts[k];
+    if (m > 0) return m;
+  }
+  mpr[0].feature = kMaxContactsPerPair;  // distinct from the face points' features (warm start keys)
+  out[0] = mpr[0];
+  return 1;
+}
+
+}  // namespace np
+}  // namespace dvi
