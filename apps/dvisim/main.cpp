@@ -3,6 +3,7 @@
 //   dvisim run [SCENE] [--backend auto|cpu|gpu|bullet] [--collision native|bullet]
 //              [--solver jacobi|gs|apgd|bb] [--iterations N] [--dt H] [--time T | --steps N]
 //              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR]
+//   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
 //
 // Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
 #include <unistd.h>
@@ -18,6 +19,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <functional>
 #include <vector>
 
 #ifdef _OPENMP
@@ -331,6 +333,9 @@ int fail(int code, const std::string& msg) {
 
 }  // namespace
 
+// `dvisim compare` (compare.cpp): registers the subcommand; the returned function runs it.
+std::function<int()> addCompareCommand(CLI::App& app);
+
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
   app.require_subcommand(1);
@@ -350,6 +355,7 @@ int main(int argc, char** argv) {
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
+  const std::function<int()> compare = addCompareCommand(app);
 
   try {
     app.parse(argc, argv);
@@ -358,6 +364,7 @@ int main(int argc, char** argv) {
     return fail(2, e.what());
   }
   try {
+    if (app.got_subcommand("compare")) return compare();
     return run(o);
   } catch (const InputError& e) {
     return fail(2, e.what());
