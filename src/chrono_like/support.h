@@ -243,7 +243,7 @@ DVI_HD Vec3 supportNearLocal(const Shape& s, Vec3 d, Vec3 t, const Vec3* hull_po
     case ShapeType::Triangle: {  // the support face: a vertex, an edge or the whole triangle, nearest t
       const Vec3 p[3] = {Vec3{s.dims.x, 0, s.dims.y}, Vec3{s.dims.z, 0, s.plane_d},
                          -(Vec3{s.dims.x, 0, s.dims.y} + Vec3{s.dims.z, 0, s.plane_d})};
-      real h[3], hmax = real(-1e300);
+      real h[3], hmax = real(-1e30);
       for (int i = 0; i < 3; ++i) hmax = std::fmax(hmax, h[i] = dot(p[i], u));
       const real htol = tol * (maxAbs3(p[0]) + maxAbs3(p[1]) + s.size);
       int on[3], k = 0;
