@@ -34,8 +34,10 @@ struct Args {
   bool bullet = true;
 };
 
-// A dense pile: spheres on a jittered lattice with a small gap, inside a box of four walls on a ground
-// plane, so that most spheres touch their neighbours from the first steps.
+// A dense pile: spheres on a jittered lattice inside a box of four walls on a ground plane. Columns are
+// stacked with a 0.1% gap, so most spheres touch the ones above and below from the first steps; across,
+// the pitch is 2.1 r and the jitter +-0.04 r, so no two spheres overlap at the start (an initial overlap
+// would measure how fast each engine pushes it out, not the penetration the step itself allows).
 struct Pile {
   std::vector<std::unique_ptr<btCollisionShape>> shapes;
   std::vector<std::unique_ptr<btRigidBody>> owned;
@@ -45,7 +47,8 @@ struct Pile {
 Pile makePile(long n, double r, double mu) {
   Pile p;
   const int side = int(std::ceil(std::cbrt(double(n) / 2.0)));  // footprint side; height ~ 2 x side
-  const double pitch = 2.0 * r * 1.002;
+  const double pitch = 2.0 * r * 1.05;    // across (x, z)
+  const double vpitch = 2.0 * r * 1.001;  // along a column (y)
   const double width = side * pitch;
   auto add = [&](btCollisionShape* s, double mass, btVector3 pos) {
     btVector3 inertia(0, 0, 0);
@@ -58,7 +61,7 @@ Pile makePile(long n, double r, double mu) {
   };
   p.shapes.emplace_back(new btStaticPlaneShape(btVector3(0, 1, 0), 0));
   add(p.shapes.back().get(), 0, btVector3(0, 0, 0));
-  const double wall_h = 2.5 * side * pitch, t = 0.05;
+  const double wall_h = 2.5 * side * vpitch, t = 0.05;
   p.shapes.emplace_back(new btBoxShape(btVector3(btScalar(t), btScalar(wall_h), btScalar(width / 2 + 2 * t))));
   add(p.shapes.back().get(), 0, btVector3(btScalar(-t - 0.5 * r), btScalar(wall_h), btScalar(width / 2)));
   add(p.shapes.back().get(), 0, btVector3(btScalar(width + t), btScalar(wall_h), btScalar(width / 2)));
@@ -68,12 +71,12 @@ Pile makePile(long n, double r, double mu) {
   p.shapes.emplace_back(new btSphereShape(btScalar(r)));
   const double mass = 2500.0 * 4.0 / 3.0 * M_PI * r * r * r;  // glass beads
   std::mt19937 rng(42);
-  std::uniform_real_distribution<double> jitter(-0.05 * r, 0.05 * r);
+  std::uniform_real_distribution<double> jitter(-0.04 * r, 0.04 * r);
   for (long i = 0; i < n; ++i) {
     long layer = i / (long(side) * side), in = i % (long(side) * side);
     double x = (in % side + 0.5) * pitch - 0.5 * r + jitter(rng);
     double z = (in / side + 0.5) * pitch - 0.5 * r + jitter(rng);
-    double y = r * 1.001 + layer * pitch;
+    double y = r * 1.001 + layer * vpitch;
     add(p.shapes.back().get(), mass, btVector3(btScalar(x), btScalar(y), btScalar(z)));
   }
   return p;

@@ -191,6 +191,7 @@ void System::integrateForces() {
   w_free_.resize(size_t(n));
   const real h = config_.dt;
   const bool gyro = config_.gyroscopic;
+  for (const auto& f : fields_) f->apply(bodies_, time_, h, bodies_.force.data(), bodies_.torque.data());
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i)
     integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i],

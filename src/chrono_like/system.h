@@ -18,6 +18,7 @@
 #include "broadphase.h"
 #include "data.h"
 #include "errors.h"
+#include "extensions.h"
 #include "solver.h"
 
 namespace dvi {
@@ -134,6 +135,13 @@ class System {
   // The host body arrays were edited through mutableBodies(): a device backend re-uploads them.
   virtual void markHostDirty() {}
 
+  // Plug-ins (extensions.h). Force fields run in IntegrateForces in the order added; row providers add
+  // their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).
+  void addForceField(std::shared_ptr<ForceField> field) { fields_.push_back(std::move(field)); }
+  void addRowProvider(std::shared_ptr<RowProvider> rows) { row_providers_.push_back(std::move(rows)); }
+  const std::vector<ConstraintRow>& constraintRows() const { return rows_; }   // last step's rows
+  const std::vector<real>& rowImpulses() const { return row_lambda_; }          // and their impulses
+
   // Contact force on each contact in the last step (impulse / dt), world frame, acting on body B.
   Vec3 contactForce(size_t k) const;
   // Sum of the hash of every body's state, for determinism tests (bitwise).
@@ -154,6 +162,10 @@ class System {
   std::vector<uint64_t> prev_keys_;         // sorted keys of last step's contacts
   std::vector<real> prev_gamma_;            // their impulses
   std::vector<Vec3> v_free_, w_free_;       // velocities after forces
+  std::vector<std::shared_ptr<ForceField>> fields_;
+  std::vector<std::shared_ptr<RowProvider>> row_providers_;
+  std::vector<ConstraintRow> rows_;         // constraint rows of this step
+  std::vector<real> row_lambda_;            // their impulses
   std::unique_ptr<CollisionDetector> collision_;
   std::unique_ptr<ContactProblem> problem_;
   StepStats stats_;
