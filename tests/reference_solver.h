@@ -201,6 +201,7 @@ class DenseProblem final : public dvi::CcpProblem {
     mu_.assign(P.mu.begin(), P.mu.end());
     eta_.assign(nc, 0);
     binv_.assign(9 * size_t(nc), 0);
+    binv6_.clear();
     maxd_ = 0;
     for (int k = 0; k < nc; ++k) {
       double b[3][3], row = 0;
@@ -220,6 +221,9 @@ class DenseProblem final : public dvi::CcpProblem {
           const int i1 = (j + 1) % 3, i2 = (j + 2) % 3, j1 = (i + 1) % 3, j2 = (i + 2) % 3;
           binv_[9 * size_t(k) + 3 * i + j] = (b[i1][j1] * b[i2][j2] - b[i1][j2] * b[i2][j1]) / det;
         }
+      const double* B = &binv_[9 * size_t(k)];
+      const double sym[6] = {B[0], B[4], B[8], 0.5 * (B[1] + B[3]), 0.5 * (B[2] + B[6]), 0.5 * (B[5] + B[7])};
+      for (int e = 0; e < 6; ++e) binv6_.push_back(dvi::real(sym[e]));
     }
   }
   int size() const override { return P_.n; }
@@ -231,26 +235,17 @@ class DenseProblem final : public dvi::CcpProblem {
       y[i] = s;
     }
   }
-  void project(dvi::real* x) const override {
-    for (int k = 0; k < P_.n / 3; ++k) cone(P_.mu[k], x + 3 * k);
-  }
-  void applyBlockInverse(const dvi::real* x, dvi::real* y) const override {
-    for (int k = 0; k < P_.n / 3; ++k)
-      for (int i = 0; i < 3; ++i) {
-        double s = 0;
-        for (int j = 0; j < 3; ++j) s += binv_[9 * size_t(k) + 3 * i + j] * x[3 * k + j];
-        y[3 * k + i] = s;
-      }
-  }
+  dvi::BlockSet blockSet() const override { return dvi::BlockSet{P_.n / 3, mu_.data(), nullptr, nullptr}; }
+  // N_kk^-1 in the solver's symmetric storage [00, 11, 22, 01, 02, 12] (from the full Cramer inverse).
+  const dvi::real* blockInverses() const override { return binv6_.data(); }
   int threads() const override { return threads_; }
-  const dvi::real* frictionCoefficients() const override { return mu_.data(); }
   const dvi::real* blockSteps() const override { return eta_.data(); }
   dvi::real maxDiagonal() const override { return maxd_; }
 
  private:
   DenseCcp P_;
   int threads_;
-  std::vector<dvi::real> r_, mu_, eta_;
+  std::vector<dvi::real> r_, mu_, eta_, binv6_;
   std::vector<double> binv_;
   double maxd_;
 };

@@ -6,8 +6,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
 #include "cone.h"
+#include "errors.h"
 
 namespace dvi {
 
@@ -28,21 +30,29 @@ bool movable(const BodyInverseMass& B) {
 }
 }  // namespace
 
+namespace {
+const BodyInverseMass kNoBody{0, {0, 0, 0, 0, 0, 0}};
+}
+
 void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
-                           const Vec3* w_free, const ContactProblemSettings& settings) {
+                           const Vec3* w_free, const ContactProblemSettings& settings,
+                           const std::vector<ConstraintRow>* rows) {
   threads_ = settings.threads > 0 ? settings.threads : omp_get_max_threads();
   const int T = threads_;
   const int64_t nb = int64_t(bodies.count());
   nc_ = int64_t(contacts.count());
   const int64_t nc = nc_;
+  const int64_t nrows = rows ? int64_t(rows->size()) : 0;
+  nrb_ = (nrows + 2) / 3;
+  const int64_t nblk = nc + nrb_;
   jac_.resize(size_t(nc));
-  rhs_.resize(size_t(3 * nc));
+  rhs_.resize(size_t(3 * nblk));
   mu_.resize(size_t(nc));
-  eta_.resize(size_t(nc));
-  binv_.resize(size_t(6 * nc));
-  jeta_.resize(size_t(nc));
-  colnorm_.resize(size_t(6 * nc));
-  rowsum_.resize(size_t(3 * nc));
+  eta_.resize(size_t(nblk));
+  binv_.resize(size_t(6 * nblk));
+  jeta_.resize(size_t(nblk));
+  colnorm_.resize(size_t(6 * nblk));
+  rowsum_.resize(size_t(3 * nblk));
   inv_.resize(size_t(nb));
   delta_.assign(size_t(nb), BodyDelta{{0, 0, 0}, {0, 0, 0}});
 
@@ -50,8 +60,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
 #pragma omp parallel for schedule(static) num_threads(T)
   for (int64_t i = 0; i < nb; ++i) {
     const bool fixed = have_flags && (bodies.flags[i] & (kBodyFixed | kBodyKinematic));
-    inv_[i] = fixed ? BodyInverseMass{0, {0, 0, 0, 0, 0, 0}}
-                    : makeBodyInverseMass(bodies.inv_mass[i], bodies.inv_inertia[i], bodies.rot[i]);
+    inv_[i] = fixed ? kNoBody : makeBodyInverseMass(bodies.inv_mass[i], bodies.inv_inertia[i], bodies.rot[i]);
   }
 
   const real h = settings.dt;
@@ -77,15 +86,77 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     rs[2] = std::fabs(N[2]) + std::fabs(N[4]) + std::fabs(N[5]);
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
+
+  // Constraint rows, three per block after the contacts; the last block is padded with empty rows.
+  rows_.assign(size_t(3 * nrb_), ConstraintRow{});
+  lo_.assign(size_t(3 * nrb_), real(0));
+  hi_.assign(size_t(3 * nrb_), real(0));
+  for (int64_t i = 0; i < 3 * nrb_; ++i) {
+    ConstraintRow& R = rows_[size_t(i)];
+    if (i < nrows) {
+      R = (*rows)[size_t(i)];
+      for (int32_t c : {R.a, R.b})
+        if (c < -1 || c >= nb) throw InputError("constraint row " + std::to_string(i) + ": body index " +
+                                                std::to_string(c) + " out of range");
+      if (R.a == R.b && R.a >= 0) throw InputError("constraint row " + std::to_string(i) + ": both sides are body " +
+                                                   std::to_string(R.a));
+      bool finite = std::isfinite(R.bias) && !std::isnan(R.lo) && !std::isnan(R.hi) && R.lo <= R.hi;
+      for (int j = 0; j < 6; ++j) finite = finite && std::isfinite(R.Ja[j]) && std::isfinite(R.Jb[j]);
+      if (!finite) throw InputError("constraint row " + std::to_string(i) + ": non-finite Jacobian or bias, or lo > hi");
+      lo_[size_t(i)] = R.lo;
+      hi_[size_t(i)] = R.hi;
+    } else {
+      R.lo = R.hi = 0;
+    }
+  }
+  auto sideInv = [&](int32_t c) -> const BodyInverseMass& { return c >= 0 ? inv_[size_t(c)] : kNoBody; };
+  for (int64_t q = 0; q < nrb_; ++q) {
+    const int64_t k = nc + q;
+    const ConstraintRow* R = rows_.data() + 3 * q;
+    real* rk = rhs_.data() + 3 * k;
+    real N[6];
+    const int ii[6] = {0, 1, 2, 0, 0, 1}, jj[6] = {0, 1, 2, 1, 2, 2};
+    for (int e = 0; e < 6; ++e) {  // N_ij = sum over the bodies both rows act on of Ji^T M^-1 Jj
+      const ConstraintRow &A = R[ii[e]], &B = R[jj[e]];
+      real v = 0;
+      for (int sa = 0; sa < 2; ++sa)
+        for (int sb = 0; sb < 2; ++sb) {
+          const int32_t ca = sa ? A.b : A.a, cb = sb ? B.b : B.a;
+          if (ca >= 0 && ca == cb) v += rowInner(sa ? A.Jb : A.Ja, sb ? B.Jb : B.Ja, inv_[size_t(ca)]);
+        }
+      N[e] = v;
+    }
+    for (int j = 0; j < 3; ++j) {
+      const ConstraintRow& Rj = R[j];
+      real v = Rj.bias;
+      if (Rj.a >= 0) v += rowDot(Rj.Ja, v_free[Rj.a], w_free[Rj.a]);
+      if (Rj.b >= 0) v += rowDot(Rj.Jb, v_free[Rj.b], w_free[Rj.b]);
+      rk[j] = (Rj.lo == 0 && Rj.hi == 0) ? real(0) : v;  // padding rows
+      colnorm_[6 * k + j] = std::sqrt(std::max(real(0), rowInner(Rj.Ja, Rj.Ja, sideInv(Rj.a))));
+      colnorm_[6 * k + 3 + j] = std::sqrt(std::max(real(0), rowInner(Rj.Jb, Rj.Jb, sideInv(Rj.b))));
+    }
+    invertSymmetric3(N, binv_.data() + 6 * k);
+    eta_[k] = blockStepFromDiagonal(N);
+    real* rs = rowsum_.data() + 3 * k;
+    rs[0] = std::fabs(N[0]) + std::fabs(N[3]) + std::fabs(N[4]);
+    rs[1] = std::fabs(N[1]) + std::fabs(N[3]) + std::fabs(N[5]);
+    rs[2] = std::fabs(N[2]) + std::fabs(N[4]) + std::fabs(N[5]);
+    max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));
+  }
   max_diag_ = max_diag > 0 ? max_diag : real(1);
 
-  // Body -> contact adjacency (CSR over the bodies that can move and touch a contact); entries 2 k + side,
-  // listed in increasing k, so the gather in schur() sums in a fixed order.
+  // Body -> entry adjacency (CSR over the bodies that can move and touch a contact or row); entries
+  // 2 k + side for contacts and 2 nc + 2 i + side for rows, listed in increasing order, so the gather in
+  // schur() sums in a fixed order.
   std::vector<int32_t> count(size_t(nb) + 1, 0);
   for (int64_t k = 0; k < nc; ++k) {
     const ContactJacobian& J = jac_[k];
     if (movable(inv_[J.a])) ++count[J.a];
     if (movable(inv_[J.b])) ++count[J.b];
+  }
+  for (const ConstraintRow& R : rows_) {
+    if (R.a >= 0 && movable(inv_[R.a])) ++count[R.a];
+    if (R.b >= 0 && movable(inv_[R.b])) ++count[R.b];
   }
   active_.clear();
   adj_start_.clear();
@@ -105,12 +176,18 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     if (movable(inv_[J.a])) adj_[fill[J.a]++] = int32_t(2 * k);
     if (movable(inv_[J.b])) adj_[fill[J.b]++] = int32_t(2 * k + 1);
   }
+  for (int64_t i = 0; i < int64_t(rows_.size()); ++i) {
+    const ConstraintRow& R = rows_[size_t(i)];
+    if (R.a >= 0 && movable(inv_[R.a])) adj_[fill[R.a]++] = int32_t(2 * nc + 2 * i);
+    if (R.b >= 0 && movable(inv_[R.b])) adj_[fill[R.b]++] = int32_t(2 * nc + 2 * i + 1);
+  }
 
   // Jacobi steps (solver.h: jacobiSteps): row (k, i) of N has absolute sum <= |row i of N_kk| + sum over
   // the two bodies c of contact k of |D_kic|_{M^-1} (Q_c - q_kc), Q_c = sum over the contacts l of c and
   // j of |D_ljc|_{M^-1}, q_kc contact k's own share (Cauchy-Schwarz in the M_c^-1 inner product for the
   // other contacts' blocks), so t_k = 1 / max_i of that bound gives rho(diag(t) N) <= 1. A contact that
-  // shares no body gets the block step eta_k.
+  // shares no body gets the block step eta_k. For a row block (whose rows may act on different bodies)
+  // the own share is not subtracted: a larger, still valid bound.
   bodyq_.assign(size_t(nb), real(0));
   const int64_t na = int64_t(active_.size());
 #pragma omp parallel for schedule(static) num_threads(T)
@@ -118,8 +195,13 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     real q = 0;
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) {
       const int32_t ent = adj_[e];
-      const real* cn = colnorm_.data() + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
-      q += cn[0] + cn[1] + cn[2];
+      if (ent < 2 * nc) {
+        const real* cn = colnorm_.data() + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
+        q += cn[0] + cn[1] + cn[2];
+      } else {
+        const int64_t i = (ent - 2 * nc) >> 1;
+        q += colnorm_[size_t(6 * (nc + i / 3) + 3 * (ent & 1) + i % 3)];
+      }
     }
     bodyq_[size_t(active_[j])] = q;
   }
@@ -133,28 +215,58 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     for (int i = 0; i < 3; ++i) g = std::max(g, rs[i] + cn[i] * qa + cn[3 + i] * qb);
     jeta_[k] = g > 0 ? real(1) / g : real(0);
   }
+  for (int64_t q = 0; q < nrb_; ++q) {
+    const int64_t k = nc + q;
+    const real* cn = colnorm_.data() + 6 * k;
+    const real* rs = rowsum_.data() + 3 * k;
+    real g = 0;
+    for (int i = 0; i < 3; ++i) {
+      const ConstraintRow& R = rows_[size_t(3 * q + i)];
+      const real qa = R.a >= 0 ? bodyq_[size_t(R.a)] : real(0);
+      const real qb = R.b >= 0 ? bodyq_[size_t(R.b)] : real(0);
+      g = std::max(g, rs[i] + cn[i] * qa + cn[3 + i] * qb);
+    }
+    jeta_[k] = g > 0 ? real(1) / g : real(0);
+  }
   // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
-  if (nc < kSerialContacts) threads_ = 1;
+  if (nblk < kSerialContacts) threads_ = 1;
 }
 
-int ContactProblem::size() const { return int(3 * nc_); }
+int ContactProblem::size() const { return int(3 * (nc_ + nrb_)); }
 const real* ContactProblem::rhs() const { return rhs_.data(); }
 int ContactProblem::threads() const { return threads_; }
 
 void ContactProblem::gatherBodyDeltas(const real* x) const {
   const int64_t na = int64_t(active_.size());
+  const int64_t nc = nc_;
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t j = 0; j < na; ++j) {
     const int32_t i = active_[j];
     Vec3 F{0, 0, 0}, Tq{0, 0, 0};
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) {
       const int32_t ent = adj_[e];
-      const int32_t k = ent >> 1;
-      accumulateContactImpulse(jac_[k], ent & 1, x + 3 * int64_t(k), F, Tq);
+      if (ent < 2 * nc) {
+        const int32_t k = ent >> 1;
+        accumulateContactImpulse(jac_[k], ent & 1, x + 3 * int64_t(k), F, Tq);
+      } else {
+        const int64_t r = (ent - 2 * nc) >> 1;
+        const ConstraintRow& R = rows_[size_t(r)];
+        accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * nc + r], F, Tq);
+      }
     }
     delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
   }
 }
+
+namespace {
+// y_i = J_i . (dv, dw) of a constraint row from the body velocity changes.
+real rowFromDeltas(const ConstraintRow& R, const BodyDelta* dl) {
+  real v = 0;
+  if (R.a >= 0) v += rowDot(R.Ja, dl[R.a].v, dl[R.a].w);
+  if (R.b >= 0) v += rowDot(R.Jb, dl[R.b].v, dl[R.b].w);
+  return v;
+}
+}  // namespace
 
 void ContactProblem::schur(const real* x, real* y) const {
   gatherBodyDeltas(x);  // pass (a): per body, a gather
@@ -167,23 +279,7 @@ void ContactProblem::schur(const real* x, real* y) const {
     const BodyDelta& B = dl[J.b];
     contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
   }
-}
-
-void ContactProblem::project(real* x) const {
-  const int64_t nc = nc_;
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-  for (int64_t k = 0; k < nc; ++k) projectConeBlock(mu_[k], x + 3 * k);
-}
-
-void ContactProblem::applyBlockInverse(const real* x, real* y) const {
-  const int64_t nc = nc_;
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-  for (int64_t k = 0; k < nc; ++k) {
-    const Vec3 v = symMul(binv_.data() + 6 * k, Vec3{x[3 * k], x[3 * k + 1], x[3 * k + 2]});
-    y[3 * k] = v.x;
-    y[3 * k + 1] = v.y;
-    y[3 * k + 2] = v.z;
-  }
+  for (int64_t i = 0; i < int64_t(rows_.size()); ++i) y[3 * nc + i] = rowFromDeltas(rows_[size_t(i)], dl);
 }
 
 void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {
@@ -205,23 +301,32 @@ void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const 
 // final residual a fresh Schur product.
 SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
   SolverStats st;
-  const int64_t nc = nc_;
-  if (nc == 0) return st;
+  const int64_t nc = nc_, nblk = nc_ + nrb_;
+  if (nblk == 0) return st;
   const real a = residualAlpha(*this, s), inv_a = real(1) / a;
   const real w = s.gs_omega;
   const bool full = s.block_scaling == BlockScaling::Inverse3x3;
+  const BlockSet bs = blockSet();
   std::vector<double> part;
   project(gamma);
   gatherBodyDeltas(gamma);  // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
   BodyDelta* dl = delta_.data();
+  // y = (N gamma + r)_k from the maintained body velocity changes
+  auto blockGradient = [&](int64_t k, real* y) {
+    if (k < nc) {
+      const ContactJacobian& J = jac_[k];
+      contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+    } else {
+      for (int j = 0; j < 3; ++j) y[j] = rowFromDeltas(rows_[size_t(3 * (k - nc) + j)], dl);
+    }
+    for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
+  };
   auto residualFromDeltas = [&]() {
     double sum;
-    detail::blockReduce<1>(nc, threads_, part, &sum, [&](int64_t k, double* acc) {
-      const ContactJacobian& J = jac_[k];
+    detail::blockReduce<1>(nblk, threads_, part, &sum, [&](int64_t k, double* acc) {
       real y[3];
-      contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
-      for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
-      acc[0] += projectedGradientResidual2(mu_[k], gamma + 3 * k, y, a, inv_a);
+      blockGradient(k, y);
+      acc[0] += blockResidual2(bs, k, gamma + 3 * k, y, a, inv_a);
     });
     return real(std::sqrt(sum));
   };
@@ -229,12 +334,10 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   if (s.record_history) st.history.push_back(res);
   if (!(s.tolerance > 0 && res < s.tolerance)) {
     for (int it = 0; it < s.max_iterations; ++it) {
-      for (int64_t k = 0; k < nc; ++k) {
-        const ContactJacobian& J = jac_[k];
+      for (int64_t k = 0; k < nblk; ++k) {
         real* g = gamma + 3 * k;
         real y[3];
-        contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
-        for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
+        blockGradient(k, y);
         real gn[3];
         if (full) {
           const Vec3 sy = symMul(binv_.data() + 6 * k, Vec3{y[0], y[1], y[2]});
@@ -245,21 +348,38 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
           const real t = w * eta_[k];
           for (int j = 0; j < 3; ++j) gn[j] = g[j] - t * y[j];
         }
-        projectConeBlock(mu_[k], gn);
+        projectBlock(bs, k, gn);
         const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
         g[0] = gn[0];
         g[1] = gn[1];
         g[2] = gn[2];
         if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-        for (int side = 0; side < 2; ++side) {
-          const int32_t i = side ? J.b : J.a;
-          const BodyInverseMass& M = inv_[i];
-          if (!movable(M)) continue;
-          Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-          accumulateContactImpulse(J, side, dg, F, Tq);
-          const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
-          dl[i].v += d.v;
-          dl[i].w += d.w;
+        if (k < nc) {
+          const ContactJacobian& J = jac_[k];
+          for (int side = 0; side < 2; ++side) {
+            const int32_t i = side ? J.b : J.a;
+            const BodyInverseMass& M = inv_[i];
+            if (!movable(M)) continue;
+            Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+            accumulateContactImpulse(J, side, dg, F, Tq);
+            const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
+            dl[i].v += d.v;
+            dl[i].w += d.w;
+          }
+        } else {
+          for (int j = 0; j < 3; ++j) {
+            if (dg[j] == 0) continue;
+            const ConstraintRow& R = rows_[size_t(3 * (k - nc) + j)];
+            for (int side = 0; side < 2; ++side) {
+              const int32_t i = side ? R.b : R.a;
+              if (i < 0 || !movable(inv_[i])) continue;
+              Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+              accumulateRowImpulse(side ? R.Jb : R.Ja, dg[j], F, Tq);
+              const BodyDelta d = bodyDeltaFromImpulse(inv_[i], F, Tq);
+              dl[i].v += d.v;
+              dl[i].w += d.w;
+            }
+          }
         }
       }
       ++st.iterations;

@@ -13,12 +13,17 @@
 //
 // Fixed and kinematic bodies (inverse mass and inertia 0) take no part in the Schur product (their
 // velocity change is 0) but their v_free enters r.
+//
+// Constraint rows (extensions.h) follow the contacts as blocks of three rows (the last block padded
+// with rows lo = hi = 0 on no body). A row stores its full Jacobian (12 reals): there are few of them
+// (joints, drives), so they are not compressed.
 #pragma once
 
 #include <cstdint>
 #include <vector>
 
 #include "data.h"
+#include "extensions.h"
 #include "jacobian.h"
 #include "solver.h"
 
@@ -36,18 +41,19 @@ class ContactProblem final : public CcpProblem {
   // Reads bodies.{pos, inv_mass, inv_inertia, rot, flags}, contacts.*, and the free velocities (after
   // external forces, before contact impulses). Writes the Jacobian blocks, r and the body -> contact
   // adjacency.
+  // rows: constraint rows solved with the contacts (may be null or empty); their impulses follow the
+  // contacts' in the solution vector (3 per block, the padding rows last).
   void build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,
-             const ContactProblemSettings& settings);
+             const ContactProblemSettings& settings, const std::vector<ConstraintRow>* rows = nullptr);
 
   int size() const override;
   const real* rhs() const override;
   // y = D^T (M^-1 (D x)) in two deterministic parallel passes. Uses an internal body buffer: do not call
   // schur, applyImpulses or solveGaussSeidel of one problem from two threads at once.
   void schur(const real* x, real* y) const override;
-  void project(real* x) const override;
-  void applyBlockInverse(const real* x, real* y) const override;
+  BlockSet blockSet() const override { return BlockSet{nc_, mu_.data(), lo_.data(), hi_.data()}; }
   int threads() const override;
-  const real* frictionCoefficients() const override { return mu_.data(); }
+  const real* blockInverses() const override { return binv_.data(); }
   const real* blockSteps() const override { return eta_.data(); }
   const real* jacobiSteps() const override { return jeta_.data(); }
   real maxDiagonal() const override { return max_diag_; }
@@ -68,19 +74,23 @@ class ContactProblem final : public CcpProblem {
 
   int threads_ = 1;
   int64_t nc_ = 0;                       // contacts
+  int64_t nrb_ = 0;                      // constraint-row blocks (3 rows each)
+  std::vector<ConstraintRow> rows_;      // 3 per row block (padded)
+  std::vector<real> lo_, hi_;            // 3 per row block: impulse bounds
   real max_diag_ = 1;
   std::vector<ContactJacobian> jac_;     // per contact
-  std::vector<real> rhs_;                // 3 per contact
+  std::vector<real> rhs_;                // 3 per block
   std::vector<real> mu_;                 // per contact
-  std::vector<real> eta_;                // per contact: scalar block step
-  std::vector<real> binv_;               // 6 per contact: N_kk^-1, symmetric
-  std::vector<real> jeta_;               // per contact: Jacobi step (coupling-aware Gershgorin bound)
-  std::vector<real> colnorm_;            // 6 per contact: M^-1 norms of the Jacobian columns (build only)
-  std::vector<real> rowsum_;             // 3 per contact: absolute row sums of N_kk (build only)
+  std::vector<real> eta_;                // per block: scalar block step
+  std::vector<real> binv_;               // 6 per block: N_kk^-1, symmetric
+  std::vector<real> jeta_;               // per block: Jacobi step (coupling-aware Gershgorin bound)
+  std::vector<real> colnorm_;            // 6 per block: M^-1 norms of the Jacobian columns (build only)
+  std::vector<real> rowsum_;             // 3 per block: absolute row sums of N_kk (build only)
   std::vector<real> bodyq_;              // per body: sum of its contacts' column norms (build only)
   std::vector<BodyInverseMass> inv_;     // per body
   std::vector<int32_t> adj_start_;       // CSR over the active bodies: entries of active body j are
-  std::vector<int32_t> adj_;             //   adj_[adj_start_[j] .. adj_start_[j+1]), each 2 k + side
+  std::vector<int32_t> adj_;             //   adj_[adj_start_[j] .. adj_start_[j+1]), each 2 k + side for
+                                         //   contact k, 2 nc + 2 i + side for constraint row i
   std::vector<int32_t> active_;          // bodies that can move and touch at least one contact
   mutable std::vector<BodyDelta> delta_; // per body; zero for bodies that are not active
 };

@@ -179,4 +179,24 @@ DVI_HD real contactBias(real dist, real h, real recovery_rel, real size) {
   return b > lo ? b : lo;
 }
 
+// ---- generic constraint rows (extensions.h): J = (linear[3], angular[3]) per side ----
+
+// J . (v, w)
+DVI_HD real rowDot(const real* J, Vec3 v, Vec3 w) {
+  return J[0] * v.x + J[1] * v.y + J[2] * v.z + J[3] * w.x + J[4] * w.y + J[5] * w.z;
+}
+
+// (F, T) += l (J_linear, J_angular): the generalised impulse of a row on one of its bodies.
+DVI_HD void accumulateRowImpulse(const real* J, real l, Vec3& F, Vec3& T) {
+  F += Vec3{J[0], J[1], J[2]} * l;
+  T += Vec3{J[3], J[4], J[5]} * l;
+}
+
+// Ji^T M^-1 Jj for one body.
+DVI_HD real rowInner(const real* Ji, const real* Jj, const BodyInverseMass& M) {
+  const Vec3 ai{Ji[3], Ji[4], Ji[5]};
+  const Vec3 aj{Jj[3], Jj[4], Jj[5]};
+  return M.m * (Ji[0] * Jj[0] + Ji[1] * Jj[1] + Ji[2] * Jj[2]) + dot(ai, symMul(M.I, aj));
+}
+
 }  // namespace dvi

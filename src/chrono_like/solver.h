@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "hd.h"
+#include "solver_kernels.h"
 
 namespace dvi {
 
@@ -72,30 +73,32 @@ constexpr int kReduceBlock = 1024;
 constexpr int64_t kSerialContacts = 2048;
 
 // The operator interface a solver works on. Vectors are plain arrays of size() reals, laid out in blocks
-// of 3 per contact (normal, tangent u, tangent w).
+// of 3: first the contacts (normal, tangent u, tangent w; projected onto their friction cone), then the
+// blocks of generic constraint rows (extensions.h; each row projected onto its box [lo, hi]). See
+// solver_kernels.h.
 class CcpProblem {
  public:
   virtual ~CcpProblem() = default;
-  virtual int size() const = 0;
+  virtual int size() const = 0;                          // 3 x blocks
+  virtual BlockSet blockSet() const = 0;                 // how each block is projected
   virtual const real* rhs() const = 0;                   // r
   virtual void schur(const real* x, real* y) const = 0;  // y = N x
-  virtual void project(real* x) const = 0;               // x <- P_Y(x)
-  virtual void applyBlockInverse(const real* x, real* y) const = 0;  // y = B^-1 x, B = block diag of N
   virtual int threads() const { return 1; }
-
-  // Friction coefficient of every contact (size() / 3 of them): the solvers project block by block with
-  // cone.h inside their fused loops.
-  virtual const real* frictionCoefficients() const = 0;
-  // Scalar step eta_k of every contact (size() / 3): 1 / (Gershgorin bound of the diagonal block N_kk).
+  // Scalar step eta_k of every block (size() / 3): 1 / (Gershgorin bound of the diagonal block N_kk).
   // APGD and BB use diag(eta_k I3) as their (cone-preserving) diagonal preconditioner.
   virtual const real* blockSteps() const = 0;
-  // Scalar Jacobi step of every contact (size() / 3): 1 / (an upper bound of the largest absolute row sum
-  // of N over the rows of contact k, coupling to every other contact included), so that the spectral
+  // Scalar Jacobi step of every block (size() / 3): 1 / (an upper bound of the largest absolute row sum
+  // of N over the rows of block k, coupling to every other block included), so that the spectral
   // radius of diag(step) N is <= 1 and the Jacobi update is a descent step. The default (blockSteps())
-  // ignores the coupling and is only safe for problems whose contacts do not share bodies.
+  // ignores the coupling and is only safe for problems whose blocks do not share bodies.
   virtual const real* jacobiSteps() const { return blockSteps(); }
+  // N_kk^-1 of every block, 6 reals each (symmetric [00, 11, 22, 01, 02, 12]).
+  virtual const real* blockInverses() const = 0;
   // Largest diagonal entry of N (scales the residual's alpha).
   virtual real maxDiagonal() const = 0;
+
+  void project(real* x) const;                           // x <- P_Y(x)
+  void applyBlockInverse(const real* x, real* y) const;  // y = B^-1 x, B = block diagonal of N
 };
 
 // The alpha the residual uses for this problem: s.residual_alpha / p.maxDiagonal().

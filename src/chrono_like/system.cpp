@@ -211,12 +211,29 @@ void System::detectCollisions() {
   stats_.contacts = int64_t(contacts_.count());
 }
 
+void System::collectRows() {
+  const size_t before = rows_.size();
+  rows_.clear();
+  provider_rows_.clear();
+  for (const auto& p : row_providers_) {  // each provider appends its rows; remember how many
+    const size_t n0 = rows_.size();
+    p->rows(bodies_, time_ + config_.dt, config_.dt, rows_);
+    provider_rows_.push_back(rows_.size() - n0);
+  }
+  if (rows_.size() != before) row_lambda_.clear();  // the rows changed: no warm start for them
+}
+
 void System::buildAndSolve() {
   const int64_t nc = int64_t(contacts_.count());
-  gamma_.assign(size_t(3 * nc), real(0));
-  if (nc == 0) {
+  if (!row_providers_.empty()) timed(stats_, StageType::BuildRows, [&] { collectRows(); });
+  else rows_.clear();
+  const int64_t nrows = int64_t(rows_.size());
+  const int64_t nblk = nc + (nrows + 2) / 3;
+  gamma_.assign(size_t(3 * nblk), real(0));
+  if (nblk == 0) {
     prev_keys_.clear();
     prev_gamma_.clear();
+    row_lambda_.clear();
     return;
   }
   timed(stats_, StageType::BuildRows, [&] {
@@ -236,8 +253,10 @@ void System::buildAndSolve() {
     ps.dt = config_.dt;
     ps.recovery_rel = config_.recovery_rel;
     ps.threads = omp_get_max_threads();
-    problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps);
+    problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_);
   });
+  if (config_.warm_start && int64_t(row_lambda_.size()) == nrows)
+    for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(3 * nc + i)] = row_lambda_[size_t(i)];
   if (config_.warm_start && !prev_keys_.empty()) {
     timed(stats_, StageType::WarmStart, [&] {
 #pragma omp parallel for schedule(static)
@@ -261,6 +280,9 @@ void System::buildAndSolve() {
     stats_.iterations = s.iterations;
     stats_.residual = s.residual;
   });
+  row_lambda_.assign(gamma_.begin() + 3 * nc, gamma_.begin() + 3 * nc + nrows);
+  for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
+    row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
   // Keep this step's impulses, sorted by key, for the next step's warm start.
   std::vector<size_t> order(static_cast<size_t>(nc));
   std::iota(order.begin(), order.end(), size_t(0));
@@ -282,7 +304,7 @@ void System::integrate() {
       bodies_.vel[i] = v_free_[i];
       bodies_.omega[i] = w_free_[i];
     }
-    if (!contacts_.count()) return;
+    if (gamma_.empty()) return;
     problem_->applyImpulses(gamma_.data(), bodies_.vel.data(), bodies_.omega.data());
   });
   timed(stats_, StageType::IntegratePositions, [&] {

@@ -121,7 +121,8 @@ class System {
   BodyArrays& mutableBodies() { return bodies_; }
   const ShapeArrays& shapes() const { return shapes_; }
   const ContactArrays& contacts() const { return contacts_; }
-  const std::vector<real>& impulses() const { return gamma_; }  // 3 per contact, last step
+  // Impulses of the last step: 3 per contact, then the constraint rows' (3 per block of rows).
+  const std::vector<real>& impulses() const { return gamma_; }
   const StepStats& lastStats() const { return stats_; }
   double time() const { return time_; }
   int64_t stepCount() const { return steps_; }
@@ -153,6 +154,7 @@ class System {
   virtual void detectCollisions();  // ComputeAabbs + BroadPhase + NarrowPhase
   virtual void buildAndSolve();     // BuildRows + WarmStart + Solve
   virtual void integrate();         // IntegrateVelocities + IntegratePositions
+  void collectRows();               // rows_ from the row providers (part of BuildRows)
 
   SystemConfig config_;
   BodyArrays bodies_;
@@ -166,6 +168,7 @@ class System {
   std::vector<std::shared_ptr<RowProvider>> row_providers_;
   std::vector<ConstraintRow> rows_;         // constraint rows of this step
   std::vector<real> row_lambda_;            // their impulses
+  std::vector<size_t> provider_rows_;       // rows of each provider this step, in order
   std::unique_ptr<CollisionDetector> collision_;
   std::unique_ptr<ContactProblem> problem_;
   StepStats stats_;

@@ -1,0 +1,329 @@
+// The CCP solver algorithms (projected Jacobi, APGD, BB/SPG), written once as templates over an
+// execution backend `Ops`. solver.cpp instantiates them with OpenMP loops over host arrays, and
+// gpu/gpu_solver.cu with CUDA kernels over device arrays: the same passes, the same kern:: functors
+// (solver_kernels.h), the same scalar logic on the host. See solver.h for the problem, the residual and
+// the references.
+//
+// Ops provides:
+//   int64_t blocks() const;                      blocks of 3 reals (contacts, then constraint-row blocks)
+//   BlockSet blockSet() const;                   projection data
+//   const real *rhs(), *blockSteps(), *jacobiSteps(), *blockInverses() const;
+//   real maxDiagonal() const;
+//   real* vec(int i);                            scratch vector i (0..7) of 3 blocks() reals, kept between solves
+//   void schur(const real* x, real* y);          y = N x
+//   template <class F> void map(const F& f);     f(k) for every block k
+//   template <int M, class F> void reduce(const F& f, double* out);  out[m] = sum_k of f(k, acc)[m],
+//                                                deterministic (fixed summation order for any thread count)
+//   void copy(const real* src, real* dst);       3 blocks() reals
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "solver.h"
+#include "solver_kernels.h"
+
+namespace dvi {
+namespace algo {
+
+inline void checkFinite(double v, const char* who, int it) {
+  if (!std::isfinite(v))
+    throw SolverError(std::string(who) + ": non-finite value (residual " + std::to_string(v) + ") at iteration " +
+                      std::to_string(it));
+}
+
+inline int freeBuffer(int count, int a, int b, int c) {
+  for (int i = 0; i < count; ++i)
+    if (i != a && i != b && i != c) return i;
+  return -1;
+}
+
+template <class Ops>
+real alphaOf(const Ops& p, const SolverSettings& s) {
+  const real d = p.maxDiagonal();
+  return d > real(0) ? s.residual_alpha / d : s.residual_alpha;
+}
+
+// Throws SolverError if the warm start holds a NaN or inf (the projection could otherwise hide it).
+template <class Ops>
+void checkWarmStart(Ops& p, const real* g, const char* who) {
+  double s;
+  p.template reduce<1>(kern::NonFinite{g}, &s);
+  if (!(s == 0)) throw SolverError(std::string(who) + ": non-finite warm start");
+}
+
+template <class Ops>
+real residualGivenNx(Ops& p, const real* x, const real* Nx, real a) {
+  double s;
+  p.template reduce<1>(kern::Residual{p.blockSet(), x, Nx, p.rhs(), a, real(1) / a}, &s);
+  return real(std::sqrt(s));
+}
+
+// Lower bound of lambda_max(S^1/2 N S^1/2), S = diag(eta_k I3) the preconditioner, to start the step
+// estimates: max(|S^1/2 N S^1/2 e| / |e|, 1/3), e = ones (the APGD paper, Mazhar et al. 2015, takes
+// L0 = |N (g0 - g^0)| / |g0 - g^0|). Both are <= lambda_max: eta_k is 1 / (Gershgorin bound of N_kk) and
+// that bound is <= 3 max_i (N_kk)_ii, so some diagonal entry eta_k (N_kk)_ii of the scaled matrix is >= 1/3.
+// The backtracking only has to grow it. One Schur product (setup, not per iteration).
+template <class Ops>
+real lipschitzLowerBound(Ops& p, real* e, real* Ne) {
+  p.map(kern::FillSqrtEta{p.blockSteps(), e});
+  p.schur(e, Ne);
+  double s;
+  p.template reduce<1>(kern::ScaledSquares{e, Ne}, &s);
+  real L = real(std::sqrt(s / double(3 * p.blocks())));
+  L = std::max(L, real(1) / 3);
+  if (!std::isfinite(L)) throw SolverError("solver: non-finite N (Lipschitz estimate is " + std::to_string(L) + ")");
+  return L;
+}
+
+// The start of every solver: x = P(warm start), then x <- s x with s = argmin_{s >= 0} f(s x), f(x) =
+// 1/2 x^T N x + r^T x, i.e. s = max(0, -r^T x / x^T N x) (s = 1 where x^T N x = 0 and r^T x <= 0, 0
+// where both vanish or r^T x > 0): f(start) <= min(f(P(warm)), f(0) = 0). Nx = N x on entry is scaled
+// with x (no second Schur product). Returns the start's residual; throws SolverError on non-finite input.
+// (For row blocks whose box excludes 0 the ray scaling can leave the box; it is projected again.)
+template <class Ops>
+real scaledStart(Ops& p, real* x, real* Nx, real a, const char* who) {
+  double sums[3];
+  p.template reduce<3>(kern::StartSums{x, Nx, p.rhs()}, sums);
+  if (!std::isfinite(sums[0]) || !std::isfinite(sums[1]) || !std::isfinite(sums[2]))
+    throw SolverError(std::string(who) + ": non-finite right-hand side, N x or warm start");
+  double sc = 1;
+  if (sums[0] > 0) sc = std::max(0.0, -sums[1] / sums[0]);
+  else if (sums[1] > 0 || sums[0] < 0) sc = 0;
+  if (sc != 1) p.map(kern::Scale2{real(sc), x, Nx});
+  const real res = residualGivenNx(p, x, Nx, a);
+  if (!std::isfinite(res)) throw SolverError(std::string(who) + ": non-finite residual at the start");
+  return res;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Projected Jacobi with over-relaxation and block scaling:
+//   g <- P(g - w S (N g + r)),  S = diag(t_k I3) (Scalar: t_k = jacobiSteps(), a Gershgorin bound of the
+//   whole row of N, coupling included, so rho(S N) <= 1 and w <= 1 decreases f) or N_kk^-1 (Inverse3x3).
+// One Schur product per iteration; the residual of the current iterate comes out of the same loop.
+template <class Ops>
+SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
+  SolverStats st;
+  if (p.blocks() == 0) return st;
+  const BlockSet bs = p.blockSet();
+  const real* r = p.rhs();
+  const real a = alphaOf(p, s), inv_a = real(1) / a;
+  const real w = s.jacobi_omega;
+  const bool full = s.block_scaling == BlockScaling::Inverse3x3;
+  real* Ng = p.vec(0);
+  real* other = p.vec(1);
+
+  checkWarmStart(p, gamma, "jacobi");
+  p.map(kern::Project{bs, gamma});
+  p.schur(gamma, Ng);
+  scaledStart(p, gamma, Ng, a, "jacobi");
+  real* cur = gamma;
+  real* next = other;
+  real res = 0;
+  for (int it = 0;; ++it) {
+    if (it > 0) p.schur(cur, Ng);
+    const bool last = it == s.max_iterations;
+    double sum;
+    if (!full)
+      p.template reduce<1>(kern::JacobiScalar{bs, cur, Ng, r, p.jacobiSteps(), a, inv_a, w, last, next}, &sum);
+    else
+      p.template reduce<1>(kern::JacobiInverse{bs, cur, Ng, r, p.blockInverses(), a, inv_a, w, last, next}, &sum);
+    res = real(std::sqrt(sum));
+    checkFinite(res, "jacobi", it);
+    if (s.record_history) st.history.push_back(res);
+    if (last || (s.tolerance > 0 && res < s.tolerance)) break;
+    std::swap(cur, next);
+    ++st.iterations;
+  }
+  if (cur != gamma) p.copy(cur, gamma);
+  st.residual = res;
+  return st;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// APGD: Mazhar, Heyn, Negrut, Tasora, "Using Nesterov's method to accelerate multibody dynamics with
+// friction and contact", ACM TOG 34(3), 2015, Algorithm APGD, in the metric of the diagonal
+// preconditioner S = diag(eta_k I3) (eta_k = blockSteps()):
+//   g_{k+1} = P(y_k - t_k S (N y_k + r));  while f(g_{k+1}) > f(y_k) + grad^T d + L_k/2 |d|_S^2: L_k *= 2, redo
+//   theta_{k+1} = (-theta_k^2 + theta_k sqrt(theta_k^2 + 4)) / 2,  beta = theta_k (1 - theta_k) / (theta_k^2 + theta_{k+1})
+//   y_{k+1} = g_{k+1} + beta (g_{k+1} - g_k)
+//   keep the best g; stop below the tolerance
+//   restart: if grad^T (g_{k+1} - g_k) > 0: y_{k+1} = g_{k+1}, theta_{k+1} = 1
+//   L_{k+1} = 0.9 L_k, t = 1 / L
+// |d|_S^2 = d^T S^-1 d. S is a positive scalar per block, so the S-metric projection onto the product of
+// cones is the Euclidean one block by block and this is APGD on the equivalent problem in z = S^-1/2 g,
+// whose Hessian S^1/2 N S^1/2 has its diagonal in [1/3, 1]: without S the step 1/L is set by the stiffest
+// contact (a mm grain with a long lever arm: diag N ~ 1e7 against ~ 1e3 elsewhere) and the other contacts
+// hardly move in 50 iterations.
+// Implementation choices:
+//  - f is quadratic, so the sufficient-decrease test is exactly d^T N d <= L |d|_S^2, d = g_{k+1} - y_k,
+//    evaluated without cancellation as d^T (N g_{k+1} - N y_k).
+//  - N y_{k+1} = (1 + beta) N g_{k+1} - beta N g_k, so one Schur product per accepted iteration (plus one
+//    per backtrack); y and N y are never stored but formed on the fly from (g_k, g_{k-1}) and their
+//    products, which fuses the vector work into two passes per iteration: (1) the projected step,
+//    (2) the backtracking test, residual and objective of g_{k+1} and restart test.
+//  - L_0 = max(|S^1/2 N S^1/2 1| / |1|, 1/3) (a lower bound of lambda_max; backtracking grows it).
+//  - best iterate: the smallest residual among the iterates whose objective is not above the start's
+//    (APGD is not monotone), so the result is never worse than the (scaled) warm start. It stays pinned in
+//    its buffer (4 iterate buffers rotate), so tracking it copies nothing.
+template <class Ops>
+SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
+  SolverStats st;
+  if (p.blocks() == 0) return st;
+  const BlockSet bs = p.blockSet();
+  const real* eta = p.blockSteps();
+  const real* r = p.rhs();
+  const real a = alphaOf(p, s), inv_a = real(1) / a;
+  real* X[4] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3)};
+  real* NX[3] = {p.vec(4), p.vec(5), p.vec(6)};
+
+  // g_0 = s P(warm start)
+  checkWarmStart(p, gamma, "apgd");
+  p.map(kern::CopyProject{bs, gamma, X[0]});
+  int cur = 0, old = 0, best = 0;
+  int ncur = 0, nold = 0;
+  p.schur(X[cur], NX[ncur]);
+  real best_res = scaledStart(p, X[cur], NX[ncur], a, "apgd");
+  real res = best_res;
+  if (s.record_history) st.history.push_back(res);
+
+  if (!(s.tolerance > 0 && res < s.tolerance) && s.max_iterations > 0) {
+    double f0;  // f of the start (for the best-iterate rule)
+    p.template reduce<1>(kern::Objective{X[cur], NX[ncur], r}, &f0);
+    real L = lipschitzLowerBound(p, X[1], NX[1]);
+    real theta = 1, beta = 0;
+    for (int it = 0; it < s.max_iterations; ++it) {
+      const int nw = freeBuffer(4, cur, old, best);
+      const int nnw = freeBuffer(3, ncur, nold, -1);
+      double sums[5];  // d^T N d, d^T S^-1 d, residual^2, grad^T (g_{k+1} - g_k), f(g_{k+1})
+      for (int bt = 0;; ++bt) {
+        p.map(kern::ApgdStep{bs, X[cur], X[old], NX[ncur], NX[nold], r, eta, beta, real(1) / L, X[nw]});
+        p.schur(X[nw], NX[nnw]);
+        p.template reduce<5>(
+            kern::ApgdTest{bs, X[cur], X[old], NX[ncur], NX[nold], X[nw], NX[nnw], r, eta, beta, a, inv_a}, sums);
+        if (!std::isfinite(sums[0]) || !std::isfinite(sums[2])) checkFinite(sums[0] + sums[2], "apgd", it);
+        if (!(sums[0] > double(L) * sums[1]) || bt >= 60) break;
+        L *= 2;
+      }
+      ++st.iterations;
+      res = real(std::sqrt(sums[2]));
+      if (s.record_history) st.history.push_back(res);
+      // Rotate: g_{k-1} <- g_k, g_k <- g_{k+1}.
+      old = cur;
+      cur = nw;
+      nold = ncur;
+      ncur = nnw;
+      if (res < best_res && sums[4] <= f0) {
+        best_res = res;
+        best = cur;
+      }
+      if (s.tolerance > 0 && res < s.tolerance) break;
+      const real theta_new = (-theta * theta + theta * std::sqrt(theta * theta + 4)) / 2;
+      beta = theta * (1 - theta) / (theta * theta + theta_new);
+      theta = theta_new;
+      if (sums[3] > 0) {  // gradient restart (O'Donoghue & Candes 2015, as in the APGD paper)
+        beta = 0;
+        theta = 1;
+      }
+      L *= real(0.9);
+    }
+  }
+  p.copy(X[best], gamma);
+  st.residual = best_res;
+  return st;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// BB / SPG: spectral projected gradient, Birgin, Martinez, Raydan, "Nonmonotone spectral projected
+// gradient methods on convex sets", SIAM J. Optim. 10(4), 2000 (algorithm SPG2), as applied to the CCP by
+// Heyn, Anitescu, Tasora, Negrut, IJNME 95 (2013), in the metric of the diagonal preconditioner
+// S = diag(eta_k I3) (see apgd):
+//   d_k = P(x_k - a_k S g_k) - x_k                  (g = N x + r)
+//   nonmonotone Armijo line search along d_k against the largest of the last M = 10 objective values,
+//   sigma = 1e-4, safeguarded quadratic interpolation of the step lambda in [0.1, 0.9] lambda
+//   x_{k+1} = x_k + lambda d_k,  g_{k+1} = g_k + lambda N d_k
+//   a_{k+1} = d^T S^-1 d / d^T N d (BB1 in the S-metric), clamped to [1e-10, 1e10] / L_0
+// f is quadratic, so every trial of the line search is evaluated exactly from (f, g^T d, d^T N d) with no
+// further Schur product: one Schur product per iteration. The best iterate is the smallest residual among
+// those whose objective is not above the start's.
+template <class Ops>
+SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
+  SolverStats st;
+  if (p.blocks() == 0) return st;
+  const BlockSet bs = p.blockSet();
+  const real* eta = p.blockSteps();
+  const real* r = p.rhs();
+  const real a = alphaOf(p, s), inv_a = real(1) / a;
+  real* X[3] = {p.vec(0), p.vec(1), p.vec(2)};
+  real* g = p.vec(3);
+  real* d = p.vec(4);
+  real* Nd = p.vec(5);
+  constexpr int kMemory = 10;
+  constexpr double kSigma = 1e-4;
+
+  checkWarmStart(p, gamma, "bb");
+  p.map(kern::CopyProject{bs, gamma, X[0]});
+  int cur = 0, best = 0;
+  p.schur(X[cur], g);
+  real res = scaledStart(p, X[cur], g, a, "bb");
+  double f;
+  p.template reduce<1>(kern::BbInit{X[cur], r, g}, &f);
+  real best_res = res;
+  const double f0 = f;
+  double fhist[kMemory];
+  for (double& v : fhist) v = f;
+  if (s.record_history) st.history.push_back(res);
+
+  if (!(s.tolerance > 0 && res < s.tolerance) && s.max_iterations > 0) {
+    const real L0 = lipschitzLowerBound(p, d, Nd);
+    const real amin = real(1e-10) / L0, amax = real(1e10) / L0;
+    real alpha = real(1) / L0;
+    for (int it = 0; it < s.max_iterations; ++it) {
+      const real* x = X[cur];
+      double s1[2];  // g^T d, d^T S^-1 d
+      p.template reduce<2>(kern::BbDirection{bs, x, g, eta, alpha, d}, s1);
+      const double gd = s1[0], dd = s1[1];
+      if (!std::isfinite(gd) || !std::isfinite(dd)) checkFinite(gd + dd, "bb", it);
+      if (!(dd > 0)) break;  // x is a fixed point of the projected gradient map: solved
+      p.schur(d, Nd);
+      double q;
+      p.template reduce<1>(kern::Dot{d, Nd}, &q);
+      if (!std::isfinite(q)) checkFinite(q, "bb", it);
+      double fmax = fhist[0];
+      for (double v : fhist) fmax = std::max(fmax, v);
+      double lambda = 1;
+      for (int ls = 0; ls < 60; ++ls) {
+        const double fn = f + lambda * gd + 0.5 * lambda * lambda * q;
+        if (fn <= fmax + kSigma * lambda * gd) break;
+        const double denom = 2 * (fn - f - lambda * gd);  // = lambda^2 q
+        double lt = denom > 0 ? -gd * lambda * lambda / denom : 0.5 * lambda;
+        if (!(lt >= 0.1 * lambda && lt <= 0.9 * lambda)) lt = 0.5 * lambda;
+        lambda = lt;
+      }
+      const int nw = freeBuffer(3, cur, best, -1);
+      double s2[2];  // residual^2, f of x_{k+1}
+      p.template reduce<2>(kern::BbUpdate{bs, x, d, Nd, r, real(lambda), a, inv_a, g, X[nw]}, s2);
+      f = s2[1];
+      fhist[(it + 1) % kMemory] = f;
+      cur = nw;
+      ++st.iterations;
+      res = real(std::sqrt(s2[0]));
+      checkFinite(double(res) + f, "bb", it);
+      if (s.record_history) st.history.push_back(res);
+      if (res < best_res && f <= f0) {
+        best_res = res;
+        best = cur;
+      }
+      if (s.tolerance > 0 && res < s.tolerance) break;
+      alpha = q > 0 ? real(dd / q) : amax;
+      alpha = std::min(amax, std::max(amin, alpha));
+    }
+  }
+  p.copy(X[best], gamma);
+  st.residual = best_res;
+  return st;
+}
+
+}  // namespace algo
+}  // namespace dvi

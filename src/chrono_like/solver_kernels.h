@@ -1,0 +1,294 @@
+// Per-block operations of the CCP solvers, written once as DVI_HD functors: the OpenMP loops of
+// solver.cpp and the CUDA kernels of gpu/gpu_solver.cu call these very structs through the algorithm
+// templates of solver_algorithms.h, so the CPU tests exercise the code the GPU runs.
+//
+// Vectors are laid out in blocks of 3 reals. Blocks [0, nc) are contacts (normal, tangent u, tangent w)
+// projected onto their friction cone (cone.h); blocks [nc, nb) hold generic constraint rows
+// (extensions.h: joints, drives), three rows per block, each row projected onto its box [lo, hi]
+// (Tasora & Anitescu, CMAME 200 (2011): bilateral rows have the whole line as their "cone"; a motor with
+// a force limit or a unilateral limit has an interval). Padding rows have lo = hi = 0.
+//
+// Preconditioner: S = diag(eta_k I3), one positive scalar per block, so the S-metric projection onto the
+// product of cones and boxes is the Euclidean one block by block (solver.h).
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "cone.h"
+#include "hd.h"
+#include "math.h"
+
+namespace dvi {
+
+// How each block is projected.
+struct BlockSet {
+  int64_t nc = 0;             // contact blocks (cones); the blocks after them are row boxes
+  const real* mu = nullptr;   // friction coefficient per contact block
+  const real* lo = nullptr;   // 3 per row block: lower and upper impulse bounds
+  const real* hi = nullptr;
+};
+
+DVI_HD real clampRow(real x, real lo, real hi) { return x < lo ? lo : (x > hi ? hi : x); }  // keeps NaN
+
+DVI_HD void projectBlock(const BlockSet& s, int64_t k, real* x) {
+  if (k < s.nc) {
+    projectConeBlock(s.mu[k], x);
+    return;
+  }
+  const int64_t i = 3 * (k - s.nc);
+  for (int j = 0; j < 3; ++j) x[j] = clampRow(x[j], s.lo[i + j], s.hi[i + j]);
+}
+
+// |(g - P(g - a grad)) / a|^2 of block k (the projected-gradient residual, solver.h).
+DVI_HD real blockResidual2(const BlockSet& s, int64_t k, const real* g, const real* grad, real a, real inv_a) {
+  real t[3] = {g[0] - a * grad[0], g[1] - a * grad[1], g[2] - a * grad[2]};
+  projectBlock(s, k, t);
+  const real e0 = (g[0] - t[0]) * inv_a, e1 = (g[1] - t[1]) * inv_a, e2 = (g[2] - t[2]) * inv_a;
+  return e0 * e0 + e1 * e1 + e2 * e2;
+}
+
+namespace kern {
+
+// ---- maps over blocks: operator()(k) ----
+
+struct Project {
+  BlockSet s;
+  real* x;
+  DVI_HD void operator()(int64_t k) const { projectBlock(s, k, x + 3 * k); }
+};
+
+struct CopyProject {
+  BlockSet s;
+  const real* src;
+  real* dst;
+  DVI_HD void operator()(int64_t k) const {
+    for (int j = 0; j < 3; ++j) dst[3 * k + j] = src[3 * k + j];
+    projectBlock(s, k, dst + 3 * k);
+  }
+};
+
+struct Copy {
+  const real* src;
+  real* dst;
+  DVI_HD void operator()(int64_t k) const {
+    for (int j = 0; j < 3; ++j) dst[3 * k + j] = src[3 * k + j];
+  }
+};
+
+struct Scale2 {  // x *= c, Nx *= c
+  real c;
+  real *x, *Nx;
+  DVI_HD void operator()(int64_t k) const {
+    for (int j = 0; j < 3; ++j) {
+      x[3 * k + j] *= c;
+      Nx[3 * k + j] *= c;
+    }
+  }
+};
+
+struct FillSqrtEta {  // e = S^1/2 1
+  const real* eta;
+  real* e;
+  DVI_HD void operator()(int64_t k) const {
+    const real v = sqrt(eta[k]);
+    for (int j = 0; j < 3; ++j) e[3 * k + j] = v;
+  }
+};
+
+// APGD pass (1): g_{k+1} = P(y - t S (N y + r)), y and N y formed from (g_k, g_{k-1}).
+struct ApgdStep {
+  BlockSet s;
+  const real *gc, *go, *Nc, *No, *r, *eta;
+  real beta, t;
+  real* gn;
+  DVI_HD void operator()(int64_t k) const {
+    real* x = gn + 3 * k;
+    const real te = t * eta[k];
+    for (int j = 0; j < 3; ++j) {
+      const int64_t i = 3 * k + j;
+      const real y = gc[i] + beta * (gc[i] - go[i]);
+      const real Ny = Nc[i] + beta * (Nc[i] - No[i]);
+      x[j] = y - te * (Ny + r[i]);
+    }
+    projectBlock(s, k, x);
+  }
+};
+
+// ---- reductions over blocks: operator()(k, acc) adds block k's terms to acc[0..M) ----
+
+struct NonFinite {  // 1 sum: NaN or inf when x holds one
+  const real* x;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    for (int j = 0; j < 3; ++j) acc[0] += double(x[3 * k + j]) * 0;
+  }
+};
+
+struct Dot {  // 1 sum: x^T y
+  const real *x, *y;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    for (int j = 0; j < 3; ++j) acc[0] += double(x[3 * k + j]) * y[3 * k + j];
+  }
+};
+
+struct ScaledSquares {  // 1 sum: |diag(e) Ne|^2 (Lipschitz estimate)
+  const real *e, *Ne;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    for (int j = 0; j < 3; ++j) {
+      const double v = double(Ne[3 * k + j]) * e[3 * k + j];
+      acc[0] += v * v;
+    }
+  }
+};
+
+struct StartSums {  // 3 sums: x^T N x, r^T x, finiteness of r
+  const real *x, *Nx, *r;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    for (int j = 0; j < 3; ++j) {
+      acc[0] += double(x[3 * k + j]) * Nx[3 * k + j];
+      acc[1] += double(r[3 * k + j]) * x[3 * k + j];
+      acc[2] += double(r[3 * k + j]) * 0;
+    }
+  }
+};
+
+struct Objective {  // 1 sum: f = 1/2 x^T (N x + 2 r)
+  const real *x, *Nx, *r;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    for (int j = 0; j < 3; ++j) acc[0] += 0.5 * double(x[3 * k + j]) * (Nx[3 * k + j] + 2 * r[3 * k + j]);
+  }
+};
+
+struct Residual {  // 1 sum: squared residual of x given N x
+  BlockSet s;
+  const real *x, *Nx, *r;
+  real a, inv_a;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    const real grad[3] = {Nx[3 * k] + r[3 * k], Nx[3 * k + 1] + r[3 * k + 1], Nx[3 * k + 2] + r[3 * k + 2]};
+    acc[0] += blockResidual2(s, k, x + 3 * k, grad, a, inv_a);
+  }
+};
+
+// Jacobi with the scalar step: residual of cur; unless last, next = P(cur - w t_k (N cur + r)).
+struct JacobiScalar {
+  BlockSet s;
+  const real *cur, *Ng, *r, *step;
+  real a, inv_a, w;
+  bool last;
+  real* next;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    const real* g = cur + 3 * k;
+    const real grad[3] = {Ng[3 * k] + r[3 * k], Ng[3 * k + 1] + r[3 * k + 1], Ng[3 * k + 2] + r[3 * k + 2]};
+    acc[0] += blockResidual2(s, k, g, grad, a, inv_a);
+    if (!last) {
+      const real t = w * step[k];
+      real* x = next + 3 * k;
+      for (int j = 0; j < 3; ++j) x[j] = g[j] - t * grad[j];
+      projectBlock(s, k, x);
+    }
+  }
+};
+
+// Jacobi with the 3x3 block inverse: residual of cur; unless last, next = P(cur - w N_kk^-1 (N cur + r)).
+struct JacobiInverse {
+  BlockSet s;
+  const real *cur, *Ng, *r, *binv;
+  real a, inv_a, w;
+  bool last;
+  real* next;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    const real* g = cur + 3 * k;
+    const real grad[3] = {Ng[3 * k] + r[3 * k], Ng[3 * k + 1] + r[3 * k + 1], Ng[3 * k + 2] + r[3 * k + 2]};
+    acc[0] += blockResidual2(s, k, g, grad, a, inv_a);
+    if (!last) {
+      const real* B = binv + 6 * k;  // symmetric [00, 11, 22, 01, 02, 12]
+      const real sg[3] = {B[0] * grad[0] + B[3] * grad[1] + B[4] * grad[2],
+                          B[3] * grad[0] + B[1] * grad[1] + B[5] * grad[2],
+                          B[4] * grad[0] + B[5] * grad[1] + B[2] * grad[2]};
+      real* x = next + 3 * k;
+      for (int j = 0; j < 3; ++j) x[j] = g[j] - w * sg[j];
+      projectBlock(s, k, x);
+    }
+  }
+};
+
+// APGD pass (2), 5 sums: d^T N d, d^T S^-1 d, residual^2 of g_{k+1}, grad(y)^T (g_{k+1} - g_k), f(g_{k+1}),
+// with d = g_{k+1} - y (see solveApgd).
+struct ApgdTest {
+  BlockSet s;
+  const real *gc, *go, *Nc, *No, *gn, *Nn, *r, *eta;
+  real beta, a, inv_a;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    real grad_n[3];
+    double dd = 0;
+    for (int j = 0; j < 3; ++j) {
+      const int64_t i = 3 * k + j;
+      const real y = gc[i] + beta * (gc[i] - go[i]);
+      const real Ny = Nc[i] + beta * (Nc[i] - No[i]);
+      const real d = gn[i] - y;
+      acc[0] += double(d) * (Nn[i] - Ny);
+      dd += double(d) * d;
+      acc[3] += double(Ny + r[i]) * (gn[i] - gc[i]);
+      acc[4] += 0.5 * double(gn[i]) * (Nn[i] + 2 * r[i]);
+      grad_n[j] = Nn[i] + r[i];
+    }
+    if (eta[k] > 0) acc[1] += dd / eta[k];  // a block between immovable bodies has no metric weight
+    acc[2] += blockResidual2(s, k, gn + 3 * k, grad_n, a, inv_a);
+  }
+};
+
+// BB start, 1 sum: g += r (g held N x), f of x.
+struct BbInit {
+  const real *x, *r;
+  real* g;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    for (int j = 0; j < 3; ++j) {
+      g[3 * k + j] += r[3 * k + j];
+      acc[0] += 0.5 * double(x[3 * k + j]) * (g[3 * k + j] + r[3 * k + j]);
+    }
+  }
+};
+
+// BB direction, 2 sums: d = P(x - alpha S g) - x; g^T d, d^T S^-1 d.
+struct BbDirection {
+  BlockSet s;
+  const real *x, *g, *eta;
+  real alpha;
+  real* d;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    real* dk = d + 3 * k;
+    const real ae = alpha * eta[k];
+    for (int j = 0; j < 3; ++j) dk[j] = x[3 * k + j] - ae * g[3 * k + j];
+    projectBlock(s, k, dk);
+    double dd = 0;
+    for (int j = 0; j < 3; ++j) {
+      dk[j] -= x[3 * k + j];
+      acc[0] += double(g[3 * k + j]) * dk[j];
+      dd += double(dk[j]) * dk[j];
+    }
+    if (eta[k] > 0) acc[1] += dd / eta[k];
+  }
+};
+
+// BB update, 2 sums: xn = P(x + lambda d), g += lambda N d; residual^2 and f of xn.
+struct BbUpdate {
+  BlockSet s;
+  const real *x, *d, *Nd, *r;
+  real lam, a, inv_a;
+  real *g, *xn;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    real* gk = g + 3 * k;
+    real* xk = xn + 3 * k;
+    for (int j = 0; j < 3; ++j) {
+      const int64_t i = 3 * k + j;
+      xk[j] = x[i] + lam * d[i];
+      gk[j] += lam * Nd[i];
+    }
+    projectBlock(s, k, xk);  // x + lambda d is in the convex set; this only removes rounding
+    for (int j = 0; j < 3; ++j) acc[1] += 0.5 * double(xk[j]) * (gk[j] + r[3 * k + j]);
+    acc[0] += blockResidual2(s, k, xk, gk, a, inv_a);
+  }
+};
+
+}  // namespace kern
+}  // namespace dvi
