@@ -14,17 +14,6 @@
 namespace dvi {
 
 namespace {
-// |D_kjc|_{M_c^-1} = sqrt(m_c + (r_c x d_j)^T I_c^-1 (r_c x d_j)) for side c (0 = A, 1 = B) and d_j in
-// (n, u, w): out[3 c + j]. These are the square roots of each body's share of the diagonal of N_kk.
-void contactColumnNorms(const ContactJacobian& J, const BodyInverseMass& A, const BodyInverseMass& B, real* out) {
-  const Vec3 d[3] = {J.n, J.u, contactW(J)};
-  for (int j = 0; j < 3; ++j) {
-    const Vec3 ca = cross(J.rA, d[j]), cb = cross(J.rB, d[j]);
-    out[j] = std::sqrt(std::max(real(0), A.m + dot(ca, symMul(A.I, ca))));
-    out[3 + j] = std::sqrt(std::max(real(0), B.m + dot(cb, symMul(B.I, cb))));
-  }
-}
-
 bool movable(const BodyInverseMass& B) {
   return B.m != 0 || B.I[0] != 0 || B.I[1] != 0 || B.I[2] != 0 || B.I[3] != 0 || B.I[4] != 0 || B.I[5] != 0;
 }
@@ -80,10 +69,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     invertSymmetric3(N, binv_.data() + 6 * k);
     eta_[k] = blockStepFromDiagonal(N);
     contactColumnNorms(J, inv_[a], inv_[b], colnorm_.data() + 6 * k);
-    real* rs = rowsum_.data() + 3 * k;  // absolute row sums of N_kk itself
-    rs[0] = std::fabs(N[0]) + std::fabs(N[3]) + std::fabs(N[4]);
-    rs[1] = std::fabs(N[1]) + std::fabs(N[3]) + std::fabs(N[5]);
-    rs[2] = std::fabs(N[2]) + std::fabs(N[4]) + std::fabs(N[5]);
+    blockRowSums(N, rowsum_.data() + 3 * k);  // absolute row sums of N_kk itself
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
 
@@ -137,10 +123,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     }
     invertSymmetric3(N, binv_.data() + 6 * k);
     eta_[k] = blockStepFromDiagonal(N);
-    real* rs = rowsum_.data() + 3 * k;
-    rs[0] = std::fabs(N[0]) + std::fabs(N[3]) + std::fabs(N[4]);
-    rs[1] = std::fabs(N[1]) + std::fabs(N[3]) + std::fabs(N[5]);
-    rs[2] = std::fabs(N[2]) + std::fabs(N[4]) + std::fabs(N[5]);
+    blockRowSums(N, rowsum_.data() + 3 * k);
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));
   }
   max_diag_ = max_diag > 0 ? max_diag : real(1);
@@ -206,15 +189,9 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     bodyq_[size_t(active_[j])] = q;
   }
 #pragma omp parallel for schedule(static) num_threads(T)
-  for (int64_t k = 0; k < nc; ++k) {
-    const real* cn = colnorm_.data() + 6 * k;
-    const real* rs = rowsum_.data() + 3 * k;
-    const real qa = std::max(real(0), bodyq_[size_t(jac_[k].a)] - (cn[0] + cn[1] + cn[2]));
-    const real qb = std::max(real(0), bodyq_[size_t(jac_[k].b)] - (cn[3] + cn[4] + cn[5]));
-    real g = 0;
-    for (int i = 0; i < 3; ++i) g = std::max(g, rs[i] + cn[i] * qa + cn[3 + i] * qb);
-    jeta_[k] = g > 0 ? real(1) / g : real(0);
-  }
+  for (int64_t k = 0; k < nc; ++k)
+    jeta_[k] = contactJacobiStep(colnorm_.data() + 6 * k, rowsum_.data() + 3 * k, bodyq_[size_t(jac_[k].a)],
+                                 bodyq_[size_t(jac_[k].b)]);
   for (int64_t q = 0; q < nrb_; ++q) {
     const int64_t k = nc + q;
     const real* cn = colnorm_.data() + 6 * k;

@@ -179,6 +179,37 @@ DVI_HD real contactBias(real dist, real h, real recovery_rel, real size) {
   return b > lo ? b : lo;
 }
 
+// |D_kjc|_{M_c^-1} = sqrt(m_c + (r_c x d_j)^T I_c^-1 (r_c x d_j)) for side c (0 = A, 1 = B) and d_j in
+// (n, u, w): out[3 c + j]. These are the square roots of each body's share of the diagonal of N_kk.
+DVI_HD void contactColumnNorms(const ContactJacobian& J, const BodyInverseMass& A, const BodyInverseMass& B,
+                               real* out) {
+  const Vec3 d[3] = {J.n, J.u, contactW(J)};
+  for (int j = 0; j < 3; ++j) {
+    const Vec3 ca = cross(J.rA, d[j]), cb = cross(J.rB, d[j]);
+    out[j] = sqrt(fmax(real(0), A.m + dot(ca, symMul(A.I, ca))));
+    out[3 + j] = sqrt(fmax(real(0), B.m + dot(cb, symMul(B.I, cb))));
+  }
+}
+
+// Absolute row sums of a symmetric 3x3 block [00, 11, 22, 01, 02, 12].
+DVI_HD void blockRowSums(const real* N, real* rs) {
+  rs[0] = fabs(N[0]) + fabs(N[3]) + fabs(N[4]);
+  rs[1] = fabs(N[1]) + fabs(N[3]) + fabs(N[5]);
+  rs[2] = fabs(N[2]) + fabs(N[4]) + fabs(N[5]);
+}
+
+// Jacobi step of contact k (CcpProblem::jacobiSteps): row (k, i) of N has absolute sum <= rs_i + sum over
+// the two bodies c of |D_kic|_{M^-1} (Q_c - q_kc), with Q_c the sum of the column norms of every entry
+// of body c (bodyq) and q_kc contact k's own share (Cauchy-Schwarz in the M_c^-1 inner product), so
+// t_k = 1 / max_i of that bound gives rho(diag(t) N) <= 1.
+DVI_HD real contactJacobiStep(const real* cn, const real* rs, real Qa, real Qb) {
+  const real qa = fmax(real(0), Qa - (cn[0] + cn[1] + cn[2]));
+  const real qb = fmax(real(0), Qb - (cn[3] + cn[4] + cn[5]));
+  real g = 0;
+  for (int i = 0; i < 3; ++i) g = fmax(g, rs[i] + cn[i] * qa + cn[3 + i] * qb);
+  return g > real(0) ? real(1) / g : real(0);
+}
+
 // ---- generic constraint rows (extensions.h): J = (linear[3], angular[3]) per side ----
 
 // J . (v, w)

@@ -1,17 +1,20 @@
 // BuildRows, WarmStart, Solve and the impulse application on the device. The per-contact and per-body
-// work is jacobian.h / cone.h (the functions ContactProblem and solver.cpp call on the CPU); the solvers
-// below are the CPU's solveJacobi / solveApgd / solveBB step for step (same fused passes, same scalar
-// logic on the host), with the vectors on the device. Reductions are deterministic: a fixed grid sums
+// work is jacobian.h / cone.h (the functions ContactProblem calls on the CPU); the solvers are the very
+// templates of chrono_like/solver_algorithms.h with their kern:: functors, instantiated with GpuOps
+// (CUDA kernels over the device vectors) where the CPU instantiates them with OpenMP loops. Reductions are deterministic: a fixed grid sums
 // fixed slices, then one block sums the partials in order.
 #include <cuda_runtime.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cub/cub.cuh>
+#include <stdexcept>
+#include <string>
 
 #include "chrono_like/cone.h"
 #include "chrono_like/jacobian.h"
 #include "chrono_like/solver.h"
+#include "chrono_like/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
 
@@ -106,7 +109,7 @@ struct RowsF {
   FrictionCombine rule;
   real h, recovery_rel;
   int32_t nbodies;
-  real *mu, *size, *rhs, *binv, *eta, *diag_max, *pen;
+  real *mu, *size, *rhs, *binv, *eta, *diag_max, *pen, *colnorm, *rowsum;
   ContactJacobian* jac;
   uint32_t* adj_key;
   int32_t* adj_val;
@@ -129,6 +132,8 @@ struct RowsF {
     contactDiagonalBlock(J, A, B, N);
     invertSymmetric3(N, binv + 6 * k);
     eta[k] = blockStepFromDiagonal(N);
+    contactColumnNorms(J, A, B, colnorm + 6 * k);
+    blockRowSums(N, rowsum + 3 * k);
     diag_max[k] = fmax(N[0], fmax(N[1], N[2]));
     pen[k] = -dist[k];
     // adjacency entries 2k + side, keyed by body (inactive bodies sort last)
@@ -198,6 +203,7 @@ struct ProblemView {
   const real* r = nullptr;
   const real* mu = nullptr;
   const real* eta = nullptr;
+  const real* jeta = nullptr;
   const real* binv = nullptr;
   real max_diag = 1;
 };
@@ -210,184 +216,56 @@ void schur(DeviceState& d, const real* x, real* y) {
   launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), y}, "launch of ContactF (Schur pass b)");
 }
 
-// ---- vector functors of the solvers ----
-
-struct ProjectF {
-  const real* mu;
-  real* x;
-  __device__ void operator()(int64_t k) const { projectConeBlock(mu[k], x + 3 * k); }
-};
-struct CopyF {
-  const real* src;
-  real* dst;
-  __device__ void operator()(int64_t i) const { dst[i] = src[i]; }
-};
-struct CopyProjectF {
-  const real* src;
-  const real* mu;
-  real* dst;
-  __device__ void operator()(int64_t k) const {
-    for (int j = 0; j < 3; ++j) dst[3 * k + j] = src[3 * k + j];
-    projectConeBlock(mu[k], dst + 3 * k);
-  }
-};
-struct FillF {
-  real v;
-  real* x;
-  __device__ void operator()(int64_t i) const { x[i] = v; }
-};
-struct SumSquaresF {
-  const real* x;
-  __device__ void operator()(int64_t k, double* acc) const {
-    for (int j = 0; j < 3; ++j) acc[0] += double(x[3 * k + j]) * x[3 * k + j];
-  }
-};
-struct ResidualF {
-  const real *x, *Nx, *r, *mu;
-  real a;
-  __device__ void operator()(int64_t k, double* acc) const {
-    real grad[3] = {Nx[3 * k] + r[3 * k], Nx[3 * k + 1] + r[3 * k + 1], Nx[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += projectedGradientResidual2(mu[k], x + 3 * k, grad, a, real(1) / a);
-  }
-};
-
-// Jacobi, scalar block step: residual of cur and next = P(cur - w eta grad)
-struct JacobiScalarF {
-  const real *cur, *Ng, *r, *mu, *eta;
-  real a, w;
-  bool last;
-  real* next;
-  __device__ void operator()(int64_t k, double* acc) const {
-    const real* g = cur + 3 * k;
-    real grad[3] = {Ng[3 * k] + r[3 * k], Ng[3 * k + 1] + r[3 * k + 1], Ng[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += projectedGradientResidual2(mu[k], g, grad, a, real(1) / a);
-    if (!last) {
-      const real t = w * eta[k];
-      real* x = next + 3 * k;
-      x[0] = g[0] - t * grad[0];
-      x[1] = g[1] - t * grad[1];
-      x[2] = g[2] - t * grad[2];
-      projectConeBlock(mu[k], x);
-    }
-  }
-};
-// Jacobi, 3x3 block inverse: residual, then next = P(cur - w N_kk^-1 grad)
-struct JacobiInverseF {
-  const real *cur, *Ng, *r, *mu, *binv;
-  real a, w;
-  bool last;
-  real* next;
-  __device__ void operator()(int64_t k, double* acc) const {
-    real grad[3];
-    for (int j = 0; j < 3; ++j) grad[j] = Ng[3 * k + j] + r[3 * k + j];
-    acc[0] += projectedGradientResidual2(mu[k], cur + 3 * k, grad, a, real(1) / a);
-    if (!last) {
-      const Vec3 sg = symMul(binv + 6 * k, Vec3{grad[0], grad[1], grad[2]});
-      real* x = next + 3 * k;
-      x[0] = cur[3 * k] - w * sg.x;
-      x[1] = cur[3 * k + 1] - w * sg.y;
-      x[2] = cur[3 * k + 2] - w * sg.z;
-      projectConeBlock(mu[k], x);
-    }
-  }
-};
-
-// APGD pass (1): g_{k+1} = P(y - t (N y + r)), y and N y formed from (g_k, g_{k-1}).
-struct ApgdStepF {
-  const real *gc, *go, *Nc, *No, *r, *mu;
-  real beta, t;
-  real* gn;
-  __device__ void operator()(int64_t k) const {
-    real* x = gn + 3 * k;
-    for (int j = 0; j < 3; ++j) {
-      const int64_t i = 3 * k + j;
-      const real y = gc[i] + beta * (gc[i] - go[i]);
-      const real Ny = Nc[i] + beta * (Nc[i] - No[i]);
-      x[j] = y - t * (Ny + r[i]);
-    }
-    projectConeBlock(mu[k], x);
-  }
-};
-// APGD pass (2): d^T N d, d^T d, residual^2 of g_{k+1}, grad^T (g_{k+1} - g_k)
-struct ApgdTestF {
-  const real *gc, *go, *Nc, *No, *gn, *Nn, *r, *mu;
-  real beta, a;
-  __device__ void operator()(int64_t k, double* acc) const {
-    real grad_n[3];
-    for (int j = 0; j < 3; ++j) {
-      const int64_t i = 3 * k + j;
-      const real y = gc[i] + beta * (gc[i] - go[i]);
-      const real Ny = Nc[i] + beta * (Nc[i] - No[i]);
-      const real d = gn[i] - y;
-      acc[0] += double(d) * (Nn[i] - Ny);
-      acc[1] += double(d) * d;
-      acc[3] += double(Ny + r[i]) * (gn[i] - gc[i]);
-      grad_n[j] = Nn[i] + r[i];
-    }
-    acc[2] += projectedGradientResidual2(mu[k], gn + 3 * k, grad_n, a, real(1) / a);
-  }
-};
-
-// BB
-struct BbInitF {  // g += r; f; residual
-  real *g;
-  const real *x, *r, *mu;
-  real a;
-  __device__ void operator()(int64_t k, double* acc) const {
-    real* gk = g + 3 * k;
-    const real* xk = x + 3 * k;
-    for (int j = 0; j < 3; ++j) {
-      gk[j] += r[3 * k + j];
-      acc[1] += 0.5 * double(xk[j]) * (gk[j] + r[3 * k + j]);
-    }
-    acc[0] += projectedGradientResidual2(mu[k], xk, gk, a, real(1) / a);
-  }
-};
-struct BbDirF {  // d = P(x - alpha g) - x; g^T d, d^T d
-  const real *x, *g, *mu;
-  real alpha;
-  real* d;
-  __device__ void operator()(int64_t k, double* acc) const {
-    real* dk = d + 3 * k;
-    for (int j = 0; j < 3; ++j) dk[j] = x[3 * k + j] - alpha * g[3 * k + j];
-    projectConeBlock(mu[k], dk);
-    for (int j = 0; j < 3; ++j) {
-      dk[j] -= x[3 * k + j];
-      acc[0] += double(g[3 * k + j]) * dk[j];
-      acc[1] += double(dk[j]) * dk[j];
-    }
-  }
-};
-struct DotF {
-  const real *x, *y;
-  __device__ void operator()(int64_t k, double* acc) const {
-    for (int j = 0; j < 3; ++j) acc[0] += double(x[3 * k + j]) * y[3 * k + j];
-  }
-};
-struct BbUpdateF {
-  const real *x, *d, *Nd, *r, *mu;
-  real lam;
-  real *g, *xn;
-  real a;
-  __device__ void operator()(int64_t k, double* acc) const {
-    real* gk = g + 3 * k;
-    real* xk = xn + 3 * k;
-    for (int j = 0; j < 3; ++j) {
-      const int64_t i = 3 * k + j;
-      xk[j] = x[i] + lam * d[i];
-      gk[j] += lam * Nd[i];
-    }
-    projectConeBlock(mu[k], xk);
-    for (int j = 0; j < 3; ++j) acc[1] += 0.5 * double(xk[j]) * (gk[j] + r[3 * k + j]);
-    acc[0] += projectedGradientResidual2(mu[k], xk, gk, a, real(1) / a);
-  }
-};
-
-int freeBuffer(int count, int a, int b, int c) {
-  for (int i = 0; i < count; ++i)
-    if (i != a && i != b && i != c) return i;
-  return -1;
+// Name of a functor type, for the error message of a failed launch.
+template <class F>
+const char* functorName() {
+  return __PRETTY_FUNCTION__;
 }
+
+// The CUDA execution backend of the solver templates (chrono_like/solver_algorithms.h): the CPU's
+// algorithms and kern:: functors, run as kernels over the device vectors. Reductions are deterministic
+// (fixed grid, partials summed in order) and read back to the host, where the scalar logic runs.
+class GpuOps {
+ public:
+  GpuOps(DeviceState& d, const ProblemView& p) : d_(d), p_(p) {
+    SolverScratch& S = d.solver;
+    DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
+    for (int i = 0; i < 7; ++i) {
+      bufs[i]->resize(size_t(3 * p.nc));
+      vec_[i] = bufs[i]->data();
+    }
+  }
+  int64_t blocks() const { return p_.nc; }
+  BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, nullptr, nullptr}; }
+  const real* rhs() const { return p_.r; }
+  const real* blockSteps() const { return p_.eta; }
+  const real* jacobiSteps() const { return p_.jeta; }
+  const real* blockInverses() const { return p_.binv; }
+  real maxDiagonal() const { return p_.max_diag; }
+  real* vec(int i) {
+    if (i < 0 || i >= 7) throw std::logic_error("GpuOps: solver vector " + std::to_string(i) + " does not exist");
+    return vec_[i];
+  }
+  void schur(const real* x, real* y) { gpu::schur(d_, x, y); }
+  template <class F>
+  void map(const F& f) {
+    launchMap(d_, p_.nc, f, functorName<F>());
+  }
+  template <int M, class F>
+  void reduce(const F& f, double* out) {
+    const double* h = launchReduce<M>(d_, p_.nc, f, functorName<F>());
+    for (int m = 0; m < M; ++m) out[m] = h[m];
+  }
+  void copy(const real* src, real* dst) {
+    if (src == dst) return;
+    DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nc), cudaMemcpyDeviceToDevice, d_.stream));
+  }
+
+ private:
+  DeviceState& d_;
+  ProblemView p_;
+  real* vec_[7] = {};
+};
 
 ProblemView view(DeviceState& d, real max_diag) {
   ProblemView p;
@@ -395,185 +273,37 @@ ProblemView view(DeviceState& d, real max_diag) {
   p.r = d.solver.rhs.data();
   p.mu = d.contacts.mu.data();
   p.eta = d.solver.block_step.data();
+  p.jeta = d.solver.jacobi_step.data();
   p.binv = d.solver.block_inv.data();
   p.max_diag = max_diag;
   return p;
 }
 
-real alphaFor(const ProblemView& p, const SolverSettings& s) {
-  return p.max_diag > real(0) ? s.residual_alpha / p.max_diag : s.residual_alpha;
-}
-
-real lipschitzLowerBound(DeviceState& d, const ProblemView& p, real* e, real* Ne) {
-  const int64_t n = 3 * p.nc;
-  launchMap(d, n, FillF{real(1), e}, "launch of FillF");
-  schur(d, e, Ne);
-  const double s = launchReduce<1>(d, p.nc, SumSquaresF{Ne}, "launch of SumSquaresF")[0];
-  real L = real(std::sqrt(s / double(n)));
-  L = std::max(L, p.max_diag);
-  if (!(L > real(0)) || !std::isfinite(L)) L = real(1);
-  return L;
-}
-
-DeviceCcpResult solveJacobiDevice(DeviceState& d, const ProblemView& p, real* gamma, const SolverSettings& s) {
-  DeviceCcpResult st;
-  const int64_t n = 3 * p.nc, nc = p.nc;
-  SolverScratch& S = d.solver;
-  S.v0.resize(n);
-  S.v1.resize(n);
-  real* Ng = S.v0.data();
-  real* other = S.v1.data();
-  const real a = alphaFor(p, s);
-  const bool full = s.block_scaling == BlockScaling::Inverse3x3;
-  launchMap(d, nc, ProjectF{p.mu, gamma}, "launch of ProjectF");
-  real* cur = gamma;
-  real* next = other;
-  real res = 0;
-  const bool need_every = s.tolerance > 0;
-  for (int it = 0;; ++it) {
-    schur(d, cur, Ng);
-    const bool last = it == s.max_iterations;
-    const bool read = last || need_every;
-    const double* sum = full ? launchReduce<1>(d, nc, JacobiInverseF{cur, Ng, p.r, p.mu, p.binv, a, s.jacobi_omega, last, next},
-                                               "launch of JacobiInverseF", read)
-                             : launchReduce<1>(d, nc, JacobiScalarF{cur, Ng, p.r, p.mu, p.eta, a, s.jacobi_omega, last, next},
-                                               "launch of JacobiScalarF", read);
-    if (read) res = real(std::sqrt(sum[0]));
-    if (last || (s.tolerance > 0 && res < s.tolerance)) break;
-    std::swap(cur, next);
-    ++st.iterations;
-  }
-  if (cur != gamma) launchMap(d, n, CopyF{cur, gamma}, "launch of CopyF");
-  st.residual = res;
-  return st;
-}
-
-DeviceCcpResult solveApgdDevice(DeviceState& d, const ProblemView& p, real* gamma, const SolverSettings& s) {
-  DeviceCcpResult st;
-  const int64_t n = 3 * p.nc, nc = p.nc;
-  SolverScratch& S = d.solver;
-  DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
-  for (auto* b : bufs) b->resize(n);
-  real* X[4] = {S.v0.data(), S.v1.data(), S.v2.data(), S.v3.data()};
-  real* NX[3] = {S.v4.data(), S.v5.data(), S.v6.data()};
-  const real a = alphaFor(p, s);
-
-  launchMap(d, nc, CopyProjectF{gamma, p.mu, X[0]}, "launch of CopyProjectF");
-  int cur = 0, old = 0, best = 0;
-  int ncur = 0, nold = 0;
-  schur(d, X[cur], NX[ncur]);
-  real best_res = real(std::sqrt(launchReduce<1>(d, nc, ResidualF{X[cur], NX[ncur], p.r, p.mu, a}, "launch of ResidualF")[0]));
-  real res = best_res;
-
-  if (!(s.tolerance > 0 && res < s.tolerance) && s.max_iterations > 0) {
-    real L = lipschitzLowerBound(d, p, X[1], NX[1]);
-    real theta = 1, beta = 0;
-    for (int it = 0; it < s.max_iterations; ++it) {
-      const int nw = freeBuffer(4, cur, old, best);
-      const int nnw = freeBuffer(3, ncur, nold, -1);
-      double sums[4];
-      for (int bt = 0;; ++bt) {
-        const real t = real(1) / L;
-        launchMap(d, nc, ApgdStepF{X[cur], X[old], NX[ncur], NX[nold], p.r, p.mu, beta, t, X[nw]}, "launch of ApgdStepF");
-        schur(d, X[nw], NX[nnw]);
-        const double* h = launchReduce<4>(
-            d, nc, ApgdTestF{X[cur], X[old], NX[ncur], NX[nold], X[nw], NX[nnw], p.r, p.mu, beta, a}, "launch of ApgdTestF");
-        for (int m = 0; m < 4; ++m) sums[m] = h[m];
-        if (!(sums[0] > double(L) * sums[1]) || bt >= 60 || !std::isfinite(sums[0])) break;
-        L *= 2;
-      }
-      ++st.iterations;
-      res = real(std::sqrt(sums[2]));
-      old = cur;
-      cur = nw;
-      nold = ncur;
-      ncur = nnw;
-      if (res < best_res) {
-        best_res = res;
-        best = cur;
-      }
-      if (s.tolerance > 0 && res < s.tolerance) break;
-      const real theta_new = (-theta * theta + theta * std::sqrt(theta * theta + 4)) / 2;
-      beta = theta * (1 - theta) / (theta * theta + theta_new);
-      theta = theta_new;
-      if (sums[3] > 0) {
-        beta = 0;
-        theta = 1;
-      }
-      L *= real(0.9);
+// Per body: the sum of the Jacobian column norms of its adjacency entries (Q_c of contactJacobiStep).
+struct BodyColumnSumF {
+  const int32_t* off;
+  const int32_t* adj;
+  const real* colnorm;
+  real* bodyq;
+  __device__ void operator()(int64_t i) const {
+    real q = 0;
+    for (int32_t e = off[i]; e < off[i + 1]; ++e) {
+      const int32_t ent = adj[e];
+      const real* cn = colnorm + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
+      q += cn[0] + cn[1] + cn[2];
     }
+    bodyq[i] = q;
   }
-  launchMap(d, n, CopyF{X[best], gamma}, "launch of CopyF");
-  st.residual = best_res;
-  return st;
-}
+};
 
-DeviceCcpResult solveBBDevice(DeviceState& d, const ProblemView& p, real* gamma, const SolverSettings& s) {
-  DeviceCcpResult st;
-  const int64_t n = 3 * p.nc, nc = p.nc;
-  SolverScratch& S = d.solver;
-  DeviceBuffer<real>* bufs[6] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5};
-  for (auto* b : bufs) b->resize(n);
-  real* X[3] = {S.v0.data(), S.v1.data(), S.v2.data()};
-  real* g = S.v3.data();
-  real* dvec = S.v4.data();
-  real* Nd = S.v5.data();
-  constexpr int kMemory = 10;
-  constexpr double kSigma = 1e-4;
-  const real a = alphaFor(p, s);
-
-  launchMap(d, nc, CopyProjectF{gamma, p.mu, X[0]}, "launch of CopyProjectF");
-  int cur = 0, best = 0;
-  schur(d, X[cur], g);
-  const double* h = launchReduce<2>(d, nc, BbInitF{g, X[cur], p.r, p.mu, a}, "launch of BbInitF");
-  real res = real(std::sqrt(h[0]));
-  real best_res = res;
-  double f = h[1];
-  double fhist[kMemory];
-  for (double& v : fhist) v = f;
-
-  if (!(s.tolerance > 0 && res < s.tolerance) && s.max_iterations > 0) {
-    const real L0 = lipschitzLowerBound(d, p, dvec, Nd);
-    const real amin = real(1e-10) / L0, amax = real(1e10) / L0;
-    real alpha = real(1) / L0;
-    for (int it = 0; it < s.max_iterations; ++it) {
-      const real* x = X[cur];
-      h = launchReduce<2>(d, nc, BbDirF{x, g, p.mu, alpha, dvec}, "launch of BbDirF");
-      const double gd = h[0], dd = h[1];
-      if (!(dd > 0)) break;
-      schur(d, dvec, Nd);
-      const double q = launchReduce<1>(d, nc, DotF{dvec, Nd}, "launch of DotF")[0];
-      double fmax = fhist[0];
-      for (double v : fhist) fmax = std::max(fmax, v);
-      double lambda = 1;
-      for (int ls = 0; ls < 60; ++ls) {
-        const double fn = f + lambda * gd + 0.5 * lambda * lambda * q;
-        if (fn <= fmax + kSigma * lambda * gd) break;
-        const double denom = 2 * (fn - f - lambda * gd);
-        double lt = denom > 0 ? -gd * lambda * lambda / denom : 0.5 * lambda;
-        if (!(lt >= 0.1 * lambda && lt <= 0.9 * lambda)) lt = 0.5 * lambda;
-        lambda = lt;
-      }
-      const int nw = freeBuffer(3, cur, best, -1);
-      h = launchReduce<2>(d, nc, BbUpdateF{x, dvec, Nd, p.r, p.mu, real(lambda), g, X[nw], a}, "launch of BbUpdateF");
-      f = h[1];
-      fhist[(it + 1) % kMemory] = f;
-      cur = nw;
-      ++st.iterations;
-      res = real(std::sqrt(h[0]));
-      if (res < best_res) {
-        best_res = res;
-        best = cur;
-      }
-      if (s.tolerance > 0 && res < s.tolerance) break;
-      alpha = q > 0 ? real(dd / q) : amax;
-      alpha = std::min(amax, std::max(amin, alpha));
-    }
+struct JacobiStepF {
+  const ContactJacobian* jac;
+  const real *colnorm, *rowsum, *bodyq;
+  real* jeta;
+  __device__ void operator()(int64_t k) const {
+    jeta[k] = contactJacobiStep(colnorm + 6 * k, rowsum + 3 * k, bodyq[jac[k].a], bodyq[jac[k].b]);
   }
-  launchMap(d, n, CopyF{X[best], gamma}, "launch of CopyF");
-  st.residual = best_res;
-  return st;
-}
+};
 
 struct WarmF {
   const uint64_t* key;
@@ -637,6 +367,10 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
   S.rhs.resize(3 * nc);
   S.block_inv.resize(6 * nc);
   S.block_step.resize(nc);
+  S.jacobi_step.resize(nc);
+  S.colnorm.resize(6 * nc);
+  S.rowsum.resize(3 * nc);
+  S.bodyq.resize(nb);
   S.adj_key.resize(2 * nc);
   S.adj_val.resize(2 * nc);
   S.adj_key_sorted.resize(2 * nc);
@@ -649,7 +383,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
           C.pb.data(),     B.pos.data(),    B.v_free.data(),  B.w_free.data(),  C.dist.data(),   B.friction.data(),
           d.shapes.shape.data(), B.inv.data(), cfg.friction_combine, cfg.dt, cfg.recovery_rel, int32_t(nb),
           C.mu.data(), C.size.data(), S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.v6.data(),
-          S.jac.data(), S.adj_key.data(), S.adj_val.data()};
+          S.colnorm.data(), S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data()};
   launchMap(d, nc, f, "launch of RowsF");
   launchMap(d, nc, KeyOrderF{C.key.data(), S.v4.data(), nc}, "launch of KeyOrderF");
   // body -> contact CSR: a stable radix sort by body keeps each body's entries in increasing k
@@ -659,6 +393,11 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
                                            S.adj_val_sorted.data(), int(2 * nc), 0, bits, d.stream);
   });
   launchMap(d, nb + 1, AdjOffsetF{S.adj_key_sorted.data(), 2 * nc, S.adj_off.data()}, "launch of AdjOffsetF");
+  // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-contact bound
+  launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), S.bodyq.data()},
+            "launch of BodyColumnSumF");
+  launchMap(d, nc, JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
+            "launch of JacobiStepF");
   // max diag(N), max penetration, key order: three maxima, one read-back
   d.step_scalars.resize(16);
   real* out = reinterpret_cast<real*>(d.step_scalars.data());
@@ -692,15 +431,20 @@ void warmStart(DeviceState& d, bool enabled) {
 }
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
-  const ProblemView p = view(d, d.max_diag);
+  GpuOps ops(d, view(d, d.max_diag));
   real* gamma = d.solver.gamma.data();
+  SolverStats st;
   switch (cfg.solver) {
-    case SolverType::Jacobi: return solveJacobiDevice(d, p, gamma, cfg.solver_settings);
-    case SolverType::BB: return solveBBDevice(d, p, gamma, cfg.solver_settings);
+    case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver_settings); break;
+    case SolverType::BB: st = algo::bb(ops, gamma, cfg.solver_settings); break;
     case SolverType::GaussSeidel:  // refused by GpuSystem's constructor
     case SolverType::APGD:
-    default: return solveApgdDevice(d, p, gamma, cfg.solver_settings);
+    default: st = algo::apgd(ops, gamma, cfg.solver_settings); break;
   }
+  DeviceCcpResult r;
+  r.iterations = st.iterations;
+  r.residual = st.residual;
+  return r;
 }
 
 void keepImpulsesForWarmStart(DeviceState& d) {

@@ -19,7 +19,7 @@ inline unsigned blocksFor(int64_t n, int block = kBlock) { return unsigned((n + 
 struct DeviceBodies {
   DeviceBuffer<Vec3> pos{"body pos"}, vel{"body vel"}, omega{"body omega"}, inv_inertia{"body inv_inertia"},
       force{"body force"}, torque{"body torque"}, gravity{"body gravity"}, v_free{"body v_free"},
-      w_free{"body w_free"};
+      w_free{"body w_free"}, field_force{"body force-field force"}, field_torque{"body force-field torque"};
   DeviceBuffer<Quat> rot{"body rot"};
   DeviceBuffer<real> inv_mass{"body inv_mass"}, friction{"body friction"};
   DeviceBuffer<uint8_t> flags{"body flags"};
@@ -85,6 +85,8 @@ struct NarrowScratch {
 struct SolverScratch {
   DeviceBuffer<ContactJacobian> jac{"contact jacobians"};
   DeviceBuffer<real> rhs{"ccp rhs"}, block_inv{"ccp block inverses"}, block_step{"ccp block steps"};
+  DeviceBuffer<real> jacobi_step{"ccp jacobi steps"}, colnorm{"ccp column norms"}, rowsum{"ccp block row sums"},
+      bodyq{"ccp body column sums"};
   DeviceBuffer<real> gamma{"ccp gamma"}, prev_gamma{"ccp previous gamma"};
   DeviceBuffer<uint64_t> prev_key{"ccp previous keys"};
   // body -> contact adjacency (CSR): entries (2k + side) sorted by body, offsets per body

@@ -38,6 +38,7 @@ size_t DeviceState::bytes() const {
   add(broad.pair_key); add(broad.pair_key_sorted);
   add(narrow.count); add(narrow.off); add(narrow.first);
   add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
+  add(solver.jacobi_step); add(solver.colnorm); add(solver.rowsum); add(solver.bodyq);
   add(solver.prev_gamma); add(solver.prev_key); add(solver.adj_key); add(solver.adj_key_sorted);
   add(solver.adj_val); add(solver.adj_val_sorted); add(solver.adj_off);
   add(solver.v0); add(solver.v1); add(solver.v2); add(solver.v3); add(solver.v4); add(solver.v5); add(solver.v6);
@@ -55,6 +56,13 @@ __global__ void integrateForcesKernel(int n, const Vec3* vel, const Vec3* omega,
   if (i >= n) return;
   integrateBodyForces(vel[i], omega[i], rot[i], inv_mass[i], inv_inertia[i], force[i], torque[i], gravity[i],
                       flags[i], gyro, h, v_free[i], w_free[i]);
+}
+
+__global__ void addForcesKernel(int n, const Vec3* f, const Vec3* t, Vec3* force, Vec3* torque) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  force[i] += f[i];
+  torque[i] += t[i];
 }
 
 __global__ void integratePositionsKernel(int n, Vec3* pos, Quat* rot, const Vec3* vel, const Vec3* omega,
@@ -162,6 +170,26 @@ void GpuSystem::integrateForces() {
   const int n = int(b.count);
   stats_.stage_ran[int(StageType::IntegrateForces)] = true;
   if (n == 0) return;
+  if (!fields_.empty()) {
+    // Force fields are host plug-ins (extensions.h): the body state goes to the host, the fields run
+    // there, and their forces come back and are added on the device. This is the one host round trip
+    // inside the step, and it happens only in scenes with force fields (docs/ARCHITECTURE.md).
+    cudaStream_t s = d_->stream;
+    b.pos.download(bodies_.pos, b.count, s);
+    b.rot.download(bodies_.rot, b.count, s);
+    b.vel.download(bodies_.vel, b.count, s);
+    b.omega.download(bodies_.omega, b.count, s);
+    DVI_CUDA(cudaStreamSynchronize(s));
+    field_force_.assign(size_t(n), Vec3{0, 0, 0});
+    field_torque_.assign(size_t(n), Vec3{0, 0, 0});
+    for (const auto& f : fields_) f->apply(bodies_, time_, config_.dt, field_force_.data(), field_torque_.data());
+    b.field_force.upload(field_force_, s);
+    b.field_torque.upload(field_torque_, s);
+    addForcesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.field_force.data(), b.field_torque.data(), b.force.data(),
+                                                    b.torque.data());
+    DVI_CUDA_LAUNCH("addForcesKernel");
+    DVI_CUDA(cudaStreamSynchronize(s));  // the host vectors may change after we return
+  }
   integrateForcesKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(
       n, b.vel.data(), b.omega.data(), b.rot.data(), b.inv_mass.data(), b.inv_inertia.data(), b.force.data(),
       b.torque.data(), b.gravity.data(), b.flags.data(), config_.gyroscopic, config_.dt, b.v_free.data(),
@@ -184,6 +212,8 @@ void GpuSystem::detectCollisions() {
 }
 
 void GpuSystem::buildAndSolve() {
+  if (!row_providers_.empty())
+    throw InputError("GPU backend: constraint rows (joints, drives) are not supported on the GPU yet; use --backend cpu");
   cudaEvent_t* ev = d_->ev;
   const size_t nc = d_->contacts.count;
   d_->solver.gamma.resize(3 * nc);

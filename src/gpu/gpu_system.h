@@ -64,6 +64,7 @@ class GpuSystem : public System {
   std::unique_ptr<gpu::DeviceState> d_;
   size_t uploaded_bodies_ = 0;
   bool host_dirty_ = true;
+  std::vector<Vec3> field_force_, field_torque_;  // host scratch of the force fields
 };
 
 }  // namespace dvi
