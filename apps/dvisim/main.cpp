@@ -2,7 +2,8 @@
 //
 //   dvisim run [SCENE] [--backend auto|cpu|gpu|bullet] [--collision native|bullet]
 //              [--solver jacobi|gs|apgd|bb] [--iterations N] [--dt H] [--time T | --steps N]
-//              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR]
+//              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR] [--resume DIR]
+//   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (src/ces/ces_run.h).
 //   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
 //
 // Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
@@ -26,6 +27,7 @@
 #include <omp.h>
 #endif
 
+#include "ces/ces_run.h"
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/gpu_factory.h"
@@ -46,6 +48,7 @@ struct Options {
   std::string iterations, dt, time, steps, threads, frames;
   std::vector<std::string> sets;
   std::string out = "dvisim-out";
+  std::string resume;  // CES machine: continue the run whose checkpoint is in this directory
 };
 
 std::string oneLine(std::string s) {
@@ -146,7 +149,17 @@ std::vector<int64_t> frameSteps(int frames, int64_t steps) {
   return f;
 }
 
+// A CES machine (no scene: the default machine; a .json with a top-level "ces"; --resume) runs in src/ces/.
+int runCes(const Options& o) {
+  dvi::ces::CesRunOptions c;
+  c.scene = o.scene, c.sets = o.sets, c.backend = o.backend, c.collision = o.collision, c.solver = o.solver;
+  c.iterations = o.iterations, c.dt = o.dt, c.time = o.time, c.steps = o.steps, c.threads = o.threads;
+  c.frames = o.frames, c.out = o.out, c.resume = o.resume;
+  return dvi::ces::runCesMachine(c);
+}
+
 int run(const Options& o) {
+  if (o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene)) return runCes(o);
   // Validate the command line before doing any work.
   requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu", "bullet"});
   if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
@@ -340,7 +353,7 @@ int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
   app.require_subcommand(1);
   Options o;
-  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene (.json or .bullet; the embedded default without one)");
+  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene (.json or .bullet) or a CES machine (.json with \"ces\"; the default CES machine without a scene)");
   run_cmd->add_option("scene", o.scene, "Scene file: .json (scenes/schema/scene.schema.json) or .bullet");
   run_cmd->add_option("--backend", o.backend, "auto|cpu|gpu|bullet (default auto)");
   run_cmd->add_option("--collision", o.collision, "native|bullet");
@@ -355,6 +368,7 @@ int main(int argc, char** argv) {
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
+  run_cmd->add_option("--resume", o.resume, "CES machine: continue the run checkpointed in DIR (DIR/checkpoint/)");
   const std::function<int()> compare = addCompareCommand(app);
 
   try {

@@ -1,0 +1,421 @@
+// CES configuration: strict JSON parsing (see ces_config.h) and the embedded default machine.
+#include "ces/ces_config.h"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "ces/ces_constants.h"
+#include "chrono_like/errors.h"
+
+namespace dvi {
+namespace ces {
+
+using nlohmann::json;
+
+const char* materialKindName(MaterialKind k) {
+  switch (k) {
+    case MaterialKind::Metal: return "metal";
+    case MaterialKind::Plastic: return "plastic";
+    case MaterialKind::Middling: return "middling";
+  }
+  return "?";
+}
+
+const char* particleShapeName(ParticleShape s) {
+  switch (s) {
+    case ParticleShape::Sphere: return "sphere";
+    case ParticleShape::Flake: return "flake";
+    case ParticleShape::Wire: return "wire";
+    case ParticleShape::Ellipsoid: return "ellipsoid";
+    case ParticleShape::Fragment: return "fragment";
+    default: return "?";
+  }
+}
+
+double CesConfig::omegaDrum() const { return -double(rpmToRadPerSec(real(drum_rpm))); }
+double CesConfig::omegaBrush() const { return -double(rpmToRadPerSec(real(brush_rpm))); }
+
+// Keep identical to scenes/ces_default.json (tests/test_ces_machine.cpp compares the two).
+const char* defaultCesJson() {
+  return R"JSON({
+  "$schema": "schema/ces.schema.json",
+  "name": "ces-default",
+  "description": "Roll-type corona electrostatic separator of DESIGN.md section 5: copper, plastic and middlings of 0.5-1 mm",
+  "ces": {
+    "duration_s": 2.5,
+    "time_step_s": 0.0002,
+    "seed": 1,
+    "solver": { "type": "apgd", "iterations": 30, "gyroscopic": false },
+    "drum": { "diameter_mm": 320, "width_mm": 300, "rpm": 44.8, "drive": "auto", "mass_kg": 30 },
+    "electrode": { "diameter_mm": 38, "distance_mm": 267, "angle_deg": 30, "voltage_kV": -35 },
+    "field": { "model": "two_cylinder", "extra_electrodes": [] },
+    "corona": { "half_angle_deg": 20, "depth_mm": 5, "charging_time_s": 0, "charging_field_kV_cm": 6, "image_cutoff_mm": 5 },
+    "brush": { "diameter_mm": 106, "angle_deg": -135, "rpm": 120, "gap_mm": 0.2, "discharge_time_s": 0.001 },
+    "air": { "viscosity_Pa_s": 1.81e-5, "density_kg_m3": 1.225 },
+    "friction": { "particle_particle": 0.2, "particle_drum": 0.5, "particle_brush": 0.5, "particle_wall": 0.3 },
+    "feed": {
+      "mass_flow_g_s": 0.5,
+      "start_s": 0,
+      "duration_s": 1.0,
+      "angle_deg": 100,
+      "height_mm": 4,
+      "speed_m_s": 0.2,
+      "width_mm": 280,
+      "diameter_mm": [0.5, 1.0],
+      "materials": [
+        { "name": "copper", "kind": "metal", "mass_fraction": 0.4, "density_kg_m3": [8400, 8900],
+          "eps_r": "inf", "relaxation_time_s": 0,
+          "shapes": { "sphere": 0.4, "wire": 0.3, "flake": 0.3 } },
+        { "name": "plastic", "kind": "plastic", "mass_fraction": 0.5, "density_kg_m3": [946, 946],
+          "eps_r": 2.5, "relaxation_time_s": "inf",
+          "shapes": { "sphere": 0.3, "flake": 0.2, "ellipsoid": 0.3, "fragment": 0.2 } },
+        { "name": "middling", "kind": "middling", "mass_fraction": 0.1, "density_kg_m3": [2500, 4500],
+          "eps_r": 10, "relaxation_time_s": 0.5,
+          "shapes": { "sphere": 0.5, "fragment": 0.5 } }
+      ]
+    },
+    "collection": { "y_mm": -350, "x0_mm": -50 },
+    "splitters": { "s1_mm": 80, "s2_mm": 140, "range_mm": [0, 200], "positions": 60 },
+    "output": { "frames": 0, "histogram_bin_mm": 2, "plots": true, "checkpoint_every_s": 0 }
+  }
+}
+)JSON";
+}
+
+bool isCesDocument(const json& doc) { return doc.is_object() && doc.contains("ces"); }
+
+namespace {
+
+std::string describe(const json& v) {
+  std::string s = v.dump();
+  return s.size() > 48 ? s.substr(0, 45) + "..." : s;
+}
+
+std::string num(double x) {
+  std::ostringstream o;
+  o.precision(10);
+  o << x;
+  return o.str();
+}
+
+// "<origin>: ces.<path>: <what>", one line.
+struct Checker {
+  std::string origin;
+  [[noreturn]] void fail(const std::string& path, const std::string& what) const {
+    throw InputError(origin + ": " + path + ": " + what);
+  }
+  const json& object(const json& o, const std::string& path, std::initializer_list<const char*> allowed) const {
+    if (!o.is_object()) fail(path, "expected an object, got " + describe(o));
+    for (auto it = o.begin(); it != o.end(); ++it) {
+      bool ok = false;
+      for (const char* a : allowed) ok = ok || it.key() == a;
+      if (!ok) {
+        std::string list;
+        for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
+        fail(path + "." + it.key(), "unknown key (allowed: " + list + ")");
+      }
+    }
+    return o;
+  }
+  double number(const json& v, const std::string& path) const {
+    if (v.is_string() && (v.get<std::string>() == "nan" || v.get<std::string>() == "NaN"))
+      fail(path, "non-finite number " + describe(v));
+    if (!v.is_number()) fail(path, "expected a finite number, got " + describe(v));
+    const double x = v.get<double>();
+    if (!std::isfinite(x)) fail(path, "non-finite number " + describe(v));
+    return x;
+  }
+  double range(const json& v, const std::string& path, double lo, double hi, bool lo_open = false) const {
+    const double x = number(v, path);
+    if (lo_open ? !(x > lo) : !(x >= lo)) fail(path, std::string("must be ") + (lo_open ? "> " : ">= ") + num(lo) + ", got " + num(x));
+    if (!(x <= hi)) fail(path, "must be <= " + num(hi) + ", got " + num(x));
+    return x;
+  }
+  double positive(const json& v, const std::string& path) const {
+    return range(v, path, 0, std::numeric_limits<double>::max(), true);
+  }
+  double nonNegative(const json& v, const std::string& path) const {
+    return range(v, path, 0, std::numeric_limits<double>::max());
+  }
+  // A number >= 0 or the string "inf".
+  double nonNegativeOrInf(const json& v, const std::string& path) const {
+    if (v.is_string() && v.get<std::string>() == "inf") return std::numeric_limits<double>::infinity();
+    if (v.is_string()) fail(path, "expected a number >= 0 or \"inf\", got " + describe(v));
+    return nonNegative(v, path);
+  }
+  int64_t integer(const json& v, const std::string& path, int64_t lo, int64_t hi) const {
+    const double x = number(v, path);
+    if (x != std::floor(x)) fail(path, "expected an integer, got " + describe(v));
+    if (x < double(lo) || x > double(hi))
+      fail(path, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + describe(v));
+    return int64_t(x);
+  }
+  bool boolean(const json& v, const std::string& path) const {
+    if (!v.is_boolean()) fail(path, "expected true or false, got " + describe(v));
+    return v.get<bool>();
+  }
+  std::string oneOf(const json& v, const std::string& path, std::initializer_list<const char*> choices) const {
+    std::string list;
+    for (const char* c : choices) list += std::string(list.empty() ? "" : "|") + c;
+    if (!v.is_string()) fail(path, "expected one of " + list + ", got " + describe(v));
+    const std::string s = v.get<std::string>();
+    for (const char* c : choices)
+      if (s == c) return s;
+    fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
+  }
+  std::string string(const json& v, const std::string& path) const {
+    if (!v.is_string()) fail(path, "expected a string, got " + describe(v));
+    return v.get<std::string>();
+  }
+  // [lo, hi] with 0 < lo <= hi (or lo >= 0 when allow_zero).
+  void interval(const json& v, const std::string& path, double& lo, double& hi, bool allow_zero = false) const {
+    if (!v.is_array() || v.size() != 2) fail(path, "expected [min, max], got " + describe(v));
+    lo = allow_zero ? nonNegative(v[0], path + "[0]") : positive(v[0], path + "[0]");
+    hi = allow_zero ? nonNegative(v[1], path + "[1]") : positive(v[1], path + "[1]");
+    if (hi < lo) fail(path, "max " + num(hi) + " is below min " + num(lo));
+  }
+};
+
+constexpr double kMm = 1e-3;
+constexpr double kDeg = 3.14159265358979323846 / 180.0;
+
+ElectrodeConfig parseElectrode(const Checker& c, const json& e, const std::string& p, const ElectrodeConfig& def) {
+  c.object(e, p, {"diameter_mm", "distance_mm", "angle_deg", "voltage_kV"});
+  ElectrodeConfig out = def;
+  if (e.contains("diameter_mm")) out.diameter = c.positive(e["diameter_mm"], p + ".diameter_mm") * kMm;
+  if (e.contains("distance_mm")) out.distance = c.positive(e["distance_mm"], p + ".distance_mm") * kMm;
+  if (e.contains("angle_deg")) out.angle = c.range(e["angle_deg"], p + ".angle_deg", -360, 360) * kDeg;
+  if (e.contains("voltage_kV")) out.voltage = c.range(e["voltage_kV"], p + ".voltage_kV", -500, 500) * 1e3;
+  // The sign is the corona polarity (negative corona is usual); zero would be no machine at all.
+  if (out.voltage == 0) c.fail(p + ".voltage_kV", "must be nonzero (its sign is the corona polarity)");
+  return out;
+}
+
+MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string& p) {
+  c.object(m, p, {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "shapes"});
+  MaterialConfig out;
+  if (!m.contains("kind")) c.fail(p + ".kind", "missing (metal|plastic|middling)");
+  const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling"});
+  out.kind = kind == "metal" ? MaterialKind::Metal : kind == "plastic" ? MaterialKind::Plastic : MaterialKind::Middling;
+  out.name = m.contains("name") ? c.string(m["name"], p + ".name") : kind;
+  // Defaults by kind (DESIGN §5): tau = 0 for metals, infinite for plastics, 0.5 s middlings [assumed].
+  const CesMachineParams d;
+  out.relaxation_time = out.kind == MaterialKind::Metal     ? double(d.metal_relaxation_time)
+                        : out.kind == MaterialKind::Plastic ? std::numeric_limits<double>::infinity()
+                                                            : double(d.middling_relaxation_time);
+  out.eps_r = out.kind == MaterialKind::Metal ? std::numeric_limits<double>::infinity() : double(d.plastic_eps_r);
+  if (out.kind == MaterialKind::Metal) out.density_min = d.metal_density_min, out.density_max = d.metal_density_max;
+  if (!m.contains("mass_fraction")) c.fail(p + ".mass_fraction", "missing");
+  out.mass_fraction = c.range(m["mass_fraction"], p + ".mass_fraction", 0, 1);
+  if (m.contains("density_kg_m3")) {
+    const json& r = m["density_kg_m3"];
+    if (r.is_number()) out.density_min = out.density_max = c.positive(r, p + ".density_kg_m3");
+    else c.interval(r, p + ".density_kg_m3", out.density_min, out.density_max);
+  }
+  if (m.contains("eps_r")) {
+    out.eps_r = c.nonNegativeOrInf(m["eps_r"], p + ".eps_r");
+    if (!(out.eps_r >= 1)) c.fail(p + ".eps_r", "relative permittivity must be >= 1, got " + num(out.eps_r));
+  }
+  if (m.contains("relaxation_time_s")) out.relaxation_time = c.nonNegativeOrInf(m["relaxation_time_s"], p + ".relaxation_time_s");
+  if (m.contains("shapes")) {
+    const json& s = c.object(m["shapes"], p + ".shapes", {"sphere", "flake", "wire", "ellipsoid", "fragment"});
+    double sum = 0;
+    for (int k = 0; k < kParticleShapes; ++k) {
+      const char* name = particleShapeName(ParticleShape(k));
+      out.shape_weight[k] = s.contains(name) ? c.nonNegative(s[name], p + ".shapes." + name) : 0.0;
+      sum += out.shape_weight[k];
+    }
+    if (!(sum > 0)) c.fail(p + ".shapes", "needs at least one shape with a positive weight");
+  }
+  return out;
+}
+
+}  // namespace
+
+void applyCesOverride(json& doc, const std::string& assignment) {
+  const size_t eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw InputError("--set " + assignment + ": expected KEY=VALUE (e.g. electrode.voltage_kV=-30)");
+  std::string key = assignment.substr(0, eq);
+  const std::string text = assignment.substr(eq + 1);
+  const std::string shown = key;
+  if (key.rfind("ces.", 0) == 0) key = key.substr(4);
+  json value;
+  try {
+    value = json::parse(text);
+  } catch (const json::exception&) {
+    value = text;  // a bare word is a string (e.g. field.model=csm)
+  }
+  if (!doc.contains("ces") || !doc["ces"].is_object()) throw InputError("--set " + shown + ": the scene has no ces object");
+  json* cur = &doc["ces"];
+  std::stringstream ss(key);
+  std::vector<std::string> parts;
+  for (std::string p; std::getline(ss, p, '.');) {
+    if (p.empty()) throw InputError("--set " + shown + ": empty key component");
+    parts.push_back(p);
+  }
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const std::string& p = parts[i];
+    const bool last = i + 1 == parts.size();
+    if (cur->is_array()) {
+      char* end = nullptr;
+      const long idx = std::strtol(p.c_str(), &end, 10);
+      if (*end || idx < 0 || size_t(idx) >= cur->size())
+        throw InputError("--set " + shown + ": no element '" + p + "' (array of " + std::to_string(cur->size()) + ")");
+      cur = &(*cur)[size_t(idx)];
+    } else if (cur->is_object()) {
+      // A missing intermediate object is created (its keys are then checked by the parser); a missing
+      // leaf is added and checked the same way, so an unknown key is still an error.
+      if (!cur->contains(p) && !last) (*cur)[p] = json::object();
+      cur = &(*cur)[p];
+    } else {
+      throw InputError("--set " + shown + ": '" + parts[i - 1] + "' is not an object or array");
+    }
+  }
+  *cur = value;
+}
+
+CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, const std::string& origin) {
+  Checker c{origin};
+  if (!doc.is_object()) throw InputError(origin + ": expected a JSON object at the top level");
+  c.object(doc, "(document)", {"$schema", "name", "description", "ces"});
+  if (!doc.contains("ces")) throw InputError(origin + ": ces: missing (a CES scene needs the machine under \"ces\")");
+  for (const std::string& o : overrides) applyCesOverride(doc, o);
+  const json& j = c.object(doc["ces"], "ces",
+                           {"duration_s", "time_step_s", "seed", "solver", "drum", "electrode", "field", "corona", "brush",
+                            "air", "friction", "feed", "collection", "splitters", "output"});
+  CesConfig cfg;
+  auto has = [](const json& o, const char* k) { return o.contains(k); };
+  if (has(j, "duration_s")) cfg.duration = c.range(j["duration_s"], "ces.duration_s", 0, 1e6);
+  if (has(j, "time_step_s")) cfg.dt = c.range(j["time_step_s"], "ces.time_step_s", 0, 0.01, true);
+  if (has(j, "seed")) cfg.seed = uint64_t(c.integer(j["seed"], "ces.seed", 0, int64_t(1) << 53));
+  if (has(j, "solver")) {
+    const json& s = c.object(j["solver"], "ces.solver", {"type", "iterations", "gyroscopic"});
+    if (has(s, "gyroscopic")) cfg.gyroscopic = c.boolean(s["gyroscopic"], "ces.solver.gyroscopic");
+    if (has(s, "type")) cfg.solver = c.oneOf(s["type"], "ces.solver.type", {"jacobi", "gs", "apgd", "bb"});
+    if (has(s, "iterations")) cfg.iterations = int(c.integer(s["iterations"], "ces.solver.iterations", 1, 100000));
+  }
+  if (has(j, "drum")) {
+    const json& s = c.object(j["drum"], "ces.drum", {"diameter_mm", "width_mm", "rpm", "drive", "mass_kg"});
+    if (has(s, "diameter_mm")) cfg.drum_diameter = c.positive(s["diameter_mm"], "ces.drum.diameter_mm") * kMm;
+    if (has(s, "width_mm")) cfg.drum_width = c.positive(s["width_mm"], "ces.drum.width_mm") * kMm;
+    if (has(s, "rpm")) cfg.drum_rpm = c.range(s["rpm"], "ces.drum.rpm", -1000, 1000);
+    if (has(s, "drive")) cfg.drum_drive = c.oneOf(s["drive"], "ces.drum.drive", {"auto", "kinematic", "rheonomic"});
+    if (has(s, "mass_kg")) cfg.drum_mass = c.positive(s["mass_kg"], "ces.drum.mass_kg");
+  }
+  if (has(j, "electrode")) cfg.electrode = parseElectrode(c, j["electrode"], "ces.electrode", cfg.electrode);
+  if (has(j, "field")) {
+    const json& s = c.object(j["field"], "ces.field", {"model", "extra_electrodes"});
+    if (has(s, "model")) cfg.field_model = c.oneOf(s["model"], "ces.field.model", {"two_cylinder", "csm"});
+    if (has(s, "extra_electrodes")) {
+      const json& a = s["extra_electrodes"];
+      if (!a.is_array()) c.fail("ces.field.extra_electrodes", "expected an array, got " + describe(a));
+      for (size_t i = 0; i < a.size(); ++i)
+        cfg.extra_electrodes.push_back(
+            parseElectrode(c, a[i], "ces.field.extra_electrodes[" + std::to_string(i) + "]", ElectrodeConfig{}));
+    }
+  }
+  if (cfg.field_model == "two_cylinder" && !cfg.extra_electrodes.empty())
+    c.fail("ces.field.extra_electrodes", "the exact two_cylinder model has one electrode; use \"model\": \"csm\"");
+  if (has(j, "corona")) {
+    const json& s = c.object(j["corona"], "ces.corona", {"half_angle_deg", "depth_mm", "charging_time_s", "charging_field_kV_cm", "image_cutoff_mm"});
+    if (has(s, "charging_field_kV_cm")) cfg.corona_field = c.nonNegative(s["charging_field_kV_cm"], "ces.corona.charging_field_kV_cm") * 1e5;
+    if (has(s, "half_angle_deg")) cfg.corona_half_angle = c.range(s["half_angle_deg"], "ces.corona.half_angle_deg", 0, 180) * kDeg;
+    if (has(s, "depth_mm")) cfg.corona_depth = c.nonNegative(s["depth_mm"], "ces.corona.depth_mm") * kMm;
+    if (has(s, "charging_time_s")) cfg.corona_charging_time = c.nonNegative(s["charging_time_s"], "ces.corona.charging_time_s");
+    if (has(s, "image_cutoff_mm")) cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
+  }
+  if (has(j, "brush")) {
+    const json& s = c.object(j["brush"], "ces.brush", {"diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s"});
+    if (has(s, "diameter_mm")) cfg.brush_diameter = c.positive(s["diameter_mm"], "ces.brush.diameter_mm") * kMm;
+    if (has(s, "angle_deg")) cfg.brush_angle = c.range(s["angle_deg"], "ces.brush.angle_deg", -360, 360) * kDeg;
+    if (has(s, "rpm")) cfg.brush_rpm = c.range(s["rpm"], "ces.brush.rpm", -10000, 10000);
+    if (has(s, "gap_mm")) cfg.brush_gap = c.nonNegative(s["gap_mm"], "ces.brush.gap_mm") * kMm;
+    if (has(s, "discharge_time_s")) cfg.brush_discharge_time = c.nonNegative(s["discharge_time_s"], "ces.brush.discharge_time_s");
+  }
+  if (has(j, "air")) {
+    const json& s = c.object(j["air"], "ces.air", {"viscosity_Pa_s", "density_kg_m3"});
+    if (has(s, "viscosity_Pa_s")) cfg.air_viscosity = c.positive(s["viscosity_Pa_s"], "ces.air.viscosity_Pa_s");
+    if (has(s, "density_kg_m3")) cfg.air_density = c.nonNegative(s["density_kg_m3"], "ces.air.density_kg_m3");
+  }
+  if (has(j, "friction")) {
+    const json& s = c.object(j["friction"], "ces.friction", {"particle_particle", "particle_drum", "particle_brush", "particle_wall"});
+    if (has(s, "particle_particle")) cfg.mu_particle_particle = c.nonNegative(s["particle_particle"], "ces.friction.particle_particle");
+    if (has(s, "particle_drum")) cfg.mu_particle_drum = c.nonNegative(s["particle_drum"], "ces.friction.particle_drum");
+    if (has(s, "particle_brush")) cfg.mu_particle_brush = c.nonNegative(s["particle_brush"], "ces.friction.particle_brush");
+    if (has(s, "particle_wall")) cfg.mu_particle_wall = c.nonNegative(s["particle_wall"], "ces.friction.particle_wall");
+  }
+  if (!(cfg.mu_particle_particle > 0))
+    c.fail("ces.friction.particle_particle", "must be > 0 (the other pairs are expressed through it under the product rule)");
+  if (has(j, "feed")) {
+    const json& s = c.object(j["feed"], "ces.feed",
+                             {"mass_flow_g_s", "start_s", "duration_s", "angle_deg", "height_mm", "speed_m_s", "width_mm",
+                              "diameter_mm", "materials"});
+    if (has(s, "mass_flow_g_s")) cfg.feed_mass_flow = c.range(s["mass_flow_g_s"], "ces.feed.mass_flow_g_s", 0, 1e6) * 1e-3;
+    if (has(s, "start_s")) cfg.feed_start = c.nonNegative(s["start_s"], "ces.feed.start_s");
+    if (has(s, "duration_s")) cfg.feed_duration = c.nonNegative(s["duration_s"], "ces.feed.duration_s");
+    if (has(s, "angle_deg")) cfg.feed_angle = c.range(s["angle_deg"], "ces.feed.angle_deg", -360, 360) * kDeg;
+    if (has(s, "height_mm")) cfg.feed_height = c.positive(s["height_mm"], "ces.feed.height_mm") * kMm;
+    if (has(s, "speed_m_s")) cfg.feed_speed = c.range(s["speed_m_s"], "ces.feed.speed_m_s", -100, 100);
+    if (has(s, "width_mm")) cfg.feed_width = c.positive(s["width_mm"], "ces.feed.width_mm") * kMm;
+    if (has(s, "diameter_mm")) {
+      c.interval(s["diameter_mm"], "ces.feed.diameter_mm", cfg.diameter_min, cfg.diameter_max);
+      cfg.diameter_min *= kMm;
+      cfg.diameter_max *= kMm;
+    }
+    if (has(s, "materials")) {
+      const json& a = s["materials"];
+      if (!a.is_array() || a.empty()) c.fail("ces.feed.materials", "expected a non-empty array, got " + describe(a));
+      double sum = 0;
+      for (size_t i = 0; i < a.size(); ++i) {
+        cfg.materials.push_back(parseMaterial(c, a[i], "ces.feed.materials[" + std::to_string(i) + "]"));
+        sum += cfg.materials.back().mass_fraction;
+      }
+      if (!(sum > 0)) c.fail("ces.feed.materials", "the mass fractions sum to 0");
+      if (cfg.materials.size() > 64) c.fail("ces.feed.materials", "at most 64 materials");
+    }
+  }
+  if (cfg.materials.empty()) c.fail("ces.feed.materials", "missing (at least one material)");
+  if (cfg.feed_width > cfg.drum_width) c.fail("ces.feed.width_mm", "wider than the drum (" + num(cfg.drum_width / kMm) + " mm)");
+  if (has(j, "collection")) {
+    const json& s = c.object(j["collection"], "ces.collection", {"y_mm", "x0_mm"});
+    if (has(s, "y_mm")) cfg.collection_y = c.range(s["y_mm"], "ces.collection.y_mm", -1e5, 1e5) * kMm;
+    if (has(s, "x0_mm")) cfg.collection_x0 = c.range(s["x0_mm"], "ces.collection.x0_mm", -1e5, 1e5) * kMm;
+  }
+  if (!(cfg.collection_y < -cfg.drumRadius()))
+    c.fail("ces.collection.y_mm", "the collection plane must lie below the drum (y < " + num(-cfg.drumRadius() / kMm) + " mm)");
+  if (has(j, "splitters")) {
+    const json& s = c.object(j["splitters"], "ces.splitters", {"s1_mm", "s2_mm", "range_mm", "positions"});
+    if (has(s, "s1_mm")) cfg.s1 = c.range(s["s1_mm"], "ces.splitters.s1_mm", -1e5, 1e5) * kMm;
+    if (has(s, "s2_mm")) cfg.s2 = c.range(s["s2_mm"], "ces.splitters.s2_mm", -1e5, 1e5) * kMm;
+    if (has(s, "range_mm")) {
+      const json& r = s["range_mm"];
+      if (!r.is_array() || r.size() != 2) c.fail("ces.splitters.range_mm", "expected [min, max], got " + describe(r));
+      cfg.splitter_lo = c.range(r[0], "ces.splitters.range_mm[0]", -1e5, 1e5) * kMm;
+      cfg.splitter_hi = c.range(r[1], "ces.splitters.range_mm[1]", -1e5, 1e5) * kMm;
+      if (!(cfg.splitter_hi > cfg.splitter_lo)) c.fail("ces.splitters.range_mm", "max must exceed min");
+    }
+    if (has(s, "positions")) cfg.splitter_positions = int(c.integer(s["positions"], "ces.splitters.positions", 2, 10000));
+  }
+  if (cfg.s2 < cfg.s1) c.fail("ces.splitters.s2_mm", "must be >= s1_mm (" + num(cfg.s1 / kMm) + ")");
+  if (has(j, "output")) {
+    const json& s = c.object(j["output"], "ces.output", {"frames", "histogram_bin_mm", "plots", "checkpoint_every_s"});
+    if (has(s, "frames")) cfg.frames = int(c.integer(s["frames"], "ces.output.frames", 0, 1000000));
+    if (has(s, "histogram_bin_mm")) cfg.histogram_bin = c.positive(s["histogram_bin_mm"], "ces.output.histogram_bin_mm") * kMm;
+    if (has(s, "plots")) cfg.plots = c.boolean(s["plots"], "ces.output.plots");
+    if (has(s, "checkpoint_every_s")) cfg.checkpoint_every = c.nonNegative(s["checkpoint_every_s"], "ces.output.checkpoint_every_s");
+  }
+  // Geometry: the electrodes outside the drum, the brush beside it.
+  auto electrodeOk = [&](const ElectrodeConfig& e, const std::string& p) {
+    if (!(e.distance > cfg.drumRadius() + e.diameter / 2))
+      c.fail(p + ".distance_mm", "the electrode must lie outside the drum (distance > drum radius + electrode radius)");
+  };
+  electrodeOk(cfg.electrode, "ces.electrode");
+  for (size_t i = 0; i < cfg.extra_electrodes.size(); ++i)
+    electrodeOk(cfg.extra_electrodes[i], "ces.field.extra_electrodes[" + std::to_string(i) + "]");
+  return cfg;
+}
+
+}  // namespace ces
+}  // namespace dvi

@@ -1,0 +1,144 @@
+// The CES machine configuration: a JSON document (scenes/schema/ces.schema.json) whose top level holds
+// the machine under the key "ces". Every key is checked: an unknown key, a wrong type, a non-finite or
+// out-of-range number is an InputError naming the key path ("ces.electrode.voltage_kV: ...").
+//
+// Units are in the key names (mm, kV, rpm, g/s, deg); CesConfig holds SI values (m, V, rad/s, kg/s,
+// rad), converted once here. Defaults are the machine of DESIGN §5 (ces_constants.h); the embedded
+// default document (defaultCesJson(), identical to scenes/ces_default.json, tested) is what
+// `dvisim run` runs without a scene.
+//
+// Sign conventions (docs/CES.md): the drum axis is z, gravity is -y, the electrode lies at angle
+// electrode.angle_deg counter-clockwise from +x. drum.rpm > 0 turns the drum clockwise seen from +z, so
+// that its top moves toward the electrode (+x): omega_z = -2 pi rpm / 60. brush.rpm uses the same
+// convention; with both positive the two surfaces move against each other where they meet (the brush
+// sweeps the drum).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "chrono_like/math.h"
+
+namespace dvi {
+namespace ces {
+
+enum class MaterialKind : int32_t { Metal = 0, Plastic = 1, Middling = 2 };
+constexpr int kMaterialKinds = 3;
+const char* materialKindName(MaterialKind k);  // "metal" | "plastic" | "middling"
+
+enum class ParticleShape : int32_t { Sphere = 0, Flake, Wire, Ellipsoid, Fragment, Count };
+constexpr int kParticleShapes = int(ParticleShape::Count);
+const char* particleShapeName(ParticleShape s);  // "sphere" | "flake" | "wire" | "ellipsoid" | "fragment"
+
+struct MaterialConfig {
+  std::string name;
+  MaterialKind kind = MaterialKind::Plastic;
+  double mass_fraction = 1;              // share of the fed mass (normalised over the materials)
+  double density_min = 946, density_max = 946;  // kg/m^3, uniform
+  double eps_r = 2.5;                    // relative permittivity (inf for a metal)
+  double relaxation_time = 0;            // s, charge relaxation through the drum contact tau = eps/sigma (inf: none)
+  double shape_weight[kParticleShapes] = {1, 0, 0, 0, 0};  // relative frequency of each shape (by count)
+};
+
+// A further cylindrical electrode for the charge-simulation field model (corona wire, static tube).
+struct ElectrodeConfig {
+  double diameter = 0.038;   // m
+  double distance = 0.267;   // m, centre distance from the drum axis
+  double angle = 0;          // rad, counter-clockwise from +x
+  double voltage = -35000;   // V
+};
+
+struct CesConfig {
+  // Run.
+  double duration = 2.5;      // s of machine time
+  double dt = 2e-4;           // s
+  uint64_t seed = 1;
+  std::string solver = "apgd";
+  int iterations = 30;
+  // The explicit gyroscopic term w x I w of the core's integrator grows without bound for tumbling
+  // millimetre particles once h |w| is not small (a wire landing on the drum spins at ~1e3 rad/s, h |w| ~
+  // 0.2 at h = 2e-4 s: measured, |w| grew 1e3 -> 1e11 rad/s in 0.1 s). Off by default for the CES machine.
+  bool gyroscopic = false;
+  int threads = 0;            // 0: OpenMP default
+
+  // Drum (grounded). drive: "auto" (rheonomic constraint when the core solves constraint rows, else
+  // kinematic), "kinematic" or "rheonomic".
+  double drum_diameter = 0.320, drum_width = 0.300, drum_rpm = 44.8;
+  std::string drum_drive = "auto";
+  double drum_mass = 30;      // kg, for the rheonomic drive (a steel shell; any large value works)
+
+  // Main static electrode and field model ("two_cylinder": exact, one electrode; "csm": charge
+  // simulation for the main electrode plus extra_electrodes).
+  ElectrodeConfig electrode{0.038, 0.267, 0.5235987755982988, -35000};
+  std::string field_model = "two_cylinder";
+  std::vector<ElectrodeConfig> extra_electrodes;
+
+  // Corona zone: particles within corona_depth of the drum surface, at angles within
+  // corona_half_angle of the electrode direction, take Pauthenier's charge.
+  double corona_half_angle = 0.3490658503988659;  // rad (20 deg)
+  double corona_depth = 0.005;                     // m
+  double corona_charging_time = 0;                 // s, Pauthenier's tau_c (0: saturation at once)
+  // Charging field of the ionised zone (V/m): Pauthenier's charge uses max(|E_Laplace|, this). The electrode
+  // field models are Laplace fields (no ion space charge); the space charge of a corona raises the field at
+  // the grounded drum. 6 kV/cm [assumed]; 0 uses the Laplace field alone.
+  double corona_field = 6e5;
+  double image_cutoff = 0.005;                     // m, image force acts within this distance of the drum surface
+
+  // Brush (grounded, rotating cylinder).
+  double brush_diameter = 0.106, brush_angle = -2.356194490192345, brush_rpm = 120, brush_gap = 0.0002;
+  double brush_discharge_time = 1e-3;              // s
+
+  // Air.
+  double air_viscosity = 1.81e-5, air_density = 1.225;
+
+  // Pair friction coefficients (converted to per-body values under the product rule).
+  double mu_particle_particle = 0.2, mu_particle_drum = 0.5, mu_particle_brush = 0.5, mu_particle_wall = 0.3;
+
+  // Feed: a vibrating conveyor's outlet, a line across the drum width above the drum.
+  double feed_mass_flow = 0.5e-3;  // kg/s
+  double feed_start = 0, feed_duration = 1.0;      // s
+  double feed_angle = 1.7453292519943295;          // rad, direction of the outlet from the drum axis (100 deg)
+  double feed_height = 0.004;                      // m, above the drum surface
+  double feed_speed = 0.2;                         // m/s, along the drum's surface motion
+  double feed_width = 0.280;                       // m, along z
+  double diameter_min = 0.5e-3, diameter_max = 1.0e-3;  // m, volume-equivalent diameter, uniform
+  std::vector<MaterialConfig> materials;
+
+  // Collection plane y = collection_y; positions along it are x - collection_x0.
+  double collection_y = -0.35, collection_x0 = -0.05;
+
+  // Splitters (virtual): bins nonconductor x' < s1 <= middling < s2 <= conductor.
+  double s1 = 0.080, s2 = 0.140;
+  double splitter_lo = 0, splitter_hi = 0.200;
+  int splitter_positions = 60;
+
+  // Outputs.
+  int frames = 0;
+  double histogram_bin = 0.002;  // m
+  bool plots = true;
+  double checkpoint_every = 0;   // s of machine time between checkpoints (0: none; one is always written at the end)
+
+  double omegaDrum() const;   // rad/s about +z
+  double omegaBrush() const;
+  double drumRadius() const { return drum_diameter / 2; }
+};
+
+// The default machine document (scenes/ces_default.json), embedded.
+const char* defaultCesJson();
+
+// True when `doc` is a CES scene (an object with the key "ces").
+bool isCesDocument(const nlohmann::json& doc);
+
+// Parses a whole scene document {"$schema", "name", "description", "ces": {...}} after applying the
+// overrides KEY=VALUE (KEY relative to "ces", e.g. electrode.voltage_kV=-30, or starting with "ces.").
+// `origin` names the file in error messages.
+CesConfig parseCesDocument(nlohmann::json doc, const std::vector<std::string>& overrides, const std::string& origin);
+
+// Applies one override to the document (exposed for the checkpoint, which stores the final document).
+void applyCesOverride(nlohmann::json& doc, const std::string& assignment);
+
+}  // namespace ces
+}  // namespace dvi

@@ -1,0 +1,397 @@
+// `dvisim run` for a CES machine (ces_run.h).
+#include "ces/ces_run.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "ces/ces_config.h"
+#include "ces/ces_output.h"
+#include "ces/machine.h"
+#include "ces/splitters.h"
+#include "chrono_like/errors.h"
+#include "chrono_like/gpu_factory.h"
+#include "chrono_like/output.h"
+#include "chrono_like/scene.h"
+
+namespace dvi {
+namespace ces {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string readText(const std::string& path, const std::string& what) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw InputError(what + ": no such file");
+  if (fs::is_directory(path, ec)) throw InputError(what + ": is a directory, not a file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(what + ": cannot open");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+json parseJson(const std::string& text, const std::string& origin) {
+  if (text.find_first_not_of(" \t\r\n") == std::string::npos) throw InputError(origin + ": file is empty");
+  try {
+    return json::parse(text);
+  } catch (const json::exception& e) {
+    std::string what = e.what();
+    const size_t p = what.find("] ");
+    if (p != std::string::npos) what = what.substr(p + 2);
+    throw InputError(origin + ": malformed JSON: " + what);
+  }
+}
+
+double parseReal(const std::string& opt, const std::string& v) {
+  char* end = nullptr;
+  const double x = std::strtod(v.c_str(), &end);
+  if (v.empty() || *end || !std::isfinite(x)) throw InputError(opt + ": expected a finite number, got '" + v + "'");
+  return x;
+}
+
+long long parseInt(const std::string& opt, const std::string& v, long long lo, long long hi) {
+  char* end = nullptr;
+  const long long x = std::strtoll(v.c_str(), &end, 10);
+  if (v.empty() || *end) throw InputError(opt + ": expected an integer, got '" + v + "'");
+  if (x < lo || x > hi) throw InputError(opt + ": must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v);
+  return x;
+}
+
+void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
+  std::string list;
+  for (const char* c : choices) {
+    if (v == c) return;
+    list += std::string(list.empty() ? "" : "|") + c;
+  }
+  throw InputError("unknown " + opt.substr(2) + " '" + v + "' (expected " + list + ")");
+}
+
+std::string fmt(double x) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", x);
+  return b;
+}
+
+json binsJson(const BinMasses& m) {
+  json j;
+  for (int bin = 0; bin < 3; ++bin) {
+    json k;
+    k["metal_kg"] = double(m.fg[size_t(bin)][0]) * kFemtogram;
+    k["plastic_kg"] = double(m.fg[size_t(bin)][1]) * kFemtogram;
+    k["middling_kg"] = double(m.fg[size_t(bin)][2]) * kFemtogram;
+    j[binName(bin)] = k;
+  }
+  return j;
+}
+
+json cellJson(const SplitterCell& c) {
+  return json{{"s1_mm", c.s1 * 1e3},           {"s2_mm", c.s2 * 1e3},
+              {"grade_metal", c.grade_metal},     {"recovery_metal", c.recovery_metal},
+              {"grade_plastic", c.grade_plastic}, {"recovery_plastic", c.recovery_plastic},
+              {"score", c.score},                 {"bins", binsJson(c.mass)}};
+}
+
+void writeCheckpoint(const CesMachine& m, const json& doc, const std::string& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) throw std::runtime_error("cannot create " + dir + ": " + ec.message());
+  std::ostringstream bin(std::ios::binary);
+  m.save(bin);
+  writeFileAtomic(dir + "/ces_config.json", doc.dump(2) + "\n");
+  writeFileAtomic(dir + "/state.bin", bin.str());
+}
+
+}  // namespace
+
+bool isCesScene(const std::string& path) {
+  if (path.empty()) return true;
+  if (fs::path(path).extension() != ".json") return false;
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return false;
+  std::ifstream f(path, std::ios::binary);
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  try {
+    return isCesDocument(json::parse(ss.str()));
+  } catch (const json::exception&) {
+    return false;
+  }
+}
+
+int runCesMachine(const CesRunOptions& o) {
+  if (o.backend == "bullet")
+    throw InputError("--backend bullet: the CES machine runs on the DVI engine only (auto|cpu|gpu)");
+  requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu"});
+  if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
+  if (!o.solver.empty()) requireOneOf("--solver", o.solver, {"jacobi", "gs", "apgd", "bb"});
+  if (!o.time.empty() && !o.steps.empty()) throw InputError("--time and --steps are mutually exclusive");
+
+  // The machine document: a scene file, the embedded default, or the one a checkpoint was written with.
+  json doc;
+  std::string origin;
+  const bool resume = !o.resume.empty();
+  if (resume) {
+    if (!o.scene.empty()) throw InputError("--resume " + o.resume + ": give either a scene or --resume, not both");
+    origin = o.resume + "/checkpoint/ces_config.json";
+    doc = parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin);
+  } else if (o.scene.empty()) {
+    origin = "<default ces machine>";
+    doc = parseJson(defaultCesJson(), origin);
+  } else {
+    origin = o.scene;
+    doc = parseJson(readText(o.scene, o.scene), o.scene);
+  }
+  // Command-line options are overrides of the document too, so a checkpoint records them.
+  std::vector<std::string> sets = o.sets;
+  if (!o.dt.empty()) {
+    const double dt = parseReal("--dt", o.dt);
+    if (!(dt > 0)) throw InputError("--dt: the time step must be > 0, got " + o.dt);
+    sets.push_back("time_step_s=" + fmt(dt));
+  }
+  if (!o.time.empty()) {
+    const double t = parseReal("--time", o.time);
+    if (t < 0) throw InputError("--time: must be >= 0, got " + o.time);
+    sets.push_back("duration_s=" + fmt(t));
+  }
+  if (!o.solver.empty()) sets.push_back("solver.type=" + o.solver);
+  if (!o.iterations.empty()) sets.push_back("solver.iterations=" + std::to_string(parseInt("--iterations", o.iterations, 1, 1000000)));
+  if (!o.frames.empty()) sets.push_back("output.frames=" + std::to_string(parseInt("--frames", o.frames, 0, 1000000)));
+  const double dt_before = resume ? parseCesDocument(doc, {}, origin).dt : 0.0;
+  CesConfig cfg = parseCesDocument(doc, sets, origin);
+  if (!o.steps.empty()) {
+    const long long n = parseInt("--steps", o.steps, 0, 1LL << 40);
+    cfg.duration = double(n) * cfg.dt;
+    sets.push_back("duration_s=" + fmt(cfg.duration));
+  }
+  for (const std::string& s : sets) applyCesOverride(doc, s);  // the document as run
+  if (resume && cfg.dt != dt_before)
+    throw InputError("--resume: the time step cannot change (checkpoint " + fmt(dt_before) + " s, now " + fmt(cfg.dt) + " s)");
+  const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
+  const int64_t total = int64_t(std::llround(cfg.duration / cfg.dt));
+
+  std::string backend = o.backend, gpu_name;
+  const bool have_gpu = gpuAvailable(&gpu_name);
+  if (backend == "auto") {
+    backend = have_gpu ? "gpu" : "cpu";
+    std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
+  }
+  if (backend == "gpu" && !have_gpu)
+    throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
+  std::error_code ec;
+  fs::create_directories(o.out, ec);
+  if (ec || !fs::is_directory(o.out))
+    throw InputError("--out " + o.out + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+
+  SceneSettings st;
+  st.dt = real(cfg.dt);
+  st.solver = cfg.solver;
+  st.iterations = cfg.iterations;
+  st.threads = threads;
+  st.collision = o.collision.empty() ? "native" : o.collision;
+  st.friction_combine = "product";  // the pair coefficients of ces.friction are converted for this rule
+  SystemConfig sc = systemConfigFromSettings(st);
+  // The particle cloud spans the machine (0.8 x 0.6 x 0.3 m) sparsely: a grid of 2^24 bins of 2 mm costs
+  // more to scan than the pairs it finds (measured 7.5 ms/step); 2^20 bins of ~5 mm keep every bin sparse.
+  sc.broadphase.max_bins = int64_t(1) << 20;
+  std::unique_ptr<System> sys = backend == "gpu" ? makeGpuSystem(sc) : std::make_unique<CheckpointSystem>(sc);
+  CesMachine m(cfg, *sys);
+  if (resume) {
+    const std::string path = o.resume + "/checkpoint/state.bin";
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError("--resume " + o.resume + ": no checkpoint/state.bin");
+    m.load(in);
+    if (m.steps() > total)
+      throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) + " s, beyond duration_s = " + fmt(cfg.duration));
+  }
+  const int64_t first = m.steps();
+  std::printf("ces machine: %s, %s field, drum %s at %g rpm, U = %g kV, feed %g g/s for %g s; %lld steps of %g s%s\n",
+              origin.c_str(), cfg.field_model.c_str(), m.rheonomicDrive() ? "rheonomic" : "kinematic", cfg.drum_rpm,
+              cfg.electrode.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.dt,
+              resume ? (" (resumed at t = " + fmt(m.time()) + " s)").c_str() : "");
+  if (m.system().backendName() != "cpu")
+    std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
+                m.system().backendName().c_str());
+  std::fflush(stdout);
+
+  // Frames at N evenly spaced steps over [0, total]; checkpoints every checkpoint_every_s.
+  std::vector<int64_t> frame_at;
+  if (cfg.frames == 1) frame_at.push_back(total);
+  for (int k = 0; cfg.frames > 1 && k < cfg.frames; ++k)
+    frame_at.push_back(int64_t(std::llround(double(k) * double(total) / double(cfg.frames - 1))));
+  const int64_t ckpt_every = cfg.checkpoint_every > 0 ? std::max<int64_t>(1, std::llround(cfg.checkpoint_every / cfg.dt)) : 0;
+  const std::string ckpt_dir = o.out + "/checkpoint";
+  CesFrameWriter frames(o.out);
+  if (cfg.frames > 0) writeFileAtomic(o.out + "/machine.vtp", cesMachineVtp(m));
+  size_t next_frame = 0;
+  while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
+  const bool tty = ::isatty(2);
+  int64_t contacts = 0, iterations = 0;
+  real max_pen = 0, residual = 0;
+  double torque_sum = 0, wall = 0;
+  std::array<double, kStageCount> stage_s{};
+  std::array<bool, kStageCount> stage_ran{};
+  const auto t0 = Clock::now();
+  auto last = t0;
+  for (int64_t k = first;; ++k) {
+    while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+      m.system().syncToHost();
+      frames.write(m.time(), m);
+      ++next_frame;
+    }
+    if (k == total) break;
+    const auto s0 = Clock::now();
+    m.step();
+    wall += std::chrono::duration<double>(Clock::now() - s0).count();
+    const StepStats& s = m.system().lastStats();
+    contacts += s.contacts;
+    iterations += s.iterations;
+    max_pen = std::fmax(max_pen, s.max_penetration);
+    residual = s.residual;
+    torque_sum += m.driveTorque();
+    for (int i = 0; i < kStageCount; ++i) {
+      stage_s[size_t(i)] += s.stage_seconds[size_t(i)];
+      stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
+    }
+    if (ckpt_every > 0 && m.steps() % ckpt_every == 0 && m.steps() < total) {
+      m.system().syncToHost();
+      writeCheckpoint(m, doc, ckpt_dir);
+    }
+    const auto now = Clock::now();
+    if (tty && (now - last > std::chrono::milliseconds(200) || k + 1 == total)) {
+      last = now;
+      const double frac = double(k + 1 - first) / double(std::max<int64_t>(1, total - first));
+      const double el = std::chrono::duration<double>(now - t0).count();
+      const MassBalance b = m.balance();
+      std::fprintf(stderr, "\r[%3d%%] t = %.3f s, %lld fed, %lld collected, %lld in flight, ETA %.0f s  ", int(frac * 100),
+                   m.time(), (long long)b.fed, (long long)b.collected, (long long)b.in_flight, frac > 0 ? el * (1 - frac) / frac : 0.0);
+      std::fflush(stderr);
+    }
+  }
+  if (tty) std::fprintf(stderr, "\r\033[K");
+  m.system().syncToHost();
+  writeCheckpoint(m, doc, ckpt_dir);
+
+  // Results.
+  const MassBalance bal = m.balance();
+  if (!bal.closes()) throw std::logic_error("CES mass balance does not close (internal error)");
+  const SplitterTable table = splitterAnalysis(m.collected(), cfg.splitter_lo, cfg.splitter_hi, cfg.splitter_positions);
+  const BinMasses at = binDirect(m.collected(), cfg.s1, cfg.s2);
+  const SplitterCell configured = splitterCell(m.collected(), cfg.s1, cfg.s2);
+  const Distribution dist = massDistribution(m.collected(), cfg.histogram_bin);
+
+  const int64_t steps_run = total - first;
+  json summary;
+  summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
+  summary["scene_name"] = doc.contains("name") && doc["name"].is_string() ? doc["name"].get<std::string>() : "ces";
+  summary["bodies"] = m.system().bodies().count();
+  summary["dt"] = cfg.dt;
+  summary["steps"] = steps_run;
+  summary["threads"] = m.system().effectiveThreads();
+  summary["backend"] = m.system().backendName();
+  summary["device"] = m.system().deviceName();
+  summary["solver"] = cfg.solver;
+  summary["collision"] = st.collision;
+  summary["iterations_mean"] = steps_run > 0 ? double(iterations) / double(steps_run) : 0.0;
+  summary["residual_final"] = residual;
+  summary["contacts_mean"] = steps_run > 0 ? double(contacts) / double(steps_run) : 0.0;
+  summary["max_penetration"] = max_pen;
+  summary["stages"] = json::array();
+  summary["stage_seconds"] = json::object();
+  for (int i = 0; i < kStageCount; ++i) {
+    if (!stage_ran[size_t(i)]) continue;
+    summary["stages"].push_back(stageName(StageType(i)));
+    summary["stage_seconds"][stageName(StageType(i))] = stage_s[size_t(i)];
+  }
+  summary["sim_time"] = m.time();
+  summary["wall_time_s"] = wall;
+  summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
+  summary["frames"] = frames.count();
+  json c;
+  c["fed_mass_kg"] = double(bal.fed_fg) * kFemtogram;
+  c["collected_mass_kg"] = double(bal.collected_fg) * kFemtogram;
+  c["in_flight_mass_kg"] = double(bal.in_flight_fg) * kFemtogram;
+  c["lost_mass_kg"] = double(bal.lost_fg) * kFemtogram;
+  c["fed_particles"] = bal.fed;
+  c["collected_particles"] = bal.collected;
+  c["in_flight_particles"] = bal.in_flight;
+  c["lost_particles"] = bal.lost;
+  c["balance_closes"] = bal.closes();
+  c["mass_unit_kg"] = kFemtogram;
+  c["splitters"] = {{"s1_mm", cfg.s1 * 1e3}, {"s2_mm", cfg.s2 * 1e3}};
+  c["bins"] = binsJson(at);
+  c["at_splitters"] = cellJson(configured);
+  c["best"] = cellJson(table.cells[table.best]);
+  c["splitter_positions"] = cfg.splitter_positions;
+  c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};
+  c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
+  c["field_model"] = cfg.field_model;
+  c["drum_drive"] = m.rheonomicDrive() ? "rheonomic" : "kinematic";
+  if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? torque_sum / double(steps_run) : 0.0;
+  c["forces_on_host"] = m.system().backendName() != "cpu";
+  json mats = json::array();
+  for (size_t k = 0; k < cfg.materials.size(); ++k) {
+    int64_t fed = 0, col = 0;
+    for (size_t i = size_t(m.firstParticleBody()); i < m.particles().count(); ++i) {
+      if (m.particles().material[i] != int32_t(k)) continue;
+      fed += m.particles().mass_fg[i];
+      if (m.particles().status[i] == kStatusCollected) col += m.particles().mass_fg[i];
+    }
+    mats.push_back({{"name", cfg.materials[k].name}, {"kind", materialKindName(cfg.materials[k].kind)},
+                    {"fed_mass_kg", double(fed) * kFemtogram}, {"collected_mass_kg", double(col) * kFemtogram}});
+  }
+  c["materials"] = mats;
+  std::string plots = "disabled (ces.output.plots = false)";
+  summary["ces"] = c;
+
+  const std::string out = o.out;
+  std::vector<BodyState> state;
+  const BodyArrays& b = m.system().bodies();
+  for (size_t i = 0; i < b.count(); ++i) state.push_back(BodyState{b.pos[i], b.rot[i], b.vel[i], b.omega[i], b.size[i]});
+  writeBodiesCsv(out + "/bodies.csv", state);
+  writeFileAtomic(out + "/ces_particles.csv", cesParticlesCsv(m));
+  writeFileAtomic(out + "/ces_collected.csv", cesCollectedCsv(m));
+  writeFileAtomic(out + "/ces_distribution.csv", distributionCsv(dist));
+  writeFileAtomic(out + "/ces_splitters.csv", splittersCsv(table));
+  writeSummary(out + "/summary.json", summary);
+  if (cfg.plots) {
+    const std::string err = cesMakePlots(out);
+    plots = err.empty() ? "distribution.png, splitters.png" : err;
+    if (!err.empty()) std::fprintf(stderr, "dvisim: warning: %s\n", err.c_str());
+    summary["ces"]["plots"] = plots;
+    writeSummary(out + "/summary.json", summary);
+  }
+
+  const double g = kFemtogram * 1e3;
+  std::printf("mass balance: fed %.6g g = collected %.6g g + in flight %.6g g + lost %.6g g (%lld = %lld + %lld + %lld particles)%s\n",
+              double(bal.fed_fg) * g, double(bal.collected_fg) * g, double(bal.in_flight_fg) * g, double(bal.lost_fg) * g,
+              (long long)bal.fed, (long long)bal.collected, (long long)bal.in_flight, (long long)bal.lost,
+              bal.closes() ? ", closes exactly" : "");
+  if (bal.lost > 0) std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n", (long long)bal.lost);
+  const SplitterCell& best = table.cells[table.best];
+  std::printf("bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g (nonconductor/middling/conductor)\n",
+              cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
+              double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
+  std::printf("best splitters: s1 = %.1f mm, s2 = %.1f mm (score %.3f; metal grade %.3f recovery %.3f; plastic grade %.3f recovery %.3f)\n",
+              best.s1 * 1e3, best.s2 * 1e3, best.score, best.grade_metal, best.recovery_metal, best.grade_plastic,
+              best.recovery_plastic);
+  std::printf("results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n", out.c_str(),
+              cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
+              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
+              wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
+  return 0;
+}
+
+}  // namespace ces
+}  // namespace dvi

@@ -1,0 +1,99 @@
+// The vibrating feeder: a multidisperse emitter with a constant mass flow (DESIGN §5; issue 5, item 4).
+//
+// Each particle has a volume-equivalent diameter d uniform in [d_min, d_max], a material chosen so that
+// the fed mass follows the materials' mass fractions (the material furthest below its share of the mass
+// fed so far comes next: deterministic, exact in the long run), a density uniform in the material's
+// range and a shape drawn by the material's shape weights:
+//   sphere    radius d/2
+//   flake     box, half extents (a, a/4, a)                 (a plate 1/4 as thick as wide)
+//   wire      cylinder, length = 4 x its diameter
+//   ellipsoid semi-axes (a, 0.5 a, 0.7 a)
+//   fragment  convex hull of 10 random points on a random ellipsoid, in its principal frame
+// every one scaled to the volume pi d^3 / 6, with the exact volume and inertia of its shape.
+// Masses are whole femtograms (1e-15 kg), so every mass sum of the run (fed, collected, per bin) is an
+// exact integer and the mass balance closes exactly.
+//
+// Random numbers: SplitMix64 (Steele, Lea, Flood, "Fast splittable pseudorandom number generators",
+// OOPSLA 2014), identical on every platform; its state is part of the checkpoint.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "ces/ces_config.h"
+#include "chrono_like/system.h"
+
+namespace dvi {
+namespace ces {
+
+constexpr double kFemtogram = 1e-15;  // kg, the unit of every particle mass
+
+struct SplitMix64 {
+  uint64_t s = 1;
+  uint64_t next() {
+    uint64_t z = (s += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  }
+  double uniform() { return double(next() >> 11) * (1.0 / 9007199254740992.0); }  // [0, 1)
+  double uniform(double a, double b) { return a + (b - a) * uniform(); }
+};
+
+// One fed particle: enough to rebuild its body (for a checkpoint) and to account for it.
+struct ParticleSpec {
+  int32_t material = 0;
+  ParticleShape shape = ParticleShape::Sphere;
+  Vec3 dims{0, 0, 0};          // sphere: (r, 0, 0); flake: half extents; wire: (r, half height, 0); ellipsoid: semi-axes
+  std::vector<Vec3> hull;      // fragment: points in the principal frame (centroid at the origin)
+  int64_t mass_fg = 0;         // mass in femtograms
+  Vec3 inertia{0, 0, 0};       // principal moments, kg m^2
+  real radius = 0;             // volume-equivalent radius (charge, drag)
+  real bound = 0;              // bounding radius about the centre of mass
+};
+
+// Emission: the owed mass grows by mass_flow x h each step; while it is >= 0 a particle is emitted and
+// its mass subtracted, so the fed mass tracks mass_flow x t within one particle mass.
+//
+// Builds a particle of the given material, shape, volume-equivalent diameter and density.
+ParticleSpec makeParticleSpec(int material, ParticleShape shape, double diameter, double density, SplitMix64& rng);
+
+// The collision shape of a spec (body frame = principal frame).
+ShapeDesc particleShapeDesc(const ParticleSpec& s);
+
+class Feeder {
+ public:
+  explicit Feeder(const CesConfig& cfg);
+
+  // Appends to `out` the particles due in the step [t, t + h).
+  // Stops when the feed window [start, start + duration) is over.
+  void emit(double t, double h, std::vector<ParticleSpec>& out);
+  // Draws a random orientation (Shoemake, "Uniform random rotations", Graphics Gems III, 1992).
+  Quat randomRotation();
+  double uniform(double a, double b) { return rng_.uniform(a, b); }
+
+  int64_t fedMassFg() const { return fed_total_fg_; }
+
+  // Checkpoint state.
+  struct State {
+    uint64_t rng = 1;
+    double owed_kg = 0;
+    int64_t fed_total_fg = 0;
+    std::vector<int64_t> fed_fg;  // per material
+  };
+  State state() const;
+  void setState(const State& s);
+
+ private:
+  ParticleSpec drawNext();
+
+  const CesConfig& cfg_;
+  SplitMix64 rng_;
+  double owed_kg_ = 0;
+  int64_t fed_total_fg_ = 0;
+  std::vector<int64_t> fed_fg_;
+  std::vector<double> fraction_;  // normalised mass fractions
+};
+
+}  // namespace ces
+}  // namespace dvi

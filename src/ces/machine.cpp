@@ -1,0 +1,536 @@
+// The CES machine (machine.h): bodies, field, drive, feeder, post-step charge and status, checkpoints.
+#include "ces/machine.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <istream>
+#include <ostream>
+
+#include "chrono_like/errors.h"
+
+namespace dvi {
+namespace ces {
+
+namespace {
+
+constexpr int16_t kGroupParticle = 1, kGroupMachine = 2;
+constexpr real kBinDrop = real(0.05);  // m below the collection plane where collected particles are kept
+
+ShapeDesc machineShape(ShapeDesc s) {
+  s.shape.group = kGroupMachine;
+  s.shape.mask = kGroupParticle;
+  return s;
+}
+
+// Cylinder shapes have their axis along local y; the machine's cylinders lie along world z.
+Quat axisZ() { return quatFromAxisAngle(Vec3{1, 0, 0}, real(1.5707963267948966)); }
+
+// Binary I/O of plain values and vectors (checkpoints).
+template <class T>
+void put(std::ostream& o, const T& v) {
+  o.write(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+template <class T>
+void putVec(std::ostream& o, const std::vector<T>& v) {
+  put(o, uint64_t(v.size()));
+  if (!v.empty()) o.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(T)));
+}
+template <class T>
+void get(std::istream& i, T& v) {
+  i.read(reinterpret_cast<char*>(&v), sizeof(T));
+  if (!i) throw InputError("checkpoint: truncated file");
+}
+template <class T>
+void getVec(std::istream& i, std::vector<T>& v) {
+  uint64_t n = 0;
+  get(i, n);
+  if (n > (uint64_t(1) << 34) / sizeof(T)) throw InputError("checkpoint: corrupt array length");
+  v.resize(size_t(n));
+  if (n) i.read(reinterpret_cast<char*>(v.data()), std::streamsize(n * sizeof(T)));
+  if (!i) throw InputError("checkpoint: truncated file");
+}
+
+// A provider with one row: body 0's x velocity = 1.
+class ProbeRow : public RowProvider {
+ public:
+  void rows(const BodyArrays&, double, real, std::vector<ConstraintRow>& out) override {
+    ConstraintRow r;
+    r.a = 0;
+    r.Ja[0] = 1;
+    r.bias = -1;
+    out.push_back(r);
+  }
+};
+
+}  // namespace
+
+bool coreSolvesConstraintRows() {
+  SystemConfig c;
+  c.dt = real(1e-3);
+  c.gravity = Vec3{0, 0, 0};
+  System s(c);
+  BodyDesc d;
+  d.shapes.push_back(makeSphere(real(0.1)));
+  s.addBody(d);
+  s.addRowProvider(std::make_shared<ProbeRow>());
+  s.step();
+  return !s.constraintRows().empty() && std::fabs(s.bodies().vel[0].x - real(1)) < real(1e-6);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Plug-ins
+// ---------------------------------------------------------------------------------------------------
+
+void CesForceField::apply(const BodyArrays& b, double, real, Vec3* force, Vec3*) {
+  const CesParticles& p = m_.p_;
+  const CesModel& model = m_.model_;
+  const int64_t n = int64_t(std::min(p.count(), b.count()));
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) {
+    if (p.status[size_t(i)] != kStatusInFlight || (b.flags[size_t(i)] & kBodyFixed)) continue;
+    force[i] += cesParticleForce(model, b.pos[size_t(i)], b.vel[size_t(i)], p.charge[size_t(i)], p.radius[size_t(i)]);
+  }
+}
+
+void DrumDrive::rows(const BodyArrays& b, double t, real dt, std::vector<ConstraintRow>& out) {
+  dt_ = dt;
+  const Vec3 p = b.pos[size_t(body_)];
+  const Vec3 err = p - centre_;
+  const real e[3] = {err.x, err.y, err.z};
+  for (int k = 0; k < 3; ++k) {  // centre fixed: v_k + C_k / h = 0
+    ConstraintRow r;
+    r.a = body_;
+    r.Ja[k] = 1;
+    r.bias = e[k] / dt;
+    out.push_back(r);
+  }
+  // Axis along z: the rotation vector theta = a x z brings the drum's axis a onto z; w_k = theta_k / h.
+  const Vec3 a = rotate(b.rot[size_t(body_)], Vec3{0, 1, 0});
+  const Vec3 theta = cross(a, Vec3{0, 0, 1});
+  const real th[2] = {theta.x, theta.y};
+  for (int k = 0; k < 2; ++k) {
+    ConstraintRow r;
+    r.a = body_;
+    r.Ja[3 + k] = 1;
+    r.bias = -th[k] / dt;
+    out.push_back(r);
+  }
+  ConstraintRow drive;  // rheonomic: omega_z = omega(t)
+  drive.a = body_;
+  drive.Ja[5] = 1;
+  drive.bias = -real(omega(t));
+  out.push_back(drive);
+}
+
+void DrumDrive::impulses(const real* lambda, size_t count) {
+  if (count >= 6 && dt_ > 0) torque_ = double(lambda[5]) / double(dt_);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Construction
+// ---------------------------------------------------------------------------------------------------
+
+CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys), feeder_(cfg_) {
+  if (sys_.bodies().count() != 0) throw InputError("CES machine: the system must be empty");
+  if (cfg_.materials.size() > size_t(kMaxMaterials)) throw InputError("CES machine: at most 64 materials");
+  if (cfg_.extra_electrodes.size() + 1 > size_t(kMaxElectrodes)) throw InputError("CES machine: at most 7 extra electrodes");
+  sys_.mutableConfig().gyroscopic = cfg_.gyroscopic;  // see CesConfig::gyroscopic
+  const real R = real(cfg_.drumRadius()), W = real(cfg_.drum_width);
+  // Pair coefficients under the product rule (Bullet's, the core's default): f_particle^2 = mu_pp and
+  // f_particle f_part = mu_(particle, part).
+  particle_friction_ = real(std::sqrt(cfg_.mu_particle_particle));
+  const real fp = particle_friction_;
+
+  // Field.
+  const ElectrodeConfig& e = cfg_.electrode;
+  model_.field.model = cfg_.field_model == "csm" ? 1 : 0;
+  if (model_.field.model == 0) {
+    if (!makeTwoCylinderField(R, real(e.diameter / 2), real(e.distance), real(e.angle), real(e.voltage), 0, 0, model_.field.tc))
+      throw InputError("ces.electrode: the two-cylinder field needs the electrode outside the drum");
+  } else {
+    csm_.addCylinder(0, 0, R, 0);
+    std::vector<ElectrodeConfig> all{e};
+    all.insert(all.end(), cfg_.extra_electrodes.begin(), cfg_.extra_electrodes.end());
+    for (const ElectrodeConfig& x : all)
+      csm_.addCylinder(real(x.distance * std::cos(x.angle)), real(x.distance * std::sin(x.angle)), real(x.diameter / 2),
+                       real(x.voltage));
+    csm_.solve();
+    model_.field.csm = csm_.view();
+  }
+  model_.drum = DrumGeometry{0, 0, R, 0, W / 2, real(cfg_.image_cutoff)};
+  model_.polarity = e.voltage < 0 ? real(-1) : real(1);
+  model_.corona_ex = real(std::cos(e.angle));
+  model_.corona_ey = real(std::sin(e.angle));
+  model_.corona_cos_half = real(std::cos(cfg_.corona_half_angle));
+  model_.corona_depth = real(cfg_.corona_depth);
+  model_.corona_tau = real(cfg_.corona_charging_time);
+  model_.corona_field = real(cfg_.corona_field);
+  const real rb = real(cfg_.brush_diameter / 2), db = R + rb + real(cfg_.brush_gap);
+  model_.brush = CylinderXY{db * real(std::cos(cfg_.brush_angle)), db * real(std::sin(cfg_.brush_angle)), rb};
+  model_.brush_tau = real(cfg_.brush_discharge_time);
+  model_.n_electrodes = 0;
+  auto addElectrode = [&](const ElectrodeConfig& x) {
+    model_.electrodes[model_.n_electrodes++] =
+        CylinderXY{real(x.distance * std::cos(x.angle)), real(x.distance * std::sin(x.angle)), real(x.diameter / 2)};
+  };
+  addElectrode(e);
+  for (const ElectrodeConfig& x : cfg_.extra_electrodes) addElectrode(x);
+  model_.air_density = real(cfg_.air_density);
+  model_.air_viscosity = real(cfg_.air_viscosity);
+  model_.contact_tol = real(1.1);
+  model_.collect_y = real(cfg_.collection_y);
+  model_.domain_x_lo = real(-1);
+  model_.domain_x_hi = real(1);
+  model_.domain_y_hi = real(1);
+  model_.domain_half_z = W / 2 + real(0.01);
+  model_.n_materials = int32_t(cfg_.materials.size());
+  for (size_t k = 0; k < cfg_.materials.size(); ++k) {
+    model_.kind[k] = int32_t(cfg_.materials[k].kind);
+    model_.eps_r[k] = real(cfg_.materials[k].eps_r);
+    model_.tau[k] = real(cfg_.materials[k].relaxation_time);
+  }
+
+  // Drum.
+  std::string drive = cfg_.drum_drive;
+  if (drive == "auto") drive = coreSolvesConstraintRows() ? "rheonomic" : "kinematic";
+  if (drive == "rheonomic" && !coreSolvesConstraintRows())
+    throw InputError("ces.drum.drive: rheonomic needs a core that solves constraint rows (this build does not); use kinematic");
+  {
+    BodyDesc d;
+    d.rot = axisZ();
+    d.omega = Vec3{0, 0, real(cfg_.omegaDrum())};
+    d.friction = real(cfg_.mu_particle_drum) / fp;
+    d.shapes.push_back(machineShape(makeCylinder(R, W / 2)));
+    if (drive == "rheonomic") {
+      const real M = real(cfg_.drum_mass);
+      d.mass = M;
+      d.inertia = Vec3{M * (6 * R * R + W * W) / 12, M * R * R, M * (6 * R * R + W * W) / 12};  // thin shell, axis local y
+      d.has_gravity = true;  // the truss carries its weight: no gravity on the drum
+      d.gravity = Vec3{0, 0, 0};
+    } else {
+      d.mass = 0;
+      d.flags = kBodyKinematic;
+    }
+    drum_ = addBody(d, -1, nullptr, 0);
+    if (drive == "rheonomic") {
+      drive_ = std::make_shared<DrumDrive>(drum_, Vec3{0, 0, 0}, cfg_.omegaDrum());
+      sys_.addRowProvider(drive_);
+    }
+  }
+  {  // Brush.
+    BodyDesc d;
+    d.pos = Vec3{model_.brush.cx, model_.brush.cy, 0};
+    d.rot = axisZ();
+    d.omega = Vec3{0, 0, real(cfg_.omegaBrush())};
+    d.mass = 0;
+    d.flags = kBodyKinematic;
+    d.friction = real(cfg_.mu_particle_brush) / fp;
+    d.shapes.push_back(machineShape(makeCylinder(rb, W / 2)));
+    brush_ = addBody(d, -1, nullptr, 0);
+  }
+  for (int k = 0; k < model_.n_electrodes; ++k) {  // electrodes
+    BodyDesc d;
+    d.pos = Vec3{model_.electrodes[k].cx, model_.electrodes[k].cy, 0};
+    d.rot = axisZ();
+    d.mass = 0;
+    d.flags = kBodyFixed;
+    d.friction = real(cfg_.mu_particle_wall) / fp;
+    d.shapes.push_back(machineShape(makeCylinder(model_.electrodes[k].R, W / 2)));
+    addBody(d, -1, nullptr, 0);
+  }
+  for (int side = -1; side <= 1; side += 2) {  // end walls: solid beyond z = +-W/2
+    BodyDesc d;
+    d.mass = 0;
+    d.flags = kBodyFixed;
+    d.friction = real(cfg_.mu_particle_wall) / fp;
+    d.shapes.push_back(machineShape(makePlane(Vec3{0, 0, real(-side)}, -W / 2)));
+    addBody(d, -1, nullptr, 0);
+  }
+  n_machine_ = int(sys_.bodies().count());
+
+  host_forces_ = sys_.backendName() != "cpu";
+  field_ = std::make_shared<CesForceField>(*this);
+  if (!host_forces_) sys_.addForceField(field_);
+}
+
+int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spec, real charge) {
+  const int id = sys_.addBody(d);
+  p_.status.push_back(material < 0 ? kStatusMachine : kStatusInFlight);
+  p_.material.push_back(material);
+  p_.charge.push_back(charge);
+  p_.radius.push_back(spec ? spec->radius : real(0));
+  p_.bound.push_back(spec ? spec->bound : real(0));
+  p_.mass_fg.push_back(spec ? spec->mass_fg : 0);
+  if (spec) specs_.push_back(*spec);
+  return id;
+}
+
+int CesMachine::addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 vel, Vec3 omega, real charge) {
+  if (spec.material < 0 || size_t(spec.material) >= cfg_.materials.size())
+    throw InputError("CES machine: particle material " + std::to_string(spec.material) + " out of range");
+  BodyDesc d;
+  d.pos = pos;
+  d.rot = rot;
+  d.vel = vel;
+  d.omega = omega;
+  d.mass = real(double(spec.mass_fg) * kFemtogram);
+  d.inertia = spec.inertia;
+  d.friction = particle_friction_;
+  d.shapes.push_back(particleShapeDesc(spec));
+  return addBody(d, spec.material, &spec, charge);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Step
+// ---------------------------------------------------------------------------------------------------
+
+void CesMachine::emit() {
+  std::vector<ParticleSpec> due;
+  const double t = time(), h = cfg_.dt;
+  feeder_.emit(t, h, due);
+  // Forget spawns older than 50 ms: they have left the outlet.
+  const BodyArrays& b = sys_.bodies();
+  const real R = real(cfg_.drumRadius());
+  const real ux = real(std::cos(cfg_.feed_angle)), uy = real(std::sin(cfg_.feed_angle));
+  const real dir = cfg_.drum_rpm >= 0 ? real(1) : real(-1);
+  const Vec3 tangent{dir * uy, -dir * ux, 0};  // the drum surface's direction of motion at the outlet
+  const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / cfg_.dt)));
+  recent_.erase(std::remove_if(recent_.begin(), recent_.end(), [&](const RecentSpawn& r) { return steps_ - r.step > keep; }),
+                recent_.end());
+  for (const ParticleSpec& s : due) {
+    const Quat rot = feeder_.randomRotation();
+    const double z = feeder_.uniform(-cfg_.feed_width / 2, cfg_.feed_width / 2);
+    const double jitter = feeder_.uniform(-0.002, 0.002);
+    Vec3 pos{};
+    for (int attempt = 0;; ++attempt) {
+      // Outlet line at feed.height above the drum, the particle's lowest point on it; moved outward by a
+      // bounding diameter per attempt until it overlaps no recent spawn (deterministic).
+      const real rad = R + real(cfg_.feed_height) + s.bound * real(1 + 2 * attempt);
+      pos = Vec3{rad * ux + real(jitter) * tangent.x, rad * uy + real(jitter) * tangent.y, real(z)};
+      bool free = true;
+      for (const RecentSpawn& r : recent_)
+        if (length(b.pos[size_t(r.body)] - pos) < p_.bound[size_t(r.body)] + s.bound) {
+          free = false;
+          break;
+        }
+      if (free || attempt > 50) break;
+    }
+    const int id = addParticle(s, pos, rot, real(cfg_.feed_speed) * tangent, Vec3{0, 0, 0});
+    recent_.push_back(RecentSpawn{id, steps_});
+  }
+}
+
+void CesMachine::applyForcesOnHost() {
+  BodyArrays& b = sys_.mutableBodies();
+  std::fill(b.force.begin(), b.force.end(), Vec3{0, 0, 0});
+  std::fill(b.torque.begin(), b.torque.end(), Vec3{0, 0, 0});
+  field_->apply(b, sys_.time(), real(cfg_.dt), b.force.data(), b.torque.data());
+}
+
+void CesMachine::step() {
+  if (host_forces_) sys_.syncToHost();
+  emit();
+  if (!drive_) sys_.mutableBodies().omega[size_t(drum_)] = Vec3{0, 0, real(cfg_.omegaDrum())};
+  sys_.mutableBodies().omega[size_t(brush_)] = Vec3{0, 0, real(cfg_.omegaBrush())};
+  if (host_forces_) {
+    applyForcesOnHost();
+    sys_.markHostDirty();
+  }
+  sys_.step();
+  if (host_forces_) sys_.syncToHost();
+  ++steps_;
+  postStep();
+  if (host_forces_) sys_.markHostDirty();
+}
+
+void CesMachine::postStep() {
+  BodyArrays& b = sys_.mutableBodies();
+  const int64_t n = int64_t(p_.count());
+  const real h = real(cfg_.dt);
+  const CesModel& m = model_;
+  std::vector<uint8_t> next(size_t(n), kStatusMachine);
+  const int threads = sys_.effectiveThreads();
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int64_t i = 0; i < n; ++i) {
+    const size_t k = size_t(i);
+    next[k] = p_.status[k];
+    if (p_.status[k] != kStatusInFlight) continue;
+    p_.charge[k] = cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h);
+    next[k] = cesClassify(m, b.pos[k]);
+  }
+  const double t1 = time();
+  for (int64_t i = n_machine_; i < n; ++i) {
+    const size_t k = size_t(i);
+    if (next[k] == p_.status[k]) continue;
+    p_.status[k] = next[k];
+    if (next[k] == kStatusCollected) {
+      // Crossing point of the collection plane on the step's straight path x - h v .. x.
+      const Vec3 x1 = b.pos[k], x0 = x1 - h * b.vel[k];
+      const double f = x0.y > x1.y ? double((x0.y - m.collect_y) / (x0.y - x1.y)) : 1.0;
+      const double fc = std::min(1.0, std::max(0.0, f));
+      CollectedParticle c;
+      c.body = int32_t(i);
+      c.material = p_.material[k];
+      c.kind = cfg_.materials[size_t(c.material)].kind;
+      c.mass_fg = p_.mass_fg[k];
+      c.x = double(x0.x) + fc * double(x1.x - x0.x) - cfg_.collection_x0;
+      c.z = double(x0.z) + fc * double(x1.z - x0.z);
+      c.t = t1 - cfg_.dt + fc * cfg_.dt;
+      collected_.push_back(c);
+      b.pos[k].y = m.collect_y - kBinDrop;  // into the bin, out of everyone's way
+    }
+    b.flags[k] = uint8_t(b.flags[k] | kBodyFixed);  // collected or lost: frozen for good
+    b.vel[k] = b.omega[k] = Vec3{0, 0, 0};
+  }
+}
+
+MassBalance CesMachine::balance() const {
+  MassBalance r;
+  for (const ParticleSpec& s : specs_) r.fed_fg += s.mass_fg;  // the feeder's and any added by hand
+  for (size_t k = size_t(n_machine_); k < p_.count(); ++k) {
+    ++r.fed;
+    const int64_t mg = p_.mass_fg[k];
+    switch (p_.status[k]) {
+      case kStatusCollected: r.collected_fg += mg, ++r.collected; break;
+      case kStatusLost: r.lost_fg += mg, ++r.lost; break;
+      default: r.in_flight_fg += mg, ++r.in_flight; break;
+    }
+  }
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Checkpoints
+// ---------------------------------------------------------------------------------------------------
+
+namespace {
+constexpr char kMagic[8] = {'D', 'V', 'I', 'C', 'E', 'S', '0', '1'};
+}
+
+void CheckpointSystem::saveCore(std::ostream& o) const {
+  put(o, time_);
+  put(o, steps_);
+  putVec(o, prev_keys_);
+  putVec(o, prev_gamma_);
+  putVec(o, rows_);
+  putVec(o, row_lambda_);
+}
+
+void CheckpointSystem::loadCore(std::istream& i) {
+  get(i, time_);
+  get(i, steps_);
+  getVec(i, prev_keys_);
+  getVec(i, prev_gamma_);
+  getVec(i, rows_);
+  getVec(i, row_lambda_);
+}
+
+void CesMachine::save(std::ostream& o) const {
+  o.write(kMagic, 8);
+  put(o, steps_);
+  const Feeder::State fs = feeder_.state();
+  put(o, fs.rng);
+  put(o, fs.owed_kg);
+  put(o, fs.fed_total_fg);
+  putVec(o, fs.fed_fg);
+  // Particle specs (hull points inline).
+  put(o, uint64_t(specs_.size()));
+  for (const ParticleSpec& s : specs_) {
+    put(o, s.material);
+    put(o, s.shape);
+    put(o, s.dims);
+    putVec(o, s.hull);
+    put(o, s.mass_fg);
+    put(o, s.inertia);
+    put(o, s.radius);
+    put(o, s.bound);
+  }
+  putVec(o, p_.status);
+  putVec(o, p_.material);
+  putVec(o, p_.charge);
+  putVec(o, collected_);
+  putVec(o, recent_);
+  const BodyArrays& b = sys_.bodies();
+  putVec(o, b.pos);
+  putVec(o, b.rot);
+  putVec(o, b.vel);
+  putVec(o, b.omega);
+  putVec(o, b.flags);
+  const auto* cs = dynamic_cast<const CheckpointSystem*>(&sys_);
+  put(o, uint8_t(cs ? 1 : 0));
+  if (cs) cs->saveCore(o);
+  if (!o) throw std::runtime_error("checkpoint: write error");
+}
+
+void CesMachine::load(std::istream& in) {
+  char magic[8];
+  in.read(magic, 8);
+  if (!in || std::memcmp(magic, kMagic, 8) != 0) throw InputError("checkpoint: not a dvisim CES checkpoint");
+  if (int(sys_.bodies().count()) != n_machine_ || !specs_.empty()) throw InputError("checkpoint: the machine is not fresh");
+  get(in, steps_);
+  Feeder::State fs;
+  get(in, fs.rng);
+  get(in, fs.owed_kg);
+  get(in, fs.fed_total_fg);
+  getVec(in, fs.fed_fg);
+  if (fs.fed_fg.size() != cfg_.materials.size()) throw InputError("checkpoint: the materials differ from the configuration");
+  feeder_.setState(fs);
+  uint64_t ns = 0;
+  get(in, ns);
+  if (ns > (uint64_t(1) << 32)) throw InputError("checkpoint: corrupt particle count");
+  for (uint64_t k = 0; k < ns; ++k) {
+    ParticleSpec s;
+    get(in, s.material);
+    get(in, s.shape);
+    get(in, s.dims);
+    getVec(in, s.hull);
+    get(in, s.mass_fg);
+    get(in, s.inertia);
+    get(in, s.radius);
+    get(in, s.bound);
+    if (s.material < 0 || size_t(s.material) >= cfg_.materials.size() || int(s.shape) < 0 || int(s.shape) >= kParticleShapes)
+      throw InputError("checkpoint: corrupt particle record");
+    addParticle(s, Vec3{0, 0, 0}, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0});
+  }
+  std::vector<uint8_t> status;
+  std::vector<int32_t> material;
+  std::vector<real> charge;
+  getVec(in, status);
+  getVec(in, material);
+  getVec(in, charge);
+  getVec(in, collected_);
+  getVec(in, recent_);
+  if (status.size() != p_.count() || material.size() != p_.count() || charge.size() != p_.count())
+    throw InputError("checkpoint: body count differs from the particle records");
+  p_.status = status;
+  p_.material = material;
+  p_.charge = charge;
+  BodyArrays& b = sys_.mutableBodies();
+  std::vector<Vec3> pos, vel, omega;
+  std::vector<Quat> rot;
+  std::vector<uint8_t> flags;
+  getVec(in, pos);
+  getVec(in, rot);
+  getVec(in, vel);
+  getVec(in, omega);
+  getVec(in, flags);
+  if (pos.size() != b.count() || rot.size() != b.count() || vel.size() != b.count() || omega.size() != b.count() ||
+      flags.size() != b.count())
+    throw InputError("checkpoint: body arrays have the wrong length");
+  b.pos = pos;
+  b.rot = rot;
+  b.vel = vel;
+  b.omega = omega;
+  b.flags = flags;
+  uint8_t has_core = 0;
+  get(in, has_core);
+  auto* cs = dynamic_cast<CheckpointSystem*>(&sys_);
+  if (has_core && cs) cs->loadCore(in);
+  sys_.markHostDirty();
+}
+
+}  // namespace ces
+}  // namespace dvi

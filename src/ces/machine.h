@@ -1,0 +1,175 @@
+// The corona electrostatic separator as a plug-in of a dvi::System (DESIGN §5, issue 5).
+//
+// Bodies (added in this order, before any particle):
+//   drum      cylinder, axis z, grounded; turned at omega(t) either as a kinematic body (omega set each
+//             step) or, when the core solves constraint rows, as a dynamic body held by a rheonomic
+//             RowProvider (DrumDrive: revolute joint to the fixed truss + angular-velocity drive, which
+//             reports the drive torque). drum.drive = auto picks the rheonomic one when available.
+//   brush     kinematic cylinder beside the drum (gap brush.gap_mm), turning at brush.rpm
+//   electrodes fixed cylinders (the static electrode and, with the CSM field, the extra electrodes)
+//   walls     two fixed planes at the drum's ends (z = +-width/2)
+// Machine parts only collide with particles (collision group 2, mask 1; particles group 1).
+// Particles are appended by the feeder (System::addBody) in feed order.
+//
+// One machine step (CesMachine::step), in the order of DESIGN §2:
+//   1. Feeder: emit the particles due in this step.
+//   2. Drive: the drum's (and brush's) prescribed angular velocity.
+//   3. System::step(); in its IntegrateForces stage the CesForceField adds Coulomb + image + drag to every
+//      particle in flight (CPU backend). A device backend does not run host force fields: there the
+//      machine syncs the bodies to the host, applies the same field into the host force array and marks
+//      the host dirty, every step (a known limitation until a device kernel calls cesParticleForce).
+//   4. Post-step (CesParticles): charge update (corona, drum contact, electrode contact, brush) and status:
+//      a particle whose centre crosses the collection plane is collected: its crossing point is recorded
+//      and the body is frozen (kBodyFixed, zero velocity) 5 cm below the plane, in the "bin"; one that leaves
+//      the domain is lost (frozen where it is). Bodies are never removed: the body count only grows, and
+//      fed = collected + in flight + lost holds exactly (masses in whole femtograms).
+//
+// Per-particle state lives here, in arrays indexed by body (machine parts included, status kStatusMachine).
+#pragma once
+
+#include <cstdint>
+#include <iosfwd>
+#include <memory>
+#include <vector>
+
+#include "ces/ces_config.h"
+#include "ces/feeder.h"
+#include "ces/particle_model.h"
+#include "chrono_like/system.h"
+
+namespace dvi {
+namespace ces {
+
+// Per-body state of the plug-in (structure of arrays, index = body).
+struct CesParticles {
+  std::vector<uint8_t> status;     // ParticleStatus
+  std::vector<int32_t> material;   // index into CesConfig::materials (-1 for machine parts)
+  std::vector<real> charge;        // C
+  std::vector<real> radius;        // volume-equivalent radius, m
+  std::vector<real> bound;         // bounding radius, m
+  std::vector<int64_t> mass_fg;    // femtograms
+  size_t count() const { return status.size(); }
+};
+
+// A particle that crossed the collection plane: where (x' = x - collection.x0, z) and when.
+struct CollectedParticle {
+  int32_t body;
+  int32_t material;
+  MaterialKind kind;
+  int64_t mass_fg;
+  double x, z, t;
+};
+
+struct MassBalance {
+  int64_t fed_fg = 0, collected_fg = 0, in_flight_fg = 0, lost_fg = 0;
+  int64_t fed = 0, collected = 0, in_flight = 0, lost = 0;  // particle counts
+  bool closes() const { return fed_fg == collected_fg + in_flight_fg + lost_fg && fed == collected + in_flight + lost; }
+};
+
+class CesMachine;
+
+// Coulomb + image + drag on every particle in flight (IntegrateForces).
+class CesForceField : public ForceField {
+ public:
+  explicit CesForceField(const CesMachine& m) : m_(m) {}
+  void apply(const BodyArrays& bodies, double t, real dt, Vec3* force, Vec3* torque) override;
+
+ private:
+  const CesMachine& m_;
+};
+
+// Rheonomic drive of the drum: 3 rows fix its centre, 2 keep its axis along z, 1 prescribes omega_z(t)
+// (Psi/h + dPsi/dt, DESIGN §3). The drive row's impulse / h is the drive torque.
+class DrumDrive : public RowProvider {
+ public:
+  DrumDrive(int body, Vec3 centre, double omega) : body_(body), centre_(centre), omega_(omega) {}
+  void rows(const BodyArrays& bodies, double t, real dt, std::vector<ConstraintRow>& out) override;
+  void impulses(const real* lambda, size_t count) override;
+  double torque() const { return torque_; }  // N m about z, last step
+  double omega(double /*t*/) const { return omega_; }
+
+ private:
+  int body_;
+  Vec3 centre_;
+  double omega_;
+  real dt_ = 0;
+  double torque_ = 0;
+};
+
+// True when System::step() solves the rows of a RowProvider (probed on a one-body system).
+bool coreSolvesConstraintRows();
+
+class CesMachine {
+ public:
+  // Builds the machine's bodies and field in `sys` (which must be empty) and registers the plug-ins.
+  CesMachine(const CesConfig& cfg, System& sys);
+
+  void step();
+  double time() const { return double(steps_) * cfg_.dt; }
+  int64_t steps() const { return steps_; }
+  const CesConfig& config() const { return cfg_; }
+  System& system() { return sys_; }
+  const System& system() const { return sys_; }
+  const CesModel& model() const { return model_; }
+  const CesParticles& particles() const { return p_; }
+  const std::vector<ParticleSpec>& specs() const { return specs_; }  // particle k is body firstParticleBody() + k
+  int firstParticleBody() const { return n_machine_; }
+  const std::vector<CollectedParticle>& collected() const { return collected_; }
+  MassBalance balance() const;
+  int64_t feederMassFg() const { return feeder_.fedMassFg(); }  // what the feeder delivered (excludes particles added by hand)
+  int drumBody() const { return drum_; }
+  int brushBody() const { return brush_; }
+  bool rheonomicDrive() const { return drive_ != nullptr; }
+  double driveTorque() const { return drive_ ? drive_->torque() : 0.0; }
+  double drumOmega() const { return cfg_.omegaDrum(); }
+  // Exact field at a point (region 0 in the gas).
+  FieldSample field(Vec3 p) const { return evalField(model_.field, p); }
+
+  // Adds one particle (tests, or a custom feed). Returns its body index.
+  int addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 vel, Vec3 omega, real charge = 0);
+  void setCharge(int body, real q) { p_.charge[size_t(body)] = q; }
+
+  // Checkpoint: the machine state, the feeder, every particle's spec and the body arrays; with a
+  // CheckpointSystem also the core's warm-start cache and clock, so that a resumed CPU run ends bitwise
+  // where an uninterrupted one does. load() expects a freshly built machine of the same configuration.
+  void save(std::ostream& out) const;
+  void load(std::istream& in);
+
+ private:
+  friend class CesForceField;
+  int addBody(const BodyDesc& d, int material, const ParticleSpec* spec, real charge);
+  void emit();
+  void postStep();
+  void applyForcesOnHost();
+
+  CesConfig cfg_;
+  System& sys_;
+  CesModel model_{};
+  CsmField csm_;
+  Feeder feeder_;
+  std::shared_ptr<CesForceField> field_;
+  std::shared_ptr<DrumDrive> drive_;
+  CesParticles p_;
+  std::vector<ParticleSpec> specs_;
+  std::vector<CollectedParticle> collected_;
+  struct RecentSpawn {
+    int32_t body;
+    int64_t step;
+  };
+  std::vector<RecentSpawn> recent_;  // particles emitted in the last 50 ms (spawn overlap test)
+  int drum_ = -1, brush_ = -1, n_machine_ = 0;
+  real particle_friction_ = 1;
+  int64_t steps_ = 0;
+  bool host_forces_ = false;     // device backend: forces applied on the host (see above)
+};
+
+// A CPU System whose clock and warm-start cache can be saved and restored (for checkpoints).
+class CheckpointSystem : public System {
+ public:
+  using System::System;
+  void saveCore(std::ostream& out) const;
+  void loadCore(std::istream& in);
+};
+
+}  // namespace ces
+}  // namespace dvi

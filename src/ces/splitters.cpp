@@ -1,0 +1,179 @@
+// Splitter statistics and the mass distribution (splitters.h).
+#include "ces/splitters.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+namespace dvi {
+namespace ces {
+
+const char* binName(int bin) {
+  switch (bin) {
+    case kBinNonconductor: return "nonconductor";
+    case kBinMiddling: return "middling";
+    case kBinConductor: return "conductor";
+  }
+  return "?";
+}
+
+namespace {
+
+int binOf(double x, double s1, double s2) { return x < s1 ? kBinNonconductor : x < s2 ? kBinMiddling : kBinConductor; }
+
+std::vector<double> gridPositions(double lo, double hi, int n) {
+  std::vector<double> p(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) p[size_t(i)] = lo + (hi - lo) * double(i) / double(n - 1);
+  return p;
+}
+
+double ratio(int64_t a, int64_t b) { return b > 0 ? double(a) / double(b) : 0.0; }
+
+// Grade, recovery and score of a cell from its masses.
+void finishCell(SplitterCell& c) {
+  const auto& f = c.mass.fg;
+  const int M = int(MaterialKind::Metal), P = int(MaterialKind::Plastic);
+  const int64_t metal = f[0][M] + f[1][M] + f[2][M], plastic = f[0][P] + f[1][P] + f[2][P];
+  c.grade_metal = ratio(f[kBinConductor][M], c.mass.total(kBinConductor));
+  c.recovery_metal = ratio(f[kBinConductor][M], metal);
+  c.grade_plastic = ratio(f[kBinNonconductor][P], c.mass.total(kBinNonconductor));
+  c.recovery_plastic = ratio(f[kBinNonconductor][P], plastic);
+  c.score = 0.5 * ((c.recovery_metal - ratio(f[kBinConductor][P], plastic)) +
+                   (c.recovery_plastic - ratio(f[kBinNonconductor][M], metal)));
+}
+
+void pickBest(SplitterTable& t) {
+  t.best = 0;
+  for (size_t k = 1; k < t.cells.size(); ++k)
+    if (t.cells[k].score > t.cells[t.best].score) t.best = k;
+}
+
+}  // namespace
+
+BinMasses binDirect(const std::vector<CollectedParticle>& c, double s1, double s2) {
+  BinMasses m;
+  for (const CollectedParticle& p : c) m.fg[size_t(binOf(p.x, s1, s2))][size_t(p.kind)] += p.mass_fg;
+  return m;
+}
+
+SplitterCell splitterCell(const std::vector<CollectedParticle>& c, double s1, double s2) {
+  SplitterCell cell{};
+  cell.s1 = s1;
+  cell.s2 = s2;
+  cell.mass = binDirect(c, s1, s2);
+  finishCell(cell);
+  return cell;
+}
+
+SplitterTable splittersDirect(const std::vector<CollectedParticle>& c, double lo, double hi, int n) {
+  SplitterTable t;
+  t.positions = gridPositions(lo, hi, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = i; j < n; ++j) {
+      t.cells.push_back(splitterCell(c, t.positions[size_t(i)], t.positions[size_t(j)]));
+    }
+  pickBest(t);
+  return t;
+}
+
+SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, double lo, double hi, int n) {
+  SplitterTable t;
+  t.positions = gridPositions(lo, hi, n);
+  std::vector<const CollectedParticle*> sorted;
+  for (const CollectedParticle& p : c) sorted.push_back(&p);
+  std::stable_sort(sorted.begin(), sorted.end(), [](const CollectedParticle* a, const CollectedParticle* b) { return a->x < b->x; });
+  // prefix[k][kind] = mass of the first k particles in x order.
+  std::vector<std::array<int64_t, kMaterialKinds>> prefix(sorted.size() + 1);
+  for (size_t k = 0; k < sorted.size(); ++k) {
+    prefix[k + 1] = prefix[k];
+    prefix[k + 1][size_t(sorted[k]->kind)] += sorted[k]->mass_fg;
+  }
+  // below[i] = prefix at the first particle with x >= positions[i] (mass with x < s).
+  std::vector<std::array<int64_t, kMaterialKinds>> below(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    const double s = t.positions[size_t(i)];
+    const size_t k = size_t(std::lower_bound(sorted.begin(), sorted.end(), s,
+                                             [](const CollectedParticle* p, double v) { return p->x < v; }) -
+                            sorted.begin());
+    below[size_t(i)] = prefix[k];
+  }
+  const auto& all = prefix.back();
+  for (int i = 0; i < n; ++i)
+    for (int j = i; j < n; ++j) {
+      SplitterCell cell{};
+      cell.s1 = t.positions[size_t(i)];
+      cell.s2 = t.positions[size_t(j)];
+      for (int k = 0; k < kMaterialKinds; ++k) {
+        cell.mass.fg[kBinNonconductor][size_t(k)] = below[size_t(i)][size_t(k)];
+        cell.mass.fg[kBinMiddling][size_t(k)] = below[size_t(j)][size_t(k)] - below[size_t(i)][size_t(k)];
+        cell.mass.fg[kBinConductor][size_t(k)] = all[size_t(k)] - below[size_t(j)][size_t(k)];
+      }
+      finishCell(cell);
+      t.cells.push_back(cell);
+    }
+  pickBest(t);
+  return t;
+}
+
+SplitterTable splitterAnalysis(const std::vector<CollectedParticle>& c, double lo, double hi, int n) {
+  SplitterTable a = splittersDirect(c, lo, hi, n);
+  const SplitterTable b = splittersCumulative(c, lo, hi, n);
+  if (a.cells.size() != b.cells.size()) throw std::logic_error("splitters: the two methods give different table sizes");
+  for (size_t k = 0; k < a.cells.size(); ++k)
+    if (!(a.cells[k].mass == b.cells[k].mass))
+      throw std::logic_error("splitters: direct binning and cumulative sums differ at s1 = " +
+                             std::to_string(a.cells[k].s1 * 1e3) + " mm, s2 = " + std::to_string(a.cells[k].s2 * 1e3) + " mm");
+  if (a.best != b.best) throw std::logic_error("splitters: the two methods pick different best settings");
+  return a;
+}
+
+Distribution massDistribution(const std::vector<CollectedParticle>& c, double bin) {
+  Distribution d;
+  d.bin = bin;
+  if (c.empty()) return d;
+  double lo = c.front().x, hi = c.front().x;
+  for (const CollectedParticle& p : c) lo = std::min(lo, p.x), hi = std::max(hi, p.x);
+  d.lo = std::floor(lo / bin) * bin;
+  const size_t nb = size_t(std::floor((hi - d.lo) / bin)) + 1;
+  d.fg.assign(nb, {0, 0, 0});
+  for (const CollectedParticle& p : c) {
+    const size_t k = std::min(nb - 1, size_t(std::max(0.0, std::floor((p.x - d.lo) / bin))));
+    d.fg[k][size_t(p.kind)] += p.mass_fg;
+  }
+  return d;
+}
+
+std::string distributionCsv(const Distribution& d) {
+  std::string o = "x_lo_mm,x_hi_mm,metal_kg,plastic_kg,middling_kg\n";
+  char buf[160];
+  for (size_t k = 0; k < d.fg.size(); ++k) {
+    std::snprintf(buf, sizeof buf, "%.6g,%.6g,%.9g,%.9g,%.9g\n", (d.lo + double(k) * d.bin) * 1e3,
+                  (d.lo + double(k + 1) * d.bin) * 1e3, double(d.fg[k][0]) * kFemtogram, double(d.fg[k][1]) * kFemtogram,
+                  double(d.fg[k][2]) * kFemtogram);
+    o += buf;
+  }
+  return o;
+}
+
+std::string splittersCsv(const SplitterTable& t) {
+  std::string o =
+      "s1_mm,s2_mm,nonconductor_metal_kg,nonconductor_plastic_kg,nonconductor_middling_kg,middling_metal_kg,"
+      "middling_plastic_kg,middling_middling_kg,conductor_metal_kg,conductor_plastic_kg,conductor_middling_kg,"
+      "grade_metal,recovery_metal,grade_plastic,recovery_plastic,score\n";
+  char buf[512];
+  for (const SplitterCell& c : t.cells) {
+    const auto& f = c.mass.fg;
+    std::snprintf(buf, sizeof buf, "%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6f,%.6f,%.6f,%.6f,%.6f\n",
+                  c.s1 * 1e3, c.s2 * 1e3, double(f[0][0]) * kFemtogram, double(f[0][1]) * kFemtogram,
+                  double(f[0][2]) * kFemtogram, double(f[1][0]) * kFemtogram, double(f[1][1]) * kFemtogram,
+                  double(f[1][2]) * kFemtogram, double(f[2][0]) * kFemtogram, double(f[2][1]) * kFemtogram,
+                  double(f[2][2]) * kFemtogram, c.grade_metal, c.recovery_metal, c.grade_plastic, c.recovery_plastic,
+                  c.score);
+    o += buf;
+  }
+  return o;
+}
+
+}  // namespace ces
+}  // namespace dvi
