@@ -10,6 +10,7 @@
 
 #include "cone.h"
 #include "errors.h"
+#include "rows_impl.h"
 
 namespace dvi {
 
@@ -95,36 +96,12 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
       R.lo = R.hi = 0;
     }
   }
-  auto sideInv = [&](int32_t c) -> const BodyInverseMass& { return c >= 0 ? inv_[size_t(c)] : kNoBody; };
   for (int64_t q = 0; q < nrb_; ++q) {
     const int64_t k = nc + q;
-    const ConstraintRow* R = rows_.data() + 3 * q;
-    real* rk = rhs_.data() + 3 * k;
-    real N[6];
-    const int ii[6] = {0, 1, 2, 0, 0, 1}, jj[6] = {0, 1, 2, 1, 2, 2};
-    for (int e = 0; e < 6; ++e) {  // N_ij = sum over the bodies both rows act on of Ji^T M^-1 Jj
-      const ConstraintRow &A = R[ii[e]], &B = R[jj[e]];
-      real v = 0;
-      for (int sa = 0; sa < 2; ++sa)
-        for (int sb = 0; sb < 2; ++sb) {
-          const int32_t ca = sa ? A.b : A.a, cb = sb ? B.b : B.a;
-          if (ca >= 0 && ca == cb) v += rowInner(sa ? A.Jb : A.Ja, sb ? B.Jb : B.Ja, inv_[size_t(ca)]);
-        }
-      N[e] = v;
-    }
-    for (int j = 0; j < 3; ++j) {
-      const ConstraintRow& Rj = R[j];
-      real v = Rj.bias;
-      if (Rj.a >= 0) v += rowDot(Rj.Ja, v_free[Rj.a], w_free[Rj.a]);
-      if (Rj.b >= 0) v += rowDot(Rj.Jb, v_free[Rj.b], w_free[Rj.b]);
-      rk[j] = (Rj.lo == 0 && Rj.hi == 0) ? real(0) : v;  // padding rows
-      colnorm_[6 * k + j] = std::sqrt(std::max(real(0), rowInner(Rj.Ja, Rj.Ja, sideInv(Rj.a))));
-      colnorm_[6 * k + 3 + j] = std::sqrt(std::max(real(0), rowInner(Rj.Jb, Rj.Jb, sideInv(Rj.b))));
-    }
-    invertSymmetric3(N, binv_.data() + 6 * k);
-    eta_[k] = blockStepFromDiagonal(N);
-    blockRowSums(N, rowsum_.data() + 3 * k);
-    max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));
+    const real d = assembleRowBlock(rows_.data() + 3 * q, inv_.data(), v_free, w_free, rhs_.data() + 3 * k,
+                                    binv_.data() + 6 * k, eta_.data() + k, colnorm_.data() + 6 * k,
+                                    rowsum_.data() + 3 * k);
+    max_diag = std::max(max_diag, d);
   }
   max_diag_ = max_diag > 0 ? max_diag : real(1);
 
@@ -176,35 +153,16 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
 #pragma omp parallel for schedule(static) num_threads(T)
   for (int64_t j = 0; j < na; ++j) {
     real q = 0;
-    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) {
-      const int32_t ent = adj_[e];
-      if (ent < 2 * nc) {
-        const real* cn = colnorm_.data() + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
-        q += cn[0] + cn[1] + cn[2];
-      } else {
-        const int64_t i = (ent - 2 * nc) >> 1;
-        q += colnorm_[size_t(6 * (nc + i / 3) + 3 * (ent & 1) + i % 3)];
-      }
-    }
+    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) q += entryColumnSum(adj_[e], nc, colnorm_.data());
     bodyq_[size_t(active_[j])] = q;
   }
 #pragma omp parallel for schedule(static) num_threads(T)
   for (int64_t k = 0; k < nc; ++k)
     jeta_[k] = contactJacobiStep(colnorm_.data() + 6 * k, rowsum_.data() + 3 * k, bodyq_[size_t(jac_[k].a)],
                                  bodyq_[size_t(jac_[k].b)]);
-  for (int64_t q = 0; q < nrb_; ++q) {
-    const int64_t k = nc + q;
-    const real* cn = colnorm_.data() + 6 * k;
-    const real* rs = rowsum_.data() + 3 * k;
-    real g = 0;
-    for (int i = 0; i < 3; ++i) {
-      const ConstraintRow& R = rows_[size_t(3 * q + i)];
-      const real qa = R.a >= 0 ? bodyq_[size_t(R.a)] : real(0);
-      const real qb = R.b >= 0 ? bodyq_[size_t(R.b)] : real(0);
-      g = std::max(g, rs[i] + cn[i] * qa + cn[3 + i] * qb);
-    }
-    jeta_[k] = g > 0 ? real(1) / g : real(0);
-  }
+  for (int64_t q = 0; q < nrb_; ++q)
+    jeta_[nc + q] = rowBlockJacobiStep(rows_.data() + 3 * q, colnorm_.data() + 6 * (nc + q), rowsum_.data() + 3 * (nc + q),
+                                       bodyq_.data());
   // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
   if (nblk < kSerialContacts) threads_ = 1;
 }
@@ -220,30 +178,11 @@ void ContactProblem::gatherBodyDeltas(const real* x) const {
   for (int64_t j = 0; j < na; ++j) {
     const int32_t i = active_[j];
     Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) {
-      const int32_t ent = adj_[e];
-      if (ent < 2 * nc) {
-        const int32_t k = ent >> 1;
-        accumulateContactImpulse(jac_[k], ent & 1, x + 3 * int64_t(k), F, Tq);
-      } else {
-        const int64_t r = (ent - 2 * nc) >> 1;
-        const ConstraintRow& R = rows_[size_t(r)];
-        accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * nc + r], F, Tq);
-      }
-    }
+    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e)
+      accumulateEntryImpulse(adj_[e], nc, jac_.data(), rows_.data(), x, F, Tq);
     delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
   }
 }
-
-namespace {
-// y_i = J_i . (dv, dw) of a constraint row from the body velocity changes.
-real rowFromDeltas(const ConstraintRow& R, const BodyDelta* dl) {
-  real v = 0;
-  if (R.a >= 0) v += rowDot(R.Ja, dl[R.a].v, dl[R.a].w);
-  if (R.b >= 0) v += rowDot(R.Jb, dl[R.b].v, dl[R.b].w);
-  return v;
-}
-}  // namespace
 
 void ContactProblem::schur(const real* x, real* y) const {
   gatherBodyDeltas(x);  // pass (a): per body, a gather

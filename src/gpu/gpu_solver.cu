@@ -14,6 +14,7 @@
 #include "chrono_like/cone.h"
 #include "chrono_like/jacobian.h"
 #include "chrono_like/solver.h"
+#include "chrono_like/rows_impl.h"
 #include "chrono_like/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
@@ -172,17 +173,15 @@ struct GatherF {
   const int32_t* off;
   const int32_t* adj;
   const ContactJacobian* jac;
+  const ConstraintRow* rows;
+  int64_t nc;
   const BodyInverseMass* inv;
   const real* x;
   BodyDelta* delta;
   __device__ void operator()(int64_t i) const {
     Vec3 F{0, 0, 0}, T{0, 0, 0};
     const int32_t e1 = off[i + 1];
-    for (int32_t e = off[i]; e < e1; ++e) {
-      const int32_t ent = adj[e];
-      const int32_t k = ent >> 1;
-      accumulateContactImpulse(jac[k], ent & 1, x + 3 * int64_t(k), F, T);
-    }
+    for (int32_t e = off[i]; e < e1; ++e) accumulateEntryImpulse(adj[e], nc, jac, rows, x, F, T);
     delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
   }
 };
@@ -198,8 +197,55 @@ struct ContactF {
   }
 };
 
+struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
+  const ConstraintRow* rows;
+  const BodyDelta* delta;
+  real* y;  // y + 3 nc
+  __device__ void operator()(int64_t i) const { y[i] = rowFromDeltas(rows[i], delta); }
+};
+
+// Row block q: rhs, block inverse and step, column norms, row sums, max diagonal; adjacency entries.
+struct RowBlockF {
+  const ConstraintRow* rows;
+  const BodyInverseMass* inv;
+  const Vec3 *v_free, *w_free;
+  int64_t nc;
+  int32_t nbodies;
+  real *rhs, *binv, *eta, *colnorm, *rowsum, *diag_max;
+  uint32_t* adj_key;
+  int32_t* adj_val;
+  __device__ void operator()(int64_t q) const {
+    const int64_t k = nc + q;
+    diag_max[k] = assembleRowBlock(rows + 3 * q, inv, v_free, w_free, rhs + 3 * k, binv + 6 * k, eta + k,
+                                   colnorm + 6 * k, rowsum + 3 * k);
+    for (int j = 0; j < 3; ++j) {
+      const int64_t i = 3 * q + j;
+      const ConstraintRow& R = rows[i];
+      const int64_t e = 2 * nc + 2 * i;
+      adj_key[e] = (R.a >= 0 && movable(inv[R.a])) ? uint32_t(R.a) : uint32_t(nbodies);
+      adj_key[e + 1] = (R.b >= 0 && movable(inv[R.b])) ? uint32_t(R.b) : uint32_t(nbodies);
+      adj_val[e] = int32_t(e);
+      adj_val[e + 1] = int32_t(e + 1);
+    }
+  }
+};
+
+struct RowJacobiStepF {
+  const ConstraintRow* rows;
+  const real *colnorm, *rowsum, *bodyq;
+  int64_t nc;
+  real* jeta;
+  __device__ void operator()(int64_t q) const {
+    const int64_t k = nc + q;
+    jeta[k] = rowBlockJacobiStep(rows + 3 * q, colnorm + 6 * k, rowsum + 3 * k, bodyq);
+  }
+};
+
 struct ProblemView {
-  int64_t nc = 0;
+  int64_t nc = 0;   // contact blocks
+  int64_t nb = 0;   // all blocks (contacts, then constraint-row blocks)
+  const real* lo = nullptr;
+  const real* hi = nullptr;
   const real* r = nullptr;
   const real* mu = nullptr;
   const real* eta = nullptr;
@@ -211,9 +257,11 @@ struct ProblemView {
 void schur(DeviceState& d, const real* x, real* y) {
   SolverScratch& S = d.solver;
   const int64_t nb = int64_t(d.bodies.count), nc = int64_t(d.contacts.count);
-  launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), d.bodies.inv.data(), x,
-                           d.bodies.delta.data()}, "launch of GatherF (Schur pass a)");
+  launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), nc,
+                           d.bodies.inv.data(), x, d.bodies.delta.data()}, "launch of GatherF (Schur pass a)");
   launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), y}, "launch of ContactF (Schur pass b)");
+  launchMap(d, int64_t(S.rows.size()), RowSchurF{S.rows.data(), d.bodies.delta.data(), y + 3 * nc},
+            "launch of RowSchurF (Schur pass b, rows)");
 }
 
 // Name of a functor type, for the error message of a failed launch.
@@ -231,12 +279,12 @@ class GpuOps {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
     for (int i = 0; i < 7; ++i) {
-      bufs[i]->resize(size_t(3 * p.nc));
+      bufs[i]->resize(size_t(3 * p.nb));
       vec_[i] = bufs[i]->data();
     }
   }
-  int64_t blocks() const { return p_.nc; }
-  BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, nullptr, nullptr}; }
+  int64_t blocks() const { return p_.nb; }
+  BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, p_.lo, p_.hi}; }
   const real* rhs() const { return p_.r; }
   const real* blockSteps() const { return p_.eta; }
   const real* jacobiSteps() const { return p_.jeta; }
@@ -249,16 +297,16 @@ class GpuOps {
   void schur(const real* x, real* y) { gpu::schur(d_, x, y); }
   template <class F>
   void map(const F& f) {
-    launchMap(d_, p_.nc, f, functorName<F>());
+    launchMap(d_, p_.nb, f, functorName<F>());
   }
   template <int M, class F>
   void reduce(const F& f, double* out) {
-    const double* h = launchReduce<M>(d_, p_.nc, f, functorName<F>());
+    const double* h = launchReduce<M>(d_, p_.nb, f, functorName<F>());
     for (int m = 0; m < M; ++m) out[m] = h[m];
   }
   void copy(const real* src, real* dst) {
     if (src == dst) return;
-    DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nc), cudaMemcpyDeviceToDevice, d_.stream));
+    DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nb), cudaMemcpyDeviceToDevice, d_.stream));
   }
 
  private:
@@ -270,6 +318,9 @@ class GpuOps {
 ProblemView view(DeviceState& d, real max_diag) {
   ProblemView p;
   p.nc = int64_t(d.contacts.count);
+  p.nb = p.nc + int64_t(d.solver.rows.size() / 3);
+  p.lo = d.solver.row_lo.data();
+  p.hi = d.solver.row_hi.data();
   p.r = d.solver.rhs.data();
   p.mu = d.contacts.mu.data();
   p.eta = d.solver.block_step.data();
@@ -284,14 +335,11 @@ struct BodyColumnSumF {
   const int32_t* off;
   const int32_t* adj;
   const real* colnorm;
+  int64_t nc;
   real* bodyq;
   __device__ void operator()(int64_t i) const {
     real q = 0;
-    for (int32_t e = off[i]; e < off[i + 1]; ++e) {
-      const int32_t ent = adj[e];
-      const real* cn = colnorm + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
-      q += cn[0] + cn[1] + cn[2];
-    }
+    for (int32_t e = off[i]; e < off[i + 1]; ++e) q += entryColumnSum(adj[e], nc, colnorm);
     bodyq[i] = q;
   }
 };
@@ -355,7 +403,8 @@ struct VelocityF {
 
 }  // namespace
 
-void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
+void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows,
+               real* max_penetration) {
   const int64_t nc = int64_t(d.contacts.count);
   const int64_t nb = int64_t(d.bodies.count);
   SolverScratch& S = d.solver;
@@ -363,20 +412,46 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
   DeviceContacts& C = d.contacts;
   launchMap(d, nb, BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data()},
             "launch of BodyInverseF");
+  // Constraint rows from the host (RowProvider plug-ins), padded to blocks of three (rows_impl.h).
+  const int64_t nrb = (int64_t(rows.size()) + 2) / 3;
+  const int64_t nblk = nc + nrb;
+  d.row_count = rows.size();
+  {
+    std::vector<ConstraintRow>& padded = d.host_rows;
+    padded.assign(rows.begin(), rows.end());
+    std::vector<real>& lohi = d.host_lohi;
+    lohi.assign(size_t(6 * nrb), real(0));
+    for (int64_t i = 0; i < 3 * nrb; ++i) {
+      if (i >= int64_t(rows.size())) {
+        ConstraintRow pad;
+        pad.lo = pad.hi = 0;
+        padded.push_back(pad);
+      }
+      lohi[size_t(i)] = padded[size_t(i)].lo;
+      lohi[size_t(3 * nrb + i)] = padded[size_t(i)].hi;
+      for (int32_t c : {padded[size_t(i)].a, padded[size_t(i)].b})
+        if (c < -1 || c >= nb)
+          throw InputError("constraint row " + std::to_string(i) + ": body index " + std::to_string(c) + " out of range");
+    }
+    S.rows.upload(padded, d.stream);
+    S.row_lo.upload(lohi.data(), size_t(3 * nrb), d.stream);
+    S.row_hi.upload(lohi.data() + 3 * nrb, size_t(3 * nrb), d.stream);
+  }
   S.jac.resize(nc);
-  S.rhs.resize(3 * nc);
-  S.block_inv.resize(6 * nc);
-  S.block_step.resize(nc);
-  S.jacobi_step.resize(nc);
-  S.colnorm.resize(6 * nc);
-  S.rowsum.resize(3 * nc);
+  S.rhs.resize(3 * nblk);
+  S.block_inv.resize(6 * nblk);
+  S.block_step.resize(nblk);
+  S.jacobi_step.resize(nblk);
+  S.colnorm.resize(6 * nblk);
+  S.rowsum.resize(3 * nblk);
   S.bodyq.resize(nb);
-  S.adj_key.resize(2 * nc);
-  S.adj_val.resize(2 * nc);
-  S.adj_key_sorted.resize(2 * nc);
-  S.adj_val_sorted.resize(2 * nc);
+  const int64_t nent = 2 * nc + 6 * nrb;  // adjacency entries: 2 per contact, 2 per row
+  S.adj_key.resize(nent);
+  S.adj_val.resize(nent);
+  S.adj_key_sorted.resize(nent);
+  S.adj_val_sorted.resize(nent);
   S.adj_off.resize(nb + 1);
-  S.v5.resize(nc);  // per-contact max diagonal entry
+  S.v5.resize(nblk);  // per-block max diagonal entry
   S.v6.resize(nc);  // per-contact penetration
   S.v4.resize(nc);  // key order flags
   RowsF f{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.normal.data(), C.pa.data(),
@@ -385,24 +460,31 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
           C.mu.data(), C.size.data(), S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.v6.data(),
           S.colnorm.data(), S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data()};
   launchMap(d, nc, f, "launch of RowsF");
+  launchMap(d, nrb,
+            RowBlockF{S.rows.data(), B.inv.data(), B.v_free.data(), B.w_free.data(), nc, int32_t(nb), S.rhs.data(),
+                      S.block_inv.data(), S.block_step.data(), S.colnorm.data(), S.rowsum.data(), S.v5.data(),
+                      S.adj_key.data(), S.adj_val.data()},
+            "launch of RowBlockF");
   launchMap(d, nc, KeyOrderF{C.key.data(), S.v4.data(), nc}, "launch of KeyOrderF");
   // body -> contact CSR: a stable radix sort by body keeps each body's entries in increasing k
   const int bits = bitsFor(uint64_t(nb));
   cubRun(d, "cub::DeviceRadixSort::SortPairs (adjacency)", [&](void* t, size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, S.adj_key.data(), S.adj_key_sorted.data(), S.adj_val.data(),
-                                           S.adj_val_sorted.data(), int(2 * nc), 0, bits, d.stream);
+                                           S.adj_val_sorted.data(), int(nent), 0, bits, d.stream);
   });
-  launchMap(d, nb + 1, AdjOffsetF{S.adj_key_sorted.data(), 2 * nc, S.adj_off.data()}, "launch of AdjOffsetF");
-  // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-contact bound
-  launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), S.bodyq.data()},
+  launchMap(d, nb + 1, AdjOffsetF{S.adj_key_sorted.data(), nent, S.adj_off.data()}, "launch of AdjOffsetF");
+  // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-block bounds
+  launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), nc, S.bodyq.data()},
             "launch of BodyColumnSumF");
   launchMap(d, nc, JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
             "launch of JacobiStepF");
+  launchMap(d, nrb, RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc, S.jacobi_step.data()},
+            "launch of RowJacobiStepF");
   // max diag(N), max penetration, key order: three maxima, one read-back
   d.step_scalars.resize(16);
   real* out = reinterpret_cast<real*>(d.step_scalars.data());
   cubRun(d, "cub::DeviceReduce::Max (diagonal)", [&](void* t, size_t& b) {
-    return cub::DeviceReduce::Max(t, b, S.v5.data(), out, int(nc), d.stream);
+    return cub::DeviceReduce::Max(t, b, S.v5.data(), out, int(nblk), d.stream);
   });
   cubRun(d, "cub::DeviceReduce::Max (penetration)", [&](void* t, size_t& b) {
     return cub::DeviceReduce::Max(t, b, S.v6.data(), out + 1, int(nc), d.stream);
@@ -418,12 +500,17 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration) {
   d.keys_unsorted = host[2] > real(0);
 }
 
-void warmStart(DeviceState& d, bool enabled) {
+void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda) {
   const int64_t nc = int64_t(d.contacts.count);
   SolverScratch& S = d.solver;
-  S.gamma.resize(3 * nc);
-  if (!enabled) {
-    S.gamma.fillZero(d.stream);
+  const int64_t nrows = int64_t(d.row_count);
+  S.gamma.resize(3 * nc + S.rows.size());
+  S.gamma.fillZero(d.stream);
+  if (nrows > 0 && int64_t(row_lambda.size()) == nrows)  // rows: by index, while their count is unchanged
+    DVI_CUDA(cudaMemcpyAsync(S.gamma.data() + 3 * nc, row_lambda.data(), sizeof(real) * size_t(nrows),
+                             cudaMemcpyHostToDevice, d.stream));
+  if (!enabled || nc == 0 || d.prev_count == 0) {
+    DVI_CUDA(cudaStreamSynchronize(d.stream));  // row_lambda may change after we return
     return;
   }
   launchMap(d, nc, WarmF{d.contacts.key.data(), S.prev_key.data(), S.prev_gamma.data(), int64_t(d.prev_count), S.gamma.data()},
@@ -476,7 +563,8 @@ void applyImpulsesToBodies(DeviceState& d, const real* gamma) {
   const int64_t nb = int64_t(B.count);
   if (gamma) {
     SolverScratch& S = d.solver;
-    launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), B.inv.data(), gamma, B.delta.data()},
+    launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(),
+                             int64_t(d.contacts.count), B.inv.data(), gamma, B.delta.data()},
               "launch of GatherF (impulses)");
   }
   launchMap(d, nb, VelocityF{B.v_free.data(), B.w_free.data(), gamma ? B.delta.data() : nullptr, B.vel.data(), B.omega.data()},

@@ -4,6 +4,7 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <vector>
 
 #include "chrono_like/broadphase.h"
 #include "chrono_like/data.h"
@@ -85,6 +86,8 @@ struct NarrowScratch {
 struct SolverScratch {
   DeviceBuffer<ContactJacobian> jac{"contact jacobians"};
   DeviceBuffer<real> rhs{"ccp rhs"}, block_inv{"ccp block inverses"}, block_step{"ccp block steps"};
+  DeviceBuffer<ConstraintRow> rows{"constraint rows"};
+  DeviceBuffer<real> row_lo{"constraint row lower bounds"}, row_hi{"constraint row upper bounds"};
   DeviceBuffer<real> jacobi_step{"ccp jacobi steps"}, colnorm{"ccp column norms"}, rowsum{"ccp block row sums"},
       bodyq{"ccp body column sums"};
   DeviceBuffer<real> gamma{"ccp gamma"}, prev_gamma{"ccp previous gamma"};
@@ -117,6 +120,9 @@ struct DeviceState {
   size_t prev_count = 0;  // contacts of the previous step (warm start source)
   real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)
   bool keys_unsorted = false;
+  size_t row_count = 0;                  // constraint rows this step (before padding)
+  std::vector<ConstraintRow> host_rows;  // host staging of the padded rows
+  std::vector<real> host_lohi;           //   and of their bounds
 
   // Reads `n` doubles from device memory into host_scalars (one synchronisation).
   const double* readScalars(const double* dev, int n);
@@ -140,8 +146,11 @@ struct DeviceCcpResult {
   real residual = 0;
 };
 // Builds rows (Jacobians, rhs, block inverses, the adjacency) for the current contacts.
-void buildRows(DeviceState& d, const SystemConfig& cfg, real* max_penetration);
-void warmStart(DeviceState& d, bool enabled);
+// rows: the constraint rows of this step from the host's RowProviders (may be empty).
+void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows, real* max_penetration);
+// Contacts from last step's impulses by key (when enabled), rows from row_lambda by index when it has
+// one value per row.
+void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda);
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg);
 void keepImpulsesForWarmStart(DeviceState& d);
 // v = v_free + M^-1 D gamma for every body (and positions), the IntegrateVelocities/Positions stages.

@@ -212,24 +212,37 @@ void GpuSystem::detectCollisions() {
 }
 
 void GpuSystem::buildAndSolve() {
-  if (!row_providers_.empty())
-    throw InputError("GPU backend: constraint rows (joints, drives) are not supported on the GPU yet; use --backend cpu");
   cudaEvent_t* ev = d_->ev;
   const size_t nc = d_->contacts.count;
-  d_->solver.gamma.resize(3 * nc);
-  if (nc == 0) {
+  if (!row_providers_.empty()) {
+    // Row providers are host plug-ins (extensions.h) that read the body state: it comes to the host
+    // here, only in scenes with constraint rows (docs/ARCHITECTURE.md).
+    const DeviceBodies& b = d_->bodies;
+    b.pos.download(bodies_.pos, b.count, d_->stream);
+    b.rot.download(bodies_.rot, b.count, d_->stream);
+    b.vel.download(bodies_.vel, b.count, d_->stream);
+    b.omega.download(bodies_.omega, b.count, d_->stream);
+    collectRows();
+  } else {
+    rows_.clear();
+    row_lambda_.clear();
+  }
+  if (nc == 0 && rows_.empty()) {
     d_->prev_count = 0;
+    d_->row_count = 0;
+    d_->solver.rows.resize(0);
+    d_->solver.gamma.resize(0);
     for (int s : {int(StageType::BuildRows), int(StageType::WarmStart), int(StageType::Solve)})
       DVI_CUDA(cudaEventRecord(ev[s + 1], d_->stream));
     return;
   }
   real max_pen = 0;
-  buildRows(*d_, config_, &max_pen);
+  buildRows(*d_, config_, rows_, &max_pen);
   stats_.max_penetration = max_pen;
   stats_.stage_ran[int(StageType::BuildRows)] = true;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
   const bool warm = config_.warm_start && d_->prev_count > 0;
-  warmStart(*d_, warm);
+  warmStart(*d_, config_.warm_start, config_.warm_start ? row_lambda_ : std::vector<real>{});
   stats_.stage_ran[int(StageType::WarmStart)] = warm;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
   DeviceCcpResult r = solveCcp(*d_, config_);
@@ -237,6 +250,14 @@ void GpuSystem::buildAndSolve() {
   stats_.residual = r.residual;
   stats_.stage_ran[int(StageType::Solve)] = true;
   keepImpulsesForWarmStart(*d_);
+  if (!rows_.empty()) {  // the rows' impulses go back to their providers (a few values)
+    row_lambda_.resize(rows_.size());
+    DVI_CUDA(cudaMemcpyAsync(row_lambda_.data(), d_->solver.gamma.data() + 3 * nc, sizeof(real) * rows_.size(),
+                             cudaMemcpyDeviceToHost, d_->stream));
+    DVI_CUDA(cudaStreamSynchronize(d_->stream));
+    for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
+      row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
+  }
   DVI_CUDA(cudaEventRecord(ev[int(StageType::Solve) + 1], d_->stream));
 }
 
@@ -245,7 +266,8 @@ void GpuSystem::integrate() {
   DeviceBodies& b = d_->bodies;
   const int n = int(b.count);
   // IntegrateVelocities: v = v_free + M^-1 D gamma (the gather of the Schur product).
-  if (n > 0) applyImpulsesToBodies(*d_, d_->contacts.count ? d_->solver.gamma.data() : nullptr);
+  const bool impulses = d_->contacts.count > 0 || d_->row_count > 0;
+  if (n > 0) applyImpulsesToBodies(*d_, impulses ? d_->solver.gamma.data() : nullptr);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegrateVelocities) + 1], d_->stream));
   if (n > 0) {
     integratePositionsKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(n, b.pos.data(), b.rot.data(), b.vel.data(),
@@ -279,7 +301,7 @@ void GpuSystem::syncToHost() {
   c.mu.download(contacts_.mu, nc, s);
   c.size.download(contacts_.size, nc, s);
   c.key.download(contacts_.key, nc, s);
-  d_->solver.gamma.download(gamma_, 3 * nc, s);
+  d_->solver.gamma.download(gamma_, d_->solver.gamma.size(), s);
 }
 
 }  // namespace dvi
