@@ -311,13 +311,26 @@ void jointRows(const JointSpec& j, const JointBody& A, const JointBody& B, real 
     r.hi = kInf;
     out.push_back(r);
   };
+  // Second-order drift of a linear row over one step: the velocity-level row makes C' = C + h J v+ vanish
+  // to first order, but the exponential-map rotation of the lever arms (and of e, fixed in A) adds
+  //   h^2/2 C'' = h^2/2 [ e.(wB x (wB x rB) - wA x (wA x rAB)) + 2 (wA x e).v_rel + (wA x (wA x e)).d ]
+  // from the velocities at the start of the step. Feeding it forward in the bias leaves an O(h^3) error
+  // instead of O(h^2 w^2 L) per step (a swinging pendulum otherwise drifts by ~(w h)^2 L / 2;
+  // Hairer, Lubich & Wanner, Geometric Numerical Integration, ch. VII, on drift of index-reduced DAEs).
+  const Vec3 v_rel = (B.v + cross(B.w, f.rB)) - (A.v + cross(A.w, rAB));
+  const Vec3 acc_rel = cross(B.w, cross(B.w, f.rB)) - cross(A.w, cross(A.w, rAB));
+  auto drift = [&](Vec3 e) {
+    if (!s.drift_feedforward) return real(0);
+    const Vec3 de = cross(A.w, e);
+    return real(0.5) * dt * dt * (dot(e, acc_rel) + 2 * dot(de, v_rel) + dot(cross(A.w, de), f.d));
+  };
   for (int i = 0; i < 3; ++i) {
     if (j.lin[i] == JointSpec::Axis::Free) continue;
     const Vec3 e = f.ea[i];
     const ConstraintRow r = linearRow(A, B, e, rAB, f.rB);
     const real si = dot(e, f.d);
     if (j.lin[i] == JointSpec::Axis::Locked) {
-      bilateral(r, si - j.lin_lo[i], vmax);
+      bilateral(r, si - j.lin_lo[i] + drift(e), vmax);
     } else {
       unilateral(r, si - j.lin_lo[i], vmax);
       unilateral(negated(r), j.lin_hi[i] - si, vmax);
