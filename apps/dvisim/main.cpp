@@ -5,6 +5,7 @@
 //              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR] [--resume DIR]
 //   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (src/ces/ces_run.h).
 //   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
+//   dvisim bench scaling --out DIR [--record] [--quick] [--sizes ...]     (bench_scaling.cpp; bench_common.h)
 //
 // Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
 #include <unistd.h>
@@ -27,6 +28,7 @@
 #include <omp.h>
 #endif
 
+#include "bench_common.h"
 #include "ces/ces_run.h"
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
@@ -348,6 +350,8 @@ int fail(int code, const std::string& msg) {
 
 // `dvisim compare` (compare.cpp): registers the subcommand; the returned function runs it.
 std::function<int()> addCompareCommand(CLI::App& app);
+// `dvisim bench scaling` (bench_scaling.cpp); runs through runBenchCommand() (bench_common.h).
+void registerBenchScaling(CLI::App& app);
 
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
@@ -370,6 +374,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
   run_cmd->add_option("--resume", o.resume, "CES machine: continue the run checkpointed in DIR (DIR/checkpoint/)");
   const std::function<int()> compare = addCompareCommand(app);
+  registerBenchScaling(app);
 
   try {
     app.parse(argc, argv);
@@ -379,6 +384,7 @@ int main(int argc, char** argv) {
   }
   try {
     if (app.got_subcommand("compare")) return compare();
+    if (app.got_subcommand("bench")) return runBenchCommand();
     return run(o);
   } catch (const InputError& e) {
     return fail(2, e.what());

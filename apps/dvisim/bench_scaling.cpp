@@ -1,0 +1,696 @@
+// dvisim bench scaling --out DIR [--record] [--quick] [--sizes 10k,100k,1M,4M] [--scenes pile,mix]
+//                      [--engines gpu,cpu,bullet] [--cpu-max 100k] [--threads N] [--budget S] [--results-dir DIR]
+//
+// The scaling benchmark of issue 3 (a benchmark, not a test): a pile of N spheres (r = 1 cm, mu = 0.5) and a
+// multidisperse mix (bench/scaling/scaling_scenes.h), h = 1e-3 s, APGD 50 iterations, stepped side by side
+// in one run by our GPU backend (every N), our CPU backend (all cores) and Bullet 2 (btDiscreteDynamicsWorld,
+// sequential impulse, 1 thread, centimetre units) for N <= --cpu-max. Per configuration: warm-up steps, then
+// timed steps; ms per step split by stage (broad = ComputeAabbs + BroadPhase, narrow, solve = BuildRows +
+// WarmStart + Solve, integrate = IntegrateForces + IntegrateVelocities + IntegratePositions), contacts,
+// deepest penetration relative to the scene's reference length, device memory, and the solver iteration's
+// achieved bandwidth (bytes model: scaling_scenes.h solverIterationBytes) against the copy bandwidth
+// measured in the same run (device copy for the GPU, a parallel host memcpy for the CPU backend).
+//
+// Outputs in DIR: scaling.csv (one row per engine x scene x N, `status` ok or why not), scaling.png
+// (scripts/plot_scaling.py, when python3 + matplotlib are present; a copy of the script is left in DIR) and
+// the table on stdout with the ratios of the issue's goals. --record also writes
+// bench/results/scaling_<device>_<date>.md and .csv (copies in DIR too). Without a GPU the GPU rows say
+// they were skipped and why.
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <LinearMath/btScalar.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include "bench_common.h"
+#include "chrono_like/bullet_peer.h"
+#include "chrono_like/gpu_factory.h"
+#include "chrono_like/system.h"
+#include "scaling/scaling_scenes.h"
+#if defined(DVISIM_HAVE_CUDA)
+#include "gpu/gpu_system.h"
+namespace dvi::gpu {
+double measureCopyBandwidth(size_t bytes);  // src/gpu/gpu_bench_support.cu
+}
+#endif
+
+namespace {
+
+using dvi::InputError;
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+struct ScalingOptions {
+  std::string out;
+  bool record = false, quick = false;
+  std::vector<std::string> sizes, scenes, engines;
+  std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
+};
+
+const char* const kBullet3Note =
+    "not run: this build has no Bullet 3 OpenCL peer (Debian's libBullet3OpenCL_clew needs clew.h, which Debian "
+    "does not ship, or a build without B3_USE_CLEW against opencl-c-headers + ocl-icd, and a b3GpuRigidBodyPipeline "
+    "driver that is not written yet; DESIGN section 6)";
+
+struct Row {
+  std::string engine, scene, device, status = "ok";
+  long n = 0, bodies = 0;
+  int threads = 0, warmup = 0, steps = 0;
+  double setup_s = 0, ms = 0, broad = 0, narrow = 0, solve = 0, integrate = 0, other = 0;
+  double solve_only_ms = 0;  // the Solve stage alone (the bandwidth's denominator)
+  double contacts = 0, iterations = 0, max_pen_rel = 0, ref_length = 0;
+  double device_mib = -1, solve_gbps = -1, copy_gbps = -1, pct_copy = -1;
+  bool ok() const { return status == "ok"; }
+};
+
+// ---------- small helpers ----------
+
+std::string trim(std::string s) {
+  while (!s.empty() && std::isspace((unsigned char)s.back())) s.pop_back();
+  size_t i = 0;
+  while (i < s.size() && std::isspace((unsigned char)s[i])) ++i;
+  return s.substr(i);
+}
+
+long parseCount(const std::string& opt, const std::string& tok_in) {
+  const std::string tok = trim(tok_in);
+  const std::string err = opt + ": expected sizes like 10k,100k,1M (integers >= 1, suffix k or M), got '" + tok_in + "'";
+  if (tok.empty()) throw InputError(err);
+  size_t digits = 0;
+  while (digits < tok.size() && std::isdigit((unsigned char)tok[digits])) ++digits;
+  if (digits == 0 || digits > 9) throw InputError(err);
+  double mult = 1;
+  const std::string suffix = tok.substr(digits);
+  if (suffix == "k" || suffix == "K") mult = 1e3;
+  else if (suffix == "M" || suffix == "m") mult = 1e6;
+  else if (!suffix.empty()) throw InputError(err);
+  const double v = std::stod(tok.substr(0, digits)) * mult;
+  if (v < 1 || v > 1e8) throw InputError(opt + ": " + tok + " is out of range [1, 100M]");
+  return long(v);
+}
+
+std::string countLabel(long n) {
+  if (n >= 1000000 && n % 1000000 == 0) return std::to_string(n / 1000000) + "M";
+  if (n >= 1000 && n % 1000 == 0) return std::to_string(n / 1000) + "k";
+  return std::to_string(n);
+}
+
+std::string shell(const std::string& cmd) {
+  std::string out;
+  if (FILE* f = popen(cmd.c_str(), "r")) {
+    char buf[256];
+    while (fgets(buf, sizeof buf, f)) out += buf;
+    pclose(f);
+  }
+  return trim(out);
+}
+
+std::string shellQuote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string csvField(std::string s) {
+  for (char& c : s)
+    if (c == ',' || c == '\n' || c == '"') c = ';';
+  return s;
+}
+
+std::string num(double v, const char* fmt = "%.6g") {
+  if (v < 0 || !std::isfinite(v)) return "";
+  char b[64];
+  std::snprintf(b, sizeof b, fmt, v);
+  return b;
+}
+
+std::string slug(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (std::isalnum((unsigned char)c)) o += char(std::tolower((unsigned char)c));
+    else if (!o.empty() && o.back() != '-') o += '-';
+  }
+  while (!o.empty() && o.back() == '-') o.pop_back();
+  if (o.size() > 48) o.resize(48);
+  return o.empty() ? "unknown" : o;
+}
+
+std::string utcNow(const char* fmt) {
+  std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char b[64];
+  std::strftime(b, sizeof b, fmt, &tm);
+  return b;
+}
+
+std::string sourceDir() {
+#ifdef DVISIM_SOURCE_DIR
+  if (fs::is_directory(DVISIM_SOURCE_DIR)) return DVISIM_SOURCE_DIR;
+#endif
+  return "";
+}
+
+std::string exeDir() {
+  std::error_code ec;
+  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string() : p.parent_path().string();
+}
+
+std::string commitId() {
+  if (const char* c = std::getenv("DVISIM_COMMIT"); c && *c) return c;
+  const std::string dir = sourceDir().empty() ? "." : sourceDir();
+  std::string head = shell("git -C " + shellQuote(dir) + " rev-parse HEAD 2>/dev/null");
+  if (head.empty()) return "unknown";
+  if (!shell("git -C " + shellQuote(dir) + " status --porcelain --untracked-files=no 2>/dev/null").empty())
+    head += " (working tree had uncommitted changes)";
+  return head;
+}
+
+// Host copy bandwidth (read + write), a parallel memcpy over the threads the CPU backend uses; median of 5.
+double measureHostCopyBandwidth(size_t bytes, int threads) {
+  std::vector<char> a(bytes, 1), b(bytes, 0);
+  std::vector<double> t;
+  for (int rep = 0; rep < 6; ++rep) {
+    const auto t0 = Clock::now();
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(threads) schedule(static)
+#endif
+    for (long k = 0; k < 64; ++k) {
+      const size_t chunk = bytes / 64, off = size_t(k) * chunk;
+      std::memcpy(b.data() + off, a.data() + off, k == 63 ? bytes - off : chunk);
+    }
+    if (rep > 0) t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+  }
+  (void)threads;
+  std::sort(t.begin(), t.end());
+  return 2.0 * double(bytes) / t[t.size() / 2] * 1e-9;
+}
+
+// ---------- running one configuration ----------
+
+struct Plan {
+  int warmup, steps;
+};
+
+Plan planFor(const std::string& engine, long n, bool quick) {
+  if (quick) return {2, 3};
+  if (engine == "gpu") return n >= 1000000 ? Plan{3, 5} : Plan{5, 20};
+  if (n >= 100000) return {1, 3};
+  if (n >= 10000) return {2, 5};
+  return {3, 10};
+}
+
+// Fewer timed steps when the last warm-up step says the plan would take longer than `budget` seconds.
+int fitSteps(int steps, double last_step_s, double budget) {
+  if (last_step_s <= 0) return steps;
+  return std::max(1, std::min(steps, int(budget / last_step_s)));
+}
+
+void groupStages(Row& r, const std::array<double, dvi::kStageCount>& ms) {
+  using dvi::StageType;
+  auto at = [&](StageType s) { return ms[size_t(s)]; };
+  r.broad = at(StageType::ComputeAabbs) + at(StageType::BroadPhase);
+  r.narrow = at(StageType::NarrowPhase);
+  r.solve = at(StageType::BuildRows) + at(StageType::WarmStart) + at(StageType::Solve);
+  r.solve_only_ms = at(StageType::Solve);
+  r.integrate = at(StageType::IntegrateForces) + at(StageType::IntegrateVelocities) + at(StageType::IntegratePositions);
+  r.other = std::max(0.0, r.ms - r.broad - r.narrow - r.solve - r.integrate);
+}
+
+Row runOurs(const std::string& engine, const dvi::bench::SceneSpec& spec, const dvi::SystemConfig& cfg, bool quick,
+            double budget, double copy_gbps) {
+  Row r;
+  r.engine = engine;
+  r.scene = spec.name;
+  r.n = long(spec.bodies.size());
+  r.ref_length = double(spec.ref_length);
+  const auto t_setup = Clock::now();
+  std::unique_ptr<dvi::System> sys = engine == "gpu" ? dvi::makeGpuSystem(cfg) : std::make_unique<dvi::System>(cfg);
+  dvi::bench::addToSystem(spec, *sys);
+  r.bodies = long(sys->bodies().count());
+  r.device = sys->deviceName();
+  r.threads = engine == "gpu" ? 0 : sys->effectiveThreads();
+  r.setup_s = std::chrono::duration<double>(Clock::now() - t_setup).count();
+  Plan p = planFor(engine, r.n, quick);
+  double last = 0;
+  for (int s = 0; s < p.warmup; ++s) {
+    const auto t0 = Clock::now();
+    sys->step();
+    last = std::chrono::duration<double>(Clock::now() - t0).count();
+  }
+  p.steps = fitSteps(p.steps, last, budget);
+  r.warmup = p.warmup;
+  r.steps = p.steps;
+  std::array<double, dvi::kStageCount> stage_ms{};
+  double wall = 0, pen = 0;
+  for (int s = 0; s < p.steps; ++s) {
+    const auto t0 = Clock::now();
+    sys->step();
+    wall += std::chrono::duration<double>(Clock::now() - t0).count();
+    const dvi::StepStats& st = sys->lastStats();
+    for (int k = 0; k < dvi::kStageCount; ++k) stage_ms[size_t(k)] += st.stage_seconds[size_t(k)] * 1e3 / p.steps;
+    r.contacts += double(st.contacts) / p.steps;
+    r.iterations += double(st.iterations) / p.steps;
+    pen = std::max(pen, double(st.max_penetration));
+  }
+  r.ms = wall * 1e3 / p.steps;
+  groupStages(r, stage_ms);
+  r.max_pen_rel = pen / r.ref_length;
+  if (r.solve_only_ms > 0 && r.iterations > 0) {
+    r.solve_gbps = dvi::bench::solverIterationBytes(r.contacts, double(r.bodies)) * r.iterations /
+                   (r.solve_only_ms * 1e-3) * 1e-9;
+    if (copy_gbps > 0) {
+      r.copy_gbps = copy_gbps;
+      r.pct_copy = 100.0 * r.solve_gbps / copy_gbps;
+    }
+  }
+#if defined(DVISIM_HAVE_CUDA)
+  if (auto* g = dynamic_cast<dvi::GpuSystem*>(sys.get())) r.device_mib = double(g->deviceBytes()) / double(1 << 20);
+#endif
+  return r;
+}
+
+Row runBullet(const dvi::bench::SceneSpec& spec, bool quick, double budget) {
+  Row r;
+  r.engine = "bullet";
+  r.scene = spec.name;
+  r.n = long(spec.bodies.size());
+  r.ref_length = double(spec.ref_length);
+  r.threads = 1;
+  const auto t_setup = Clock::now();
+  dvi::bench::BulletScene scene = dvi::bench::makeBulletScene(spec);
+  dvi::BulletPeerSettings bs;
+  bs.dt = dvi::real(1e-3);
+  bs.solver_iterations = 10;  // Bullet's default
+  bs.length_scale = 100;      // centimetres: Bullet's absolute tolerances (0.04 margin) break 1 cm bodies in metres
+  dvi::BulletPeer peer(scene.bodies, bs);
+  r.bodies = long(scene.bodies.size());
+  r.device = "Bullet " + std::to_string(btGetVersion() / 100) + "." + std::to_string(btGetVersion() % 100) +
+             " btDiscreteDynamicsWorld, sequential impulse 10 it, 1 thread, cm";
+  r.setup_s = std::chrono::duration<double>(Clock::now() - t_setup).count();
+  Plan p = planFor("bullet", r.n, quick);
+  double last = 0;
+  for (int s = 0; s < p.warmup; ++s) {
+    const auto t0 = Clock::now();
+    peer.step();
+    last = std::chrono::duration<double>(Clock::now() - t0).count();
+  }
+  p.steps = fitSteps(p.steps, last, budget);
+  r.warmup = p.warmup;
+  r.steps = p.steps;
+  double wall = 0, pen = 0;
+  for (int s = 0; s < p.steps; ++s) {
+    const auto t0 = Clock::now();
+    peer.step();
+    wall += std::chrono::duration<double>(Clock::now() - t0).count();
+    r.contacts += double(peer.lastStats().contacts) / p.steps;
+    pen = std::max(pen, double(peer.lastStats().max_penetration));
+  }
+  r.ms = wall * 1e3 / p.steps;
+  r.broad = r.narrow = r.solve = r.integrate = r.other = -1;  // Bullet's stages are not split here
+  r.iterations = bs.solver_iterations;
+  r.max_pen_rel = pen / r.ref_length;
+  return r;
+}
+
+// ---------- outputs ----------
+
+const char* kCsvHeader =
+    "engine,scene,n,bodies,threads,warmup_steps,timed_steps,setup_s,ms_per_step,ms_broad,ms_narrow,ms_solve,"
+    "ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,"
+    "copy_gbps,solve_pct_of_copy,device,status";
+
+std::string csvText(const std::vector<Row>& rows) {
+  std::ostringstream o;
+  o << kCsvHeader << "\n";
+  for (const Row& r : rows) {
+    const bool ok = r.ok();
+    auto v = [&](double x) { return ok ? num(x) : std::string(); };
+    o << r.engine << "," << r.scene << "," << r.n << "," << (ok ? std::to_string(r.bodies) : "") << ","
+      << (ok ? std::to_string(r.threads) : "") << "," << (ok ? std::to_string(r.warmup) : "") << ","
+      << (ok ? std::to_string(r.steps) : "") << "," << v(r.setup_s) << "," << v(r.ms) << "," << v(r.broad) << ","
+      << v(r.narrow) << "," << v(r.solve) << "," << v(r.integrate) << "," << v(r.other) << "," << v(r.contacts) << ","
+      << v(r.iterations) << "," << v(r.max_pen_rel) << "," << num(r.ref_length) << "," << v(r.device_mib) << ","
+      << v(r.solve_gbps) << "," << v(r.copy_gbps) << "," << v(r.pct_copy) << "," << csvField(r.device) << ","
+      << csvField(r.status) << "\n";
+  }
+  return o.str();
+}
+
+std::string tableText(const std::vector<Row>& rows) {
+  std::ostringstream o;
+  char line[512];
+  std::snprintf(line, sizeof line, "%-7s %-5s %6s %10s %8s %8s %8s %8s %10s %8s %8s %9s %7s\n", "engine", "scene", "N",
+                "ms/step", "broad", "narrow", "solve", "integr", "contacts", "pen/ref", "dev MiB", "solv GB/s", "%copy");
+  o << line;
+  auto f = [](double x, const char* fmt) { return x < 0 ? std::string("-") : num(x, fmt); };
+  for (const Row& r : rows) {
+    if (!r.ok()) {
+      if (r.engine == "bullet3_opencl") continue;  // one note below instead of a line per size
+      std::snprintf(line, sizeof line, "%-7s %-5s %6s  %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(),
+                    r.status.c_str());
+      o << line;
+      continue;
+    }
+    std::snprintf(line, sizeof line, "%-7s %-5s %6s %10s %8s %8s %8s %8s %10.0f %8s %8s %9s %7s\n", r.engine.c_str(),
+                  r.scene.c_str(), countLabel(r.n).c_str(), num(r.ms, "%.2f").c_str(), f(r.broad, "%.2f").c_str(),
+                  f(r.narrow, "%.2f").c_str(), f(r.solve, "%.2f").c_str(), f(r.integrate, "%.2f").c_str(), r.contacts,
+                  num(r.max_pen_rel, "%.4f").c_str(), f(r.device_mib, "%.0f").c_str(), f(r.solve_gbps, "%.1f").c_str(),
+                  f(r.pct_copy, "%.1f").c_str());
+    o << line;
+  }
+  return o.str();
+}
+
+const Row* findRow(const std::vector<Row>& rows, const std::string& engine, const std::string& scene, long n) {
+  for (const Row& r : rows)
+    if (r.ok() && r.engine == engine && r.scene == scene && r.n == n) return &r;
+  return nullptr;
+}
+
+// The largest N at which both engines ran the scene, preferring `want`.
+std::optional<long> commonN(const std::vector<Row>& rows, const std::string& a, const std::string& b,
+                            const std::string& scene, long want) {
+  if (findRow(rows, a, scene, want) && findRow(rows, b, scene, want)) return want;
+  std::optional<long> best;
+  for (const Row& r : rows)
+    if (r.ok() && r.engine == a && r.scene == scene && findRow(rows, b, scene, r.n) && (!best || r.n > *best)) best = r.n;
+  return best;
+}
+
+std::string verdict(double value, double goal, bool at_most) {
+  char b[128];
+  const bool met = at_most ? value <= goal : value >= goal;
+  if (met) return "met";
+  std::snprintf(b, sizeof b, "missed by %.1fx", at_most ? value / goal : goal / value);
+  return b;
+}
+
+// The goals of issue 3 read from this run, then the same ratios for the mix.
+std::string goalsText(const std::vector<Row>& rows, const std::string& gpu_status) {
+  std::ostringstream o;
+  char b[512];
+  o << "Goals (issue 3), from this run:\n";
+  const bool gpu = std::any_of(rows.begin(), rows.end(), [](const Row& r) { return r.ok() && r.engine == "gpu"; });
+  if (!gpu) o << "  GPU: " << gpu_status << " -- the GPU goals are not evaluated in this run.\n";
+  for (const std::string scene : {"pile", "mix"}) {
+    const bool any = std::any_of(rows.begin(), rows.end(), [&](const Row& r) { return r.ok() && r.scene == scene; });
+    if (!any) continue;
+    const std::string tag = scene == "pile" ? "" : " [mix, for information]";
+    if (gpu) {
+      if (const Row* g = findRow(rows, "gpu", scene, 1000000)) {
+        std::snprintf(b, sizeof b, "  GPU ms/step at 1M: %.2f (goal <= 20): %s%s\n", g->ms,
+                      verdict(g->ms, 20, true).c_str(), tag.c_str());
+        o << b;
+      } else {
+        o << "  GPU ms/step at 1M: not run (1M not in --sizes)" << tag << "\n";
+      }
+      const Row* bw = findRow(rows, "gpu", scene, 1000000);
+      if (!bw)
+        for (const Row& r : rows)
+          if (r.ok() && r.engine == "gpu" && r.scene == scene && (!bw || r.n > bw->n)) bw = &r;
+      if (bw && bw->pct_copy >= 0) {
+        std::snprintf(b, sizeof b,
+                      "  solver bandwidth at %s: %.0f GB/s = %.1f%% of the measured copy %.0f GB/s (goal >= 60%%): %s%s\n",
+                      countLabel(bw->n).c_str(), bw->solve_gbps, bw->pct_copy, bw->copy_gbps,
+                      verdict(bw->pct_copy, 60, false).c_str(), tag.c_str());
+        o << b;
+      }
+    }
+    const struct {
+      const char *a, *b, *what;
+      double goal;
+    } ratios[] = {{"gpu", "bullet", "GPU speed-up over Bullet (1 thread)", 300},
+                  {"gpu", "cpu", "GPU speed-up over our CPU backend", 20},
+                  {"cpu", "bullet", "our CPU backend's speed-up over Bullet (1 thread)", 0}};
+    for (const auto& q : ratios) {
+      if (!gpu && std::string(q.a) == "gpu") continue;
+      const std::optional<long> n = commonN(rows, q.a, q.b, scene, 100000);
+      if (!n) continue;
+      const double ratio = findRow(rows, q.b, scene, *n)->ms / findRow(rows, q.a, scene, *n)->ms;
+      std::string goal = q.goal > 0 ? " (goal >= " + num(q.goal, "%.0f") + "x at 100k): " + verdict(ratio, q.goal, false) : "";
+      if (q.goal > 0 && *n != 100000) goal += " -- at " + countLabel(*n) + ", 100k not run";
+      std::snprintf(b, sizeof b, "  %s at %s: %.1fx%s%s\n", q.what, countLabel(*n).c_str(), ratio, goal.c_str(), tag.c_str());
+      o << b;
+    }
+  }
+  return o.str();
+}
+
+std::string notesText(double dev_copy, double host_copy) {
+  std::ostringstream o;
+  o << "Notes:\n"
+    << "- Stages (ms/step): broad = ComputeAabbs + BroadPhase; narrow = NarrowPhase; solve = BuildRows + WarmStart + "
+       "Solve; integrate = IntegrateForces + IntegrateVelocities + IntegratePositions; ms/step is the wall time of "
+       "step().\n"
+    << "- Solver bandwidth is a model: (contacts x 200 B + bodies x 50 B) per iteration x iterations / Solve-stage time "
+       "(DESIGN section 6, src/gpu/NOTES.md). It is compared with the copy bandwidth measured in this run (read + "
+       "write): device "
+    << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("not measured (no GPU)")) << ", host "
+    << num(host_copy, "%.0f") << " GB/s (parallel memcpy over the CPU backend's threads).\n"
+    << "- Penetration is the deepest over the timed steps, relative to the scene's reference length (pile: r = 1 cm; "
+       "mix: its smallest size, 0.5 cm).\n"
+    << "- contacts: ours count every contact within the collision envelope; Bullet's peer counts manifold points at "
+       "negative distance.\n"
+    << "- Bullet 2 runs the same bodies in centimetres (BulletPeer length_scale 100) with 10 sequential-impulse "
+       "iterations on 1 thread; its numbers are converted back to metres.\n"
+    << "- Bullet 3 OpenCL GPU pipeline: " << kBullet3Note << ".\n";
+  return o.str();
+}
+
+// Locates scripts/plot_scaling.py (env DVISIM_PLOT_SCALING, next to the binary, ../share/dvisim, the source
+// tree), copies it into DIR and runs it. Returns a one-line message.
+std::string makePlot(const std::string& dir) {
+  std::vector<std::string> candidates;
+  if (const char* e = std::getenv("DVISIM_PLOT_SCALING")) candidates.push_back(e);
+  const std::string exe = exeDir();
+  if (!exe.empty()) {
+    candidates.push_back(exe + "/plot_scaling.py");
+    candidates.push_back(exe + "/../share/dvisim/plot_scaling.py");
+  }
+  if (!sourceDir().empty()) candidates.push_back(sourceDir() + "/scripts/plot_scaling.py");
+  std::string script;
+  for (const std::string& c : candidates)
+    if (fs::is_regular_file(c)) {
+      script = c;
+      break;
+    }
+  if (script.empty()) return "scaling.png not written: plot_scaling.py not found (set DVISIM_PLOT_SCALING)";
+  const std::string local = dir + "/plot_scaling.py";
+  std::error_code ec;
+  if (fs::absolute(script) != fs::absolute(local)) fs::copy_file(script, local, fs::copy_options::overwrite_existing, ec);
+  std::string python;  // the first interpreter with matplotlib (PATH's python3 may be a pyenv one without it)
+  for (const char* p : {"python3", "/usr/bin/python3"})
+    if (std::system((std::string(p) + " -c 'import matplotlib' >/dev/null 2>&1").c_str()) == 0) {
+      python = p;
+      break;
+    }
+  if (python.empty())
+    return "scaling.png not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib); "
+           "the CSV is complete, plot later with: python3 " + local + " " + dir;
+  const std::string cmd = python + " " + shellQuote(ec ? script : local) + " " + shellQuote(dir) + " >" +
+                          shellQuote(dir + "/plot_scaling.log") + " 2>&1";
+  if (std::system(cmd.c_str()) != 0) return "scaling.png not written: plot_scaling.py failed (see " + dir + "/plot_scaling.log)";
+  return "plot: " + dir + "/scaling.png";
+}
+
+void writeFile(const std::string& path, const std::string& text) {
+  std::ofstream f(path, std::ios::binary);
+  f << text;
+  if (!f) throw std::runtime_error("cannot write " + path);
+}
+
+std::vector<std::string> splitList(const std::vector<std::string>& in) {
+  std::vector<std::string> out;
+  for (const std::string& s : in) {
+    std::stringstream ss(s);
+    std::string tok;
+    while (std::getline(ss, tok, ',')) out.push_back(trim(tok));
+  }
+  return out;
+}
+
+// ---------- the benchmark ----------
+
+int runScaling(const ScalingOptions& o) {
+  // Validate everything before any work.
+  std::vector<long> sizes;
+  for (const std::string& t : splitList(o.sizes)) sizes.push_back(parseCount("--sizes", t));
+  if (sizes.empty()) sizes = o.quick ? std::vector<long>{1000, 4000} : std::vector<long>{10000, 100000, 1000000, 4000000};
+  std::sort(sizes.begin(), sizes.end());
+  sizes.erase(std::unique(sizes.begin(), sizes.end()), sizes.end());
+  std::vector<std::string> scenes = splitList(o.scenes), engines = splitList(o.engines);
+  if (scenes.empty()) scenes = {"pile", "mix"};
+  if (engines.empty()) engines = {"gpu", "cpu", "bullet"};
+  for (const std::string& s : scenes)
+    if (s != "pile" && s != "mix") throw InputError("--scenes: unknown scene '" + s + "' (expected pile,mix)");
+  for (const std::string& e : engines)
+    if (e != "gpu" && e != "cpu" && e != "bullet") throw InputError("--engines: unknown engine '" + e + "' (expected gpu,cpu,bullet)");
+  auto has = [&](const char* e) { return std::find(engines.begin(), engines.end(), e) != engines.end(); };
+  const long cpu_max = parseCount("--cpu-max", o.cpu_max);
+  char* end = nullptr;
+  const long threads = std::strtol(o.threads.c_str(), &end, 10);
+  if (o.threads.empty() || *end || threads < 0 || threads > 4096) throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
+  const double budget = std::strtod(o.budget.c_str(), &end);
+  if (o.budget.empty() || *end || !(budget > 0) || !std::isfinite(budget)) throw InputError("--budget: expected seconds > 0, got '" + o.budget + "'");
+
+  const std::string dir = o.out;
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir)) throw InputError("--out " + dir + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+  if (::access(dir.c_str(), W_OK) != 0 || !std::ofstream(dir + "/scaling.csv"))
+    throw InputError("--out " + dir + ": the directory is not writable");
+  std::string results_dir;
+  if (o.record) {
+    results_dir = !o.results_dir.empty() ? o.results_dir
+                  : !sourceDir().empty() ? sourceDir() + "/bench/results" : std::string("bench/results");
+    fs::create_directories(results_dir, ec);
+    if (ec || !fs::is_directory(results_dir) || ::access(results_dir.c_str(), W_OK) != 0)
+      throw InputError("--results-dir " + results_dir + ": cannot create or write the directory");
+  }
+
+  dvi::SystemConfig cfg;
+  cfg.dt = dvi::real(1e-3);
+  cfg.solver = dvi::SolverType::APGD;
+  cfg.solver_settings.max_iterations = 50;
+  cfg.solver_settings.tolerance = 0;  // all 50 iterations
+  cfg.threads = int(threads);
+
+  std::string gpu_name;
+  const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
+  const std::string gpu_status = has("gpu") ? (have_gpu ? "" : "skipped: no GPU (" + (gpu_name.empty() ? std::string("no CUDA device") : gpu_name) + ")")
+                                            : "skipped: not in --engines";
+#ifdef _OPENMP
+  const int host_threads = threads > 0 ? int(threads) : omp_get_num_procs();
+#else
+  const int host_threads = 1;
+#endif
+  std::string cpu_model = dvi::System(cfg).deviceName();  // "model (k threads)" for an empty scene
+  cpu_model = cpu_model.substr(0, cpu_model.rfind(" ("));
+  const std::string cpu_name = cpu_model + " (" + std::to_string(host_threads) + " threads)";
+  std::printf("bench scaling: scenes %s; sizes", [&] { std::string s; for (auto& x : scenes) s += (s.empty() ? "" : ",") + x; return s; }().c_str());
+  for (long n : sizes) std::printf(" %s", countLabel(n).c_str());
+  std::printf("; h = 1e-3 s, APGD 50 iterations, %s precision\n", sizeof(dvi::real) == 8 ? "double" : "float");
+  std::printf("GPU: %s\nCPU: %s\n", have_gpu ? gpu_name.c_str() : gpu_status.c_str(), cpu_name.c_str());
+  std::fflush(stdout);
+
+  double dev_copy = -1;
+#if defined(DVISIM_HAVE_CUDA)
+  if (have_gpu) dev_copy = dvi::gpu::measureCopyBandwidth(o.quick ? (size_t(64) << 20) : (size_t(1) << 30));
+#endif
+  const double host_copy = measureHostCopyBandwidth(o.quick ? (size_t(32) << 20) : (size_t(256) << 20), host_threads);
+  std::printf("copy bandwidth (read + write): device %s, host %.0f GB/s\n",
+              dev_copy > 0 ? (num(dev_copy, "%.0f") + " GB/s").c_str() : "-", host_copy);
+  std::fflush(stdout);
+
+  std::vector<Row> rows;
+  auto flush = [&] { writeFile(dir + "/scaling.csv", csvText(rows)); };
+  auto report = [&](const Row& r) {
+    if (r.ok())
+      std::printf("  %-6s %-4s %6s: %10.2f ms/step (%d timed after %d warm-up), %.0f contacts, pen/ref %.4f, setup %.1f s\n",
+                  r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.ms, r.steps, r.warmup, r.contacts,
+                  r.max_pen_rel, r.setup_s);
+    else if (r.engine != "bullet3_opencl")
+      std::printf("  %-6s %-4s %6s: %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.status.c_str());
+    std::fflush(stdout);
+  };
+  auto failed = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, const std::string& status) {
+    Row r;
+    r.engine = engine, r.scene = spec.name, r.n = long(spec.bodies.size()), r.status = status;
+    r.ref_length = double(spec.ref_length);
+    return r;
+  };
+  for (long n : sizes) {
+    for (const std::string& scene : scenes) {
+      const dvi::bench::SceneSpec spec = dvi::bench::makeSceneSpec(scene, n);
+      auto attempt = [&](const std::string& engine, auto&& fn) {
+        try {
+          rows.push_back(fn());
+        } catch (const std::exception& e) {
+          rows.push_back(failed(engine, spec, std::string("error: ") + e.what()));
+        }
+        report(rows.back());
+        flush();
+      };
+      if (has("gpu")) {
+        if (have_gpu)
+          attempt("gpu", [&] { return runOurs("gpu", spec, cfg, o.quick, budget, dev_copy); });
+        else
+          rows.push_back(failed("gpu", spec, gpu_status)), report(rows.back());
+        rows.push_back(failed("bullet3_opencl", spec, "not run: no Bullet 3 OpenCL peer in this build (see the notes)"));
+      }
+      if (n <= cpu_max) {
+        if (has("cpu")) attempt("cpu", [&] { return runOurs("cpu", spec, cfg, o.quick, budget, host_copy); });
+        if (has("bullet")) attempt("bullet", [&] { return runBullet(spec, o.quick, budget); });
+      }
+      flush();
+    }
+  }
+
+  const std::string table = tableText(rows), goals = goalsText(rows, gpu_status), notes = notesText(dev_copy, host_copy);
+  std::printf("\n%s\n%s\n%s", table.c_str(), goals.c_str(), notes.c_str());
+  std::printf("results: %s/scaling.csv\n", dir.c_str());
+  std::printf("%s\n", makePlot(dir).c_str());
+
+  if (o.record) {
+    const std::string device = have_gpu ? gpu_name : cpu_name;
+    const std::string base = "scaling_" + slug(have_gpu ? gpu_name : "cpu-" + cpu_model) + "_" + utcNow("%Y%m%d-%H%M%S");
+    std::ostringstream md;
+    md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
+       << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
+       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
+       << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
+       << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
+          "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
+       << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
+       << ", host " << num(host_copy, "%.0f") << " GB/s\n\n"
+       << "```\n" << table << "```\n\n" << goals << "\n" << notes << "\nThe rows: " << base << ".csv\n";
+    for (const std::string& d : {results_dir, dir}) {
+      writeFile(d + "/" + base + ".md", md.str());
+      writeFile(d + "/" + base + ".csv", csvText(rows));
+    }
+    std::printf("recorded: %s/%s.md and .csv (copies in %s/) -- device %s\n", results_dir.c_str(), base.c_str(),
+                dir.c_str(), device.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+void registerBenchScaling(CLI::App& app) {
+  auto o = std::make_shared<ScalingOptions>();
+  CLI::App* cmd = benchCommand(app)->add_subcommand(
+      "scaling", "Pile and multidisperse mix for N = 10k..4M: GPU, CPU backend and Bullet side by side");
+  cmd->add_option("--out", o->out, "Output directory (scaling.csv, scaling.png)")->required();
+  cmd->add_flag("--record", o->record, "Also write bench/results/scaling_<device>_<date>.md and .csv");
+  cmd->add_flag("--quick", o->quick, "Tiny sizes (1k, 4k) and few steps: a smoke test");
+  cmd->add_option("--sizes", o->sizes, "Body counts, e.g. 10k,100k,1M,4M (default; --quick: 1k,4k)");
+  cmd->add_option("--scenes", o->scenes, "pile,mix (default both)");
+  cmd->add_option("--engines", o->engines, "gpu,cpu,bullet (default all)");
+  cmd->add_option("--cpu-max", o->cpu_max, "Largest N for our CPU backend and Bullet (default 100k)");
+  cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
+  cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
+  cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
+  addBenchRunner(cmd, [o] { return runScaling(*o); });
+}
