@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# CTest smoke test of `dvisim bench scaling --quick` (tests/CMakeLists.txt: bench_scaling_quick):
+# the CSV has the expected columns and one row per engine x scene x N, measured rows have sane values
+# (times > 0, contacts > 0, finite penetration), and bad input ends with a one-line error and exit code 2.
+#   bash smoke_test.sh DVISIM_BINARY WORK_DIR
+set -u
+cli=$1
+work=$2
+rm -rf "$work"
+mkdir -p "$work"
+fail() { echo "FAIL: $*"; exit 1; }
+
+# One CPU thread: the test machine's cores are shared with the other tests (an oversubscribed OpenMP team
+# can be 100x slower), and the smoke test checks the outputs, not the speed.
+"$cli" bench scaling --quick --threads 1 --out "$work/out" > "$work/stdout.txt" 2> "$work/stderr.txt"
+rc=$?
+cat "$work/stdout.txt"
+[ $rc -eq 0 ] || { cat "$work/stderr.txt"; fail "bench scaling --quick exited with $rc"; }
+csv="$work/out/scaling.csv"
+[ -s "$csv" ] || fail "no $csv"
+
+expected="engine,scene,n,bodies,threads,warmup_steps,timed_steps,setup_s,ms_per_step,ms_broad,ms_narrow,ms_solve,ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,copy_gbps,solve_pct_of_copy,device,status"
+[ "$(head -1 "$csv")" = "$expected" ] || fail "CSV header: $(head -1 "$csv")"
+
+# Every engine x scene x N planned: gpu (measured or skipped), cpu and bullet (measured).
+for scene in pile mix; do
+  for n in 1000 4000; do
+    for engine in gpu cpu bullet; do
+      c=$(awk -F, -v e=$engine -v s=$scene -v n=$n '$1==e && $2==s && $3==n' "$csv" | wc -l)
+      [ "$c" -eq 1 ] || fail "expected one row $engine $scene $n, got $c"
+    done
+  done
+done
+
+# Field checks (columns by name).
+awk -F, '
+NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
+{
+  st = $col["status"]; e = $1
+  if (st ~ /^error/) { print "row " NR ": " e " " $2 " " $3 ": " st; bad = 1; next }
+  if (st != "ok") {
+    if (e == "cpu" || e == "bullet") { print "row " NR ": " e " did not run: " st; bad = 1 }
+    next
+  }
+  if (!($col["ms_per_step"] > 0)) { print "row " NR ": ms_per_step " $col["ms_per_step"]; bad = 1 }
+  if (!($col["contacts"] > 0)) { print "row " NR ": contacts " $col["contacts"]; bad = 1 }
+  if (!($col["bodies"] >= $col["n"])) { print "row " NR ": bodies " $col["bodies"] " < n"; bad = 1 }
+  if (!($col["timed_steps"] >= 1)) { print "row " NR ": timed_steps " $col["timed_steps"]; bad = 1 }
+  p = $col["max_penetration_rel"]
+  if (p == "" || !(p >= 0 && p < 1)) { print "row " NR ": max_penetration_rel " p; bad = 1 }
+  if (e != "bullet") {
+    if ($col["iterations"] != 50) { print "row " NR ": iterations " $col["iterations"]; bad = 1 }
+    s = $col["ms_broad"] + $col["ms_narrow"] + $col["ms_solve"] + $col["ms_integrate"]
+    if (!(s > 0 && s <= 1.01 * $col["ms_per_step"] + 0.01)) { print "row " NR ": stages " s " vs step " $col["ms_per_step"]; bad = 1 }
+    if (!($col["solve_model_gbps"] > 0)) { print "row " NR ": solve_model_gbps " $col["solve_model_gbps"]; bad = 1 }
+  }
+  if (e == "gpu" && !($col["device_mib"] > 0)) { print "row " NR ": device_mib " $col["device_mib"]; bad = 1 }
+}
+END { exit bad }' "$csv" || fail "bad values in $csv"
+grep -q "Goals (issue 3)" "$work/stdout.txt" || fail "no goals table on stdout"
+
+# Bad input: one line on stderr, exit code 2, and nothing else.
+expect2() {
+  "$cli" "$@" > /dev/null 2> "$work/err.txt"
+  local rc=$?
+  [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
+  [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
+  grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
+}
+expect2 bench scaling --quick --out "$work/e1" --sizes 10k,abc
+expect2 bench scaling --quick --out "$work/e2" --sizes 0
+expect2 bench scaling --quick --out "$work/e3" --bogus
+expect2 bench scaling --quick --out "$work/e4" --scenes pile,sand
+expect2 bench scaling --quick
+echo plain > "$work/a_file"
+expect2 bench scaling --quick --out "$work/a_file/sub"
+expect2 bench
+echo "bench_scaling_quick: OK"
