@@ -153,7 +153,7 @@ TEST_CASE("CES config: bad values are InputErrors naming the key", "[ces][ces_ma
   fails({"feed.mass_flow_g_s=-1"}, "ces.feed.mass_flow_g_s: must be >= 0");
   fails({"drum.diameter_mm=-320"}, "ces.drum.diameter_mm: must be > 0");
   fails({"electrode.distance_mm=100"}, "outside the drum");
-  fails({"splitters.s1_mm=150"}, "ces.splitters.s2_mm: must be >= s1_mm");
+  fails({"splitters.s1_mm=170"}, "ces.splitters.s2_mm: must be >= s1_mm");
   fails({"feed.materials.0.kind=gold"}, "ces.feed.materials[0].kind");
   fails({"field.extra_electrodes=[{\"diameter_mm\": 1, \"distance_mm\": 250, \"angle_deg\": 60, \"voltage_kV\": -30}]"},
         "use \"model\": \"csm\"");
@@ -201,8 +201,13 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
   // A heavy, non-rolling sphere (inertia x 1e6) with pair friction 200 on the drum rides with the surface
   // until the normal force vanishes: m g sin(theta) = m omega^2 (R + r) (theta above the horizontal, on
   // the electrode side). No charge (corona zone depth 0, plastic), no air (viscosity 1e-12, density 0).
+  // Both drives: the kinematic drum and (when the core solves constraint rows) the rheonomic one.
+  std::vector<std::string> drives{"kinematic"};
+  if (coreSolvesConstraintRows()) drives.push_back("rheonomic");
+  for (const std::string& drive : drives) {
+  INFO("drum drive " << drive);
   CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "corona.depth_mm=0", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
-                              "friction.particle_drum=200", "time_step_s=0.0001",
+                              "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=" + drive,
                               "feed.materials=[{\"kind\": \"plastic\", \"mass_fraction\": 1, \"density_kg_m3\": 8000}]"});
   SystemConfig sc;
   sc.dt = real(cfg.dt);
@@ -237,6 +242,8 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
   const Vec3 vs{real(w * Rc * std::sin(th_star)), real(-w * Rc * std::cos(th_star)), 0};
   CHECK(double(length(v_leave)) == Approx(w * Rc).epsilon(0.005));
   CHECK(double(length(v_leave - vs)) < 0.01 * w * Rc);
+  CHECK(m.rheonomicDrive() == (drive == "rheonomic"));
+  }
 }
 
 TEST_CASE("CES machine: an insulator with its corona charge stays on the drum until the brush", "[ces][ces_machine]") {

@@ -43,7 +43,7 @@ const char* defaultCesJson() {
   "name": "ces-default",
   "description": "Roll-type corona electrostatic separator of DESIGN.md section 5: copper, plastic and middlings of 0.5-1 mm",
   "ces": {
-    "duration_s": 2.5,
+    "duration_s": 2.0,
     "time_step_s": 0.0002,
     "seed": 1,
     "solver": { "type": "apgd", "iterations": 30, "gyroscopic": false },
@@ -57,7 +57,7 @@ const char* defaultCesJson() {
     "feed": {
       "mass_flow_g_s": 0.5,
       "start_s": 0,
-      "duration_s": 1.0,
+      "duration_s": 0.6,
       "angle_deg": 100,
       "height_mm": 4,
       "speed_m_s": 0.2,
@@ -75,8 +75,8 @@ const char* defaultCesJson() {
           "shapes": { "sphere": 0.5, "fragment": 0.5 } }
       ]
     },
-    "collection": { "y_mm": -350, "x0_mm": -50 },
-    "splitters": { "s1_mm": 80, "s2_mm": 140, "range_mm": [0, 200], "positions": 60 },
+    "collection": { "y_mm": -350, "x0_mm": 0 },
+    "splitters": { "s1_mm": 90, "s2_mm": 160, "range_mm": [0, 200], "positions": 60 },
     "output": { "frames": 0, "histogram_bin_mm": 2, "plots": true, "checkpoint_every_s": 0 }
   }
 }

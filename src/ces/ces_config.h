@@ -53,7 +53,7 @@ struct ElectrodeConfig {
 
 struct CesConfig {
   // Run.
-  double duration = 2.5;      // s of machine time
+  double duration = 2.0;      // s of machine time
   double dt = 2e-4;           // s
   uint64_t seed = 1;
   std::string solver = "apgd";
@@ -99,7 +99,7 @@ struct CesConfig {
 
   // Feed: a vibrating conveyor's outlet, a line across the drum width above the drum.
   double feed_mass_flow = 0.5e-3;  // kg/s
-  double feed_start = 0, feed_duration = 1.0;      // s
+  double feed_start = 0, feed_duration = 0.6;      // s
   double feed_angle = 1.7453292519943295;          // rad, direction of the outlet from the drum axis (100 deg)
   double feed_height = 0.004;                      // m, above the drum surface
   double feed_speed = 0.2;                         // m/s, along the drum's surface motion
@@ -108,10 +108,10 @@ struct CesConfig {
   std::vector<MaterialConfig> materials;
 
   // Collection plane y = collection_y; positions along it are x - collection_x0.
-  double collection_y = -0.35, collection_x0 = -0.05;
+  double collection_y = -0.35, collection_x0 = 0;
 
   // Splitters (virtual): bins nonconductor x' < s1 <= middling < s2 <= conductor.
-  double s1 = 0.080, s2 = 0.140;
+  double s1 = 0.090, s2 = 0.160;
   double splitter_lo = 0, splitter_hi = 0.200;
   int splitter_positions = 60;
 
