@@ -352,6 +352,9 @@ int fail(int code, const std::string& msg) {
 std::function<int()> addCompareCommand(CLI::App& app);
 // `dvisim bench scaling` (bench_scaling.cpp); runs through runBenchCommand() (bench_common.h).
 void registerBenchScaling(CLI::App& app);
+// `dvisim bench accuracy` (bench_accuracy.cpp) and `dvisim bench stability` (bench_stability.cpp), the same way.
+void registerBenchAccuracy(CLI::App& app);
+void registerBenchStability(CLI::App& app);
 
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
@@ -375,6 +378,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--resume", o.resume, "CES machine: continue the run checkpointed in DIR (DIR/checkpoint/)");
   const std::function<int()> compare = addCompareCommand(app);
   registerBenchScaling(app);
+  registerBenchAccuracy(app);
+  registerBenchStability(app);
 
   try {
     app.parse(argc, argv);

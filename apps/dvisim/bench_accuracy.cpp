@@ -1,0 +1,410 @@
+// dvisim bench accuracy --out DIR [--quick] [--record] [--threads N]
+//
+// Work-precision benchmark of issue 6 (part 1): run time against error for each CCP solver (Jacobi, Gauss-Seidel
+// on the CPU, APGD, BB) on our CPU backend (and the GPU backend when a device is present), with Bullet's own
+// sequential-impulse solver as one more line, on standard scenes: a sphere pile (100k spheres in full mode), a
+// mixed-shape pile, and the 10-box stack with a 1000x heavy top (scenes/stack.json's tower). Per scene, solver
+// and backend it sweeps the iteration count at the scene's step h0 and the step (2 h0 .. h0/4) at a fixed
+// iteration count, for the same simulated time, and measures:
+//  - wall_s: wall time of the steps (step() only; the measurements below are taken outside it);
+//  - residual: the projected-gradient CCP residual each step ends with (solver.h: ccpResidual, m/s), mean and last;
+//  - max_penetration_rel: the deepest penetration over the run relative to the scene's reference length;
+//  - complementarity violation (m/s), our definition, after each step, from the post-step velocities v+:
+//        C = sum_k |g_k . u_k| / sum_k |g_k|,   u_k = D_k^T v+ + b_k = (N g + r)_k
+//    with g_k the world impulse of contact k on body B (n gn + u gu + w gw), D_k^T v+ the relative velocity at the
+//    contact ((vB + wB x rB) - (vA + wA x rA), lever arms from the pre-step centres of mass) and
+//    b_k = (max(dist/h, -v_rec), 0, 0) (jacobian.h contactBias). At an exact CCP solution g_k . (N g + r)_k = 0 for
+//    every contact (gamma in the cone, u in the dual cone, orthogonal: the cone complementarity of Anitescu &
+//    Tasora 2010, Comput. Optim. Appl. 47; Tasora & Anitescu 2011, CMAME 200), so C is the impulse-weighted mean
+//    complementarity gap, a velocity;
+//  - the error of a macroscopic observable against a reference run (APGD, 500 iterations or residual < 1e-7,
+//    h0/4): piles: mean height of the bodies, error relative to the reference length; stack: position of the top
+//    box, error relative to its half size.
+// Also the issue's goal: on the pile, after a few settling steps, two identical systems (deterministic, so the
+// same state and the same CCP) solve the next step's CCP with APGD and with Jacobi down to residual 1e-4
+// (tolerance stop; record_history on); the ratio of the Solve-stage times is printed (goal >= 10x).
+// Outputs: DIR/accuracy.csv, DIR/accuracy.png (scripts/plot_accuracy.py, when python3 has matplotlib), a table on
+// stdout; --record also writes bench/results/accuracy_<device>_<date>.{md,csv}.
+#include <CLI/CLI.hpp>
+#include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench_common.h"
+#include "chrono_like/gpu_factory.h"
+#include "chrono_like/jacobian.h"
+#include "chrono_like/solver.h"
+#include "chrono_like/system.h"
+#include "scaling/scaling_scenes.h"
+#include "stability/bench_util.h"
+
+namespace {
+
+using dvi::InputError;
+using dvi::Quat;
+using dvi::real;
+using dvi::Vec3;
+using namespace dvi::benchutil;
+using Clock = std::chrono::steady_clock;
+
+struct AccOptions {
+  std::string out, threads = "0";
+  bool quick = false, record = false;
+};
+
+// A scene of the benchmark: its bodies (rebuilt for each run), step, duration and observable.
+struct AccScene {
+  std::string name;
+  double h0 = 1e-3, T = 0.03, ref_length = 0.01, bullet_scale = 100;
+  std::function<void(BtBodies&, std::unique_ptr<dvi::bench::BulletScene>&)> build;
+  // observable of the final state and its error scale
+  std::function<Vec3(const Runner&, const std::vector<btRigidBody*>&)> observe;
+  double obs_scale = 0.01;
+  std::string obs_name;
+};
+
+struct Row {
+  std::string scene, engine, solver, sweep, status = "ok", device;
+  int iterations = 0, steps = 0;
+  double dt = 0, wall_s = 0, res_mean = NAN, res_last = NAN, pen_rel = 0, compl_mean = NAN, obs = NAN, obs_err = NAN;
+};
+
+Vec3 meanHeight(const Runner& r, const std::vector<btRigidBody*>& b) {
+  double s = 0;
+  long n = 0;
+  for (size_t i = 0; i < b.size(); ++i)
+    if (b[i]->getInvMass() > 0) s += double(r.pos(i).y), ++n;
+  return Vec3{0, real(n ? s / double(n) : 0), 0};
+}
+
+std::vector<AccScene> makeScenes(bool quick) {
+  std::vector<AccScene> v;
+  {
+    AccScene s;
+    s.name = "pile";
+    const long n = quick ? 400 : 100000;
+    s.h0 = 1e-3, s.T = quick ? 0.03 : 0.02, s.ref_length = 0.01;
+    s.build = [n](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>& keep) {
+      (void)b;
+      keep = std::make_unique<dvi::bench::BulletScene>(dvi::bench::makeBulletScene(dvi::bench::makePileSpec(n)));
+    };
+    s.observe = meanHeight, s.obs_scale = 0.01, s.obs_name = "mean height of the spheres";
+    v.push_back(s);
+  }
+  {
+    AccScene s;
+    s.name = "mix";
+    const long n = quick ? 250 : 20000;
+    s.h0 = 1e-3, s.T = quick ? 0.03 : 0.02, s.ref_length = 0.005;
+    s.build = [n](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>& keep) {
+      (void)b;
+      keep = std::make_unique<dvi::bench::BulletScene>(dvi::bench::makeBulletScene(dvi::bench::makeMixSpec(n)));
+    };
+    s.observe = meanHeight, s.obs_scale = 0.005, s.obs_name = "mean height of the bodies";
+    v.push_back(s);
+  }
+  {
+    AccScene s;
+    s.name = "stack";
+    s.h0 = 1e-2, s.T = quick ? 0.5 : 2.0, s.ref_length = 0.1, s.bullet_scale = 1;
+    // scenes/stack.json: 10 boxes of 0.2 m, mass 1, friction 0.5, the top one 1000 kg, on a plane (friction 1).
+    s.build = [](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>&) {
+      b.add(new btStaticPlaneShape(btVector3(0, 1, 0), 0), 0, Vec3{0, 0, 0}, real(1.0));
+      btCollisionShape* box = b.own(new btBoxShape(btVector3(0.1f, 0.1f, 0.1f)));
+      for (int i = 0; i < 10; ++i) b.addShared(box, i == 9 ? 1000.0 : 1.0, Vec3{0, real(0.1 * 1.0002 + 0.2002 * i), 0}, real(0.5));
+    };
+    s.observe = [](const Runner& r, const std::vector<btRigidBody*>& b) { return r.pos(b.size() - 1); };
+    s.obs_scale = 0.1, s.obs_name = "position of the top box";
+    v.push_back(s);
+  }
+  return v;
+}
+
+// One run of a scene on one engine. `solver` empty: Bullet with `iterations` sequential-impulse iterations.
+Row runOne(const AccScene& sc, const std::string& engine, const std::string& solver, int iterations, double dt,
+           double tol, int threads, Vec3* obs_out) {
+  Row row;
+  row.scene = sc.name, row.engine = engine, row.solver = solver.empty() ? "bullet-si" : solver;
+  row.iterations = iterations, row.dt = dt;
+  row.steps = std::max(1, int(std::lround(sc.T / dt)));
+  BtBodies own;
+  std::unique_ptr<dvi::bench::BulletScene> keep;
+  sc.build(own, keep);
+  const std::vector<btRigidBody*>& bodies = keep ? keep->bodies : own.bodies;
+  std::unique_ptr<Runner> run;
+  OursRunner* ours = nullptr;
+  if (engine == "bullet") {
+    dvi::BulletPeerSettings bs;
+    bs.dt = real(dt);
+    bs.solver_iterations = iterations;
+    bs.length_scale = real(sc.bullet_scale);
+    run = std::make_unique<BulletRunner>(bodies, bs);
+  } else {
+    dvi::SystemConfig cfg;
+    cfg.dt = real(dt);
+    dvi::parseSolver(solver, cfg.solver);
+    cfg.solver_settings.max_iterations = iterations;
+    cfg.solver_settings.tolerance = real(tol);
+    cfg.threads = threads;
+    auto o = std::make_unique<OursRunner>(bodies, cfg, engine == "gpu");
+    ours = o.get();
+    run = std::move(o);
+  }
+  row.device = run->device();
+  double res_sum = 0, compl_sum = 0;
+  int compl_n = 0;
+  std::vector<Vec3> x_pre;
+  for (int s = 0; s < row.steps; ++s) {
+    if (ours) {
+      run->sync();
+      x_pre = ours->sys->bodies().pos;
+    }
+    run->step();
+    row.wall_s += run->last_step_s;
+    if (ours) {
+      dvi::System& sys = *ours->sys;
+      const dvi::StepStats& st = sys.lastStats();
+      res_sum += double(st.residual);
+      row.res_last = double(st.residual);
+      row.pen_rel = std::max(row.pen_rel, double(st.max_penetration) / sc.ref_length);
+      sys.syncToHost();
+      // Complementarity violation (header comment).
+      const dvi::ContactArrays& c = sys.contacts();
+      const dvi::BodyArrays& b = sys.bodies();
+      double gap = 0, mag = 0;
+      for (size_t k = 0; k < c.dist.size(); ++k) {
+        const size_t A = size_t(c.body_a[k]), B = size_t(c.body_b[k]);
+        const Vec3 rA = c.pa[k] - x_pre[A], rB = c.pb[k] - x_pre[B];
+        const Vec3 vrel = (b.vel[B] + dvi::cross(b.omega[B], rB)) - (b.vel[A] + dvi::cross(b.omega[A], rA));
+        const real bn = dvi::contactBias(c.dist[k], real(dt), sys.config().recovery_rel, c.size[k]);
+        const Vec3 G = sys.contactForce(k) * real(dt);
+        gap += std::fabs(double(dvi::dot(G, vrel + bn * c.normal[k])));
+        mag += double(dvi::length(G));
+      }
+      if (mag > 0) compl_sum += gap / mag, ++compl_n;
+    } else {
+      const auto* br = static_cast<BulletRunner*>(run.get());
+      row.pen_rel = std::max(row.pen_rel, double(br->peer->lastStats().max_penetration) / sc.ref_length);
+    }
+  }
+  if (ours) {
+    row.res_mean = res_sum / row.steps;
+    row.compl_mean = compl_n ? compl_sum / compl_n : 0;
+  }
+  run->sync();
+  const Vec3 o = sc.observe(*run, bodies);
+  if (obs_out) *obs_out = o;
+  row.obs = double(o.y);  // the height (pile, mix) or the top box's y (stack)
+  for (size_t i = 0; i < bodies.size(); ++i)
+    if (bodies[i]->getInvMass() > 0 && (!finite3(run->pos(i)) || !finite3(run->vel(i)))) row.status = "non-finite state";
+  return row;
+}
+
+// ---------- the goal: time to residual 1e-4, APGD against Jacobi, on the same CCP ----------
+
+struct GoalResult {
+  double seconds = 0, residual = 0;
+  int iterations = 0;
+  bool reached = false;
+  std::string error;
+};
+
+GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, int threads, int presteps) {
+  GoalResult g;
+  try {
+    dvi::bench::BulletScene scene = dvi::bench::makeBulletScene(dvi::bench::makePileSpec(n));
+    dvi::SystemConfig cfg;
+    cfg.dt = real(1e-3);
+    cfg.solver = dvi::SolverType::APGD;
+    cfg.solver_settings.max_iterations = 50;
+    cfg.threads = threads;
+    OursRunner run(scene.bodies, cfg, false);
+    for (int i = 0; i < presteps; ++i) run.step();
+    dvi::SystemConfig& c = run.sys->mutableConfig();
+    c.solver = solver;
+    c.solver_settings.max_iterations = cap;
+    c.solver_settings.tolerance = real(1e-4);
+    c.solver_settings.record_history = true;
+    c.warm_start = warm;
+    run.step();
+    const dvi::StepStats& st = run.sys->lastStats();
+    g.seconds = st.stage_seconds[size_t(dvi::StageType::Solve)];
+    g.iterations = st.iterations;
+    g.residual = double(st.residual);
+    g.reached = st.residual < real(1e-4);
+  } catch (const std::exception& e) {
+    g.error = e.what();
+  }
+  return g;
+}
+
+// ---------- outputs ----------
+
+const char* kCsvHeader =
+    "scene,engine,solver,sweep,iterations,dt_s,steps,wall_s,ms_per_step,residual_mean,residual_last,"
+    "max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status";
+
+std::string csvText(const std::vector<Row>& rows, const std::vector<double>& refs_obs, const std::vector<std::string>& ref_scene) {
+  std::ostringstream o;
+  o << kCsvHeader << "\n";
+  for (const Row& r : rows) {
+    double ref = NAN;
+    for (size_t i = 0; i < ref_scene.size(); ++i)
+      if (ref_scene[i] == r.scene) ref = refs_obs[i];
+    o << r.scene << "," << r.engine << "," << r.solver << "," << r.sweep << "," << r.iterations << "," << num(r.dt) << ","
+      << r.steps << "," << num(r.wall_s) << "," << num(1e3 * r.wall_s / std::max(1, r.steps)) << "," << num(r.res_mean)
+      << "," << num(r.res_last) << "," << num(r.pen_rel) << "," << num(r.compl_mean) << "," << num(r.obs) << ","
+      << num(ref) << "," << num(r.obs_err) << "," << csvField(r.device) << "," << csvField(r.status) << "\n";
+  }
+  return o.str();
+}
+
+int runAccuracy(const AccOptions& o) {
+  char* end = nullptr;
+  const long threads = std::strtol(o.threads.c_str(), &end, 10);
+  if (o.threads.empty() || *end || threads < 0 || threads > 4096)
+    throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
+  prepareOutDir(o.out, "accuracy.csv");
+  const std::string results_dir = o.record ? resultsDir() : std::string();
+  std::string gpu_name;
+  const bool have_gpu = dvi::gpuAvailable(&gpu_name);
+  const auto t_all = Clock::now();
+
+  const std::vector<int> iters = o.quick ? std::vector<int>{5, 20, 80} : std::vector<int>{5, 10, 25, 50, 100, 200};
+  const std::vector<double> dt_factors = o.quick ? std::vector<double>{2.0, 0.5} : std::vector<double>{2.0, 0.5, 0.25};
+  const int dt_iters = o.quick ? 20 : 50;
+  std::vector<std::string> engines = {"cpu"};
+  if (have_gpu) engines.push_back("gpu");
+  std::printf("bench accuracy%s: solvers jacobi, gs (CPU), apgd, bb on %s; Bullet's sequential impulse; iterations",
+              o.quick ? " --quick" : "", have_gpu ? ("cpu and gpu (" + gpu_name + ")").c_str() : "cpu (no GPU in this run)");
+  for (int i : iters) std::printf(" %d", i);
+  std::printf("; steps 2 h0 .. h0/4 at %d iterations\n", dt_iters);
+  std::printf("CES machine: not in this benchmark (src/ces/ces_run.h offers only runCesMachine, a whole run writing its "
+              "own outputs; no API returns per-step solver statistics or bin fractions to compare)\n");
+  std::fflush(stdout);
+
+  std::vector<Row> rows;
+  std::vector<double> ref_obs;
+  std::vector<std::string> ref_scene;
+  std::string cpu_device;
+  auto flush = [&] { writeFile(o.out + "/accuracy.csv", csvText(rows, ref_obs, ref_scene)); };
+  for (const AccScene& sc : makeScenes(o.quick)) {
+    // Reference: APGD, tight tolerance, h0/4, on the fastest backend we have.
+    Vec3 ref{0, 0, 0};
+    Row rr;
+    try {
+      rr = runOne(sc, have_gpu ? "gpu" : "cpu", "apgd", o.quick ? 300 : 500, sc.h0 / 4, 1e-7, int(threads), &ref);
+    } catch (const std::exception& e) {
+      rr.scene = sc.name, rr.status = std::string("error: ") + e.what();
+    }
+    rr.sweep = "reference";
+    rr.obs_err = 0;
+    rows.push_back(rr);
+    ref_obs.push_back(double(ref.y));
+    ref_scene.push_back(sc.name);
+    std::printf("%s: reference (APGD %d it, tol 1e-7, h = %g): %s = %.6g, %.2f s\n", sc.name.c_str(), rr.iterations,
+                rr.dt, sc.obs_name.c_str(), double(ref.y), rr.wall_s);
+    std::fflush(stdout);
+    auto attempt = [&](const std::string& engine, const std::string& solver, int it, double dt, const std::string& sweep) {
+      Row r;
+      Vec3 obs{0, 0, 0};
+      try {
+        r = runOne(sc, engine, solver, it, dt, 0, int(threads), &obs);
+        r.obs_err = double(dvi::length(obs - ref)) / sc.obs_scale;
+        if (engine == "cpu") cpu_device = r.device;
+      } catch (const dvi::SolverError& e) {
+        r.scene = sc.name, r.engine = engine, r.solver = solver, r.iterations = it, r.dt = dt;
+        r.status = std::string("SolverError: ") + e.what();
+      } catch (const std::exception& e) {
+        r.scene = sc.name, r.engine = engine, r.solver = solver.empty() ? "bullet-si" : solver, r.iterations = it, r.dt = dt;
+        r.status = std::string("error: ") + e.what();
+      }
+      r.sweep = sweep;
+      rows.push_back(r);
+      std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s  res %-10s pen %-10s compl %-10s obs err %s%s\n",
+                  sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s,
+                  num(r.res_mean, "%.3g").c_str(), num(r.pen_rel, "%.3g").c_str(), num(r.compl_mean, "%.3g").c_str(),
+                  num(r.obs_err, "%.3g").c_str(), r.status == "ok" ? "" : ("  [" + r.status + "]").c_str());
+      std::fflush(stdout);
+      flush();
+    };
+    for (const std::string& engine : engines)
+      for (const char* solver : {"jacobi", "gs", "apgd", "bb"}) {
+        if (engine == "gpu" && std::string(solver) == "gs") continue;  // Gauss-Seidel is CPU only
+        for (int it : iters) attempt(engine, solver, it, sc.h0, "iterations");
+        for (double f : dt_factors) attempt(engine, solver, dt_iters, sc.h0 * f, "dt");
+      }
+    for (int it : o.quick ? std::vector<int>{5, 10, 40} : std::vector<int>{5, 10, 25, 50, 100})
+      attempt("bullet", "", it, sc.h0, "iterations");
+    for (double f : dt_factors) attempt("bullet", "", 10, sc.h0 * f, "dt");
+  }
+
+  // The goal: APGD against Jacobi to residual 1e-4 on the pile's CCP.
+  const long goal_n = o.quick ? 2000 : 100000;
+  const int cap = o.quick ? 3000 : 5000;
+  std::ostringstream goal;
+  goal << "Goal (issue 6): time for the CCP solve to reach residual 1e-4 on the " << goal_n
+       << "-sphere pile, APGD vs Jacobi, the same CCP (5 settling steps, then one step per solver from the same state; "
+          "Solve-stage time, tolerance stop, Jacobi capped at "
+       << cap << " iterations):\n";
+  for (bool warm : {true, false}) {
+    const GoalResult a = timeToResidual(goal_n, dvi::SolverType::APGD, warm, cap, int(threads), 5);
+    const GoalResult j = timeToResidual(goal_n, dvi::SolverType::Jacobi, warm, cap, int(threads), 5);
+    char b[512];
+    if (!a.error.empty() || !j.error.empty()) {
+      goal << "  " << (warm ? "warm start" : "cold start") << ": error: " << a.error << " " << j.error << "\n";
+      continue;
+    }
+    const double ratio = a.seconds > 0 ? j.seconds / a.seconds : NAN;
+    std::snprintf(b, sizeof b,
+                  "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
+                  warm ? "warm start" : "cold start", a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached",
+                  j.iterations, j.seconds, j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
+                  !a.reached ? "APGD did not reach 1e-4" : ratio >= 10 ? "met" : (j.reached ? "missed" : "met (lower bound)"));
+    goal << b;
+  }
+  const std::string goal_text = goal.str();
+  const double total = std::chrono::duration<double>(Clock::now() - t_all).count();
+  flush();
+  std::printf("\n%s", goal_text.c_str());
+  std::printf("results: %s/accuracy.csv (%.1f s)\n", o.out.c_str(), total);
+  std::printf("%s\n", runPlot("plot_accuracy.py", o.out, "accuracy.png").c_str());
+  if (o.record) {
+    const std::string device = have_gpu ? gpu_name : cpu_device;
+    const std::string base = "accuracy_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
+    std::ostringstream md;
+    md << "# Accuracy against run time" << (o.quick ? " (--quick)" : "") << "\n\n"
+       << "Written by `dvisim bench accuracy --record` (apps/dvisim/bench_accuracy.cpp).\n\n- device: " << device
+       << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scenes: pile "
+       << (o.quick ? "400" : "100k") << " spheres r 1 cm; mix " << (o.quick ? "250" : "20k")
+       << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2\n\n"
+       << goal_text << "\nRows: " << base << ".csv (columns in apps/dvisim/bench_accuracy.cpp's header).\n";
+    for (const std::string& d : {results_dir, o.out}) {
+      writeFile(d + "/" + base + ".md", md.str());
+      writeFile(d + "/" + base + ".csv", csvText(rows, ref_obs, ref_scene));
+    }
+    std::printf("recorded: %s/%s.md and .csv\n", results_dir.c_str(), base.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+void registerBenchAccuracy(CLI::App& app) {
+  auto o = std::make_shared<AccOptions>();
+  CLI::App* cmd = benchCommand(app)->add_subcommand(
+      "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time");
+  cmd->add_option("--out", o->out, "Output directory (accuracy.csv, accuracy.png)")->required();
+  cmd->add_flag("--quick", o->quick, "Small scenes and a short sweep (CI smoke test)");
+  cmd->add_flag("--record", o->record, "Also write bench/results/accuracy_<device>_<date>.{md,csv}");
+  cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
+  addBenchRunner(cmd, [o] { return runAccuracy(*o); });
+}
