@@ -46,7 +46,7 @@ const char* defaultCesJson() {
     "duration_s": 2.0,
     "time_step_s": 0.0002,
     "seed": 1,
-    "solver": { "type": "apgd", "iterations": 30, "gyroscopic": false },
+    "solver": { "type": "apgd", "iterations": 30, "gyroscopic": true },
     "drum": { "diameter_mm": 320, "width_mm": 300, "rpm": 44.8, "drive": "auto", "mass_kg": 30 },
     "electrode": { "diameter_mm": 38, "distance_mm": 267, "angle_deg": 30, "voltage_kV": -35 },
     "field": { "model": "two_cylinder", "extra_electrodes": [] },
