@@ -28,6 +28,7 @@
 #include <omp.h>
 #endif
 
+#include "chrono_like/parse.h"
 #include "bench_common.h"
 #include "ces/ces_run.h"
 #include "chrono_like/bullet_import.h"
@@ -40,6 +41,8 @@
 namespace {
 
 using dvi::InputError;
+using dvi::parseInt;
+using dvi::parseReal;
 using Clock = std::chrono::steady_clock;
 
 struct Options {
@@ -60,21 +63,6 @@ std::string oneLine(std::string s) {
   return s;
 }
 
-double parseReal(const std::string& opt, const std::string& v) {
-  char* end = nullptr;
-  const double x = std::strtod(v.c_str(), &end);
-  if (v.empty() || *end || !std::isfinite(x)) throw InputError(opt + ": expected a finite number, got '" + v + "'");
-  return x;
-}
-
-long long parseInt(const std::string& opt, const std::string& v, long long lo, long long hi) {
-  char* end = nullptr;
-  const long long x = std::strtoll(v.c_str(), &end, 10);
-  if (v.empty() || *end) throw InputError(opt + ": expected an integer, got '" + v + "'");
-  if (x < lo || x > hi)
-    throw InputError(opt + ": must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v);
-  return x;
-}
 
 void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
   std::string list;

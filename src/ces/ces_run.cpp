@@ -1,6 +1,8 @@
 // `dvisim run` for a CES machine (ces_run.h).
 #include "ces/ces_run.h"
 
+#include "chrono_like/parse.h"
+
 #include <unistd.h>
 
 #include <chrono>
@@ -54,20 +56,6 @@ json parseJson(const std::string& text, const std::string& origin) {
   }
 }
 
-double parseReal(const std::string& opt, const std::string& v) {
-  char* end = nullptr;
-  const double x = std::strtod(v.c_str(), &end);
-  if (v.empty() || *end || !std::isfinite(x)) throw InputError(opt + ": expected a finite number, got '" + v + "'");
-  return x;
-}
-
-long long parseInt(const std::string& opt, const std::string& v, long long lo, long long hi) {
-  char* end = nullptr;
-  const long long x = std::strtoll(v.c_str(), &end, 10);
-  if (v.empty() || *end) throw InputError(opt + ": expected an integer, got '" + v + "'");
-  if (x < lo || x > hi) throw InputError(opt + ": must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v);
-  return x;
-}
 
 void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
   std::string list;

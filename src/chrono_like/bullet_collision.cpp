@@ -45,6 +45,7 @@
 #include <string>
 
 #include "broadphase.h"
+#include "bullet_convert.h"
 #include "collision.h"
 #include "errors.h"
 #include "system.h"
@@ -56,11 +57,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-btVector3 toBt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
-Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
-btTransform toBt(const Pose& p) {
-  return btTransform(btQuaternion(btScalar(p.q.x), btScalar(p.q.y), btScalar(p.q.z), btScalar(p.q.w)), toBt(p.p));
-}
 
 
 // Characteristic length of a shape: Shape::size when set, else the smallest half-dimension; a plane has

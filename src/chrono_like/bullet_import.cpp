@@ -9,6 +9,7 @@
 // Axis-symmetric shapes are canonical along +Y here; Bullet's X and Z variants become a child pose
 // rotated so that the record's +Y maps onto Bullet's up axis (a cone keeps its apex at +height/2).
 #include "bullet_import.h"
+#include "bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
@@ -20,11 +21,6 @@ namespace dvi {
 
 namespace {
 
-Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
-btVector3 toBt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
-Quat fromBt(const btQuaternion& q) { return Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())}; }
-btQuaternion toBt(Quat q) { return btQuaternion(btScalar(q.x), btScalar(q.y), btScalar(q.z), btScalar(q.w)); }
-Pose fromBt(const btTransform& t) { return Pose{fromBt(t.getOrigin()), fromBt(t.getRotation())}; }
 
 // Rotation taking the canonical axis +Y onto Bullet's up axis (0 = X, 1 = Y, 2 = Z).
 Quat upAxisRotation(int up) {

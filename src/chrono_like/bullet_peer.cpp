@@ -10,6 +10,7 @@
 // (0.04, or btBoxShape's/btCylinderShape's "safe margin" for small boxes), i.e. exactly what a user who
 // built the scene in Bullet units would run: that is the point of the peer.
 #include "bullet_peer.h"
+#include "bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 
@@ -23,8 +24,6 @@ namespace dvi {
 
 namespace {
 
-btVector3 toBt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
-Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
 
 }  // namespace
 

@@ -1,5 +1,6 @@
 // The Bullet drop-in world (bullet_world.h).
 #include "bullet_world.h"
+#include "bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 
@@ -16,10 +17,6 @@ namespace dvi {
 
 namespace {
 
-Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
-btVector3 toBt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
-Quat fromBt(const btQuaternion& q) { return Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())}; }
-btQuaternion toBt(Quat q) { return btQuaternion(btScalar(q.x), btScalar(q.y), btScalar(q.z), btScalar(q.w)); }
 
 bool sameTransform(const btTransform& a, const btTransform& b) {
   return a.getOrigin() == b.getOrigin() && a.getBasis()[0] == b.getBasis()[0] && a.getBasis()[1] == b.getBasis()[1] &&

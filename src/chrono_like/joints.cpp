@@ -1,5 +1,6 @@
 // Bullet constraints as DVI constraint rows (joints.h).
 #include "joints.h"
+#include "bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
@@ -17,9 +18,6 @@ namespace {
 
 constexpr real kInf = std::numeric_limits<real>::infinity();
 
-Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
-Quat fromBt(const btQuaternion& q) { return Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())}; }
-Pose fromBt(const btTransform& t) { return Pose{fromBt(t.getOrigin()), normalized(fromBt(t.getRotation()))}; }
 
 Vec3 unitAxis(int k) { return k == 0 ? Vec3{1, 0, 0} : (k == 1 ? Vec3{0, 1, 0} : Vec3{0, 0, 1}); }
 real comp(Vec3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }

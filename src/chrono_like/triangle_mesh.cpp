@@ -1,5 +1,6 @@
 // Static triangle geometry from Bullet (triangle_mesh.h).
 #include "triangle_mesh.h"
+#include "bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btConcaveShape.h>
@@ -13,9 +14,6 @@ namespace dvi {
 
 namespace {
 
-Vec3 fromBt(const btVector3& v) { return Vec3{real(v.x()), real(v.y()), real(v.z())}; }
-Quat fromBt(const btQuaternion& q) { return Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())}; }
-Pose fromBt(const btTransform& t) { return Pose{fromBt(t.getOrigin()), fromBt(t.getRotation())}; }
 
 bool isTriangleShape(int type) {
   return type == TRIANGLE_MESH_SHAPE_PROXYTYPE || type == SCALED_TRIANGLE_MESH_SHAPE_PROXYTYPE ||
