@@ -253,10 +253,13 @@ a1.set_xlabel("s1 (mm)")
 a1.set_ylabel("s2 (mm)")
 a1.set_title("splitter map (%d x %d positions)" % (n, n), fontsize=9)
 a1.legend(loc="lower right")
+# the grid positions nearest the best setting (the CSV and the summary round differently)
+s1b = min({float(c["s1_mm"]) for c in cells}, key=lambda v: abs(v - best["s1_mm"]))
+s2b = min({float(c["s2_mm"]) for c in cells}, key=lambda v: abs(v - best["s2_mm"]))
 s2_line = sorted((float(c["s2_mm"]), float(c["grade_metal"]), float(c["recovery_metal"])) for c in cells
-                 if abs(float(c["s1_mm"]) - best["s1_mm"]) < 1e-6)
+                 if float(c["s1_mm"]) == s1b)
 s1_line = sorted((float(c["s1_mm"]), float(c["grade_plastic"]), float(c["recovery_plastic"])) for c in cells
-                 if abs(float(c["s2_mm"]) - best["s2_mm"]) < 1e-6)
+                 if float(c["s2_mm"]) == s2b)
 if s2_line:
     a2.plot([r[0] for r in s2_line], [r[1] for r in s2_line], color=colors["metal"], label="metal grade (conductor bin) vs s2")
     a2.plot([r[0] for r in s2_line], [r[2] for r in s2_line], color=colors["metal"], ls="--", label="metal recovery vs s2")
