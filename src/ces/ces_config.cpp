@@ -1,6 +1,8 @@
 // CES configuration: strict JSON parsing (see ces_config.h) and the embedded default machine.
 #include "ces/ces_config.h"
 
+#include "chrono_like/json_check.h"
+
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -87,95 +89,9 @@ bool isCesDocument(const json& doc) { return doc.is_object() && doc.contains("ce
 
 namespace {
 
-std::string describe(const json& v) {
-  std::string s = v.dump();
-  return s.size() > 48 ? s.substr(0, 45) + "..." : s;
-}
-
-std::string num(double x) {
-  std::ostringstream o;
-  o.precision(10);
-  o << x;
-  return o.str();
-}
-
-// "<origin>: ces.<path>: <what>", one line.
-struct Checker {
-  std::string origin;
-  [[noreturn]] void fail(const std::string& path, const std::string& what) const {
-    throw InputError(origin + ": " + path + ": " + what);
-  }
-  const json& object(const json& o, const std::string& path, std::initializer_list<const char*> allowed) const {
-    if (!o.is_object()) fail(path, "expected an object, got " + describe(o));
-    for (auto it = o.begin(); it != o.end(); ++it) {
-      bool ok = false;
-      for (const char* a : allowed) ok = ok || it.key() == a;
-      if (!ok) {
-        std::string list;
-        for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
-        fail(path + "." + it.key(), "unknown key (allowed: " + list + ")");
-      }
-    }
-    return o;
-  }
-  double number(const json& v, const std::string& path) const {
-    if (v.is_string() && (v.get<std::string>() == "nan" || v.get<std::string>() == "NaN"))
-      fail(path, "non-finite number " + describe(v));
-    if (!v.is_number()) fail(path, "expected a finite number, got " + describe(v));
-    const double x = v.get<double>();
-    if (!std::isfinite(x)) fail(path, "non-finite number " + describe(v));
-    return x;
-  }
-  double range(const json& v, const std::string& path, double lo, double hi, bool lo_open = false) const {
-    const double x = number(v, path);
-    if (lo_open ? !(x > lo) : !(x >= lo)) fail(path, std::string("must be ") + (lo_open ? "> " : ">= ") + num(lo) + ", got " + num(x));
-    if (!(x <= hi)) fail(path, "must be <= " + num(hi) + ", got " + num(x));
-    return x;
-  }
-  double positive(const json& v, const std::string& path) const {
-    return range(v, path, 0, std::numeric_limits<double>::max(), true);
-  }
-  double nonNegative(const json& v, const std::string& path) const {
-    return range(v, path, 0, std::numeric_limits<double>::max());
-  }
-  // A number >= 0 or the string "inf".
-  double nonNegativeOrInf(const json& v, const std::string& path) const {
-    if (v.is_string() && v.get<std::string>() == "inf") return std::numeric_limits<double>::infinity();
-    if (v.is_string()) fail(path, "expected a number >= 0 or \"inf\", got " + describe(v));
-    return nonNegative(v, path);
-  }
-  int64_t integer(const json& v, const std::string& path, int64_t lo, int64_t hi) const {
-    const double x = number(v, path);
-    if (x != std::floor(x)) fail(path, "expected an integer, got " + describe(v));
-    if (x < double(lo) || x > double(hi))
-      fail(path, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + describe(v));
-    return int64_t(x);
-  }
-  bool boolean(const json& v, const std::string& path) const {
-    if (!v.is_boolean()) fail(path, "expected true or false, got " + describe(v));
-    return v.get<bool>();
-  }
-  std::string oneOf(const json& v, const std::string& path, std::initializer_list<const char*> choices) const {
-    std::string list;
-    for (const char* c : choices) list += std::string(list.empty() ? "" : "|") + c;
-    if (!v.is_string()) fail(path, "expected one of " + list + ", got " + describe(v));
-    const std::string s = v.get<std::string>();
-    for (const char* c : choices)
-      if (s == c) return s;
-    fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
-  }
-  std::string string(const json& v, const std::string& path) const {
-    if (!v.is_string()) fail(path, "expected a string, got " + describe(v));
-    return v.get<std::string>();
-  }
-  // [lo, hi] with 0 < lo <= hi (or lo >= 0 when allow_zero).
-  void interval(const json& v, const std::string& path, double& lo, double& hi, bool allow_zero = false) const {
-    if (!v.is_array() || v.size() != 2) fail(path, "expected [min, max], got " + describe(v));
-    lo = allow_zero ? nonNegative(v[0], path + "[0]") : positive(v[0], path + "[0]");
-    hi = allow_zero ? nonNegative(v[1], path + "[1]") : positive(v[1], path + "[1]");
-    if (hi < lo) fail(path, "max " + num(hi) + " is below min " + num(lo));
-  }
-};
+using jsoncheck::describe;
+using jsoncheck::num;
+using Checker = jsoncheck::JsonCheck;
 
 constexpr double kMm = 1e-3;
 constexpr double kDeg = 3.14159265358979323846 / 180.0;

@@ -1,0 +1,174 @@
+// Validation of JSON documents (scenes, the CES machine config): every problem is one InputError line
+// "<origin>: <key path>: <what>, got <value>" (exit code 2 in the CLI). Shared by scene.cpp and
+// ces/ces_config.cpp.
+#pragma once
+
+#include <cmath>
+#include <initializer_list>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "errors.h"
+#include "math.h"
+
+namespace dvi {
+namespace jsoncheck {
+
+using nlohmann::json;
+
+inline std::string describe(const json& v) {
+  std::string s = v.dump();
+  if (s.size() > 48) s = s.substr(0, 45) + "...";
+  return s;
+}
+
+inline const char* typeName(const json& v) {
+  if (v.is_null()) return "null";
+  if (v.is_boolean()) return "boolean";
+  if (v.is_number()) return "number";
+  if (v.is_string()) return "string";
+  if (v.is_array()) return "array";
+  return "object";
+}
+
+inline std::string num(double x) {
+  std::ostringstream o;
+  o.precision(10);
+  o << x;
+  return o.str();
+}
+
+// Reports problems as "<origin>: <path>: <what>" (one line, an InputError: exit code 2 in the CLI).
+struct JsonCheck {
+  std::string origin;
+
+  [[noreturn]] void fail(const std::string& path, const std::string& what) const {
+    throw InputError(origin + ": " + (path.empty() ? std::string() : path + ": ") + what);
+  }
+
+  const json& object(const json& v, const std::string& path) const {
+    if (!v.is_object()) fail(path, std::string("expected an object, got ") + typeName(v) + " " + describe(v));
+    return v;
+  }
+  const json& array(const json& v, const std::string& path) const {
+    if (!v.is_array()) fail(path, std::string("expected an array, got ") + typeName(v) + " " + describe(v));
+    return v;
+  }
+  void keys(const json& o, const std::string& path, std::initializer_list<const char*> allowed) const {
+    for (auto it = o.begin(); it != o.end(); ++it) {
+      bool ok = false;
+      for (const char* a : allowed) ok = ok || it.key() == a;
+      if (!ok) {
+        std::string list;
+        for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
+        fail(path.empty() ? it.key() : path + "." + it.key(), "unknown key (allowed: " + list + ")");
+      }
+    }
+  }
+  double number(const json& v, const std::string& path) const {
+    if (v.is_string() && (v.get<std::string>() == "nan" || v.get<std::string>() == "NaN"))
+      fail(path, "non-finite number " + describe(v));
+    if (!v.is_number())
+      fail(path, std::string("expected a finite number, got ") + typeName(v) + " " + describe(v));
+    const double x = v.get<double>();
+    if (!std::isfinite(x)) fail(path, "non-finite number " + describe(v));
+    return x;
+  }
+  double positive(const json& v, const std::string& path) const {
+    const double x = number(v, path);
+    if (!(x > 0)) fail(path, "must be > 0, got " + num(x));
+    return x;
+  }
+  double nonNegative(const json& v, const std::string& path) const {
+    const double x = number(v, path);
+    if (x < 0) fail(path, "must be >= 0, got " + num(x));
+    return x;
+  }
+  int64_t integer(const json& v, const std::string& path, int64_t lo, int64_t hi) const {
+    const double x = number(v, path);
+    if (x != std::floor(x)) fail(path, "expected an integer, got " + describe(v));
+    if (x < double(lo) || x > double(hi))
+      fail(path, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + describe(v));
+    return int64_t(x);
+  }
+  bool boolean(const json& v, const std::string& path) const {
+    if (!v.is_boolean()) fail(path, std::string("expected true or false, got ") + typeName(v) + " " + describe(v));
+    return v.get<bool>();
+  }
+  std::string string(const json& v, const std::string& path) const {
+    if (!v.is_string()) fail(path, std::string("expected a string, got ") + typeName(v) + " " + describe(v));
+    return v.get<std::string>();
+  }
+  std::string oneOf(const json& v, const std::string& path, std::initializer_list<const char*> choices) const {
+    const std::string s = string(v, path);
+    std::string list;
+    for (const char* c : choices) {
+      if (s == c) return s;
+      list += std::string(list.empty() ? "" : "|") + c;
+    }
+    fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
+  }
+  Vec3 vec3(const json& v, const std::string& path) const {
+    if (!v.is_array() || v.size() != 3)
+      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    return Vec3{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]"))};
+  }
+  Vec3 positiveVec3(const json& v, const std::string& path) const {
+    Vec3 x = vec3(v, path);
+    const real c[3] = {x.x, x.y, x.z};
+    for (int i = 0; i < 3; ++i)
+      if (!(c[i] > 0)) fail(path + "[" + std::to_string(i) + "]", "must be > 0, got " + num(c[i]));
+    return x;
+  }
+  Quat rotation(const json& v, const std::string& path) const {
+    if (v.is_array()) {
+      if (v.size() != 4) fail(path, "expected a quaternion [w, x, y, z] or {axis, angle_deg}, got " + describe(v));
+      Quat q{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]")),
+             real(number(v[3], path + "[3]"))};
+      const real n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+      if (!(n > 0) || !std::isfinite(n)) fail(path, "quaternion has zero length");
+      return normalized(q);
+    }
+    if (v.is_object()) {
+      keys(v, path, {"axis", "angle_deg", "angle"});
+      if (!v.contains("axis")) fail(path + ".axis", "missing");
+      const Vec3 axis = vec3(v["axis"], path + ".axis");
+      if (!(length(axis) > 0)) fail(path + ".axis", "has zero length");
+      if (v.contains("angle_deg") == v.contains("angle")) fail(path, "give exactly one of angle_deg, angle (radians)");
+      const real angle = v.contains("angle") ? real(number(v["angle"], path + ".angle"))
+                                             : real(number(v["angle_deg"], path + ".angle_deg") * M_PI / 180.0);
+      return quatFromAxisAngle(axis, angle);
+    }
+    fail(path, std::string("expected a quaternion [w, x, y, z] or {axis, angle_deg}, got ") + describe(v));
+  }
+  // An object whose keys are all in `allowed` (unknown keys are errors).
+  const json& object(const json& o, const std::string& path, std::initializer_list<const char*> allowed) const {
+    object(o, path);
+    keys(o, path, allowed);
+    return o;
+  }
+  double range(const json& v, const std::string& path, double lo, double hi, bool lo_open = false) const {
+    const double x = number(v, path);
+    if (lo_open ? !(x > lo) : !(x >= lo)) fail(path, std::string("must be ") + (lo_open ? "> " : ">= ") + num(lo) + ", got " + num(x));
+    if (!(x <= hi)) fail(path, "must be <= " + num(hi) + ", got " + num(x));
+    return x;
+  }
+  // A number >= 0 or the string "inf".
+  double nonNegativeOrInf(const json& v, const std::string& path) const {
+    if (v.is_string() && v.get<std::string>() == "inf") return std::numeric_limits<double>::infinity();
+    if (v.is_string()) fail(path, "expected a number >= 0 or \"inf\", got " + describe(v));
+    return nonNegative(v, path);
+  }
+  // [lo, hi] with 0 < lo <= hi (or lo >= 0 when allow_zero).
+  void interval(const json& v, const std::string& path, double& lo, double& hi, bool allow_zero = false) const {
+    if (!v.is_array() || v.size() != 2) fail(path, "expected [min, max], got " + describe(v));
+    lo = allow_zero ? nonNegative(v[0], path + "[0]") : positive(v[0], path + "[0]");
+    hi = allow_zero ? nonNegative(v[1], path + "[1]") : positive(v[1], path + "[1]");
+    if (hi < lo) fail(path, "max " + num(hi) + " is below min " + num(lo));
+  }
+};
+
+}  // namespace jsoncheck
+}  // namespace dvi
