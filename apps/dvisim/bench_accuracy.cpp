@@ -44,7 +44,7 @@
 #include "chrono_like/solver.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"
-#include "stability/bench_util.h"
+#include "bench_util.h"
 
 namespace {
 

@@ -43,6 +43,7 @@
 #endif
 
 #include "bench_common.h"
+#include "bench_util.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/gpu_factory.h"
 #include "chrono_like/system.h"
@@ -55,6 +56,17 @@ double measureCopyBandwidth(size_t bytes);  // src/gpu/gpu_bench_support.cu
 #endif
 
 namespace {
+
+using dvi::benchutil::commitId;
+using dvi::benchutil::csvField;
+using dvi::benchutil::exeDir;
+using dvi::benchutil::shell;
+using dvi::benchutil::shellQuote;
+using dvi::benchutil::slug;
+using dvi::benchutil::sourceDir;
+using dvi::benchutil::trim;
+using dvi::benchutil::utcNow;
+using dvi::benchutil::writeFile;
 
 using dvi::InputError;
 using Clock = std::chrono::steady_clock;
@@ -85,13 +97,6 @@ struct Row {
 
 // ---------- small helpers ----------
 
-std::string trim(std::string s) {
-  while (!s.empty() && std::isspace((unsigned char)s.back())) s.pop_back();
-  size_t i = 0;
-  while (i < s.size() && std::isspace((unsigned char)s[i])) ++i;
-  return s.substr(i);
-}
-
 long parseCount(const std::string& opt, const std::string& tok_in) {
   const std::string tok = trim(tok_in);
   const std::string err = opt + ": expected sizes like 10k,100k,1M (integers >= 1, suffix k or M), got '" + tok_in + "'";
@@ -115,76 +120,11 @@ std::string countLabel(long n) {
   return std::to_string(n);
 }
 
-std::string shell(const std::string& cmd) {
-  std::string out;
-  if (FILE* f = popen(cmd.c_str(), "r")) {
-    char buf[256];
-    while (fgets(buf, sizeof buf, f)) out += buf;
-    pclose(f);
-  }
-  return trim(out);
-}
-
-std::string shellQuote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::string csvField(std::string s) {
-  for (char& c : s)
-    if (c == ',' || c == '\n' || c == '"') c = ';';
-  return s;
-}
-
 std::string num(double v, const char* fmt = "%.6g") {
   if (v < 0 || !std::isfinite(v)) return "";
   char b[64];
   std::snprintf(b, sizeof b, fmt, v);
   return b;
-}
-
-std::string slug(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (std::isalnum((unsigned char)c)) o += char(std::tolower((unsigned char)c));
-    else if (!o.empty() && o.back() != '-') o += '-';
-  }
-  while (!o.empty() && o.back() == '-') o.pop_back();
-  if (o.size() > 48) o.resize(48);
-  return o.empty() ? "unknown" : o;
-}
-
-std::string utcNow(const char* fmt) {
-  std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[64];
-  std::strftime(b, sizeof b, fmt, &tm);
-  return b;
-}
-
-std::string sourceDir() {
-#ifdef DVISIM_SOURCE_DIR
-  if (fs::is_directory(DVISIM_SOURCE_DIR)) return DVISIM_SOURCE_DIR;
-#endif
-  return "";
-}
-
-std::string exeDir() {
-  std::error_code ec;
-  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? std::string() : p.parent_path().string();
-}
-
-std::string commitId() {
-  if (const char* c = std::getenv("DVISIM_COMMIT"); c && *c) return c;
-  const std::string dir = sourceDir().empty() ? "." : sourceDir();
-  std::string head = shell("git -C " + shellQuote(dir) + " rev-parse HEAD 2>/dev/null");
-  if (head.empty()) return "unknown";
-  if (!shell("git -C " + shellQuote(dir) + " status --porcelain --untracked-files=no 2>/dev/null").empty())
-    head += " (working tree had uncommitted changes)";
-  return head;
 }
 
 // Host copy bandwidth (read + write), a parallel memcpy over the threads the CPU backend uses; median of 5.
@@ -513,12 +453,6 @@ std::string makePlot(const std::string& dir) {
                           shellQuote(dir + "/plot_scaling.log") + " 2>&1";
   if (std::system(cmd.c_str()) != 0) return "scaling.png not written: plot_scaling.py failed (see " + dir + "/plot_scaling.log)";
   return "plot: " + dir + "/scaling.png";
-}
-
-void writeFile(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::binary);
-  f << text;
-  if (!f) throw std::runtime_error("cannot write " + path);
 }
 
 std::vector<std::string> splitList(const std::vector<std::string>& in) {

@@ -36,7 +36,7 @@
 #include "chrono_like/gpu_factory.h"
 #include "chrono_like/solver.h"
 #include "chrono_like/system.h"
-#include "stability/bench_util.h"
+#include "bench_util.h"
 
 namespace {
 
