@@ -157,39 +157,11 @@ void applyCesOverride(json& doc, const std::string& assignment) {
   const std::string text = assignment.substr(eq + 1);
   const std::string shown = key;
   if (key.rfind("ces.", 0) == 0) key = key.substr(4);
-  json value;
-  try {
-    value = json::parse(text);
-  } catch (const json::exception&) {
-    value = text;  // a bare word is a string (e.g. field.model=csm)
-  }
   if (!doc.contains("ces") || !doc["ces"].is_object()) throw InputError("--set " + shown + ": the scene has no ces object");
-  json* cur = &doc["ces"];
-  std::stringstream ss(key);
-  std::vector<std::string> parts;
-  for (std::string p; std::getline(ss, p, '.');) {
-    if (p.empty()) throw InputError("--set " + shown + ": empty key component");
-    parts.push_back(p);
-  }
-  for (size_t i = 0; i < parts.size(); ++i) {
-    const std::string& p = parts[i];
-    const bool last = i + 1 == parts.size();
-    if (cur->is_array()) {
-      char* end = nullptr;
-      const long idx = std::strtol(p.c_str(), &end, 10);
-      if (*end || idx < 0 || size_t(idx) >= cur->size())
-        throw InputError("--set " + shown + ": no element '" + p + "' (array of " + std::to_string(cur->size()) + ")");
-      cur = &(*cur)[size_t(idx)];
-    } else if (cur->is_object()) {
-      // A missing intermediate object is created (its keys are then checked by the parser); a missing
-      // leaf is added and checked the same way, so an unknown key is still an error.
-      if (!cur->contains(p) && !last) (*cur)[p] = json::object();
-      cur = &(*cur)[p];
-    } else {
-      throw InputError("--set " + shown + ": '" + parts[i - 1] + "' is not an object or array");
-    }
-  }
-  *cur = value;
+  // A missing intermediate object is created (its keys are then checked by the parser); a missing leaf
+  // is added and checked the same way, so an unknown key is still an error.
+  jsoncheck::setByPath(doc["ces"], key, shown, jsoncheck::parseSetValue(text),
+                       [](size_t, const std::string&) { return true; });
 }
 
 CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, const std::string& origin) {

@@ -8,7 +8,9 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "errors.h"
 #include "math.h"
@@ -169,6 +171,50 @@ struct JsonCheck {
     if (hi < lo) fail(path, "max " + num(hi) + " is below min " + num(lo));
   }
 };
+
+
+// --set KEY=VALUE: VALUE as JSON, or as a string when it does not parse (a bare word: settings.solver=gs).
+inline json parseSetValue(const std::string& text) {
+  try {
+    return json::parse(text);
+  } catch (const json::exception&) {
+    return json(text);
+  }
+}
+
+// Assigns value at the dotted path `key` below root (array elements by index). A missing intermediate
+// object is created where create(depth, name) allows it, else an error; a missing leaf is added (the
+// document's parser then rejects unknown keys). Errors name the key as `shown`.
+template <class MayCreate>
+void setByPath(json& root, const std::string& key, const std::string& shown, json value, MayCreate create) {
+  std::vector<std::string> parts;
+  std::stringstream ss(key);
+  for (std::string p; std::getline(ss, p, '.');) {
+    if (p.empty()) throw InputError("--set " + shown + ": empty key component");
+    parts.push_back(p);
+  }
+  json* cur = &root;
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const std::string& p = parts[i];
+    const bool last = i + 1 == parts.size();
+    if (cur->is_array()) {
+      char* end = nullptr;
+      const long idx = std::strtol(p.c_str(), &end, 10);
+      if (*end || idx < 0 || size_t(idx) >= cur->size())
+        throw InputError("--set " + shown + ": no element '" + p + "' (array of " + std::to_string(cur->size()) + ")");
+      cur = &(*cur)[size_t(idx)];
+    } else if (cur->is_object()) {
+      if (!cur->contains(p) && !last) {
+        if (!create(i, p)) throw InputError("--set " + shown + ": unknown key '" + p + "'");
+        (*cur)[p] = json::object();
+      }
+      cur = &(*cur)[p];
+    } else {
+      throw InputError("--set " + shown + ": '" + parts[i - 1] + "' is not an object or array");
+    }
+  }
+  *cur = std::move(value);
+}
 
 }  // namespace jsoncheck
 }  // namespace dvi

@@ -174,39 +174,9 @@ void applyOverride(json& doc, const std::string& assignment) {
   if (eq == std::string::npos || eq == 0)
     throw InputError("--set " + assignment + ": expected KEY=VALUE (e.g. settings.dt=1e-4)");
   const std::string key = assignment.substr(0, eq), text = assignment.substr(eq + 1);
-  json value;
-  try {
-    value = json::parse(text);
-  } catch (const json::exception&) {
-    value = text;  // a bare word is a string (e.g. settings.solver=gs)
-  }
-  std::vector<std::string> parts;
-  std::stringstream ss(key);
-  for (std::string p; std::getline(ss, p, '.');) {
-    if (p.empty()) throw InputError("--set " + key + ": empty key component");
-    parts.push_back(p);
-  }
-  json* cur = &doc;
-  for (size_t i = 0; i < parts.size(); ++i) {
-    const std::string& p = parts[i];
-    const bool last = i + 1 == parts.size();
-    if (cur->is_array()) {
-      char* end = nullptr;
-      const long idx = std::strtol(p.c_str(), &end, 10);
-      if (*end || idx < 0 || size_t(idx) >= cur->size())
-        throw InputError("--set " + key + ": no element '" + p + "' (array of " + std::to_string(cur->size()) + ")");
-      cur = &(*cur)[size_t(idx)];
-    } else if (cur->is_object()) {
-      if (!cur->contains(p)) {
-        if (!last && i == 0 && p == "settings") (*cur)[p] = json::object();
-        else if (!last) throw InputError("--set " + key + ": unknown key '" + p + "'");
-      }
-      cur = &(*cur)[p];
-    } else {
-      throw InputError("--set " + key + ": '" + parts[i - 1] + "' is not an object or array");
-    }
-  }
-  *cur = value;
+  // only the settings object may be created (a .bullet scene's overrides start from an empty document)
+  jsoncheck::setByPath(doc, key, key, jsoncheck::parseSetValue(text),
+                       [](size_t depth, const std::string& name) { return depth == 0 && name == "settings"; });
   // steps and time are alternatives: setting one drops the other.
   if (key == "settings.steps" && doc["settings"].contains("time")) doc["settings"].erase("time");
   if (key == "settings.time" && doc["settings"].contains("steps")) doc["settings"].erase("steps");
