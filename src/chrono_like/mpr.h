@@ -48,6 +48,9 @@ constexpr int kMprMaxIterations = 64;  // per phase, per pass
 #ifndef DVI_MPR_PASSES
 #define DVI_MPR_PASSES 3
 #endif
+#ifndef DVI_MPR_DEEP
+#define DVI_MPR_DEEP 0.02
+#endif
 #ifndef DVI_MPR_TAU
 #define DVI_MPR_TAU 0.25
 #endif
@@ -117,7 +120,10 @@ struct MprResult {
 
 // One MPR pass with interior point v0 of M. Returns false when the origin is found outside M.
 DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* hull_points, MprResult& res) {
-  const real rel_tol = sizeof(real) == 8 ? real(1e-9) : real(1e-5);
+#ifndef DVI_MPR_REL_TOL
+#define DVI_MPR_REL_TOL 1e-7
+#endif
+  const real rel_tol = sizeof(real) == 8 ? real(DVI_MPR_REL_TOL) : real(1e-5);
   MprVert V1, V2, V3, V4;
   // Phase 1: portal discovery.
   mprSupportM(A, B, -v0, hull_points, V1);
@@ -242,13 +248,16 @@ DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose
   MprResult best;
   if (!mprPass(A, B, v0, hull_points, best)) return 0;
   mprRefine(A, B, hull_points, best);
+  // Shallow contacts (penetration of the true shapes below DVI_MPR_DEEP x the smaller size) keep MPR's fixed
+  // point: it is the nearest face of M there, and the candidate restarts below cost ~10x the first pass.
+  const bool deep = best.depth - A.env > real(DVI_MPR_DEEP) * std::fmin(a.size, b.size);
   // Global candidates for the normal (MPR's fixed point holds the origin's projection, not necessarily the
   // nearest face of M, most of all for deep penetrations): face normals (box faces, cylinder caps, cone base),
   // side normals of cylinders and cones toward the other shape, cross products of the edge and axis
   // directions, the centre line, and for hulls (faces not stored) the frame axes. Each is evaluated exactly
   // by h(n); a face normal that beats MPR is kept (with MPR restarted along it), and MPR is restarted from the
   // two best candidates of all.
-  {
+  if (deep) {
     Vec3 cand[40];
     int nc = 0, nface = 0;
     Vec3 ax[2][3];
