@@ -229,3 +229,39 @@ TEST_CASE("a torque-free tumbling body: energy never grows, principal spins are 
   CHECK(w.z == Approx(30).epsilon(1e-12));
   CHECK(std::fabs(w.x) + std::fabs(w.y) < 1e-12);
 }
+
+// Speculative contacts: a 1 cm sphere at 10, 30 and 100 m/s toward a fixed 2 mm wall, h = 1e-3 s, so it moves
+// 1 to 10 sphere diameters per step. Without speculative contacts it ends in or beyond the wall (the check
+// that the test can fail); with them it must stop on the near side (the plastic DVI impact leaves it at rest against
+// the wall: its centre ends within the envelope of x = wall face - r) and never overlap the wall deeply.
+TEST_CASE("speculative contacts: fast spheres do not tunnel through a thin wall", "[physics]") {
+  const real r = real(0.005), t = real(0.001);  // sphere radius, wall half thickness; wall face at x = -t
+  for (real speed : {real(10), real(30), real(100)}) {
+    for (bool speculative : {false, true}) {
+      SystemConfig cfg;
+      cfg.gravity = Vec3{0, 0, 0};
+      cfg.speculative = speculative;
+      System sys(cfg);
+      BodyDesc wall = box(Vec3{t, real(0.05), real(0.05)}, 0, Vec3{0, 0, 0}, real(0.5));
+      wall.flags = kBodyFixed;
+      sys.addBody(wall);
+      BodyDesc s = sphere(r, real(0.004), Vec3{real(-0.1), 0, 0}, real(0.5));
+      s.vel = Vec3{speed, 0, 0};
+      const int b = sys.addBody(s);
+      real deepest = 0;
+      for (int k = 0; k < 20; ++k) {
+        sys.step();
+        deepest = std::max(deepest, sys.lastStats().max_penetration);
+      }
+      const real x = sys.bodies().pos[size_t(b)].x;
+      INFO("speed " << speed << " m/s, speculative " << speculative << ": final x " << x << ", deepest " << deepest);
+      if (!speculative) {
+        CHECK(x > -t - real(0.5) * r);  // tunnelled through, or stuck half-way in the wall
+      } else {
+        CHECK(x == Approx(double(-t - r)).margin(0.05 * r));
+        CHECK(sys.bodies().vel[size_t(b)].x <= real(1e-6));
+        CHECK(deepest < real(0.01) * r);
+      }
+    }
+  }
+}

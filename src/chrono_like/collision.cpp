@@ -34,14 +34,18 @@ class NativeCollision final : public CollisionDetector {
     const Shape* sh = shapes.shape.data();
     const Vec3* hull = shapes.hull_points.data();
 
-    // ComputeAabbs: reads bodies.pos/rot, shapes.shape; writes shapes.aabb.
+    // ComputeAabbs: reads bodies.pos/rot/vel/omega, shapes.shape; writes shapes.sweep, shapes.aabb.
     double t0 = omp_get_wtime();
     shapes.aabb.resize(size_t(ns));
+    shapes.sweep.resize(size_t(ns));
+    const real h_sweep = config.speculative ? config.dt : real(0);
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < ns; ++i) {
       const Shape& s = sh[i];
       Pose body{bodies.pos[s.body], bodies.rot[s.body]};
-      shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, config.envelope_rel * s.size);
+      const real sweep = shapeSweep(s, hull, bodies.vel[s.body], bodies.omega[s.body], h_sweep);
+      shapes.sweep[i] = sweep;
+      shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, config.envelope_rel, sweep));
     }
     double t1 = omp_get_wtime();
 
@@ -64,7 +68,8 @@ class NativeCollision final : public CollisionDetector {
         const Shape& b = sh[pairs_[p].b];
         Pose wa = shapeWorldPose(Pose{bodies.pos[a.body], bodies.rot[a.body]}, a);
         Pose wb = shapeWorldPose(Pose{bodies.pos[b.body], bodies.rot[b.body]}, b);
-        real envelope = config.envelope_rel * fmin(a.size, b.size);
+        const real envelope =
+            pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b]);
         int n = collideShapes(a, wa, b, wb, hull, envelope, pts);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }

@@ -41,7 +41,8 @@ struct BodyArrays {
 struct ShapeArrays {
   std::vector<Shape> shape;       // sorted by body
   std::vector<Vec3> hull_points;  // vertices of all convex hulls, referenced by Shape::hull_start/count
-  std::vector<Aabb> aabb;         // world AABB of each shape, enlarged by the collision envelope
+  std::vector<Aabb> aabb;         // world AABB of each shape, enlarged by shapeMargin (narrowphase.h)
+  std::vector<real> sweep;        // this step's shapeSweep (speculative contacts; 0 when they are off)
 
   size_t count() const { return shape.size(); }
 };

@@ -22,6 +22,25 @@ DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points);
 // unbounded box (callers treat them as large bodies).
 DVI_HD Aabb shapeAabb(const Shape& s, const Pose& world, const Vec3* hull_points, real envelope);
 
+// Speculative contacts (E. Catto, "Continuous Collision", GDC 2013): a bound on how far any point of shape s
+// moves in one step of length h, from its body's velocity v and angular velocity w. A pair is collided with
+// an envelope of at least the sum of the two sweeps, so a contact exists before a fast body reaches a thin
+// obstacle; the contact's bias dist/h (jacobian.h contactBias) lets it push only if the bodies would close
+// the gap within the step, so a speculative contact costs nothing physically (no tunnelling, no early stop).
+DVI_HD real shapeSweep(const Shape& s, const Vec3* hull_points, Vec3 v, Vec3 w, real h) {
+  if (s.type == ShapeType::Plane) return h * length(v);
+  return h * (length(v) + length(w) * (length(s.local.p) + boundingRadius(s, hull_points)));
+}
+
+// AABB growth of a shape: its relative collision envelope, or its sweep when that is larger.
+DVI_HD real shapeMargin(const Shape& s, real envelope_rel, real sweep) { return fmax(envelope_rel * s.size, sweep); }
+
+// Envelope of a pair: the relative envelope of the smaller shape, or the sum of the sweeps when larger. Never
+// more than the two AABB margins together, so every pair within it is found by the broad phase.
+DVI_HD real pairEnvelope(const Shape& a, const Shape& b, real envelope_rel, real sweep_a, real sweep_b) {
+  return fmax(envelope_rel * fmin(a.size, b.size), sweep_a + sweep_b);
+}
+
 // Collides shape a at world pose wa with shape b at wb. Writes up to kMaxContactsPerPair points with
 // signed distance < envelope into out[], normals pointing from a to b, and returns how many.
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,

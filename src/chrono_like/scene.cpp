@@ -130,6 +130,7 @@ SystemConfig systemConfigFromSettings(const SceneSettings& s) {
                                                          : FrictionCombine::Product;
   c.collision = s.collision == "bullet" ? CollisionBackend::Bullet : CollisionBackend::Native;
   c.warm_start = s.warm_start;
+  c.speculative = s.speculative;
   return c;
 }
 
@@ -139,7 +140,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   c.object(j, path);
   c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "tolerance", "gravity", "friction_combine",
                    "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
-                   "bullet_length_scale", "bullet_iterations"});
+                   "speculative", "bullet_length_scale", "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
   if (j.contains("dt")) s.dt = real(c.positive(j["dt"], at("dt")));
   if (j.contains("steps") && j.contains("time")) c.fail(path, "give either steps or time, not both");
@@ -157,6 +158,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("threads")) s.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
   if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
   if (j.contains("warm_start")) s.warm_start = c.boolean(j["warm_start"], at("warm_start"));
+  if (j.contains("speculative")) s.speculative = c.boolean(j["speculative"], at("speculative"));
   if (j.contains("bullet_length_scale"))
     s.bullet_length_scale = real(c.nonNegative(j["bullet_length_scale"], at("bullet_length_scale")));
   if (j.contains("bullet_iterations"))

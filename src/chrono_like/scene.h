@@ -43,6 +43,7 @@ struct SceneSettings {
   int threads = 0;                   // 0: OpenMP's default
   int frames = 0;                    // VTK frames to write
   bool warm_start = true;
+  bool speculative = true;
   real bullet_length_scale = 0;      // Bullet peer unit scale; 0: automatic from the body sizes
   int bullet_iterations = 10;        // Bullet peer sequential-impulse iterations
 

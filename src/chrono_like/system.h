@@ -56,6 +56,7 @@ struct SystemConfig {
   BroadPhaseSettings broadphase;
   bool warm_start = true;
   bool gyroscopic = true;           // omega x I omega for bodies with non-spherical inertia
+  bool speculative = true;          // speculative contacts: envelopes grow to the step's sweep (narrowphase.h)
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

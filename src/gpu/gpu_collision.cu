@@ -18,13 +18,16 @@ namespace dvi::gpu {
 
 namespace {
 
-__global__ void aabbKernel(int n, const Shape* shapes, const Vec3* pos, const Quat* rot, const Vec3* hull,
-                           real envelope_rel, Aabb* out) {
+__global__ void aabbKernel(int n, const Shape* shapes, const Vec3* pos, const Quat* rot, const Vec3* vel,
+                           const Vec3* omega, const Vec3* hull, real envelope_rel, real h_sweep, real* sweep,
+                           Aabb* out) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
   const Shape s = shapes[i];
   const Pose body{pos[s.body], rot[s.body]};
-  out[i] = shapeAabb(s, shapeWorldPose(body, s), hull, envelope_rel * s.size);
+  const real sw = shapeSweep(s, hull, vel[s.body], omega[s.body], h_sweep);
+  sweep[i] = sw;
+  out[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, envelope_rel, sw));
 }
 
 // ---- broad phase: classification and grid (the rule of broadphase.h, on the device) ----
@@ -236,6 +239,7 @@ struct NarrowArgs {
   const Vec3* pos;
   const Quat* rot;
   const Vec3* hull;
+  const real* sweep;
   real envelope_rel;
 };
 
@@ -247,7 +251,7 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
   const Shape sb = A.shapes[b];
   const Pose wa = shapeWorldPose(Pose{A.pos[sa.body], A.rot[sa.body]}, sa);
   const Pose wb = shapeWorldPose(Pose{A.pos[sb.body], A.rot[sb.body]}, sb);
-  const real envelope = A.envelope_rel * fmin(sa.size, sb.size);
+  const real envelope = pairEnvelope(sa, sb, A.envelope_rel, A.sweep[a], A.sweep[b]);
   return collideShapes(sa, wa, sb, wb, A.hull, envelope, pts);
 }
 
@@ -308,9 +312,10 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
 void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
   const int n = int(d.shapes.count);
   if (n == 0) return;
-  aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(n, d.shapes.shape.data(), d.bodies.pos.data(),
-                                                     d.bodies.rot.data(), d.shapes.hull.data(), cfg.envelope_rel,
-                                                     d.shapes.aabb.data());
+  aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(
+      n, d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(), d.bodies.vel.data(), d.bodies.omega.data(),
+      d.shapes.hull.data(), cfg.envelope_rel, cfg.speculative ? cfg.dt : real(0), d.shapes.sweep.data(),
+      d.shapes.aabb.data());
   DVI_CUDA_LAUNCH("aabbKernel");
 }
 
@@ -464,7 +469,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.off.resize(np + 1);
   N.first.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
-               d.shapes.hull.data(), cfg.envelope_rel};
+               d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel};
   narrowCountKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data());
   DVI_CUDA_LAUNCH("narrowCountKernel");
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {

@@ -33,6 +33,7 @@ struct DeviceShapes {
   DeviceBuffer<Shape> shape{"shapes"};
   DeviceBuffer<Vec3> hull{"hull points"};
   DeviceBuffer<Aabb> aabb{"shape aabbs"};
+  DeviceBuffer<real> sweep{"shape sweeps"};
   size_t count = 0;
 };
 

@@ -27,7 +27,7 @@ size_t DeviceState::bytes() const {
   add(bodies.pos); add(bodies.vel); add(bodies.omega); add(bodies.inv_inertia); add(bodies.force);
   add(bodies.torque); add(bodies.gravity); add(bodies.v_free); add(bodies.w_free); add(bodies.rot);
   add(bodies.inv_mass); add(bodies.friction); add(bodies.flags); add(bodies.inv); add(bodies.delta);
-  add(shapes.shape); add(shapes.hull); add(shapes.aabb);
+  add(shapes.shape); add(shapes.hull); add(shapes.aabb); add(shapes.sweep);
   add(contacts.shape_a); add(contacts.shape_b); add(contacts.body_a); add(contacts.body_b);
   add(contacts.normal); add(contacts.pa); add(contacts.pb); add(contacts.dist); add(contacts.mu);
   add(contacts.size); add(contacts.key);
@@ -139,6 +139,7 @@ void GpuSystem::uploadIfNeeded() {
   sh.shape.uploadTail(shapes_.shape, first_shape, s);
   sh.hull.uploadTail(shapes_.hull_points, first_hull, s);
   sh.aabb.resizeKeep(shapes_.count());
+  sh.sweep.resizeKeep(shapes_.count());
   sh.count = shapes_.count();
   DVI_CUDA(cudaStreamSynchronize(s));  // the host vectors may change after we return
   uploaded_bodies_ = bodies_.count();
