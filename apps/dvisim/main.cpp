@@ -6,6 +6,8 @@
 //   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (src/ces/ces_run.h).
 //   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
 //   dvisim bench scaling --out DIR [--record] [--quick] [--sizes ...]     (bench_scaling.cpp; bench_common.h)
+//   dvisim bench accuracy | stability | ces --out DIR [--record] [--quick]  (bench_accuracy.cpp, bench_stability.cpp,
+//                                                                           bench_ces.cpp)
 //
 // Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
 #include <unistd.h>
@@ -343,6 +345,8 @@ void registerBenchScaling(CLI::App& app);
 // `dvisim bench accuracy` (bench_accuracy.cpp) and `dvisim bench stability` (bench_stability.cpp), the same way.
 void registerBenchAccuracy(CLI::App& app);
 void registerBenchStability(CLI::App& app);
+// `dvisim bench ces` (bench_ces.cpp): the CES machine at an industrial feed against wall time.
+void registerBenchCes(CLI::App& app);
 
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
@@ -368,6 +372,7 @@ int main(int argc, char** argv) {
   registerBenchScaling(app);
   registerBenchAccuracy(app);
   registerBenchStability(app);
+  registerBenchCes(app);
 
   try {
     app.parse(argc, argv);

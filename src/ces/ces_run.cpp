@@ -103,6 +103,102 @@ void writeCheckpoint(const CesMachine& m, const json& doc, const std::string& di
 
 }  // namespace
 
+json loadCesDocument(const std::string& scene, std::string& origin) {
+  if (scene.empty()) {
+    origin = "<default ces machine>";
+    return parseJson(defaultCesJson(), origin);
+  }
+  origin = scene;
+  return parseJson(readText(scene, scene), scene);
+}
+
+std::string resolveCesBackend(const std::string& requested) {
+  if (requested == "bullet")
+    throw InputError("--backend bullet: the CES machine runs on the DVI engine only (auto|cpu|gpu)");
+  requireOneOf("--backend", requested, {"auto", "cpu", "gpu"});
+  std::string backend = requested, gpu_name;
+  const bool have_gpu = gpuAvailable(&gpu_name);
+  if (backend == "auto") {
+    backend = have_gpu ? "gpu" : "cpu";
+    std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
+  }
+  if (backend == "gpu" && !have_gpu)
+    throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
+  return backend;
+}
+
+std::unique_ptr<System> makeCesSystem(const CesConfig& cfg, const std::string& backend, int threads,
+                                      const std::string& collision) {
+  SceneSettings st;
+  st.dt = real(cfg.dt);
+  st.solver = cfg.solver;
+  st.iterations = cfg.iterations;
+  st.threads = threads;
+  st.collision = collision.empty() ? "native" : collision;
+  st.friction_combine = "product";  // the pair coefficients of ces.friction are converted for this rule
+  SystemConfig sc = systemConfigFromSettings(st);
+  // The particle cloud spans the machine (0.8 x 0.6 x 0.3 m) sparsely: a grid of 2^24 bins of 2 mm costs
+  // more to scan than the pairs it finds (measured 7.5 ms/step); 2^20 bins of ~5 mm keep every bin sparse.
+  sc.broadphase.max_bins = int64_t(1) << 20;
+  if (backend == "gpu") return makeGpuSystem(sc);
+  return std::make_unique<CheckpointSystem>(sc);
+}
+
+void CesRunTotals::add(const CesMachine& m) {
+  const StepStats& s = m.system().lastStats();
+  ++steps;
+  contacts += s.contacts;
+  max_contacts = std::max<int64_t>(max_contacts, s.contacts);
+  iterations += s.iterations;
+  max_penetration = std::fmax(max_penetration, s.max_penetration);
+  residual = s.residual;
+  drive_torque_sum += m.driveTorque();
+  for (int i = 0; i < kStageCount; ++i) {
+    stage_seconds[size_t(i)] += s.stage_seconds[size_t(i)];
+    stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
+  }
+}
+
+json CesRunTotals::stageNames() const {
+  json a = json::array();
+  for (int i = 0; i < kStageCount; ++i)
+    if (stage_ran[size_t(i)]) a.push_back(stageName(StageType(i)));
+  return a;
+}
+
+json CesRunTotals::stageSeconds() const {
+  json o = json::object();
+  for (int i = 0; i < kStageCount; ++i)
+    if (stage_ran[size_t(i)]) o[stageName(StageType(i))] = stage_seconds[size_t(i)];
+  return o;
+}
+
+json massBalanceJson(const MassBalance& bal) {
+  json c;
+  c["fed_mass_kg"] = double(bal.fed_fg) * kFemtogram;
+  c["collected_mass_kg"] = double(bal.collected_fg) * kFemtogram;
+  c["in_flight_mass_kg"] = double(bal.in_flight_fg) * kFemtogram;
+  c["lost_mass_kg"] = double(bal.lost_fg) * kFemtogram;
+  c["fed_particles"] = bal.fed;
+  c["collected_particles"] = bal.collected;
+  c["in_flight_particles"] = bal.in_flight;
+  c["lost_particles"] = bal.lost;
+  c["balance_closes"] = bal.closes();
+  c["mass_unit_kg"] = kFemtogram;
+  return c;
+}
+
+std::string massBalanceLine(const MassBalance& bal) {
+  const double g = kFemtogram * 1e3;
+  char b[400];
+  std::snprintf(b, sizeof b,
+                "fed %.6g g = collected %.6g g + in flight %.6g g + lost %.6g g (%lld = %lld + %lld + %lld particles)%s",
+                double(bal.fed_fg) * g, double(bal.collected_fg) * g, double(bal.in_flight_fg) * g,
+                double(bal.lost_fg) * g, (long long)bal.fed, (long long)bal.collected, (long long)bal.in_flight,
+                (long long)bal.lost, bal.closes() ? ", closes exactly" : ", DOES NOT CLOSE");
+  return b;
+}
+
 bool isCesScene(const std::string& path) {
   if (path.empty()) return true;
   if (fs::path(path).extension() != ".json") return false;
@@ -134,12 +230,8 @@ int runCesMachine(const CesRunOptions& o) {
     if (!o.scene.empty()) throw InputError("--resume " + o.resume + ": give either a scene or --resume, not both");
     origin = o.resume + "/checkpoint/ces_config.json";
     doc = parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin);
-  } else if (o.scene.empty()) {
-    origin = "<default ces machine>";
-    doc = parseJson(defaultCesJson(), origin);
   } else {
-    origin = o.scene;
-    doc = parseJson(readText(o.scene, o.scene), o.scene);
+    doc = loadCesDocument(o.scene, origin);
   }
   // Command-line options are overrides of the document too, so a checkpoint records them.
   std::vector<std::string> sets = o.sets;
@@ -169,31 +261,14 @@ int runCesMachine(const CesRunOptions& o) {
   const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
   const int64_t total = int64_t(std::llround(cfg.duration / cfg.dt));
 
-  std::string backend = o.backend, gpu_name;
-  const bool have_gpu = gpuAvailable(&gpu_name);
-  if (backend == "auto") {
-    backend = have_gpu ? "gpu" : "cpu";
-    std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
-  }
-  if (backend == "gpu" && !have_gpu)
-    throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
+  const std::string backend = resolveCesBackend(o.backend);
   std::error_code ec;
   fs::create_directories(o.out, ec);
   if (ec || !fs::is_directory(o.out))
     throw InputError("--out " + o.out + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
 
-  SceneSettings st;
-  st.dt = real(cfg.dt);
-  st.solver = cfg.solver;
-  st.iterations = cfg.iterations;
-  st.threads = threads;
-  st.collision = o.collision.empty() ? "native" : o.collision;
-  st.friction_combine = "product";  // the pair coefficients of ces.friction are converted for this rule
-  SystemConfig sc = systemConfigFromSettings(st);
-  // The particle cloud spans the machine (0.8 x 0.6 x 0.3 m) sparsely: a grid of 2^24 bins of 2 mm costs
-  // more to scan than the pairs it finds (measured 7.5 ms/step); 2^20 bins of ~5 mm keep every bin sparse.
-  sc.broadphase.max_bins = int64_t(1) << 20;
-  std::unique_ptr<System> sys = backend == "gpu" ? makeGpuSystem(sc) : std::make_unique<CheckpointSystem>(sc);
+  const std::string collision = o.collision.empty() ? "native" : o.collision;
+  std::unique_ptr<System> sys = makeCesSystem(cfg, backend, threads, collision);
   CesMachine m(cfg, *sys);
   if (resume) {
     const std::string path = o.resume + "/checkpoint/state.bin";
@@ -225,11 +300,8 @@ int runCesMachine(const CesRunOptions& o) {
   size_t next_frame = 0;
   while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
   const bool tty = ::isatty(2);
-  int64_t contacts = 0, iterations = 0;
-  real max_pen = 0, residual = 0;
-  double torque_sum = 0, wall = 0;
-  std::array<double, kStageCount> stage_s{};
-  std::array<bool, kStageCount> stage_ran{};
+  CesRunTotals tot;
+  double wall = 0;
   const auto t0 = Clock::now();
   auto last = t0;
   for (int64_t k = first;; ++k) {
@@ -242,16 +314,7 @@ int runCesMachine(const CesRunOptions& o) {
     const auto s0 = Clock::now();
     m.step();
     wall += std::chrono::duration<double>(Clock::now() - s0).count();
-    const StepStats& s = m.system().lastStats();
-    contacts += s.contacts;
-    iterations += s.iterations;
-    max_pen = std::fmax(max_pen, s.max_penetration);
-    residual = s.residual;
-    torque_sum += m.driveTorque();
-    for (int i = 0; i < kStageCount; ++i) {
-      stage_s[size_t(i)] += s.stage_seconds[size_t(i)];
-      stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
-    }
+    tot.add(m);
     if (ckpt_every > 0 && m.steps() % ckpt_every == 0 && m.steps() < total) {
       m.system().syncToHost();
       writeCheckpoint(m, doc, ckpt_dir);
@@ -290,33 +353,18 @@ int runCesMachine(const CesRunOptions& o) {
   summary["backend"] = m.system().backendName();
   summary["device"] = m.system().deviceName();
   summary["solver"] = cfg.solver;
-  summary["collision"] = st.collision;
-  summary["iterations_mean"] = steps_run > 0 ? double(iterations) / double(steps_run) : 0.0;
-  summary["residual_final"] = residual;
-  summary["contacts_mean"] = steps_run > 0 ? double(contacts) / double(steps_run) : 0.0;
-  summary["max_penetration"] = max_pen;
-  summary["stages"] = json::array();
-  summary["stage_seconds"] = json::object();
-  for (int i = 0; i < kStageCount; ++i) {
-    if (!stage_ran[size_t(i)]) continue;
-    summary["stages"].push_back(stageName(StageType(i)));
-    summary["stage_seconds"][stageName(StageType(i))] = stage_s[size_t(i)];
-  }
+  summary["collision"] = collision;
+  summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
+  summary["residual_final"] = tot.residual;
+  summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
+  summary["max_penetration"] = tot.max_penetration;
+  summary["stages"] = tot.stageNames();
+  summary["stage_seconds"] = tot.stageSeconds();
   summary["sim_time"] = m.time();
   summary["wall_time_s"] = wall;
   summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
   summary["frames"] = frames.count();
-  json c;
-  c["fed_mass_kg"] = double(bal.fed_fg) * kFemtogram;
-  c["collected_mass_kg"] = double(bal.collected_fg) * kFemtogram;
-  c["in_flight_mass_kg"] = double(bal.in_flight_fg) * kFemtogram;
-  c["lost_mass_kg"] = double(bal.lost_fg) * kFemtogram;
-  c["fed_particles"] = bal.fed;
-  c["collected_particles"] = bal.collected;
-  c["in_flight_particles"] = bal.in_flight;
-  c["lost_particles"] = bal.lost;
-  c["balance_closes"] = bal.closes();
-  c["mass_unit_kg"] = kFemtogram;
+  json c = massBalanceJson(bal);
   c["splitters"] = {{"s1_mm", cfg.s1 * 1e3}, {"s2_mm", cfg.s2 * 1e3}};
   c["bins"] = binsJson(at);
   c["at_splitters"] = cellJson(configured);
@@ -326,7 +374,7 @@ int runCesMachine(const CesRunOptions& o) {
   c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
   c["field_model"] = cfg.field_model;
   c["drum_drive"] = m.rheonomicDrive() ? "rheonomic" : "kinematic";
-  if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? torque_sum / double(steps_run) : 0.0;
+  if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? tot.drive_torque_sum / double(steps_run) : 0.0;
   c["forces_on_host"] = m.system().backendName() != "cpu";
   json mats = json::array();
   for (size_t k = 0; k < cfg.materials.size(); ++k) {
@@ -362,10 +410,7 @@ int runCesMachine(const CesRunOptions& o) {
   }
 
   const double g = kFemtogram * 1e3;
-  std::printf("mass balance: fed %.6g g = collected %.6g g + in flight %.6g g + lost %.6g g (%lld = %lld + %lld + %lld particles)%s\n",
-              double(bal.fed_fg) * g, double(bal.collected_fg) * g, double(bal.in_flight_fg) * g, double(bal.lost_fg) * g,
-              (long long)bal.fed, (long long)bal.collected, (long long)bal.in_flight, (long long)bal.lost,
-              bal.closes() ? ", closes exactly" : "");
+  std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
   if (bal.lost > 0) std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n", (long long)bal.lost);
   const SplitterCell& best = table.cells[table.best];
   std::printf("bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g (nonconductor/middling/conductor)\n",

@@ -2,8 +2,17 @@
 // run itself (feed, step, frames, checkpoints, results, plots). apps/dvisim/main.cpp only calls these.
 #pragma once
 
+#include <array>
+#include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "ces/ces_config.h"
+#include "ces/machine.h"
+#include "chrono_like/system.h"
 
 namespace dvi {
 namespace ces {
@@ -25,6 +34,37 @@ bool isCesScene(const std::string& path);
 
 // Runs the machine; writes the results under o.out. Throws InputError on bad input. Returns the exit code.
 int runCesMachine(const CesRunOptions& o);
+
+// ---- Pieces of the run, shared with `dvisim bench ces` (apps/dvisim/bench_ces.cpp) ----
+
+// The machine document: the embedded default (empty scene) or a scene file. `origin` names it in errors.
+nlohmann::json loadCesDocument(const std::string& scene, std::string& origin);
+
+// Checks `requested` (auto|cpu|gpu; bullet is refused) and resolves auto to gpu when a device is usable
+// (printed), else cpu. gpu without a device is an InputError.
+std::string resolveCesBackend(const std::string& requested);
+
+// The System the machine runs on: cfg's step and solver, `threads` (0: OpenMP default), collision
+// native|bullet, the product friction rule, a sparse broad-phase grid; a CheckpointSystem on the CPU.
+std::unique_ptr<System> makeCesSystem(const CesConfig& cfg, const std::string& backend, int threads,
+                                      const std::string& collision);
+
+// Per-step statistics summed over the steps of a run.
+struct CesRunTotals {
+  int64_t steps = 0, contacts = 0, max_contacts = 0, iterations = 0;
+  real max_penetration = 0, residual = 0;
+  double drive_torque_sum = 0;
+  std::array<double, kStageCount> stage_seconds{};
+  std::array<bool, kStageCount> stage_ran{};
+  void add(const CesMachine& m);      // after each CesMachine::step()
+  nlohmann::json stageNames() const;  // the stages that ran (stageName), in stage order
+  nlohmann::json stageSeconds() const;  // {name: seconds summed over the run}
+};
+
+// fed/collected/in flight/lost in kg and particles, balance_closes, mass_unit_kg (summary.json: ces).
+nlohmann::json massBalanceJson(const MassBalance& b);
+// "fed X g = collected X g + in flight X g + lost X g (n = n + n + n particles), closes exactly"
+std::string massBalanceLine(const MassBalance& b);
 
 }  // namespace ces
 }  // namespace dvi

@@ -153,6 +153,21 @@ ShapeDesc particleShapeDesc(const ParticleSpec& s) {
   }
 }
 
+double expectedParticleMass(const CesConfig& cfg) {
+  const double a = cfg.diameter_min, b = cfg.diameter_max;
+  const double d3 = b > a ? (b * b * b * b - a * a * a * a) / (4 * (b - a)) : a * a * a;  // E[d^3], d ~ U[a, b]
+  const double volume = kPiD / 6.0 * d3;
+  double fsum = 0, per_mass = 0;  // sum f_k, sum f_k / m_k
+  for (const MaterialConfig& m : cfg.materials) {
+    if (!(m.mass_fraction > 0)) continue;
+    const double mean_mass = volume * 0.5 * (m.density_min + m.density_max);
+    fsum += m.mass_fraction;
+    per_mass += m.mass_fraction / mean_mass;
+  }
+  if (!(per_mass > 0)) throw InputError("CES feeder: no material with a positive mass fraction");
+  return fsum / per_mass;
+}
+
 Feeder::Feeder(const CesConfig& cfg) : cfg_(cfg), fed_fg_(cfg.materials.size(), 0) {
   rng_.s = cfg.seed * 0x9e3779b97f4a7c15ull + 0x632be59bd9b4e019ull;
   double sum = 0;

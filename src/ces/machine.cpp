@@ -366,6 +366,7 @@ void CesMachine::postStep() {
     const size_t k = size_t(i);
     if (next[k] == p_.status[k]) continue;
     p_.status[k] = next[k];
+    if (next[k] == kStatusLost) ++lost_;
     if (next[k] == kStatusCollected) {
       // Crossing point of the collection plane on the step's straight path x - h v .. x.
       const Vec3 x1 = b.pos[k], x0 = x1 - h * b.vel[k];
@@ -506,6 +507,7 @@ void CesMachine::load(std::istream& in) {
   if (status.size() != p_.count() || material.size() != p_.count() || charge.size() != p_.count())
     throw InputError("checkpoint: body count differs from the particle records");
   p_.status = status;
+  lost_ = int64_t(std::count(status.begin(), status.end(), uint8_t(kStatusLost)));
   p_.material = material;
   p_.charge = charge;
   BodyArrays& b = sys_.mutableBodies();

@@ -116,6 +116,8 @@ class CesMachine {
   int firstParticleBody() const { return n_machine_; }
   const std::vector<CollectedParticle>& collected() const { return collected_; }
   MassBalance balance() const;
+  // Particles in flight now, in O(1) (balance() walks every particle): fed - collected - lost.
+  int64_t particlesInFlight() const { return int64_t(p_.count()) - n_machine_ - int64_t(collected_.size()) - lost_; }
   int64_t feederMassFg() const { return feeder_.fedMassFg(); }  // what the feeder delivered (excludes particles added by hand)
   int drumBody() const { return drum_; }
   int brushBody() const { return brush_; }
@@ -160,6 +162,7 @@ class CesMachine {
   int drum_ = -1, brush_ = -1, n_machine_ = 0;
   real particle_friction_ = 1;
   int64_t steps_ = 0;
+  int64_t lost_ = 0;             // particles with kStatusLost (kept for particlesInFlight)
   bool host_forces_ = false;     // device backend: forces applied on the host (see above)
 };
 
