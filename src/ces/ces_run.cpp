@@ -228,8 +228,7 @@ int runCesMachine(const CesRunOptions& o) {
   int64_t contacts = 0, iterations = 0;
   real max_pen = 0, residual = 0;
   double torque_sum = 0, wall = 0;
-  std::array<double, kStageCount> stage_s{};
-  std::array<bool, kStageCount> stage_ran{};
+  StageLog stage_log;
   const auto t0 = Clock::now();
   auto last = t0;
   for (int64_t k = first;; ++k) {
@@ -248,10 +247,7 @@ int runCesMachine(const CesRunOptions& o) {
     max_pen = std::fmax(max_pen, s.max_penetration);
     residual = s.residual;
     torque_sum += m.driveTorque();
-    for (int i = 0; i < kStageCount; ++i) {
-      stage_s[size_t(i)] += s.stage_seconds[size_t(i)];
-      stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
-    }
+    stage_log.add(s);
     if (ckpt_every > 0 && m.steps() % ckpt_every == 0 && m.steps() < total) {
       m.system().syncToHost();
       writeCheckpoint(m, doc, ckpt_dir);
@@ -295,13 +291,7 @@ int runCesMachine(const CesRunOptions& o) {
   summary["residual_final"] = residual;
   summary["contacts_mean"] = steps_run > 0 ? double(contacts) / double(steps_run) : 0.0;
   summary["max_penetration"] = max_pen;
-  summary["stages"] = json::array();
-  summary["stage_seconds"] = json::object();
-  for (int i = 0; i < kStageCount; ++i) {
-    if (!stage_ran[size_t(i)]) continue;
-    summary["stages"].push_back(stageName(StageType(i)));
-    summary["stage_seconds"][stageName(StageType(i))] = stage_s[size_t(i)];
-  }
+  addStageSummary(summary, stage_log);
   summary["sim_time"] = m.time();
   summary["wall_time_s"] = wall;
   summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
