@@ -8,6 +8,7 @@
 //   dvisim bench scaling --out DIR [--record] [--quick] [--sizes ...]     (bench_scaling.cpp; bench_common.h)
 //   dvisim bench accuracy | stability | ces --out DIR [--record] [--quick]  (bench_accuracy.cpp, bench_stability.cpp,
 //                                                                           bench_ces.cpp)
+//   dvisim bench pruning --out DIR [--quick] [--record] [--backend B] [--n N] [--threads N]  (bench_pruning.cpp)
 //
 // Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
 #include <unistd.h>
@@ -286,18 +287,14 @@ int run(const Options& o) {
     };
     int64_t contacts = 0, iterations = 0;
     dvi::real max_pen = 0, residual = 0;
-    std::array<double, dvi::kStageCount> stage_s{};
-    std::array<bool, dvi::kStageCount> stage_ran{};
+    dvi::StageLog stage_log;
     runSteps(collect, [&] { sys->step(); }, [&] {
       const dvi::StepStats& s = sys->lastStats();
       contacts += s.contacts;
       iterations += s.iterations;
       max_pen = std::fmax(max_pen, s.max_penetration);
       residual = s.residual;
-      for (int i = 0; i < dvi::kStageCount; ++i) {
-        stage_s[size_t(i)] += s.stage_seconds[size_t(i)];
-        stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
-      }
+      stage_log.add(s);
     });
     summary["backend"] = sys->backendName();
     summary["device"] = sys->deviceName();
@@ -307,14 +304,8 @@ int run(const Options& o) {
     summary["residual_final"] = residual;
     summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
     summary["max_penetration"] = max_pen;
-    summary["stages"] = nlohmann::json::array();
-    summary["stage_seconds"] = nlohmann::json::object();
-    for (int i = 0; i < dvi::kStageCount; ++i) {
-      if (!stage_ran[size_t(i)]) continue;
-      const char* name = dvi::stageName(dvi::StageType(i));
-      summary["stages"].push_back(name);
-      summary["stage_seconds"][name] = stage_s[size_t(i)];
-    }
+    dvi::addStageSummary(summary, stage_log);
+    summary["prune"] = cfg.prune;
   }
   summary["sim_time"] = double(steps) * double(st.dt);
   summary["wall_time_s"] = wall;
@@ -347,6 +338,8 @@ void registerBenchAccuracy(CLI::App& app);
 void registerBenchStability(CLI::App& app);
 // `dvisim bench ces` (bench_ces.cpp): the CES machine at an industrial feed against wall time.
 void registerBenchCes(CLI::App& app);
+// `dvisim bench pruning` (bench_pruning.cpp): prune on against off, side by side.
+void registerBenchPruning(CLI::App& app);
 
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
@@ -373,6 +366,7 @@ int main(int argc, char** argv) {
   registerBenchAccuracy(app);
   registerBenchStability(app);
   registerBenchCes(app);
+  registerBenchPruning(app);
 
   try {
     app.parse(argc, argv);

@@ -153,6 +153,7 @@ void CesRunTotals::add(const CesMachine& m) {
   max_penetration = std::fmax(max_penetration, s.max_penetration);
   residual = s.residual;
   drive_torque_sum += m.driveTorque();
+  log.add(s);
   for (int i = 0; i < kStageCount; ++i) {
     stage_seconds[size_t(i)] += s.stage_seconds[size_t(i)];
     stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
@@ -358,8 +359,7 @@ int runCesMachine(const CesRunOptions& o) {
   summary["residual_final"] = tot.residual;
   summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
   summary["max_penetration"] = tot.max_penetration;
-  summary["stages"] = tot.stageNames();
-  summary["stage_seconds"] = tot.stageSeconds();
+  addStageSummary(summary, tot.log);
   summary["sim_time"] = m.time();
   summary["wall_time_s"] = wall;
   summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;

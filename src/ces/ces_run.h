@@ -56,6 +56,7 @@ struct CesRunTotals {
   double drive_torque_sum = 0;
   std::array<double, kStageCount> stage_seconds{};
   std::array<bool, kStageCount> stage_ran{};
+  StageLog log;                       // stages, parts and what was left out (summary.json: addStageSummary)
   void add(const CesMachine& m);      // after each CesMachine::step()
   nlohmann::json stageNames() const;  // the stages that ran (stageName), in stage order
   nlohmann::json stageSeconds() const;  // {name: seconds summed over the run}

@@ -6,11 +6,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "cone.h"
 #include "errors.h"
 #include "rows_impl.h"
+#include "solver_kernels.h"
 
 namespace dvi {
 
@@ -34,7 +36,11 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   const int64_t nc = nc_;
   const int64_t nrows = rows ? int64_t(rows->size()) : 0;
   nrb_ = (nrows + 2) / 3;
-  const int64_t nblk = nc + nrb_;
+  normal_only_ = settings.normal_only;
+  ncb_ = normal_only_ ? (nc + 2) / 3 : nc;
+  const int64_t ncb = ncb_;
+  const int64_t nblk = ncb + nrb_;
+  const int64_t nbox = normal_only_ ? 3 * ncb : 0;  // box entries of the contacts' normal blocks
   jac_.resize(size_t(nc));
   rhs_.resize(size_t(3 * nblk));
   mu_.resize(size_t(nc));
@@ -61,10 +67,15 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     const ContactJacobian J =
         makeContactJacobian(contacts.normal[k], contacts.pa[k], contacts.pb[k], bodies.pos[a], bodies.pos[b], a, b);
     jac_[k] = J;
+    mu_[k] = contacts.mu[k];
+    if (normal_only_) {  // block data per block of three contacts, below
+      rhs_[k] = contactNormalVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b]) +
+                contactBias(contacts.dist[k], h, settings.recovery_rel, contacts.size[k]);
+      continue;
+    }
     real* rk = rhs_.data() + 3 * k;
     contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
     rk[0] += contactBias(contacts.dist[k], h, settings.recovery_rel, contacts.size[k]);
-    mu_[k] = contacts.mu[k];
     real N[6];
     contactDiagonalBlock(J, inv_[a], inv_[b], N);
     invertSymmetric3(N, binv_.data() + 6 * k);
@@ -74,10 +85,22 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
 
+  lo_.assign(size_t(nbox + 3 * nrb_), real(0));
+  hi_.assign(size_t(nbox + 3 * nrb_), real(0));
+  if (normal_only_) {  // blocks of three normal rows, each in [0, inf); padding rows in [0, 0]
+#pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
+    for (int64_t q = 0; q < ncb; ++q) {
+      const int cnt = int(std::min<int64_t>(3, nc - 3 * q));
+      for (int j = cnt; j < 3; ++j) rhs_[size_t(3 * q + j)] = 0;
+      for (int j = 0; j < cnt; ++j) hi_[size_t(3 * q + j)] = std::numeric_limits<real>::infinity();
+      const real d = assembleNormalBlock(jac_.data() + 3 * q, cnt, inv_.data(), binv_.data() + 6 * q, eta_.data() + q,
+                                         colnorm_.data() + 6 * q, rowsum_.data() + 3 * q);
+      max_diag = std::max(max_diag, d);
+    }
+  }
+
   // Constraint rows, three per block after the contacts; the last block is padded with empty rows.
   rows_.assign(size_t(3 * nrb_), ConstraintRow{});
-  lo_.assign(size_t(3 * nrb_), real(0));
-  hi_.assign(size_t(3 * nrb_), real(0));
   for (int64_t i = 0; i < 3 * nrb_; ++i) {
     ConstraintRow& R = rows_[size_t(i)];
     if (i < nrows) {
@@ -90,14 +113,14 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
       bool finite = std::isfinite(R.bias) && !std::isnan(R.lo) && !std::isnan(R.hi) && R.lo <= R.hi;
       for (int j = 0; j < 6; ++j) finite = finite && std::isfinite(R.Ja[j]) && std::isfinite(R.Jb[j]);
       if (!finite) throw InputError("constraint row " + std::to_string(i) + ": non-finite Jacobian or bias, or lo > hi");
-      lo_[size_t(i)] = R.lo;
-      hi_[size_t(i)] = R.hi;
+      lo_[size_t(nbox + i)] = R.lo;
+      hi_[size_t(nbox + i)] = R.hi;
     } else {
       R.lo = R.hi = 0;
     }
   }
   for (int64_t q = 0; q < nrb_; ++q) {
-    const int64_t k = nc + q;
+    const int64_t k = ncb + q;
     const real d = assembleRowBlock(rows_.data() + 3 * q, inv_.data(), v_free, w_free, rhs_.data() + 3 * k,
                                     binv_.data() + 6 * k, eta_.data() + k, colnorm_.data() + 6 * k,
                                     rowsum_.data() + 3 * k);
@@ -150,36 +173,64 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   // the own share is not subtracted: a larger, still valid bound.
   bodyq_.assign(size_t(nb), real(0));
   const int64_t na = int64_t(active_.size());
+  const EntryLayout L = layout();
 #pragma omp parallel for schedule(static) num_threads(T)
   for (int64_t j = 0; j < na; ++j) {
     real q = 0;
-    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) q += entryColumnSum(adj_[e], nc, colnorm_.data());
+    for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) q += entryColumnSum(adj_[e], L, colnorm_.data());
     bodyq_[size_t(active_[j])] = q;
   }
+  if (normal_only_) {
 #pragma omp parallel for schedule(static) num_threads(T)
-  for (int64_t k = 0; k < nc; ++k)
-    jeta_[k] = contactJacobiStep(colnorm_.data() + 6 * k, rowsum_.data() + 3 * k, bodyq_[size_t(jac_[k].a)],
-                                 bodyq_[size_t(jac_[k].b)]);
+    for (int64_t q = 0; q < ncb; ++q)
+      jeta_[q] = normalBlockJacobiStep(jac_.data() + 3 * q, int(std::min<int64_t>(3, nc - 3 * q)), colnorm_.data() + 6 * q,
+                                       rowsum_.data() + 3 * q, bodyq_.data());
+  } else {
+#pragma omp parallel for schedule(static) num_threads(T)
+    for (int64_t k = 0; k < nc; ++k)
+      jeta_[k] = contactJacobiStep(colnorm_.data() + 6 * k, rowsum_.data() + 3 * k, bodyq_[size_t(jac_[k].a)],
+                                   bodyq_[size_t(jac_[k].b)]);
+  }
   for (int64_t q = 0; q < nrb_; ++q)
-    jeta_[nc + q] = rowBlockJacobiStep(rows_.data() + 3 * q, colnorm_.data() + 6 * (nc + q), rowsum_.data() + 3 * (nc + q),
-                                       bodyq_.data());
+    jeta_[ncb + q] = rowBlockJacobiStep(rows_.data() + 3 * q, colnorm_.data() + 6 * (ncb + q),
+                                        rowsum_.data() + 3 * (ncb + q), bodyq_.data());
   // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
   if (nblk < kSerialContacts) threads_ = 1;
 }
 
-int ContactProblem::size() const { return int(3 * (nc_ + nrb_)); }
+int ContactProblem::size() const { return int(3 * (ncb_ + nrb_)); }
+
+void ContactProblem::toSolverLayout(const real* g3, real* x) const {
+  const int64_t n = size();
+  if (!normal_only_) {
+    if (g3 != x) std::copy(g3, g3 + n, x);
+    return;
+  }
+  const kern::ToNormalLayout f{g3, x, nc_, ncb_};
+  for (int64_t i = 0; i < n; ++i) f(i);
+}
+
+void ContactProblem::fromSolverLayout(const real* x, real* g3) const {
+  const int64_t n = 3 * (nc_ + nrb_);
+  if (!normal_only_) {
+    if (g3 != x) std::copy(x, x + n, g3);
+    return;
+  }
+  const kern::FromNormalLayout f{x, g3, nc_, ncb_};
+  for (int64_t i = 0; i < n; ++i) f(i);
+}
 const real* ContactProblem::rhs() const { return rhs_.data(); }
 int ContactProblem::threads() const { return threads_; }
 
 void ContactProblem::gatherBodyDeltas(const real* x) const {
   const int64_t na = int64_t(active_.size());
-  const int64_t nc = nc_;
+  const EntryLayout L = layout();
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t j = 0; j < na; ++j) {
     const int32_t i = active_[j];
     Vec3 F{0, 0, 0}, Tq{0, 0, 0};
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e)
-      accumulateEntryImpulse(adj_[e], nc, jac_.data(), rows_.data(), x, F, Tq);
+      accumulateEntryImpulse(adj_[e], L, jac_.data(), rows_.data(), x, F, Tq);
     delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
   }
 }
@@ -188,14 +239,23 @@ void ContactProblem::schur(const real* x, real* y) const {
   gatherBodyDeltas(x);  // pass (a): per body, a gather
   const int64_t nc = nc_;
   const BodyDelta* dl = delta_.data();
+  if (normal_only_) {
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-  for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact
-    const ContactJacobian& J = jac_[k];
-    const BodyDelta& A = dl[J.a];
-    const BodyDelta& B = dl[J.b];
-    contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
+    for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact, the normal row
+      const ContactJacobian& J = jac_[k];
+      y[k] = contactNormalVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w);
+    }
+    for (int64_t k = nc; k < 3 * ncb_; ++k) y[k] = 0;  // padding rows
+  } else {
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
+    for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact
+      const ContactJacobian& J = jac_[k];
+      const BodyDelta& A = dl[J.a];
+      const BodyDelta& B = dl[J.b];
+      contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
+    }
   }
-  for (int64_t i = 0; i < int64_t(rows_.size()); ++i) y[3 * nc + i] = rowFromDeltas(rows_[size_t(i)], dl);
+  for (int64_t i = 0; i < int64_t(rows_.size()); ++i) y[3 * ncb_ + i] = rowFromDeltas(rows_[size_t(i)], dl);
 }
 
 void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {
@@ -217,7 +277,8 @@ void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const 
 // final residual a fresh Schur product.
 SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
   SolverStats st;
-  const int64_t nc = nc_, nblk = nc_ + nrb_;
+  const int64_t nc = nc_, ncb = ncb_, nblk = ncb_ + nrb_;
+  const bool normal = normal_only_;
   if (nblk == 0) return st;
   const real a = residualAlpha(*this, s), inv_a = real(1) / a;
   const real w = s.gs_omega;
@@ -229,11 +290,17 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   BodyDelta* dl = delta_.data();
   // y = (N gamma + r)_k from the maintained body velocity changes
   auto blockGradient = [&](int64_t k, real* y) {
-    if (k < nc) {
+    if (k < ncb && !normal) {
       const ContactJacobian& J = jac_[k];
       contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+    } else if (k < ncb) {  // three normal rows (padding rows: 0)
+      for (int j = 0; j < 3; ++j) {
+        const int64_t c = 3 * k + j;
+        y[j] = c < nc ? contactNormalVelocity(jac_[c], dl[jac_[c].a].v, dl[jac_[c].a].w, dl[jac_[c].b].v, dl[jac_[c].b].w)
+                      : real(0);
+      }
     } else {
-      for (int j = 0; j < 3; ++j) y[j] = rowFromDeltas(rows_[size_t(3 * (k - nc) + j)], dl);
+      for (int j = 0; j < 3; ++j) y[j] = rowFromDeltas(rows_[size_t(3 * (k - ncb) + j)], dl);
     }
     for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
   };
@@ -270,7 +337,21 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
         g[1] = gn[1];
         g[2] = gn[2];
         if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-        if (k < nc) {
+        if (k < ncb && normal) {
+          for (int j = 0; j < 3; ++j) {
+            const int64_t c = 3 * k + j;
+            if (dg[j] == 0 || c >= nc) continue;
+            for (int side = 0; side < 2; ++side) {
+              const int32_t i = side ? jac_[c].b : jac_[c].a;
+              if (!movable(inv_[i])) continue;
+              Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+              accumulateContactNormalImpulse(jac_[c], side, dg[j], F, Tq);
+              const BodyDelta d = bodyDeltaFromImpulse(inv_[i], F, Tq);
+              dl[i].v += d.v;
+              dl[i].w += d.w;
+            }
+          }
+        } else if (k < ncb) {
           const ContactJacobian& J = jac_[k];
           for (int side = 0; side < 2; ++side) {
             const int32_t i = side ? J.b : J.a;
@@ -285,7 +366,7 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
         } else {
           for (int j = 0; j < 3; ++j) {
             if (dg[j] == 0) continue;
-            const ConstraintRow& R = rows_[size_t(3 * (k - nc) + j)];
+            const ConstraintRow& R = rows_[size_t(3 * (k - ncb) + j)];
             for (int side = 0; side < 2; ++side) {
               const int32_t i = side ? R.b : R.a;
               if (i < 0 || !movable(inv_[i])) continue;

@@ -25,6 +25,7 @@
 #include "data.h"
 #include "extensions.h"
 #include "jacobian.h"
+#include "rows_impl.h"
 #include "solver.h"
 
 namespace dvi {
@@ -34,6 +35,9 @@ struct ContactProblemSettings {
   real recovery_rel = real(10);  // largest separating speed asked for a penetration: recovery_rel x size per s
   int threads = 0;               // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
                                  // under kSerialContacts contacts solve serially (threads() == 1).
+  // Every contact is frictionless (mu = 0): assemble the normal rows only, packed three per block
+  // (jacobian.h); the solution vector is then in the normal layout (toSolverLayout / fromSolverLayout).
+  bool normal_only = false;
 };
 
 class ContactProblem final : public CcpProblem {
@@ -51,7 +55,14 @@ class ContactProblem final : public CcpProblem {
   // y = D^T (M^-1 (D x)) in two deterministic parallel passes. Uses an internal body buffer: do not call
   // schur, applyImpulses or solveGaussSeidel of one problem from two threads at once.
   void schur(const real* x, real* y) const override;
-  BlockSet blockSet() const override { return BlockSet{nc_, mu_.data(), lo_.data(), hi_.data()}; }
+  // Normal-only: no cone blocks; the contacts' normal blocks are boxes [0, inf) like the rows' boxes.
+  BlockSet blockSet() const override { return BlockSet{normal_only_ ? 0 : nc_, mu_.data(), lo_.data(), hi_.data()}; }
+  bool normalOnly() const { return normal_only_; }
+  // The System's impulse vector (3 per contact, then the rows) to this problem's solution vector (size()
+  // reals) and back; the identity unless normalOnly() (then the tangential impulses come back as 0).
+  void toSolverLayout(const real* g3, real* x) const;
+  void fromSolverLayout(const real* x, real* g3) const;
+  EntryLayout layout() const { return EntryLayout{nc_, ncb_, normal_only_}; }
   int threads() const override;
   const real* blockInverses() const override { return binv_.data(); }
   const real* blockSteps() const override { return eta_.data(); }
@@ -74,9 +85,11 @@ class ContactProblem final : public CcpProblem {
 
   int threads_ = 1;
   int64_t nc_ = 0;                       // contacts
+  int64_t ncb_ = 0;                      // contact blocks: nc_, or ceil(nc_ / 3) when normal_only_
+  bool normal_only_ = false;
   int64_t nrb_ = 0;                      // constraint-row blocks (3 rows each)
   std::vector<ConstraintRow> rows_;      // 3 per row block (padded)
-  std::vector<real> lo_, hi_;            // 3 per row block: impulse bounds
+  std::vector<real> lo_, hi_;            // 3 per box block (normal-only contact blocks, then row blocks)
   real max_diag_ = 1;
   std::vector<ContactJacobian> jac_;     // per contact
   std::vector<real> rhs_;                // 3 per block

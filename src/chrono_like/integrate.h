@@ -36,10 +36,12 @@ DVI_HD Vec3 implicitGyroscopic(Vec3 w, Vec3 inv_inertia, real h) {
 //   w_gyro = w - J^-1 (h w x I w).
 // The explicit form w + h I^-1 (-w x I w) gains energy at every step and blows up for small, fast
 // tumbling bodies (a 1 mm wire spun from 1e3 to 1e11 rad/s in 0.1 s); the implicit one does not.
-// The term vanishes for spherical inertia and is skipped there. Kinematic bodies keep their prescribed
-// velocity; fixed bodies have none.
+// The term vanishes for spherical inertia (w x I w = 0 for I = c 1) and is skipped there unless
+// skip_spherical is false (SystemConfig::prune = false: the step then costs what it would without pruning).
+// Kinematic bodies keep their prescribed velocity; fixed bodies have none.
 DVI_HD void integrateBodyForces(Vec3 v, Vec3 w, Quat q, real inv_mass, Vec3 inv_inertia, Vec3 force, Vec3 torque,
-                                Vec3 gravity, uint8_t flags, bool gyroscopic, real h, Vec3& v_free, Vec3& w_free) {
+                                Vec3 gravity, uint8_t flags, bool gyroscopic, bool skip_spherical, real h, Vec3& v_free,
+                                Vec3& w_free) {
   if (flags & kBodyFixed) {
     v_free = Vec3{0, 0, 0};
     w_free = Vec3{0, 0, 0};
@@ -54,8 +56,14 @@ DVI_HD void integrateBodyForces(Vec3 v, Vec3 w, Quat q, real inv_mass, Vec3 inv_
   Vec3 wl = rotateInv(q, w);  // body frame
   Vec3 tl = rotateInv(q, torque);
   const bool spherical = inv_inertia.x == inv_inertia.y && inv_inertia.y == inv_inertia.z;
-  if (gyroscopic && !spherical) wl = implicitGyroscopic(wl, inv_inertia, h);
+  if (gyroscopic && !(spherical && skip_spherical)) wl = implicitGyroscopic(wl, inv_inertia, h);
   w_free = rotate(q, wl + h * mul(inv_inertia, tl));
+}
+
+// Whether a body needs the gyroscopic term: dynamic, with non-spherical inertia.
+DVI_HD bool needsGyroscopic(Vec3 inv_inertia, uint8_t flags) {
+  if (flags & (kBodyFixed | kBodyKinematic)) return false;
+  return !(inv_inertia.x == inv_inertia.y && inv_inertia.y == inv_inertia.z);
 }
 
 DVI_HD void integrateBodyPosition(Vec3& x, Quat& q, Vec3 v, Vec3 w, uint8_t flags, real h) {

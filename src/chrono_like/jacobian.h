@@ -210,6 +210,88 @@ DVI_HD real contactJacobiStep(const real* cn, const real* rs, real Qa, real Qb) 
   return g > real(0) ? real(1) / g : real(0);
 }
 
+// ---- frictionless contacts: the normal row only (DESIGN §2, "leave out what a scene does not need") ----
+// A contact with mu = 0 has only its normal row: its tangential impulses are projected to 0 by the cone
+// (cone.h, mu = 0), so dropping the rows u, w leaves the CCP's solution unchanged (Anitescu & Tasora 2010:
+// the frictionless CCP is the LCP 0 <= gn _|_ N_nn gn + r_n >= 0). In a normal-only problem the normal rows
+// of contacts 3q, 3q+1, 3q+2 form block q, each row projected onto [0, inf) (solver_kernels.h), so the
+// solvers' block layout is unchanged.
+
+// n . (relative velocity at the contact): the first row of contactRelativeVelocity.
+DVI_HD real contactNormalVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, Vec3 vB, Vec3 wB) {
+  const Vec3 rel = (vB + cross(wB, J.rB)) - (vA + cross(wA, J.rA));
+  return dot(J.n, rel);
+}
+
+// accumulateContactImpulse for the normal impulse gn alone.
+DVI_HD void accumulateContactNormalImpulse(const ContactJacobian& J, int side, real gn, Vec3& F, Vec3& T) {
+  const Vec3 P = J.n * gn;
+  if (side) {
+    F += P;
+    T += cross(J.rB, P);
+  } else {
+    F -= P;
+    T -= cross(J.rA, P);
+  }
+}
+
+// Entry N_ij = D_in^T M^-1 D_jn between the normal rows of contacts i and j: the sum over the bodies c they
+// share of s_ic s_jc (m_c n_i . n_j + (r_ic x n_i)^T I_c^-1 (r_jc x n_j)), s = -1 on side A, +1 on B.
+// Fixed and kinematic bodies (zero inverse mass) add nothing. For i = j it is N_kk[0] of contactDiagonalBlock.
+DVI_HD real normalRowCoupling(const ContactJacobian& Ji, const ContactJacobian& Jj, const BodyInverseMass* inv) {
+  real v = 0;
+  for (int si = 0; si < 2; ++si)
+    for (int sj = 0; sj < 2; ++sj) {
+      const int32_t ci = si ? Ji.b : Ji.a, cj = sj ? Jj.b : Jj.a;
+      if (ci != cj) continue;
+      const BodyInverseMass& M = inv[ci];
+      const Vec3 ai = cross(si ? Ji.rB : Ji.rA, Ji.n), aj = cross(sj ? Jj.rB : Jj.rA, Jj.n);
+      const real e = M.m * dot(Ji.n, Jj.n) + dot(ai, symMul(M.I, aj));
+      v += (si == sj) ? e : -e;
+    }
+  return v;
+}
+
+// Block q of a normal-only problem: the normal rows of the cnt (1..3) contacts J[0..cnt) (padding rows
+// after them are empty). Writes the 3x3 diagonal block's inverse, its scalar step (blockStepFromDiagonal),
+// its absolute row sums, and the column norms |D_jn|_{M_c^-1} per side (colnorm[j] side A, colnorm[3 + j]
+// side B, the layout of a constraint-row block); returns the largest diagonal entry.
+DVI_HD real assembleNormalBlock(const ContactJacobian* J, int cnt, const BodyInverseMass* inv, real* binv, real* eta,
+                                real* colnorm, real* rowsum) {
+  real N[6] = {0, 0, 0, 0, 0, 0};
+  const int ii[6] = {0, 1, 2, 0, 0, 1}, jj[6] = {0, 1, 2, 1, 2, 2};
+  for (int e = 0; e < 6; ++e)
+    if (ii[e] < cnt && jj[e] < cnt) N[e] = normalRowCoupling(J[ii[e]], J[jj[e]], inv);
+  for (int j = 0; j < 3; ++j) {
+    colnorm[j] = colnorm[3 + j] = 0;
+    if (j >= cnt) continue;
+    const BodyInverseMass& A = inv[J[j].a];
+    const BodyInverseMass& B = inv[J[j].b];
+    const Vec3 ca = cross(J[j].rA, J[j].n), cb = cross(J[j].rB, J[j].n);
+    colnorm[j] = sqrt(fmax(real(0), A.m + dot(ca, symMul(A.I, ca))));
+    colnorm[3 + j] = sqrt(fmax(real(0), B.m + dot(cb, symMul(B.I, cb))));
+  }
+  invertSymmetric3(N, binv);
+  *eta = blockStepFromDiagonal(N);
+  blockRowSums(N, rowsum);
+  return fmax(N[0], fmax(N[1], N[2]));
+}
+
+// Jacobi step of normal block q (CcpProblem::jacobiSteps), the bound of contactJacobiStep per row j:
+// rowsum_j (this block, couplings to its other rows included) + sum over the sides c of
+// |D_jc| (Q_c - |D_jc|). The other rows of the block are counted twice (in rowsum and in Q): a larger,
+// still valid bound.
+DVI_HD real normalBlockJacobiStep(const ContactJacobian* J, int cnt, const real* colnorm, const real* rowsum,
+                                  const real* bodyq) {
+  real g = 0;
+  for (int j = 0; j < cnt; ++j) {
+    const real qa = fmax(real(0), bodyq[J[j].a] - colnorm[j]);
+    const real qb = fmax(real(0), bodyq[J[j].b] - colnorm[3 + j]);
+    g = fmax(g, rowsum[j] + colnorm[j] * qa + colnorm[3 + j] * qb);
+  }
+  return g > real(0) ? real(1) / g : real(0);
+}
+
 // ---- generic constraint rows (extensions.h): J = (linear[3], angular[3]) per side ----
 
 // J . (v, w)

@@ -407,6 +407,25 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
 
 }  // namespace np
 
+// Whether the narrow phase may run MPR for a pair of shape types (in either order): the pairs without a
+// closed form in collideOrdered's dispatch above (keep the two in step), and convex-triangle pairs (the face
+// axis, then MPR for edge and vertex contacts). Pairs that never collide (plane-plane, triangle-plane,
+// triangle-triangle) do not. The System reports the NarrowPhase.Mpr part from it (DESIGN §2).
+DVI_HD bool pairUsesMpr(ShapeType a, ShapeType b) {
+  if (b < a) {
+    const ShapeType t = a;
+    a = b;
+    b = t;
+  }
+  const bool a_static = a == ShapeType::Plane || a == ShapeType::Triangle;
+  if (b == ShapeType::Triangle) return !a_static;
+  if (b == ShapeType::Plane) return false;
+  if (a == ShapeType::Sphere)
+    return !(b == ShapeType::Sphere || b == ShapeType::Box || b == ShapeType::Cylinder || b == ShapeType::Capsule);
+  if (a == b && (a == ShapeType::Box || a == ShapeType::Capsule)) return false;
+  return true;
+}
+
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                          real envelope, ContactPoint* out) {
   if (a.type == ShapeType::Sphere && b.type == ShapeType::Sphere)  // the hot path

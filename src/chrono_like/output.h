@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "math.h"
+#include "system.h"
 
 namespace dvi {
 
@@ -49,6 +50,39 @@ class FrameWriter {
 // ABI tag changes with the header version a consumer happens to include).
 inline void writeSummary(const std::string& path, const nlohmann::json& summary) {
   writeFileAtomic(path, summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
+}
+
+// The stages of a run in summary.json (DESIGN §2: "the run summary lists the stages that ran"):
+//   stages            the StageType names that ran in at least one step, in step order
+//   stage_seconds     their total wall time
+//   stage_parts       the StagePart names ("Stage.Part") that ran in at least one step
+//   stages_left_out   [{name, reason}] for every stage and part that ran in no step
+//   normal_only_steps steps whose CCP had the normal rows only (no contact with mu > 0)
+inline void addStageSummary(nlohmann::json& summary, const StageLog& log) {
+  summary["stages"] = nlohmann::json::array();
+  summary["stage_seconds"] = nlohmann::json::object();
+  summary["stage_parts"] = nlohmann::json::array();
+  summary["stages_left_out"] = nlohmann::json::array();
+  for (int i = 0; i < kStageCount; ++i) {
+    const char* name = stageName(StageType(i));
+    if (log.ran[size_t(i)]) {
+      summary["stages"].push_back(name);
+      summary["stage_seconds"][name] = log.seconds[size_t(i)];
+    } else {
+      const char* why = log.reason[size_t(i)];
+      summary["stages_left_out"].push_back({{"name", name}, {"reason", why ? why : "not run"}});
+    }
+  }
+  for (int i = 0; i < kStagePartCount; ++i) {
+    const char* name = stagePartName(StagePart(i));
+    if (log.part_ran[size_t(i)]) {
+      summary["stage_parts"].push_back(name);
+    } else {
+      const char* why = log.part_reason[size_t(i)];
+      summary["stages_left_out"].push_back({{"name", name}, {"reason", why ? why : "not run"}});
+    }
+  }
+  summary["normal_only_steps"] = log.normal_only_steps;
 }
 
 }  // namespace dvi

@@ -71,28 +71,40 @@ DVI_HD real rowFromDeltas(const ConstraintRow& R, const BodyDelta* dl) {
   return v;
 }
 
+// Where the unknowns of a problem lie in its solution vector x: contact k's impulses at x[3k..3k+2] (three
+// rows) or, in a normal-only problem (frictionless contacts, jacobian.h), its normal impulse at x[k], the
+// contacts' normal rows packed three per block; constraint row i at x[3 rb0 + i] in block rb0 + i / 3.
+struct EntryLayout {
+  int64_t nc = 0;            // contacts
+  int64_t rb0 = 0;           // first constraint-row block: nc, or ceil(nc / 3) when normal_only
+  bool normal_only = false;
+};
+
 // Column norm of adjacency entry ent (2 k + side for contact k, 2 nc + 2 i + side for row i) summed over
 // its columns: the entry's share of its body's Q (contactJacobiStep).
-DVI_HD real entryColumnSum(int32_t ent, int64_t nc, const real* colnorm) {
-  if (ent < 2 * nc) {
-    const real* cn = colnorm + 6 * int64_t(ent >> 1) + 3 * (ent & 1);
+DVI_HD real entryColumnSum(int32_t ent, const EntryLayout& L, const real* colnorm) {
+  if (ent < 2 * L.nc) {
+    const int64_t k = int64_t(ent >> 1);
+    if (L.normal_only) return colnorm[6 * (k / 3) + 3 * (ent & 1) + k % 3];
+    const real* cn = colnorm + 6 * k + 3 * (ent & 1);
     return cn[0] + cn[1] + cn[2];
   }
-  const int64_t i = (int64_t(ent) - 2 * nc) >> 1;
-  return colnorm[6 * (nc + i / 3) + 3 * (ent & 1) + i % 3];
+  const int64_t i = (int64_t(ent) - 2 * L.nc) >> 1;
+  return colnorm[6 * (L.rb0 + i / 3) + 3 * (ent & 1) + i % 3];
 }
 
 // Adds adjacency entry ent's impulse on its body to (F, T): contacts through their compact Jacobian,
-// rows through their full one. x holds 3 values per contact, then one per row.
-DVI_HD void accumulateEntryImpulse(int32_t ent, int64_t nc, const ContactJacobian* jac, const ConstraintRow* rows,
-                                   const real* x, Vec3& F, Vec3& T) {
-  if (ent < 2 * nc) {
+// rows through their full one; x in the layout L.
+DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryLayout& L, const ContactJacobian* jac,
+                                   const ConstraintRow* rows, const real* x, Vec3& F, Vec3& T) {
+  if (ent < 2 * L.nc) {
     const int32_t k = ent >> 1;
-    accumulateContactImpulse(jac[k], ent & 1, x + 3 * int64_t(k), F, T);
+    if (L.normal_only) accumulateContactNormalImpulse(jac[k], ent & 1, x[k], F, T);
+    else accumulateContactImpulse(jac[k], ent & 1, x + 3 * int64_t(k), F, T);
   } else {
-    const int64_t r = (int64_t(ent) - 2 * nc) >> 1;
+    const int64_t r = (int64_t(ent) - 2 * L.nc) >> 1;
     const ConstraintRow& R = rows[r];
-    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * nc + r], F, T);
+    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * L.rb0 + r], F, T);
   }
 }
 

@@ -115,6 +115,30 @@ struct ApgdStep {
   }
 };
 
+// ---- layout conversions of a normal-only problem (jacobian.h): maps over single reals ----
+// The System keeps 3 impulses per contact (then the rows') for the warm start and its callers; a
+// normal-only problem solves for x = (gn of every contact, padded to blocks of 3, then the rows).
+
+struct ToNormalLayout {  // x[i] for i in [0, 3 (ncb + nrb))
+  const real* g3;  // 3 per contact, then the rows
+  real* x;
+  int64_t nc, ncb;
+  DVI_HD void operator()(int64_t i) const {
+    if (i < 3 * ncb) x[i] = i < nc ? g3[3 * i] : real(0);
+    else x[i] = g3[3 * nc + (i - 3 * ncb)];
+  }
+};
+
+struct FromNormalLayout {  // g3[i] for i in [0, 3 nc + 3 nrb): tangential impulses are 0
+  const real* x;
+  real* g3;
+  int64_t nc, ncb;
+  DVI_HD void operator()(int64_t i) const {
+    if (i < 3 * nc) g3[i] = i % 3 == 0 ? x[i / 3] : real(0);
+    else g3[i] = x[3 * ncb + (i - 3 * nc)];
+  }
+};
+
 // ---- reductions over blocks: operator()(k, acc) adds block k's terms to acc[0..M) ----
 
 struct NonFinite {  // 1 sum: NaN or inf when x holds one

@@ -12,6 +12,7 @@
 #include "collision.h"
 #include "contact_problem.h"
 #include "integrate.h"
+#include "narrowphase.h"
 
 namespace dvi {
 
@@ -27,6 +28,27 @@ const char* stageName(StageType s) {
     case StageType::IntegrateVelocities: return "IntegrateVelocities";
     case StageType::IntegratePositions: return "IntegratePositions";
     default: return "?";
+  }
+}
+
+const char* stagePartName(StagePart p) {
+  switch (p) {
+    case StagePart::ForceFields: return "IntegrateForces.ForceFields";
+    case StagePart::Gyroscopic: return "IntegrateForces.Gyroscopic";
+    case StagePart::Mpr: return "NarrowPhase.Mpr";
+    case StagePart::ConstraintRows: return "BuildRows.ConstraintRows";
+    case StagePart::FrictionRows: return "BuildRows.FrictionRows";
+    case StagePart::RollingSpinningRows: return "BuildRows.RollingSpinningRows";
+    default: return "?";
+  }
+}
+
+StageType stageOfPart(StagePart p) {
+  switch (p) {
+    case StagePart::ForceFields:
+    case StagePart::Gyroscopic: return StageType::IntegrateForces;
+    case StagePart::Mpr: return StageType::NarrowPhase;
+    default: return StageType::BuildRows;
   }
 }
 
@@ -170,11 +192,42 @@ int System::addBody(const BodyDesc& d) {
   return index;
 }
 
+bool System::planParts() {
+  auto part = [&](StagePart p, bool ran, const char* why) {
+    stats_.part_ran[int(p)] = ran;
+    stats_.part_reason[int(p)] = ran ? nullptr : why;
+  };
+  const bool prune = config_.prune;
+  part(StagePart::ForceFields, !fields_.empty() || !prune, "no force field in the scene");
+  part(StagePart::ConstraintRows, !row_providers_.empty() || !prune, "no joint or row provider in the scene");
+  // Gyroscopic term: only dynamic bodies with non-spherical inertia need it.
+  bool gyro_bodies = false;
+  const size_t nb = bodies_.count();
+  for (size_t i = 0; i < nb && !gyro_bodies; ++i) gyro_bodies = needsGyroscopic(bodies_.inv_inertia[i], bodies_.flags[i]);
+  const bool gyro = config_.gyroscopic && (gyro_bodies || !prune) && nb > 0;
+  part(StagePart::Gyroscopic, gyro,
+       !config_.gyroscopic ? "switched off (SystemConfig::gyroscopic)" : "every dynamic body has spherical inertia");
+  // MPR: the shape types present decide whether any pair can need it (pairUsesMpr). It is a per-pair choice of
+  // the narrow phase, not a switch: prune = false does not force it on pairs with a closed form.
+  for (; typed_shapes_ < shapes_.count(); ++typed_shapes_) shape_types_ |= 1u << unsigned(shapes_.shape[typed_shapes_].type);
+  bool mpr = false;
+  for (int a = 0; a < int(ShapeType::Count); ++a)
+    for (int b = a; b < int(ShapeType::Count); ++b)
+      if ((shape_types_ >> a & 1u) && (shape_types_ >> b & 1u) && pairUsesMpr(ShapeType(a), ShapeType(b))) mpr = true;
+  if (config_.collision == CollisionBackend::Bullet) mpr = false;
+  part(StagePart::Mpr, mpr,
+       config_.collision == CollisionBackend::Bullet ? "Bullet's collision backend (GJK/EPA)"
+                                                     : "every pair of shape types in the scene has a closed form");
+  part(StagePart::RollingSpinningRows, false, "not in the engine: no rolling or spinning friction (Bullet's is not imported)");
+  return gyro;
+}
+
 void System::step() {
   stats_ = StepStats{};
   // The stages read omp_get_max_threads(); the caller's setting is restored after the step.
   const int caller_threads = omp_get_max_threads();
   omp_set_num_threads(effectiveThreads());
+  planParts();
 
   timed(stats_, StageType::IntegrateForces, [&] { integrateForces(); });
   detectCollisions();
@@ -190,13 +243,14 @@ void System::integrateForces() {
   v_free_.resize(size_t(n));
   w_free_.resize(size_t(n));
   const real h = config_.dt;
-  const bool gyro = config_.gyroscopic;
+  const bool gyro = stats_.part_ran[int(StagePart::Gyroscopic)];
+  const bool skip_spherical = config_.prune;
   for (const auto& f : fields_) f->apply(bodies_, time_, h, bodies_.force.data(), bodies_.torque.data());
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i)
     integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i],
                         bodies_.inv_inertia[i], bodies_.force[i], bodies_.torque[i], bodies_.gravity[i],
-                        bodies_.flags[i], gyro, h, v_free_[i], w_free_[i]);
+                        bodies_.flags[i], gyro, skip_spherical, h, v_free_[i], w_free_[i]);
 }
 
 void System::detectCollisions() {
@@ -225,7 +279,8 @@ void System::collectRows() {
 
 void System::buildAndSolve() {
   const int64_t nc = int64_t(contacts_.count());
-  if (!row_providers_.empty()) timed(stats_, StageType::BuildRows, [&] { collectRows(); });
+  solution_ = nullptr;
+  if (stats_.part_ran[int(StagePart::ConstraintRows)]) timed(stats_, StageType::BuildRows, [&] { collectRows(); });
   else rows_.clear();
   const int64_t nrows = int64_t(rows_.size());
   const int64_t nblk = nc + (nrows + 2) / 3;
@@ -234,12 +289,17 @@ void System::buildAndSolve() {
     prev_keys_.clear();
     prev_gamma_.clear();
     row_lambda_.clear();
+    stats_.part_ran[int(StagePart::FrictionRows)] = false;
+    stats_.part_reason[int(StagePart::FrictionRows)] = "no contacts";
+    leaveOut(StageType::BuildRows, "no contacts and no constraint rows");
+    leaveOut(StageType::WarmStart, "no contacts and no constraint rows");
+    leaveOut(StageType::Solve, "no contacts and no constraint rows");
     return;
   }
   timed(stats_, StageType::BuildRows, [&] {
-    real max_pen = 0;
+    real max_pen = 0, max_mu = 0;
     const FrictionCombine rule = config_.friction_combine;
-#pragma omp parallel for schedule(static) reduction(max : max_pen)
+#pragma omp parallel for schedule(static) reduction(max : max_pen, max_mu)
     for (int64_t k = 0; k < nc; ++k) {
       real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
       contacts_.mu[k] = rule == FrictionCombine::Product ? fa * fb
@@ -247,16 +307,27 @@ void System::buildAndSolve() {
                                                          : real(0.5) * (fa + fb);
       contacts_.size[k] = fmin(shapes_.shape[contacts_.shape_a[k]].size, shapes_.shape[contacts_.shape_b[k]].size);
       max_pen = fmax(max_pen, -contacts_.dist[k]);
+      max_mu = fmax(max_mu, contacts_.mu[k]);
     }
     stats_.max_penetration = max_pen;
+    // Friction rows only where mu > 0 (DESIGN §2): a step whose contacts are all frictionless solves the
+    // normal rows alone (jacobian.h); the solution is the same (its tangential impulses would be 0).
+    const bool normal_only = config_.prune && nc > 0 && !(max_mu > 0);
+    stats_.normal_only = normal_only;
+    stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !normal_only;
+    stats_.part_reason[int(StagePart::FrictionRows)] =
+        nc == 0 ? "no contacts" : normal_only ? "no contact with mu > 0 this step" : nullptr;
     ContactProblemSettings ps;
     ps.dt = config_.dt;
     ps.recovery_rel = config_.recovery_rel;
     ps.threads = omp_get_max_threads();
+    ps.normal_only = normal_only;
     problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_);
   });
   if (config_.warm_start && int64_t(row_lambda_.size()) == nrows)
     for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(3 * nc + i)] = row_lambda_[size_t(i)];
+  if (!config_.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::warm_start)");
+  else if (prev_keys_.empty()) leaveOut(StageType::WarmStart, "no contacts in the previous step");
   if (config_.warm_start && !prev_keys_.empty()) {
     timed(stats_, StageType::WarmStart, [&] {
 #pragma omp parallel for schedule(static)
@@ -270,13 +341,22 @@ void System::buildAndSolve() {
     });
   }
   timed(stats_, StageType::Solve, [&] {
+    // A normal-only problem solves in its own layout (1 impulse per contact): in and out of gamma_.
+    real* x = gamma_.data();
+    if (problem_->normalOnly()) {
+      x_.resize(size_t(problem_->size()));
+      problem_->toSolverLayout(gamma_.data(), x_.data());
+      x = x_.data();
+    }
     SolverStats s;
     switch (config_.solver) {
-      case SolverType::Jacobi: s = solveJacobi(*problem_, gamma_.data(), config_.solver_settings); break;
-      case SolverType::GaussSeidel: s = problem_->solveGaussSeidel(gamma_.data(), config_.solver_settings); break;
-      case SolverType::APGD: s = solveApgd(*problem_, gamma_.data(), config_.solver_settings); break;
-      case SolverType::BB: s = solveBB(*problem_, gamma_.data(), config_.solver_settings); break;
+      case SolverType::Jacobi: s = solveJacobi(*problem_, x, config_.solver_settings); break;
+      case SolverType::GaussSeidel: s = problem_->solveGaussSeidel(x, config_.solver_settings); break;
+      case SolverType::APGD: s = solveApgd(*problem_, x, config_.solver_settings); break;
+      case SolverType::BB: s = solveBB(*problem_, x, config_.solver_settings); break;
     }
+    if (problem_->normalOnly()) problem_->fromSolverLayout(x, gamma_.data());
+    solution_ = x;
     stats_.iterations = s.iterations;
     stats_.residual = s.residual;
   });
@@ -304,8 +384,8 @@ void System::integrate() {
       bodies_.vel[i] = v_free_[i];
       bodies_.omega[i] = w_free_[i];
     }
-    if (gamma_.empty()) return;
-    problem_->applyImpulses(gamma_.data(), bodies_.vel.data(), bodies_.omega.data());
+    if (gamma_.empty() || !solution_) return;
+    problem_->applyImpulses(solution_, bodies_.vel.data(), bodies_.omega.data());
   });
   timed(stats_, StageType::IntegratePositions, [&] {
     const real h = config_.dt;

@@ -38,6 +38,22 @@ enum class StageType : int {
 constexpr int kStageCount = int(StageType::Count);
 const char* stageName(StageType s);
 
+// Parts of the stages that the System leaves out when the scene does not need them (DESIGN §2: "the system
+// assembles its stages from the scene"). Each part belongs to a StageType; its name is "Stage.Part" with the
+// stage's name (stagePartName), so the run summary lists stages and parts under the profiler's names.
+enum class StagePart : int {
+  ForceFields = 0,      // IntegrateForces: the ForceField plug-ins (CES fields, ...)
+  Gyroscopic,           // IntegrateForces: the implicit gyroscopic term (non-spherical inertia)
+  Mpr,                  // NarrowPhase: MPR, for the shape pairs without a closed form
+  ConstraintRows,       // BuildRows/Solve: the RowProvider rows (joints, drives)
+  FrictionRows,         // BuildRows/Solve: the two tangential rows of every contact
+  RollingSpinningRows,  // BuildRows/Solve: not in the engine (no rolling or spinning friction)
+  Count
+};
+constexpr int kStagePartCount = int(StagePart::Count);
+const char* stagePartName(StagePart p);  // e.g. "BuildRows.FrictionRows"
+StageType stageOfPart(StagePart p);
+
 enum class CollisionBackend { Native, Bullet };
 enum class FrictionCombine { Product, Min, Average };  // Product is Bullet's rule
 
@@ -57,6 +73,11 @@ struct SystemConfig {
   bool warm_start = true;
   bool gyroscopic = true;           // omega x I omega for bodies with non-spherical inertia
   bool speculative = true;          // speculative contacts: envelopes grow to the step's sweep (narrowphase.h)
+  // Leave out the stages and rows the scene does not need (DESIGN §2): the normal row only when no contact
+  // of the step has mu > 0, no gyroscopic term for spherical inertia, no row or field round trips without
+  // row providers or fields. false runs every one of them (3 rows per contact even for mu = 0, the
+  // gyroscopic Newton step for every body, the row and field stages when empty): for benchmarks and tests.
+  bool prune = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.
@@ -97,6 +118,37 @@ struct StepStats {
   real residual = 0;
   std::array<double, kStageCount> stage_seconds{};  // wall time of each stage in this step
   std::array<bool, kStageCount> stage_ran{};
+  // Why a stage did not run this step (null where it ran).
+  std::array<const char*, kStageCount> stage_reason{};
+  // Parts of the stages (StagePart) that ran this step, and why each other one was left out.
+  std::array<bool, kStagePartCount> part_ran{};
+  std::array<const char*, kStagePartCount> part_reason{};
+  bool normal_only = false;  // this step's CCP had the normal rows only (no contact with mu > 0)
+};
+
+// Stages and parts over a run (the run summary, output.h: addStageSummary): seconds per stage, whether
+// each stage and part ran in any step, and the last reason one was left out.
+struct StageLog {
+  int64_t steps = 0;
+  int64_t normal_only_steps = 0;
+  std::array<double, kStageCount> seconds{};
+  std::array<bool, kStageCount> ran{};
+  std::array<const char*, kStageCount> reason{};
+  std::array<bool, kStagePartCount> part_ran{};
+  std::array<const char*, kStagePartCount> part_reason{};
+  void add(const StepStats& s) {
+    ++steps;
+    normal_only_steps += s.normal_only ? 1 : 0;
+    for (int i = 0; i < kStageCount; ++i) {
+      seconds[size_t(i)] += s.stage_seconds[size_t(i)];
+      ran[size_t(i)] = ran[size_t(i)] || s.stage_ran[size_t(i)];
+      if (s.stage_reason[size_t(i)]) reason[size_t(i)] = s.stage_reason[size_t(i)];
+    }
+    for (int i = 0; i < kStagePartCount; ++i) {
+      part_ran[size_t(i)] = part_ran[size_t(i)] || s.part_ran[size_t(i)];
+      if (s.part_reason[size_t(i)]) part_reason[size_t(i)] = s.part_reason[size_t(i)];
+    }
+  }
 };
 
 class CollisionDetector;  // narrow + broad phase backend (native or Bullet's)
@@ -156,6 +208,14 @@ class System {
   virtual void buildAndSolve();     // BuildRows + WarmStart + Solve
   virtual void integrate();         // IntegrateVelocities + IntegratePositions
   void collectRows();               // rows_ from the row providers (part of BuildRows)
+  // Scene-level parts (host arrays): gyroscopic term and MPR needed? Fills stats_.part_ran/part_reason for
+  // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
+  // term runs.
+  bool planParts();
+  // Records a stage as left out of this step.
+  void leaveOut(StageType s, const char* why) {
+    if (!stats_.stage_ran[int(s)]) stats_.stage_reason[int(s)] = why;
+  }
 
   SystemConfig config_;
   BodyArrays bodies_;
@@ -172,6 +232,10 @@ class System {
   std::vector<size_t> provider_rows_;       // rows of each provider this step, in order
   std::unique_ptr<CollisionDetector> collision_;
   std::unique_ptr<ContactProblem> problem_;
+  std::vector<real> x_;                     // solution in the problem's layout when it is normal-only
+  const real* solution_ = nullptr;          // gamma_ or x_: what IntegrateVelocities applies
+  size_t typed_shapes_ = 0;                 // shapes whose type is in shape_types_
+  uint32_t shape_types_ = 0;                // bit t: the scene has a shape of type t
   StepStats stats_;
   double time_ = 0;
   int64_t steps_ = 0;

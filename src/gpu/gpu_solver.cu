@@ -101,47 +101,89 @@ struct BodyInverseF {
   }
 };
 
-struct RowsF {
+// Combined friction, pair size and penetration of every contact (first: mu decides the problem's rows).
+struct MuF {
   const int32_t *body_a, *body_b, *shape_a, *shape_b;
-  const Vec3 *normal, *pa, *pb, *pos, *v_free, *w_free;
   const real *dist, *friction;
   const Shape* shapes;
-  const BodyInverseMass* inv;
   FrictionCombine rule;
+  real *mu, *size, *pen;
+  __device__ void operator()(int64_t k) const {
+    const real fa = friction[body_a[k]], fb = friction[body_b[k]];
+    mu[k] = rule == FrictionCombine::Product ? fa * fb
+            : rule == FrictionCombine::Min   ? fmin(fa, fb)
+                                             : real(0.5) * (fa + fb);
+    size[k] = fmin(shapes[shape_a[k]].size, shapes[shape_b[k]].size);
+    pen[k] = -dist[k];
+  }
+};
+
+struct RowsF {
+  const int32_t *body_a, *body_b;
+  const Vec3 *normal, *pa, *pb, *pos, *v_free, *w_free;
+  const real *dist, *size;
+  const BodyInverseMass* inv;
   real h, recovery_rel;
   int32_t nbodies;
-  real *mu, *size, *rhs, *binv, *eta, *diag_max, *pen, *colnorm, *rowsum;
+  bool normal_only;  // the normal row only (block data per three contacts: NormalBlockF)
+  real *rhs, *binv, *eta, *diag_max, *colnorm, *rowsum;
   ContactJacobian* jac;
   uint32_t* adj_key;
   int32_t* adj_val;
   __device__ void operator()(int64_t k) const {
     const int32_t a = body_a[k], b = body_b[k];
-    const real fa = friction[a], fb = friction[b];
-    const real m = rule == FrictionCombine::Product ? fa * fb
-                   : rule == FrictionCombine::Min   ? fmin(fa, fb)
-                                                    : real(0.5) * (fa + fb);
-    const real sz = fmin(shapes[shape_a[k]].size, shapes[shape_b[k]].size);
-    mu[k] = m;
-    size[k] = sz;
     const ContactJacobian J = makeContactJacobian(normal[k], pa[k], pb[k], pos[a], pos[b], a, b);
     jac[k] = J;
-    real* rk = rhs + 3 * k;
-    contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
-    rk[0] += contactBias(dist[k], h, recovery_rel, sz);
-    real N[6];
     const BodyInverseMass A = inv[a], B = inv[b];
-    contactDiagonalBlock(J, A, B, N);
-    invertSymmetric3(N, binv + 6 * k);
-    eta[k] = blockStepFromDiagonal(N);
-    contactColumnNorms(J, A, B, colnorm + 6 * k);
-    blockRowSums(N, rowsum + 3 * k);
-    diag_max[k] = fmax(N[0], fmax(N[1], N[2]));
-    pen[k] = -dist[k];
+    if (normal_only) {
+      rhs[k] = contactNormalVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b]) +
+               contactBias(dist[k], h, recovery_rel, size[k]);
+    } else {
+      real* rk = rhs + 3 * k;
+      contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
+      rk[0] += contactBias(dist[k], h, recovery_rel, size[k]);
+      real N[6];
+      contactDiagonalBlock(J, A, B, N);
+      invertSymmetric3(N, binv + 6 * k);
+      eta[k] = blockStepFromDiagonal(N);
+      contactColumnNorms(J, A, B, colnorm + 6 * k);
+      blockRowSums(N, rowsum + 3 * k);
+      diag_max[k] = fmax(N[0], fmax(N[1], N[2]));
+    }
     // adjacency entries 2k + side, keyed by body (inactive bodies sort last)
     adj_key[2 * k] = movable(A) ? uint32_t(a) : uint32_t(nbodies);
     adj_key[2 * k + 1] = movable(B) ? uint32_t(b) : uint32_t(nbodies);
     adj_val[2 * k] = int32_t(2 * k);
     adj_val[2 * k + 1] = int32_t(2 * k + 1);
+  }
+};
+
+// Block q of a normal-only problem: contacts 3q .. 3q+2 (jacobian.h: assembleNormalBlock), their boxes
+// [0, inf) and the padding rows' [0, 0].
+struct NormalBlockF {
+  const ContactJacobian* jac;
+  const BodyInverseMass* inv;
+  int64_t nc;
+  real *rhs, *binv, *eta, *colnorm, *rowsum, *diag_max, *lo, *hi;
+  __device__ void operator()(int64_t q) const {
+    const int cnt = int(nc - 3 * q < 3 ? nc - 3 * q : 3);
+    for (int j = 0; j < 3; ++j) {
+      lo[3 * q + j] = 0;
+      hi[3 * q + j] = j < cnt ? real(INFINITY) : real(0);
+      if (j >= cnt) rhs[3 * q + j] = 0;
+    }
+    diag_max[q] = assembleNormalBlock(jac + 3 * q, cnt, inv, binv + 6 * q, eta + q, colnorm + 6 * q, rowsum + 3 * q);
+  }
+};
+
+struct NormalJacobiStepF {
+  const ContactJacobian* jac;
+  const real *colnorm, *rowsum, *bodyq;
+  int64_t nc;
+  real* jeta;
+  __device__ void operator()(int64_t q) const {
+    const int cnt = int(nc - 3 * q < 3 ? nc - 3 * q : 3);
+    jeta[q] = normalBlockJacobiStep(jac + 3 * q, cnt, colnorm + 6 * q, rowsum + 3 * q, bodyq);
   }
 };
 
@@ -174,14 +216,14 @@ struct GatherF {
   const int32_t* adj;
   const ContactJacobian* jac;
   const ConstraintRow* rows;
-  int64_t nc;
+  EntryLayout L;
   const BodyInverseMass* inv;
   const real* x;
   BodyDelta* delta;
   __device__ void operator()(int64_t i) const {
     Vec3 F{0, 0, 0}, T{0, 0, 0};
     const int32_t e1 = off[i + 1];
-    for (int32_t e = off[i]; e < e1; ++e) accumulateEntryImpulse(adj[e], nc, jac, rows, x, F, T);
+    for (int32_t e = off[i]; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, x, F, T);
     delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
   }
 };
@@ -197,6 +239,22 @@ struct ContactF {
   }
 };
 
+struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padding rows 0)
+  const ContactJacobian* jac;
+  const BodyDelta* delta;
+  int64_t nc;
+  real* y;
+  __device__ void operator()(int64_t k) const {
+    if (k >= nc) {
+      y[k] = 0;
+      return;
+    }
+    const ContactJacobian J = jac[k];
+    const BodyDelta A = delta[J.a], B = delta[J.b];
+    y[k] = contactNormalVelocity(J, A.v, A.w, B.v, B.w);
+  }
+};
+
 struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
   const ConstraintRow* rows;
   const BodyDelta* delta;
@@ -209,13 +267,13 @@ struct RowBlockF {
   const ConstraintRow* rows;
   const BodyInverseMass* inv;
   const Vec3 *v_free, *w_free;
-  int64_t nc;
+  int64_t nc, rb0;  // contacts; first row block
   int32_t nbodies;
   real *rhs, *binv, *eta, *colnorm, *rowsum, *diag_max;
   uint32_t* adj_key;
   int32_t* adj_val;
   __device__ void operator()(int64_t q) const {
-    const int64_t k = nc + q;
+    const int64_t k = rb0 + q;
     diag_max[k] = assembleRowBlock(rows + 3 * q, inv, v_free, w_free, rhs + 3 * k, binv + 6 * k, eta + k,
                                    colnorm + 6 * k, rowsum + 3 * k);
     for (int j = 0; j < 3; ++j) {
@@ -233,10 +291,10 @@ struct RowBlockF {
 struct RowJacobiStepF {
   const ConstraintRow* rows;
   const real *colnorm, *rowsum, *bodyq;
-  int64_t nc;
+  int64_t rb0;  // first row block
   real* jeta;
   __device__ void operator()(int64_t q) const {
-    const int64_t k = nc + q;
+    const int64_t k = rb0 + q;
     jeta[k] = rowBlockJacobiStep(rows + 3 * q, colnorm + 6 * k, rowsum + 3 * k, bodyq);
   }
 };
@@ -254,13 +312,21 @@ struct ProblemView {
   real max_diag = 1;
 };
 
+EntryLayout layoutOf(const DeviceState& d) {
+  return EntryLayout{int64_t(d.contacts.count), d.contact_blocks, d.normal_only};
+}
+
 void schur(DeviceState& d, const real* x, real* y) {
   SolverScratch& S = d.solver;
   const int64_t nb = int64_t(d.bodies.count), nc = int64_t(d.contacts.count);
-  launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), nc,
+  launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), layoutOf(d),
                            d.bodies.inv.data(), x, d.bodies.delta.data()}, "launch of GatherF (Schur pass a)");
-  launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), y}, "launch of ContactF (Schur pass b)");
-  launchMap(d, int64_t(S.rows.size()), RowSchurF{S.rows.data(), d.bodies.delta.data(), y + 3 * nc},
+  if (d.normal_only)
+    launchMap(d, 3 * d.contact_blocks, NormalContactF{S.jac.data(), d.bodies.delta.data(), nc, y},
+              "launch of NormalContactF (Schur pass b, normal rows)");
+  else
+    launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), y}, "launch of ContactF (Schur pass b)");
+  launchMap(d, int64_t(S.rows.size()), RowSchurF{S.rows.data(), d.bodies.delta.data(), y + 3 * d.contact_blocks},
             "launch of RowSchurF (Schur pass b, rows)");
 }
 
@@ -317,8 +383,8 @@ class GpuOps {
 
 ProblemView view(DeviceState& d, real max_diag) {
   ProblemView p;
-  p.nc = int64_t(d.contacts.count);
-  p.nb = p.nc + int64_t(d.solver.rows.size() / 3);
+  p.nc = d.normal_only ? 0 : int64_t(d.contacts.count);  // cone blocks; normal-only blocks are boxes
+  p.nb = d.contact_blocks + int64_t(d.solver.rows.size() / 3);
   p.lo = d.solver.row_lo.data();
   p.hi = d.solver.row_hi.data();
   p.r = d.solver.rhs.data();
@@ -335,11 +401,11 @@ struct BodyColumnSumF {
   const int32_t* off;
   const int32_t* adj;
   const real* colnorm;
-  int64_t nc;
+  EntryLayout L;
   real* bodyq;
   __device__ void operator()(int64_t i) const {
     real q = 0;
-    for (int32_t e = off[i]; e < off[i + 1]; ++e) q += entryColumnSum(adj[e], nc, colnorm);
+    for (int32_t e = off[i]; e < off[i + 1]; ++e) q += entryColumnSum(adj[e], L, colnorm);
     bodyq[i] = q;
   }
 };
@@ -412,9 +478,32 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   DeviceContacts& C = d.contacts;
   launchMap(d, nb, BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data()},
             "launch of BodyInverseF");
+  // Combined friction first: friction rows only where mu > 0 (DESIGN §2). When no contact of the step has
+  // mu > 0 the CCP has the normal rows only (jacobian.h), as on the CPU (System::buildAndSolve).
+  C.mu.resize(nc);
+  C.size.resize(nc);
+  S.v6.resize(nc);  // per-contact penetration
+  launchMap(d, nc, MuF{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.dist.data(),
+                       B.friction.data(), d.shapes.shape.data(), cfg.friction_combine, C.mu.data(), C.size.data(),
+                       S.v6.data()},
+            "launch of MuF");
+  real max_mu = 0;
+  if (nc > 0 && cfg.prune) {
+    d.step_scalars.resize(16);
+    real* mu_out = reinterpret_cast<real*>(d.step_scalars.data()) + 4;
+    cubRun(d, "cub::DeviceReduce::Max (friction)", [&](void* t, size_t& b) {
+      return cub::DeviceReduce::Max(t, b, C.mu.data(), mu_out, int(nc), d.stream);
+    });
+    max_mu = d.readValue(mu_out);
+  }
+  d.normal_only = cfg.prune && nc > 0 && !(max_mu > 0);
+  const bool normal = d.normal_only;
+  const int64_t ncb = normal ? (nc + 2) / 3 : nc;
+  d.contact_blocks = ncb;
+  const int64_t nbox = normal ? 3 * ncb : 0;  // box entries of the normal blocks, before the rows'
   // Constraint rows from the host (RowProvider plug-ins), padded to blocks of three (rows_impl.h).
   const int64_t nrb = (int64_t(rows.size()) + 2) / 3;
-  const int64_t nblk = nc + nrb;
+  const int64_t nblk = ncb + nrb;
   d.row_count = rows.size();
   {
     std::vector<ConstraintRow>& padded = d.host_rows;
@@ -434,8 +523,14 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
           throw InputError("constraint row " + std::to_string(i) + ": body index " + std::to_string(c) + " out of range");
     }
     S.rows.upload(padded, d.stream);
-    S.row_lo.upload(lohi.data(), size_t(3 * nrb), d.stream);
-    S.row_hi.upload(lohi.data() + 3 * nrb, size_t(3 * nrb), d.stream);
+    S.row_lo.resize(size_t(nbox + 3 * nrb));
+    S.row_hi.resize(size_t(nbox + 3 * nrb));
+    if (nrb > 0) {
+      DVI_CUDA(cudaMemcpyAsync(S.row_lo.data() + nbox, lohi.data(), sizeof(real) * size_t(3 * nrb),
+                               cudaMemcpyHostToDevice, d.stream));
+      DVI_CUDA(cudaMemcpyAsync(S.row_hi.data() + nbox, lohi.data() + 3 * nrb, sizeof(real) * size_t(3 * nrb),
+                               cudaMemcpyHostToDevice, d.stream));
+    }
   }
   S.jac.resize(nc);
   S.rhs.resize(3 * nblk);
@@ -452,16 +547,19 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.adj_val_sorted.resize(nent);
   S.adj_off.resize(nb + 1);
   S.v5.resize(nblk);  // per-block max diagonal entry
-  S.v6.resize(nc);  // per-contact penetration
   S.v4.resize(nc);  // key order flags
-  RowsF f{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.normal.data(), C.pa.data(),
-          C.pb.data(),     B.pos.data(),    B.v_free.data(),  B.w_free.data(),  C.dist.data(),   B.friction.data(),
-          d.shapes.shape.data(), B.inv.data(), cfg.friction_combine, cfg.dt, cfg.recovery_rel, int32_t(nb),
-          C.mu.data(), C.size.data(), S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.v6.data(),
-          S.colnorm.data(), S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data()};
+  RowsF f{C.body_a.data(), C.body_b.data(), C.normal.data(), C.pa.data(), C.pb.data(), B.pos.data(),
+          B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), cfg.dt, cfg.recovery_rel,
+          int32_t(nb), normal, S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.colnorm.data(),
+          S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data()};
   launchMap(d, nc, f, "launch of RowsF");
+  if (normal)
+    launchMap(d, ncb,
+              NormalBlockF{S.jac.data(), B.inv.data(), nc, S.rhs.data(), S.block_inv.data(), S.block_step.data(),
+                           S.colnorm.data(), S.rowsum.data(), S.v5.data(), S.row_lo.data(), S.row_hi.data()},
+              "launch of NormalBlockF");
   launchMap(d, nrb,
-            RowBlockF{S.rows.data(), B.inv.data(), B.v_free.data(), B.w_free.data(), nc, int32_t(nb), S.rhs.data(),
+            RowBlockF{S.rows.data(), B.inv.data(), B.v_free.data(), B.w_free.data(), nc, ncb, int32_t(nb), S.rhs.data(),
                       S.block_inv.data(), S.block_step.data(), S.colnorm.data(), S.rowsum.data(), S.v5.data(),
                       S.adj_key.data(), S.adj_val.data()},
             "launch of RowBlockF");
@@ -474,11 +572,15 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   });
   launchMap(d, nb + 1, AdjOffsetF{S.adj_key_sorted.data(), nent, S.adj_off.data()}, "launch of AdjOffsetF");
   // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-block bounds
-  launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), nc, S.bodyq.data()},
+  launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), layoutOf(d), S.bodyq.data()},
             "launch of BodyColumnSumF");
-  launchMap(d, nc, JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
-            "launch of JacobiStepF");
-  launchMap(d, nrb, RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc, S.jacobi_step.data()},
+  if (normal)
+    launchMap(d, ncb, NormalJacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc, S.jacobi_step.data()},
+              "launch of NormalJacobiStepF");
+  else
+    launchMap(d, nc, JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
+              "launch of JacobiStepF");
+  launchMap(d, nrb, RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), ncb, S.jacobi_step.data()},
             "launch of RowJacobiStepF");
   // max diag(N), max penetration, key order: three maxima, one read-back
   d.step_scalars.resize(16);
@@ -517,9 +619,18 @@ void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda
             "launch of WarmF");
 }
 
+real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.solver.gamma.data(); }
+
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
-  GpuOps ops(d, view(d, d.max_diag));
-  real* gamma = d.solver.gamma.data();
+  const ProblemView pv = view(d, d.max_diag);
+  GpuOps ops(d, pv);
+  SolverScratch& S = d.solver;
+  const int64_t nc = int64_t(d.contacts.count);
+  if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout
+    S.x.resize(size_t(3 * pv.nb));
+    launchMap(d, 3 * pv.nb, kern::ToNormalLayout{S.gamma.data(), S.x.data(), nc, d.contact_blocks}, "launch of ToNormalLayout");
+  }
+  real* gamma = solution(d);
   SolverStats st;
   switch (cfg.solver) {
     case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver_settings); break;
@@ -528,6 +639,9 @@ DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
     case SolverType::APGD:
     default: st = algo::apgd(ops, gamma, cfg.solver_settings); break;
   }
+  if (d.normal_only)
+    launchMap(d, int64_t(S.gamma.size()), kern::FromNormalLayout{S.x.data(), S.gamma.data(), nc, d.contact_blocks},
+              "launch of FromNormalLayout");
   DeviceCcpResult r;
   r.iterations = st.iterations;
   r.residual = st.residual;
@@ -563,8 +677,8 @@ void applyImpulsesToBodies(DeviceState& d, const real* gamma) {
   const int64_t nb = int64_t(B.count);
   if (gamma) {
     SolverScratch& S = d.solver;
-    launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(),
-                             int64_t(d.contacts.count), B.inv.data(), gamma, B.delta.data()},
+    launchMap(d, nb, GatherF{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), layoutOf(d),
+                             B.inv.data(), gamma, B.delta.data()},
               "launch of GatherF (impulses)");
   }
   launchMap(d, nb, VelocityF{B.v_free.data(), B.w_free.data(), gamma ? B.delta.data() : nullptr, B.vel.data(), B.omega.data()},

@@ -92,6 +92,7 @@ struct SolverScratch {
   DeviceBuffer<real> jacobi_step{"ccp jacobi steps"}, colnorm{"ccp column norms"}, rowsum{"ccp block row sums"},
       bodyq{"ccp body column sums"};
   DeviceBuffer<real> gamma{"ccp gamma"}, prev_gamma{"ccp previous gamma"};
+  DeviceBuffer<real> x{"ccp normal-only solution"};  // the solution in a normal-only problem's layout
   DeviceBuffer<uint64_t> prev_key{"ccp previous keys"};
   // body -> contact adjacency (CSR): entries (2k + side) sorted by body, offsets per body
   DeviceBuffer<uint32_t> adj_key{"adjacency keys"}, adj_key_sorted{"adjacency sorted keys"};
@@ -122,6 +123,8 @@ struct DeviceState {
   real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)
   bool keys_unsorted = false;
   size_t row_count = 0;                  // constraint rows this step (before padding)
+  bool normal_only = false;              // this step's CCP has the contacts' normal rows only (jacobian.h)
+  int64_t contact_blocks = 0;            // contact blocks: contacts, or ceil(contacts / 3) when normal_only
   std::vector<ConstraintRow> host_rows;  // host staging of the padded rows
   std::vector<real> host_lohi;           //   and of their bounds
 
@@ -156,5 +159,7 @@ DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg);
 void keepImpulsesForWarmStart(DeviceState& d);
 // v = v_free + M^-1 D gamma for every body (and positions), the IntegrateVelocities/Positions stages.
 void applyImpulsesToBodies(DeviceState& d, const real* gamma);
+// The solution in the problem's layout (solver.x when normal_only, else solver.gamma).
+real* solution(DeviceState& d);
 
 }  // namespace dvi::gpu

@@ -51,11 +51,11 @@ namespace {
 __global__ void integrateForcesKernel(int n, const Vec3* vel, const Vec3* omega, const Quat* rot,
                                       const real* inv_mass, const Vec3* inv_inertia, const Vec3* force,
                                       const Vec3* torque, const Vec3* gravity, const uint8_t* flags, bool gyro,
-                                      real h, Vec3* v_free, Vec3* w_free) {
+                                      bool skip_spherical, real h, Vec3* v_free, Vec3* w_free) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
   integrateBodyForces(vel[i], omega[i], rot[i], inv_mass[i], inv_inertia[i], force[i], torque[i], gravity[i],
-                      flags[i], gyro, h, v_free[i], w_free[i]);
+                      flags[i], gyro, skip_spherical, h, v_free[i], w_free[i]);
 }
 
 __global__ void addForcesKernel(int n, const Vec3* f, const Vec3* t, Vec3* force, Vec3* torque) {
@@ -149,6 +149,7 @@ void GpuSystem::uploadIfNeeded() {
 void GpuSystem::step() {
   stats_ = StepStats{};
   uploadIfNeeded();
+  planParts();
   cudaEvent_t* ev = d_->ev;
   DVI_CUDA(cudaEventRecord(ev[0], d_->stream));
   integrateForces();
@@ -171,7 +172,7 @@ void GpuSystem::integrateForces() {
   const int n = int(b.count);
   stats_.stage_ran[int(StageType::IntegrateForces)] = true;
   if (n == 0) return;
-  if (!fields_.empty()) {
+  if (stats_.part_ran[int(StagePart::ForceFields)]) {  // with prune = false even without fields
     // Force fields are host plug-ins (extensions.h): the body state goes to the host, the fields run
     // there, and their forces come back and are added on the device. This is the one host round trip
     // inside the step, and it happens only in scenes with force fields (docs/ARCHITECTURE.md).
@@ -193,8 +194,8 @@ void GpuSystem::integrateForces() {
   }
   integrateForcesKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(
       n, b.vel.data(), b.omega.data(), b.rot.data(), b.inv_mass.data(), b.inv_inertia.data(), b.force.data(),
-      b.torque.data(), b.gravity.data(), b.flags.data(), config_.gyroscopic, config_.dt, b.v_free.data(),
-      b.w_free.data());
+      b.torque.data(), b.gravity.data(), b.flags.data(), stats_.part_ran[int(StagePart::Gyroscopic)], config_.prune,
+      config_.dt, b.v_free.data(), b.w_free.data());
   DVI_CUDA_LAUNCH("integrateForcesKernel");
 }
 
@@ -215,7 +216,7 @@ void GpuSystem::detectCollisions() {
 void GpuSystem::buildAndSolve() {
   cudaEvent_t* ev = d_->ev;
   const size_t nc = d_->contacts.count;
-  if (!row_providers_.empty()) {
+  if (stats_.part_ran[int(StagePart::ConstraintRows)]) {  // with prune = false even without providers
     // Row providers are host plug-ins (extensions.h) that read the body state: it comes to the host
     // here, only in scenes with constraint rows (docs/ARCHITECTURE.md).
     const DeviceBodies& b = d_->bodies;
@@ -235,16 +236,27 @@ void GpuSystem::buildAndSolve() {
     d_->solver.gamma.resize(0);
     for (int s : {int(StageType::BuildRows), int(StageType::WarmStart), int(StageType::Solve)})
       DVI_CUDA(cudaEventRecord(ev[s + 1], d_->stream));
+    d_->normal_only = false;
+    stats_.part_reason[int(StagePart::FrictionRows)] = "no contacts";
+    leaveOut(StageType::BuildRows, "no contacts and no constraint rows");
+    leaveOut(StageType::WarmStart, "no contacts and no constraint rows");
+    leaveOut(StageType::Solve, "no contacts and no constraint rows");
     return;
   }
   real max_pen = 0;
   buildRows(*d_, config_, rows_, &max_pen);
   stats_.max_penetration = max_pen;
   stats_.stage_ran[int(StageType::BuildRows)] = true;
+  stats_.normal_only = d_->normal_only;
+  stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !d_->normal_only;
+  stats_.part_reason[int(StagePart::FrictionRows)] =
+      nc == 0 ? "no contacts" : d_->normal_only ? "no contact with mu > 0 this step" : nullptr;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
   const bool warm = config_.warm_start && d_->prev_count > 0;
   warmStart(*d_, config_.warm_start, config_.warm_start ? row_lambda_ : std::vector<real>{});
   stats_.stage_ran[int(StageType::WarmStart)] = warm;
+  if (!config_.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::warm_start)");
+  else if (!warm) leaveOut(StageType::WarmStart, "no contacts in the previous step");
   DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
   DeviceCcpResult r = solveCcp(*d_, config_);
   stats_.iterations = r.iterations;
@@ -268,7 +280,7 @@ void GpuSystem::integrate() {
   const int n = int(b.count);
   // IntegrateVelocities: v = v_free + M^-1 D gamma (the gather of the Schur product).
   const bool impulses = d_->contacts.count > 0 || d_->row_count > 0;
-  if (n > 0) applyImpulsesToBodies(*d_, impulses ? d_->solver.gamma.data() : nullptr);
+  if (n > 0) applyImpulsesToBodies(*d_, impulses ? solution(*d_) : nullptr);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegrateVelocities) + 1], d_->stream));
   if (n > 0) {
     integratePositionsKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(n, b.pos.data(), b.rot.data(), b.vel.data(),
