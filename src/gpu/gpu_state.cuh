@@ -98,6 +98,9 @@ struct SolverScratch {
   DeviceBuffer<uint32_t> adj_key{"adjacency keys"}, adj_key_sorted{"adjacency sorted keys"};
   DeviceBuffer<int32_t> adj_val{"adjacency values"}, adj_val_sorted{"adjacency sorted values"};
   DeviceBuffer<int32_t> adj_off{"adjacency offsets"};
+  // bodies with kHeavyDegree or more entries (a CES drum touches every particle on it): gathered by a block
+  DeviceBuffer<int32_t> heavy{"heavy bodies"}, heavy_count{"heavy body count"};
+  int64_t n_heavy = 0;
   DeviceBuffer<int32_t> order{"key order"}, order_sorted{"sorted key order"};
   // solver vectors
   DeviceBuffer<real> v0{"solver vector 0"}, v1{"solver vector 1"}, v2{"solver vector 2"}, v3{"solver vector 3"},
