@@ -77,6 +77,7 @@ struct Case {
   double dt = 1e-3;
   int steps = 100;
   int iterations = 100;
+  double tolerance = 0;  // > 0: APGD stops at this residual (iterations is then the cap)
   Vec3 gravity{0, real(-9.81), 0};
   double bullet_scale = 1;
   double settle_t = 0;   // late_pen_rel from this time on
@@ -239,6 +240,17 @@ void buildStack(BtBodies& s, int n, double a, double ratio, double mu) {
   }
 }
 
+// Mass ratios of 1e4 and more make the CCP ill-conditioned (the condition number of N grows with the ratio):
+// a fixed 100 APGD iterations leave a residual that lets the light bodies jitter (the 1e4 particle case rose by
+// 0.1 r, the 1e6 one sank 1.4 r). An engine user sets a tolerance for such scenes, so ours runs to an absolute
+// residual of 1e-10 (impulses here are ~1e-4 N s and more) with up to 5000 iterations; the row's note says so
+// and its run time shows the cost.
+void convergeStiff(Case& c, double ratio) {
+  if (ratio < 1e4) return;
+  c.iterations = 5000;
+  c.tolerance = 1e-10;
+}
+
 std::vector<Case> makeCases(bool quick, bool have_gpu) {
   std::vector<Case> cases;
   // 1. Mass ratios in a stack: 4 boxes of 10 cm, the top one R times heavier; h = 1/60 s.
@@ -248,6 +260,7 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     const double a = 0.05;
     c.build = [=](BtBodies& s) { buildStack(s, 4, a, ratio, 0.7); };
     c.dt = 1.0 / 60, c.steps = quick ? 60 : 180, c.length = a;
+    convergeStiff(c, ratio);
     c.criterion = "4 boxes (10 cm), top " + fmt("%.0e", ratio) +
                   "x heavier, h = 1/60 s: top box moves < 10% of its half size, penetration < 5% of the half size";
     c.judge = [a](const Metrics& m) {
@@ -283,6 +296,7 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
       s.addShared(sph, m * ratio, Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)}, real(0.7));
     };
     c.dt = 1e-3, c.steps = quick ? 300 : 1000, c.length = r, c.bullet_scale = 100, c.bullet_units = "cm";
+    convergeStiff(c, ratio);
     c.criterion = "2x2 spheres (r 1 cm) in a box, one " + fmt("%.0e", ratio) +
                   "x heavier on top, h = 1e-3 s: heavy sphere sinks < 5% of r, penetration < 5% of r";
     c.judge = [r](const Metrics& m) {
@@ -335,8 +349,11 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     c.dt = 1e-3, c.steps = quick ? 300 : 1000, c.length = 0.05, c.settle_t = 0;
     c.bullet_scale = 100, c.bullet_units = "cm";
-    c.criterion = "cubes and spheres of 0.1 mm..10 cm at rest, h = 1e-3 s: every body moves < 10% of its size, "
-                  "penetration < 5% of the pair's size";
+    // Each cube starts 0.1% of its size above the one below, so the stack first closes its gaps (0.11 mm in
+    // all, 2.2 sizes of the 0.1 mm cube): bodies are judged against their analytic rest positions (cube i at
+    // y = 2 sum_{j<i} a_j + a_i, spheres at y = r), not against where they started.
+    c.criterion = "cubes and spheres of 0.1 mm..10 cm, h = 1e-3 s: every body ends within 10% of its size of its "
+                  "analytic rest position, penetration < 5% of the pair's size";
     c.judge = [](const Metrics& m) {
       Verdict v;
       if (broken(m, v)) return v;
@@ -345,8 +362,16 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
                              "1 mm sphere", "0.1 mm sphere"};
       double worst = 0;
       size_t wi = 1;
+      double below = 0;  // height of the cubes below cube i
       for (size_t i = 1; i < m.final_pos.size() && i < 9; ++i) {
-        const double d = double(dvi::length(m.final_pos[i] - m.start_pos[i])) / sizes[i];
+        Vec3 rest = m.start_pos[i];
+        if (i <= 4) {
+          rest.y = real(below + sizes[i]);
+          below += 2 * sizes[i];
+        } else {
+          rest.y = real(sizes[i]);
+        }
+        const double d = double(dvi::length(m.final_pos[i] - rest)) / sizes[i];
         if (d > worst) worst = d, wi = i;
       }
       v.measured = std::string("worst: ") + names[wi] + fmt(" moved %.3g sizes, pen %.3g", worst, m.pen_rel);
@@ -713,9 +738,12 @@ int runStability(const StabOptions& o) {
           cfg.gravity = c.gravity;
           cfg.solver = dvi::SolverType::APGD;
           cfg.solver_settings.max_iterations = c.iterations;
+          cfg.solver_settings.tolerance = real(c.tolerance);
           cfg.threads = int(threads);
           run = std::make_unique<OursRunner>(s.bodies, cfg, e.name == "gpu");
-          r.note = "APGD " + std::to_string(c.iterations) + " iterations";
+          r.note = c.tolerance > 0 ? "APGD to residual " + fmt("%.0e", c.tolerance) + ", at most " +
+                                         std::to_string(c.iterations) + " iterations"
+                                   : "APGD " + std::to_string(c.iterations) + " iterations";
         } else {
           dvi::BulletPeerSettings bs;
           bs.dt = real(c.dt);
