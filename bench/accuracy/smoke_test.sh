@@ -3,21 +3,13 @@
 # has the expected columns, rows for every scene x solver (and Bullet), sane values, the goal line, and bad input
 # ends with a one-line error and exit code 2.
 #   bash smoke_test.sh DVISIM_BINARY WORK_DIR
-set -u
-cli=$1
-work=$2
-rm -rf "$work"
-mkdir -p "$work"
-fail() { echo "FAIL: $*"; exit 1; }
+source "$(dirname "$0")/../smoke_common.sh" "$@"
 
-"$cli" bench accuracy --quick --threads 1 --out "$work/out" > "$work/stdout.txt" 2> "$work/stderr.txt"
-rc=$?
-cat "$work/stdout.txt"
-[ $rc -eq 0 ] || { cat "$work/stderr.txt"; fail "bench accuracy --quick exited with $rc"; }
+run_bench accuracy --quick --threads 1
 csv="$work/out/accuracy.csv"
 [ -s "$csv" ] || fail "no $csv"
 expected="scene,engine,solver,sweep,iterations,dt_s,steps,wall_s,ms_per_step,residual_mean,residual_last,max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status"
-[ "$(head -1 "$csv")" = "$expected" ] || fail "CSV header: $(head -1 "$csv")"
+expect_header "$csv" "$expected"
 for scene in pile mix stack; do
   for solver in jacobi gs apgd bb bullet-si; do
     c=$(awk -F, -v s=$scene -v v=$solver '$1==s && $3==v && $4=="iterations"' "$csv" | wc -l)
@@ -43,13 +35,6 @@ END { exit bad }' "$csv" || fail "bad values in $csv"
 grep -q "Goal (issue 6)" "$work/stdout.txt" || fail "no goal line on stdout"
 grep -q "APGD .* Jacobi .* ratio" "$work/stdout.txt" || fail "no APGD/Jacobi ratio on stdout"
 
-expect2() {
-  "$cli" "$@" > /dev/null 2> "$work/err.txt"
-  local rc=$?
-  [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
-  [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
-  grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
-}
 expect2 bench accuracy --quick --out "$work/e1" --bogus
 expect2 bench accuracy --quick
 expect2 bench accuracy --quick --out "$work/e2" --threads x

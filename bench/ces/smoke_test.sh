@@ -4,17 +4,9 @@
 # lost, a run cut by --wall-limit says so, and bad input ends with a one-line error and exit code 2. (Collection is
 # not reached in 0.02 s of machine time; the Catch2 test "CES machine: the mass balance closes exactly" covers it.)
 #   bash smoke_test.sh DVISIM_BINARY WORK_DIR
-set -u
-cli=$1
-work=$2
-rm -rf "$work"
-mkdir -p "$work"
-fail() { echo "FAIL: $*"; exit 1; }
+source "$(dirname "$0")/../smoke_common.sh" "$@"
 
-"$cli" bench ces --quick --threads 2 --out "$work/out" > "$work/stdout.txt" 2> "$work/stderr.txt"
-rc=$?
-cat "$work/stdout.txt"
-[ $rc -eq 0 ] || { cat "$work/stderr.txt"; fail "bench ces --quick exited with $rc"; }
+run_bench ces --quick --threads 2
 json="$work/out/ces_bench.json"
 md="$work/out/ces_bench.md"
 [ -s "$json" ] || fail "no $json"
@@ -68,13 +60,6 @@ assert r["stopped_by"] == "wall_limit" and r["steps"] < j["target"]["steps"] and
 assert j["mass_balance"]["balance_closes"] is True
 PY
 
-expect2() {
-  "$cli" "$@" > /dev/null 2> "$work/err.txt"
-  local rc=$?
-  [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
-  [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
-  grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
-}
 expect2 bench ces --quick --out "$work/e" --backend bogus
 expect2 bench ces --quick --out "$work/e" --backend bullet
 expect2 bench ces --quick --out "$work/e" --rate -5

@@ -3,22 +3,14 @@
 # the expected columns and one row per scene x prune with sane values, pruning.md and the goal line exist, and bad
 # input ends with a one-line error and exit code 2. It checks the fields, not the speed.
 #   bash smoke_test.sh DVISIM_BINARY WORK_DIR
-set -u
-cli=$1
-work=$2
-rm -rf "$work"
-mkdir -p "$work"
-fail() { echo "FAIL: $*"; exit 1; }
+source "$(dirname "$0")/../smoke_common.sh" "$@"
 
-"$cli" bench pruning --quick --backend cpu --threads 1 --out "$work/out" > "$work/stdout.txt" 2> "$work/stderr.txt"
-rc=$?
-cat "$work/stdout.txt"
-[ $rc -eq 0 ] || { cat "$work/stderr.txt"; fail "bench pruning --quick exited with $rc"; }
+run_bench pruning --quick --backend cpu --threads 1
 csv="$work/out/pruning.csv"
 [ -s "$csv" ] || fail "no $csv"
 [ -s "$work/out/pruning.md" ] || fail "no pruning.md"
 expected="scene,mu,prune,bodies,steps,ms_per_step,IntegrateForces_ms,ComputeAabbs_ms,BroadPhase_ms,NarrowPhase_ms,BuildRows_ms,WarmStart_ms,Solve_ms,IntegrateVelocities_ms,IntegratePositions_ms,contacts_mean,normal_only_steps,saving_pct,backend,threads,device,parts_ran"
-[ "$(head -1 "$csv")" = "$expected" ] || fail "CSV header: $(head -1 "$csv")"
+expect_header "$csv" "$expected"
 [ "$(tail -n +2 "$csv" | wc -l)" -eq 4 ] || fail "expected 4 rows"
 awk -F, '
 NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
@@ -39,13 +31,6 @@ END { exit bad }' "$csv" || fail "bad values in $csv"
 grep -q "Goal (issue 6): pruning saves >= 30% on a frictionless all-sphere scene: " "$work/stdout.txt" || fail "no goal line"
 grep -q "do not edit by hand" "$work/out/pruning.md" || fail "pruning.md header"
 
-expect2() {
-  "$cli" "$@" > /dev/null 2> "$work/err.txt"
-  local rc=$?
-  [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
-  [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
-  grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
-}
 expect2 bench pruning --quick --out "$work/e1" --bogus
 expect2 bench pruning --quick
 expect2 bench pruning --quick --out "$work/e2" --threads x

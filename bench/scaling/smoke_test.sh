@@ -3,24 +3,16 @@
 # the CSV has the expected columns and one row per engine x scene x N, measured rows have sane values
 # (times > 0, contacts > 0, finite penetration), and bad input ends with a one-line error and exit code 2.
 #   bash smoke_test.sh DVISIM_BINARY WORK_DIR
-set -u
-cli=$1
-work=$2
-rm -rf "$work"
-mkdir -p "$work"
-fail() { echo "FAIL: $*"; exit 1; }
+source "$(dirname "$0")/../smoke_common.sh" "$@"
 
 # One CPU thread: the test machine's cores are shared with the other tests (an oversubscribed OpenMP team
 # can be 100x slower), and the smoke test checks the outputs, not the speed.
-"$cli" bench scaling --quick --threads 1 --out "$work/out" > "$work/stdout.txt" 2> "$work/stderr.txt"
-rc=$?
-cat "$work/stdout.txt"
-[ $rc -eq 0 ] || { cat "$work/stderr.txt"; fail "bench scaling --quick exited with $rc"; }
+run_bench scaling --quick --threads 1
 csv="$work/out/scaling.csv"
 [ -s "$csv" ] || fail "no $csv"
 
 expected="engine,scene,n,bodies,threads,warmup_steps,timed_steps,setup_s,ms_per_step,ms_broad,ms_narrow,ms_solve,ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,copy_gbps,solve_pct_of_copy,device,status"
-[ "$(head -1 "$csv")" = "$expected" ] || fail "CSV header: $(head -1 "$csv")"
+expect_header "$csv" "$expected"
 
 # Every engine x scene x N planned: gpu (measured or skipped), cpu and bullet (measured).
 for scene in pile mix; do
@@ -60,13 +52,6 @@ END { exit bad }' "$csv" || fail "bad values in $csv"
 grep -q "Goals (issue 3)" "$work/stdout.txt" || fail "no goals table on stdout"
 
 # Bad input: one line on stderr, exit code 2, and nothing else.
-expect2() {
-  "$cli" "$@" > /dev/null 2> "$work/err.txt"
-  local rc=$?
-  [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
-  [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
-  grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
-}
 expect2 bench scaling --quick --out "$work/e1" --sizes 10k,abc
 expect2 bench scaling --quick --out "$work/e2" --sizes 0
 expect2 bench scaling --quick --out "$work/e3" --bogus

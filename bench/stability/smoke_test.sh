@@ -3,23 +3,15 @@
 # and stability.md exist, the CSV has the expected columns, every case has a row per engine with the verdict column
 # filled (PASS, FAIL or SKIP), measured rows have sane metrics, and bad input ends with exit code 2.
 #   bash smoke_test.sh DVISIM_BINARY WORK_DIR
-set -u
-cli=$1
-work=$2
-rm -rf "$work"
-mkdir -p "$work"
-fail() { echo "FAIL: $*"; exit 1; }
+source "$(dirname "$0")/../smoke_common.sh" "$@"
 
-"$cli" bench stability --quick --threads 1 --out "$work/out" > "$work/stdout.txt" 2> "$work/stderr.txt"
-rc=$?
-cat "$work/stdout.txt"
-[ $rc -eq 0 ] || { cat "$work/stderr.txt"; fail "bench stability --quick exited with $rc"; }
+run_bench stability --quick --threads 1
 csv="$work/out/stability.csv"
 md="$work/out/stability.md"
 [ -s "$csv" ] || fail "no $csv"
 [ -s "$md" ] || fail "no $md"
 expected="case,engine,criterion,measured,verdict,max_penetration_rel,late_penetration_rel,energy_growth,max_speed_mps,nan,dt_s,steps,steps_done,bodies,wall_s,device,note"
-[ "$(head -1 "$csv")" = "$expected" ] || fail "CSV header: $(head -1 "$csv")"
+expect_header "$csv" "$expected"
 grep -q "| case | engine | criterion | measured | verdict |" "$md" || fail "no table in $md"
 for c in stack_mass_ratio_1e+02 stack_mass_ratio_1e+06 particle_mass_ratio_1e+04 tall_stack_30 tall_stack_100 \
          size_range_0.1mm_10cm tiny_0.1mm_h1e-4 impact_10mps_thin_wall impact_100mps_thin_wall friction_mu_0 \
@@ -52,13 +44,6 @@ if grep -q ",cpu,.*,FAIL," "$csv"; then
   grep -q "FAILURES of our engine" "$work/stdout.txt" || fail "our failures are not listed in the summary"
 fi
 
-expect2() {
-  "$cli" "$@" > /dev/null 2> "$work/err.txt"
-  local rc=$?
-  [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
-  [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
-  grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
-}
 expect2 bench stability --quick --out "$work/e1" --bogus
 expect2 bench stability --quick
 echo plain > "$work/a_file"
