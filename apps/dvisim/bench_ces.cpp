@@ -351,9 +351,9 @@ int runCesBench(const CesBenchOptions& o) {
   std::vector<std::pair<std::string, double>> stages;
   double stage_total = 0;
   for (int i = 0; i < dvi::kStageCount; ++i)
-    if (tot.stage_ran[size_t(i)]) {
-      stages.emplace_back(dvi::stageName(dvi::StageType(i)), tot.stage_seconds[size_t(i)]);
-      stage_total += tot.stage_seconds[size_t(i)];
+    if (tot.log.ran[size_t(i)]) {
+      stages.emplace_back(dvi::stageName(dvi::StageType(i)), tot.log.seconds[size_t(i)]);
+      stage_total += tot.log.seconds[size_t(i)];
     }
   for (const auto& [name, sec] : stages)
     md << "| " << name << " | " << fmt(sec, "%.3g") << " | " << fmt(stage_total > 0 ? 100 * sec / stage_total : 0.0, "%.1f")

@@ -154,23 +154,19 @@ void CesRunTotals::add(const CesMachine& m) {
   residual = s.residual;
   drive_torque_sum += m.driveTorque();
   log.add(s);
-  for (int i = 0; i < kStageCount; ++i) {
-    stage_seconds[size_t(i)] += s.stage_seconds[size_t(i)];
-    stage_ran[size_t(i)] = stage_ran[size_t(i)] || s.stage_ran[size_t(i)];
-  }
 }
 
 json CesRunTotals::stageNames() const {
   json a = json::array();
   for (int i = 0; i < kStageCount; ++i)
-    if (stage_ran[size_t(i)]) a.push_back(stageName(StageType(i)));
+    if (log.ran[size_t(i)]) a.push_back(stageName(StageType(i)));
   return a;
 }
 
 json CesRunTotals::stageSeconds() const {
   json o = json::object();
   for (int i = 0; i < kStageCount; ++i)
-    if (stage_ran[size_t(i)]) o[stageName(StageType(i))] = stage_seconds[size_t(i)];
+    if (log.ran[size_t(i)]) o[stageName(StageType(i))] = log.seconds[size_t(i)];
   return o;
 }
 

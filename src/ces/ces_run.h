@@ -54,9 +54,7 @@ struct CesRunTotals {
   int64_t steps = 0, contacts = 0, max_contacts = 0, iterations = 0;
   real max_penetration = 0, residual = 0;
   double drive_torque_sum = 0;
-  std::array<double, kStageCount> stage_seconds{};
-  std::array<bool, kStageCount> stage_ran{};
-  StageLog log;                       // stages, parts and what was left out (summary.json: addStageSummary)
+  StageLog log;                       // seconds per stage, stages and parts that ran, what was left out
   void add(const CesMachine& m);      // after each CesMachine::step()
   nlohmann::json stageNames() const;  // the stages that ran (stageName), in stage order
   nlohmann::json stageSeconds() const;  // {name: seconds summed over the run}
