@@ -8,6 +8,7 @@
 #include <map>
 #include <sstream>
 #include <cstdio>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
@@ -414,7 +415,11 @@ TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree 
   const int n = 10000;  // the one-step test's pile; 2,000 bodies (one realisation of a chaotic flow) differed by 2.1%
   buildPile(cpu, n, 7, true, 1.7);
   buildPile(*gpu, n, 7, true, 1.7);
-  const int steps = int(std::lround(1.0 / double(cfg.dt)));
+  // Under compute-sanitizer (src/gpu/tools/run_device.sh sanitize sets DVISIM_SANITIZER_RUN=1) the kernels run
+  // 10-100x slower: the run is cut to 0.1 s, which executes every kernel of the step, and the statistics, which
+  // need the whole second, are not judged (the sanitizer's report is that run's verdict).
+  const bool sanitizer_run = std::getenv("DVISIM_SANITIZER_RUN") != nullptr;
+  const int steps = int(std::lround((sanitizer_run ? 0.1 : 1.0) / double(cfg.dt)));
   // The flow is chaotic (rounding differences grow until single trajectories differ), so the statistics are
   // time averages: kinetic energy over the whole second, mean height over its second half (sampled every 10
   // steps); an instantaneous height of the still-flowing pile differed by 2.1% on an H200.
@@ -444,6 +449,10 @@ TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree 
                  << "; final height CPU " << a.mean_height << " GPU " << b.mean_height << ", final KE CPU "
                  << a.kinetic << " GPU " << b.kinetic << "; contacts per body CPU " << z_cpu / nh << " GPU "
                  << z_gpu / nh);
+  if (sanitizer_run) {
+    WARN("DVISIM_SANITIZER_RUN: 0.1 s run under the sanitizer, statistics not judged");
+    return;
+  }
   REQUIRE(nh > 10);
   CHECK(z_gpu == Approx(z_cpu).epsilon(0.02));
   CHECK(h_gpu == Approx(h_cpu).epsilon(0.02));

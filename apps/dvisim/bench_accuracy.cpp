@@ -217,7 +217,7 @@ struct GoalResult {
   std::string error;
 };
 
-GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, int threads, int presteps) {
+GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, int threads, int presteps, bool gpu) {
   GoalResult g;
   try {
     dvi::bench::BulletScene scene = dvi::bench::makeBulletScene(dvi::bench::makePileSpec(n));
@@ -226,7 +226,7 @@ GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, in
     cfg.solver = dvi::SolverType::APGD;
     cfg.solver_settings.max_iterations = 50;
     cfg.threads = threads;
-    OursRunner run(scene.bodies, cfg, false);
+    OursRunner run(scene.bodies, cfg, gpu);
     for (int i = 0; i < presteps; ++i) run.step();
     dvi::SystemConfig& c = run.sys->mutableConfig();
     c.solver = solver;
@@ -355,22 +355,25 @@ int runAccuracy(const AccOptions& o) {
        << "-sphere pile, APGD vs Jacobi, the same CCP (5 settling steps, then one step per solver from the same state; "
           "Solve-stage time, tolerance stop, Jacobi capped at "
        << cap << " iterations):\n";
-  for (bool warm : {true, false}) {
-    const GoalResult a = timeToResidual(goal_n, dvi::SolverType::APGD, warm, cap, int(threads), 5);
-    const GoalResult j = timeToResidual(goal_n, dvi::SolverType::Jacobi, warm, cap, int(threads), 5);
-    char b[512];
-    if (!a.error.empty() || !j.error.empty()) {
-      goal << "  " << (warm ? "warm start" : "cold start") << ": error: " << a.error << " " << j.error << "\n";
-      continue;
+  for (const std::string& engine : engines)
+    for (bool warm : {true, false}) {
+      const bool gpu = engine == "gpu";
+      const GoalResult a = timeToResidual(goal_n, dvi::SolverType::APGD, warm, cap, int(threads), 5, gpu);
+      const GoalResult j = timeToResidual(goal_n, dvi::SolverType::Jacobi, warm, cap, int(threads), 5, gpu);
+      char b[512];
+      const std::string label = engine + (warm ? ", warm start" : ", cold start");
+      if (!a.error.empty() || !j.error.empty()) {
+        goal << "  " << label << ": error: " << a.error << " " << j.error << "\n";
+        continue;
+      }
+      const double ratio = a.seconds > 0 ? j.seconds / a.seconds : NAN;
+      std::snprintf(b, sizeof b,
+                    "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
+                    label.c_str(), a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached", j.iterations,
+                    j.seconds, j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
+                    !a.reached ? "APGD did not reach 1e-4" : ratio >= 10 ? "met" : (j.reached ? "missed" : "met (lower bound)"));
+      goal << b;
     }
-    const double ratio = a.seconds > 0 ? j.seconds / a.seconds : NAN;
-    std::snprintf(b, sizeof b,
-                  "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
-                  warm ? "warm start" : "cold start", a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached",
-                  j.iterations, j.seconds, j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
-                  !a.reached ? "APGD did not reach 1e-4" : ratio >= 10 ? "met" : (j.reached ? "missed" : "met (lower bound)"));
-    goal << b;
-  }
   const std::string goal_text = goal.str();
   const double total = std::chrono::duration<double>(Clock::now() - t_all).count();
   flush();

@@ -1,49 +1,72 @@
 #!/bin/bash
 # One device-machine session for the GPU backend. Run from the repository root on the device machine
-# (carry .deps); each mode appends its log under $OUT (default ./out-device):
+# (carry .deps); logs and bench outputs go to $LOGS, plots and recorded results to $OUT (default ./out-device):
 #   DVISIM_COMMIT=<sha> bash src/gpu/tools/run_device.sh build tests sanitize ces scaling ...
 # Modes:
 #   build      configure + build dvisim_cli and dvisim_tests in build-dev (sm_90, Release; ~5 min, 16 cores)
 #   tests      every [gpu] test
-#   sanitize   compute-sanitizer memcheck and racecheck on the multi-solver and constraint-row [gpu] tests
-#   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $OUT/ces_default
+#   sanitize   compute-sanitizer memcheck and racecheck on every [gpu] test (one process per test)
+#   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $LOGS/ces_default
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
-# Results written with --record land in bench/results/ of this copy and are copied to $OUT/results.
+# Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
 set -u
 OUT=${OUT:-$PWD/out-device}
-mkdir -p "$OUT"
+# The device machine returns only a few files from $OUT per call: logs stay in $LOGS and come back (as
+# $OUT/<name>.log) only when a step fails; $OUT holds the recorded results and the plots.
+LOGS=${LOGS:-/tmp/dvisim-device-logs}
+mkdir -p "$OUT" "$LOGS"
 source .deps/env.sh
 export DVISIM_COMMIT=${DVISIM_COMMIT:-unknown}
 # Benchmarks find scripts and bench/results through the source directory compiled into the binaries.
-nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee -a "$OUT/gpu.txt"
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee -a "$LOGS/gpu.txt"
 B=build-dev
 BIN=$B/bin/dvisim
 TESTS=$B/tests/dvisim_tests
 for m in "$@"; do
   T0=$(date +%s)
+  touch "$LOGS/.mark_$m"
   echo "== $m (commit $DVISIM_COMMIT)"
   case $m in
     build)
       cmake -S . -B $B -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_BUILD_TYPE=Release -DDVISIM_BUILD_DEMOS=OFF \
-        > "$OUT/configure.log" 2>&1 || { tail -30 "$OUT/configure.log"; exit 1; }
-      cmake --build $B -j16 --target dvisim_cli dvisim_tests > "$OUT/build.log" 2>&1 ||
-        { grep -E "error" "$OUT/build.log" | head -30; exit 1; } ;;
-    tests) $TESTS "[gpu]" -d yes 2>&1 | tee "$OUT/tests.log" | grep -E "passed|failed|FAILED|with message|^  [a-z]|s: " ;;
+        > "$LOGS/configure.log" 2>&1 || { tail -30 "$LOGS/configure.log"; cp "$LOGS/configure.log" "$OUT/"; exit 1; }
+      cmake --build $B -j16 --target dvisim_cli dvisim_tests > "$LOGS/build.log" 2>&1 ||
+        { grep -E "error" "$LOGS/build.log" | head -30; cp "$LOGS/build.log" "$OUT/"; exit 1; } ;;
+    tests) $TESTS "[gpu]" -d yes 2>&1 | tee "$LOGS/tests.log" | grep -E "passed|failed|FAILED|with message|^  [a-z]|s: " ;;
     sanitize)
+      # Every [gpu] test, one process per test (names from --list-test-names-only), under memcheck and
+      # racecheck; DVISIM_SANITIZER_RUN=1 cuts the 1 s statistics test to 0.1 s (tests/test_gpu.cpp).
+      # Per tool: one log ($LOGS/<tool>.log, copied to $OUT on a failure) and a line per test: rc (0 clean, 9 sanitizer errors, 124 timeout).
+      $TESTS "[gpu]" --list-test-names-only | grep -v '^$' > "$LOGS/gpu_tests.txt"
       for tool in memcheck racecheck; do
-        timeout 240 compute-sanitizer --tool $tool --error-exitcode 9 $TESTS \
-          "GPU system runs every solver*,constraint rows on the GPU*" > "$OUT/$tool.log" 2>&1
-        echo "$tool rc=$?"; tail -3 "$OUT/$tool.log"
+        : > "$LOGS/$tool.log"
+        while IFS= read -r t; do
+          # Catch2 v2 reads ',' as "or" and '*' as a wildcard: match the name up to its first comma.
+          pat="${t%%,*}"; [ "$pat" != "$t" ] && pat="$pat*"
+          echo "### $t" >> "$LOGS/$tool.log"
+          DVISIM_SANITIZER_RUN=1 timeout ${SAN_TIMEOUT:-150} compute-sanitizer --tool $tool --error-exitcode 9 \
+            $TESTS "$pat" >> "$LOGS/$tool.log" 2>&1
+          rc=$?
+          echo "$tool rc=$rc  $t"
+          grep -E "ERROR SUMMARY|RACECHECK SUMMARY" "$LOGS/$tool.log" | tail -1
+          [ $rc -ne 0 ] && cp "$LOGS/$tool.log" "$OUT/"
+        done < "$LOGS/gpu_tests.txt"
       done ;;
-    ces) $BIN run --backend gpu --out "$OUT/ces_default" 2>&1 | tail -25 ;;
-    scaling) $BIN bench scaling --out "$OUT/scaling" --record --budget 5 2>&1 | tail -45 ;;
-    accuracy) $BIN bench accuracy --out "$OUT/accuracy" --record 2>&1 | tail -30 ;;
-    stability) $BIN bench stability --out "$OUT/stability" --record 2>&1 | tail -30 ;;
-    pruning) $BIN bench pruning --out "$OUT/pruning" --backend gpu --record 2>&1 | tail -30 ;;
-    cesbench) $BIN bench ces --out "$OUT/cesbench" --backend gpu --record 2>&1 | tail -30 ;;
+    ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
+    scaling) $BIN bench scaling --out "$LOGS/scaling" --record --budget 5 2>&1 | tail -45 ;;
+    accuracy) $BIN bench accuracy --out "$LOGS/accuracy" --record 2>&1 | tail -30 ;;
+    stability) $BIN bench stability --out "$LOGS/stability" --record 2>&1 | tail -30 ;;
+    pruning) $BIN bench pruning --out "$LOGS/pruning" --backend gpu --record 2>&1 | tail -30 ;;
+    cesbench) $BIN bench ces --out "$LOGS/cesbench" --backend gpu --record 2>&1 | tail -30 ;;
     *) echo "unknown mode $m"; exit 2 ;;
   esac
   echo "== $m took $(( $(date +%s) - T0 )) s"
-  if [ -d bench/results ]; then mkdir -p "$OUT/results" && cp -r bench/results/. "$OUT/results/"; fi
+  # The mode's plots, and only the results it wrote, come back (the device returns a few files per call).
+  find "$LOGS" -name "*.png" -newer "$LOGS/.mark_$m" -exec cp {} "$OUT/" \;
+  # Only the results this mode wrote come back (the device returns a few files per call).
+  if [ -d bench/results ]; then
+    find bench/results -type f -newer "$LOGS/.mark_$m" | while read -r f; do
+      mkdir -p "$OUT/results" && cp "$f" "$OUT/results/"; done
+  fi
 done
