@@ -8,6 +8,7 @@
 
 #include <btBulletDynamicsCommon.h>
 
+#include <algorithm>
 #include <chrono>
 
 #include <cctype>
@@ -18,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -38,6 +40,31 @@ inline std::string trim(std::string s) {
   size_t i = 0;
   while (i < s.size() && std::isspace((unsigned char)s[i])) ++i;
   return s.substr(i);
+}
+
+// "a,b" "c" -> {a, b, c}: the values of a repeatable comma-separated option, trimmed.
+inline std::vector<std::string> splitList(const std::vector<std::string>& in) {
+  std::vector<std::string> out;
+  for (const std::string& s : in) {
+    std::stringstream ss(s);
+    std::string tok;
+    while (std::getline(ss, tok, ',')) out.push_back(trim(tok));
+  }
+  return out;
+}
+
+// The names given to `option` (all of `known` when none), each checked against `known`.
+inline std::vector<std::string> selectNames(const char* option, const std::vector<std::string>& given,
+                                            const std::vector<std::string>& known) {
+  std::vector<std::string> v = splitList(given);
+  if (v.empty()) return known;
+  for (const std::string& n : v)
+    if (std::find(known.begin(), known.end(), n) == known.end()) {
+      std::string list;
+      for (const std::string& k : known) list += (list.empty() ? "" : ",") + k;
+      throw InputError(std::string(option) + ": unknown name '" + n + "' (expected " + list + ")");
+    }
+  return v;
 }
 
 inline std::string shell(const std::string& cmd) {

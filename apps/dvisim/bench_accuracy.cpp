@@ -6,7 +6,8 @@
 // mixed-shape pile, and the 10-box stack with a 1000x heavy top (scenes/stack.json's tower). Per scene, solver
 // and backend it sweeps the iteration count at the scene's step h0 and the step (2 h0 .. h0/4) at a fixed
 // iteration count, for the same simulated time, and measures:
-//  - wall_s: wall time of the steps (step() only; the measurements below are taken outside it);
+//  - wall_s: wall time of the steps (step() only; the measurements below are taken outside it); run_s: the whole
+//    run, scene set-up, measurements and teardown included;
 //  - residual: the projected-gradient CCP residual each step ends with (solver.h: ccpResidual, m/s), mean and last;
 //  - max_penetration_rel: the deepest penetration over the run relative to the scene's reference length;
 //  - complementarity violation (m/s), our definition, after each step, from the post-step velocities v+:
@@ -23,6 +24,7 @@
 // Also the goal: on the pile, after a few settling steps, two identical systems (deterministic, so the
 // same state and the same CCP) solve the next step's CCP with APGD and with Jacobi down to residual 1e-4
 // (tolerance stop; record_history on); the ratio of the Solve-stage times is printed (goal >= 10x).
+// --scenes and --engines narrow a run (a full run on one device can be split over several invocations).
 // Outputs: DIR/accuracy.csv, DIR/accuracy.png (scripts/plot_accuracy.py, when python3 has matplotlib), a table on
 // stdout; --record also writes bench/results/accuracy_<device>_<date>.{md,csv}.
 #include <CLI/CLI.hpp>
@@ -57,6 +59,7 @@ using Clock = std::chrono::steady_clock;
 
 struct AccOptions {
   std::string out, threads = "0";
+  std::vector<std::string> scenes, engines;
   bool quick = false, record = false;
 };
 
@@ -74,7 +77,7 @@ struct AccScene {
 struct Row {
   std::string scene, engine, solver, sweep, status = "ok", device;
   int iterations = 0, steps = 0;
-  double dt = 0, wall_s = 0, res_mean = NAN, res_last = NAN, pen_rel = 0, compl_mean = NAN, obs = NAN, obs_err = NAN;
+  double dt = 0, wall_s = 0, run_s = 0, res_mean = NAN, res_last = NAN, pen_rel = 0, compl_mean = NAN, obs = NAN, obs_err = NAN;
 };
 
 Vec3 meanHeight(const Runner& r, const std::vector<btRigidBody*>& b) {
@@ -131,6 +134,7 @@ std::vector<AccScene> makeScenes(bool quick) {
 // One run of a scene on one engine. `solver` empty: Bullet with `iterations` sequential-impulse iterations.
 Row runOne(const AccScene& sc, const std::string& engine, const std::string& solver, int iterations, double dt,
            double tol, int threads, Vec3* obs_out) {
+  const auto t_run = Clock::now();
   Row row;
   row.scene = sc.name, row.engine = engine, row.solver = solver.empty() ? "bullet-si" : solver;
   row.iterations = iterations, row.dt = dt;
@@ -205,6 +209,9 @@ Row runOne(const AccScene& sc, const std::string& engine, const std::string& sol
   row.obs = double(o.y);  // the height (pile, mix) or the top box's y (stack)
   for (size_t i = 0; i < bodies.size(); ++i)
     if (bodies[i]->getInvMass() > 0 && (!finite3(run->pos(i)) || !finite3(run->vel(i)))) row.status = "non-finite state";
+  run.reset();
+  keep.reset();
+  row.run_s = std::chrono::duration<double>(Clock::now() - t_run).count();  // setup, steps, measurements, teardown
   return row;
 }
 
@@ -250,7 +257,7 @@ GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, in
 
 const char* kCsvHeader =
     "scene,engine,solver,sweep,iterations,dt_s,steps,wall_s,ms_per_step,residual_mean,residual_last,"
-    "max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status";
+    "max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status,run_s";
 
 std::string csvText(const std::vector<Row>& rows, const std::vector<double>& refs_obs, const std::vector<std::string>& ref_scene) {
   std::ostringstream o;
@@ -262,9 +269,15 @@ std::string csvText(const std::vector<Row>& rows, const std::vector<double>& ref
     o << r.scene << "," << r.engine << "," << r.solver << "," << r.sweep << "," << r.iterations << "," << num(r.dt) << ","
       << r.steps << "," << num(r.wall_s) << "," << num(1e3 * r.wall_s / std::max(1, r.steps)) << "," << num(r.res_mean)
       << "," << num(r.res_last) << "," << num(r.pen_rel) << "," << num(r.compl_mean) << "," << num(r.obs) << ","
-      << num(ref) << "," << num(r.obs_err) << "," << csvField(r.device) << "," << csvField(r.status) << "\n";
+      << num(ref) << "," << num(r.obs_err) << "," << csvField(r.device) << "," << csvField(r.status) << "," << num(r.run_s) << "\n";
   }
   return o.str();
+}
+
+std::string joined(const std::vector<std::string>& v) {
+  std::string s;
+  for (const std::string& x : v) s += (s.empty() ? "" : ",") + x;
+  return s;
 }
 
 int runAccuracy(const AccOptions& o) {
@@ -272,6 +285,11 @@ int runAccuracy(const AccOptions& o) {
   const long threads = std::strtol(o.threads.c_str(), &end, 10);
   if (o.threads.empty() || *end || threads < 0 || threads > 4096)
     throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
+  const std::vector<std::string> scene_sel = selectNames("--scenes", o.scenes, {"pile", "mix", "stack", "goal"});
+  const std::vector<std::string> engine_sel = selectNames("--engines", o.engines, {"cpu", "gpu", "bullet"});
+  auto selected = [](const std::vector<std::string>& v, const std::string& n) {
+    return std::find(v.begin(), v.end(), n) != v.end();
+  };
   prepareOutDir(o.out, "accuracy.csv");
   const std::string results_dir = o.record ? resultsDir() : std::string();
   std::string gpu_name;
@@ -281,8 +299,10 @@ int runAccuracy(const AccOptions& o) {
   const std::vector<int> iters = o.quick ? std::vector<int>{5, 20, 80} : std::vector<int>{5, 10, 25, 50, 100, 200};
   const std::vector<double> dt_factors = o.quick ? std::vector<double>{2.0, 0.5} : std::vector<double>{2.0, 0.5, 0.25};
   const int dt_iters = o.quick ? 20 : 50;
-  std::vector<std::string> engines = {"cpu"};
-  if (have_gpu) engines.push_back("gpu");
+  std::vector<std::string> engines;
+  if (selected(engine_sel, "cpu")) engines.push_back("cpu");
+  if (have_gpu && selected(engine_sel, "gpu")) engines.push_back("gpu");
+  const bool run_bullet = selected(engine_sel, "bullet");
   std::printf("bench accuracy%s: solvers jacobi, gs (CPU), apgd, bb on %s; Bullet's sequential impulse; iterations",
               o.quick ? " --quick" : "", have_gpu ? ("cpu and gpu (" + gpu_name + ")").c_str() : "cpu (no GPU in this run)");
   for (int i : iters) std::printf(" %d", i);
@@ -297,6 +317,7 @@ int runAccuracy(const AccOptions& o) {
   std::string cpu_device;
   auto flush = [&] { writeFile(o.out + "/accuracy.csv", csvText(rows, ref_obs, ref_scene)); };
   for (const AccScene& sc : makeScenes(o.quick)) {
+    if (!selected(scene_sel, sc.name)) continue;
     // Reference: APGD, tight tolerance, h0/4, on the fastest backend we have.
     Vec3 ref{0, 0, 0};
     Row rr;
@@ -314,6 +335,9 @@ int runAccuracy(const AccOptions& o) {
                 rr.dt, sc.obs_name.c_str(), double(ref.y), rr.wall_s);
     std::fflush(stdout);
     auto attempt = [&](const std::string& engine, const std::string& solver, int it, double dt, const std::string& sweep) {
+      std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g ...\r", sc.name.c_str(), engine.c_str(),
+                  solver.empty() ? "bullet-si" : solver.c_str(), sweep.c_str(), it, dt);
+      std::fflush(stdout);
       Row r;
       Vec3 obs{0, 0, 0};
       try {
@@ -329,8 +353,8 @@ int runAccuracy(const AccOptions& o) {
       }
       r.sweep = sweep;
       rows.push_back(r);
-      std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s  res %-10s pen %-10s compl %-10s obs err %s%s\n",
-                  sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s,
+      std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s (run %.1f s)  res %-10s pen %-10s compl %-10s obs err %s%s\n",
+                  sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s, r.run_s,
                   num(r.res_mean, "%.3g").c_str(), num(r.pen_rel, "%.3g").c_str(), num(r.compl_mean, "%.3g").c_str(),
                   num(r.obs_err, "%.3g").c_str(), r.status == "ok" ? "" : ("  [" + r.status + "]").c_str());
       std::fflush(stdout);
@@ -342,9 +366,11 @@ int runAccuracy(const AccOptions& o) {
         for (int it : iters) attempt(engine, solver, it, sc.h0, "iterations");
         for (double f : dt_factors) attempt(engine, solver, dt_iters, sc.h0 * f, "dt");
       }
-    for (int it : o.quick ? std::vector<int>{5, 10, 40} : std::vector<int>{5, 10, 25, 50, 100})
-      attempt("bullet", "", it, sc.h0, "iterations");
-    for (double f : dt_factors) attempt("bullet", "", 10, sc.h0 * f, "dt");
+    if (run_bullet) {
+      for (int it : o.quick ? std::vector<int>{5, 10, 40} : std::vector<int>{5, 10, 25, 50, 100})
+        attempt("bullet", "", it, sc.h0, "iterations");
+      for (double f : dt_factors) attempt("bullet", "", 10, sc.h0 * f, "dt");
+    }
   }
 
   // The goal: APGD against Jacobi to residual 1e-4 on the pile's CCP.
@@ -355,7 +381,7 @@ int runAccuracy(const AccOptions& o) {
        << "-sphere pile, APGD vs Jacobi, the same CCP (5 settling steps, then one step per solver from the same state; "
           "Solve-stage time, tolerance stop, Jacobi capped at "
        << cap << " iterations):\n";
-  for (const std::string& engine : engines)
+  for (const std::string& engine : selected(scene_sel, "goal") ? engines : std::vector<std::string>{})
     for (bool warm : {true, false}) {
       const bool gpu = engine == "gpu";
       const GoalResult a = timeToResidual(goal_n, dvi::SolverType::APGD, warm, cap, int(threads), 5, gpu);
@@ -388,7 +414,8 @@ int runAccuracy(const AccOptions& o) {
        << "Written by `dvisim bench accuracy --record` (apps/dvisim/bench_accuracy.cpp).\n\n- device: " << device
        << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scenes: pile "
        << (o.quick ? "400" : "100k") << " spheres r 1 cm; mix " << (o.quick ? "250" : "20k")
-       << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2\n\n"
+       << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2\n- this run: --scenes " << joined(scene_sel)
+       << " --engines " << joined(engine_sel) << (have_gpu ? "" : " (no GPU)") << "\n\n"
        << goal_text << "\nRows: " << base << ".csv (columns in apps/dvisim/bench_accuracy.cpp's header).\n";
     for (const std::string& d : {results_dir, o.out}) {
       writeFile(d + "/" + base + ".md", md.str());
@@ -409,5 +436,7 @@ void registerBenchAccuracy(CLI::App& app) {
   cmd->add_flag("--quick", o->quick, "Small scenes and a short sweep (CI smoke test)");
   cmd->add_flag("--record", o->record, "Also write bench/results/accuracy_<device>_<date>.{md,csv}");
   cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
+  cmd->add_option("--scenes", o->scenes, "pile,mix,stack,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
+  cmd->add_option("--engines", o->engines, "cpu,gpu,bullet (default all; gpu where a device is present)");
   addBenchRunner(cmd, [o] { return runAccuracy(*o); });
 }

@@ -63,6 +63,7 @@ using dvi::benchutil::exeDir;
 using dvi::benchutil::shell;
 using dvi::benchutil::shellQuote;
 using dvi::benchutil::slug;
+using dvi::benchutil::splitList;
 using dvi::benchutil::sourceDir;
 using dvi::benchutil::trim;
 using dvi::benchutil::utcNow;
@@ -453,16 +454,6 @@ std::string makePlot(const std::string& dir) {
                           shellQuote(dir + "/plot_scaling.log") + " 2>&1";
   if (std::system(cmd.c_str()) != 0) return "scaling.png not written: plot_scaling.py failed (see " + dir + "/plot_scaling.log)";
   return "plot: " + dir + "/scaling.png";
-}
-
-std::vector<std::string> splitList(const std::vector<std::string>& in) {
-  std::vector<std::string> out;
-  for (const std::string& s : in) {
-    std::stringstream ss(s);
-    std::string tok;
-    while (std::getline(ss, tok, ',')) out.push_back(trim(tok));
-  }
-  return out;
 }
 
 // ---------- the benchmark ----------

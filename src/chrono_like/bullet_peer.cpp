@@ -41,7 +41,22 @@ struct BulletPeer::Impl {
 
   ~Impl() {
     if (world) {
-      for (auto& b : bodies) world->removeRigidBody(b.get());
+      // Removing bodies one by one is quadratic in Bullet 3.24 (2.6 s for 100k spheres): every removal cleans
+      // its proxy from the whole pair cache, and btDiscreteDynamicsWorld::removeRigidBody finds the body in
+      // its non-static array by a linear search from the front. So: empty the pair cache in one pass, then
+      // remove the non-static bodies in the order that keeps each at the front of that array (b0, then the
+      // last one, which took b0's slot, and so on backwards), and the static ones last.
+      struct RemoveAll : btOverlapCallback {
+        bool processOverlap(btBroadphasePair&) override { return true; }
+      } remove_all;
+      world->getPairCache()->processAllOverlappingPairs(&remove_all, world->getDispatcher());
+      std::vector<btRigidBody*> moving, fixed;
+      for (auto& b : bodies) (b->isStaticObject() ? fixed : moving).push_back(b.get());
+      if (!moving.empty()) {
+        world->removeRigidBody(moving.front());
+        for (size_t i = moving.size() - 1; i >= 1; --i) world->removeRigidBody(moving[i]);
+      }
+      for (btRigidBody* b : fixed) world->removeRigidBody(b);
     }
     bodies.clear();
     world.reset();

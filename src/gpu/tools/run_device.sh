@@ -9,6 +9,7 @@
 #   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $LOGS/ces_default
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
+# BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
 set -u
 OUT=${OUT:-$PWD/out-device}
@@ -20,9 +21,19 @@ source .deps/env.sh
 export DVISIM_COMMIT=${DVISIM_COMMIT:-unknown}
 # Benchmarks find scripts and bench/results through the source directory compiled into the binaries.
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee -a "$LOGS/gpu.txt"
-B=build-dev
+B=${BUILD_DIR:-build-dev}
 BIN=$B/bin/dvisim
 TESTS=$B/tests/dvisim_tests
+# bench NAME [ARGS]: dvisim bench NAME --record with $BENCH_ARGS, stopped after $BENCH_TIMEOUT s (default none);
+# its stdout goes to $LOGS/NAME.log (tail shown); a run that recorded nothing returns its CSV as
+# $OUT/NAME_partial.csv.
+bench() {
+  local name=$1; shift
+  local dir="$LOGS/$name"; rm -rf "$dir"
+  timeout ${BENCH_TIMEOUT:-86400} $BIN bench $name --out "$dir" --record "$@" ${BENCH_ARGS:-} > "$LOGS/$name.log" 2>&1
+  echo "bench $name rc=$?"; tr '\r' '\n' < "$LOGS/$name.log" | grep -v '\.\.\.$' | tail -40
+  grep -q "^recorded" "$LOGS/$name.log" || cp "$dir"/*.csv "$OUT/${name}_partial.csv" 2>/dev/null
+}
 for m in "$@"; do
   T0=$(date +%s)
   touch "$LOGS/.mark_$m"
@@ -38,8 +49,10 @@ for m in "$@"; do
       # Every [gpu] test, one process per test (names from --list-test-names-only), under memcheck and
       # racecheck; DVISIM_SANITIZER_RUN=1 cuts the 1 s statistics test to 0.1 s (tests/test_gpu.cpp).
       # Per tool: one log ($LOGS/<tool>.log, copied to $OUT on a failure) and a line per test: rc (0 clean, 9 sanitizer errors, 124 timeout).
-      $TESTS "[gpu]" --list-test-names-only | grep -v '^$' > "$LOGS/gpu_tests.txt"
-      for tool in memcheck racecheck; do
+      # SAN_TOOLS (default "memcheck racecheck") and SAN_MATCH (an extended regex on the test names, default all)
+      # narrow a run.
+      $TESTS "[gpu]" --list-test-names-only | grep -v '^$' | grep -E "${SAN_MATCH:-.}" > "$LOGS/gpu_tests.txt"
+      for tool in ${SAN_TOOLS:-memcheck racecheck}; do
         : > "$LOGS/$tool.log"
         while IFS= read -r t; do
           # Catch2 v2 reads ',' as "or" and '*' as a wildcard: match the name up to its first comma.
@@ -54,11 +67,10 @@ for m in "$@"; do
         done < "$LOGS/gpu_tests.txt"
       done ;;
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
-    scaling) $BIN bench scaling --out "$LOGS/scaling" --record --budget 5 2>&1 | tail -45 ;;
-    accuracy) $BIN bench accuracy --out "$LOGS/accuracy" --record 2>&1 | tail -30 ;;
-    stability) $BIN bench stability --out "$LOGS/stability" --record 2>&1 | tail -30 ;;
-    pruning) $BIN bench pruning --out "$LOGS/pruning" --backend gpu --record 2>&1 | tail -30 ;;
-    cesbench) $BIN bench ces --out "$LOGS/cesbench" --backend gpu --record 2>&1 | tail -30 ;;
+    scaling) bench scaling --budget 5 ;;
+    accuracy|stability) bench $m ;;
+    pruning) bench pruning --backend gpu ;;
+    cesbench) bench ces --backend gpu ;;
     *) echo "unknown mode $m"; exit 2 ;;
   esac
   echo "== $m took $(( $(date +%s) - T0 )) s"
