@@ -2,6 +2,9 @@
 """Work-precision plots of `dvisim bench accuracy` (apps/dvisim/bench_accuracy.cpp), run by it after the benchmark.
 
     python3 plot_accuracy.py DIR        reads DIR/accuracy.csv, writes DIR/accuracy.png
+    python3 plot_accuracy.py --out PNG A.csv B.csv ...
+                                        one plot of several runs' rows (a full run split with --scenes/--engines,
+                                        e.g. the recorded bench/results/accuracy_*.csv of one device)
 
 One row of panels per scene; columns: CCP residual, observable error, max penetration, each against wall time,
 log-log, one line per engine and solver over the iteration sweep (the time-step sweep as hollow markers).
@@ -27,9 +30,19 @@ def fl(x):
 
 
 def main():
-    d = sys.argv[1] if len(sys.argv) > 1 else "."
-    with open(os.path.join(d, "accuracy.csv")) as f:
-        rows = [r for r in csv.DictReader(f) if r["status"] == "ok" and r["sweep"] != "reference"]
+    args = sys.argv[1:]
+    if args and args[0] == "--out":
+        if len(args) < 3:
+            print("plot_accuracy.py: usage: --out PNG CSV [CSV ...]", file=sys.stderr)
+            return 2
+        png, files = args[1], args[2:]
+    else:
+        d = args[0] if args else "."
+        png, files = os.path.join(d, "accuracy.png"), [os.path.join(d, "accuracy.csv")]
+    rows = []
+    for name in files:
+        with open(name) as f:
+            rows += [r for r in csv.DictReader(f) if r["status"] == "ok" and r["sweep"] != "reference"]
     if not rows:
         print("plot_accuracy.py: no measured rows in accuracy.csv")
         return 1
@@ -73,8 +86,8 @@ def main():
                 ax.legend(fontsize=7)
     fig.suptitle("dvisim bench accuracy: error against wall time (lines: iteration sweep at h0; squares: step sweep)")
     fig.tight_layout()
-    fig.savefig(os.path.join(d, "accuracy.png"), dpi=90)
-    print("wrote", os.path.join(d, "accuracy.png"))
+    fig.savefig(png, dpi=90)
+    print("wrote", png)
     return 0
 
 

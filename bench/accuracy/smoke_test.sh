@@ -18,6 +18,12 @@ for scene in pile mix stack; do
   c=$(awk -F, -v s=$scene '$1==s && $4=="reference"' "$csv" | wc -l)
   [ "$c" -eq 1 ] || fail "expected one reference row for $scene"
 done
+# The CES machine: our solvers only (Bullet has no CES machine), 2 iteration counts in --quick.
+for solver in jacobi gs apgd bb; do
+  c=$(awk -F, -v v=$solver '$1=="ces" && $3==v && $4=="iterations"' "$csv" | wc -l)
+  [ "$c" -ge 2 ] || fail "expected >= 2 iteration-sweep rows for ces $solver, got $c"
+done
+[ "$(awk -F, '$1=="ces" && $4=="reference"' "$csv" | wc -l)" -eq 1 ] || fail "expected one reference row for ces"
 awk -F, '
 NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
 {
