@@ -467,6 +467,74 @@ TEST_CASE("convex hull against a plane: deepest vertices, at most 8", "[narrowph
   }
 }
 
+TEST_CASE("small shapes on the side of a large cylinder: a point per vertex, exact radial depth", "[narrowphase]") {
+  // The CES drum (R = 160 mm, axis z) against a 0.22 mm-thick flake, a wire and a fragment resting on its side
+  // at several angles, in both orders. Oracle: each vertex's distance from the axis minus R, computed here from
+  // the shape's definition (brute force over the box corners, the hull points and the wire's bottom line).
+  const real R = 0.16;
+  Shape drum = cylinder(R, 0.15);
+  const Quat qz = quatFromAxisAngle(Vec3{1, 0, 0}, real(kPi / 2));  // cylinder axis Y -> world Z
+  const Pose wd = pose(Vec3{0, 0, 0}, qz);
+  REQUIRE(std::fabs(double(rotate(qz, Vec3{0, 1, 0}).z) - 1) < 1e-12);
+  const double env = 2e-5;
+  ContactPoint c[kMaxContactsPerPair];
+  for (double ang : {90.0, 40.0, 135.0, -20.0}) {
+    const double th = ang * kPi / 180;
+    const Vec3 radial{real(std::cos(th)), real(std::sin(th)), 0};
+    const Quat qr = quatFromAxisAngle(Vec3{0, 0, 1}, real(th - kPi / 2));  // local +Y -> radial
+    REQUIRE(length(rotate(qr, Vec3{0, 1, 0}) - radial) < 1e-12);
+    const double pen = 1.5e-5, hx = 0.44e-3, hy = 0.11e-3;
+    // Flake: its thin axis radial, bottom face penetrating by `pen` at its centre.
+    Shape flake = box(real(hx), real(hy), real(hx));
+    const Pose wf = pose(radial * real(R + hy - pen) + Vec3{0, 0, real(0.01)}, qr);
+    for (int order = 0; order < 2; ++order) {
+      const int m = order == 0 ? collideShapes(flake, wf, drum, wd, nullptr, real(env), c)
+                               : collideShapes(drum, wd, flake, wf, nullptr, real(env), c);
+      REQUIRE(m == 4);  // the four bottom corners (the top ones are 0.22 mm away)
+      checkConsistent(c, m, env);
+      for (int i = 0; i < m; ++i) {
+        const Vec3 x = order == 0 ? c[i].pa : c[i].pb;  // the flake's vertex
+        bool corner = false;
+        for (int k = 0; k < 8; ++k) {
+          const Vec3 l{(k & 1) ? real(hx) : real(-hx), (k & 2) ? real(hy) : real(-hy), (k & 4) ? real(hx) : real(-hx)};
+          corner = corner || length(transformPoint(wf, l) - x) < 1e-12;
+        }
+        CHECK(corner);
+        const double rho = std::sqrt(double(x.x * x.x + x.y * x.y));
+        CHECK(double(c[i].dist) == Approx(rho - double(R)).margin(1e-12));
+        const Vec3 out_dir = normalized(Vec3{x.x, x.y, 0});
+        CHECK(angleDeg(order == 0 ? -c[i].normal : c[i].normal, out_dir) < 1e-6);
+        CHECK(double(c[i].dist) < -pen + 1e-6);  // the corners sit (0.44 mm)^2 / 2R = 0.6 um deeper than the centre
+      }
+    }
+    // Wire along the axis: its bottom line is at radius R - pen over its whole length.
+    Shape wire = cylinder(real(0.1e-3), real(0.5e-3));
+    const Pose ww = pose(radial * real(R + 0.1e-3 - pen), quatFromAxisAngle(Vec3{1, 0, 0}, real(kPi / 2)));
+    int m = collideShapes(drum, wd, wire, ww, nullptr, real(env), c);
+    REQUIRE(m >= 2);
+    checkConsistent(c, m, env);
+    CHECK(double(c[deepest(c, m)].dist) == Approx(-pen).margin(1e-12));
+    // Fragment (convex hull) with a flat bottom of 6 points 0.2 mm below its origin.
+    std::vector<Vec3> pts;
+    for (int i = 0; i < 6; ++i) pts.push_back(Vec3{real(0.3e-3 * std::cos(i * kPi / 3)), real(-0.2e-3), real(0.3e-3 * std::sin(i * kPi / 3))});
+    pts.push_back(Vec3{0, real(0.3e-3), 0});
+    Shape frag = hull(0, int(pts.size()));
+    const Pose wh = pose(radial * real(R + 0.2e-3 - pen), qr);
+    m = collideShapes(frag, wh, drum, wd, pts.data(), real(env), c);
+    REQUIRE(m == 6);
+    checkConsistent(c, m, env);
+    for (int i = 0; i < m; ++i) {
+      const Vec3 x = c[i].pa;
+      CHECK(double(c[i].dist) == Approx(std::sqrt(double(x.x * x.x + x.y * x.y)) - double(R)).margin(1e-12));
+    }
+  }
+  // Near a cap the pair is not in the side's regime: the general path (MPR) answers with its single point.
+  Shape flake = box(real(0.44e-3), real(0.11e-3), real(0.44e-3));
+  const Pose wcap = pose(Vec3{0, real(R + 0.1e-3), real(0.15)}, quatIdentity());
+  const int m = collideShapes(flake, wcap, drum, wd, nullptr, real(env), c);
+  CHECK(m <= 1);
+}
+
 TEST_CASE("box-box: resting face contact, edge-edge, rotated", "[narrowphase]") {
   Rng rng(8);
   ContactPoint c[kMaxContactsPerPair];
