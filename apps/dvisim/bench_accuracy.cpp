@@ -13,7 +13,7 @@
 //  - complementarity violation (m/s), our definition, after each step, from the post-step velocities v+:
 //        C = sum_k |g_k . u_k| / sum_k |g_k|,   u_k = D_k^T v+ + b_k = (N g + r)_k
 //    with g_k the world impulse of contact k on body B (n gn + u gu + w gw), D_k^T v+ the relative velocity at the
-//    contact ((vB + wB x rB) - (vA + wA x rA), lever arms from the pre-step centres of mass) and
+//    contact ((vB + wB x rB) - (vA + wA x rA), lever arms from the pre-step centres of mass x+ - h v+) and
 //    b_k = (max(dist/h, -v_rec), 0, 0) (jacobian.h contactBias). At an exact CCP solution g_k . (N g + r)_k = 0 for
 //    every contact (gamma in the cone, u in the dual cone, orthogonal: the cone complementarity of Anitescu &
 //    Tasora 2010, Comput. Optim. Appl. 47; Tasora & Anitescu 2011, CMAME 200), so C is the impulse-weighted mean
@@ -158,16 +158,18 @@ std::vector<AccScene> makeScenes(bool quick) {
   return v;
 }
 
-// The complementarity violation of the last step (header comment), from the host copy of `sys` (synced) and
-// the pre-step centres of mass; -1 when no contact carries an impulse.
-double complementarityGap(const dvi::System& sys, const std::vector<Vec3>& x_pre) {
+// The complementarity violation of the last step (header comment), from the host copy of `sys` (synced); -1
+// when no contact carries an impulse. The lever arms start at the pre-step centres of mass, x+ - h v+
+// (the position update is x+ = x + h v+, integrate.h), so no copy of the state is kept across the step.
+double complementarityGap(const dvi::System& sys) {
   const dvi::ContactArrays& c = sys.contacts();
   const dvi::BodyArrays& b = sys.bodies();
   const real dt = sys.config().dt;
+  auto x_pre = [&](size_t i) { return b.pos[i] - b.vel[i] * dt; };
   double gap = 0, mag = 0;
   for (size_t k = 0; k < c.dist.size(); ++k) {
     const size_t A = size_t(c.body_a[k]), B = size_t(c.body_b[k]);
-    const Vec3 rA = c.pa[k] - x_pre[A], rB = c.pb[k] - x_pre[B];
+    const Vec3 rA = c.pa[k] - x_pre(A), rB = c.pb[k] - x_pre(B);
     const Vec3 vrel = (b.vel[B] + dvi::cross(b.omega[B], rB)) - (b.vel[A] + dvi::cross(b.omega[A], rA));
     const real bn = dvi::contactBias(c.dist[k], dt, sys.config().recovery_rel, c.size[k]);
     const Vec3 G = sys.contactForce(k) * dt;
@@ -200,10 +202,7 @@ Row runCesOne(const AccScene& sc, const std::string& engine, const std::string& 
   row.steps = int(std::llround(cfg.duration / cfg.dt));
   double res_sum = 0, compl_sum = 0;
   int compl_n = 0;
-  std::vector<Vec3> x_pre;
   for (int k = 0; k < row.steps; ++k) {
-    sys->syncToHost();
-    x_pre = sys->bodies().pos;
     const auto t0 = Clock::now();
     m.step();
     row.wall_s += std::chrono::duration<double>(Clock::now() - t0).count();
@@ -219,10 +218,7 @@ Row runCesOne(const AccScene& sc, const std::string& engine, const std::string& 
       if (c.dist[q] < 0 && (bd.inv_mass[size_t(c.body_a[q])] > 0 || bd.inv_mass[size_t(c.body_b[q])] > 0)) {
         row.pen_rel = std::max(row.pen_rel, -double(c.dist[q]) / double(c.size[q]));
       }
-    // Particles the feeder added in this step have no pre-step copy: their centre before the position update
-    // is x+ - h v+ (semi-implicit Euler, integrate.h).
-    for (size_t i = x_pre.size(); i < bd.pos.size(); ++i) x_pre.push_back(bd.pos[i] - bd.vel[i] * real(dt));
-    const double gap = complementarityGap(*sys, x_pre);
+    const double gap = complementarityGap(*sys);
     if (gap >= 0) compl_sum += gap, ++compl_n;
   }
   row.res_mean = res_sum / std::max(1, row.steps);
@@ -288,12 +284,7 @@ Row runOne(const AccScene& sc, const std::string& engine, const std::string& sol
   row.device = run->device();
   double res_sum = 0, compl_sum = 0;
   int compl_n = 0;
-  std::vector<Vec3> x_pre;
   for (int s = 0; s < row.steps; ++s) {
-    if (ours) {
-      run->sync();
-      x_pre = ours->sys->bodies().pos;
-    }
     run->step();
     row.wall_s += run->last_step_s;
     if (ours) {
@@ -303,7 +294,7 @@ Row runOne(const AccScene& sc, const std::string& engine, const std::string& sol
       row.res_last = double(st.residual);
       row.pen_rel = std::max(row.pen_rel, double(st.max_penetration) / sc.ref_length);
       sys.syncToHost();
-      const double gap = complementarityGap(sys, x_pre);
+      const double gap = complementarityGap(sys);
       if (gap >= 0) compl_sum += gap, ++compl_n;
     } else {
       const auto* br = static_cast<BulletRunner*>(run.get());

@@ -89,8 +89,8 @@ DVI_HD void contactRelativeVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, 
 
 // Adds the generalised impulse of contact k on one of its bodies (side 0 = A, 1 = B) to (F, T):
 // F += s P, T += s r x P with P = n g0 + u g1 + w g2 and s = -1 on A, +1 on B.
-DVI_HD void accumulateContactImpulse(const ContactJacobian& J, int side, const real* g, Vec3& F, Vec3& T) {
-  const Vec3 P = J.n * g[0] + J.u * g[1] + contactW(J) * g[2];
+// The world impulse P of a contact added to side `side` of it: +P on B, -P on A, with its moment.
+DVI_HD void accumulateSidedImpulse(const ContactJacobian& J, int side, Vec3 P, Vec3& F, Vec3& T) {
   if (side) {
     F += P;
     T += cross(J.rB, P);
@@ -98,6 +98,10 @@ DVI_HD void accumulateContactImpulse(const ContactJacobian& J, int side, const r
     F -= P;
     T -= cross(J.rA, P);
   }
+}
+
+DVI_HD void accumulateContactImpulse(const ContactJacobian& J, int side, const real* g, Vec3& F, Vec3& T) {
+  accumulateSidedImpulse(J, side, J.n * g[0] + J.u * g[1] + contactW(J) * g[2], F, T);
 }
 
 // dv = m^-1 F, dw = I^-1 T.
@@ -225,14 +229,7 @@ DVI_HD real contactNormalVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, Ve
 
 // accumulateContactImpulse for the normal impulse gn alone.
 DVI_HD void accumulateContactNormalImpulse(const ContactJacobian& J, int side, real gn, Vec3& F, Vec3& T) {
-  const Vec3 P = J.n * gn;
-  if (side) {
-    F += P;
-    T += cross(J.rB, P);
-  } else {
-    F -= P;
-    T -= cross(J.rA, P);
-  }
+  accumulateSidedImpulse(J, side, J.n * gn, F, T);
 }
 
 // Entry N_ij = D_in^T M^-1 D_jn between the normal rows of contacts i and j: the sum over the bodies c they
