@@ -491,6 +491,52 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
   }
 }
 
+// APGD's scalar decisions (backtracking, restart, best iterate, stop) run on the device in ApgdControl, the
+// struct the CPU loop calls on the host (solver_algorithms.h). With a tolerance the device loop stops in
+// batches of trials: the iteration count of every step must equal the CPU's, and launching each trial as
+// one CUDA graph must give bitwise the same state as launching its kernels one by one.
+TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, graphs equal kernel-by-kernel launches", "[gpu]") {
+  if (!haveDevice()) return;
+  SystemConfig cfg = pileConfig();
+  cfg.solver_settings.max_iterations = 100;
+  cfg.solver_settings.tolerance = 0;
+  real r100 = 0;
+  {
+    System probe(cfg);
+    buildPile(probe, 2000, 5, false, 1.7);
+    probe.step();
+    r100 = probe.lastStats().residual;
+  }
+  REQUIRE(r100 > 0);
+  cfg.solver_settings.tolerance = 3 * r100;  // reached before iteration 100 in the first step
+  System cpu(cfg);
+  auto graphs = makeGpuSystem(cfg);
+  SystemConfig plain_cfg = cfg;
+  plain_cfg.gpu_graphs = false;
+  auto plain = makeGpuSystem(plain_cfg);
+  buildPile(cpu, 2000, 5, false, 1.7);
+  buildPile(*graphs, 2000, 5, false, 1.7);
+  buildPile(*plain, 2000, 5, false, 1.7);
+  for (int s = 0; s < 5; ++s) {
+    cpu.step();
+    graphs->step();
+    plain->step();
+    INFO("step " << s << ": iterations CPU " << cpu.lastStats().iterations << ", GPU graphs "
+                 << graphs->lastStats().iterations << ", GPU kernels " << plain->lastStats().iterations
+                 << " (tolerance " << cfg.solver_settings.tolerance << ")");
+    if (s == 0) CHECK(cpu.lastStats().iterations < 100);
+    CHECK(graphs->lastStats().iterations == cpu.lastStats().iterations);
+    CHECK(plain->lastStats().iterations == cpu.lastStats().iterations);
+  }
+  graphs->syncToHost();
+  plain->syncToHost();
+  CHECK(relDiff(flatten(graphs->bodies().vel), flatten(plain->bodies().vel)) == 0);
+  CHECK(relDiff(flatten(graphs->bodies().pos), flatten(plain->bodies().pos)) == 0);
+  const double ev = relDiff(flatten(graphs->bodies().vel), flatten(cpu.bodies().vel));
+  INFO("velocity difference GPU vs CPU after 5 steps " << ev);
+  CHECK(ev < (kDouble ? 1e-9 : 1e-2));
+}
+
 TEST_CASE("constraint rows on the GPU: a pendulum chain on a pile equals the CPU run", "[gpu]") {
   if (!haveDevice()) return;
   for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {

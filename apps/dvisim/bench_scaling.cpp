@@ -78,6 +78,7 @@ struct ScalingOptions {
   bool record = false, quick = false;
   std::vector<std::string> sizes, scenes, engines;
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
+  bool gpu_graphs = true;
 };
 
 const char* const kBullet3Note =
@@ -501,6 +502,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.solver_settings.max_iterations = 50;
   cfg.solver_settings.tolerance = 0;  // all 50 iterations
   cfg.threads = int(threads);
+  cfg.gpu_graphs = o.gpu_graphs;
 
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
@@ -586,6 +588,7 @@ int runScaling(const ScalingOptions& o) {
        << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
        << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
+       << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
@@ -616,6 +619,8 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--cpu-max", o->cpu_max, "Largest N for our CPU backend and Bullet (default 100k)");
   cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
+  cmd->add_option("--gpu-graphs", o->gpu_graphs,
+                  "GPU APGD trials as one CUDA graph each (true, the default) or kernel by kernel (false)");
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   addBenchRunner(cmd, [o] { return runScaling(*o); });
 }

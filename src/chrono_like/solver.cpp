@@ -58,6 +58,7 @@ int solverThreads(const CcpProblem& p) { return p.size() / 3 < kSerialContacts ?
 // parallel loop over blocks, every reduction a detail::blockReduce (bitwise identical for any thread count).
 class CpuOps {
  public:
+  static constexpr bool kDeviceLoop = false;
   explicit CpuOps(const CcpProblem& p) : p_(p), T_(solverThreads(p)), nb_(p.size() / 3), ws_(workspace()) {}
   int64_t blocks() const { return nb_; }
   BlockSet blockSet() const { return p_.blockSet(); }

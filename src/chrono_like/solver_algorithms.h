@@ -15,6 +15,8 @@
 //   template <int M, class F> void reduce(const F& f, double* out);  out[m] = sum_k of f(k, acc)[m],
 //                                                deterministic (fixed summation order for any thread count)
 //   void copy(const real* src, real* dst);       3 blocks() reals
+//   static constexpr bool kDeviceLoop;           true: p.apgdIterate(...) runs the APGD iterations itself
+//                                                (same signature as algo::apgdIterate, same ApgdControl)
 #pragma once
 
 #include <algorithm>
@@ -167,12 +169,103 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
 //  - best iterate: the smallest residual among the iterates whose objective is not above the start's
 //    (APGD is not monotone), so the result is never worse than the (scaled) warm start. It stays pinned in
 //    its buffer (4 iterate buffers rotate), so tracking it copies nothing.
+// The scalar side of APGD after each test reduction: backtracking, momentum, gradient restart, best
+// iterate, buffer rotation and the stop test. Written once, DVI_HD: apgdIterate below calls it on the host
+// after every reduction; the GPU backend calls it in a one-thread kernel on the device (gpu_solver.cu), so
+// the device iterates without reading anything back and takes the very same decisions.
+struct ApgdControl {
+  // iterate buffers X[0..3] (cur: g_k, old: g_{k-1}, best pinned, nw: the trial g_{k+1}) and N x buffers
+  // NX[0..2] (ncur: N g_k, nold: N g_{k-1}, nnw: N of the trial)
+  int cur = 0, old = 0, best = 0, nw = 1;
+  int ncur = 0, nold = 0, nnw = 1;
+  int iterations = 0;  // accepted iterations
+  int bt = 0;          // backtracks of the current iteration
+  int done = 0;        // 1: stop (converged, iteration limit, or failed)
+  int failed = 0;      // 1: non-finite test sums at iteration `iterations` (failed_value)
+  int accepted = 0;    // the last afterTest accepted its trial; res is its residual
+  int max_iterations = 0;
+  real tolerance = 0;
+  real L = 1, theta = 1, beta = 0, res = 0, best_res = 0;
+  double f0 = 0, failed_value = 0;
+
+  DVI_HD static int freeBuf(int count, int a, int b, int c) {
+    for (int i = 0; i < count; ++i)
+      if (i != a && i != b && i != c) return i;
+    return -1;
+  }
+  DVI_HD static bool finite(double v) { return v - v == 0; }  // false for inf and NaN
+  DVI_HD void pick() {
+    nw = freeBuf(4, cur, old, best);
+    nnw = freeBuf(3, ncur, nold, -1);
+  }
+  // sums: d^T N d, d^T S^-1 d, residual^2, grad^T (g_{k+1} - g_k), f(g_{k+1}) of the trial in X[nw].
+  DVI_HD void afterTest(const double* sums) {
+    accepted = 0;
+    if (done) return;
+    if (!finite(sums[0]) || !finite(sums[2])) {
+      failed = 1;
+      failed_value = sums[0] + sums[2];
+      done = 1;
+      return;
+    }
+    if (sums[0] > double(L) * sums[1] && bt < 60) {  // sufficient decrease failed: L *= 2, redo the step
+      L *= 2;
+      ++bt;
+      return;
+    }
+    bt = 0;
+    ++iterations;
+    accepted = 1;
+    res = real(sqrt(sums[2]));
+    old = cur;  // rotate: g_{k-1} <- g_k, g_k <- g_{k+1}
+    cur = nw;
+    nold = ncur;
+    ncur = nnw;
+    if (res < best_res && sums[4] <= f0) {
+      best_res = res;
+      best = cur;
+    }
+    if ((tolerance > 0 && res < tolerance) || iterations >= max_iterations) {
+      done = 1;
+      return;
+    }
+    const real theta_new = (-theta * theta + theta * real(sqrt(double(theta * theta + 4)))) / 2;
+    beta = theta * (1 - theta) / (theta * theta + theta_new);
+    theta = theta_new;
+    if (sums[3] > 0) {  // gradient restart (O'Donoghue & Candes 2015, as in the APGD paper)
+      beta = 0;
+      theta = 1;
+    }
+    L *= real(0.9);
+    pick();
+  }
+};
+
+// The APGD iterations on the host: one projected step, one Schur product and one test reduction per trial.
+template <class Ops>
+void apgdIterate(Ops& p, ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
+                 SolverStats& st) {
+  const BlockSet bs = p.blockSet();
+  const real* eta = p.blockSteps();
+  const real* r = p.rhs();
+  while (!c.done) {
+    p.map(kern::ApgdStep{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], r, eta, c.beta, real(1) / c.L, X[c.nw]});
+    p.schur(X[c.nw], NX[c.nnw]);
+    double sums[5];
+    p.template reduce<5>(kern::ApgdTest{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], X[c.nw], NX[c.nnw], r, eta,
+                                        c.beta, a, inv_a},
+                         sums);
+    c.afterTest(sums);
+    if (c.failed) checkFinite(c.failed_value, "apgd", c.iterations);
+    if (c.accepted && s.record_history) st.history.push_back(c.res);
+  }
+}
+
 template <class Ops>
 SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   SolverStats st;
   if (p.blocks() == 0) return st;
   const BlockSet bs = p.blockSet();
-  const real* eta = p.blockSteps();
   const real* r = p.rhs();
   const real a = alphaOf(p, s), inv_a = real(1) / a;
   real* X[4] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3)};
@@ -181,56 +274,23 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   // g_0 = s P(warm start)
   checkWarmStart(p, gamma, "apgd");
   p.map(kern::CopyProject{bs, gamma, X[0]});
-  int cur = 0, old = 0, best = 0;
-  int ncur = 0, nold = 0;
-  p.schur(X[cur], NX[ncur]);
-  real best_res = scaledStart(p, X[cur], NX[ncur], a, "apgd");
-  real res = best_res;
-  if (s.record_history) st.history.push_back(res);
-
-  if (!(s.tolerance > 0 && res < s.tolerance) && s.max_iterations > 0) {
-    double f0;  // f of the start (for the best-iterate rule)
-    p.template reduce<1>(kern::Objective{X[cur], NX[ncur], r}, &f0);
-    real L = lipschitzLowerBound(p, X[1], NX[1]);
-    real theta = 1, beta = 0;
-    for (int it = 0; it < s.max_iterations; ++it) {
-      const int nw = freeBuffer(4, cur, old, best);
-      const int nnw = freeBuffer(3, ncur, nold, -1);
-      double sums[5];  // d^T N d, d^T S^-1 d, residual^2, grad^T (g_{k+1} - g_k), f(g_{k+1})
-      for (int bt = 0;; ++bt) {
-        p.map(kern::ApgdStep{bs, X[cur], X[old], NX[ncur], NX[nold], r, eta, beta, real(1) / L, X[nw]});
-        p.schur(X[nw], NX[nnw]);
-        p.template reduce<5>(
-            kern::ApgdTest{bs, X[cur], X[old], NX[ncur], NX[nold], X[nw], NX[nnw], r, eta, beta, a, inv_a}, sums);
-        if (!std::isfinite(sums[0]) || !std::isfinite(sums[2])) checkFinite(sums[0] + sums[2], "apgd", it);
-        if (!(sums[0] > double(L) * sums[1]) || bt >= 60) break;
-        L *= 2;
-      }
-      ++st.iterations;
-      res = real(std::sqrt(sums[2]));
-      if (s.record_history) st.history.push_back(res);
-      // Rotate: g_{k-1} <- g_k, g_k <- g_{k+1}.
-      old = cur;
-      cur = nw;
-      nold = ncur;
-      ncur = nnw;
-      if (res < best_res && sums[4] <= f0) {
-        best_res = res;
-        best = cur;
-      }
-      if (s.tolerance > 0 && res < s.tolerance) break;
-      const real theta_new = (-theta * theta + theta * std::sqrt(theta * theta + 4)) / 2;
-      beta = theta * (1 - theta) / (theta * theta + theta_new);
-      theta = theta_new;
-      if (sums[3] > 0) {  // gradient restart (O'Donoghue & Candes 2015, as in the APGD paper)
-        beta = 0;
-        theta = 1;
-      }
-      L *= real(0.9);
-    }
+  ApgdControl c;
+  p.schur(X[0], NX[0]);
+  c.res = c.best_res = scaledStart(p, X[0], NX[0], a, "apgd");
+  if (s.record_history) st.history.push_back(c.res);
+  c.max_iterations = s.max_iterations;
+  c.tolerance = s.tolerance;
+  c.done = (s.tolerance > 0 && c.res < s.tolerance) || !(s.max_iterations > 0);
+  if (!c.done) {
+    p.template reduce<1>(kern::Objective{X[0], NX[0], r}, &c.f0);  // f of the start (best-iterate rule)
+    c.L = lipschitzLowerBound(p, X[1], NX[1]);
+    c.pick();
+    if constexpr (Ops::kDeviceLoop) p.apgdIterate(c, X, NX, a, inv_a, s, st);
+    else apgdIterate(p, c, X, NX, a, inv_a, s, st);
   }
-  p.copy(X[best], gamma);
-  st.residual = best_res;
+  st.iterations = c.iterations;
+  p.copy(X[c.best], gamma);
+  st.residual = c.best_res;
   return st;
 }
 

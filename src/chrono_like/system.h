@@ -78,6 +78,9 @@ struct SystemConfig {
   // row providers or fields. false runs every one of them (3 rows per contact even for mu = 0, the
   // gyroscopic Newton step for every body, the row and field stages when empty): for benchmarks and tests.
   bool prune = true;
+  // GPU backend: run each APGD trial (step, Schur product, test, control) as one captured CUDA graph,
+  // launched once per trial; false launches the kernels one by one (same results, more launch latency).
+  bool gpu_graphs = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cub/cub.cuh>
 #include <stdexcept>
 #include <string>
@@ -31,8 +32,9 @@ __global__ void mapKernel(int64_t n, F f) {
   if (i < n) f(i);
 }
 
+// Block partials of a deterministic reduction: this block's grid-strided slice of f, summed in a fixed tree.
 template <int M, class F>
-__global__ void __launch_bounds__(kBlock) reduceKernel(int64_t n, F f, double* partial) {
+__device__ __forceinline__ void reduceBlockSlice(int64_t n, const F& f, double* partial) {
   double acc[M];
   for (int m = 0; m < M; ++m) acc[m] = 0;
   for (int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; i < n; i += int64_t(gridDim.x) * blockDim.x)
@@ -46,8 +48,10 @@ __global__ void __launch_bounds__(kBlock) reduceKernel(int64_t n, F f, double* p
   }
 }
 
+// The partials of nblk blocks summed in order by one block; the result lands in out (thread 0's view only
+// is defined before the final __syncthreads).
 template <int M>
-__global__ void __launch_bounds__(kBlock) finalizeKernel(int nblk, const double* partial, double* out) {
+__device__ __forceinline__ void reducePartials(int nblk, const double* partial, double* out) {
   double acc[M];
   for (int m = 0; m < M; ++m) acc[m] = 0;
   for (int b = threadIdx.x; b < nblk; b += blockDim.x)
@@ -59,6 +63,16 @@ __global__ void __launch_bounds__(kBlock) finalizeKernel(int nblk, const double*
     if (threadIdx.x == 0) out[m] = s;
     __syncthreads();
   }
+}
+
+template <int M, class F>
+__global__ void __launch_bounds__(kBlock) reduceKernel(int64_t n, F f, double* partial) {
+  reduceBlockSlice<M>(n, f, partial);
+}
+
+template <int M>
+__global__ void __launch_bounds__(kBlock) finalizeKernel(int nblk, const double* partial, double* out) {
+  reducePartials<M>(nblk, partial, out);
 }
 
 template <class F>
@@ -225,11 +239,15 @@ struct GatherF {
   const BodyInverseMass* inv;
   const real* x;
   BodyDelta* delta;
+  const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
+  __device__ const real* input() const { return x_slot ? *x_slot : x; }
   __device__ void operator()(int64_t i) const {
+    const real* xx = input();
+    if (!xx) return;
     const int32_t e0 = off[i], e1 = off[i + 1];
     if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
     Vec3 F{0, 0, 0}, T{0, 0, 0};
-    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, x, F, T);
+    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
     delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
   }
 };
@@ -238,8 +256,10 @@ struct GatherF {
 __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherF g) {
   const int32_t i = heavy[blockIdx.x];
   const int t = threadIdx.x;
+  const real* x = g.input();
+  if (!x) return;
   Vec3 F{0, 0, 0}, T{0, 0, 0};
-  for (int32_t e = g.off[i] + t; e < g.off[i + 1]; e += kBlock) accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, g.x, F, T);
+  for (int32_t e = g.off[i] + t; e < g.off[i + 1]; e += kBlock) accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
   __shared__ real sh[6][kBlock];
   sh[0][t] = F.x, sh[1][t] = F.y, sh[2][t] = F.z, sh[3][t] = T.x, sh[4][t] = T.y, sh[5][t] = T.z;
   __syncthreads();
@@ -260,11 +280,20 @@ struct HeavyListF {
   }
 };
 
+// The output of a Schur pass (b): y, or *slot where the device chooses the buffer (null there: skip).
+struct SchurOut {
+  real* y;
+  real* const* slot;
+  __device__ real* get() const { return slot ? *slot : y; }
+};
+
 struct ContactF {
   const ContactJacobian* jac;
   const BodyDelta* delta;
-  real* y;
+  SchurOut out;
   __device__ void operator()(int64_t k) const {
+    real* y = out.get();
+    if (!y) return;
     const ContactJacobian J = jac[k];
     const BodyDelta A = delta[J.a], B = delta[J.b];
     contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
@@ -275,8 +304,10 @@ struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padd
   const ContactJacobian* jac;
   const BodyDelta* delta;
   int64_t nc;
-  real* y;
+  SchurOut out;
   __device__ void operator()(int64_t k) const {
+    real* y = out.get();
+    if (!y) return;
     if (k >= nc) {
       y[k] = 0;
       return;
@@ -290,8 +321,12 @@ struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padd
 struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
   const ConstraintRow* rows;
   const BodyDelta* delta;
-  real* y;  // y + 3 nc
-  __device__ void operator()(int64_t i) const { y[i] = rowFromDeltas(rows[i], delta); }
+  SchurOut out;
+  int64_t first;  // y[first + i]: the row blocks follow the contact blocks
+  __device__ void operator()(int64_t i) const {
+    real* y = out.get();
+    if (y) y[first + i] = rowFromDeltas(rows[i], delta);
+  }
 };
 
 // Row block q: rhs, block inverse and step, column norms, row sums, max diagonal; adjacency entries.
@@ -348,11 +383,11 @@ EntryLayout layoutOf(const DeviceState& d) {
   return EntryLayout{int64_t(d.contacts.count), d.contact_blocks, d.normal_only};
 }
 
-// delta = M^-1 D x per body (Schur pass a, and the impulses' velocity change).
-void gather(DeviceState& d, const real* x, const char* what) {
+// delta = M^-1 D x per body (Schur pass a, and the impulses' velocity change); x is *x_slot when that is set.
+void gather(DeviceState& d, const real* x, const char* what, const real* const* x_slot = nullptr) {
   SolverScratch& S = d.solver;
   const GatherF g{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), layoutOf(d),
-                  d.bodies.inv.data(), x, d.bodies.delta.data()};
+                  d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {
     HeavyGatherKernel<<<unsigned(S.n_heavy), kBlock, 0, d.stream>>>(S.heavy.data(), g);
@@ -360,17 +395,136 @@ void gather(DeviceState& d, const real* x, const char* what) {
   }
 }
 
-void schur(DeviceState& d, const real* x, real* y) {
+// y = N x. With slots, x = *x_slot and y = *y_slot are read on the device (the APGD device loop).
+void schur(DeviceState& d, const real* x, real* y, const real* const* x_slot = nullptr, real* const* y_slot = nullptr) {
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
-  gather(d, x, "launch of GatherF (Schur pass a)");
+  const SchurOut out{y, y_slot};
+  gather(d, x, "launch of GatherF (Schur pass a)", x_slot);
   if (d.normal_only)
-    launchMap(d, 3 * d.contact_blocks, NormalContactF{S.jac.data(), d.bodies.delta.data(), nc, y},
+    launchMap(d, 3 * d.contact_blocks, NormalContactF{S.jac.data(), d.bodies.delta.data(), nc, out},
               "launch of NormalContactF (Schur pass b, normal rows)");
   else
-    launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), y}, "launch of ContactF (Schur pass b)");
-  launchMap(d, int64_t(S.rows.size()), RowSchurF{S.rows.data(), d.bodies.delta.data(), y + 3 * d.contact_blocks},
+    launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), out}, "launch of ContactF (Schur pass b)");
+  launchMap(d, int64_t(S.rows.size()), RowSchurF{S.rows.data(), d.bodies.delta.data(), out, 3 * d.contact_blocks},
             "launch of RowSchurF (Schur pass b, rows)");
+}
+
+// ---- APGD iterations on the device (no read-back per iteration) ----
+// algo::ApgdControl lives in device memory. Every trial is: the projected step, the Schur product, the test
+// reduction, and a one-thread kernel that sums the test's partials and calls ApgdControl::afterTest, which
+// picks the buffers of the next trial (the Schur passes read them through the slots). Once the control is
+// done every kernel of a trial returns at once, so the host enqueues a whole batch of trials and reads the
+// control back once per batch.
+struct ApgdBuffers {
+  BlockSet bs;
+  const real *r, *eta;
+  real* X[4];
+  real* NX[3];
+  real a, inv_a;
+};
+
+__global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers B, const ApgdDeviceState* st) {
+  const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (k >= n) return;
+  const algo::ApgdControl& c = st->c;
+  if (c.done) return;
+  const kern::ApgdStep f{B.bs, B.X[c.cur], B.X[c.old], B.NX[c.ncur], B.NX[c.nold], B.r, B.eta, c.beta, real(1) / c.L,
+                         B.X[c.nw]};
+  f(k);
+}
+
+__global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers B, const ApgdDeviceState* st,
+                                                         double* partial) {
+  const algo::ApgdControl& c = st->c;
+  if (c.done) return;
+  const kern::ApgdTest f{B.bs, B.X[c.cur], B.X[c.old], B.NX[c.ncur], B.NX[c.nold], B.X[c.nw], B.NX[c.nnw], B.r, B.eta,
+                         c.beta, B.a, B.inv_a};
+  reduceBlockSlice<5>(n, f, partial);
+}
+
+__global__ void __launch_bounds__(kBlock) apgdControlKernel(int nblk, const double* partial, ApgdBuffers B,
+                                                            ApgdDeviceState* st) {
+  if (st->c.done) return;
+  __shared__ double sums[5];
+  reducePartials<5>(nblk, partial, sums);
+  if (threadIdx.x != 0) return;
+  algo::ApgdControl c = st->c;
+  c.afterTest(sums);
+  st->c = c;
+  st->schur_x = c.done ? nullptr : B.X[c.nw];
+  st->schur_y = c.done ? nullptr : B.NX[c.nnw];
+}
+
+int reduceBlocksFor(int64_t n) {
+  return int(std::max<int64_t>(1, std::min<int64_t>(kReduceBlocks, (n + kBlock - 1) / kBlock)));
+}
+
+void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers& B, ApgdDeviceState* st) {
+  SolverScratch& S = d.solver;
+  apgdStepKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
+  cudaCheck(cudaGetLastError(), "launch of apgdStepKernel", __FILE__, __LINE__);
+  char* base = reinterpret_cast<char*>(st);
+  schur(d, nullptr, nullptr, reinterpret_cast<const real* const*>(base + offsetof(ApgdDeviceState, schur_x)),
+        reinterpret_cast<real* const*>(base + offsetof(ApgdDeviceState, schur_y)));
+  const int nblk = reduceBlocksFor(n);
+  apgdTestKernel<<<nblk, kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
+  cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
+  apgdControlKernel<<<1, kBlock, 0, d.stream>>>(nblk, S.partial.data(), B, st);
+  cudaCheck(cudaGetLastError(), "launch of apgdControlKernel", __FILE__, __LINE__);
+}
+
+// Runs the APGD trials of one solve until the control is done: batches of trials, one read-back each. With
+// graphs, one trial is captured once per solve and the batch is that graph launched again and again.
+void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, real* const* NX, real a,
+                         real inv_a, const SolverSettings& s, SolverStats& st, const BlockSet& bs, const real* r,
+                         const real* eta, bool graphs) {
+  SolverScratch& S = d.solver;
+  S.apgd.resize(1);
+  S.partial.resize(size_t(reduceBlocksFor(n)) * 5);
+  ApgdBuffers B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
+  ApgdDeviceState h{c, X[c.nw], NX[c.nnw]};
+  DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
+  DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
+  cudaGraphExec_t exec = nullptr;
+  if (graphs) {
+    cudaGraph_t graph = nullptr;
+    DVI_CUDA(cudaStreamBeginCapture(d.stream, cudaStreamCaptureModeThreadLocal));
+    try {
+      launchApgdTrial(d, n, B, S.apgd.data());
+    } catch (...) {
+      cudaStreamEndCapture(d.stream, &graph);
+      if (graph) cudaGraphDestroy(graph);
+      throw;
+    }
+    DVI_CUDA(cudaStreamEndCapture(d.stream, &graph));
+    const cudaError_t e = cudaGraphInstantiate(&exec, graph, 0);
+    cudaGraphDestroy(graph);
+    DVI_CUDA(e);
+  }
+  try {
+    for (;;) {
+      const int remaining = c.max_iterations - c.iterations;
+      const int batch = s.tolerance > 0 ? std::min(remaining, 16) : remaining;
+      for (int b = 0; b < std::max(1, batch); ++b) {
+        if (exec) DVI_CUDA(cudaGraphLaunch(exec, d.stream));
+        else launchApgdTrial(d, n, B, S.apgd.data());
+      }
+      DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
+      DVI_CUDA(cudaStreamSynchronize(d.stream));
+      c = h.c;
+      if (c.done) break;
+    }
+  } catch (...) {
+    if (exec) cudaGraphExecDestroy(exec);
+    throw;
+  }
+  if (exec) DVI_CUDA(cudaGraphExecDestroy(exec));
+  if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
+  // SolverSettings::record_history: the GPU step reports iterations and the final residual only
+  // (DeviceCcpResult), so the per-iteration residuals are not kept on the device.
+  (void)s;
+  (void)st;
 }
 
 // Name of a functor type, for the error message of a failed launch.
@@ -384,7 +538,8 @@ const char* functorName() {
 // (fixed grid, partials summed in order) and read back to the host, where the scalar logic runs.
 class GpuOps {
  public:
-  GpuOps(DeviceState& d, const ProblemView& p) : d_(d), p_(p) {
+  static constexpr bool kDeviceLoop = true;
+  GpuOps(DeviceState& d, const ProblemView& p, bool graphs) : d_(d), p_(p), graphs_(graphs) {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
     for (int i = 0; i < 7; ++i) {
@@ -417,10 +572,15 @@ class GpuOps {
     if (src == dst) return;
     DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nb), cudaMemcpyDeviceToDevice, d_.stream));
   }
+  void apgdIterate(algo::ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
+                   SolverStats& st) {
+    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, st, blockSet(), rhs(), blockSteps(), graphs_);
+  }
 
  private:
   DeviceState& d_;
   ProblemView p_;
+  bool graphs_;
   real* vec_[7] = {};
 };
 
@@ -672,7 +832,7 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv);
+  GpuOps ops(d, pv, cfg.gpu_graphs);
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout

@@ -9,6 +9,7 @@
 #include "chrono_like/broadphase.h"
 #include "chrono_like/data.h"
 #include "chrono_like/jacobian.h"
+#include "chrono_like/solver_algorithms.h"
 #include "chrono_like/system.h"
 #include "gpu/device_buffer.h"
 
@@ -84,6 +85,13 @@ struct NarrowScratch {
   DeviceBuffer<ContactPoint> first{"narrow first points"};
 };
 
+// The APGD control of the device loop (gpu_solver.cu: apgdIterateOnDevice), in device memory.
+struct ApgdDeviceState {
+  algo::ApgdControl c;
+  const real* schur_x;  // X[c.nw] while running, null when done
+  real* schur_y;        // NX[c.nnw]
+};
+
 struct SolverScratch {
   DeviceBuffer<ContactJacobian> jac{"contact jacobians"};
   DeviceBuffer<real> rhs{"ccp rhs"}, block_inv{"ccp block inverses"}, block_step{"ccp block steps"};
@@ -107,6 +115,7 @@ struct SolverScratch {
       v4{"solver vector 4"}, v5{"solver vector 5"}, v6{"solver vector 6"};
   DeviceBuffer<double> partial{"reduction partials"};
   DeviceBuffer<double> scalars{"reduction results"};
+  DeviceBuffer<ApgdDeviceState> apgd{"APGD device control"};
 };
 
 struct DeviceState {
