@@ -8,6 +8,7 @@
 #   sanitize   compute-sanitizer memcheck and racecheck on every [gpu] test (one process per test)
 #   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $LOGS/ces_default
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
+#   probe      unrecorded GPU pile timings with CUDA graphs on and off (PROBE_SIZES, PROBE_SCENES)
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
@@ -68,6 +69,12 @@ for m in "$@"; do
       done ;;
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
     scaling) bench scaling --budget 5 ;;
+    probe)  # unrecorded GPU pile timings, CUDA graphs on and off (PROBE_SIZES, default 10k,100k,1M)
+      for g in true false; do
+        echo "-- gpu_graphs=$g"
+        $BIN bench scaling --out "$LOGS/probe_$g" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} \
+          --budget 3 --gpu-graphs $g 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
+      done ;;
     accuracy|stability) bench $m ;;
     pruning) bench pruning --backend gpu ;;
     cesbench) bench ces --backend gpu ;;
