@@ -55,7 +55,7 @@ __device__ __forceinline__ void reducePartials(int nblk, const double* partial, 
   double acc[M];
   for (int m = 0; m < M; ++m) acc[m] = 0;
   for (int b = threadIdx.x; b < nblk; b += blockDim.x)
-    for (int m = 0; m < M; ++m) acc[m] += partial[b * M + m];
+    for (int m = 0; m < M; ++m) acc[m] += __ldcg(partial + b * M + m);  // L2: written by other blocks
   using BR = cub::BlockReduce<double, kBlock>;
   __shared__ typename BR::TempStorage tmp;
   for (int m = 0; m < M; ++m) {
@@ -411,9 +411,9 @@ void schur(DeviceState& d, const real* x, real* y, const real* const* x_slot = n
 }
 
 // ---- APGD iterations on the device (no read-back per iteration) ----
-// algo::ApgdControl lives in device memory. Every trial is: the projected step, the Schur product, the test
-// reduction, and a one-thread kernel that sums the test's partials and calls ApgdControl::afterTest, which
-// picks the buffers of the next trial (the Schur passes read them through the slots). Once the control is
+// algo::ApgdControl lives in device memory. Every trial is: the projected step, the Schur product, and the
+// test reduction, whose last block sums the partials and calls ApgdControl::afterTest, which picks the
+// buffers of the next trial (the Schur passes read them through the slots). Once the control is
 // done every kernel of a trial returns at once, so the host enqueues a whole batch of trials and reads the
 // control back once per batch.
 struct ApgdBuffers {
@@ -434,26 +434,32 @@ __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers 
   f(k);
 }
 
-__global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers B, const ApgdDeviceState* st,
+// The test reduction, and in its last block to finish (a counter in st; the partials are then summed in
+// block order, so the result does not depend on which block is last) the control update.
+__global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers B, ApgdDeviceState* st,
                                                          double* partial) {
   const algo::ApgdControl& c = st->c;
-  if (c.done) return;
-  const kern::ApgdTest f{B.bs, B.X[c.cur], B.X[c.old], B.NX[c.ncur], B.NX[c.nold], B.X[c.nw], B.NX[c.nnw], B.r, B.eta,
-                         c.beta, B.a, B.inv_a};
-  reduceBlockSlice<5>(n, f, partial);
-}
-
-__global__ void __launch_bounds__(kBlock) apgdControlKernel(int nblk, const double* partial, ApgdBuffers B,
-                                                            ApgdDeviceState* st) {
-  if (st->c.done) return;
+  if (c.done) return;  // uniform: st->c changes only after every block has counted itself below
+  {
+    const kern::ApgdTest f{B.bs, B.X[c.cur], B.X[c.old], B.NX[c.ncur], B.NX[c.nold], B.X[c.nw], B.NX[c.nnw], B.r,
+                           B.eta, c.beta, B.a, B.inv_a};
+    reduceBlockSlice<5>(n, f, partial);
+  }
+  __shared__ bool last;
+  __threadfence();  // this block's partials are visible before it counts itself
+  if (threadIdx.x == 0) last = atomicAdd(&st->blocks_done, 1u) == gridDim.x - 1;
+  __syncthreads();
+  if (!last) return;
+  __threadfence();
   __shared__ double sums[5];
-  reducePartials<5>(nblk, partial, sums);
+  reducePartials<5>(int(gridDim.x), partial, sums);
   if (threadIdx.x != 0) return;
-  algo::ApgdControl c = st->c;
-  c.afterTest(sums);
-  st->c = c;
-  st->schur_x = c.done ? nullptr : B.X[c.nw];
-  st->schur_y = c.done ? nullptr : B.NX[c.nnw];
+  algo::ApgdControl next = st->c;
+  next.afterTest(sums);
+  st->c = next;
+  st->schur_x = next.done ? nullptr : B.X[next.nw];
+  st->schur_y = next.done ? nullptr : B.NX[next.nnw];
+  st->blocks_done = 0;
 }
 
 int reduceBlocksFor(int64_t n) {
@@ -467,11 +473,8 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers& B, ApgdDevice
   char* base = reinterpret_cast<char*>(st);
   schur(d, nullptr, nullptr, reinterpret_cast<const real* const*>(base + offsetof(ApgdDeviceState, schur_x)),
         reinterpret_cast<real* const*>(base + offsetof(ApgdDeviceState, schur_y)));
-  const int nblk = reduceBlocksFor(n);
-  apgdTestKernel<<<nblk, kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
+  apgdTestKernel<<<reduceBlocksFor(n), kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
   cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
-  apgdControlKernel<<<1, kBlock, 0, d.stream>>>(nblk, S.partial.data(), B, st);
-  cudaCheck(cudaGetLastError(), "launch of apgdControlKernel", __FILE__, __LINE__);
 }
 
 // Runs the APGD trials of one solve until the control is done: batches of trials, one read-back each. With
@@ -483,7 +486,7 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
   S.apgd.resize(1);
   S.partial.resize(size_t(reduceBlocksFor(n)) * 5);
   ApgdBuffers B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
-  ApgdDeviceState h{c, X[c.nw], NX[c.nnw]};
+  ApgdDeviceState h{c, X[c.nw], NX[c.nnw], 0};
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
   cudaGraphExec_t exec = nullptr;

@@ -72,7 +72,7 @@ struct BroadScratch {
   DeviceBuffer<uint32_t> entry_bin{"broad entry bins"}, entry_bin_sorted{"broad sorted entry bins"};
   DeviceBuffer<int32_t> entry_shape{"broad entry shapes"}, entry_shape_sorted{"broad sorted entry shapes"};
   DeviceBuffer<uint32_t> run_bin{"broad run bins"};
-  DeviceBuffer<int32_t> run_len{"broad run lengths"}, run_start{"broad run starts"}, num_runs{"broad run count"};
+  DeviceBuffer<int32_t> run_len{"broad run lengths"}, num_runs{"broad run count"};  // statistics only
   DeviceBuffer<uint64_t> pair_count{"broad pair counts"}, pair_off{"broad pair offsets"};
   DeviceBuffer<uint64_t> pair_key{"broad pair keys"}, pair_key_sorted{"broad sorted pair keys"};
   DeviceBuffer<BroadParams> params{"broad params"};
@@ -90,6 +90,7 @@ struct ApgdDeviceState {
   algo::ApgdControl c;
   const real* schur_x;  // X[c.nw] while running, null when done
   real* schur_y;        // NX[c.nnw]
+  unsigned int blocks_done;  // test-reduction blocks finished this trial (the last one updates c)
 };
 
 struct SolverScratch {

@@ -8,6 +8,7 @@
 #   sanitize   compute-sanitizer memcheck and racecheck on every [gpu] test (one process per test)
 #   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $LOGS/ces_default
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
+#   ncu        per-kernel device time of a GPU pile run (NCU_COUNT launches, NCU_STEPS divides)
 #   probe      unrecorded GPU pile timings with CUDA graphs on and off (PROBE_SIZES, PROBE_SCENES)
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
@@ -75,6 +76,12 @@ for m in "$@"; do
         $BIN bench scaling --out "$LOGS/probe_$g" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} \
           --budget 3 --gpu-graphs $g 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
       done ;;
+    ncu)  # kernel durations (ncu, serialised, no launch gaps) of the first NCU_COUNT launches of a GPU pile run
+      ncu --clock-control none --csv --metrics gpu__time_duration.sum --launch-count ${NCU_COUNT:-2000} \
+        $BIN bench scaling --out "$LOGS/ncu" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-100k} \
+        --budget 0.01 > "$LOGS/ncu.csv" 2> "$LOGS/ncu.err"
+      echo "ncu rc=$?"; tail -3 "$LOGS/ncu.err"
+      python3 src/gpu/tools/ncu_summary.py "$LOGS/ncu.csv" ${NCU_STEPS:-1} ;;
     accuracy|stability) bench $m ;;
     pruning) bench pruning --backend gpu ;;
     cesbench) bench ces --backend gpu ;;
