@@ -192,6 +192,13 @@ int System::addBody(const BodyDesc& d) {
   return index;
 }
 
+bool System::hasGyroscopicBodies() const {
+  const size_t nb = bodies_.count();
+  for (size_t i = 0; i < nb; ++i)
+    if (needsGyroscopic(bodies_.inv_inertia[i], bodies_.flags[i])) return true;
+  return false;
+}
+
 bool System::planParts() {
   auto part = [&](StagePart p, bool ran, const char* why) {
     stats_.part_ran[int(p)] = ran;
@@ -201,10 +208,8 @@ bool System::planParts() {
   part(StagePart::ForceFields, !fields_.empty() || !prune, "no force field in the scene");
   part(StagePart::ConstraintRows, !row_providers_.empty() || !prune, "no joint or row provider in the scene");
   // Gyroscopic term: only dynamic bodies with non-spherical inertia need it.
-  bool gyro_bodies = false;
   const size_t nb = bodies_.count();
-  for (size_t i = 0; i < nb && !gyro_bodies; ++i) gyro_bodies = needsGyroscopic(bodies_.inv_inertia[i], bodies_.flags[i]);
-  const bool gyro = config_.gyroscopic && (gyro_bodies || !prune) && nb > 0;
+  const bool gyro = config_.gyroscopic && nb > 0 && (!prune || hasGyroscopicBodies());
   part(StagePart::Gyroscopic, gyro,
        !config_.gyroscopic ? "switched off (SystemConfig::gyroscopic)" : "every dynamic body has spherical inertia");
   // MPR: the shape types present decide whether any pair can need it (pairUsesMpr). It is a per-pair choice of

@@ -215,6 +215,9 @@ class System {
   // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
   // term runs.
   bool planParts();
+  // Does any dynamic body have non-spherical inertia (needsGyroscopic)? Scans the host arrays (they may have
+  // been edited through mutableBodies()); the GPU system answers from its last upload instead.
+  virtual bool hasGyroscopicBodies() const;
   // Records a stage as left out of this step.
   void leaveOut(StageType s, const char* why) {
     if (!stats_.stage_ran[int(s)]) stats_.stage_reason[int(s)] = why;

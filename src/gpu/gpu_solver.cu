@@ -424,13 +424,20 @@ struct ApgdBuffers {
   real a, inv_a;
 };
 
+// X[i] and NX[i] by selects: indexing the kernel-parameter arrays with a run-time index would copy them to
+// local memory in every thread (measured: +20% on the 1M-sphere solve, H200).
+__device__ __forceinline__ real* pickX(const ApgdBuffers& B, int i) {
+  return i == 0 ? B.X[0] : i == 1 ? B.X[1] : i == 2 ? B.X[2] : B.X[3];
+}
+__device__ __forceinline__ real* pickNX(const ApgdBuffers& B, int i) { return i == 0 ? B.NX[0] : i == 1 ? B.NX[1] : B.NX[2]; }
+
 __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers B, const ApgdDeviceState* st) {
   const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (k >= n) return;
   const algo::ApgdControl& c = st->c;
   if (c.done) return;
-  const kern::ApgdStep f{B.bs, B.X[c.cur], B.X[c.old], B.NX[c.ncur], B.NX[c.nold], B.r, B.eta, c.beta, real(1) / c.L,
-                         B.X[c.nw]};
+  const kern::ApgdStep f{B.bs,  pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold), B.r, B.eta,
+                         c.beta, real(1) / c.L, pickX(B, c.nw)};
   f(k);
 }
 
@@ -441,8 +448,9 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers 
   const algo::ApgdControl& c = st->c;
   if (c.done) return;  // uniform: st->c changes only after every block has counted itself below
   {
-    const kern::ApgdTest f{B.bs, B.X[c.cur], B.X[c.old], B.NX[c.ncur], B.NX[c.nold], B.X[c.nw], B.NX[c.nnw], B.r,
-                           B.eta, c.beta, B.a, B.inv_a};
+    const kern::ApgdTest f{B.bs,           pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
+                           pickX(B, c.nw), pickNX(B, c.nnw), B.r,           B.eta,           c.beta,
+                           B.a,            B.inv_a};
     reduceBlockSlice<5>(n, f, partial);
   }
   __shared__ bool last;
@@ -457,8 +465,8 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers 
   algo::ApgdControl next = st->c;
   next.afterTest(sums);
   st->c = next;
-  st->schur_x = next.done ? nullptr : B.X[next.nw];
-  st->schur_y = next.done ? nullptr : B.NX[next.nnw];
+  st->schur_x = next.done ? nullptr : pickX(B, next.nw);
+  st->schur_y = next.done ? nullptr : pickNX(B, next.nnw);
   st->blocks_done = 0;
 }
 

@@ -131,6 +131,9 @@ void GpuSystem::uploadIfNeeded() {
   b.friction.uploadTail(bodies_.friction, first_body, s);
   b.flags.uploadTail(bodies_.flags, first_body, s);
   b.count = bodies_.count();
+  if (first_body == 0) gyro_bodies_ = false;
+  for (size_t i = first_body; i < b.count && !gyro_bodies_; ++i)
+    gyro_bodies_ = needsGyroscopic(bodies_.inv_inertia[i], bodies_.flags[i]);
   b.v_free.resize(b.count);
   b.w_free.resize(b.count);
   b.inv.resize(b.count);

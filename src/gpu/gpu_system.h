@@ -57,6 +57,9 @@ class GpuSystem : public System {
   void detectCollisions() override;
   void buildAndSolve() override;
   void integrate() override;
+  // From the bodies uploaded so far (kept up to date by uploadIfNeeded), not a scan of the host arrays every
+  // step (1M bodies: ~4 ms of host time per step, H200 host).
+  bool hasGyroscopicBodies() const override { return gyro_bodies_; }
 
  private:
   void uploadIfNeeded();
@@ -64,6 +67,7 @@ class GpuSystem : public System {
   std::unique_ptr<gpu::DeviceState> d_;
   size_t uploaded_bodies_ = 0;
   bool host_dirty_ = true;
+  bool gyro_bodies_ = false;  // an uploaded dynamic body has non-spherical inertia
   std::vector<Vec3> field_force_, field_torque_;  // host scratch of the force fields
 };
 
