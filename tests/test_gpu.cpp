@@ -105,6 +105,9 @@ SystemConfig pileConfig() {
   c.dt = real(1e-3);
   c.solver = SolverType::APGD;
   c.solver_settings.max_iterations = 50;
+  // Real storage of APGD's vectors on the GPU (the default is float, SystemConfig::gpu_float_storage): these
+  // tests compare the two backends' algorithms to rounding. The float default has its own tests below.
+  c.gpu_float_storage = false;
   return c;
 }
 
@@ -409,7 +412,8 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
 
 TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree within 2%", "[gpu]") {
   if (!haveDevice()) return;
-  const SystemConfig cfg = pileConfig();
+  SystemConfig cfg = pileConfig();
+  cfg.gpu_float_storage = true;  // the GPU's default: float storage of APGD's vectors
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);
   const int n = 10000;  // the one-step test's pile; 2,000 bodies (one realisation of a chaotic flow) differed by 2.1%
@@ -535,6 +539,45 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, graphs equal
   const double ev = relDiff(flatten(graphs->bodies().vel), flatten(cpu.bodies().vel));
   INFO("velocity difference GPU vs CPU after 5 steps " << ev);
   CHECK(ev < (kDouble ? 1e-9 : 1e-2));
+}
+
+// The default float storage of APGD's vectors (SystemConfig::gpu_float_storage): the iterates are rounded to
+// float at every trial, so the GPU follows the CPU to float rounding, not bitwise. Velocities are the CCP's
+// unique part (impulses on redundant contacts are not unique); 200 iterations bring both runs close to it.
+TEST_CASE("GPU float storage (the default): the 10,000-body mixed pile's step matches the CPU to float tolerance",
+          "[gpu]") {
+  if (!haveDevice()) return;
+  SystemConfig cfg = pileConfig();
+  cfg.solver_settings.max_iterations = 200;
+  cfg.gpu_float_storage = true;
+  System cpu(cfg);
+  auto gpu = makeGpuSystem(cfg);
+  SystemConfig plain_cfg = cfg;
+  plain_cfg.gpu_graphs = false;
+  auto plain = makeGpuSystem(plain_cfg);
+  buildPile(cpu, 10000, 7, true, 1.7);
+  buildPile(*gpu, 10000, 7, true, 1.7);
+  buildPile(*plain, 10000, 7, true, 1.7);
+  for (int s = 0; s < 2; ++s) {
+    cpu.step();
+    gpu->step();
+    plain->step();
+    gpu->syncToHost();
+    plain->syncToHost();
+    REQUIRE(gpu->contacts().count() == cpu.contacts().count());
+    const double ev = relDiff(flatten(gpu->bodies().vel), flatten(cpu.bodies().vel));
+    const double ew = relDiff(flatten(gpu->bodies().omega), flatten(cpu.bodies().omega));
+    const double eg = relDiff(gpu->impulses(), cpu.impulses());
+    WARN("float storage, step " << s << " (" << cpu.contacts().count() << " contacts): relative differences v " << ev
+                                << ", omega " << ew << ", impulses " << eg << "; residual CPU "
+                                << cpu.lastStats().residual << " GPU " << gpu->lastStats().residual);
+    CHECK(ev < 1e-4);
+    CHECK(ew < 1e-3);
+    CHECK(eg < 1e-2);
+    CHECK(gpu->lastStats().residual < 10 * cpu.lastStats().residual + real(1e-6));
+    // graphs or kernel by kernel: the same float rounding, bitwise
+    CHECK(relDiff(flatten(plain->bodies().vel), flatten(gpu->bodies().vel)) == 0);
+  }
 }
 
 TEST_CASE("constraint rows on the GPU: a pendulum chain on a pile equals the CPU run", "[gpu]") {

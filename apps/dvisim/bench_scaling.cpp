@@ -79,6 +79,7 @@ struct ScalingOptions {
   std::vector<std::string> sizes, scenes, engines;
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
   bool gpu_graphs = true;
+  bool gpu_float_storage = true;
 };
 
 const char* const kBullet3Note =
@@ -503,6 +504,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.solver_settings.tolerance = 0;  // all 50 iterations
   cfg.threads = int(threads);
   cfg.gpu_graphs = o.gpu_graphs;
+  cfg.gpu_float_storage = o.gpu_float_storage;
 
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
@@ -589,6 +591,7 @@ int runScaling(const ScalingOptions& o) {
        << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
+       << "; APGD vectors stored in " << (o.gpu_float_storage ? "float (arithmetic in double)" : "double")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
@@ -621,6 +624,8 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
   cmd->add_option("--gpu-graphs", o->gpu_graphs,
                   "GPU APGD trials as one CUDA graph each (true, the default) or kernel by kernel (false)");
+  cmd->add_option("--gpu-float-storage", o->gpu_float_storage,
+                  "GPU APGD vectors stored in float (true, the default) or in double (false)");
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   addBenchRunner(cmd, [o] { return runScaling(*o); });
 }

@@ -97,23 +97,30 @@ struct FillSqrtEta {  // e = S^1/2 1
 };
 
 // APGD pass (1): g_{k+1} = P(y - t S (N y + r)), y and N y formed from (g_k, g_{k-1}).
-struct ApgdStep {
+// V: the storage type of the iterates and their Schur products (real; float in the GPU's float-storage
+// APGD loop, gpu_solver.cu); r, eta and all arithmetic are real.
+template <class V>
+struct ApgdStepT {
   BlockSet s;
-  const real *gc, *go, *Nc, *No, *r, *eta;
+  const V *gc, *go, *Nc, *No;
+  const real *r, *eta;
   real beta, t;
-  real* gn;
+  V* gn;
   DVI_HD void operator()(int64_t k) const {
-    real* x = gn + 3 * k;
+    real x[3];
     const real te = t * eta[k];
     for (int j = 0; j < 3; ++j) {
       const int64_t i = 3 * k + j;
-      const real y = gc[i] + beta * (gc[i] - go[i]);
-      const real Ny = Nc[i] + beta * (Nc[i] - No[i]);
+      const real c = real(gc[i]), nc = real(Nc[i]);
+      const real y = c + beta * (c - real(go[i]));
+      const real Ny = nc + beta * (nc - real(No[i]));
       x[j] = y - te * (Ny + r[i]);
     }
     projectBlock(s, k, x);
+    for (int j = 0; j < 3; ++j) gn[3 * k + j] = V(x[j]);
   }
 };
+using ApgdStep = ApgdStepT<real>;
 
 // ---- layout conversions of a normal-only problem (jacobian.h): maps over single reals ----
 // The System keeps 3 impulses per contact (then the rows') for the warm start and its callers; a
@@ -238,28 +245,33 @@ struct JacobiInverse {
 
 // APGD pass (2), 5 sums: d^T N d, d^T S^-1 d, residual^2 of g_{k+1}, grad(y)^T (g_{k+1} - g_k), f(g_{k+1}),
 // with d = g_{k+1} - y (see solveApgd).
-struct ApgdTest {
+template <class V>
+struct ApgdTestT {
   BlockSet s;
-  const real *gc, *go, *Nc, *No, *gn, *Nn, *r, *eta;
+  const V *gc, *go, *Nc, *No, *gn, *Nn;
+  const real *r, *eta;
   real beta, a, inv_a;
   DVI_HD void operator()(int64_t k, double* acc) const {
-    real grad_n[3];
+    real grad_n[3], g_n[3];
     double dd = 0;
     for (int j = 0; j < 3; ++j) {
       const int64_t i = 3 * k + j;
-      const real y = gc[i] + beta * (gc[i] - go[i]);
-      const real Ny = Nc[i] + beta * (Nc[i] - No[i]);
-      const real d = gn[i] - y;
-      acc[0] += double(d) * (Nn[i] - Ny);
+      const real c = real(gc[i]), nc = real(Nc[i]), g = real(gn[i]), Ng = real(Nn[i]);
+      const real y = c + beta * (c - real(go[i]));
+      const real Ny = nc + beta * (nc - real(No[i]));
+      const real d = g - y;
+      acc[0] += double(d) * (Ng - Ny);
       dd += double(d) * d;
-      acc[3] += double(Ny + r[i]) * (gn[i] - gc[i]);
-      acc[4] += 0.5 * double(gn[i]) * (Nn[i] + 2 * r[i]);
-      grad_n[j] = Nn[i] + r[i];
+      acc[3] += double(Ny + r[i]) * (g - c);
+      acc[4] += 0.5 * double(g) * (Ng + 2 * r[i]);
+      grad_n[j] = Ng + r[i];
+      g_n[j] = g;
     }
     if (eta[k] > 0) acc[1] += dd / eta[k];  // a block between immovable bodies has no metric weight
-    acc[2] += blockResidual2(s, k, gn + 3 * k, grad_n, a, inv_a);
+    acc[2] += blockResidual2(s, k, g_n, grad_n, a, inv_a);
   }
 };
+using ApgdTest = ApgdTestT<real>;
 
 // BB start, 1 sum: g += r (g held N x), f of x.
 struct BbInit {

@@ -81,6 +81,10 @@ struct SystemConfig {
   // GPU backend: run each APGD trial (step, Schur product, test, control) as one captured CUDA graph,
   // launched once per trial; false launches the kernels one by one (same results, more launch latency).
   bool gpu_graphs = true;
+  // GPU backend: APGD's iterates and their Schur products (7 vectors, the bulk of each iteration's traffic)
+  // stored in float, all arithmetic and reductions in double; false keeps them in real (the GPU then
+  // reproduces the CPU backend to rounding). Jacobi and BB always use real storage.
+  bool gpu_float_storage = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

@@ -11,6 +11,7 @@
 #include <cub/cub.cuh>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "chrono_like/cone.h"
 #include "chrono_like/jacobian.h"
@@ -230,19 +231,20 @@ struct KeyOrderF {  // 1 where the keys are out of order
 // product made the whole solve wait for it (157 ms/step at 10,000 particles, H200).
 constexpr int32_t kHeavyDegree = 512;
 
-struct GatherF {
+template <class V>
+struct GatherT {
   const int32_t* off;
   const int32_t* adj;
   const ContactJacobian* jac;
   const ConstraintRow* rows;
   EntryLayout L;
   const BodyInverseMass* inv;
-  const real* x;
+  const V* x;
   BodyDelta* delta;
-  const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
-  __device__ const real* input() const { return x_slot ? *x_slot : x; }
+  const V* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
+  __device__ const V* input() const { return x_slot ? *x_slot : x; }
   __device__ void operator()(int64_t i) const {
-    const real* xx = input();
+    const V* xx = input();
     if (!xx) return;
     const int32_t e0 = off[i], e1 = off[i + 1];
     if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
@@ -253,10 +255,11 @@ struct GatherF {
 };
 
 // One block per heavy body: strided partial sums of the entries, then a fixed-order tree in shared memory.
-__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherF g) {
+template <class V>
+__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherT<V> g) {
   const int32_t i = heavy[blockIdx.x];
   const int t = threadIdx.x;
-  const real* x = g.input();
+  const V* x = g.input();
   if (!x) return;
   Vec3 F{0, 0, 0}, T{0, 0, 0};
   for (int32_t e = g.off[i] + t; e < g.off[i + 1]; e += kBlock) accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
@@ -271,6 +274,8 @@ __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy
   if (t == 0) g.delta[i] = bodyDeltaFromImpulse(g.inv[i], Vec3{sh[0][0], sh[1][0], sh[2][0]}, Vec3{sh[3][0], sh[4][0], sh[5][0]});
 }
 
+using GatherF = GatherT<real>;
+
 struct HeavyListF {
   const int32_t* off;
   int32_t* heavy;
@@ -281,32 +286,38 @@ struct HeavyListF {
 };
 
 // The output of a Schur pass (b): y, or *slot where the device chooses the buffer (null there: skip).
+// V: the storage type of y (real, or float in the float-storage APGD loop).
+template <class V>
 struct SchurOut {
-  real* y;
-  real* const* slot;
-  __device__ real* get() const { return slot ? *slot : y; }
+  V* y;
+  V* const* slot;
+  __device__ V* get() const { return slot ? *slot : y; }
 };
 
+template <class V>
 struct ContactF {
   const ContactJacobian* jac;
   const BodyDelta* delta;
-  SchurOut out;
+  SchurOut<V> out;
   __device__ void operator()(int64_t k) const {
-    real* y = out.get();
+    V* y = out.get();
     if (!y) return;
     const ContactJacobian J = jac[k];
     const BodyDelta A = delta[J.a], B = delta[J.b];
-    contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
+    real v[3];
+    contactRelativeVelocity(J, A.v, A.w, B.v, B.w, v);
+    for (int j = 0; j < 3; ++j) y[3 * k + j] = V(v[j]);
   }
 };
 
+template <class V>
 struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padding rows 0)
   const ContactJacobian* jac;
   const BodyDelta* delta;
   int64_t nc;
-  SchurOut out;
+  SchurOut<V> out;
   __device__ void operator()(int64_t k) const {
-    real* y = out.get();
+    V* y = out.get();
     if (!y) return;
     if (k >= nc) {
       y[k] = 0;
@@ -314,18 +325,19 @@ struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padd
     }
     const ContactJacobian J = jac[k];
     const BodyDelta A = delta[J.a], B = delta[J.b];
-    y[k] = contactNormalVelocity(J, A.v, A.w, B.v, B.w);
+    y[k] = V(contactNormalVelocity(J, A.v, A.w, B.v, B.w));
   }
 };
 
+template <class V>
 struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
   const ConstraintRow* rows;
   const BodyDelta* delta;
-  SchurOut out;
+  SchurOut<V> out;
   int64_t first;  // y[first + i]: the row blocks follow the contact blocks
   __device__ void operator()(int64_t i) const {
-    real* y = out.get();
-    if (y) y[first + i] = rowFromDeltas(rows[i], delta);
+    V* y = out.get();
+    if (y) y[first + i] = V(rowFromDeltas(rows[i], delta));
   }
 };
 
@@ -384,29 +396,31 @@ EntryLayout layoutOf(const DeviceState& d) {
 }
 
 // delta = M^-1 D x per body (Schur pass a, and the impulses' velocity change); x is *x_slot when that is set.
-void gather(DeviceState& d, const real* x, const char* what, const real* const* x_slot = nullptr) {
+template <class V = real>
+void gather(DeviceState& d, const V* x, const char* what, const V* const* x_slot = nullptr) {
   SolverScratch& S = d.solver;
-  const GatherF g{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), layoutOf(d),
-                  d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
+  const GatherT<V> g{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), layoutOf(d),
+                     d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {
-    HeavyGatherKernel<<<unsigned(S.n_heavy), kBlock, 0, d.stream>>>(S.heavy.data(), g);
+    HeavyGatherKernel<V><<<unsigned(S.n_heavy), kBlock, 0, d.stream>>>(S.heavy.data(), g);
     cudaCheck(cudaGetLastError(), "launch of HeavyGatherKernel", __FILE__, __LINE__);
   }
 }
 
 // y = N x. With slots, x = *x_slot and y = *y_slot are read on the device (the APGD device loop).
-void schur(DeviceState& d, const real* x, real* y, const real* const* x_slot = nullptr, real* const* y_slot = nullptr) {
+template <class V = real>
+void schur(DeviceState& d, const V* x, V* y, const V* const* x_slot = nullptr, V* const* y_slot = nullptr) {
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
-  const SchurOut out{y, y_slot};
-  gather(d, x, "launch of GatherF (Schur pass a)", x_slot);
+  const SchurOut<V> out{y, y_slot};
+  gather<V>(d, x, "launch of GatherF (Schur pass a)", x_slot);
   if (d.normal_only)
-    launchMap(d, 3 * d.contact_blocks, NormalContactF{S.jac.data(), d.bodies.delta.data(), nc, out},
+    launchMap(d, 3 * d.contact_blocks, NormalContactF<V>{S.jac.data(), d.bodies.delta.data(), nc, out},
               "launch of NormalContactF (Schur pass b, normal rows)");
   else
-    launchMap(d, nc, ContactF{S.jac.data(), d.bodies.delta.data(), out}, "launch of ContactF (Schur pass b)");
-  launchMap(d, int64_t(S.rows.size()), RowSchurF{S.rows.data(), d.bodies.delta.data(), out, 3 * d.contact_blocks},
+    launchMap(d, nc, ContactF<V>{S.jac.data(), d.bodies.delta.data(), out}, "launch of ContactF (Schur pass b)");
+  launchMap(d, int64_t(S.rows.size()), RowSchurF<V>{S.rows.data(), d.bodies.delta.data(), out, 3 * d.contact_blocks},
             "launch of RowSchurF (Schur pass b, rows)");
 }
 
@@ -416,41 +430,63 @@ void schur(DeviceState& d, const real* x, real* y, const real* const* x_slot = n
 // buffers of the next trial (the Schur passes read them through the slots). Once the control is
 // done every kernel of a trial returns at once, so the host enqueues a whole batch of trials and reads the
 // control back once per batch.
+template <class V>
 struct ApgdBuffers {
   BlockSet bs;
   const real *r, *eta;
-  real* X[4];
-  real* NX[3];
+  V* X[4];
+  V* NX[3];
   real a, inv_a;
 };
 
 // X[i] and NX[i] by selects: indexing the kernel-parameter arrays with a run-time index would copy them to
 // local memory in every thread (measured: +20% on the 1M-sphere solve, H200).
-__device__ __forceinline__ real* pickX(const ApgdBuffers& B, int i) {
+template <class V>
+__device__ __forceinline__ V* pickX(const ApgdBuffers<V>& B, int i) {
   return i == 0 ? B.X[0] : i == 1 ? B.X[1] : i == 2 ? B.X[2] : B.X[3];
 }
-__device__ __forceinline__ real* pickNX(const ApgdBuffers& B, int i) { return i == 0 ? B.NX[0] : i == 1 ? B.NX[1] : B.NX[2]; }
+template <class V>
+__device__ __forceinline__ V* pickNX(const ApgdBuffers<V>& B, int i) {
+  return i == 0 ? B.NX[0] : i == 1 ? B.NX[1] : B.NX[2];
+}
 
-__global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers B, const ApgdDeviceState* st) {
+// The Schur slots of the storage type V in the device state (by offset: the host passes their device
+// addresses to the Schur passes without dereferencing st).
+template <class V>
+__host__ __device__ V** schurXSlot(ApgdDeviceState* st) {
+  char* base = reinterpret_cast<char*>(st);
+  if constexpr (std::is_same_v<V, float>) return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_xf));
+  else return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_x));
+}
+template <class V>
+__host__ __device__ V** schurYSlot(ApgdDeviceState* st) {
+  char* base = reinterpret_cast<char*>(st);
+  if constexpr (std::is_same_v<V, float>) return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_yf));
+  else return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_y));
+}
+
+template <class V>
+__global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers<V> B, const ApgdDeviceState* st) {
   const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (k >= n) return;
   const algo::ApgdControl& c = st->c;
   if (c.done) return;
-  const kern::ApgdStep f{B.bs,  pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold), B.r, B.eta,
-                         c.beta, real(1) / c.L, pickX(B, c.nw)};
+  const kern::ApgdStepT<V> f{B.bs,  pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold), B.r,
+                             B.eta, c.beta,          real(1) / c.L,   pickX(B, c.nw)};
   f(k);
 }
 
 // The test reduction, and in its last block to finish (a counter in st; the partials are then summed in
 // block order, so the result does not depend on which block is last) the control update.
-__global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers B, ApgdDeviceState* st,
+template <class V>
+__global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<V> B, ApgdDeviceState* st,
                                                          double* partial) {
   const algo::ApgdControl& c = st->c;
   if (c.done) return;  // uniform: st->c changes only after every block has counted itself below
   {
-    const kern::ApgdTest f{B.bs,           pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
-                           pickX(B, c.nw), pickNX(B, c.nnw), B.r,           B.eta,           c.beta,
-                           B.a,            B.inv_a};
+    const kern::ApgdTestT<V> f{B.bs,           pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
+                               pickX(B, c.nw), pickNX(B, c.nnw), B.r,           B.eta,           c.beta,
+                               B.a,            B.inv_a};
     reduceBlockSlice<5>(n, f, partial);
   }
   __shared__ bool last;
@@ -465,8 +501,8 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers 
   algo::ApgdControl next = st->c;
   next.afterTest(sums);
   st->c = next;
-  st->schur_x = next.done ? nullptr : pickX(B, next.nw);
-  st->schur_y = next.done ? nullptr : pickNX(B, next.nnw);
+  *schurXSlot<V>(st) = next.done ? nullptr : pickX(B, next.nw);
+  *schurYSlot<V>(st) = next.done ? nullptr : pickNX(B, next.nnw);
   st->blocks_done = 0;
 }
 
@@ -474,27 +510,40 @@ int reduceBlocksFor(int64_t n) {
   return int(std::max<int64_t>(1, std::min<int64_t>(kReduceBlocks, (n + kBlock - 1) / kBlock)));
 }
 
-void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers& B, ApgdDeviceState* st) {
+template <class V>
+void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDeviceState* st) {
   SolverScratch& S = d.solver;
-  apgdStepKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
+  apgdStepKernel<V><<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
   cudaCheck(cudaGetLastError(), "launch of apgdStepKernel", __FILE__, __LINE__);
-  char* base = reinterpret_cast<char*>(st);
-  schur(d, nullptr, nullptr, reinterpret_cast<const real* const*>(base + offsetof(ApgdDeviceState, schur_x)),
-        reinterpret_cast<real* const*>(base + offsetof(ApgdDeviceState, schur_y)));
-  apgdTestKernel<<<reduceBlocksFor(n), kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
+  schur<V>(d, nullptr, nullptr, schurXSlot<V>(st), schurYSlot<V>(st));
+  apgdTestKernel<V><<<reduceBlocksFor(n), kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
   cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
 }
 
+// Storage conversions between the solver's real vectors and the float-storage loop's.
+template <class To, class From>
+struct ConvertF {
+  const From* in;
+  To* out;
+  __device__ void operator()(int64_t i) const { out[i] = To(in[i]); }
+};
+
 // Runs the APGD trials of one solve until the control is done: batches of trials, one read-back each. With
 // graphs, one trial is captured once per solve and the batch is that graph launched again and again.
-void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, real* const* NX, real a,
-                         real inv_a, const SolverSettings& s, SolverStats& st, const BlockSet& bs, const real* r,
-                         const real* eta, bool graphs) {
+// V = float (SystemConfig::gpu_float_storage): the iterates and their Schur products live in 7 float vectors
+// for the trials (start and result stay real: X[0], NX[0] are converted in, X[best] is converted back).
+template <class V>
+void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, V* const* X, V* const* NX, real a,
+                        real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
+                        bool graphs) {
   SolverScratch& S = d.solver;
   S.apgd.resize(1);
   S.partial.resize(size_t(reduceBlocksFor(n)) * 5);
-  ApgdBuffers B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
-  ApgdDeviceState h{c, X[c.nw], NX[c.nnw], 0};
+  const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
+  ApgdDeviceState h{};
+  h.c = c;
+  *schurXSlot<V>(&h) = X[c.nw];
+  *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
   cudaGraphExec_t exec = nullptr;
@@ -502,7 +551,7 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
     cudaGraph_t graph = nullptr;
     DVI_CUDA(cudaStreamBeginCapture(d.stream, cudaStreamCaptureModeThreadLocal));
     try {
-      launchApgdTrial(d, n, B, S.apgd.data());
+      launchApgdTrial<V>(d, n, B, S.apgd.data());
     } catch (...) {
       cudaStreamEndCapture(d.stream, &graph);
       if (graph) cudaGraphDestroy(graph);
@@ -519,7 +568,7 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
       const int batch = s.tolerance > 0 ? std::min(remaining, 16) : remaining;
       for (int b = 0; b < std::max(1, batch); ++b) {
         if (exec) DVI_CUDA(cudaGraphLaunch(exec, d.stream));
-        else launchApgdTrial(d, n, B, S.apgd.data());
+        else launchApgdTrial<V>(d, n, B, S.apgd.data());
       }
       DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
       DVI_CUDA(cudaStreamSynchronize(d.stream));
@@ -531,11 +580,32 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
     throw;
   }
   if (exec) DVI_CUDA(cudaGraphExecDestroy(exec));
+}
+
+void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, real* const* NX, real a,
+                         real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
+                         bool graphs, bool float_storage) {
+  if constexpr (!std::is_same_v<real, float>) {
+    if (float_storage) {
+      SolverScratch& S = d.solver;
+      const int64_t len = 3 * n;
+      S.vf.resize(size_t(7 * len));
+      float* Xf[4];
+      float* NXf[3];
+      for (int i = 0; i < 4; ++i) Xf[i] = S.vf.data() + i * len;
+      for (int i = 0; i < 3; ++i) NXf[i] = S.vf.data() + (4 + i) * len;
+      launchMap(d, len, ConvertF<float, real>{X[c.cur], Xf[c.cur]}, "launch of ConvertF (APGD start, to float)");
+      launchMap(d, len, ConvertF<float, real>{NX[c.ncur], NXf[c.ncur]}, "launch of ConvertF (APGD start, to float)");
+      apgdTrialsOnDevice<float>(d, n, c, Xf, NXf, a, inv_a, s, bs, r, eta, graphs);
+      if (c.best != 0)  // buffer 0 (the start) is pinned while it is the best: X[0] is still exact
+        launchMap(d, len, ConvertF<real, float>{Xf[c.best], X[c.best]}, "launch of ConvertF (APGD result, to real)");
+      if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
+      return;
+    }
+  }
+  (void)float_storage;
+  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, graphs);
   if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
-  // SolverSettings::record_history: the GPU step reports iterations and the final residual only
-  // (DeviceCcpResult), so the per-iteration residuals are not kept on the device.
-  (void)s;
-  (void)st;
 }
 
 // Name of a functor type, for the error message of a failed launch.
@@ -550,7 +620,8 @@ const char* functorName() {
 class GpuOps {
  public:
   static constexpr bool kDeviceLoop = true;
-  GpuOps(DeviceState& d, const ProblemView& p, bool graphs) : d_(d), p_(p), graphs_(graphs) {
+  GpuOps(DeviceState& d, const ProblemView& p, bool graphs, bool float_storage)
+      : d_(d), p_(p), graphs_(graphs), float_(float_storage) {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
     for (int i = 0; i < 7; ++i) {
@@ -583,15 +654,18 @@ class GpuOps {
     if (src == dst) return;
     DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nb), cudaMemcpyDeviceToDevice, d_.stream));
   }
+  // SolverSettings::record_history: the GPU step reports the iterations and the final residual only
+  // (DeviceCcpResult), so the device loop keeps no per-iteration residuals (st is left as it is).
   void apgdIterate(algo::ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
-                   SolverStats& st) {
-    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, st, blockSet(), rhs(), blockSteps(), graphs_);
+                   SolverStats& /*st*/) {
+    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), graphs_, float_);
   }
 
  private:
   DeviceState& d_;
   ProblemView p_;
   bool graphs_;
+  bool float_;
   real* vec_[7] = {};
 };
 
@@ -843,7 +917,7 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, cfg.gpu_graphs);
+  GpuOps ops(d, pv, cfg.gpu_graphs, cfg.gpu_float_storage);
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout

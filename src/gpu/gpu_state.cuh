@@ -90,6 +90,8 @@ struct ApgdDeviceState {
   algo::ApgdControl c;
   const real* schur_x;  // X[c.nw] while running, null when done
   real* schur_y;        // NX[c.nnw]
+  const float* schur_xf;  // the same, float storage (SystemConfig::gpu_float_storage)
+  float* schur_yf;
   unsigned int blocks_done;  // test-reduction blocks finished this trial (the last one updates c)
 };
 
@@ -117,6 +119,7 @@ struct SolverScratch {
   DeviceBuffer<double> partial{"reduction partials"};
   DeviceBuffer<double> scalars{"reduction results"};
   DeviceBuffer<ApgdDeviceState> apgd{"APGD device control"};
+  DeviceBuffer<float> vf{"APGD float-storage vectors"};  // 7 x 3 blocks: X[0..3], NX[0..2]
 };
 
 struct DeviceState {

@@ -9,7 +9,7 @@
 #   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $LOGS/ces_default
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
 #   ncu        per-kernel device time of a GPU pile run (NCU_COUNT launches, NCU_STEPS divides)
-#   probe      unrecorded GPU pile timings with CUDA graphs on and off (PROBE_SIZES, PROBE_SCENES)
+#   probe      unrecorded GPU pile timings, float and double APGD storage (PROBE_SIZES, PROBE_SCENES)
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
@@ -70,11 +70,11 @@ for m in "$@"; do
       done ;;
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
     scaling) bench scaling --budget 5 ;;
-    probe)  # unrecorded GPU pile timings, CUDA graphs on and off (PROBE_SIZES, default 10k,100k,1M)
-      for g in true false; do
-        echo "-- gpu_graphs=$g"
-        $BIN bench scaling --out "$LOGS/probe_$g" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} \
-          --budget 3 --gpu-graphs $g 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
+    probe)  # unrecorded GPU pile timings: float and double storage of APGD's vectors (PROBE_SIZES, default 10k,100k,1M)
+      for f in true false; do
+        echo "-- gpu_float_storage=$f"
+        $BIN bench scaling --out "$LOGS/probe_$f" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} \
+          --budget 3 --gpu-float-storage $f 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
       done ;;
     ncu)  # kernel durations (ncu, serialised, no launch gaps) of the first NCU_COUNT launches of a GPU pile run
       ncu --clock-control none --csv --metrics gpu__time_duration.sum --launch-count ${NCU_COUNT:-2000} \
