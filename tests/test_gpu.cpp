@@ -105,8 +105,8 @@ SystemConfig pileConfig() {
   c.dt = real(1e-3);
   c.solver = SolverType::APGD;
   c.solver_settings.max_iterations = 50;
-  // Real storage of APGD's vectors on the GPU (the default is float, SystemConfig::gpu_float_storage): these
-  // tests compare the two backends' algorithms to rounding. The float default has its own tests below.
+  // Real storage of APGD's vectors on the GPU (the default; SystemConfig::gpu_float_storage): these tests
+  // compare the two backends' algorithms to rounding. The float option has its own test below.
   c.gpu_float_storage = false;
   return c;
 }
@@ -412,8 +412,7 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
 
 TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree within 2%", "[gpu]") {
   if (!haveDevice()) return;
-  SystemConfig cfg = pileConfig();
-  cfg.gpu_float_storage = true;  // the GPU's default: float storage of APGD's vectors
+  const SystemConfig cfg = pileConfig();
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);
   const int n = 10000;  // the one-step test's pile; 2,000 bodies (one realisation of a chaotic flow) differed by 2.1%
@@ -541,10 +540,13 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, graphs equal
   CHECK(ev < (kDouble ? 1e-9 : 1e-2));
 }
 
-// The default float storage of APGD's vectors (SystemConfig::gpu_float_storage): the iterates are rounded to
-// float at every trial, so the GPU follows the CPU to float rounding, not bitwise. Velocities are the CCP's
+// The experimental float storage of APGD's vectors (SystemConfig::gpu_float_storage): the iterates are rounded
+// to float at every trial, so the GPU follows the CPU to float rounding, not bitwise. Velocities are the CCP's
 // unique part (impulses on redundant contacts are not unique); 200 iterations bring both runs close to it.
-TEST_CASE("GPU float storage (the default): the 10,000-body mixed pile's step matches the CPU to float tolerance",
+// Measured on an H200 (b6ee290): v 5.1e-7 and 2.4e-6, omega 1.3e-6 and 8.6e-6, impulses 3.6e-6 and 4.7e-5 after
+// steps 0 and 1. The residual the GPU reports then stays above 1e-4 against the CPU's 1e-9 (it is computed from
+// the float iterates), which is why this storage is not the default.
+TEST_CASE("GPU float storage (option): the 10,000-body mixed pile's step matches the CPU to float tolerance",
           "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
@@ -574,7 +576,6 @@ TEST_CASE("GPU float storage (the default): the 10,000-body mixed pile's step ma
     CHECK(ev < 1e-4);
     CHECK(ew < 1e-3);
     CHECK(eg < 1e-2);
-    CHECK(gpu->lastStats().residual < 10 * cpu.lastStats().residual + real(1e-6));
     // graphs or kernel by kernel: the same float rounding, bitwise
     CHECK(relDiff(flatten(plain->bodies().vel), flatten(gpu->bodies().vel)) == 0);
   }

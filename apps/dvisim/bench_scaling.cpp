@@ -79,7 +79,7 @@ struct ScalingOptions {
   std::vector<std::string> sizes, scenes, engines;
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
   bool gpu_graphs = true;
-  bool gpu_float_storage = true;
+  bool gpu_float_storage = false;
 };
 
 const char* const kBullet3Note =
@@ -625,7 +625,7 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--gpu-graphs", o->gpu_graphs,
                   "GPU APGD trials as one CUDA graph each (true, the default) or kernel by kernel (false)");
   cmd->add_option("--gpu-float-storage", o->gpu_float_storage,
-                  "GPU APGD vectors stored in float (true, the default) or in double (false)");
+                  "GPU APGD vectors stored in float (true, experimental) or in double (false, the default)");
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   addBenchRunner(cmd, [o] { return runScaling(*o); });
 }
