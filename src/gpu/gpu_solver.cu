@@ -76,6 +76,11 @@ __global__ void __launch_bounds__(kBlock) finalizeKernel(int nblk, const double*
   reducePartials<M>(nblk, partial, out);
 }
 
+// Blocks of every deterministic reduction over n elements (a fixed grid: the partials' order is fixed).
+int reduceBlocksFor(int64_t n) {
+  return int(std::max<int64_t>(1, std::min<int64_t>(kReduceBlocks, (n + kBlock - 1) / kBlock)));
+}
+
 template <class F>
 void launchMap(DeviceState& d, int64_t n, const F& f, const char* what) {
   if (n <= 0) return;
@@ -88,7 +93,7 @@ void launchMap(DeviceState& d, int64_t n, const F& f, const char* what) {
 template <int M, class F>
 const double* launchReduce(DeviceState& d, int64_t n, const F& f, const char* what, bool read = true) {
   SolverScratch& S = d.solver;
-  const int nblk = int(std::max<int64_t>(1, std::min<int64_t>(kReduceBlocks, (n + kBlock - 1) / kBlock)));
+  const int nblk = reduceBlocksFor(n);
   S.partial.resize(size_t(nblk) * M);
   S.scalars.resize(8);
   reduceKernel<M><<<nblk, kBlock, 0, d.stream>>>(n, f, S.partial.data());
@@ -504,10 +509,6 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<
   *schurXSlot<V>(st) = next.done ? nullptr : pickX(B, next.nw);
   *schurYSlot<V>(st) = next.done ? nullptr : pickNX(B, next.nnw);
   st->blocks_done = 0;
-}
-
-int reduceBlocksFor(int64_t n) {
-  return int(std::max<int64_t>(1, std::min<int64_t>(kReduceBlocks, (n + kBlock - 1) / kBlock)));
 }
 
 template <class V>
