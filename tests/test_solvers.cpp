@@ -315,6 +315,43 @@ TEST_CASE("every solver reaches the dense reference on random contact scenes", "
   checkAgainstReference(cp, dense(s), true, true, "random scene, unique");
 }
 
+// VectorStorage::Float (the GPU's default) on the CPU: APGD's Schur buffers hold the gradient N g + r rounded to
+// float, the iterates stay real. Against the dense reference (an independent solver) the solution must reach
+// float precision; Auto is real storage on the CPU (bitwise).
+TEST_CASE("APGD with float storage reaches the dense reference to float precision", "[solver]") {
+  if (sizeof(real) == sizeof(float)) return;  // a float build stores real = float anyway
+  Scene sc = randomScene(21, 6, 8);
+  ContactProblem cp;
+  cp.build(sc.bodies, sc.contacts, sc.vf.data(), sc.wf.data(), sc.ps);
+  const refsolver::DenseCcp P = dense(sc);
+  const std::vector<double> ref = refsolver::solve(P);
+  REQUIRE(refsolver::kktViolation(P, ref) < 1e-9);
+  const double gs = 1 + maxAbs(ref);
+  std::vector<real> result[3];
+  const VectorStorage kinds[3] = {VectorStorage::Real, VectorStorage::Float, VectorStorage::Auto};
+  for (int m = 0; m < 3; ++m) {
+    const bool rounded = kinds[m] == VectorStorage::Float;
+    // error after 50, 100 and 400 iterations: float storage follows real storage until float rounding
+    const int iters[3] = {50, 100, 400};
+    for (int it : iters) {
+      SolverSettings s;
+      s.max_iterations = it;
+      s.storage = kinds[m];
+      std::vector<real> g(size_t(P.n), 0);
+      const SolverStats st = solveApgd(cp, g.data(), s);
+      double err = 0;
+      for (int i = 0; i < P.n; ++i) err = std::max(err, std::fabs(double(g[size_t(i)]) - ref[size_t(i)]) / gs);
+      INFO((rounded ? "float" : "real") << " storage, " << it << " iterations: max |g - g_ref| / (1 + |g_ref|) "
+                                        << err << ", residual " << st.residual);
+      // measured: real 2.7e-4, 1.8e-6, 3.8e-10; float 2.7e-4, 1.9e-6, 2.3e-8
+      CHECK(err < (it == 50 ? 5e-4 : it == 100 ? 4e-6 : rounded ? 1e-7 : 1e-9));
+      if (it == 400) result[m] = g;
+    }
+  }
+  CHECK(result[2] == result[0]);  // Auto is real storage on the CPU
+  CHECK(result[1] != result[0]);  // float storage did round
+}
+
 TEST_CASE("box resting on the ground with four contacts", "[solver]") {
   // Ground (fixed) and a box of half extents (0.5, 0.25, 0.3), mass 2, resting on its four bottom corners
   // with mu 0.5; gravity gives v_free = -g h. The impulses are not unique (four contacts, three

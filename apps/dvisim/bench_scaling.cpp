@@ -79,8 +79,12 @@ struct ScalingOptions {
   std::vector<std::string> sizes, scenes, engines;
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
   bool gpu_graphs = true;
-  bool gpu_float_storage = false;
+  std::string storage = "auto";
 };
+
+std::string storageLabel(const dvi::SolverSettings& s, bool gpu) {
+  return dvi::floatStorage(s, gpu) && sizeof(dvi::real) == 8 ? "float" : sizeof(dvi::real) == 8 ? "double" : "float";
+}
 
 const char* const kBullet3Note =
     "not run: this build has no Bullet 3 OpenCL peer (Debian's libBullet3OpenCL_clew needs clew.h, which Debian "
@@ -504,7 +508,9 @@ int runScaling(const ScalingOptions& o) {
   cfg.solver_settings.tolerance = 0;  // all 50 iterations
   cfg.threads = int(threads);
   cfg.gpu_graphs = o.gpu_graphs;
-  cfg.gpu_float_storage = o.gpu_float_storage;
+  cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
+                                : o.storage == "float" ? dvi::VectorStorage::Float
+                                                       : dvi::VectorStorage::Auto;
 
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
@@ -591,7 +597,8 @@ int runScaling(const ScalingOptions& o) {
        << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
-       << "; APGD vectors stored in " << (o.gpu_float_storage ? "float (arithmetic in double)" : "double")
+       << "; APGD vectors stored in " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
+       << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
@@ -624,8 +631,9 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
   cmd->add_option("--gpu-graphs", o->gpu_graphs,
                   "GPU APGD trials as one CUDA graph each (true, the default) or kernel by kernel (false)");
-  cmd->add_option("--gpu-float-storage", o->gpu_float_storage,
-                  "GPU APGD vectors stored in float (true, experimental) or in double (false, the default)");
+  cmd->add_option("--storage", o->storage,
+                  "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
+      ->check(CLI::IsMember({"auto", "real", "float"}));
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   addBenchRunner(cmd, [o] { return runScaling(*o); });
 }

@@ -64,8 +64,9 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
 #pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
   for (int64_t k = 0; k < nc; ++k) {
     const int32_t a = contacts.body_a[k], b = contacts.body_b[k];
-    const ContactJacobian J =
+    ContactJacobian J =
         makeContactJacobian(contacts.normal[k], contacts.pa[k], contacts.pb[k], bodies.pos[a], bodies.pos[b], a, b);
+    if (settings.float_jacobians) J = roundJacobian(J);
     jac_[k] = J;
     mu_[k] = contacts.mu[k];
     if (normal_only_) {  // block data per block of three contacts, below

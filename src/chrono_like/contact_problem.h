@@ -38,6 +38,8 @@ struct ContactProblemSettings {
   // Every contact is frictionless (mu = 0): assemble the normal rows only, packed three per block
   // (jacobian.h); the solution vector is then in the normal layout (toSolverLayout / fromSolverLayout).
   bool normal_only = false;
+  // VectorStorage::Float with APGD: the Jacobians rounded to float (roundJacobian), as the GPU's are.
+  bool float_jacobians = false;
 };
 
 class ContactProblem final : public CcpProblem {

@@ -64,6 +64,42 @@ DVI_HD ContactJacobian makeContactJacobian(Vec3 normal, Vec3 pa, Vec3 pb, Vec3 x
   return J;
 }
 
+// VectorStorage::Float: APGD's trials on the GPU read the contact Jacobians as 56 bytes of float. Both backends
+// then build the whole step's problem from the Jacobian rounded to float (roundJacobian), so every Schur
+// product, GPU or CPU, float copy or real, applies the same operator; the rounding moves a normal by ~1e-7 rad.
+struct ContactJacobianF {
+  float n[3], u[3], rA[3], rB[3];
+  int32_t a, b;
+};
+
+DVI_HD ContactJacobianF toFloatJacobian(const ContactJacobian& J) {
+  ContactJacobianF f;
+  const Vec3* src[4] = {&J.n, &J.u, &J.rA, &J.rB};
+  float* dst[4] = {f.n, f.u, f.rA, f.rB};
+  for (int i = 0; i < 4; ++i) {
+    dst[i][0] = float(src[i]->x);
+    dst[i][1] = float(src[i]->y);
+    dst[i][2] = float(src[i]->z);
+  }
+  f.a = J.a;
+  f.b = J.b;
+  return f;
+}
+
+DVI_HD ContactJacobian loadJacobian(const ContactJacobian& J) { return J; }
+DVI_HD ContactJacobian loadJacobian(const ContactJacobianF& f) {
+  ContactJacobian J;
+  J.n = Vec3{real(f.n[0]), real(f.n[1]), real(f.n[2])};
+  J.u = Vec3{real(f.u[0]), real(f.u[1]), real(f.u[2])};
+  J.rA = Vec3{real(f.rA[0]), real(f.rA[1]), real(f.rA[2])};
+  J.rB = Vec3{real(f.rB[0]), real(f.rB[1]), real(f.rB[2])};
+  J.a = f.a;
+  J.b = f.b;
+  return J;
+}
+
+DVI_HD ContactJacobian roundJacobian(const ContactJacobian& J) { return loadJacobian(toFloatJacobian(J)); }
+
 // World inverse inertia R diag(d) R^T of a body with principal inverse inertia d and rotation q.
 DVI_HD BodyInverseMass makeBodyInverseMass(real inv_mass, Vec3 d, Quat q) {
   Mat33 R = matFromQuat(q);

@@ -94,25 +94,19 @@ DVI_HD real entryColumnSum(int32_t ent, const EntryLayout& L, const real* colnor
 }
 
 // Adds adjacency entry ent's impulse on its body to (F, T): contacts through their compact Jacobian,
-// rows through their full one; x in the layout L.
-// V: the storage type of x (real, or float where the GPU keeps the solver's vectors in float); the
-// arithmetic is in real either way.
-template <class V = real>
-DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryLayout& L, const ContactJacobian* jac,
-                                   const ConstraintRow* rows, const V* x, Vec3& F, Vec3& T) {
+// rows through their full one; x in the layout L. JT: ContactJacobian, or ContactJacobianF (jacobian.h).
+template <class JT>
+DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryLayout& L, const JT* jac, const ConstraintRow* rows,
+                                   const real* x, Vec3& F, Vec3& T) {
   if (ent < 2 * L.nc) {
     const int32_t k = ent >> 1;
-    if (L.normal_only) {
-      accumulateContactNormalImpulse(jac[k], ent & 1, real(x[k]), F, T);
-    } else {
-      const V* g = x + 3 * int64_t(k);
-      const real g3[3] = {real(g[0]), real(g[1]), real(g[2])};
-      accumulateContactImpulse(jac[k], ent & 1, g3, F, T);
-    }
+    const ContactJacobian J = loadJacobian(jac[k]);
+    if (L.normal_only) accumulateContactNormalImpulse(J, ent & 1, x[k], F, T);
+    else accumulateContactImpulse(J, ent & 1, x + 3 * int64_t(k), F, T);
   } else {
     const int64_t r = (int64_t(ent) - 2 * L.nc) >> 1;
     const ConstraintRow& R = rows[r];
-    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, real(x[3 * L.rb0 + r]), F, T);
+    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * L.rb0 + r], F, T);
   }
 }
 

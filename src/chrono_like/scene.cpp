@@ -122,6 +122,9 @@ SystemConfig systemConfigFromSettings(const SceneSettings& s) {
   else c.solver = SolverType::APGD;
   c.solver_settings.max_iterations = s.iterations;
   c.solver_settings.tolerance = s.tolerance;
+  c.solver_settings.storage = s.storage == "real"    ? VectorStorage::Real
+                              : s.storage == "float" ? VectorStorage::Float
+                                                     : VectorStorage::Auto;
   c.threads = s.threads;
   c.envelope_rel = s.envelope_rel;
   c.recovery_rel = s.recovery_rel;
@@ -138,7 +141,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   Check c{origin};
   SceneSettings s;
   c.object(j, path);
-  c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "tolerance", "gravity", "friction_combine",
+  c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "tolerance", "storage", "gravity", "friction_combine",
                    "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
                    "speculative", "bullet_length_scale", "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
@@ -149,6 +152,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("solver")) s.solver = c.oneOf(j["solver"], at("solver"), {"jacobi", "gs", "apgd", "bb"});
   if (j.contains("iterations")) s.iterations = int(c.integer(j["iterations"], at("iterations"), 0, 1000000));
   if (j.contains("tolerance")) s.tolerance = real(c.nonNegative(j["tolerance"], at("tolerance")));
+  if (j.contains("storage")) s.storage = c.oneOf(j["storage"], at("storage"), {"auto", "real", "float"});
   if (j.contains("gravity")) s.gravity = c.vec3(j["gravity"], at("gravity"));
   if (j.contains("friction_combine"))
     s.friction_combine = c.oneOf(j["friction_combine"], at("friction_combine"), {"product", "min", "average"});

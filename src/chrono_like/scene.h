@@ -35,6 +35,7 @@ struct SceneSettings {
   std::string solver = "apgd";  // jacobi | gs | apgd | bb
   int iterations = 50;
   real tolerance = 0;
+  std::string storage = "auto";  // auto | real | float (APGD's vectors, VectorStorage)
   Vec3 gravity{0, real(-9.81), 0};
   std::string friction_combine = "product";  // product (Bullet's rule) | min | average
   real envelope_rel = real(0.05);

@@ -46,6 +46,18 @@ bool parseSolver(const std::string& s, SolverType& out);
 //              it only for frictionless or sticking contacts; kept for comparison with Chrono.
 enum class BlockScaling { Scalar, Inverse3x3 };
 
+// Storage of APGD's iterates and their Schur products (the 7 vectors of its loop, the bulk of each
+// iteration's memory traffic). Arithmetic and reductions are in real either way. Float storage rounds every
+// stored iterate and Schur product to float: the GPU keeps float vectors (half the traffic); the CPU rounds
+// its real vectors in place, the same values, so CI tests the GPU's float arithmetic. The residual then
+// carries float rounding (its 2-norm over the contacts stays near 1e-7 |N g| sqrt(3 contacts)): ask for
+// Real where a tolerance below that matters. Jacobi, Gauss-Seidel and BB always store real.
+enum class VectorStorage {
+  Auto,   // Float on the GPU backend, Real on the CPU backend
+  Real,
+  Float,
+};
+
 struct SolverSettings {
   int max_iterations = 50;
   real tolerance = real(0);      // stop when the residual falls below it (0: run all iterations)
@@ -57,7 +69,13 @@ struct SolverSettings {
   real residual_alpha = real(1e-4);  // a in the residual, as a fraction of 1 / max diag(N) (see above)
   bool record_history = false;   // keep the residual of every iteration
   BlockScaling block_scaling = BlockScaling::Scalar;  // Jacobi and Gauss-Seidel
+  VectorStorage storage = VectorStorage::Auto;         // APGD (see VectorStorage)
 };
+
+// The storage a backend uses: Auto resolved to the backend's default.
+inline bool floatStorage(const SolverSettings& s, bool gpu_backend) {
+  return s.storage == VectorStorage::Float || (s.storage == VectorStorage::Auto && gpu_backend);
+}
 
 struct SolverStats {
   int iterations = 0;

@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <type_traits>
 
 #include "solver.h"
 #include "solver_kernels.h"
@@ -242,18 +243,22 @@ struct ApgdControl {
 };
 
 // The APGD iterations on the host: one projected step, one Schur product and one test reduction per trial.
+// round: VectorStorage::Float, the Schur buffers hold the gradient N x + r rounded to float, as the GPU's float
+// buffers do (kern::ApgdStepT::grad_form; the start's is rounded by apgd()).
 template <class Ops>
 void apgdIterate(Ops& p, ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
-                 SolverStats& st) {
+                 SolverStats& st, bool round) {
   const BlockSet bs = p.blockSet();
   const real* eta = p.blockSteps();
   const real* r = p.rhs();
   while (!c.done) {
-    p.map(kern::ApgdStep{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], r, eta, c.beta, real(1) / c.L, X[c.nw]});
+    p.map(kern::ApgdStep{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], r, eta, c.beta, real(1) / c.L, X[c.nw],
+                         round});
     p.schur(X[c.nw], NX[c.nnw]);
+    if (round) p.map(kern::RoundToFloat{NX[c.nnw], r});
     double sums[5];
     p.template reduce<5>(kern::ApgdTest{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], X[c.nw], NX[c.nnw], r, eta,
-                                        c.beta, a, inv_a},
+                                        c.beta, a, inv_a, round},
                          sums);
     c.afterTest(sums);
     if (c.failed) checkFinite(c.failed_value, "apgd", c.iterations);
@@ -285,8 +290,13 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
     p.template reduce<1>(kern::Objective{X[0], NX[0], r}, &c.f0);  // f of the start (best-iterate rule)
     c.L = lipschitzLowerBound(p, X[1], NX[1]);
     c.pick();
-    if constexpr (Ops::kDeviceLoop) p.apgdIterate(c, X, NX, a, inv_a, s, st);
-    else apgdIterate(p, c, X, NX, a, inv_a, s, st);
+    if constexpr (Ops::kDeviceLoop) {
+      p.apgdIterate(c, X, NX, a, inv_a, s, st);
+    } else {
+      const bool round = floatStorage(s, false) && !std::is_same_v<real, float>;
+      if (round) p.map(kern::RoundToFloat{NX[0], r});  // f0 and L above are of the exact start, as on the GPU
+      apgdIterate(p, c, X, NX, a, inv_a, s, st, round);
+    }
   }
   st.iterations = c.iterations;
   p.copy(X[c.best], gamma);

@@ -97,30 +97,48 @@ struct FillSqrtEta {  // e = S^1/2 1
 };
 
 // APGD pass (1): g_{k+1} = P(y - t S (N y + r)), y and N y formed from (g_k, g_{k-1}).
-// V: the storage type of the iterates and their Schur products (real; float in the GPU's float-storage
-// APGD loop, gpu_solver.cu); r, eta and all arithmetic are real.
+// V: the storage type of the Schur buffers (real; float for VectorStorage::Float on the GPU); the iterates g,
+// r, eta and all arithmetic are real.
+// grad_form: the Schur buffers hold the gradient N x + r, not N x (VectorStorage::Float: rounding then errs by a
+// float ulp of the gradient, which vanishes at the solution, not of N x, which does not). The extrapolation
+// keeps the form: its weights (1 + beta, -beta) sum to 1.
 template <class V>
 struct ApgdStepT {
   BlockSet s;
-  const V *gc, *go, *Nc, *No;
+  const real *gc, *go;
+  const V *Nc, *No;
   const real *r, *eta;
   real beta, t;
-  V* gn;
+  real* gn;
+  bool grad_form = false;
   DVI_HD void operator()(int64_t k) const {
     real x[3];
     const real te = t * eta[k];
     for (int j = 0; j < 3; ++j) {
       const int64_t i = 3 * k + j;
-      const real c = real(gc[i]), nc = real(Nc[i]);
-      const real y = c + beta * (c - real(go[i]));
+      const real c = gc[i], nc = real(Nc[i]);
+      const real y = c + beta * (c - go[i]);
       const real Ny = nc + beta * (nc - real(No[i]));
-      x[j] = y - te * (Ny + r[i]);
+      x[j] = y - te * (grad_form ? Ny : Ny + r[i]);
     }
     projectBlock(s, k, x);
-    for (int j = 0; j < 3; ++j) gn[3 * k + j] = V(x[j]);
+    for (int j = 0; j < 3; ++j) gn[3 * k + j] = x[j];
   }
 };
 using ApgdStep = ApgdStepT<real>;
+
+// VectorStorage::Float on the CPU: the values the GPU's float Schur buffers hold, in place: x = float(x + add)
+// (add = r turns a Schur product into the stored gradient, see ApgdStepT::grad_form).
+struct RoundToFloat {
+  real* x;
+  const real* add;
+  DVI_HD void operator()(int64_t k) const {
+    for (int j = 0; j < 3; ++j) {
+      const int64_t i = 3 * k + j;
+      x[i] = real(float(add ? x[i] + add[i] : x[i]));
+    }
+  }
+};
 
 // ---- layout conversions of a normal-only problem (jacobian.h): maps over single reals ----
 // The System keeps 3 impulses per contact (then the rows') for the warm start and its callers; a
@@ -244,27 +262,32 @@ struct JacobiInverse {
 };
 
 // APGD pass (2), 5 sums: d^T N d, d^T S^-1 d, residual^2 of g_{k+1}, grad(y)^T (g_{k+1} - g_k), f(g_{k+1}),
-// with d = g_{k+1} - y (see solveApgd).
+// with d = g_{k+1} - y (see solveApgd). grad_form: as in ApgdStepT.
 template <class V>
 struct ApgdTestT {
   BlockSet s;
-  const V *gc, *go, *Nc, *No, *gn, *Nn;
+  const real *gc, *go;
+  const V *Nc, *No;
+  const real* gn;
+  const V* Nn;
   const real *r, *eta;
   real beta, a, inv_a;
+  bool grad_form = false;
   DVI_HD void operator()(int64_t k, double* acc) const {
     real grad_n[3], g_n[3];
     double dd = 0;
     for (int j = 0; j < 3; ++j) {
       const int64_t i = 3 * k + j;
-      const real c = real(gc[i]), nc = real(Nc[i]), g = real(gn[i]), Ng = real(Nn[i]);
-      const real y = c + beta * (c - real(go[i]));
+      const real c = gc[i], nc = real(Nc[i]), g = gn[i], Ng = real(Nn[i]);
+      const real y = c + beta * (c - go[i]);
       const real Ny = nc + beta * (nc - real(No[i]));
       const real d = g - y;
       acc[0] += double(d) * (Ng - Ny);
       dd += double(d) * d;
-      acc[3] += double(Ny + r[i]) * (g - c);
-      acc[4] += 0.5 * double(g) * (Ng + 2 * r[i]);
-      grad_n[j] = Ng + r[i];
+      const real rr = grad_form ? real(0) : r[i];  // the gradients are Ny + rr, Ng + rr
+      acc[3] += double(Ny + rr) * (g - c);
+      acc[4] += 0.5 * double(g) * (Ng + rr + r[i]);
+      grad_n[j] = Ng + rr;
       g_n[j] = g;
     }
     if (eta[k] > 0) acc[1] += dd / eta[k];  // a block between immovable bodies has no metric weight

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <numeric>
 #include <sstream>
+#include <type_traits>
 
 #include "collision.h"
 #include "contact_problem.h"
@@ -327,6 +328,8 @@ void System::buildAndSolve() {
     ps.recovery_rel = config_.recovery_rel;
     ps.threads = omp_get_max_threads();
     ps.normal_only = normal_only;
+    ps.float_jacobians = config_.solver == SolverType::APGD && floatStorage(config_.solver_settings, false) &&
+                         !std::is_same_v<real, float>;
     problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_);
   });
   if (config_.warm_start && int64_t(row_lambda_.size()) == nrows)

@@ -81,13 +81,6 @@ struct SystemConfig {
   // GPU backend: run each APGD trial (step, Schur product, test, control) as one captured CUDA graph,
   // launched once per trial; false launches the kernels one by one (same results, more launch latency).
   bool gpu_graphs = true;
-  // GPU backend, experimental: APGD's iterates and their Schur products (7 vectors, the bulk of each
-  // iteration's traffic) stored in float, all arithmetic and reductions in double. Faster (1M-sphere pile
-  // 22.3 -> 19.8 ms/step on an H200) but not yet accurate enough to be the default: the 100k pile's deepest
-  // penetration rose from 0.0007 to 0.02 radii and the 1 s mixed-pile statistics left the 2% band
-  // (src/gpu/NOTES.md, session 5). false (the default) keeps them in real, and the GPU reproduces the CPU
-  // backend to rounding. Jacobi and BB always use real storage.
-  bool gpu_float_storage = false;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

@@ -150,9 +150,14 @@ struct RowsF {
   ContactJacobian* jac;
   uint32_t* adj_key;
   int32_t* adj_val;
+  ContactJacobianF* jacf;  // VectorStorage::Float: the rounded Jacobian, also as float (else null)
   __device__ void operator()(int64_t k) const {
     const int32_t a = body_a[k], b = body_b[k];
-    const ContactJacobian J = makeContactJacobian(normal[k], pa[k], pb[k], pos[a], pos[b], a, b);
+    ContactJacobian J = makeContactJacobian(normal[k], pa[k], pb[k], pos[a], pos[b], a, b);
+    if (jacf) {
+      J = roundJacobian(J);
+      jacf[k] = toFloatJacobian(J);
+    }
     jac[k] = J;
     const BodyInverseMass A = inv[a], B = inv[b];
     if (normal_only) {
@@ -236,20 +241,20 @@ struct KeyOrderF {  // 1 where the keys are out of order
 // product made the whole solve wait for it (157 ms/step at 10,000 particles, H200).
 constexpr int32_t kHeavyDegree = 512;
 
-template <class V>
+template <class JT>
 struct GatherT {
   const int32_t* off;
   const int32_t* adj;
-  const ContactJacobian* jac;
+  const JT* jac;
   const ConstraintRow* rows;
   EntryLayout L;
   const BodyInverseMass* inv;
-  const V* x;
+  const real* x;
   BodyDelta* delta;
-  const V* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
-  __device__ const V* input() const { return x_slot ? *x_slot : x; }
+  const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
+  __device__ const real* input() const { return x_slot ? *x_slot : x; }
   __device__ void operator()(int64_t i) const {
-    const V* xx = input();
+    const real* xx = input();
     if (!xx) return;
     const int32_t e0 = off[i], e1 = off[i + 1];
     if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
@@ -260,11 +265,11 @@ struct GatherT {
 };
 
 // One block per heavy body: strided partial sums of the entries, then a fixed-order tree in shared memory.
-template <class V>
-__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherT<V> g) {
+template <class JT>
+__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherT<JT> g) {
   const int32_t i = heavy[blockIdx.x];
   const int t = threadIdx.x;
-  const V* x = g.input();
+  const real* x = g.input();
   if (!x) return;
   Vec3 F{0, 0, 0}, T{0, 0, 0};
   for (int32_t e = g.off[i] + t; e < g.off[i + 1]; e += kBlock) accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
@@ -279,8 +284,6 @@ __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy
   if (t == 0) g.delta[i] = bodyDeltaFromImpulse(g.inv[i], Vec3{sh[0][0], sh[1][0], sh[2][0]}, Vec3{sh[3][0], sh[4][0], sh[5][0]});
 }
 
-using GatherF = GatherT<real>;
-
 struct HeavyListF {
   const int32_t* off;
   int32_t* heavy;
@@ -291,33 +294,36 @@ struct HeavyListF {
 };
 
 // The output of a Schur pass (b): y, or *slot where the device chooses the buffer (null there: skip).
-// V: the storage type of y (real, or float in the float-storage APGD loop).
+// V: the storage type of y (real, or float for VectorStorage::Float). add: stores N x + add (the gradient
+// form of the float APGD loop, kern::ApgdStepT::grad_form) when set.
 template <class V>
 struct SchurOut {
   V* y;
   V* const* slot;
+  const real* add = nullptr;
   __device__ V* get() const { return slot ? *slot : y; }
+  __device__ V value(real v, int64_t i) const { return V(add ? v + add[i] : v); }
 };
 
-template <class V>
+template <class V, class JT>
 struct ContactF {
-  const ContactJacobian* jac;
+  const JT* jac;
   const BodyDelta* delta;
   SchurOut<V> out;
   __device__ void operator()(int64_t k) const {
     V* y = out.get();
     if (!y) return;
-    const ContactJacobian J = jac[k];
+    const ContactJacobian J = loadJacobian(jac[k]);
     const BodyDelta A = delta[J.a], B = delta[J.b];
     real v[3];
     contactRelativeVelocity(J, A.v, A.w, B.v, B.w, v);
-    for (int j = 0; j < 3; ++j) y[3 * k + j] = V(v[j]);
+    for (int j = 0; j < 3; ++j) y[3 * k + j] = out.value(v[j], 3 * k + j);
   }
 };
 
-template <class V>
+template <class V, class JT>
 struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padding rows 0)
-  const ContactJacobian* jac;
+  const JT* jac;
   const BodyDelta* delta;
   int64_t nc;
   SchurOut<V> out;
@@ -325,12 +331,12 @@ struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padd
     V* y = out.get();
     if (!y) return;
     if (k >= nc) {
-      y[k] = 0;
+      y[k] = out.value(0, k);
       return;
     }
-    const ContactJacobian J = jac[k];
+    const ContactJacobian J = loadJacobian(jac[k]);
     const BodyDelta A = delta[J.a], B = delta[J.b];
-    y[k] = V(contactNormalVelocity(J, A.v, A.w, B.v, B.w));
+    y[k] = out.value(contactNormalVelocity(J, A.v, A.w, B.v, B.w), k);
   }
 };
 
@@ -342,7 +348,7 @@ struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
   int64_t first;  // y[first + i]: the row blocks follow the contact blocks
   __device__ void operator()(int64_t i) const {
     V* y = out.get();
-    if (y) y[first + i] = V(rowFromDeltas(rows[i], delta));
+    if (y) y[first + i] = out.value(rowFromDeltas(rows[i], delta), first + i);
   }
 };
 
@@ -401,30 +407,41 @@ EntryLayout layoutOf(const DeviceState& d) {
 }
 
 // delta = M^-1 D x per body (Schur pass a, and the impulses' velocity change); x is *x_slot when that is set.
-template <class V = real>
-void gather(DeviceState& d, const V* x, const char* what, const V* const* x_slot = nullptr) {
+// JT: the Jacobians read (jac: S.jac, or S.jacf for the float APGD trials).
+template <class JT = ContactJacobian>
+void gather(DeviceState& d, const real* x, const char* what, const real* const* x_slot = nullptr,
+            const JT* jac = nullptr) {
   SolverScratch& S = d.solver;
-  const GatherT<V> g{S.adj_off.data(), S.adj_val_sorted.data(), S.jac.data(), S.rows.data(), layoutOf(d),
+  if constexpr (std::is_same_v<JT, ContactJacobian>) {
+    if (!jac) jac = S.jac.data();
+  }
+  const GatherT<JT> g{S.adj_off.data(), S.adj_val_sorted.data(), jac, S.rows.data(), layoutOf(d),
                      d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {
-    HeavyGatherKernel<V><<<unsigned(S.n_heavy), kBlock, 0, d.stream>>>(S.heavy.data(), g);
+    HeavyGatherKernel<JT><<<unsigned(S.n_heavy), kBlock, 0, d.stream>>>(S.heavy.data(), g);
     cudaCheck(cudaGetLastError(), "launch of HeavyGatherKernel", __FILE__, __LINE__);
   }
 }
 
-// y = N x. With slots, x = *x_slot and y = *y_slot are read on the device (the APGD device loop).
+// y = N x (+ add, when set). With slots, x = *x_slot and y = *y_slot are read on the device (the APGD device
+// loop). V: the storage type of y; float (VectorStorage::Float) reads the float copy of the Jacobians.
 template <class V = real>
-void schur(DeviceState& d, const V* x, V* y, const V* const* x_slot = nullptr, V* const* y_slot = nullptr) {
+void schur(DeviceState& d, const real* x, V* y, const real* const* x_slot = nullptr, V* const* y_slot = nullptr,
+           const real* add = nullptr) {
+  using JT = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
   SolverScratch& S = d.solver;
+  const JT* jac = nullptr;
+  if constexpr (std::is_same_v<JT, ContactJacobian>) jac = S.jac.data();
+  else jac = S.jacf.data();
   const int64_t nc = int64_t(d.contacts.count);
-  const SchurOut<V> out{y, y_slot};
-  gather<V>(d, x, "launch of GatherF (Schur pass a)", x_slot);
+  const SchurOut<V> out{y, y_slot, add};
+  gather<JT>(d, x, "launch of GatherF (Schur pass a)", x_slot, jac);
   if (d.normal_only)
-    launchMap(d, 3 * d.contact_blocks, NormalContactF<V>{S.jac.data(), d.bodies.delta.data(), nc, out},
+    launchMap(d, 3 * d.contact_blocks, NormalContactF<V, JT>{jac, d.bodies.delta.data(), nc, out},
               "launch of NormalContactF (Schur pass b, normal rows)");
   else
-    launchMap(d, nc, ContactF<V>{S.jac.data(), d.bodies.delta.data(), out}, "launch of ContactF (Schur pass b)");
+    launchMap(d, nc, ContactF<V, JT>{jac, d.bodies.delta.data(), out}, "launch of ContactF (Schur pass b)");
   launchMap(d, int64_t(S.rows.size()), RowSchurF<V>{S.rows.data(), d.bodies.delta.data(), out, 3 * d.contact_blocks},
             "launch of RowSchurF (Schur pass b, rows)");
 }
@@ -439,7 +456,7 @@ template <class V>
 struct ApgdBuffers {
   BlockSet bs;
   const real *r, *eta;
-  V* X[4];
+  real* X[4];
   V* NX[3];
   real a, inv_a;
 };
@@ -447,7 +464,7 @@ struct ApgdBuffers {
 // X[i] and NX[i] by selects: indexing the kernel-parameter arrays with a run-time index would copy them to
 // local memory in every thread (measured: +20% on the 1M-sphere solve, H200).
 template <class V>
-__device__ __forceinline__ V* pickX(const ApgdBuffers<V>& B, int i) {
+__device__ __forceinline__ real* pickX(const ApgdBuffers<V>& B, int i) {
   return i == 0 ? B.X[0] : i == 1 ? B.X[1] : i == 2 ? B.X[2] : B.X[3];
 }
 template <class V>
@@ -455,13 +472,10 @@ __device__ __forceinline__ V* pickNX(const ApgdBuffers<V>& B, int i) {
   return i == 0 ? B.NX[0] : i == 1 ? B.NX[1] : B.NX[2];
 }
 
-// The Schur slots of the storage type V in the device state (by offset: the host passes their device
-// addresses to the Schur passes without dereferencing st).
-template <class V>
-__host__ __device__ V** schurXSlot(ApgdDeviceState* st) {
-  char* base = reinterpret_cast<char*>(st);
-  if constexpr (std::is_same_v<V, float>) return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_xf));
-  else return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_x));
+// The Schur slots in the device state, the output's of the storage type V (by offset: the host passes their
+// device addresses to the Schur passes without dereferencing st).
+__host__ __device__ inline real** schurXSlot(ApgdDeviceState* st) {
+  return reinterpret_cast<real**>(reinterpret_cast<char*>(st) + offsetof(ApgdDeviceState, schur_x));
 }
 template <class V>
 __host__ __device__ V** schurYSlot(ApgdDeviceState* st) {
@@ -476,8 +490,9 @@ __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers<
   if (k >= n) return;
   const algo::ApgdControl& c = st->c;
   if (c.done) return;
+  constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
   const kern::ApgdStepT<V> f{B.bs,  pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold), B.r,
-                             B.eta, c.beta,          real(1) / c.L,   pickX(B, c.nw)};
+                             B.eta, c.beta,          real(1) / c.L,   pickX(B, c.nw),    grad_form};
   f(k);
 }
 
@@ -489,9 +504,10 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<
   const algo::ApgdControl& c = st->c;
   if (c.done) return;  // uniform: st->c changes only after every block has counted itself below
   {
+    constexpr bool grad_form = !std::is_same_v<V, real>;
     const kern::ApgdTestT<V> f{B.bs,           pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
                                pickX(B, c.nw), pickNX(B, c.nnw), B.r,           B.eta,           c.beta,
-                               B.a,            B.inv_a};
+                               B.a,            B.inv_a,         grad_form};
     reduceBlockSlice<5>(n, f, partial);
   }
   __shared__ bool last;
@@ -506,7 +522,7 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<
   algo::ApgdControl next = st->c;
   next.afterTest(sums);
   st->c = next;
-  *schurXSlot<V>(st) = next.done ? nullptr : pickX(B, next.nw);
+  *schurXSlot(st) = next.done ? nullptr : pickX(B, next.nw);
   *schurYSlot<V>(st) = next.done ? nullptr : pickNX(B, next.nnw);
   st->blocks_done = 0;
 }
@@ -516,25 +532,24 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
   SolverScratch& S = d.solver;
   apgdStepKernel<V><<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
   cudaCheck(cudaGetLastError(), "launch of apgdStepKernel", __FILE__, __LINE__);
-  schur<V>(d, nullptr, nullptr, schurXSlot<V>(st), schurYSlot<V>(st));
+  schur<V>(d, nullptr, nullptr, schurXSlot(st), schurYSlot<V>(st), std::is_same_v<V, real> ? nullptr : B.r);
   apgdTestKernel<V><<<reduceBlocksFor(n), kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
   cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
 }
 
-// Storage conversions between the solver's real vectors and the float-storage loop's.
-template <class To, class From>
-struct ConvertF {
-  const From* in;
-  To* out;
-  __device__ void operator()(int64_t i) const { out[i] = To(in[i]); }
+// The float loop's start: out = float(N x + r) from the real N x.
+struct GradientToFloatF {
+  const real *nx, *r;
+  float* out;
+  __device__ void operator()(int64_t i) const { out[i] = float(nx[i] + r[i]); }
 };
 
 // Runs the APGD trials of one solve until the control is done: batches of trials, one read-back each. With
 // graphs, one trial is captured once per solve and the batch is that graph launched again and again.
-// V = float (SystemConfig::gpu_float_storage): the iterates and their Schur products live in 7 float vectors
-// for the trials (start and result stay real: X[0], NX[0] are converted in, X[best] is converted back).
+// V = float (VectorStorage::Float, the GPU's default): the 3 Schur buffers are float and hold the gradient
+// N x + r (NX[0] converted in); the iterates stay real.
 template <class V>
-void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, V* const* X, V* const* NX, real a,
+void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, V* const* NX, real a,
                         real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
                         bool graphs) {
   SolverScratch& S = d.solver;
@@ -543,7 +558,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, V* cons
   const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
   ApgdDeviceState h{};
   h.c = c;
-  *schurXSlot<V>(&h) = X[c.nw];
+  *schurXSlot(&h) = X[c.nw];
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
@@ -590,16 +605,11 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
     if (float_storage) {
       SolverScratch& S = d.solver;
       const int64_t len = 3 * n;
-      S.vf.resize(size_t(7 * len));
-      float* Xf[4];
+      S.vf.resize(size_t(3 * len));
       float* NXf[3];
-      for (int i = 0; i < 4; ++i) Xf[i] = S.vf.data() + i * len;
-      for (int i = 0; i < 3; ++i) NXf[i] = S.vf.data() + (4 + i) * len;
-      launchMap(d, len, ConvertF<float, real>{X[c.cur], Xf[c.cur]}, "launch of ConvertF (APGD start, to float)");
-      launchMap(d, len, ConvertF<float, real>{NX[c.ncur], NXf[c.ncur]}, "launch of ConvertF (APGD start, to float)");
-      apgdTrialsOnDevice<float>(d, n, c, Xf, NXf, a, inv_a, s, bs, r, eta, graphs);
-      if (c.best != 0)  // buffer 0 (the start) is pinned while it is the best: X[0] is still exact
-        launchMap(d, len, ConvertF<real, float>{Xf[c.best], X[c.best]}, "launch of ConvertF (APGD result, to real)");
+      for (int i = 0; i < 3; ++i) NXf[i] = S.vf.data() + i * len;
+      launchMap(d, len, GradientToFloatF{NX[c.ncur], r, NXf[c.ncur]}, "launch of GradientToFloatF (APGD start)");
+      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, graphs);
       if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
       return;
     }
@@ -823,6 +833,10 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
     }
   }
   S.jac.resize(nc);
+  // VectorStorage::Float with APGD: the Jacobians rounded to float, and a float copy for the trials
+  const bool float_jac = cfg.solver == SolverType::APGD && floatStorage(cfg.solver_settings, true) &&
+                         !std::is_same_v<real, float>;
+  if (float_jac) S.jacf.resize(nc);
   S.rhs.resize(3 * nblk);
   S.block_inv.resize(6 * nblk);
   S.block_step.resize(nblk);
@@ -841,7 +855,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   RowsF f{C.body_a.data(), C.body_b.data(), C.normal.data(), C.pa.data(), C.pb.data(), B.pos.data(),
           B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), cfg.dt, cfg.recovery_rel,
           int32_t(nb), normal, S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.colnorm.data(),
-          S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data()};
+          S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data(), float_jac ? S.jacf.data() : nullptr};
   launchMap(d, nc, f, "launch of RowsF");
   if (normal)
     launchMap(d, ncb,
@@ -918,7 +932,7 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, cfg.gpu_graphs, cfg.gpu_float_storage);
+  GpuOps ops(d, pv, cfg.gpu_graphs, floatStorage(cfg.solver_settings, true));
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout

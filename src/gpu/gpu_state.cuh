@@ -89,14 +89,14 @@ struct NarrowScratch {
 struct ApgdDeviceState {
   algo::ApgdControl c;
   const real* schur_x;  // X[c.nw] while running, null when done
-  real* schur_y;        // NX[c.nnw]
-  const float* schur_xf;  // the same, float storage (SystemConfig::gpu_float_storage)
-  float* schur_yf;
+  real* schur_y;        // NX[c.nnw] (real storage)
+  float* schur_yf;      // NX[c.nnw] (float storage, VectorStorage)
   unsigned int blocks_done;  // test-reduction blocks finished this trial (the last one updates c)
 };
 
 struct SolverScratch {
   DeviceBuffer<ContactJacobian> jac{"contact jacobians"};
+  DeviceBuffer<ContactJacobianF> jacf{"contact jacobians (float)"};
   DeviceBuffer<real> rhs{"ccp rhs"}, block_inv{"ccp block inverses"}, block_step{"ccp block steps"};
   DeviceBuffer<ConstraintRow> rows{"constraint rows"};
   DeviceBuffer<real> row_lo{"constraint row lower bounds"}, row_hi{"constraint row upper bounds"};

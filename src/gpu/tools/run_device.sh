@@ -71,10 +71,10 @@ for m in "$@"; do
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
     scaling) bench scaling --budget 5 ;;
     probe)  # unrecorded GPU pile timings: float and double storage of APGD's vectors (PROBE_SIZES, default 10k,100k,1M)
-      for f in true false; do
-        echo "-- gpu_float_storage=$f"
+      for f in float real; do
+        echo "-- storage $f"
         $BIN bench scaling --out "$LOGS/probe_$f" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} \
-          --budget 3 --gpu-float-storage $f 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
+          --budget 3 --storage $f 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
       done ;;
     ncu)  # kernel durations (ncu, serialised, no launch gaps) of the first NCU_COUNT launches of a GPU pile run
       ncu --clock-control none --csv --metrics gpu__time_duration.sum --launch-count ${NCU_COUNT:-2000} \
