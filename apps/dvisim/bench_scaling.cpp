@@ -83,7 +83,8 @@ struct ScalingOptions {
 };
 
 std::string storageLabel(const dvi::SolverSettings& s, bool gpu) {
-  return dvi::floatStorage(s, gpu) && sizeof(dvi::real) == 8 ? "float" : sizeof(dvi::real) == 8 ? "double" : "float";
+  if (sizeof(dvi::real) != 8) return "float";
+  return dvi::floatStorage(s, gpu) ? "float gradients and Jacobians (iterates double)" : "double";
 }
 
 const char* const kBullet3Note =
@@ -597,7 +598,7 @@ int runScaling(const ScalingOptions& o) {
        << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
-       << "; APGD vectors stored in " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
+       << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
