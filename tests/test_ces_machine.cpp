@@ -21,6 +21,7 @@
 #include "ces/machine.h"
 #include "ces/splitters.h"
 #include "chrono_like/errors.h"
+#include "chrono_like/gpu_factory.h"
 
 using namespace dvi;
 using namespace dvi::ces;
@@ -486,4 +487,100 @@ TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors
   }
   expectInputError("run " + quote((d / "bad.json").string()) + out, "ces.drumm: unknown key");
   fs::remove_all(d);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// The CES machine on the GPU: field, charging and classification as device kernels (CesDevice)
+// ---------------------------------------------------------------------------------------------------
+
+namespace {
+std::unique_ptr<System> cesSystem(const CesConfig& cfg, bool gpu) {
+  SystemConfig sc;
+  sc.dt = real(cfg.dt);
+  sc.solver_settings.max_iterations = cfg.iterations;
+  sc.solver_settings.storage = VectorStorage::Real;  // both backends alike, to rounding
+  sc.broadphase.max_bins = int64_t(1) << 20;
+  if (gpu) return makeGpuSystem(sc);
+  return std::make_unique<System>(sc);
+}
+
+double relL2(const std::vector<double>& a, const std::vector<double>& b) {
+  double num = 0, den = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    num += (a[i] - b[i]) * (a[i] - b[i]);
+    den += b[i] * b[i];
+  }
+  return den > 0 ? std::sqrt(num / den) : std::sqrt(num);
+}
+}  // namespace
+
+// 100 steps of the default machine (600 particles fed): the GPU's device kernels (the same cesParticleForce and
+// cesChargeUpdate) give the CPU's positions, velocities and charges to rounding; then the mass-balance run of
+// the test above (collection plane raised): the particles collected and their masses agree, nothing is lost,
+// every collected body is frozen on the device, and the balance closes at every step.
+TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's; the mass balance closes", "[gpu][ces]") {
+  std::string why;
+  if (!gpuAvailable(&why)) {
+    WARN("no CUDA device: skipping (" << why << ")");
+    return;
+  }
+  {
+    const CesConfig cfg = configWith({});
+    auto cpu_sys = cesSystem(cfg, false);
+    auto gpu_sys = cesSystem(cfg, true);
+    CesMachine cpu(cfg, *cpu_sys), gpu(cfg, *gpu_sys);
+    REQUIRE(gpu.deviceParticles());
+    REQUIRE_FALSE(cpu.deviceParticles());
+    for (int s = 0; s < 100; ++s) {
+      cpu.step();
+      gpu.step();
+    }
+    gpu_sys->syncToHost();
+    REQUIRE(gpu_sys->bodies().count() == cpu_sys->bodies().count());
+    const size_t n0 = size_t(cpu.firstParticleBody()), n = cpu_sys->bodies().count();
+    REQUIRE(n > n0 + 100);
+    std::vector<double> xc, xg, vc, vg, qc, qg;
+    for (size_t i = n0; i < n; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        xc.push_back(double((&cpu_sys->bodies().pos[i].x)[k]));
+        xg.push_back(double((&gpu_sys->bodies().pos[i].x)[k]));
+        vc.push_back(double((&cpu_sys->bodies().vel[i].x)[k]));
+        vg.push_back(double((&gpu_sys->bodies().vel[i].x)[k]));
+      }
+      qc.push_back(double(cpu.particles().charge[i]));
+      qg.push_back(double(gpu.particles().charge[i]));
+    }
+    const double ex = relL2(xg, xc), ev = relL2(vg, vc), eq = relL2(qg, qc);
+    double qmax = 0;
+    for (double q : qc) qmax = std::max(qmax, std::fabs(q));
+    WARN("CES, 100 steps, " << n - n0 << " particles: relative differences GPU vs CPU: positions " << ex
+                            << ", velocities " << ev << ", charges " << eq << " (largest charge " << qmax << " C)");
+    CHECK(qmax > 0);  // the particles were charged
+    CHECK(ex < 1e-9);
+    CHECK(ev < 1e-6);
+    CHECK(eq < 1e-6);
+  }
+  {
+    const CesConfig cfg = configWith({"feed.mass_flow_g_s=1.5", "feed.duration_s=0.1", "collection.y_mm=-170"});
+    auto cpu_sys = cesSystem(cfg, false);
+    auto gpu_sys = cesSystem(cfg, true);
+    CesMachine cpu(cfg, *cpu_sys), gpu(cfg, *gpu_sys);
+    int64_t closes = 0, steps = 0;
+    while (gpu.time() < 0.45) {
+      cpu.step();
+      gpu.step();
+      ++steps;
+      closes += gpu.balance().closes() && gpu.particlesInFlight() == gpu.balance().in_flight;
+    }
+    CHECK(closes == steps);
+    const MassBalance a = cpu.balance(), b = gpu.balance();
+    INFO("collected CPU " << a.collected << " (" << a.collected_fg << " fg), GPU " << b.collected << " ("
+                          << b.collected_fg << " fg); fed " << a.fed << " and " << b.fed);
+    CHECK(b.fed == a.fed);
+    CHECK(b.lost == 0);
+    CHECK(b.collected > 0);
+    CHECK(std::abs(b.collected - a.collected) <= std::max<int64_t>(2, a.collected / 20));
+    gpu_sys->syncToHost();
+    for (const CollectedParticle& c : gpu.collected()) CHECK(gpu_sys->bodies().flags[size_t(c.body)] & kBodyFixed);
+  }
 }

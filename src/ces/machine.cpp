@@ -95,6 +95,12 @@ void CesForceField::apply(const BodyArrays& b, double, real, Vec3* force, Vec3*)
   }
 }
 
+bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, double, real, Vec3* force, Vec3*) {
+  if (!m_.dev_) return false;
+  m_.dev_->forces(b, force);
+  return true;
+}
+
 void DrumDrive::rows(const BodyArrays& b, double t, real dt, std::vector<ConstraintRow>& out) {
   dt_ = dt;
   const Vec3 p = b.pos[size_t(body_)];
@@ -251,8 +257,12 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   }
   n_machine_ = int(sys_.bodies().count());
 
-  host_forces_ = sys_.backendName() != "cpu";
   field_ = std::make_shared<CesForceField>(*this);
+#ifdef DVISIM_HAVE_CUDA
+  DeviceBodyRefs refs;
+  if (sys_.deviceBodies(refs)) dev_ = makeCesDevice(model_);
+#endif
+  host_forces_ = sys_.backendName() != "cpu" && !dev_;
   if (!host_forces_) sys_.addForceField(field_);
 }
 
@@ -330,7 +340,56 @@ void CesMachine::applyForcesOnHost() {
   field_->apply(b, sys_.time(), real(cfg_.dt), b.force.data(), b.torque.data());
 }
 
+void CesMachine::setCharge(int body, real q) {
+  p_.charge[size_t(body)] = q;
+  if (dev_ && size_t(body) < dev_uploaded_) dev_->setCharge(body, q);
+}
+
+void CesMachine::syncCharges() const {
+  if (!dev_ || !charges_stale_) return;
+  std::vector<real> q;
+  dev_->downloadCharges(q);
+  std::copy(q.begin(), q.begin() + std::ptrdiff_t(std::min(q.size(), dev_uploaded_)), p_.charge.begin());
+  charges_stale_ = false;
+}
+
+// A machine step with CesDevice: the host reads and edits only the bodies named here.
+void CesMachine::stepDevice() {
+  std::vector<int32_t> ids{drum_, brush_};  // their omega is set below
+  for (const RecentSpawn& r : recent_) ids.push_back(r.body);  // the feeder's overlap test
+  sys_.syncBodiesToHost(ids);
+  syncCharges();  // the host copy is whole before new particles append to it
+  emit();
+  if (!drive_) sys_.mutableBodies().omega[size_t(drum_)] = Vec3{0, 0, real(cfg_.omegaDrum())};
+  sys_.mutableBodies().omega[size_t(brush_)] = Vec3{0, 0, real(cfg_.omegaBrush())};
+  sys_.markBodiesDirty({drum_, brush_});
+  dev_->append(p_, dev_uploaded_);
+  dev_uploaded_ = p_.count();
+  sys_.step();
+  charges_stale_ = true;
+  ++steps_;
+  postStepDevice();
+}
+
+void CesMachine::postStepDevice() {
+  DeviceBodyRefs refs;
+  sys_.deviceBodies(refs);
+  std::vector<std::pair<int32_t, uint8_t>> changed;
+  dev_->postStep(refs, real(cfg_.dt), changed);
+  if (changed.empty()) return;
+  std::vector<int32_t> ids;
+  ids.reserve(changed.size());
+  for (const auto& c : changed) ids.push_back(c.first);
+  sys_.syncBodiesToHost(ids);
+  for (const auto& c : changed) settle(size_t(c.first), c.second);
+  sys_.markBodiesDirty(ids);
+}
+
 void CesMachine::step() {
+  if (dev_) {
+    stepDevice();
+    return;
+  }
   if (host_forces_) sys_.syncToHost();
   emit();
   if (!drive_) sys_.mutableBodies().omega[size_t(drum_)] = Vec3{0, 0, real(cfg_.omegaDrum())};
@@ -361,31 +420,33 @@ void CesMachine::postStep() {
     p_.charge[k] = cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h);
     next[k] = cesClassify(m, b.pos[k]);
   }
-  const double t1 = time();
-  for (int64_t i = n_machine_; i < n; ++i) {
-    const size_t k = size_t(i);
-    if (next[k] == p_.status[k]) continue;
-    p_.status[k] = next[k];
-    if (next[k] == kStatusLost) ++lost_;
-    if (next[k] == kStatusCollected) {
-      // Crossing point of the collection plane on the step's straight path x - h v .. x.
-      const Vec3 x1 = b.pos[k], x0 = x1 - h * b.vel[k];
-      const double f = x0.y > x1.y ? double((x0.y - m.collect_y) / (x0.y - x1.y)) : 1.0;
-      const double fc = std::min(1.0, std::max(0.0, f));
-      CollectedParticle c;
-      c.body = int32_t(i);
-      c.material = p_.material[k];
-      c.kind = cfg_.materials[size_t(c.material)].kind;
-      c.mass_fg = p_.mass_fg[k];
-      c.x = double(x0.x) + fc * double(x1.x - x0.x) - cfg_.collection_x0;
-      c.z = double(x0.z) + fc * double(x1.z - x0.z);
-      c.t = t1 - cfg_.dt + fc * cfg_.dt;
-      collected_.push_back(c);
-      b.pos[k].y = m.collect_y - kBinDrop;  // into the bin, out of everyone's way
-    }
-    b.flags[k] = uint8_t(b.flags[k] | kBodyFixed);  // collected or lost: frozen for good
-    b.vel[k] = b.omega[k] = Vec3{0, 0, 0};
+  for (int64_t i = n_machine_; i < n; ++i)
+    if (next[size_t(i)] != p_.status[size_t(i)]) settle(size_t(i), next[size_t(i)]);
+}
+
+void CesMachine::settle(size_t k, uint8_t next) {
+  BodyArrays& b = sys_.mutableBodies();
+  p_.status[k] = next;
+  if (next == kStatusLost) ++lost_;
+  if (next == kStatusCollected) {
+    // Crossing point of the collection plane on the step's straight path x - h v .. x.
+    const real h = real(cfg_.dt);
+    const Vec3 x1 = b.pos[k], x0 = x1 - h * b.vel[k];
+    const double f = x0.y > x1.y ? double((x0.y - model_.collect_y) / (x0.y - x1.y)) : 1.0;
+    const double fc = std::min(1.0, std::max(0.0, f));
+    CollectedParticle c;
+    c.body = int32_t(k);
+    c.material = p_.material[k];
+    c.kind = cfg_.materials[size_t(c.material)].kind;
+    c.mass_fg = p_.mass_fg[k];
+    c.x = double(x0.x) + fc * double(x1.x - x0.x) - cfg_.collection_x0;
+    c.z = double(x0.z) + fc * double(x1.z - x0.z);
+    c.t = time() - cfg_.dt + fc * cfg_.dt;
+    collected_.push_back(c);
+    b.pos[k].y = model_.collect_y - kBinDrop;  // into the bin, out of everyone's way
   }
+  b.flags[k] = uint8_t(b.flags[k] | kBodyFixed);  // collected or lost: frozen for good
+  b.vel[k] = b.omega[k] = Vec3{0, 0, 0};
 }
 
 MassBalance CesMachine::balance() const {
@@ -430,6 +491,7 @@ void CheckpointSystem::loadCore(std::istream& i) {
 }
 
 void CesMachine::save(std::ostream& o) const {
+  syncCharges();
   o.write(kMagic, 8);
   put(o, steps_);
   const Feeder::State fs = feeder_.state();
@@ -532,6 +594,8 @@ void CesMachine::load(std::istream& in) {
   auto* cs = dynamic_cast<CheckpointSystem*>(&sys_);
   if (has_core && cs) cs->loadCore(in);
   sys_.markHostDirty();
+  dev_uploaded_ = 0;  // CesDevice: every particle's state goes up again before the next step
+  charges_stale_ = false;
 }
 
 }  // namespace ces

@@ -15,10 +15,12 @@
 //   1. Feeder: emit the particles due in this step.
 //   2. Drive: the drum's (and brush's) prescribed angular velocity.
 //   3. System::step(); in its IntegrateForces stage the CesForceField adds Coulomb + image + drag to every
-//      particle in flight (CPU backend). A device backend does not run host force fields: there the
-//      machine syncs the bodies to the host, applies the same field into the host force array and marks
-//      the host dirty, every step (a known limitation until a device kernel calls cesParticleForce).
-//   4. Post-step (CesParticles): charge update (corona, drum contact, electrode contact, brush) and status:
+//      particle in flight. On the GPU backend it does so on the device (CesDevice, ces_device.cu, the same
+//      cesParticleForce), and the machine copies only the bodies it reads or edits (the recent spawns, the
+//      drum and the brush, the particles that change status). A device backend without the CES kernels
+//      gets the old path: all bodies synced to the host, the field applied there, the host marked dirty.
+//   4. Post-step (CesParticles; on the device with CesDevice): charge update (corona, drum contact, electrode
+//      contact, brush) and status:
 //      a particle whose centre crosses the collection plane is collected: its crossing point is recorded
 //      and the body is frozen (kBodyFixed, zero velocity) 5 cm below the plane, in the "bin"; one that leaves
 //      the domain is lost (frozen where it is). Bodies are never removed: the body count only grows, and
@@ -33,6 +35,7 @@
 #include <vector>
 
 #include "ces/ces_config.h"
+#include "ces/ces_device.h"
 #include "ces/feeder.h"
 #include "ces/particle_model.h"
 #include "chrono_like/system.h"
@@ -73,6 +76,8 @@ class CesForceField : public ForceField {
  public:
   explicit CesForceField(const CesMachine& m) : m_(m) {}
   void apply(const BodyArrays& bodies, double t, real dt, Vec3* force, Vec3* torque) override;
+  // On a device backend with the CES kernels (CesDevice): the same forces, computed there.
+  bool applyOnDevice(const DeviceBodyRefs& bodies, double t, real dt, Vec3* force, Vec3* torque) override;
 
  private:
   const CesMachine& m_;
@@ -85,6 +90,10 @@ class DrumDrive : public RowProvider {
   DrumDrive(int body, Vec3 centre, double omega) : body_(body), centre_(centre), omega_(omega) {}
   void rows(const BodyArrays& bodies, double t, real dt, std::vector<ConstraintRow>& out) override;
   void impulses(const real* lambda, size_t count) override;
+  bool bodiesRead(std::vector<int32_t>& ids) const override {  // the drum alone
+    ids.push_back(body_);
+    return true;
+  }
   double torque() const { return torque_; }  // N m about z, last step
   double omega(double /*t*/) const { return omega_; }
 
@@ -111,7 +120,13 @@ class CesMachine {
   System& system() { return sys_; }
   const System& system() const { return sys_; }
   const CesModel& model() const { return model_; }
-  const CesParticles& particles() const { return p_; }
+  // The particles' state; on a device backend the charges are fetched from the device first.
+  const CesParticles& particles() const {
+    syncCharges();
+    return p_;
+  }
+  // True when the field, charging and classification run on the device (CesDevice, GPU backend).
+  bool deviceParticles() const { return dev_ != nullptr; }
   const std::vector<ParticleSpec>& specs() const { return specs_; }  // particle k is body firstParticleBody() + k
   int firstParticleBody() const { return n_machine_; }
   const std::vector<CollectedParticle>& collected() const { return collected_; }
@@ -129,7 +144,7 @@ class CesMachine {
 
   // Adds one particle (tests, or a custom feed). Returns its body index.
   int addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 vel, Vec3 omega, real charge = 0);
-  void setCharge(int body, real q) { p_.charge[size_t(body)] = q; }
+  void setCharge(int body, real q);
 
   // Checkpoint: the machine state, the feeder, every particle's spec and the body arrays; with a
   // CheckpointSystem also the core's warm-start cache and clock, so that a resumed CPU run ends bitwise
@@ -143,6 +158,11 @@ class CesMachine {
   void emit();
   void postStep();
   void applyForcesOnHost();
+  void stepDevice();
+  void postStepDevice();
+  // Status change of particle body i (collected: its crossing point recorded; collected or lost: frozen).
+  void settle(size_t i, uint8_t next);
+  void syncCharges() const;
 
   CesConfig cfg_;
   System& sys_;
@@ -151,7 +171,7 @@ class CesMachine {
   Feeder feeder_;
   std::shared_ptr<CesForceField> field_;
   std::shared_ptr<DrumDrive> drive_;
-  CesParticles p_;
+  mutable CesParticles p_;  // charges refreshed from the device by syncCharges()
   std::vector<ParticleSpec> specs_;
   std::vector<CollectedParticle> collected_;
   struct RecentSpawn {
@@ -163,7 +183,10 @@ class CesMachine {
   real particle_friction_ = 1;
   int64_t steps_ = 0;
   int64_t lost_ = 0;             // particles with kStatusLost (kept for particlesInFlight)
-  bool host_forces_ = false;     // device backend: forces applied on the host (see above)
+  bool host_forces_ = false;     // device backend without CesDevice: forces applied on the host (see above)
+  std::unique_ptr<CesDevice> dev_;  // device backend: the per-particle work as kernels
+  size_t dev_uploaded_ = 0;         // particles uploaded to dev_
+  mutable bool charges_stale_ = false;
 };
 
 // A CPU System whose clock and warm-start cache can be saved and restored (for checkpoints).

@@ -32,6 +32,19 @@ struct ConstraintRow {
   real hi = std::numeric_limits<real>::infinity();
 };
 
+// Raw device pointers to a device backend's body arrays (System::deviceBodies), for plug-ins with device code
+// (the CES machine's field and charging kernels). stream: the backend's cudaStream_t; work enqueued on it is
+// ordered with the step's.
+struct DeviceBodyRefs {
+  Vec3* pos = nullptr;
+  Quat* rot = nullptr;
+  Vec3* vel = nullptr;
+  Vec3* omega = nullptr;
+  uint8_t* flags = nullptr;
+  int64_t count = 0;
+  void* stream = nullptr;
+};
+
 // Produces the rows of this step from the current state (positions, velocities at the start of the
 // step). Called once per step, in BuildRows, before the solve. t is the time at the end of the step.
 class RowProvider {
@@ -41,6 +54,9 @@ class RowProvider {
   // Called after the solve with the impulses of the rows this provider produced (in order), e.g. to
   // report joint reaction forces or a drive torque. Default: ignore.
   virtual void impulses(const real* /*lambda*/, size_t /*count*/) {}
+  // The bodies rows() reads, when it reads only a few: a device backend then copies just those to the host
+  // before calling rows() (instead of every body). false (the default): any body.
+  virtual bool bodiesRead(std::vector<int32_t>& /*ids*/) const { return false; }
 };
 
 // Adds forces and torques (world frame, N and N m, acting at the centre of mass) to every body it
@@ -50,6 +66,13 @@ class ForceField {
  public:
   virtual ~ForceField() = default;
   virtual void apply(const BodyArrays& bodies, double t, real dt, Vec3* force, Vec3* torque) = 0;
+  // A device backend first offers the field its device arrays (force, torque: device pointers, one per body,
+  // to add to). true: applied there, no host round trip; false (the default): the backend copies the bodies
+  // to the host and calls apply().
+  virtual bool applyOnDevice(const DeviceBodyRefs& /*bodies*/, double /*t*/, real /*dt*/, Vec3* /*force*/,
+                             Vec3* /*torque*/) {
+    return false;
+  }
 };
 
 }  // namespace dvi

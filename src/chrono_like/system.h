@@ -191,6 +191,12 @@ class System {
   virtual void syncToHost() {}
   // The host body arrays were edited through mutableBodies(): a device backend re-uploads them.
   virtual void markHostDirty() {}
+  // The same for a few bodies (their pos, rot, vel, omega and flags only): plug-ins that read or edit some
+  // bodies between steps without moving the whole state. No-op on the CPU.
+  virtual void syncBodiesToHost(const std::vector<int32_t>& /*ids*/) {}
+  virtual void markBodiesDirty(const std::vector<int32_t>& /*ids*/) {}
+  // A device backend's body arrays (extensions.h), for plug-ins with device code; false on the CPU.
+  virtual bool deviceBodies(DeviceBodyRefs& /*out*/) { return false; }
 
   // Plug-ins (extensions.h). Force fields run in IntegrateForces in the order added; row providers add
   // their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).

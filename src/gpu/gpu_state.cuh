@@ -12,6 +12,7 @@
 #include "chrono_like/solver_algorithms.h"
 #include "chrono_like/system.h"
 #include "gpu/device_buffer.h"
+#include "gpu/gpu_system.h"
 
 namespace dvi::gpu {
 
@@ -27,6 +28,8 @@ struct DeviceBodies {
   DeviceBuffer<uint8_t> flags{"body flags"};
   DeviceBuffer<BodyInverseMass> inv{"body world inverse mass"};
   DeviceBuffer<BodyDelta> delta{"body velocity change"};
+  DeviceBuffer<int32_t> sel_ids{"selected body ids"};
+  DeviceBuffer<BodyRecord> sel_state{"selected body states"};
   size_t count = 0;
 };
 

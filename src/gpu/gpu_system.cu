@@ -5,6 +5,8 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 
 #include "chrono_like/integrate.h"
 #include "gpu/cuda_check.h"
@@ -63,6 +65,27 @@ __global__ void addForcesKernel(int n, const Vec3* f, const Vec3* t, Vec3* force
   if (i >= n) return;
   force[i] += f[i];
   torque[i] += t[i];
+}
+
+__global__ void gatherBodiesKernel(int n, const int32_t* ids, const Vec3* pos, const Quat* rot, const Vec3* vel,
+                                   const Vec3* omega, const uint8_t* flags, BodyRecord* out) {
+  const int k = blockIdx.x * blockDim.x + threadIdx.x;
+  if (k >= n) return;
+  const int32_t i = ids[k];
+  out[k] = BodyRecord{pos[i], vel[i], omega[i], rot[i], flags[i]};
+}
+
+__global__ void scatterBodiesKernel(int n, const int32_t* ids, const BodyRecord* in, Vec3* pos, Quat* rot, Vec3* vel,
+                                    Vec3* omega, uint8_t* flags) {
+  const int k = blockIdx.x * blockDim.x + threadIdx.x;
+  if (k >= n) return;
+  const int32_t i = ids[k];
+  const BodyRecord r = in[k];
+  pos[i] = r.pos;
+  rot[i] = r.rot;
+  vel[i] = r.vel;
+  omega[i] = r.omega;
+  flags[i] = r.flags;
 }
 
 __global__ void integratePositionsKernel(int n, Vec3* pos, Quat* rot, const Vec3* vel, const Vec3* omega,
@@ -176,24 +199,35 @@ void GpuSystem::integrateForces() {
   stats_.stage_ran[int(StageType::IntegrateForces)] = true;
   if (n == 0) return;
   if (stats_.part_ran[int(StagePart::ForceFields)]) {  // with prune = false even without fields
-    // Force fields are host plug-ins (extensions.h): the body state goes to the host, the fields run
-    // there, and their forces come back and are added on the device. This is the one host round trip
-    // inside the step, and it happens only in scenes with force fields (docs/ARCHITECTURE.md).
+    // A field with device code adds into field_force/field_torque on the device (ForceField::applyOnDevice).
+    // The others are host plug-ins: the body state goes to the host, they run there, and their forces are
+    // added to the device's sums. That round trip happens only for such fields (docs/ARCHITECTURE.md).
     cudaStream_t s = d_->stream;
-    b.pos.download(bodies_.pos, b.count, s);
-    b.rot.download(bodies_.rot, b.count, s);
-    b.vel.download(bodies_.vel, b.count, s);
-    b.omega.download(bodies_.omega, b.count, s);
-    DVI_CUDA(cudaStreamSynchronize(s));
-    field_force_.assign(size_t(n), Vec3{0, 0, 0});
-    field_torque_.assign(size_t(n), Vec3{0, 0, 0});
-    for (const auto& f : fields_) f->apply(bodies_, time_, config_.dt, field_force_.data(), field_torque_.data());
-    b.field_force.upload(field_force_, s);
-    b.field_torque.upload(field_torque_, s);
+    b.field_force.resize(size_t(n));
+    b.field_torque.resize(size_t(n));
+    DVI_CUDA(cudaMemsetAsync(b.field_force.data(), 0, sizeof(Vec3) * size_t(n), s));
+    DVI_CUDA(cudaMemsetAsync(b.field_torque.data(), 0, sizeof(Vec3) * size_t(n), s));
+    DeviceBodyRefs refs;
+    deviceBodies(refs);
+    std::vector<ForceField*> host_fields;
+    for (const auto& f : fields_)
+      if (!f->applyOnDevice(refs, time_, config_.dt, b.field_force.data(), b.field_torque.data()))
+        host_fields.push_back(f.get());
+    if (!host_fields.empty()) {
+      b.pos.download(bodies_.pos, b.count, s);
+      b.rot.download(bodies_.rot, b.count, s);
+      b.vel.download(bodies_.vel, b.count, s);
+      b.omega.download(bodies_.omega, b.count, s);
+      b.field_force.download(field_force_, size_t(n), s);  // the device fields' sums, synchronous
+      b.field_torque.download(field_torque_, size_t(n), s);
+      for (ForceField* f : host_fields) f->apply(bodies_, time_, config_.dt, field_force_.data(), field_torque_.data());
+      b.field_force.upload(field_force_, s);
+      b.field_torque.upload(field_torque_, s);
+    }
     addForcesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.field_force.data(), b.field_torque.data(), b.force.data(),
                                                     b.torque.data());
     DVI_CUDA_LAUNCH("addForcesKernel");
-    DVI_CUDA(cudaStreamSynchronize(s));  // the host vectors may change after we return
+    if (!host_fields.empty()) DVI_CUDA(cudaStreamSynchronize(s));  // the host vectors may change after we return
   }
   integrateForcesKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(
       n, b.vel.data(), b.omega.data(), b.rot.data(), b.inv_mass.data(), b.inv_inertia.data(), b.force.data(),
@@ -221,12 +255,20 @@ void GpuSystem::buildAndSolve() {
   const size_t nc = d_->contacts.count;
   if (stats_.part_ran[int(StagePart::ConstraintRows)]) {  // with prune = false even without providers
     // Row providers are host plug-ins (extensions.h) that read the body state: it comes to the host
-    // here, only in scenes with constraint rows (docs/ARCHITECTURE.md).
-    const DeviceBodies& b = d_->bodies;
-    b.pos.download(bodies_.pos, b.count, d_->stream);
-    b.rot.download(bodies_.rot, b.count, d_->stream);
-    b.vel.download(bodies_.vel, b.count, d_->stream);
-    b.omega.download(bodies_.omega, b.count, d_->stream);
+    // here, only in scenes with constraint rows (docs/ARCHITECTURE.md), and only the bodies they name
+    // when every provider names them (RowProvider::bodiesRead; the CES drum drive reads the drum alone).
+    std::vector<int32_t> ids;
+    bool listed = true;
+    for (const auto& p : row_providers_) listed = listed && p->bodiesRead(ids);
+    if (listed) {
+      syncBodiesToHost(ids);
+    } else {
+      const DeviceBodies& b = d_->bodies;
+      b.pos.download(bodies_.pos, b.count, d_->stream);
+      b.rot.download(bodies_.rot, b.count, d_->stream);
+      b.vel.download(bodies_.vel, b.count, d_->stream);
+      b.omega.download(bodies_.omega, b.count, d_->stream);
+    }
     collectRows();
   } else {
     rows_.clear();
@@ -293,6 +335,72 @@ void GpuSystem::integrate() {
   }
   DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegratePositions) + 1], d_->stream));
   stats_.stage_ran[int(StageType::IntegrateVelocities)] = stats_.stage_ran[int(StageType::IntegratePositions)] = true;
+}
+
+bool GpuSystem::deviceBodies(DeviceBodyRefs& out) {
+  uploadIfNeeded();
+  DeviceBodies& b = d_->bodies;
+  out.pos = b.pos.data();
+  out.rot = b.rot.data();
+  out.vel = b.vel.data();
+  out.omega = b.omega.data();
+  out.flags = b.flags.data();
+  out.count = int64_t(b.count);
+  out.stream = d_->stream;
+  return true;
+}
+
+namespace {
+void checkIds(const std::vector<int32_t>& ids, size_t count, const char* what) {
+  for (int32_t i : ids)
+    if (i < 0 || size_t(i) >= count)
+      throw std::out_of_range(std::string(what) + ": body " + std::to_string(i) + " does not exist (" +
+                              std::to_string(count) + " bodies)");
+}
+}  // namespace
+
+void GpuSystem::syncBodiesToHost(const std::vector<int32_t>& ids) {
+  if (ids.empty()) return;
+  uploadIfNeeded();
+  checkIds(ids, bodies_.count(), "syncBodiesToHost");
+  DeviceBodies& b = d_->bodies;
+  cudaStream_t s = d_->stream;
+  const int n = int(ids.size());
+  b.sel_ids.upload(ids, s);
+  b.sel_state.resize(size_t(n));
+  gatherBodiesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.pos.data(), b.rot.data(), b.vel.data(),
+                                                      b.omega.data(), b.flags.data(), b.sel_state.data());
+  DVI_CUDA_LAUNCH("gatherBodiesKernel");
+  b.sel_state.download(sel_state_, size_t(n), s);  // synchronous
+  for (int k = 0; k < n; ++k) {
+    const size_t i = size_t(ids[size_t(k)]);
+    const BodyRecord& r = sel_state_[size_t(k)];
+    bodies_.pos[i] = r.pos;
+    bodies_.rot[i] = r.rot;
+    bodies_.vel[i] = r.vel;
+    bodies_.omega[i] = r.omega;
+    bodies_.flags[i] = r.flags;
+  }
+}
+
+void GpuSystem::markBodiesDirty(const std::vector<int32_t>& ids) {
+  if (ids.empty() || host_dirty_) return;  // everything goes up before the next step anyway
+  uploadIfNeeded();
+  checkIds(ids, bodies_.count(), "markBodiesDirty");
+  DeviceBodies& b = d_->bodies;
+  cudaStream_t s = d_->stream;
+  const int n = int(ids.size());
+  sel_state_.resize(size_t(n));
+  for (int k = 0; k < n; ++k) {
+    const size_t i = size_t(ids[size_t(k)]);
+    sel_state_[size_t(k)] = BodyRecord{bodies_.pos[i], bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.flags[i]};
+  }
+  b.sel_ids.upload(ids, s);
+  b.sel_state.upload(sel_state_, s);
+  scatterBodiesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.sel_state.data(), b.pos.data(),
+                                                       b.rot.data(), b.vel.data(), b.omega.data(), b.flags.data());
+  DVI_CUDA_LAUNCH("scatterBodiesKernel");
+  DVI_CUDA(cudaStreamSynchronize(s));  // sel_state_ may change after we return
 }
 
 void GpuSystem::syncToHost() {

@@ -32,6 +32,12 @@ namespace dvi {
 
 namespace gpu {
 struct DeviceState;  // device mirrors and scratch (gpu_state.cuh)
+// One body's state as GpuSystem::syncBodiesToHost / markBodiesDirty move it.
+struct BodyRecord {
+  Vec3 pos, vel, omega;
+  Quat rot;
+  uint8_t flags;
+};
 }
 
 class GpuSystem : public System {
@@ -48,6 +54,10 @@ class GpuSystem : public System {
   void syncToHost() override;
   // The host body arrays were edited (mutableBodies()): upload them before the next step.
   void markHostDirty() override { host_dirty_ = true; }
+  // A few bodies' pos, rot, vel, omega and flags (one gather or scatter kernel and one copy each way).
+  void syncBodiesToHost(const std::vector<int32_t>& ids) override;
+  void markBodiesDirty(const std::vector<int32_t>& ids) override;
+  bool deviceBodies(DeviceBodyRefs& out) override;
 
   // Device memory held by this system's buffers, bytes.
   size_t deviceBytes() const;
@@ -69,6 +79,8 @@ class GpuSystem : public System {
   bool host_dirty_ = true;
   bool gyro_bodies_ = false;  // an uploaded dynamic body has non-spherical inertia
   std::vector<Vec3> field_force_, field_torque_;  // host scratch of the force fields
+  std::vector<int32_t> sel_ids_;                  // host scratch of the selected-body copies
+  std::vector<gpu::BodyRecord> sel_state_;
 };
 
 }  // namespace dvi

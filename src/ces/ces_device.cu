@@ -1,0 +1,127 @@
+// CUDA implementation of CesDevice (ces_device.h). Every per-particle formula is the host's DVI_HD function.
+#include "ces/ces_device.h"
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+
+#include "ces/machine.h"
+#include "gpu/cuda_check.h"
+#include "gpu/device_buffer.h"
+
+namespace dvi {
+namespace ces {
+namespace {
+
+constexpr int kThreads = 256;
+
+int blocks(int64_t n) { return int((n + kThreads - 1) / kThreads); }
+
+__global__ void forceKernel(int64_t n, const CesModel* m, const uint8_t* status, const real* charge,
+                            const real* radius, const Vec3* pos, const Vec3* vel, const uint8_t* flags, Vec3* force) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n || status[i] != kStatusInFlight || (flags[i] & kBodyFixed)) return;
+  force[i] += cesParticleForce(*m, pos[i], vel[i], charge[i], radius[i]);
+}
+
+// Charge update and classification (CesMachine::postStep's loop); a changed status is appended to the list.
+__global__ void postStepKernel(int64_t n, const CesModel* m, real h, uint8_t* status, const int32_t* material,
+                               real* charge, const real* radius, const real* bound, const Vec3* pos,
+                               int32_t* changed, uint8_t* changed_status, int32_t* n_changed) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n || status[i] != kStatusInFlight) return;
+  charge[i] = cesChargeUpdate(*m, material[i], pos[i], charge[i], radius[i], bound[i], h);
+  const uint8_t next = cesClassify(*m, pos[i]);
+  if (next != status[i]) {
+    status[i] = next;
+    const int32_t k = atomicAdd(n_changed, 1);
+    changed[k] = int32_t(i);
+    changed_status[k] = next;
+  }
+}
+
+class CudaCesDevice final : public CesDevice {
+ public:
+  explicit CudaCesDevice(const CesModel& host) {
+    CesModel m = host;
+    if (m.field.model == 1) {  // the CSM view points at host arrays: copy them and point at the copies
+      charges_.upload(m.field.csm.charges, size_t(m.field.csm.nCharges));
+      conductors_.upload(m.field.csm.conductors, size_t(m.field.csm.nConductors));
+      DVI_CUDA(cudaDeviceSynchronize());
+      m.field.csm.charges = charges_.data();
+      m.field.csm.conductors = conductors_.data();
+    }
+    model_.upload(&m, 1);
+    DVI_CUDA(cudaDeviceSynchronize());
+    n_changed_.resize(1);
+  }
+
+  void append(const CesParticles& p, size_t first) override {
+    status_.uploadTail(p.status, first);
+    material_.uploadTail(p.material, first);
+    charge_.uploadTail(p.charge, first);
+    radius_.uploadTail(p.radius, first);
+    bound_.uploadTail(p.bound, first);
+    count_ = p.count();
+    DVI_CUDA(cudaDeviceSynchronize());  // the host vectors may grow (reallocate) after we return
+  }
+
+  void forces(const DeviceBodyRefs& b, Vec3* force) override {
+    const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
+    if (n == 0) return;
+    forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), status_.data(), charge_.data(),
+                                                        radius_.data(), b.pos, b.vel, b.flags, force);
+    DVI_CUDA_LAUNCH("CES forceKernel");
+  }
+
+  void postStep(const DeviceBodyRefs& b, real h, std::vector<std::pair<int32_t, uint8_t>>& changed) override {
+    changed.clear();
+    const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
+    if (n == 0) return;
+    cudaStream_t s = stream(b);
+    changed_.resize(size_t(n));
+    changed_status_.resize(size_t(n));
+    DVI_CUDA(cudaMemsetAsync(n_changed_.data(), 0, sizeof(int32_t), s));
+    postStepKernel<<<blocks(n), kThreads, 0, s>>>(n, model_.data(), h, status_.data(), material_.data(),
+                                                   charge_.data(), radius_.data(), bound_.data(), b.pos,
+                                                   changed_.data(), changed_status_.data(), n_changed_.data());
+    DVI_CUDA_LAUNCH("CES postStepKernel");
+    std::vector<int32_t> count;
+    n_changed_.download(count, 1, s);  // synchronous
+    if (count[0] == 0) return;
+    std::vector<int32_t> ids;
+    std::vector<uint8_t> st;
+    changed_.download(ids, size_t(count[0]), s);
+    changed_status_.download(st, size_t(count[0]), s);
+    changed.reserve(ids.size());
+    for (size_t k = 0; k < ids.size(); ++k) changed.emplace_back(ids[k], st[k]);
+    std::sort(changed.begin(), changed.end());  // the atomic order is arbitrary; the host's is by body
+  }
+
+  void downloadCharges(std::vector<real>& charge) override { charge_.download(charge, count_, 0); }
+
+  void setCharge(int32_t body, real q) override {
+    if (body < 0 || size_t(body) >= count_) return;
+    DVI_CUDA(cudaMemcpy(charge_.data() + body, &q, sizeof(real), cudaMemcpyHostToDevice));
+  }
+
+ private:
+  static cudaStream_t stream(const DeviceBodyRefs& b) { return static_cast<cudaStream_t>(b.stream); }
+
+  gpu::DeviceBuffer<CesModel> model_{"CES model"};
+  gpu::DeviceBuffer<CsmLineCharge> charges_{"CES CSM line charges"};
+  gpu::DeviceBuffer<CsmConductor> conductors_{"CES CSM conductors"};
+  gpu::DeviceBuffer<uint8_t> status_{"CES particle status"};
+  gpu::DeviceBuffer<int32_t> material_{"CES particle material"};
+  gpu::DeviceBuffer<real> charge_{"CES particle charge"}, radius_{"CES particle radius"}, bound_{"CES particle bound"};
+  gpu::DeviceBuffer<int32_t> changed_{"CES changed particles"}, n_changed_{"CES changed count"};
+  gpu::DeviceBuffer<uint8_t> changed_status_{"CES changed status"};
+  size_t count_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<CesDevice> makeCesDevice(const CesModel& model) { return std::make_unique<CudaCesDevice>(model); }
+
+}  // namespace ces
+}  // namespace dvi
