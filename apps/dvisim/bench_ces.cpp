@@ -149,9 +149,10 @@ int runCesBench(const CesBenchOptions& o) {
               "(mean particle %.4g mg -> %.4g g/s), wall limit %g s\n",
               o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.dt, cfg.solver.c_str(),
               cfg.iterations, grouped(rate).c_str(), mean_mass * 1e6, mass_flow * 1e3, wall_limit);
-  if (backend != "cpu")
-    std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step; docs/CES.md)\n",
-                backend.c_str());
+  const std::string where = m.deviceParticles()
+                                ? "CES field, charges and classification on the device (CesDevice)"
+                                : "CES forces applied on the host";
+  std::printf("note: %s (docs/CES.md)\n", where.c_str());
   std::fflush(stdout);
 
   dvi::ces::CesRunTotals tot;
@@ -323,7 +324,7 @@ int runCesBench(const CesBenchOptions& o) {
      << "Written by `dvisim bench ces" << (o.record ? " --record" : "")
      << "` (apps/dvisim/bench_ces.cpp); do not edit by hand.\n\n"
      << "- command: `" << command << "`\n- device: " << device << "\n- backend: " << j["backend"].get<std::string>()
-     << (backend != "cpu" ? " (CES forces applied on the host, bodies synced every step)" : "") << "\n- commit: " << commit
+     << " (" << where << ")\n- commit: " << commit
      << "\n- date: " << date << "\n- machine: " << origin << (o.sets.empty() ? "" : " with --set") << "; dt "
      << fmt(cfg.dt, "%g") << " s, " << cfg.solver << " " << cfg.iterations << " iterations, drum "
      << j["machine"]["drum_drive"].get<std::string>() << ", particles " << fmt(cfg.diameter_min * 1e3, "%g") << "-"

@@ -232,130 +232,169 @@ DVI_HD void mprContactPoints(const MprShape& A, const MprShape& B, Vec3 n, const
   pb = mprSurfacePoint(B, -n, pa, hull_points);
 }
 
-// Contact of two convex shapes through MPR (see the header comment). Writes at most one point.
+// The deep stage of collideMpr runs its restarts in rounds: every restart of a round starts from the same
+// depth estimate (the interior point v0 = -tau depth d) and the results are taken in index order (the first
+// strictly shallower one wins), so a round's restarts are independent. The CPU runs them one after the other;
+// the GPU narrow phase runs deep pairs apart, one lane per restart (gpu_collision.cu), with the same result.
+constexpr int kMprRoundTries = 4;
+struct MprRound {
+  int n = 0;
+  Vec3 dir[kMprRoundTries];
+};
+
+// One restart of a round (mprTryDirection with a fixed depth estimate); depth +inf when the pass fails.
+DVI_HD MprResult mprRestart(const MprShape& A, const MprShape& B, const Vec3* hull_points, Vec3 d, real depth0) {
+  MprResult r;
+  if (!mprPass(A, B, d * (real(-DVI_MPR_TAU) * depth0), hull_points, r)) {
+    r.n = d;
+    r.depth = real(INFINITY);
+    return r;
+  }
+  mprRefine(A, B, hull_points, r);
+  return r;
+}
+
+// Takes r when it is shallower (the combine of a round, in index order).
+DVI_HD void mprKeepShallower(MprResult& best, const MprResult& r) {
+  if (r.depth < best.depth) best = r;
+}
+
+// Runs a round sequentially.
+DVI_HD void mprRunRound(const MprShape& A, const MprShape& B, const Vec3* hull_points, const MprRound& round,
+                        MprResult& best) {
+  const real depth0 = best.depth;
+  MprResult s = best;
+  for (int i = 0; i < round.n; ++i) mprKeepShallower(s, mprRestart(A, B, hull_points, round.dir[i], depth0));
+  best = s;
+}
+
+// The second round: deep hull penetrations (faces of M unknown, many local fixed points) restart from the
+// current normal tilted by ~35 degrees toward four tangent directions. False when none is needed.
+DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, const MprResult& best, MprRound& round) {
+  round.n = 0;
+  if (!((a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) &&
+        best.depth - A.env > real(0.1) * std::fmin(a.size, b.size)))
+    return false;
+  Vec3 u, w;
+  tangentBasis(best.n, u, w);
+  for (int k = 0; k < 4; ++k) {
+    const Vec3 t = (k & 1) ? w : u;
+    round.dir[round.n++] = normalized(best.n + t * real((k & 2) ? -0.7 : 0.7));
+  }
+  return true;
+}
+
+// The first stage of collideMpr: the first pass and its refinement and, for a deep pair, the global candidates.
+// Returns 0 (no contact), 1 (best is final) or 2 (deep: run `round`, then mprTiltRound's, then mprFinish).
 //
 // MPR's fixed points are faces of M whose plane holds the origin's projection, not necessarily the nearest
 // one, least of all for deep penetrations. Global candidates guard against the wrong face (see the block
 // below): known face normals, side normals, axis cross products, the centre line and, for hulls, the frame
 // axes are evaluated exactly by h(n) and MPR is restarted from the best; deep hull pairs also restart from
 // the normal tilted four ways.
-DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                      real envelope, ContactPoint* out) {
-  MprShape A = makeMprShape(a, wa, hull_points, envelope);
-  MprShape B = makeMprShape(b, wb, hull_points, real(0));
+DVI_HD int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
+                    MprResult& best, MprRound& round) {
+  round.n = 0;
   Vec3 v0 = A.center - B.center;
   if (length2(v0) < real(1e-30)) v0 = Vec3{real(1e-10) * (real(1) + boundingRadius(a, hull_points)), 0, 0};
-  MprResult best;
   if (!mprPass(A, B, v0, hull_points, best)) return 0;
   mprRefine(A, B, hull_points, best);
   // Shallow contacts (penetration of the true shapes below DVI_MPR_DEEP x the smaller size) keep MPR's fixed
   // point: it is the nearest face of M there, and the candidate restarts below cost ~10x the first pass.
   const bool deep = best.depth - A.env > real(DVI_MPR_DEEP) * std::fmin(a.size, b.size);
-  // Global candidates for the normal (MPR's fixed point holds the origin's projection, not necessarily the
-  // nearest face of M, most of all for deep penetrations): face normals (box faces, cylinder caps, cone base),
-  // side normals of cylinders and cones toward the other shape, cross products of the edge and axis
-  // directions, the centre line, and for hulls (faces not stored) the frame axes. Each is evaluated exactly
-  // by h(n); a face normal that beats MPR is kept (with MPR restarted along it), and MPR is restarted from the
-  // two best candidates of all.
-  if (deep) {
-    Vec3 cand[40];
-    int nc = 0, nface = 0;
-    Vec3 ax[2][3];
-    int nax[2] = {0, 0};
-    const MprShape* sh[2] = {&A, &B};
-    for (int k = 0; k < 2; ++k) {
-      ShapeType t = sh[k]->s->type;
-      if (t == ShapeType::Box) {
-        for (int j = 0; j < 3; ++j) ax[k][nax[k]++] = cand[nc++] = column(sh[k]->R, j);
-      } else if (t == ShapeType::Cylinder || t == ShapeType::Cone) {
-        ax[k][nax[k]++] = cand[nc++] = column(sh[k]->R, 1);
-      } else if (t == ShapeType::Capsule) {
-        ax[k][nax[k]++] = column(sh[k]->R, 1);
+  if (!deep) return 1;
+  Vec3 cand[40];
+  int nc = 0, nface = 0;
+  Vec3 ax[2][3];
+  int nax[2] = {0, 0};
+  const MprShape* sh[2] = {&A, &B};
+  for (int k = 0; k < 2; ++k) {
+    ShapeType t = sh[k]->s->type;
+    if (t == ShapeType::Box) {
+      for (int j = 0; j < 3; ++j) ax[k][nax[k]++] = cand[nc++] = column(sh[k]->R, j);
+    } else if (t == ShapeType::Cylinder || t == ShapeType::Cone) {
+      ax[k][nax[k]++] = cand[nc++] = column(sh[k]->R, 1);
+    } else if (t == ShapeType::Capsule) {
+      ax[k][nax[k]++] = column(sh[k]->R, 1);
+    }
+  }
+  nface = nc;
+  for (int k = 0; k < 2; ++k) {  // side normals toward the other shape's centre
+    ShapeType t = sh[k]->s->type;
+    if (t != ShapeType::Cylinder && t != ShapeType::Cone && t != ShapeType::Capsule) continue;
+    Vec3 y = column(sh[k]->R, 1);
+    Vec3 w = sh[1 - k]->center - sh[k]->center;
+    w -= y * dot(w, y);
+    real lw = length(w);
+    if (!(lw > real(0))) continue;
+    w = w / lw;
+    cand[nc++] = w;
+    if (t == ShapeType::Cone) {  // generator normal: (2 hh, R) in (radial, axis) coordinates
+      real R = sh[k]->s->dims.x, H = sh[k]->s->dims.y;
+      cand[nc++] = normalized(w * H + y * R);
+    }
+  }
+  for (int i = 0; i < nax[0]; ++i)
+    for (int j = 0; j < nax[1]; ++j) {
+      Vec3 c = cross(ax[0][i], ax[1][j]);
+      real lc = length(c);
+      if (lc > real(1e-6)) cand[nc++] = c / lc;
+    }
+  {
+    Vec3 cc = B.center - A.center;
+    real lc = length(cc);
+    if (lc > real(0)) cand[nc++] = cc / lc;
+  }
+  if (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull)
+    for (int k = 0; k < 2; ++k)
+      for (int j = 0; j < 3; ++j) cand[nc++] = column(sh[k]->R, j);
+  constexpr int kTop = 4;
+  real bh = best.depth, th[kTop];
+  Vec3 bn{0, 0, 0}, td[kTop];
+  for (int i = 0; i < kTop; ++i) {
+    th[i] = real(1e30);
+    td[i] = Vec3{0, 0, 0};
+  }
+  for (int i = 0; i < nc; ++i) {
+    for (int sgn = -1; sgn <= 1; sgn += 2) {
+      Vec3 n = cand[i] * real(sgn);
+      MprVert V;
+      mprSupportM(A, B, n, hull_points, V);
+      real h = dot(V.v, n);
+      if (i < nface && h < bh) {
+        bh = h;
+        bn = n;
       }
-    }
-    nface = nc;
-    for (int k = 0; k < 2; ++k) {  // side normals toward the other shape's centre
-      ShapeType t = sh[k]->s->type;
-      if (t != ShapeType::Cylinder && t != ShapeType::Cone && t != ShapeType::Capsule) continue;
-      Vec3 y = column(sh[k]->R, 1);
-      Vec3 w = sh[1 - k]->center - sh[k]->center;
-      w -= y * dot(w, y);
-      real lw = length(w);
-      if (!(lw > real(0))) continue;
-      w = w / lw;
-      cand[nc++] = w;
-      if (t == ShapeType::Cone) {  // generator normal: (2 hh, R) in (radial, axis) coordinates
-        real R = sh[k]->s->dims.x, H = sh[k]->s->dims.y;
-        cand[nc++] = normalized(w * H + y * R);
-      }
-    }
-    for (int i = 0; i < nax[0]; ++i)
-      for (int j = 0; j < nax[1]; ++j) {
-        Vec3 c = cross(ax[0][i], ax[1][j]);
-        real lc = length(c);
-        if (lc > real(1e-6)) cand[nc++] = c / lc;
-      }
-    {
-      Vec3 cc = B.center - A.center;
-      real lc = length(cc);
-      if (lc > real(0)) cand[nc++] = cc / lc;
-    }
-    if (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull)
-      for (int k = 0; k < 2; ++k)
-        for (int j = 0; j < 3; ++j) cand[nc++] = column(sh[k]->R, j);
-    constexpr int kTop = 4;
-    real bh = best.depth, th[kTop];
-    Vec3 bn{0, 0, 0}, td[kTop];
-    for (int i = 0; i < kTop; ++i) {
-      th[i] = real(1e30);
-      td[i] = Vec3{0, 0, 0};
-    }
-    for (int i = 0; i < nc; ++i) {
-      for (int sgn = -1; sgn <= 1; sgn += 2) {
-        Vec3 n = cand[i] * real(sgn);
-        MprVert V;
-        mprSupportM(A, B, n, hull_points, V);
-        real h = dot(V.v, n);
-        if (i < nface && h < bh) {
-          bh = h;
-          bn = n;
+      if (h < th[kTop - 1]) {  // insert into the sorted list of the kTop smallest
+        int j = kTop - 1;
+        for (; j > 0 && h < th[j - 1]; --j) {
+          th[j] = th[j - 1];
+          td[j] = td[j - 1];
         }
-        if (h < th[kTop - 1]) {  // insert into the sorted list of the kTop smallest
-          int j = kTop - 1;
-          for (; j > 0 && h < th[j - 1]; --j) {
-            th[j] = th[j - 1];
-            td[j] = td[j - 1];
-          }
-          th[j] = h;
-          td[j] = n;
-        }
-      }
-    }
-    if (bh < best.depth * (real(1) - real(1e-9)) && bh > real(0)) {
-      MprResult r = best;
-      mprTryDirection(A, B, hull_points, bn, r);
-      if (r.depth <= bh * (real(1) + real(1e-9))) {
-        best = r;
-      } else {  // keep the face normal
-        best.n = bn;
-        best.depth = bh;
-      }
-    }
-    const int ntry = (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) ? kTop : 2;
-    for (int i = 0; i < ntry; ++i)
-      if (th[i] > real(0) && th[i] < real(1e30)) mprTryDirection(A, B, hull_points, td[i], best);
-    // Deep hull penetrations (faces of M unknown, many local fixed points): restarts from the current normal
-    // tilted by ~35 degrees toward four tangent directions.
-    if ((a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) &&
-        best.depth - A.env > real(0.1) * std::fmin(a.size, b.size)) {
-      Vec3 n0 = best.n, u, w;
-      tangentBasis(n0, u, w);
-      for (int k = 0; k < 4; ++k) {
-        Vec3 t = (k & 1) ? w : u;
-        mprTryDirection(A, B, hull_points, normalized(n0 + t * real((k & 2) ? -0.7 : 0.7)), best);
+        th[j] = h;
+        td[j] = n;
       }
     }
   }
+  if (bh < best.depth * (real(1) - real(1e-9)) && bh > real(0)) {
+    MprResult r = best;
+    mprTryDirection(A, B, hull_points, bn, r);
+    if (r.depth <= bh * (real(1) + real(1e-9))) {
+      best = r;
+    } else {  // keep the face normal
+      best.n = bn;
+      best.depth = bh;
+    }
+  }
+  const int ntry = (a.type == ShapeType::ConvexHull || b.type == ShapeType::ConvexHull) ? kTop : 2;
+  for (int i = 0; i < ntry; ++i)
+    if (th[i] > real(0) && th[i] < real(1e30)) round.dir[round.n++] = td[i];
+  return 2;
+}
+
+// The last stage: contact points along the final normal, at most one contact.
+DVI_HD int mprFinish(const MprShape& A, const MprShape& B, const Vec3* hull_points, const MprResult& best,
+                     real envelope, ContactPoint* out) {
   if (!(best.depth > real(0))) return 0;
   Vec3 pa, pb;
   mprContactPoints(A, B, best.n, hull_points, pa, pb);
@@ -363,6 +402,37 @@ DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose
   if (!(dist < envelope)) return 0;
   setContact(out[0], best.n, pa, pb, dist, 0);
   return 1;
+}
+
+// A deep pair left for later (collideMpr with `defer`): the state after mprBegin. `swapped`: the pair's shapes
+// were collided in the opposite order (collideShapes' canonical order), so the contacts get flipped.
+struct MprDeferred {
+  MprResult best;
+  MprRound round;
+  int32_t swapped;
+};
+constexpr int kMprDeferred = -1;  // collideShapes' answer for a pair left in *defer
+
+// Contact of two convex shapes through MPR (see the header comment). Writes at most one point. With `defer`,
+// a deep pair is not finished: its state goes to *defer and the answer is kMprDeferred.
+DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                      real envelope, ContactPoint* out, MprDeferred* defer = nullptr) {
+  MprShape A = makeMprShape(a, wa, hull_points, envelope);
+  MprShape B = makeMprShape(b, wb, hull_points, real(0));
+  MprResult best;
+  MprRound round;
+  const int stage = mprBegin(A, B, a, b, hull_points, best, round);
+  if (stage == 0) return 0;
+  if (stage == 2) {
+    if (defer) {
+      defer->best = best;
+      defer->round = round;
+      return kMprDeferred;
+    }
+    mprRunRound(A, B, hull_points, round, best);
+    if (mprTiltRound(A, a, b, best, round)) mprRunRound(A, B, hull_points, round, best);
+  }
+  return mprFinish(A, B, hull_points, best, envelope, out);
 }
 
 }  // namespace np

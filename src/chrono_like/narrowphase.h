@@ -47,10 +47,17 @@ DVI_HD real pairEnvelope(const Shape& a, const Shape& b, real envelope_rel, real
   return sweep > real(0.5) * (a.size + b.size) ? fmax(envelope, sweep) : envelope;
 }
 
+namespace np {
+struct MprDeferred;
+}
+
 // Collides shape a at world pose wa with shape b at wb. Writes up to kMaxContactsPerPair points with
-// signed distance < envelope into out[], normals pointing from a to b, and returns how many.
+// signed distance < envelope into out[], normals pointing from a to b, and returns how many. With `defer`, a
+// deep MPR pair is left unfinished: its state goes to *defer, the answer is np::kMprDeferred (-1), and
+// finishDeferredMpr completes it (the GPU narrow phase runs those apart, a lane per restart: mpr.h).
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
-                         const Vec3* hull_points, real envelope, ContactPoint* out);
+                         const Vec3* hull_points, real envelope, ContactPoint* out,
+                         np::MprDeferred* defer = nullptr);
 
 }  // namespace dvi
 

@@ -433,7 +433,7 @@ DVI_HD int collideConvexBigCylinder(const Shape& a, const Pose& wa, const Shape&
 
 // Canonical order: a.type <= b.type.
 DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                          real envelope, ContactPoint* out) {
+                          real envelope, ContactPoint* out, MprDeferred* defer = nullptr) {
   if (b.type == ShapeType::Triangle) {  // static geometry: never against a plane or another triangle
     if (a.type == ShapeType::Plane || a.type == ShapeType::Triangle) return 0;
     return collideConvexTriangle(a, wa, b, wb, hull_points, envelope, out);
@@ -467,7 +467,7 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
       break;
     default: break;
   }
-  return collideMpr(a, wa, b, wb, hull_points, envelope, out);
+  return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer);
 }
 
 }  // namespace np
@@ -492,12 +492,33 @@ DVI_HD bool pairUsesMpr(ShapeType a, ShapeType b) {
 }
 
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                         real envelope, ContactPoint* out) {
+                         real envelope, ContactPoint* out, np::MprDeferred* defer) {
   if (a.type == ShapeType::Sphere && b.type == ShapeType::Sphere)  // the hot path
     return np::collideSphereSphere(a, wa, b, wb, envelope, out);
-  if (int(a.type) <= int(b.type)) return np::collideOrdered(a, wa, b, wb, hull_points, envelope, out);
-  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out);
+  if (int(a.type) <= int(b.type)) {
+    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer);
+    if (m == np::kMprDeferred) defer->swapped = 0;
+    return m;
+  }
+  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer);
+  if (m == np::kMprDeferred) {
+    defer->swapped = 1;
+    return m;
+  }
   np::flipContacts(out, m);
+  return m;
+}
+
+// Finishes a pair that collideShapes left in `defer` (the GPU runs the same steps a lane per restart).
+DVI_HD int finishDeferredMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                             real envelope, np::MprDeferred d, ContactPoint* out) {
+  const bool sw = d.swapped != 0;
+  const np::MprShape A = np::makeMprShape(sw ? b : a, sw ? wb : wa, hull_points, envelope);
+  const np::MprShape B = np::makeMprShape(sw ? a : b, sw ? wa : wb, hull_points, real(0));
+  np::mprRunRound(A, B, hull_points, d.round, d.best);
+  if (np::mprTiltRound(A, sw ? b : a, sw ? a : b, d.best, d.round)) np::mprRunRound(A, B, hull_points, d.round, d.best);
+  const int m = np::mprFinish(A, B, hull_points, d.best, envelope, out);
+  if (sw) np::flipContacts(out, m);
   return m;
 }
 

@@ -5,6 +5,7 @@
 // by (shape_a, shape_b, feature), exactly as on the CPU.
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <stdexcept>
@@ -240,19 +241,40 @@ struct NarrowArgs {
   real envelope_rel;
 };
 
-__device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& b, ContactPoint* pts) {
+struct PairPoses {
+  int32_t a, b;
+  Shape sa, sb;
+  Pose wa, wb;
+  real envelope;
+};
+
+__device__ PairPoses pairPoses(const NarrowArgs& A, int64_t i) {
+  PairPoses P;
   const uint64_t key = A.pairs[i];
-  a = int32_t(key >> 32);
-  b = int32_t(key & 0xFFFFFFFFu);
-  const Shape sa = A.shapes[a];
-  const Shape sb = A.shapes[b];
-  const Pose wa = shapeWorldPose(Pose{A.pos[sa.body], A.rot[sa.body]}, sa);
-  const Pose wb = shapeWorldPose(Pose{A.pos[sb.body], A.rot[sb.body]}, sb);
-  const real envelope = pairEnvelope(sa, sb, A.envelope_rel, A.sweep[a], A.sweep[b]);
-  return collideShapes(sa, wa, sb, wb, A.hull, envelope, pts);
+  P.a = int32_t(key >> 32);
+  P.b = int32_t(key & 0xFFFFFFFFu);
+  P.sa = A.shapes[P.a];
+  P.sb = A.shapes[P.b];
+  P.wa = shapeWorldPose(Pose{A.pos[P.sa.body], A.rot[P.sa.body]}, P.sa);
+  P.wb = shapeWorldPose(Pose{A.pos[P.sb.body], A.rot[P.sb.body]}, P.sb);
+  P.envelope = pairEnvelope(P.sa, P.sb, A.envelope_rel, A.sweep[P.a], A.sweep[P.b]);
+  return P;
 }
 
-__global__ void narrowCountKernel(NarrowArgs A, int64_t np, int64_t* count, ContactPoint* first) {
+__device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& b, ContactPoint* pts,
+                           np::MprDeferred* defer = nullptr) {
+  const PairPoses P = pairPoses(A, i);
+  a = P.a;
+  b = P.b;
+  return collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer);
+}
+
+// Count pass: contacts per pair, keeping the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left
+// to narrowDeepKernel: its state goes to deferred[i] and its index to the deep list. The restarts of such a
+// pair cost up to ~25 MPR passes in one thread; one such thread set the length of the whole pass (3.7 ms of the
+// CES industrial feed's step on an H200, with 1.7 of 32 lanes active on average).
+__global__ void narrowCountKernel(NarrowArgs A, int64_t np, int64_t* count, ContactPoint* first,
+                                  np::MprDeferred* deferred, int32_t* deep, int32_t* deep_count) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i > np) return;
   if (i == np) {
@@ -261,9 +283,69 @@ __global__ void narrowCountKernel(NarrowArgs A, int64_t np, int64_t* count, Cont
   }
   ContactPoint pts[kMaxContactsPerPair];
   int32_t a, b;
-  const int n = collidePair(A, i, a, b, pts);
+  np::MprDeferred d;
+  const int n = collidePair(A, i, a, b, pts, &d);
+  if (n == np::kMprDeferred) {
+    deferred[i] = d;
+    deep[atomicAdd(deep_count, 1)] = int32_t(i);  // list order is free: results go to index i
+    count[i] = 0;
+    return;
+  }
   count[i] = n;
   if (n >= 1) first[i] = pts[0];
+}
+
+// Deep MPR pairs, kDeepLanes lanes each (grid-stride over the deep list): lane l runs restart l of a round, every
+// lane takes the round's results in index order (mprKeepShallower, as mprRunRound on the CPU), and lane 0 places
+// the contact. The same arithmetic as finishDeferredMpr, so the GPU's contacts equal the CPU's.
+constexpr int kDeepLanes = np::kMprRoundTries;
+static_assert(32 % kDeepLanes == 0, "lane groups must tile a warp");
+
+__device__ np::MprResult deepRound(const np::MprShape& SA, const np::MprShape& SB, const Vec3* hull,
+                                   const np::MprRound& round, np::MprResult best, int lane, unsigned mask,
+                                   int base) {
+  np::MprResult mine;
+  mine.n = Vec3{0, 0, 0};
+  mine.depth = real(INFINITY);
+  if (lane < round.n) mine = np::mprRestart(SA, SB, hull, round.dir[lane], best.depth);
+  np::MprResult s = best;
+  for (int k = 0; k < kDeepLanes; ++k) {
+    np::MprResult r;
+    r.n.x = __shfl_sync(mask, mine.n.x, base + k);
+    r.n.y = __shfl_sync(mask, mine.n.y, base + k);
+    r.n.z = __shfl_sync(mask, mine.n.z, base + k);
+    r.depth = __shfl_sync(mask, mine.depth, base + k);
+    if (k < round.n) np::mprKeepShallower(s, r);
+  }
+  return s;
+}
+
+__global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::MprDeferred* deferred,
+                                                       const int32_t* deep, const int32_t* deep_count,
+                                                       int64_t* count, ContactPoint* first) {
+  const int lane = int(threadIdx.x % kDeepLanes), base = int(threadIdx.x % 32) - lane;
+  const unsigned mask = ((1u << kDeepLanes) - 1u) << base;
+  const int64_t groups = int64_t(gridDim.x) * blockDim.x / kDeepLanes;
+  const int32_t nd = *deep_count;
+  for (int64_t g = (int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / kDeepLanes; g < nd; g += groups) {
+    const int64_t i = deep[g];
+    const PairPoses P = pairPoses(A, i);
+    np::MprDeferred d = deferred[i];
+    const bool sw = d.swapped != 0;
+    const Shape& fa = sw ? P.sb : P.sa;
+    const Shape& fb = sw ? P.sa : P.sb;
+    const np::MprShape SA = np::makeMprShape(fa, sw ? P.wb : P.wa, A.hull, P.envelope);
+    const np::MprShape SB = np::makeMprShape(fb, sw ? P.wa : P.wb, A.hull, real(0));
+    d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
+    if (np::mprTiltRound(SA, fa, fb, d.best, d.round)) d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
+    if (lane == 0) {
+      ContactPoint pts[1];
+      const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts);
+      if (sw) np::flipContacts(pts, m);
+      count[i] = m;
+      if (m >= 1) first[i] = pts[0];
+    }
+  }
 }
 
 struct ContactOut {
@@ -462,8 +544,17 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.first.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
                d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel};
-  narrowCountKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data());
+  N.deferred.resize(np);
+  N.deep.resize(np);
+  N.deep_count.resize(1);
+  DVI_CUDA(cudaMemsetAsync(N.deep_count.data(), 0, sizeof(int32_t), st));
+  narrowCountKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data(), N.deferred.data(),
+                                                          N.deep.data(), N.deep_count.data());
   DVI_CUDA_LAUNCH("narrowCountKernel");
+  // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
+  narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(np * kDeepLanes, 128), 4 * d.multiprocessors)), 128, 0,
+                     st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), N.count.data(), N.first.data());
+  DVI_CUDA_LAUNCH("narrowDeepKernel");
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
   });

@@ -9,6 +9,7 @@
 #include "chrono_like/broadphase.h"
 #include "chrono_like/data.h"
 #include "chrono_like/jacobian.h"
+#include "chrono_like/narrowphase.h"
 #include "chrono_like/solver_algorithms.h"
 #include "chrono_like/system.h"
 #include "gpu/device_buffer.h"
@@ -86,6 +87,9 @@ struct NarrowScratch {
   DeviceBuffer<int64_t> count{"narrow counts"};
   DeviceBuffer<int64_t> off{"narrow offsets"};
   DeviceBuffer<ContactPoint> first{"narrow first points"};
+  // deep MPR pairs, finished by narrowDeepKernel a lane per restart (mpr.h: MprRound)
+  DeviceBuffer<np::MprDeferred> deferred{"narrow deferred MPR states"};  // per pair (only deep ones written)
+  DeviceBuffer<int32_t> deep{"narrow deep pairs"}, deep_count{"narrow deep pair count"};
 };
 
 // The APGD control of the device loop (gpu_solver.cu: apgdIterateOnDevice), in device memory.
@@ -114,6 +118,8 @@ struct SolverScratch {
   DeviceBuffer<int32_t> adj_off{"adjacency offsets"};
   // bodies with kHeavyDegree or more entries (a CES drum touches every particle on it): gathered by a block
   DeviceBuffer<int32_t> heavy{"heavy bodies"}, heavy_count{"heavy body count"};
+  DeviceBuffer<real> heavy_partial{"heavy body partial sums"};  // n_heavy x kHeavyChunks x 6
+  DeviceBuffer<uint32_t> heavy_ticket{"heavy body tickets"};    // blocks done per heavy body (0 between launches)
   int64_t n_heavy = 0;
   DeviceBuffer<int32_t> order{"key order"}, order_sorted{"sorted key order"};
   // solver vectors
@@ -137,6 +143,7 @@ struct DeviceState {
   DeviceBuffer<double> step_scalars{"step scalars"};
   double* host_scalars = nullptr;  // pinned, for single-value read-backs
   int64_t pairs = 0;
+  int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)
   cudaEvent_t ev[kStageCount + 1] = {};
   size_t prev_count = 0;  // contacts of the previous step (warm start source)
   real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)

@@ -112,6 +112,11 @@ GpuSystem::GpuSystem(SystemConfig config) : System(config), d_(std::make_unique<
   if (config_.solver == SolverType::GaussSeidel)
     throw InputError("GPU backend: Gauss-Seidel is sequential; use jacobi, apgd or bb on the GPU");
   DVI_CUDA(cudaStreamCreateWithFlags(&d_->stream, cudaStreamNonBlocking));
+  {
+    int dev = 0;
+    DVI_CUDA(cudaGetDevice(&dev));
+    DVI_CUDA(cudaDeviceGetAttribute(&d_->multiprocessors, cudaDevAttrMultiProcessorCount, dev));
+  }
   for (auto& e : d_->ev) DVI_CUDA(cudaEventCreate(&e));
   DVI_CUDA(cudaMallocHost(&d_->host_scalars, 64 * sizeof(double)));
   d_->step_scalars.resize(16);
