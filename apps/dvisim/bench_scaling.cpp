@@ -278,7 +278,8 @@ Row runBullet(const dvi::bench::SceneSpec& spec, bool quick, double budget) {
   return r;
 }
 
-// Bullet 3's OpenCL pipeline, in a child process (bench_scaling_bullet3.h); its log is left in log_dir.
+// Bullet 3's OpenCL pipeline, in a child process (bench_scaling_bullet3.h); its log and the kernel cache go to
+// work_dir.
 Row runBullet3Row(const dvi::bench::SceneSpec& spec, bool quick, double budget, dvi::bench::OpenClDeviceType device,
                   const std::string& work_dir) {
   Bullet3Job job;
@@ -672,7 +673,9 @@ int runScaling(const ScalingOptions& o) {
     std::ostringstream md;
     md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
        << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
-       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
+       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name
+       << "\n- Bullet 3 OpenCL: " << (!has("bullet3_opencl") ? std::string("not in --engines") : b3_status.empty() ? b3_what : b3_status)
+       << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
