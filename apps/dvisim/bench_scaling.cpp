@@ -291,9 +291,10 @@ Row runBullet3Row(const dvi::bench::SceneSpec& spec, bool quick, double budget, 
   job.budget = budget;
   job.device = device;
   job.cache_dir = work_dir + "/kernel_cache";
-  // Set-up (kernels compiled on the first run), warm-up and timed steps, the penetration check; a hung device
-  // is stopped after this.
-  const double timeout_s = 600 + 4 * budget;
+  // Set-up (kernels compiled on the first run: tens of seconds), warm-up and timed steps (budget), the penetration
+  // check (seconds at 4M); a hung device is stopped after this, 420 s with the default budget: less than the 10
+  // minutes a device-machine command may take, so a hang costs a row there too, not the run's output.
+  const double timeout_s = 300 + 4 * budget;
   const Bullet3Outcome b = runBullet3Isolated(job, work_dir + "/" + spec.name + "_" + countLabel(job.n) + ".log", timeout_s);
   Row r;
   r.engine = "bullet3_opencl";
