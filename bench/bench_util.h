@@ -141,6 +141,12 @@ inline std::string commitId() {
   return head;
 }
 
+// Fewer timed steps when the last warm-up step says the plan would take longer than `budget` seconds.
+inline int fitSteps(int steps, double last_step_s, double budget) {
+  if (last_step_s <= 0) return steps;
+  return std::max(1, std::min(steps, int(budget / last_step_s)));
+}
+
 inline void writeFile(const std::string& path, const std::string& text) {
   std::ofstream f(path, std::ios::binary);
   f << text;

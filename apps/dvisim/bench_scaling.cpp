@@ -1,10 +1,13 @@
 // dvisim bench scaling --out DIR [--record] [--quick] [--sizes 10k,100k,1M,4M] [--scenes pile,mix]
-//                      [--engines gpu,cpu,bullet] [--cpu-max 100k] [--threads N] [--budget S] [--results-dir DIR]
+//                      [--engines gpu,cpu,bullet,bullet3_opencl] [--cpu-max 100k] [--threads N] [--budget S]
+//                      [--bullet3-device gpu|cpu|any] [--results-dir DIR]
 //
 // The scaling benchmark of issue 3 (a benchmark, not a test): a pile of N spheres (r = 1 cm, mu = 0.5) and a
 // multidisperse mix (bench/scaling/scaling_scenes.h), h = 1e-3 s, APGD 50 iterations, stepped side by side
-// in one run by our GPU backend (every N), our CPU backend (all cores) and Bullet 2 (btDiscreteDynamicsWorld,
-// sequential impulse, 1 thread, centimetre units) for N <= --cpu-max. Per configuration: warm-up steps, then
+// in one run by our GPU backend (every N), Bullet 3's OpenCL GPU pipeline (every N until it fails at one;
+// bench/scaling/bullet3_peer.h, each configuration in a child process: bench_scaling_bullet3.h), our CPU
+// backend (all cores) and Bullet 2 (btDiscreteDynamicsWorld, sequential impulse, 1 thread, centimetre units)
+// for N <= --cpu-max. Per configuration: warm-up steps, then
 // timed steps; ms per step split by stage (broad = ComputeAabbs + BroadPhase, narrow, solve = BuildRows +
 // WarmStart + Solve, integrate = IntegrateForces + IntegrateVelocities + IntegratePositions), contacts,
 // deepest penetration relative to the scene's reference length, device memory, and the solver iteration's
@@ -15,7 +18,8 @@
 // (scripts/plot_scaling.py, when python3 + matplotlib are present; a copy of the script is left in DIR) and
 // the table on stdout with the ratios of the issue's goals. --record also writes
 // bench/results/scaling_<device>_<date>.md and .csv (copies in DIR too). Without a GPU the GPU rows say
-// they were skipped and why.
+// they were skipped and why; the Bullet 3 rows say "not run: ..." where this build has no Bullet 3 peer or
+// no OpenCL device of --bullet3-device's type exists (Bullet 3's logs and kernel cache: DIR/bullet3/).
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -43,6 +47,7 @@
 #endif
 
 #include "bench_common.h"
+#include "bench_scaling_bullet3.h"
 #include "bench_util.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/gpu_factory.h"
@@ -60,6 +65,7 @@ namespace {
 using dvi::benchutil::commitId;
 using dvi::benchutil::csvField;
 using dvi::benchutil::exeDir;
+using dvi::benchutil::fitSteps;
 using dvi::benchutil::shell;
 using dvi::benchutil::shellQuote;
 using dvi::benchutil::slug;
@@ -80,17 +86,13 @@ struct ScalingOptions {
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
   bool gpu_graphs = true;
   std::string storage = "auto";
+  std::string bullet3_device = "gpu";
 };
 
 std::string storageLabel(const dvi::SolverSettings& s, bool gpu) {
   if (sizeof(dvi::real) != 8) return "float";
   return dvi::floatStorage(s, gpu) ? "float gradients and Jacobians (iterates double)" : "double";
 }
-
-const char* const kBullet3Note =
-    "not run: this build has no Bullet 3 OpenCL peer (Debian's libBullet3OpenCL_clew needs clew.h, which Debian "
-    "does not ship, or a build without B3_USE_CLEW against opencl-c-headers + ocl-icd, and a b3GpuRigidBodyPipeline "
-    "driver that is not written yet; DESIGN section 6)";
 
 struct Row {
   std::string engine, scene, device, status = "ok";
@@ -163,16 +165,10 @@ struct Plan {
 
 Plan planFor(const std::string& engine, long n, bool quick) {
   if (quick) return {2, 3};
-  if (engine == "gpu") return n >= 1000000 ? Plan{3, 5} : Plan{5, 20};
+  if (engine == "gpu" || engine == "bullet3_opencl") return n >= 1000000 ? Plan{3, 5} : Plan{5, 20};
   if (n >= 100000) return {1, 3};
   if (n >= 10000) return {2, 5};
   return {3, 10};
-}
-
-// Fewer timed steps when the last warm-up step says the plan would take longer than `budget` seconds.
-int fitSteps(int steps, double last_step_s, double budget) {
-  if (last_step_s <= 0) return steps;
-  return std::max(1, std::min(steps, int(budget / last_step_s)));
 }
 
 void groupStages(Row& r, const std::array<double, dvi::kStageCount>& ms) {
@@ -282,6 +278,44 @@ Row runBullet(const dvi::bench::SceneSpec& spec, bool quick, double budget) {
   return r;
 }
 
+// Bullet 3's OpenCL pipeline, in a child process (bench_scaling_bullet3.h); its log and the kernel cache go to
+// work_dir.
+Row runBullet3Row(const dvi::bench::SceneSpec& spec, bool quick, double budget, dvi::bench::OpenClDeviceType device,
+                  const std::string& work_dir) {
+  Bullet3Job job;
+  job.scene = spec.name;
+  job.n = long(spec.bodies.size());
+  const Plan p = planFor("bullet3_opencl", job.n, quick);
+  job.warmup = p.warmup;
+  job.steps = p.steps;
+  job.budget = budget;
+  job.device = device;
+  job.cache_dir = work_dir + "/kernel_cache";
+  // Set-up (kernels compiled on the first run: tens of seconds), warm-up and timed steps (budget), the penetration
+  // check (seconds at 4M); a hung device is stopped after this, 420 s with the default budget: less than the 10
+  // minutes a device-machine command may take, so a hang costs a row there too, not the run's output.
+  const double timeout_s = 300 + 4 * budget;
+  const Bullet3Outcome b = runBullet3Isolated(job, work_dir + "/" + spec.name + "_" + countLabel(job.n) + ".log", timeout_s);
+  Row r;
+  r.engine = "bullet3_opencl";
+  r.scene = spec.name;
+  r.n = job.n;
+  r.ref_length = double(spec.ref_length);
+  r.status = b.status;
+  if (!b.ok()) return r;
+  r.device = b.device;
+  r.bodies = b.bodies;
+  r.warmup = b.warmup;
+  r.steps = b.steps;
+  r.setup_s = b.setup_s;
+  r.ms = b.ms;
+  r.contacts = b.contacts;
+  r.iterations = 4;  // Bullet 3's GPU PGS (b3GpuPgsContactSolver::solveContacts), not a setting
+  r.broad = r.narrow = r.solve = r.integrate = r.other = -1;  // not split
+  r.max_pen_rel = b.max_penetration / r.ref_length;
+  return r;
+}
+
 // ---------- outputs ----------
 
 const char* kCsvHeader =
@@ -306,22 +340,24 @@ std::string csvText(const std::vector<Row>& rows) {
   return o.str();
 }
 
-std::string tableText(const std::vector<Row>& rows) {
+// `common_status`: a status shared by every row of an engine that did not run at all (no Bullet 3 peer or no
+// OpenCL device), said once in the notes instead of on a line per size.
+std::string tableText(const std::vector<Row>& rows, const std::string& common_status) {
   std::ostringstream o;
   char line[512];
-  std::snprintf(line, sizeof line, "%-7s %-5s %6s %10s %8s %8s %8s %8s %10s %8s %8s %9s %7s\n", "engine", "scene", "N",
+  std::snprintf(line, sizeof line, "%-14s %-5s %6s %10s %8s %8s %8s %8s %10s %8s %8s %9s %7s\n", "engine", "scene", "N",
                 "ms/step", "broad", "narrow", "solve", "integr", "contacts", "pen/ref", "dev MiB", "solv GB/s", "%copy");
   o << line;
   auto f = [](double x, const char* fmt) { return x < 0 ? std::string("-") : num(x, fmt); };
   for (const Row& r : rows) {
     if (!r.ok()) {
-      if (r.engine == "bullet3_opencl") continue;  // one note below instead of a line per size
-      std::snprintf(line, sizeof line, "%-7s %-5s %6s  %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(),
+      if (!common_status.empty() && r.status == common_status) continue;
+      std::snprintf(line, sizeof line, "%-14s %-5s %6s  %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(),
                     r.status.c_str());
       o << line;
       continue;
     }
-    std::snprintf(line, sizeof line, "%-7s %-5s %6s %10s %8s %8s %8s %8s %10.0f %8s %8s %9s %7s\n", r.engine.c_str(),
+    std::snprintf(line, sizeof line, "%-14s %-5s %6s %10s %8s %8s %8s %8s %10.0f %8s %8s %9s %7s\n", r.engine.c_str(),
                   r.scene.c_str(), countLabel(r.n).c_str(), num(r.ms, "%.2f").c_str(), f(r.broad, "%.2f").c_str(),
                   f(r.narrow, "%.2f").c_str(), f(r.solve, "%.2f").c_str(), f(r.integrate, "%.2f").c_str(), r.contacts,
                   num(r.max_pen_rel, "%.4f").c_str(), f(r.device_mib, "%.0f").c_str(), f(r.solve_gbps, "%.1f").c_str(),
@@ -391,7 +427,8 @@ std::string goalsText(const std::vector<Row>& rows, const std::string& gpu_statu
       double goal;
     } ratios[] = {{"gpu", "bullet", "GPU speed-up over Bullet (1 thread)", 300},
                   {"gpu", "cpu", "GPU speed-up over our CPU backend", 20},
-                  {"cpu", "bullet", "our CPU backend's speed-up over Bullet (1 thread)", 0}};
+                  {"cpu", "bullet", "our CPU backend's speed-up over Bullet (1 thread)", 0},
+                  {"gpu", "bullet3_opencl", "GPU speed-up over Bullet 3's OpenCL GPU pipeline", 0}};
     for (const auto& q : ratios) {
       if (!gpu && std::string(q.a) == "gpu") continue;
       const std::optional<long> n = commonN(rows, q.a, q.b, scene, 100000);
@@ -406,7 +443,7 @@ std::string goalsText(const std::vector<Row>& rows, const std::string& gpu_statu
   return o.str();
 }
 
-std::string notesText(double dev_copy, double host_copy) {
+std::string notesText(double dev_copy, double host_copy, const std::string& bullet3) {
   std::ostringstream o;
   o << "Notes:\n"
     << "- Stages (ms/step): broad = ComputeAabbs + BroadPhase; narrow = NarrowPhase; solve = BuildRows + WarmStart + "
@@ -417,13 +454,14 @@ std::string notesText(double dev_copy, double host_copy) {
        "write): device "
     << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("not measured (no GPU)")) << ", host "
     << num(host_copy, "%.0f") << " GB/s (parallel memcpy over the CPU backend's threads).\n"
-    << "- Penetration is the deepest over the timed steps, relative to the scene's reference length (pile: r = 1 cm; "
-       "mix: its smallest size, 0.5 cm).\n"
+    << "- Penetration is the deepest over the timed steps (Bullet 3: at their end, see below), relative to the scene's "
+       "reference length (pile: r = 1 cm; mix: its smallest size, 0.5 cm).\n"
     << "- contacts: ours count every contact within the collision envelope; Bullet's peer counts manifold points at "
-       "negative distance.\n"
+       "negative distance; Bullet 3 counts its contact manifolds (one per touching sphere pair, up to 4 points per "
+       "hull pair), which it makes only for touching or overlapping pairs.\n"
     << "- Bullet 2 runs the same bodies in centimetres (BulletPeer length_scale 100) with 10 sequential-impulse "
        "iterations on 1 thread; its numbers are converted back to metres.\n"
-    << "- Bullet 3 OpenCL GPU pipeline: " << kBullet3Note << ".\n";
+    << "- Bullet 3 OpenCL GPU pipeline (bench/scaling/bullet3_peer.h): " << bullet3 << "\n";
   return o.str();
 }
 
@@ -474,12 +512,14 @@ int runScaling(const ScalingOptions& o) {
   sizes.erase(std::unique(sizes.begin(), sizes.end()), sizes.end());
   std::vector<std::string> scenes = splitList(o.scenes), engines = splitList(o.engines);
   if (scenes.empty()) scenes = {"pile", "mix"};
-  if (engines.empty()) engines = {"gpu", "cpu", "bullet"};
+  if (engines.empty()) engines = {"gpu", "cpu", "bullet", "bullet3_opencl"};
   for (const std::string& s : scenes)
     if (s != "pile" && s != "mix") throw InputError("--scenes: unknown scene '" + s + "' (expected pile,mix)");
   for (const std::string& e : engines)
-    if (e != "gpu" && e != "cpu" && e != "bullet") throw InputError("--engines: unknown engine '" + e + "' (expected gpu,cpu,bullet)");
+    if (e != "gpu" && e != "cpu" && e != "bullet" && e != "bullet3_opencl")
+      throw InputError("--engines: unknown engine '" + e + "' (expected gpu,cpu,bullet,bullet3_opencl)");
   auto has = [&](const char* e) { return std::find(engines.begin(), engines.end(), e) != engines.end(); };
+  const dvi::bench::OpenClDeviceType b3_device = dvi::bench::parseOpenClDeviceType(o.bullet3_device);
   const long cpu_max = parseCount("--cpu-max", o.cpu_max);
   char* end = nullptr;
   const long threads = std::strtol(o.threads.c_str(), &end, 10);
@@ -529,6 +569,20 @@ int runScaling(const ScalingOptions& o) {
   for (long n : sizes) std::printf(" %s", countLabel(n).c_str());
   std::printf("; h = 1e-3 s, APGD 50 iterations, %s precision\n", sizeof(dvi::real) == 8 ? "double" : "float");
   std::printf("GPU: %s\nCPU: %s\n", have_gpu ? gpu_name.c_str() : gpu_status.c_str(), cpu_name.c_str());
+  // Bullet 3: the peer in this build and an OpenCL device of the asked type, else one status for all its rows.
+  std::string b3_what, b3_status;
+  if (has("bullet3_opencl")) {
+    if (!dvi::bench::bullet3PeerBuilt(&b3_what))
+      b3_status = "not run: " + b3_what;
+    else if (!dvi::bench::findOpenClDevice(b3_device, &b3_what))
+      b3_status = "not run: " + b3_what;
+    std::printf("Bullet 3 OpenCL: %s\n", b3_status.empty() ? b3_what.c_str() : b3_status.c_str());
+  }
+  const std::string b3_dir = dir + "/bullet3";  // the workers' logs and Bullet 3's kernel cache
+  if (has("bullet3_opencl") && b3_status.empty()) {
+    fs::create_directories(b3_dir + "/kernel_cache", ec);
+    if (ec) throw InputError("--out " + dir + ": cannot create " + b3_dir + " (" + ec.message() + ")");
+  }
   std::fflush(stdout);
 
   double dev_copy = -1;
@@ -547,7 +601,7 @@ int runScaling(const ScalingOptions& o) {
       std::printf("  %-6s %-4s %6s: %10.2f ms/step (%d timed after %d warm-up), %.0f contacts, pen/ref %.4f, setup %.1f s\n",
                   r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.ms, r.steps, r.warmup, r.contacts,
                   r.max_pen_rel, r.setup_s);
-    else if (r.engine != "bullet3_opencl")
+    else if (b3_status.empty() || r.status != b3_status)
       std::printf("  %-6s %-4s %6s: %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.status.c_str());
     std::fflush(stdout);
   };
@@ -557,6 +611,7 @@ int runScaling(const ScalingOptions& o) {
     r.ref_length = double(spec.ref_length);
     return r;
   };
+  std::map<std::string, long> b3_failed_at;  // scene -> the N at which Bullet 3 failed (larger N are not run)
   for (long n : sizes) {
     for (const std::string& scene : scenes) {
       const dvi::bench::SceneSpec spec = dvi::bench::makeSceneSpec(scene, n);
@@ -574,7 +629,17 @@ int runScaling(const ScalingOptions& o) {
           attempt("gpu", [&] { return runOurs("gpu", spec, cfg, o.quick, budget, dev_copy); });
         else
           rows.push_back(failed("gpu", spec, gpu_status)), report(rows.back());
-        rows.push_back(failed("bullet3_opencl", spec, "not run: no Bullet 3 OpenCL peer in this build (see the notes)"));
+      }
+      if (has("bullet3_opencl")) {
+        if (!b3_status.empty()) {
+          rows.push_back(failed("bullet3_opencl", spec, b3_status)), report(rows.back());
+        } else if (b3_failed_at.count(scene)) {
+          rows.push_back(failed("bullet3_opencl", spec, "not run: failed at smaller N (" + countLabel(b3_failed_at[scene]) + ")"));
+          report(rows.back());
+        } else {
+          attempt("bullet3_opencl", [&] { return runBullet3Row(spec, o.quick, budget, b3_device, b3_dir); });
+          if (!rows.back().ok()) b3_failed_at[scene] = n;
+        }
       }
       if (n <= cpu_max) {
         if (has("cpu")) attempt("cpu", [&] { return runOurs("cpu", spec, cfg, o.quick, budget, host_copy); });
@@ -584,7 +649,21 @@ int runScaling(const ScalingOptions& o) {
     }
   }
 
-  const std::string table = tableText(rows), goals = goalsText(rows, gpu_status), notes = notesText(dev_copy, host_copy);
+  std::string b3_note = b3_status;
+  if (b3_status.empty() && has("bullet3_opencl"))
+    b3_note = "b3GpuRigidBodyPipeline on " + b3_what + " (--bullet3-device " + o.bullet3_device +
+              "), the same bodies in centimetres, each configuration in a child process (logs in " + b3_dir +
+              "). Bullet 3 fixes mu = 0.7 in its kernels (the scene's 0.5 cannot be set), solves contacts with 4 PGS "
+              "iterations and a 1/60 s solver step, damps angular velocity by 0.99 per step; the peer gives it the scenes' "
+              "masses and inertias, and the mix's cylinders and ellipsoids as convex hulls (scaling_scenes.h "
+              "withConvexHulls). ms/step ends each step with clFinish; setup includes compiling Bullet 3's kernels in the "
+              "first configuration (the later ones load them from " + b3_dir + "/kernel_cache). Its penetration is "
+              "measured once, after the timed steps, by our narrow phase on the poses read back and the shapes Bullet 3 "
+              "had; after a failure at one N the larger N of that scene are not run.";
+  else if (!has("bullet3_opencl"))
+    b3_note = "not in --engines.";
+  const std::string table = tableText(rows, b3_status), goals = goalsText(rows, gpu_status),
+                    notes = notesText(dev_copy, host_copy, b3_note);
   std::printf("\n%s\n%s\n%s", table.c_str(), goals.c_str(), notes.c_str());
   std::printf("results: %s/scaling.csv\n", dir.c_str());
   std::printf("%s\n", makePlot(dir).c_str());
@@ -595,7 +674,9 @@ int runScaling(const ScalingOptions& o) {
     std::ostringstream md;
     md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
        << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
-       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- commit: " << commitId()
+       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name
+       << "\n- Bullet 3 OpenCL: " << (!has("bullet3_opencl") ? std::string("not in --engines") : b3_status.empty() ? b3_what : b3_status)
+       << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
@@ -626,7 +707,7 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_flag("--quick", o->quick, "Tiny sizes (1k, 4k) and few steps: a smoke test");
   cmd->add_option("--sizes", o->sizes, "Body counts, e.g. 10k,100k,1M,4M (default; --quick: 1k,4k)");
   cmd->add_option("--scenes", o->scenes, "pile,mix (default both)");
-  cmd->add_option("--engines", o->engines, "gpu,cpu,bullet (default all)");
+  cmd->add_option("--engines", o->engines, "gpu,cpu,bullet,bullet3_opencl (default all)");
   cmd->add_option("--cpu-max", o->cpu_max, "Largest N for our CPU backend and Bullet (default 100k)");
   cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
@@ -635,6 +716,10 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));
+  cmd->add_option("--bullet3-device", o->bullet3_device,
+                  "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
+      ->check(CLI::IsMember({"gpu", "cpu", "any"}));
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   addBenchRunner(cmd, [o] { return runScaling(*o); });
+  registerBenchBullet3Worker(app);
 }

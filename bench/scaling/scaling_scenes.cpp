@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdint>
 
+#include "chrono_like/collision.h"
+
 namespace dvi::bench {
 
 namespace {
@@ -184,19 +186,60 @@ SceneSpec makeSceneSpec(const std::string& name, long n) {
 
 namespace {
 
-// The container: ground plane y = 0 and four walls whose inner faces are x = 0, x = width, z = 0, z = width.
-struct Wall {
-  Vec3 centre, half;
-};
-std::vector<Wall> walls(const SceneSpec& s) {
+// The 42 vertices of a unit icosphere: an icosahedron with each edge split once, pushed onto the sphere.
+std::vector<Vec3> unitIcosphere() {
+  const double phi = (1 + std::sqrt(5.0)) / 2;
+  std::vector<Vec3> v;
+  for (double a : {-1.0, 1.0})
+    for (double b : {-phi, phi}) {
+      v.push_back(Vec3{0, real(a), real(b)});
+      v.push_back(Vec3{real(a), real(b), 0});
+      v.push_back(Vec3{real(b), 0, real(a)});
+    }
+  const size_t corners = v.size();
+  for (size_t i = 0; i < corners; ++i)
+    for (size_t j = i + 1; j < corners; ++j)
+      if (std::fabs(double(dot(v[i] - v[j], v[i] - v[j])) - 4.0) < 1e-6) v.push_back(v[i] + v[j]);  // edges have length 2
+  for (Vec3& p : v) p = p / length(p);
+  return v;  // 12 corners + 30 edge midpoints
+}
+
+std::vector<Vec3> unitCylinderHull() {  // radius 1, half height 1, axis y
+  std::vector<Vec3> p;
+  for (int i = 0; i < kCylinderSides; ++i) {
+    const double a = 2 * kPi * i / kCylinderSides;
+    for (real y : {real(-1), real(1)}) p.push_back(Vec3{real(std::cos(a)), y, real(std::sin(a))});
+  }
+  return p;
+}
+
+}  // namespace
+
+SceneSpec withConvexHulls(const SceneSpec& spec) {
+  SceneSpec out = spec;
+  const int cylinder = int(out.hulls.size()), ellipsoid = cylinder + 1;
+  out.hulls.push_back(unitCylinderHull());
+  out.hulls.push_back(unitIcosphere());
+  for (BodySpec& b : out.bodies) {
+    if (b.kind == BodyKind::Cylinder) {
+      b.kind = BodyKind::Hull;
+      b.hull = cylinder;
+      b.dims = Vec3{b.dims.x, b.dims.y, b.dims.x};
+    } else if (b.kind == BodyKind::Ellipsoid) {
+      b.kind = BodyKind::Hull;
+      b.hull = ellipsoid;
+    }
+  }
+  return out;
+}
+
+std::vector<WallSpec> containerWalls(const SceneSpec& s) {
   const real w = s.width, h = s.wall_height, t = s.wall_thickness;
   return {{Vec3{-t, h / 2, w / 2}, Vec3{t, h / 2, w / 2 + 2 * t}},
           {Vec3{w + t, h / 2, w / 2}, Vec3{t, h / 2, w / 2 + 2 * t}},
           {Vec3{w / 2, h / 2, -t}, Vec3{w / 2 + 2 * t, h / 2, t}},
           {Vec3{w / 2, h / 2, w + t}, Vec3{w / 2 + 2 * t, h / 2, t}}};
 }
-
-}  // namespace
 
 void addToSystem(const SceneSpec& spec, System& sys) {
   BodyDesc g;
@@ -205,7 +248,7 @@ void addToSystem(const SceneSpec& spec, System& sys) {
   g.friction = spec.friction;
   g.shapes.push_back(makePlane(Vec3{0, 1, 0}, 0));
   sys.addBody(g);
-  for (const Wall& w : walls(spec)) {
+  for (const WallSpec& w : containerWalls(spec)) {
     g.shapes.clear();
     g.shapes.push_back(makeBox(w.half));
     g.pos = w.centre;
@@ -222,7 +265,7 @@ void addToSystem(const SceneSpec& spec, System& sys) {
       case BodyKind::Ellipsoid: d.shapes[0] = makeEllipsoid(b.dims); break;
       case BodyKind::Hull: {
         std::vector<Vec3> pts = spec.hulls[size_t(b.hull)];
-        for (Vec3& q : pts) q = q * b.dims.x;
+        for (Vec3& q : pts) q = Vec3{q.x * b.dims.x, q.y * b.dims.y, q.z * b.dims.z};
         d.shapes[0] = makeConvexHull(std::move(pts));
         break;
       }
@@ -233,6 +276,35 @@ void addToSystem(const SceneSpec& spec, System& sys) {
     d.inertia = b.inertia;
     sys.addBody(d);
   }
+}
+
+real deepestPenetration(const SceneSpec& spec, const std::vector<Vec3>& pos, const std::vector<Quat>& rot) {
+  if (pos.size() != spec.bodies.size() || rot.size() != spec.bodies.size())
+    throw InputError("deepestPenetration: " + std::to_string(pos.size()) + " positions and " +
+                     std::to_string(rot.size()) + " rotations for " + std::to_string(spec.bodies.size()) + " bodies");
+  SystemConfig cfg;
+  cfg.speculative = false;  // poses only: no sweep, the envelope alone decides which pairs are tested
+  System sys(cfg);
+  addToSystem(spec, sys);
+  BodyArrays bodies = sys.bodies();
+  for (size_t i = 0; i < pos.size(); ++i) {
+    const Vec3 p = pos[i];
+    const Quat q = rot[i];
+    if (!std::isfinite(double(p.x + p.y + p.z)) || !std::isfinite(double(q.w + q.x + q.y + q.z)))
+      throw InputError("deepestPenetration: body " + std::to_string(i) + " has a non-finite pose");
+    const size_t b = size_t(kStaticBodies) + i;
+    bodies.pos[b] = p;
+    bodies.rot[b] = q;
+    bodies.vel[b] = Vec3{0, 0, 0};
+    bodies.omega[b] = Vec3{0, 0, 0};
+  }
+  ShapeArrays shapes = sys.shapes();
+  ContactArrays contacts;
+  CollisionTimes times;
+  makeNativeCollision(cfg.broadphase)->detect(bodies, shapes, cfg, contacts, times);
+  real deepest = 0;
+  for (size_t k = 0; k < contacts.count(); ++k) deepest = std::max(deepest, -contacts.dist[k]);
+  return deepest;
 }
 
 struct BulletScene::Owned {
@@ -260,7 +332,7 @@ BulletScene makeBulletScene(const SceneSpec& spec) {
   const btQuaternion identity(0, 0, 0, 1);
   own.shapes.emplace_back(new btStaticPlaneShape(btVector3(0, 1, 0), 0));
   add(own.shapes.back().get(), 0, btVector3(0, 0, 0), btVector3(0, 0, 0), identity);
-  for (const Wall& w : walls(spec)) {
+  for (const WallSpec& w : containerWalls(spec)) {
     own.shapes.emplace_back(new btBoxShape(bt(w.half)));
     add(own.shapes.back().get(), 0, btVector3(0, 0, 0), bt(w.centre), identity);
   }
@@ -293,7 +365,7 @@ BulletScene makeBulletScene(const SceneSpec& spec) {
       }
       case BodyKind::Hull: {
         auto* h = new btConvexHullShape();
-        for (const Vec3& q : spec.hulls[size_t(b.hull)]) h->addPoint(bt(q * b.dims.x), false);
+        for (const Vec3& q : spec.hulls[size_t(b.hull)]) h->addPoint(bt(Vec3{q.x * b.dims.x, q.y * b.dims.y, q.z * b.dims.z}), false);
         h->recalcLocalAabb();
         own.shapes.emplace_back(h);
         shape = h;

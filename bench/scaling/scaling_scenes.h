@@ -25,8 +25,9 @@ const char* bodyKindName(BodyKind k);
 
 struct BodySpec {
   BodyKind kind = BodyKind::Sphere;
-  Vec3 dims{0, 0, 0};  // sphere: r; box: half extents; cylinder (axis y): r, half height; ellipsoid: semi axes
-  int hull = -1;       // kind Hull: index into SceneSpec::hulls (points in the body frame)
+  Vec3 dims{0, 0, 0};  // sphere: r; box: half extents; cylinder (axis y): r, half height; ellipsoid: semi axes;
+                       // hull: the scale of the prototype along each axis
+  int hull = -1;       // kind Hull: index into SceneSpec::hulls (points in the body frame, before scaling)
   Vec3 pos{0, 0, 0};
   Quat rot{1, 0, 0, 0};
   real mass = 0;
@@ -52,8 +53,31 @@ SceneSpec makeMixSpec(long n, real mu = real(0.5));
 // "pile" or "mix"; throws InputError for another name.
 SceneSpec makeSceneSpec(const std::string& name, long n);
 
+// The scene for an engine without cylinders and ellipsoids (Bullet 3's GPU pipeline): each cylinder becomes the
+// convex hull of two kCylinderSides-gons on its caps, each ellipsoid the hull of a 42-vertex icosphere scaled to
+// its semi-axes (two prototypes appended to hulls, scaled per body through dims). The points lie on the true
+// surfaces, so the hulls are inside the shapes (a 24-gon has 99.1% of the radius across its sides, the
+// icosphere's faces 93% of it). Masses, inertias, poses and every other body are unchanged. Measure such an
+// engine's penetration on this scene, the shapes it simulated.
+constexpr int kCylinderSides = 24;
+SceneSpec withConvexHulls(const SceneSpec& spec);
+
+// The container: the ground plane y = 0 and four fixed box walls whose inner faces are x = 0, x = width,
+// z = 0 and z = width.
+struct WallSpec {
+  Vec3 centre, half;  // half extents
+};
+std::vector<WallSpec> containerWalls(const SceneSpec& spec);
+
 // Adds the ground, the walls and every body to `sys` (ground first, then 4 walls, then the bodies).
+constexpr int kStaticBodies = 5;  // the ground and the 4 walls, ahead of spec.bodies in every engine
 void addToSystem(const SceneSpec& spec, System& sys);
+
+// The deepest penetration (scene units, >= 0) of the scene with spec.bodies[i] at pos[i], rot[i]: the
+// largest -distance over the contacts our native narrow phase finds, i.e. the measure of our engines'
+// StepStats::max_penetration, applied to poses another engine computed (the Bullet 3 peer reads them back).
+// Throws InputError when pos or rot do not have one entry per body or hold a non-finite number.
+real deepestPenetration(const SceneSpec& spec, const std::vector<Vec3>& pos, const std::vector<Quat>& rot);
 
 // The same scene as Bullet bodies (static ground plane and walls, then the dynamic bodies). Bullet's
 // friction is the product of the two bodies' values, as ours. The shapes and bodies are owned here.
