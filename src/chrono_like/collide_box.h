@@ -69,7 +69,7 @@ DVI_HD int clipPolygon(const Vec3* in, int n, Vec3 pn, real po, Vec3* outp, int 
 }
 
 // Box a (half extents a.dims) at wa, box b at wb. Normals from a to b.
-DVI_HD int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+DVI_HD_CALL int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
                          ContactPoint* out) {
   const Mat33 Ra = matFromQuat(wa.q), Rb = matFromQuat(wb.q);
   Vec3 ax[3] = {column(Ra, 0), column(Ra, 1), column(Ra, 2)};

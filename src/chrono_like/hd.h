@@ -11,9 +11,15 @@
 #if defined(__CUDACC__)
 #define DVI_HD __host__ __device__ __forceinline__
 #define DVI_HOST_DEVICE __host__ __device__
+// DVI_HD for the large pieces of the narrow phase (support mappings, an MPR pass, box-box, ...): one copy called
+// from every site instead of one inlined copy per site. With everything forced inline, the narrow-phase kernel's
+// code outgrew the instruction cache: a thread left alone with a deep MPR pair issued an instruction every ~10k
+// cycles of its ~400 MPR iterations, and that one thread set the pass's length (ncu, CES feed on an H200).
+#define DVI_HD_CALL __host__ __device__ __noinline__ inline
 #else
 #define DVI_HD inline
 #define DVI_HOST_DEVICE
+#define DVI_HD_CALL inline
 #endif
 
 namespace dvi {

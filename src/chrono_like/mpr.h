@@ -103,7 +103,7 @@ struct MprVert {
   Vec3 v, a, b;  // v = a' - b with a' = a + env d/|d|; a on the true A, b on B
 };
 
-DVI_HD void mprSupportM(const MprShape& A, const MprShape& B, Vec3 d, const Vec3* hull_points, MprVert& o) {
+DVI_HD_CALL void mprSupportM(const MprShape& A, const MprShape& B, Vec3 d, const Vec3* hull_points, MprVert& o) {
   o.a = mprSupport(A, d, hull_points);
   o.b = mprSupport(B, -d, hull_points);
   o.v = o.a - o.b;
@@ -119,7 +119,7 @@ struct MprResult {
 };
 
 // One MPR pass with interior point v0 of M. Returns false when the origin is found outside M.
-DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* hull_points, MprResult& res) {
+DVI_HD_CALL bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* hull_points, MprResult& res) {
 #ifndef DVI_MPR_REL_TOL
 #define DVI_MPR_REL_TOL 1e-7
 #endif
@@ -195,7 +195,7 @@ DVI_HD bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* h
 
 // Re-runs the portal search with the ray along the current normal (see the header comment) until h(n) stops
 // decreasing or kMprPasses passes are done.
-DVI_HD void mprRefine(const MprShape& A, const MprShape& B, const Vec3* hull_points, MprResult& best) {
+DVI_HD_CALL void mprRefine(const MprShape& A, const MprShape& B, const Vec3* hull_points, MprResult& best) {
   for (int pass = 1; pass < kMprPasses; ++pass) {
     if (!(best.depth > real(0))) break;
     MprResult r;
@@ -223,7 +223,7 @@ DVI_HD void mprTryDirection(const MprShape& A, const MprShape& B, const Vec3* hu
 // (or near) the overlap of the two faces seen along n. The start and every projection depend continuously on
 // the poses, never on the MPR portal (whose final triangle can change with the rounding of its branch tests),
 // so CPU and GPU builds agree.
-DVI_HD void mprContactPoints(const MprShape& A, const MprShape& B, Vec3 n, const Vec3* hull_points, Vec3& pa,
+DVI_HD_CALL void mprContactPoints(const MprShape& A, const MprShape& B, Vec3 n, const Vec3* hull_points, Vec3& pa,
                              Vec3& pb) {
   Vec3 t = (A.center + B.center) * real(0.5);
   pa = mprSurfacePoint(A, n, t, hull_points);
@@ -243,7 +243,7 @@ struct MprRound {
 };
 
 // One restart of a round (mprTryDirection with a fixed depth estimate); depth +inf when the pass fails.
-DVI_HD MprResult mprRestart(const MprShape& A, const MprShape& B, const Vec3* hull_points, Vec3 d, real depth0) {
+DVI_HD_CALL MprResult mprRestart(const MprShape& A, const MprShape& B, const Vec3* hull_points, Vec3 d, real depth0) {
   MprResult r;
   if (!mprPass(A, B, d * (real(-DVI_MPR_TAU) * depth0), hull_points, r)) {
     r.n = d;
@@ -292,7 +292,7 @@ DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, cons
 // below): known face normals, side normals, axis cross products, the centre line and, for hulls, the frame
 // axes are evaluated exactly by h(n) and MPR is restarted from the best; deep hull pairs also restart from
 // the normal tilted four ways.
-DVI_HD int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
+DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
                     MprResult& best, MprRound& round) {
   round.n = 0;
   Vec3 v0 = A.center - B.center;
@@ -393,7 +393,7 @@ DVI_HD int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const 
 }
 
 // The last stage: contact points along the final normal, at most one contact.
-DVI_HD int mprFinish(const MprShape& A, const MprShape& B, const Vec3* hull_points, const MprResult& best,
+DVI_HD_CALL int mprFinish(const MprShape& A, const MprShape& B, const Vec3* hull_points, const MprResult& best,
                      real envelope, ContactPoint* out) {
   if (!(best.depth > real(0))) return 0;
   Vec3 pa, pb;
@@ -415,7 +415,7 @@ constexpr int kMprDeferred = -1;  // collideShapes' answer for a pair left in *d
 
 // Contact of two convex shapes through MPR (see the header comment). Writes at most one point. With `defer`,
 // a deep pair is not finished: its state goes to *defer and the answer is kMprDeferred.
-DVI_HD int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+DVI_HD_CALL int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                       real envelope, ContactPoint* out, MprDeferred* defer = nullptr) {
   MprShape A = makeMprShape(a, wa, hull_points, envelope);
   MprShape B = makeMprShape(b, wb, hull_points, real(0));

@@ -281,7 +281,7 @@ DVI_HD void rimFrame(Vec3 ax, Vec3 xaxis, Vec3 pn, Vec3& u, Vec3& v) {
 }
 
 // Shape (a) against the half-space {x : dot(pn, x) <= pd}.
-DVI_HD int collideConvexHalfSpace(const Shape& a, const Pose& wa, Vec3 pn, real pd, const Vec3* hull_points,
+DVI_HD_CALL int collideConvexHalfSpace(const Shape& a, const Pose& wa, Vec3 pn, real pd, const Vec3* hull_points,
                                   real envelope, ContactPoint* out) {
   int m = 0;
   switch (a.type) {
@@ -408,7 +408,7 @@ DVI_HD bool bigCylinderSide(const Shape& a, const Pose& wa, const Shape& cyl, co
   return length(d - ax * axial) > real(0.5) * R;  // a radial direction well defined, a near the side
 }
 
-DVI_HD int collideConvexBigCylinder(const Shape& a, const Pose& wa, const Shape& cyl, const Pose& wc,
+DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const Shape& cyl, const Pose& wc,
                                     const Vec3* hull_points, real envelope, ContactPoint* out) {
   const real R = cyl.dims.x;
   const Vec3 ax = rotate(wc.q, Vec3{0, 1, 0});

@@ -76,7 +76,7 @@ DVI_HD real sgnTol(real x, real tol) { return x < -tol ? real(-1) : real(1); }  
 
 // Support functions h(d) = argmax_{x in S} d.x of the primitives, in the shape frame. d need not be unit.
 // Ties are broken by the deterministic rules above.
-DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
+DVI_HD_CALL Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
   const real tol = np::kSupportTieTol * np::maxAbs3(d);
   switch (s.type) {
     case ShapeType::Sphere: {
@@ -156,7 +156,7 @@ namespace np {
 // edge or vertex (clamp the free coordinates), a cylinder cap disc, side line or rim point, a cone base disc,
 // generator or point, a capsule side line, a hull face polygon (approximately: Frank-Wolfe steps), or one
 // point of a curved surface. Used for contact points: on the surface by construction, and near t.
-DVI_HD Vec3 supportNearLocal(const Shape& s, Vec3 d, Vec3 t, const Vec3* hull_points) {
+DVI_HD_CALL Vec3 supportNearLocal(const Shape& s, Vec3 d, Vec3 t, const Vec3* hull_points) {
   const real l = length(d);
   if (!(l > real(0))) return supportLocal(s, d, hull_points);
   const Vec3 u = d / l;
