@@ -1129,3 +1129,48 @@ TEST_CASE("support ties on flat features are broken deterministically", "[narrow
     if (k == 0) CHECK(length(Vec3{c0[0].pa.x - 0.2, 0, c0[0].pa.z + 0.1}) <= 0.3 + 1e-12);  // under the cylinder
   }
 }
+
+// The GPU narrow phase leaves deep MPR pairs to a second kernel (collideShapes with `defer`, then the rounds of
+// mpr.h a lane per restart). On the CPU the same split, finished by finishDeferredMpr, must give exactly the
+// contacts of the one-call path, in both argument orders, and every deferred pair must be a deep MPR pair.
+TEST_CASE("deferred deep MPR pairs finish to exactly the one-call contacts", "[narrowphase]") {
+  std::vector<Vec3> pts;
+  pts.reserve(100000);
+  Rng rng(77);
+  int deferred = 0, total = 0;
+  for (int ia = 0; ia < 7; ++ia)
+    for (int ib = 0; ib < 7; ++ib) {
+      const ShapeType ta = kConvexTypes[ia], tb = kConvexTypes[ib];
+      for (int it = 0; it < 40; ++it) {
+        Pair A = randomShape(ta, rng, pts), B = randomShape(tb, rng, pts);
+        const Pose wa = pose(Vec3{0, 0, 0}, rng.rot());
+        // centres 0.1 to 0.9 of the summed extents apart: from deep to touching
+        const Pose wb = pose(rng.dir() * (rng.uni(0.1, 0.9) * (A.s.dims.x + B.s.dims.x)), rng.rot());
+        const real env = real(0.05) * std::min(A.s.size, B.s.size);
+        ContactPoint direct[kMaxContactsPerPair], split[kMaxContactsPerPair];
+        const int n = collideShapes(A.s, wa, B.s, wb, pts.data(), env, direct);
+        np::MprDeferred d;
+        int m = collideShapes(A.s, wa, B.s, wb, pts.data(), env, split, &d);
+        ++total;
+        if (m == np::kMprDeferred) {
+          ++deferred;
+          CHECK(pairUsesMpr(ta, tb));
+          CHECK(d.round.n >= 1);
+          CHECK(d.round.n <= np::kMprRoundTries);
+          CHECK(d.swapped == (int(ta) > int(tb) ? 1 : 0));
+          m = finishDeferredMpr(A.s, wa, B.s, wb, pts.data(), env, d, split);
+        }
+        REQUIRE(m == n);
+        auto same = [](Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
+        for (int k = 0; k < n; ++k) {
+          CHECK(same(split[k].normal, direct[k].normal));
+          CHECK(same(split[k].pa, direct[k].pa));
+          CHECK(same(split[k].pb, direct[k].pb));
+          CHECK(split[k].dist == direct[k].dist);
+          CHECK(split[k].feature == direct[k].feature);
+        }
+      }
+    }
+  INFO(deferred << " of " << total << " pairs deferred");
+  CHECK(deferred > total / 10);  // the split is exercised, not just the shallow path
+}
