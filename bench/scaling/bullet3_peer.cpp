@@ -64,20 +64,22 @@ void checkCl(cl_int e, const std::string& what) {
     throw Bullet3Error("OpenCL " + what + " failed: " + clErrorName(e) + " (" + std::to_string(e) + ")");
 }
 
-std::string platformString(cl_platform_id p, cl_platform_info what) {
+// A string property of an OpenCL object (clGetPlatformInfo or clGetDeviceInfo): size query, then the value.
+template <class Object, class Info>
+std::string clInfoString(cl_int (*get)(Object, Info, size_t, void*, size_t*), Object o, Info what, const char* name) {
   size_t n = 0;
-  checkCl(clGetPlatformInfo(p, what, 0, nullptr, &n), "clGetPlatformInfo");
+  checkCl(get(o, what, 0, nullptr, &n), name);
   std::string s(n, '\0');
-  checkCl(clGetPlatformInfo(p, what, n, s.data(), nullptr), "clGetPlatformInfo");
+  checkCl(get(o, what, n, s.data(), nullptr), name);
   return std::string(s.c_str());
 }
 
+std::string platformString(cl_platform_id p, cl_platform_info what) {
+  return clInfoString(clGetPlatformInfo, p, what, "clGetPlatformInfo");
+}
+
 std::string deviceString(cl_device_id d, cl_device_info what) {
-  size_t n = 0;
-  checkCl(clGetDeviceInfo(d, what, 0, nullptr, &n), "clGetDeviceInfo");
-  std::string s(n, '\0');
-  checkCl(clGetDeviceInfo(d, what, n, s.data(), nullptr), "clGetDeviceInfo");
-  return std::string(s.c_str());
+  return clInfoString(clGetDeviceInfo, d, what, "clGetDeviceInfo");
 }
 
 template <class T>

@@ -509,16 +509,27 @@ DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const P
   return m;
 }
 
+// The MPR shapes of a deferred pair in the order mprBegin saw them (swapped back where collideShapes swapped),
+// with that order's shapes in *fa, *fb: what finishDeferredMpr and the GPU's narrowDeepKernel start from.
+DVI_HD void deferredMprShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                              real envelope, bool swapped, np::MprShape& A, np::MprShape& B, const Shape*& fa,
+                              const Shape*& fb) {
+  fa = swapped ? &b : &a;
+  fb = swapped ? &a : &b;
+  A = np::makeMprShape(*fa, swapped ? wb : wa, hull_points, envelope);
+  B = np::makeMprShape(*fb, swapped ? wa : wb, hull_points, real(0));
+}
+
 // Finishes a pair that collideShapes left in `defer` (the GPU runs the same steps a lane per restart).
 DVI_HD int finishDeferredMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                              real envelope, np::MprDeferred d, ContactPoint* out) {
-  const bool sw = d.swapped != 0;
-  const np::MprShape A = np::makeMprShape(sw ? b : a, sw ? wb : wa, hull_points, envelope);
-  const np::MprShape B = np::makeMprShape(sw ? a : b, sw ? wa : wb, hull_points, real(0));
+  np::MprShape A, B;
+  const Shape *fa, *fb;
+  deferredMprShapes(a, wa, b, wb, hull_points, envelope, d.swapped != 0, A, B, fa, fb);
   np::mprRunRound(A, B, hull_points, d.round, d.best);
-  if (np::mprTiltRound(A, sw ? b : a, sw ? a : b, d.best, d.round)) np::mprRunRound(A, B, hull_points, d.round, d.best);
+  if (np::mprTiltRound(A, *fa, *fb, d.best, d.round)) np::mprRunRound(A, B, hull_points, d.round, d.best);
   const int m = np::mprFinish(A, B, hull_points, d.best, envelope, out);
-  if (sw) np::flipContacts(out, m);
+  if (d.swapped) np::flipContacts(out, m);
   return m;
 }
 

@@ -331,17 +331,15 @@ __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::
     const int64_t i = deep[g];
     const PairPoses P = pairPoses(A, i);
     np::MprDeferred d = deferred[i];
-    const bool sw = d.swapped != 0;
-    const Shape& fa = sw ? P.sb : P.sa;
-    const Shape& fb = sw ? P.sa : P.sb;
-    const np::MprShape SA = np::makeMprShape(fa, sw ? P.wb : P.wa, A.hull, P.envelope);
-    const np::MprShape SB = np::makeMprShape(fb, sw ? P.wa : P.wb, A.hull, real(0));
+    np::MprShape SA, SB;
+    const Shape *fa, *fb;
+    deferredMprShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d.swapped != 0, SA, SB, fa, fb);
     d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
-    if (np::mprTiltRound(SA, fa, fb, d.best, d.round)) d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
+    if (np::mprTiltRound(SA, *fa, *fb, d.best, d.round)) d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
     if (lane == 0) {
       ContactPoint pts[1];
       const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts);
-      if (sw) np::flipContacts(pts, m);
+      if (d.swapped) np::flipContacts(pts, m);
       count[i] = m;
       if (m >= 1) first[i] = pts[0];
     }
