@@ -318,7 +318,10 @@ void compareOneStep(bool mixed) {
   for (int s = 0; s < 2; ++s) {
     cpu.step();
     gpu->step();
+    trials->step();
     gpu->syncToHost();
+    trials->syncToHost();
+    CHECK(relDiff(flatten(trials->bodies().vel), flatten(gpu->bodies().vel)) == 0);  // bitwise, both heavy paths
     const ContactArrays& cc = cpu.contacts();
     const ContactArrays& gc = gpu->contacts();
     INFO((mixed ? "mixed" : "spheres") << " step " << s << ": contacts CPU " << cc.count() << ", GPU " << gc.count());
@@ -499,9 +502,10 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
 
 // APGD's scalar decisions (backtracking, restart, best iterate, stop) run on the device in ApgdControl, the
 // struct the CPU loop calls on the host (solver_algorithms.h). With a tolerance the device loop stops in
-// batches of trials: the iteration count of every step must equal the CPU's, and launching each trial as
-// one CUDA graph must give bitwise the same state as launching its kernels one by one.
-TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, graphs equal kernel-by-kernel launches", "[gpu]") {
+// batches of trials: the iteration count of every step must equal the CPU's. The three ways of launching the
+// trials must give bitwise the same state: all trials in one cooperative kernel (the default), each trial as
+// one CUDA graph, and each trial's kernels one by one.
+TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, graph and kernel launches agree", "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
   cfg.solver_settings.max_iterations = 100;
@@ -515,29 +519,34 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, graphs equal
   }
   REQUIRE(r100 > 0);
   cfg.solver_settings.tolerance = 3 * r100;  // reached before iteration 100 in the first step
+  REQUIRE(cfg.gpu_persistent_solver);  // the default
   System cpu(cfg);
-  auto graphs = makeGpuSystem(cfg);
-  SystemConfig plain_cfg = cfg;
+  auto persistent = makeGpuSystem(cfg);
+  SystemConfig graphs_cfg = cfg;
+  graphs_cfg.gpu_persistent_solver = false;
+  auto graphs = makeGpuSystem(graphs_cfg);
+  SystemConfig plain_cfg = graphs_cfg;
   plain_cfg.gpu_graphs = false;
   auto plain = makeGpuSystem(plain_cfg);
-  buildPile(cpu, 2000, 5, false, 1.7);
-  buildPile(*graphs, 2000, 5, false, 1.7);
-  buildPile(*plain, 2000, 5, false, 1.7);
+  for (System* sys : {&cpu, persistent.get(), graphs.get(), plain.get()}) buildPile(*sys, 2000, 5, false, 1.7);
   for (int s = 0; s < 5; ++s) {
-    cpu.step();
-    graphs->step();
-    plain->step();
-    INFO("step " << s << ": iterations CPU " << cpu.lastStats().iterations << ", GPU graphs "
-                 << graphs->lastStats().iterations << ", GPU kernels " << plain->lastStats().iterations
-                 << " (tolerance " << cfg.solver_settings.tolerance << ")");
+    for (System* sys : {&cpu, persistent.get(), graphs.get(), plain.get()}) sys->step();
+    INFO("step " << s << ": iterations CPU " << cpu.lastStats().iterations << ", GPU persistent "
+                 << persistent->lastStats().iterations << ", GPU graphs " << graphs->lastStats().iterations
+                 << ", GPU kernels " << plain->lastStats().iterations << " (tolerance " << cfg.solver_settings.tolerance
+                 << ")");
     if (s == 0) CHECK(cpu.lastStats().iterations < 100);
+    CHECK(persistent->lastStats().iterations == cpu.lastStats().iterations);
     CHECK(graphs->lastStats().iterations == cpu.lastStats().iterations);
     CHECK(plain->lastStats().iterations == cpu.lastStats().iterations);
   }
+  persistent->syncToHost();
   graphs->syncToHost();
   plain->syncToHost();
   CHECK(relDiff(flatten(graphs->bodies().vel), flatten(plain->bodies().vel)) == 0);
   CHECK(relDiff(flatten(graphs->bodies().pos), flatten(plain->bodies().pos)) == 0);
+  CHECK(relDiff(flatten(persistent->bodies().vel), flatten(plain->bodies().vel)) == 0);
+  CHECK(relDiff(flatten(persistent->bodies().pos), flatten(plain->bodies().pos)) == 0);
   const double ev = relDiff(flatten(graphs->bodies().vel), flatten(cpu.bodies().vel));
   INFO("velocity difference GPU vs CPU after 5 steps " << ev);
   CHECK(ev < (kDouble ? 1e-9 : 1e-2));
@@ -556,8 +565,9 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
   cfg.solver_settings.max_iterations = 200;
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);
-  SystemConfig plain_cfg = cfg;
+  SystemConfig plain_cfg = cfg;  // trial by trial, kernel by kernel (the default: one persistent kernel)
   plain_cfg.gpu_graphs = false;
+  plain_cfg.gpu_persistent_solver = false;
   auto plain = makeGpuSystem(plain_cfg);
   buildPile(cpu, 10000, 7, true, 1.7);
   buildPile(*gpu, 10000, 7, true, 1.7);
@@ -581,7 +591,7 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
     CHECK(ev < 1e-4);
     CHECK(ew < 1e-3);
     CHECK(eg < 1e-2);
-    // graphs or kernel by kernel: the same float rounding, bitwise
+    // one persistent kernel or kernel by kernel: the same float rounding, bitwise
     CHECK(relDiff(flatten(plain->bodies().vel), flatten(gpu->bodies().vel)) == 0);
   }
 }
@@ -633,9 +643,12 @@ TEST_CASE("a plate under 2,025 spheres: the GPU's heavy-body gather equals the C
   if (!haveDevice()) return;
   const SystemConfig cfg = pileConfig();
   System cpu(cfg);
-  auto gpu = makeGpuSystem(cfg);
+  auto gpu = makeGpuSystem(cfg);  // the persistent APGD kernel: heavy chunks inside it
+  SystemConfig trials_cfg = cfg;  // trial by trial: HeavyGatherKernel
+  trials_cfg.gpu_persistent_solver = false;
+  auto trials = makeGpuSystem(trials_cfg);
   const real r = real(0.01);
-  for (System* sys : {&cpu, gpu.get()}) {
+  for (System* sys : {&cpu, gpu.get(), trials.get()}) {
     BodyDesc g;
     g.mass = 0;
     g.flags = kBodyFixed;
@@ -669,7 +682,10 @@ TEST_CASE("a plate under 2,025 spheres: the GPU's heavy-body gather equals the C
   for (int s = 0; s < 2; ++s) {
     cpu.step();
     gpu->step();
+    trials->step();
     gpu->syncToHost();
+    trials->syncToHost();
+    CHECK(relDiff(flatten(trials->bodies().vel), flatten(gpu->bodies().vel)) == 0);  // bitwise, both heavy paths
     const ContactArrays& cc = cpu.contacts();
     int on_plate = 0;
     for (size_t k = 0; k < cc.count(); ++k) on_plate += (cc.body_a[k] == 1 || cc.body_b[k] == 1) ? 1 : 0;

@@ -84,7 +84,7 @@ struct ScalingOptions {
   bool record = false, quick = false;
   std::vector<std::string> sizes, scenes, engines;
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
-  bool gpu_graphs = true;
+  bool gpu_graphs = true, gpu_persistent = true;
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
@@ -220,6 +220,12 @@ Row runOurs(const std::string& engine, const dvi::bench::SceneSpec& spec, const 
   }
   r.ms = wall * 1e3 / p.steps;
   groupStages(r, stage_ms);
+  {  // every stage of the named step (StageType), for the profile behind the grouped columns
+    std::string line = "  stages " + engine + " " + spec.name + " " + std::to_string(r.n) + " (ms/step):";
+    for (int k = 0; k < dvi::kStageCount; ++k)
+      if (stage_ms[size_t(k)] > 0) line += " " + std::string(dvi::stageName(dvi::StageType(k))) + " " + num(stage_ms[size_t(k)], "%.3f");
+    std::printf("%s\n", line.c_str());
+  }
   r.max_pen_rel = pen / r.ref_length;
   if (r.solve_only_ms > 0 && r.iterations > 0) {
     r.solve_gbps = dvi::bench::solverIterationBytes(r.contacts, double(r.bodies)) * r.iterations /
@@ -549,6 +555,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.solver_settings.tolerance = 0;  // all 50 iterations
   cfg.threads = int(threads);
   cfg.gpu_graphs = o.gpu_graphs;
+  cfg.gpu_persistent_solver = o.gpu_persistent;
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
@@ -678,7 +685,9 @@ int runScaling(const ScalingOptions& o) {
        << "\n- Bullet 3 OpenCL: " << (!has("bullet3_opencl") ? std::string("not in --engines") : b3_status.empty() ? b3_what : b3_status)
        << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
-       << "\n- GPU APGD trials: " << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
+       << "\n- GPU APGD trials: "
+       << (o.gpu_persistent ? "all in one cooperative kernel per solve"
+                            : o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
@@ -712,7 +721,11 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
   cmd->add_option("--gpu-graphs", o->gpu_graphs,
-                  "GPU APGD trials as one CUDA graph each (true, the default) or kernel by kernel (false)");
+                  "Without --gpu-persistent: GPU APGD trials as one CUDA graph each (true, the default) or kernel by "
+                  "kernel (false)");
+  cmd->add_option("--gpu-persistent", o->gpu_persistent,
+                  "All GPU APGD trials of a solve in one cooperative kernel (true, the default) or launched trial by "
+                  "trial (false)");
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));

@@ -81,6 +81,11 @@ struct SystemConfig {
   // GPU backend: run each APGD trial (step, Schur product, test, control) as one captured CUDA graph,
   // launched once per trial; false launches the kernels one by one (same results, more launch latency).
   bool gpu_graphs = true;
+  // GPU backend: run all APGD trials of a solve in one cooperative kernel (grid-wide barriers between the
+  // step, the gather and the fused Schur/test pass; the control is updated in every block). Bitwise the same
+  // iterates as the trial-by-trial launches, which run when this is false or the device has no cooperative
+  // launch. Jacobi and BB always launch kernel by kernel.
+  bool gpu_persistent_solver = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cooperative_groups.h>
 #include <cub/cub.cuh>
 #include <stdexcept>
 #include <string>
@@ -33,20 +34,28 @@ __global__ void mapKernel(int64_t n, F f) {
   if (i < n) f(i);
 }
 
-// Block partials of a deterministic reduction: this block's grid-strided slice of f, summed in a fixed tree.
+// Partial `slice` of `slices` of a deterministic reduction: the slice's grid-strided elements of f (element
+// slice*kBlock + t + j*slices*kBlock in thread t), summed in a fixed tree. A kernel's block is a slice
+// (reduceBlockSlice); the persistent APGD kernel runs the slices of a fixed count over whatever grid it has,
+// so both sum every element in the same order.
 template <int M, class F>
-__device__ __forceinline__ void reduceBlockSlice(int64_t n, const F& f, double* partial) {
+__device__ __forceinline__ void reduceSlice(int slice, int slices, int64_t n, const F& f, double* partial) {
   double acc[M];
   for (int m = 0; m < M; ++m) acc[m] = 0;
-  for (int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; i < n; i += int64_t(gridDim.x) * blockDim.x)
-    f(i, acc);
+  for (int64_t i = int64_t(slice) * kBlock + threadIdx.x; i < n; i += int64_t(slices) * kBlock) f(i, acc);
   using BR = cub::BlockReduce<double, kBlock>;
   __shared__ typename BR::TempStorage tmp;
   for (int m = 0; m < M; ++m) {
     const double s = BR(tmp).Sum(acc[m]);
-    if (threadIdx.x == 0) partial[blockIdx.x * M + m] = s;
+    if (threadIdx.x == 0) partial[slice * M + m] = s;
     __syncthreads();
   }
+}
+
+// Block partials of a deterministic reduction: this block's grid-strided slice of f, summed in a fixed tree.
+template <int M, class F>
+__device__ __forceinline__ void reduceBlockSlice(int64_t n, const F& f, double* partial) {
+  reduceSlice<M>(int(blockIdx.x), int(gridDim.x), n, f, partial);
 }
 
 // The partials of nblk blocks summed in order by one block; the result lands in out (thread 0's view only
@@ -264,21 +273,17 @@ struct GatherT {
   }
 };
 
-// Heavy bodies are gathered by kHeavyChunks blocks each (grid kHeavyChunks x n_heavy): block (c, h) sums the
-// entries c*kBlock + t, c*kBlock + t + kHeavyChunks*kBlock, ... of heavy body h into a fixed-order tree in shared
-// memory and stores the chunk's partial; the last of the body's blocks to finish (an atomic ticket, reset for the
-// next launch) adds the partials in chunk order, so the sum is deterministic. One block per body made every Schur
-// product wait for the drum: 31 us of a 65 us APGD trial in the CES industrial feed (15,000 entries, H200 ncu).
-constexpr int kHeavyChunks = 32;
+constexpr int kHeavyChunks = 32;  // blocks per heavy body (heavyGatherChunk)
 
+// Chunk c of heavy body h (heavy[h]), summed by the calling block: the entries c*kBlock + t,
+// c*kBlock + t + kHeavyChunks*kBlock, ... into a fixed-order tree in shared memory, stored as the chunk's partial;
+// the body's last chunk to finish (an atomic ticket, reset for the next product) adds the partials in chunk
+// order and writes the body's delta, so the sum is deterministic. x: the impulses (never null here).
 template <class JT>
-__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherT<JT> g, real* partial,
-                                                           uint32_t* ticket) {
-  const int32_t h = int32_t(blockIdx.y), c = int32_t(blockIdx.x);
+__device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, const real* x, real* partial,
+                                 uint32_t* ticket, int32_t h, int32_t c) {
   const int32_t i = heavy[h];
   const int t = threadIdx.x;
-  const real* x = g.input();
-  if (!x) return;  // the same for every block of the launch
   Vec3 F{0, 0, 0}, T{0, 0, 0};
   for (int32_t e = g.off[i] + c * kBlock + t; e < g.off[i + 1]; e += kBlock * kHeavyChunks)
     accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
@@ -298,7 +303,9 @@ __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy
     last = atomicAdd(ticket + h, 1u) == unsigned(kHeavyChunks - 1);
   }
   __syncthreads();
-  if (!last || t != 0) return;
+  const bool finish = last;
+  __syncthreads();  // `last` and sh are reused by the caller's next chunk
+  if (!finish || t != 0) return;
   __threadfence();
   real sum[6] = {0, 0, 0, 0, 0, 0};
   const real* all = partial + int64_t(h) * kHeavyChunks * 6;
@@ -306,6 +313,17 @@ __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy
     for (int j = 0; j < 6; ++j) sum[j] += __ldcg(all + k * 6 + j);  // L2: written by other blocks
   ticket[h] = 0;
   g.delta[i] = bodyDeltaFromImpulse(g.inv[i], Vec3{sum[0], sum[1], sum[2]}, Vec3{sum[3], sum[4], sum[5]});
+}
+
+// Heavy bodies are gathered by kHeavyChunks blocks each (grid kHeavyChunks x n_heavy), block (c, h) summing
+// chunk c of heavy body h. One block per body made every Schur product wait for the drum: 31 us of a 65 us
+// APGD trial in the CES industrial feed (15,000 entries, H200 ncu).
+template <class JT>
+__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherT<JT> g, real* partial,
+                                                           uint32_t* ticket) {
+  const real* x = g.input();
+  if (!x) return;  // the same for every block of the launch
+  heavyGatherChunk(heavy, g, x, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
 }
 
 struct HeavyListF {
@@ -562,6 +580,149 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
   cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
 }
 
+// ---- All APGD trials of a solve in one cooperative kernel ----
+// At 100,000 contacts a trial of the launches above (step, gather, Schur pass b, test) took ~51 us on an H200
+// for ~6 us worth of bytes: each launch waits for the last, loads the control and the slots before its first
+// useful load, and the test's last block runs alone. The persistent kernel runs the same per-element functions
+// over a grid that stays resident, with a grid-wide barrier between the passes:
+//   (1) the projected step into X[nw];  (2) the gather, heavy bodies by chunks;  (3) Schur pass (b) and the test
+//   terms fused per block (the thread that writes a block's N x sums its test terms); then every block sums the
+//   test partials itself, in slice order, and runs ApgdControl::afterTest, so all blocks hold the same control
+//   without a fourth barrier.
+// The slices and sums are those of the kernel-by-kernel trial (reduceSlice), so both paths give bitwise the
+// same iterates ([gpu] test "GPU APGD on the device").
+template <class V, class JT>
+struct PersistentApgd {
+  ApgdBuffers<V> B;
+  GatherT<JT> g;  // x set per trial
+  const ConstraintRow* rows;
+  int64_t nc, ncb, n;  // contacts, contact blocks, blocks (contact blocks, then row blocks)
+  int64_t nbodies;
+  bool normal_only;
+  int slices;  // of the test reduction: reduceBlocksFor(n), as launchApgdTrial's grid
+  double* partial;
+  const int32_t* heavy;
+  int32_t n_heavy;
+  real* heavy_partial;
+  uint32_t* heavy_ticket;
+  ApgdDeviceState* st;
+};
+
+// Schur pass (b) of block i, the same functors as schur(): contact i (or the normal rows 3i..3i+2), or row
+// block i - ncb.
+template <class V, class JT>
+__device__ __forceinline__ void schurBlock(const PersistentApgd<V, JT>& p, int64_t i, const SchurOut<V>& out) {
+  if (i < p.ncb) {
+    if (p.normal_only) {
+      const NormalContactF<V, JT> f{p.g.jac, p.g.delta, p.nc, out};
+      for (int j = 0; j < 3; ++j) f(3 * i + j);
+    } else {
+      ContactF<V, JT>{p.g.jac, p.g.delta, out}(i);
+    }
+  } else {
+    const RowSchurF<V> f{p.rows, p.g.delta, out, 3 * p.ncb};
+    for (int j = 0; j < 3; ++j) f(3 * (i - p.ncb) + j);
+  }
+}
+
+template <class V, class JT>
+struct SchurTestF {  // pass (3): block i's N x, then its test terms (which read that N x back, same thread)
+  const PersistentApgd<V, JT>& p;
+  SchurOut<V> out;
+  kern::ApgdTestT<V> test;
+  __device__ void operator()(int64_t i, double* acc) const {
+    schurBlock(p, i, out);
+    test(i, acc);
+  }
+};
+
+// 64 registers a thread at most, so 4 blocks of 256 stay resident per SM (a cooperative grid must fit at once).
+constexpr int kPersistentBlocksPerSm = 4;
+
+template <class V, class JT>
+__global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
+    apgdPersistentKernel(const __grid_constant__ PersistentApgd<V, JT> p) {
+  namespace cg = cooperative_groups;
+  cg::grid_group grid = cg::this_grid();
+  __shared__ alignas(algo::ApgdControl) unsigned char c_mem[sizeof(algo::ApgdControl)];
+  __shared__ double sums[5];
+  algo::ApgdControl& c = *reinterpret_cast<algo::ApgdControl*>(c_mem);
+  if (threadIdx.x == 0) c = p.st->c;
+  __syncthreads();
+  constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
+  const int64_t tid = int64_t(blockIdx.x) * kBlock + threadIdx.x, stride = int64_t(gridDim.x) * kBlock;
+  while (!c.done) {  // c is the same in every block
+    real* xn = pickX(p.B, c.nw);
+    {  // (1) the projected step
+      const kern::ApgdStepT<V> f{p.B.bs, pickX(p.B, c.cur), pickX(p.B, c.old), pickNX(p.B, c.ncur), pickNX(p.B, c.nold),
+                                 p.B.r,  p.B.eta,           c.beta,           real(1) / c.L,      xn,
+                                 grad_form};
+      for (int64_t k = tid; k < p.n; k += stride) f(k);
+    }
+    grid.sync();
+    {  // (2) Schur pass (a): the gather
+      GatherT<JT> g = p.g;
+      g.x = xn;
+      for (int64_t i = tid; i < p.nbodies; i += stride) g(i);
+      for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
+        heavyGatherChunk(p.heavy, g, xn, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
+    }
+    grid.sync();
+    {  // (3) Schur pass (b) and the test terms
+      const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
+      const kern::ApgdTestT<V> test{p.B.bs,  pickX(p.B, c.cur), pickX(p.B, c.old),   pickNX(p.B, c.ncur),
+                                    pickNX(p.B, c.nold), xn, pickNX(p.B, c.nnw), p.B.r,
+                                    p.B.eta, c.beta,      p.B.a,              p.B.inv_a,
+                                    grad_form};
+      const SchurTestF<V, JT> f{p, out, test};
+      for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
+    }
+    grid.sync();
+    reducePartials<5>(p.slices, p.partial, sums);  // every block: the same partials in the same order
+    if (threadIdx.x == 0) c.afterTest(sums);
+    __syncthreads();
+  }
+  if (blockIdx.x == 0 && threadIdx.x == 0) p.st->c = c;
+}
+
+// Runs the trials in apgdPersistentKernel; false when the device cannot run it (no cooperative launch), and
+// the caller then launches trial by trial. The control is in S.apgd on entry and on return.
+template <class V>
+bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
+  if (!d.cooperative) return false;
+  using JT = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
+  SolverScratch& S = d.solver;
+  const JT* jac = nullptr;
+  if constexpr (std::is_same_v<JT, ContactJacobian>) jac = S.jac.data();
+  else jac = S.jacf.data();
+  PersistentApgd<V, JT> p{};
+  p.B = B;
+  p.g = GatherT<JT>{S.adj_off.data(), S.adj_val_sorted.data(), jac,    S.rows.data(), layoutOf(d),
+                    d.bodies.inv.data(), nullptr,          d.bodies.delta.data(), nullptr};
+  p.rows = S.rows.data();
+  p.nc = int64_t(d.contacts.count);
+  p.ncb = d.contact_blocks;
+  p.n = n;
+  p.nbodies = int64_t(d.bodies.count);
+  p.normal_only = d.normal_only;
+  p.slices = reduceBlocksFor(n);
+  p.partial = S.partial.data();
+  p.heavy = S.heavy.data();
+  p.n_heavy = int32_t(S.n_heavy);
+  p.heavy_partial = S.heavy_partial.data();
+  p.heavy_ticket = S.heavy_ticket.data();
+  p.st = S.apgd.data();
+  const void* kernel = reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT>);
+  int per_sm = 0;
+  DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kBlock, 0));
+  if (per_sm < 1) return false;
+  const int64_t want = std::max<int64_t>({blocksFor(n), blocksFor(p.nbodies), int64_t(p.n_heavy) * kHeavyChunks, 1});
+  const unsigned grid = unsigned(std::min<int64_t>(want, int64_t(per_sm) * d.multiprocessors));
+  void* args[] = {&p};
+  DVI_CUDA(cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlock), args, 0, d.stream));
+  return true;
+}
+
 // The float loop's start: out = float(N x + r) from the real N x.
 struct GradientToFloatF {
   const real *nx, *r;
@@ -576,7 +737,7 @@ struct GradientToFloatF {
 template <class V>
 void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, V* const* NX, real a,
                         real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
-                        bool graphs) {
+                        bool graphs, bool persistent) {
   SolverScratch& S = d.solver;
   S.apgd.resize(1);
   S.partial.resize(size_t(reduceBlocksFor(n)) * 5);
@@ -587,6 +748,12 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
+  if (persistent && apgdPersistent<V>(d, n, B)) {
+    DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
+    DVI_CUDA(cudaStreamSynchronize(d.stream));
+    c = h.c;
+    return;
+  }
   cudaGraphExec_t exec = nullptr;
   if (graphs) {
     cudaGraph_t graph = nullptr;
@@ -625,7 +792,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
 
 void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, real* const* NX, real a,
                          real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
-                         bool graphs, bool float_storage) {
+                         bool graphs, bool persistent, bool float_storage) {
   if constexpr (!std::is_same_v<real, float>) {
     if (float_storage) {
       SolverScratch& S = d.solver;
@@ -634,13 +801,13 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
       float* NXf[3];
       for (int i = 0; i < 3; ++i) NXf[i] = S.vf.data() + i * len;
       launchMap(d, len, GradientToFloatF{NX[c.ncur], r, NXf[c.ncur]}, "launch of GradientToFloatF (APGD start)");
-      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, graphs);
+      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, graphs, persistent);
       if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
       return;
     }
   }
   (void)float_storage;
-  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, graphs);
+  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, graphs, persistent);
   if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
 }
 
@@ -656,8 +823,8 @@ const char* functorName() {
 class GpuOps {
  public:
   static constexpr bool kDeviceLoop = true;
-  GpuOps(DeviceState& d, const ProblemView& p, bool graphs, bool float_storage)
-      : d_(d), p_(p), graphs_(graphs), float_(float_storage) {
+  GpuOps(DeviceState& d, const ProblemView& p, bool graphs, bool persistent, bool float_storage)
+      : d_(d), p_(p), graphs_(graphs), persistent_(persistent), float_(float_storage) {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
     for (int i = 0; i < 7; ++i) {
@@ -694,13 +861,15 @@ class GpuOps {
   // (DeviceCcpResult), so the device loop keeps no per-iteration residuals (st is left as it is).
   void apgdIterate(algo::ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
                    SolverStats& /*st*/) {
-    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), graphs_, float_);
+    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), graphs_, persistent_,
+                        float_);
   }
 
  private:
   DeviceState& d_;
   ProblemView p_;
   bool graphs_;
+  bool persistent_;
   bool float_;
   real* vec_[7] = {};
 };
@@ -966,7 +1135,7 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, cfg.gpu_graphs, floatStorage(cfg.solver_settings, true));
+  GpuOps ops(d, pv, cfg.gpu_graphs, cfg.gpu_persistent_solver, floatStorage(cfg.solver_settings, true));
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout

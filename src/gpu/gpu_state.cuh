@@ -144,6 +144,7 @@ struct DeviceState {
   double* host_scalars = nullptr;  // pinned, for single-value read-backs
   int64_t pairs = 0;
   int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)
+  bool cooperative = false;  // the device can launch cooperative kernels (grid-wide barriers: apgdPersistentKernel)
   cudaEvent_t ev[kStageCount + 1] = {};
   size_t prev_count = 0;  // contacts of the previous step (warm start source)
   real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)

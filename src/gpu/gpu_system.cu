@@ -116,6 +116,9 @@ GpuSystem::GpuSystem(SystemConfig config) : System(config), d_(std::make_unique<
     int dev = 0;
     DVI_CUDA(cudaGetDevice(&dev));
     DVI_CUDA(cudaDeviceGetAttribute(&d_->multiprocessors, cudaDevAttrMultiProcessorCount, dev));
+    int coop = 0;
+    DVI_CUDA(cudaDeviceGetAttribute(&coop, cudaDevAttrCooperativeLaunch, dev));
+    d_->cooperative = coop != 0;
   }
   for (auto& e : d_->ev) DVI_CUDA(cudaEventCreate(&e));
   DVI_CUDA(cudaMallocHost(&d_->host_scalars, 64 * sizeof(double)));

@@ -70,11 +70,15 @@ for m in "$@"; do
       done ;;
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
     scaling) bench scaling --budget 5 ;;
-    probe)  # unrecorded GPU pile timings: float and double storage of APGD's vectors (PROBE_SIZES, default 10k,100k,1M)
-      for f in float real; do
-        echo "-- storage $f"
-        $BIN bench scaling --out "$LOGS/probe_$f" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} \
-          --budget 3 --storage $f 2>&1 | tr '\r' '\n' | grep -E "^(gpu|engine) |copy"
+    probe)  # unrecorded GPU timings (PROBE_SIZES, default 10k,100k,1M; PROBE_SCENES, default pile) for each APGD
+            # storage in PROBE_STORAGE (default "float real") and launch in PROBE_PERSISTENT (default "true false")
+      for f in ${PROBE_STORAGE:-float real}; do
+        for pe in ${PROBE_PERSISTENT:-true false}; do
+          echo "-- storage $f, persistent APGD kernel $pe"
+          $BIN bench scaling --out "$LOGS/probe_${f}_$pe" --scenes ${PROBE_SCENES:-pile} --engines gpu \
+            --sizes ${PROBE_SIZES:-10k,100k,1M} --budget 3 --storage $f --gpu-persistent $pe 2>&1 | tr '\r' '\n' |
+            grep -E "^(gpu|engine) |copy|^  stages"
+        done
       done ;;
     ncu)  # kernel durations (ncu, serialised, no launch gaps) of the first NCU_COUNT launches of a GPU pile run
       ncu --clock-control none --csv --metrics gpu__time_duration.sum --launch-count ${NCU_COUNT:-2000} \
