@@ -318,10 +318,7 @@ void compareOneStep(bool mixed) {
   for (int s = 0; s < 2; ++s) {
     cpu.step();
     gpu->step();
-    trials->step();
     gpu->syncToHost();
-    trials->syncToHost();
-    CHECK(relDiff(flatten(trials->bodies().vel), flatten(gpu->bodies().vel)) == 0);  // bitwise, both heavy paths
     const ContactArrays& cc = cpu.contacts();
     const ContactArrays& gc = gpu->contacts();
     INFO((mixed ? "mixed" : "spheres") << " step " << s << ": contacts CPU " << cc.count() << ", GPU " << gc.count());
