@@ -262,14 +262,18 @@ struct GatherT {
   BodyDelta* delta;
   const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
   __device__ const real* input() const { return x_slot ? *x_slot : x; }
+  // Body i's delta from the impulses xs reads (ArrayImpulses, or the persistent kernel's StepImpulses).
+  template <class XS>
+  __device__ void body(int64_t i, const XS& xs) const {
+    const int32_t e0 = off[i], e1 = off[i + 1];
+    if (e1 - e0 >= kHeavyDegree) return;  // heavyGatherChunk
+    Vec3 F{0, 0, 0}, T{0, 0, 0};
+    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulseFrom(adj[e], L, jac, rows, xs, F, T);
+    delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
+  }
   __device__ void operator()(int64_t i) const {
     const real* xx = input();
-    if (!xx) return;
-    const int32_t e0 = off[i], e1 = off[i + 1];
-    if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
-    Vec3 F{0, 0, 0}, T{0, 0, 0};
-    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
-    delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
+    if (xx) body(i, ArrayImpulses{xx});
   }
 };
 
@@ -278,15 +282,15 @@ constexpr int kHeavyChunks = 32;  // blocks per heavy body (heavyGatherChunk)
 // Chunk c of heavy body h (heavy[h]), summed by the calling block: the entries c*kBlock + t,
 // c*kBlock + t + kHeavyChunks*kBlock, ... into a fixed-order tree in shared memory, stored as the chunk's partial;
 // the body's last chunk to finish (an atomic ticket, reset for the next product) adds the partials in chunk
-// order and writes the body's delta, so the sum is deterministic. x: the impulses (never null here).
-template <class JT>
-__device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, const real* x, real* partial,
+// order and writes the body's delta, so the sum is deterministic. xs: the impulses' reader (ArrayImpulses).
+template <class JT, class XS>
+__device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, const XS& xs, real* partial,
                                  uint32_t* ticket, int32_t h, int32_t c) {
   const int32_t i = heavy[h];
   const int t = threadIdx.x;
   Vec3 F{0, 0, 0}, T{0, 0, 0};
   for (int32_t e = g.off[i] + c * kBlock + t; e < g.off[i + 1]; e += kBlock * kHeavyChunks)
-    accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
+    accumulateEntryImpulseFrom(g.adj[e], g.L, g.jac, g.rows, xs, F, T);
   __shared__ real sh[6][kBlock];
   __shared__ bool last;
   sh[0][t] = F.x, sh[1][t] = F.y, sh[2][t] = F.z, sh[3][t] = T.x, sh[4][t] = T.y, sh[5][t] = T.z;
@@ -323,7 +327,7 @@ __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy
                                                            uint32_t* ticket) {
   const real* x = g.input();
   if (!x) return;  // the same for every block of the launch
-  heavyGatherChunk(heavy, g, x, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
+  heavyGatherChunk(heavy, g, ArrayImpulses{x}, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
 }
 
 struct HeavyListF {
@@ -581,20 +585,21 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
 }
 
 // ---- All APGD trials of a solve in one cooperative kernel ----
-// At 100,000 contacts a trial of the launches above (step, gather, Schur pass b, test) took ~51 us on an H200
+// At 100,000 contacts a trial of the launches above (step, gather, Schur pass b, test) took ~45 us on an H100
 // for ~6 us worth of bytes: each launch waits for the last, loads the control and the slots before its first
 // useful load, and the test's last block runs alone. The persistent kernel runs the same per-element functions
-// over a grid that stays resident, with a grid-wide barrier between the passes:
-//   (1) the projected step into X[nw];  (2) the gather, heavy bodies by chunks;  (3) Schur pass (b) and the test
-//   terms fused per block (the thread that writes a block's N x sums its test terms); then every block sums the
-//   test partials itself, in slice order, and runs ApgdControl::afterTest, so all blocks hold the same control
-//   without a fourth barrier.
-// The slices and sums are those of the kernel-by-kernel trial (reduceSlice), so both paths give bitwise the
-// same iterates ([gpu] test "GPU APGD on the device").
+// over a grid that stays resident, with two grid-wide barriers a trial:
+//   (1) the gather of g_{k+1}, each entry computing its block's projected step from (g_k, g_{k-1}) itself
+//       (StepImpulses: ApgdStepT::block), so the step needs no pass and no barrier of its own;
+//   (2) per block: the step stored into X[nw], Schur pass (b), and the test terms, by one thread;
+//   then every block sums the test partials itself, in slice order, and runs ApgdControl::afterTest, so all
+//   blocks hold the same control without a third barrier.
+// The steps, slices and sums are those of the trial-by-trial launches (ApgdStepT, reduceSlice), so both paths
+// give bitwise the same iterates ([gpu] test "GPU APGD on the device").
 template <class V, class JT>
 struct PersistentApgd {
   ApgdBuffers<V> B;
-  GatherT<JT> g;  // x set per trial
+  GatherT<JT> g;
   const ConstraintRow* rows;
   int64_t nc, ncb, n;  // contacts, contact blocks, blocks (contact blocks, then row blocks)
   int64_t nbodies;
@@ -606,7 +611,10 @@ struct PersistentApgd {
   real* heavy_partial;
   uint32_t* heavy_ticket;
   ApgdDeviceState* st;
+  long long* stamps;  // null, or kPhaseStampTrials x 5 clock64() stamps of block 0 (DVISIM_APGD_PHASES)
 };
+
+constexpr int kPhaseStampTrials = 64;
 
 // Schur pass (b) of block i, the same functors as schur(): contact i (or the normal rows 3i..3i+2), or row
 // block i - ncb.
@@ -626,21 +634,26 @@ __device__ __forceinline__ void schurBlock(const PersistentApgd<V, JT>& p, int64
 }
 
 template <class V, class JT>
-struct SchurTestF {  // pass (3): block i's N x, then its test terms (which read that N x back, same thread)
+struct StepSchurTestF {  // pass (2) of block i: its step stored, its N x, then its test terms (reading both back)
   const PersistentApgd<V, JT>& p;
+  kern::ApgdStepT<V> step;
   SchurOut<V> out;
   kern::ApgdTestT<V> test;
   __device__ void operator()(int64_t i, double* acc) const {
+    step(i);
     schurBlock(p, i, out);
     test(i, acc);
   }
 };
 
-// 64 registers a thread at most, so 4 blocks of 256 stay resident per SM (a cooperative grid must fit at once).
-constexpr int kPersistentBlocksPerSm = 4;
+// Blocks of 256 resident per SM (a cooperative grid must fit at once): 4 caps a thread at 64 registers, 3 at 80.
 
-template <class V, class JT>
-__global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
+__device__ __forceinline__ void phaseStamp(long long* stamps, int trial, int j) {
+  if (stamps && blockIdx.x == 0 && threadIdx.x == 0 && trial < kPhaseStampTrials) stamps[5 * trial + j] = clock64();
+}
+
+template <class V, class JT, int MinBlocks>
+__global__ void __launch_bounds__(kBlock, MinBlocks)
     apgdPersistentKernel(const __grid_constant__ PersistentApgd<V, JT> p) {
   namespace cg = cooperative_groups;
   cg::grid_group grid = cg::this_grid();
@@ -651,33 +664,31 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
   __syncthreads();
   constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
   const int64_t tid = int64_t(blockIdx.x) * kBlock + threadIdx.x, stride = int64_t(gridDim.x) * kBlock;
-  while (!c.done) {  // c is the same in every block
+  for (int trial = 0; !c.done; ++trial) {  // c is the same in every block
     real* xn = pickX(p.B, c.nw);
-    {  // (1) the projected step
-      const kern::ApgdStepT<V> f{p.B.bs, pickX(p.B, c.cur), pickX(p.B, c.old), pickNX(p.B, c.ncur), pickNX(p.B, c.nold),
-                                 p.B.r,  p.B.eta,           c.beta,           real(1) / c.L,      xn,
-                                 grad_form};
-      for (int64_t k = tid; k < p.n; k += stride) f(k);
-    }
+    const kern::ApgdStepT<V> step{p.B.bs, pickX(p.B, c.cur), pickX(p.B, c.old), pickNX(p.B, c.ncur), pickNX(p.B, c.nold),
+                                  p.B.r,  p.B.eta,           c.beta,           real(1) / c.L,      xn,
+                                  grad_form};
+    phaseStamp(p.stamps, trial, 0);
+    // (1) Schur pass (a) of g_{k+1}, computed per entry
+    for (int64_t i = tid; i < p.nbodies; i += stride) p.g.body(i, step);
+    for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
+      heavyGatherChunk(p.heavy, p.g, step, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
+    phaseStamp(p.stamps, trial, 1);
     grid.sync();
-    {  // (2) Schur pass (a): the gather
-      GatherT<JT> g = p.g;
-      g.x = xn;
-      for (int64_t i = tid; i < p.nbodies; i += stride) g(i);
-      for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
-        heavyGatherChunk(p.heavy, g, xn, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
-    }
-    grid.sync();
-    {  // (3) Schur pass (b) and the test terms
+    phaseStamp(p.stamps, trial, 2);
+    {  // (2) the step stored, Schur pass (b) and the test terms
       const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
       const kern::ApgdTestT<V> test{p.B.bs,  pickX(p.B, c.cur), pickX(p.B, c.old),   pickNX(p.B, c.ncur),
                                     pickNX(p.B, c.nold), xn, pickNX(p.B, c.nnw), p.B.r,
                                     p.B.eta, c.beta,      p.B.a,              p.B.inv_a,
                                     grad_form};
-      const SchurTestF<V, JT> f{p, out, test};
+      const StepSchurTestF<V, JT> f{p, step, out, test};
       for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
     }
+    phaseStamp(p.stamps, trial, 3);
     grid.sync();
+    phaseStamp(p.stamps, trial, 4);
     reducePartials<5>(p.slices, p.partial, sums);  // every block: the same partials in the same order
     if (threadIdx.x == 0) c.afterTest(sums);
     __syncthreads();
@@ -712,7 +723,14 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
   p.heavy_partial = S.heavy_partial.data();
   p.heavy_ticket = S.heavy_ticket.data();
   p.st = S.apgd.data();
-  const void* kernel = reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT>);
+  p.stamps = nullptr;
+  if (d.phase_profile) {
+    S.stamps.resize(size_t(kPhaseStampTrials) * 5);
+    S.stamps.fillZero(d.stream);
+    p.stamps = S.stamps.data();
+  }
+  const void* kernel = d.persistent_blocks == 3 ? reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT, 3>)
+                                                : reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT, 4>);
   int per_sm = 0;
   DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kBlock, 0));
   if (per_sm < 1) return false;
@@ -720,6 +738,18 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
   const unsigned grid = unsigned(std::min<int64_t>(want, int64_t(per_sm) * d.multiprocessors));
   void* args[] = {&p};
   DVI_CUDA(cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlock), args, 0, d.stream));
+  if (d.phase_profile) {  // DVISIM_APGD_PHASES: block 0's clock at each phase boundary of the first trials
+    std::vector<long long> h(size_t(kPhaseStampTrials) * 5);
+    DVI_CUDA(cudaMemcpyAsync(h.data(), S.stamps.data(), sizeof(long long) * h.size(), cudaMemcpyDeviceToHost,
+                             d.stream));
+    DVI_CUDA(cudaStreamSynchronize(d.stream));
+    for (int t = 0; t + 1 < kPhaseStampTrials && h[5 * (t + 1)] != 0; ++t) {
+      const long long* a = h.data() + 5 * t;
+      const long long ph[5] = {a[1] - a[0], a[2] - a[1], a[3] - a[2], a[4] - a[3], a[5] - a[4]};
+      for (int j = 0; j < 5; ++j) d.phase_cycles[j] += double(ph[j]);
+      ++d.phase_trials;
+    }
+  }
   return true;
 }
 

@@ -129,6 +129,7 @@ struct SolverScratch {
   DeviceBuffer<double> scalars{"reduction results"};
   DeviceBuffer<ApgdDeviceState> apgd{"APGD device control"};
   DeviceBuffer<float> vf{"APGD float-storage vectors"};  // 7 x 3 blocks: X[0..3], NX[0..2]
+  DeviceBuffer<long long> stamps{"APGD phase stamps"};  // DVISIM_APGD_PHASES only
 };
 
 struct DeviceState {
@@ -145,6 +146,12 @@ struct DeviceState {
   int64_t pairs = 0;
   int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)
   bool cooperative = false;  // the device can launch cooperative kernels (grid-wide barriers: apgdPersistentKernel)
+  // DVISIM_APGD_PHASES set: the persistent APGD kernel's block 0 stamps its phases (gather, wait, step/Schur/test,
+  // wait, control) for the first trials of every solve; the sums (SM cycles) are printed when the system goes.
+  bool phase_profile = false;
+  int persistent_blocks = 4;  // DVISIM_APGD_PERSISTENT_BLOCKS (3 or 4): resident blocks per SM of that kernel
+  double phase_cycles[5] = {};
+  int64_t phase_trials = 0;
   cudaEvent_t ev[kStageCount + 1] = {};
   size_t prev_count = 0;  // contacts of the previous step (warm start source)
   real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)

@@ -77,7 +77,7 @@ for m in "$@"; do
           echo "-- storage $f, persistent APGD kernel $pe"
           $BIN bench scaling --out "$LOGS/probe_${f}_$pe" --scenes ${PROBE_SCENES:-pile} --engines gpu \
             --sizes ${PROBE_SIZES:-10k,100k,1M} --budget 3 --storage $f --gpu-persistent $pe 2>&1 | tr '\r' '\n' |
-            grep -E "^(gpu|engine) |copy|^  stages"
+            grep -E "^(gpu|engine) |copy|^  stages|^apgd phases"
         done
       done ;;
     ncu)  # kernel durations (ncu, serialised, no launch gaps) of the first NCU_COUNT launches of a GPU pile run
