@@ -516,11 +516,12 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, 
   }
   REQUIRE(r100 > 0);
   cfg.solver_settings.tolerance = 3 * r100;  // reached before iteration 100 in the first step
-  REQUIRE(cfg.gpu_persistent_solver);  // the default
+  SystemConfig persistent_cfg = cfg;
+  persistent_cfg.gpu_persistent_max_blocks = int64_t(1) << 40;
   System cpu(cfg);
-  auto persistent = makeGpuSystem(cfg);
+  auto persistent = makeGpuSystem(persistent_cfg);
   SystemConfig graphs_cfg = cfg;
-  graphs_cfg.gpu_persistent_solver = false;
+  graphs_cfg.gpu_persistent_max_blocks = 0;
   auto graphs = makeGpuSystem(graphs_cfg);
   SystemConfig plain_cfg = graphs_cfg;
   plain_cfg.gpu_graphs = false;
@@ -562,9 +563,9 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
   cfg.solver_settings.max_iterations = 200;
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);
-  SystemConfig plain_cfg = cfg;  // trial by trial, kernel by kernel (the default: one persistent kernel)
+  SystemConfig plain_cfg = cfg;  // trial by trial, kernel by kernel (the default here: one persistent kernel)
   plain_cfg.gpu_graphs = false;
-  plain_cfg.gpu_persistent_solver = false;
+  plain_cfg.gpu_persistent_max_blocks = 0;
   auto plain = makeGpuSystem(plain_cfg);
   buildPile(cpu, 10000, 7, true, 1.7);
   buildPile(*gpu, 10000, 7, true, 1.7);
@@ -640,9 +641,9 @@ TEST_CASE("a plate under 2,025 spheres: the GPU's heavy-body gather equals the C
   if (!haveDevice()) return;
   const SystemConfig cfg = pileConfig();
   System cpu(cfg);
-  auto gpu = makeGpuSystem(cfg);  // the persistent APGD kernel: heavy chunks inside it
+  auto gpu = makeGpuSystem(cfg);  // the persistent APGD kernel (~4,000 contacts): heavy chunks inside it
   SystemConfig trials_cfg = cfg;  // trial by trial: HeavyGatherKernel
-  trials_cfg.gpu_persistent_solver = false;
+  trials_cfg.gpu_persistent_max_blocks = 0;
   auto trials = makeGpuSystem(trials_cfg);
   const real r = real(0.01);
   for (System* sys : {&cpu, gpu.get(), trials.get()}) {

@@ -84,7 +84,8 @@ struct ScalingOptions {
   bool record = false, quick = false;
   std::vector<std::string> sizes, scenes, engines;
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
-  bool gpu_graphs = true, gpu_persistent = true;
+  bool gpu_graphs = true;
+  long long gpu_persistent_max = -1;  // -1: SystemConfig's default
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
@@ -555,7 +556,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.solver_settings.tolerance = 0;  // all 50 iterations
   cfg.threads = int(threads);
   cfg.gpu_graphs = o.gpu_graphs;
-  cfg.gpu_persistent_solver = o.gpu_persistent;
+  if (o.gpu_persistent_max >= 0) cfg.gpu_persistent_max_blocks = o.gpu_persistent_max;
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
@@ -686,8 +687,8 @@ int runScaling(const ScalingOptions& o) {
        << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: "
-       << (o.gpu_persistent ? "all in one cooperative kernel per solve"
-                            : o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
+       << "all in one cooperative kernel per solve up to " << cfg.gpu_persistent_max_blocks << " blocks, above that "
+       << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
@@ -721,11 +722,12 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
   cmd->add_option("--gpu-graphs", o->gpu_graphs,
-                  "Without --gpu-persistent: GPU APGD trials as one CUDA graph each (true, the default) or kernel by "
+                  "GPU APGD trials launched one by one: as one CUDA graph each (true, the default) or kernel by "
                   "kernel (false)");
-  cmd->add_option("--gpu-persistent", o->gpu_persistent,
-                  "All GPU APGD trials of a solve in one cooperative kernel (true, the default) or launched trial by "
-                  "trial (false)");
+  cmd->add_option("--gpu-persistent-max", o->gpu_persistent_max,
+                  "APGD problems of at most this many blocks run all trials in one cooperative kernel (0: never; "
+                  "default: SystemConfig's)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));

@@ -93,44 +93,21 @@ DVI_HD real entryColumnSum(int32_t ent, const EntryLayout& L, const real* colnor
   return colnorm[6 * (L.rb0 + i / 3) + 3 * (ent & 1) + i % 3];
 }
 
-// The impulses of a Schur product's input as an entry reads them: value(i) = x[i], block(b) = x[3b..3b+2].
-// The GPU's persistent APGD kernel reads a trial's new iterate through a reader that computes it from the
-// previous two (gpu_solver.cu: StepImpulses) instead of storing it first.
-struct ArrayImpulses {
-  const real* x;
-  DVI_HD real value(int64_t i) const { return x[i]; }
-  DVI_HD void block(int64_t b, real* out) const {
-    for (int j = 0; j < 3; ++j) out[j] = x[3 * b + j];
-  }
-};
-
 // Adds adjacency entry ent's impulse on its body to (F, T): contacts through their compact Jacobian,
-// rows through their full one; the impulses read through xs (ArrayImpulses: x in the layout L).
-// JT: ContactJacobian, or ContactJacobianF (jacobian.h).
-template <class JT, class XS>
-DVI_HD void accumulateEntryImpulseFrom(int32_t ent, const EntryLayout& L, const JT* jac, const ConstraintRow* rows,
-                                       const XS& xs, Vec3& F, Vec3& T) {
-  if (ent < 2 * L.nc) {
-    const int32_t k = ent >> 1;
-    const ContactJacobian J = loadJacobian(jac[k]);
-    if (L.normal_only) {
-      accumulateContactNormalImpulse(J, ent & 1, xs.value(k), F, T);
-    } else {
-      real x[3];
-      xs.block(k, x);
-      accumulateContactImpulse(J, ent & 1, x, F, T);
-    }
-  } else {
-    const int64_t r = (int64_t(ent) - 2 * L.nc) >> 1;
-    const ConstraintRow& R = rows[r];
-    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, xs.value(3 * L.rb0 + r), F, T);
-  }
-}
-
+// rows through their full one; x in the layout L. JT: ContactJacobian, or ContactJacobianF (jacobian.h).
 template <class JT>
 DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryLayout& L, const JT* jac, const ConstraintRow* rows,
                                    const real* x, Vec3& F, Vec3& T) {
-  accumulateEntryImpulseFrom(ent, L, jac, rows, ArrayImpulses{x}, F, T);
+  if (ent < 2 * L.nc) {
+    const int32_t k = ent >> 1;
+    const ContactJacobian J = loadJacobian(jac[k]);
+    if (L.normal_only) accumulateContactNormalImpulse(J, ent & 1, x[k], F, T);
+    else accumulateContactImpulse(J, ent & 1, x + 3 * int64_t(k), F, T);
+  } else {
+    const int64_t r = (int64_t(ent) - 2 * L.nc) >> 1;
+    const ConstraintRow& R = rows[r];
+    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * L.rb0 + r], F, T);
+  }
 }
 
 }  // namespace dvi

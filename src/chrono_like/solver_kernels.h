@@ -111,7 +111,8 @@ struct ApgdStepT {
   real beta, t;
   real* gn;
   bool grad_form = false;
-  DVI_HD void block(int64_t k, real* x) const {  // g_{k+1} of block k, not stored
+  DVI_HD void operator()(int64_t k) const {
+    real x[3];
     const real te = t * eta[k];
     for (int j = 0; j < 3; ++j) {
       const int64_t i = 3 * k + j;
@@ -121,15 +122,6 @@ struct ApgdStepT {
       x[j] = y - te * (grad_form ? Ny : Ny + r[i]);
     }
     projectBlock(s, k, x);
-  }
-  DVI_HD real value(int64_t i) const {  // one unknown of g_{k+1} (its block computed; an impulse reader)
-    real x[3];
-    block(i / 3, x);
-    return x[i % 3];
-  }
-  DVI_HD void operator()(int64_t k) const {
-    real x[3];
-    block(k, x);
     for (int j = 0; j < 3; ++j) gn[3 * k + j] = x[j];
   }
 };

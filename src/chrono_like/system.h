@@ -81,11 +81,13 @@ struct SystemConfig {
   // GPU backend: run each APGD trial (step, Schur product, test, control) as one captured CUDA graph,
   // launched once per trial; false launches the kernels one by one (same results, more launch latency).
   bool gpu_graphs = true;
-  // GPU backend: run all APGD trials of a solve in one cooperative kernel (grid-wide barriers between the
-  // step, the gather and the fused Schur/test pass; the control is updated in every block). Bitwise the same
-  // iterates as the trial-by-trial launches, which run when this is false or the device has no cooperative
-  // launch. Jacobi and BB always launch kernel by kernel.
-  bool gpu_persistent_solver = true;
+  // GPU backend: an APGD problem of at most this many blocks (contacts, or row blocks) runs all its trials in one
+  // cooperative kernel (grid-wide barriers between the step, the gather and the fused Schur/test pass; the
+  // control updated in every block): small problems are bound by launch latency, and this removes it. Larger
+  // ones are bound by their bytes and launch trial by trial (gpu_graphs). Both give bitwise the same iterates.
+  // 0: never; the default is the crossover measured on an H100 (src/gpu/NOTES.md). Jacobi and BB always launch
+  // kernel by kernel, and so does a device without cooperative launch.
+  int64_t gpu_persistent_max_blocks = 32768;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

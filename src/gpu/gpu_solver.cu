@@ -262,18 +262,14 @@ struct GatherT {
   BodyDelta* delta;
   const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
   __device__ const real* input() const { return x_slot ? *x_slot : x; }
-  // Body i's delta from the impulses xs reads (ArrayImpulses, or the persistent kernel's StepImpulses).
-  template <class XS>
-  __device__ void body(int64_t i, const XS& xs) const {
-    const int32_t e0 = off[i], e1 = off[i + 1];
-    if (e1 - e0 >= kHeavyDegree) return;  // heavyGatherChunk
-    Vec3 F{0, 0, 0}, T{0, 0, 0};
-    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulseFrom(adj[e], L, jac, rows, xs, F, T);
-    delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
-  }
   __device__ void operator()(int64_t i) const {
     const real* xx = input();
-    if (xx) body(i, ArrayImpulses{xx});
+    if (!xx) return;
+    const int32_t e0 = off[i], e1 = off[i + 1];
+    if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
+    Vec3 F{0, 0, 0}, T{0, 0, 0};
+    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
+    delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
   }
 };
 
@@ -282,15 +278,15 @@ constexpr int kHeavyChunks = 32;  // blocks per heavy body (heavyGatherChunk)
 // Chunk c of heavy body h (heavy[h]), summed by the calling block: the entries c*kBlock + t,
 // c*kBlock + t + kHeavyChunks*kBlock, ... into a fixed-order tree in shared memory, stored as the chunk's partial;
 // the body's last chunk to finish (an atomic ticket, reset for the next product) adds the partials in chunk
-// order and writes the body's delta, so the sum is deterministic. xs: the impulses' reader (ArrayImpulses).
-template <class JT, class XS>
-__device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, const XS& xs, real* partial,
+// order and writes the body's delta, so the sum is deterministic. x: the impulses (never null here).
+template <class JT>
+__device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, const real* x, real* partial,
                                  uint32_t* ticket, int32_t h, int32_t c) {
   const int32_t i = heavy[h];
   const int t = threadIdx.x;
   Vec3 F{0, 0, 0}, T{0, 0, 0};
   for (int32_t e = g.off[i] + c * kBlock + t; e < g.off[i + 1]; e += kBlock * kHeavyChunks)
-    accumulateEntryImpulseFrom(g.adj[e], g.L, g.jac, g.rows, xs, F, T);
+    accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
   __shared__ real sh[6][kBlock];
   __shared__ bool last;
   sh[0][t] = F.x, sh[1][t] = F.y, sh[2][t] = F.z, sh[3][t] = T.x, sh[4][t] = T.y, sh[5][t] = T.z;
@@ -327,7 +323,7 @@ __global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy
                                                            uint32_t* ticket) {
   const real* x = g.input();
   if (!x) return;  // the same for every block of the launch
-  heavyGatherChunk(heavy, g, ArrayImpulses{x}, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
+  heavyGatherChunk(heavy, g, x, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
 }
 
 struct HeavyListF {
@@ -585,21 +581,22 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
 }
 
 // ---- All APGD trials of a solve in one cooperative kernel ----
-// At 100,000 contacts a trial of the launches above (step, gather, Schur pass b, test) took ~45 us on an H100
-// for ~6 us worth of bytes: each launch waits for the last, loads the control and the slots before its first
-// useful load, and the test's last block runs alone. The persistent kernel runs the same per-element functions
-// over a grid that stays resident, with two grid-wide barriers a trial:
-//   (1) the gather of g_{k+1}, each entry computing its block's projected step from (g_k, g_{k-1}) itself
-//       (StepImpulses: ApgdStepT::block), so the step needs no pass and no barrier of its own;
-//   (2) per block: the step stored into X[nw], Schur pass (b), and the test terms, by one thread;
-//   then every block sums the test partials itself, in slice order, and runs ApgdControl::afterTest, so all
-//   blocks hold the same control without a third barrier.
-// The steps, slices and sums are those of the trial-by-trial launches (ApgdStepT, reduceSlice), so both paths
+// A small problem's trial is bound by its launches: at 10,000 spheres (14,000 contacts) the four kernels of a
+// trial took ~25 us on an H100, each waiting for the last and loading the control before its first useful
+// load. The persistent kernel runs the same per-element functions over a grid that stays resident, with a
+// grid-wide barrier between the passes:
+//   (1) the projected step into X[nw];  (2) the gather, heavy bodies by chunks;  (3) Schur pass (b) and the test
+//   terms fused per block (the thread that writes a block's N x sums its test terms); the last block to finish
+//   sums the partials in slice order into the control state; after the barrier every block reads the five sums
+//   and runs ApgdControl::afterTest itself, so all blocks hold the same control.
+// Large problems are bound by their bytes (~650 B per contact a trial), where a resident grid of 3 blocks per
+// SM moves them slower than full-occupancy launches; SystemConfig::gpu_persistent_max_blocks picks the path.
+// The slices and sums are those of the trial-by-trial launches (reduceSlice, reducePartials), so both paths
 // give bitwise the same iterates ([gpu] test "GPU APGD on the device").
 template <class V, class JT>
 struct PersistentApgd {
   ApgdBuffers<V> B;
-  GatherT<JT> g;
+  GatherT<JT> g;  // x set per trial
   const ConstraintRow* rows;
   int64_t nc, ncb, n;  // contacts, contact blocks, blocks (contact blocks, then row blocks)
   int64_t nbodies;
@@ -611,10 +608,11 @@ struct PersistentApgd {
   real* heavy_partial;
   uint32_t* heavy_ticket;
   ApgdDeviceState* st;
-  long long* stamps;  // null, or kPhaseStampTrials x 5 clock64() stamps of block 0 (DVISIM_APGD_PHASES)
+  long long* stamps;  // null, or kPhaseStampTrials x kPhaseStamps clock64() stamps of block 0 (DVISIM_APGD_PHASES)
 };
 
 constexpr int kPhaseStampTrials = 64;
+constexpr int kPhaseStamps = 6;  // step | wait | gather | wait | Schur (b) + test (+ the last block's sums) | wait
 
 // Schur pass (b) of block i, the same functors as schur(): contact i (or the normal rows 3i..3i+2), or row
 // block i - ncb.
@@ -634,31 +632,33 @@ __device__ __forceinline__ void schurBlock(const PersistentApgd<V, JT>& p, int64
 }
 
 template <class V, class JT>
-struct StepSchurTestF {  // pass (2) of block i: its step stored, its N x, then its test terms (reading both back)
+struct SchurTestF {  // pass (3): block i's N x, then its test terms (which read that N x back, same thread)
   const PersistentApgd<V, JT>& p;
-  kern::ApgdStepT<V> step;
   SchurOut<V> out;
   kern::ApgdTestT<V> test;
   __device__ void operator()(int64_t i, double* acc) const {
-    step(i);
     schurBlock(p, i, out);
     test(i, acc);
   }
 };
 
-// Blocks of 256 resident per SM (a cooperative grid must fit at once): 4 caps a thread at 64 registers, 3 at 80.
+// Blocks of 256 resident per SM (the cooperative grid must fit at once): at most 80 registers a thread (64 for
+// 4 blocks spilled the float kernel's loops, and the 100k pile's solve was 20% slower on an H100).
+constexpr int kPersistentBlocksPerSm = 3;
 
 __device__ __forceinline__ void phaseStamp(long long* stamps, int trial, int j) {
-  if (stamps && blockIdx.x == 0 && threadIdx.x == 0 && trial < kPhaseStampTrials) stamps[5 * trial + j] = clock64();
+  if (stamps && blockIdx.x == 0 && threadIdx.x == 0 && trial < kPhaseStampTrials)
+    stamps[kPhaseStamps * trial + j] = clock64();
 }
 
-template <class V, class JT, int MinBlocks>
-__global__ void __launch_bounds__(kBlock, MinBlocks)
+template <class V, class JT>
+__global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
     apgdPersistentKernel(const __grid_constant__ PersistentApgd<V, JT> p) {
   namespace cg = cooperative_groups;
   cg::grid_group grid = cg::this_grid();
   __shared__ alignas(algo::ApgdControl) unsigned char c_mem[sizeof(algo::ApgdControl)];
   __shared__ double sums[5];
+  __shared__ bool last;
   algo::ApgdControl& c = *reinterpret_cast<algo::ApgdControl*>(c_mem);
   if (threadIdx.x == 0) c = p.st->c;
   __syncthreads();
@@ -666,31 +666,54 @@ __global__ void __launch_bounds__(kBlock, MinBlocks)
   const int64_t tid = int64_t(blockIdx.x) * kBlock + threadIdx.x, stride = int64_t(gridDim.x) * kBlock;
   for (int trial = 0; !c.done; ++trial) {  // c is the same in every block
     real* xn = pickX(p.B, c.nw);
-    const kern::ApgdStepT<V> step{p.B.bs, pickX(p.B, c.cur), pickX(p.B, c.old), pickNX(p.B, c.ncur), pickNX(p.B, c.nold),
-                                  p.B.r,  p.B.eta,           c.beta,           real(1) / c.L,      xn,
-                                  grad_form};
     phaseStamp(p.stamps, trial, 0);
-    // (1) Schur pass (a) of g_{k+1}, computed per entry
-    for (int64_t i = tid; i < p.nbodies; i += stride) p.g.body(i, step);
-    for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
-      heavyGatherChunk(p.heavy, p.g, step, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
+    {  // (1) the projected step
+      const kern::ApgdStepT<V> f{p.B.bs, pickX(p.B, c.cur), pickX(p.B, c.old), pickNX(p.B, c.ncur), pickNX(p.B, c.nold),
+                                 p.B.r,  p.B.eta,           c.beta,           real(1) / c.L,      xn,
+                                 grad_form};
+      for (int64_t k = tid; k < p.n; k += stride) f(k);
+    }
     phaseStamp(p.stamps, trial, 1);
     grid.sync();
     phaseStamp(p.stamps, trial, 2);
-    {  // (2) the step stored, Schur pass (b) and the test terms
+    {  // (2) Schur pass (a): the gather
+      GatherT<JT> g = p.g;
+      g.x = xn;
+      for (int64_t i = tid; i < p.nbodies; i += stride) g(i);
+      for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
+        heavyGatherChunk(p.heavy, g, xn, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
+    }
+    phaseStamp(p.stamps, trial, 3);
+    grid.sync();
+    phaseStamp(p.stamps, trial, 4);
+    {  // (3) Schur pass (b) and the test terms
       const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
       const kern::ApgdTestT<V> test{p.B.bs,  pickX(p.B, c.cur), pickX(p.B, c.old),   pickNX(p.B, c.ncur),
                                     pickNX(p.B, c.nold), xn, pickNX(p.B, c.nnw), p.B.r,
                                     p.B.eta, c.beta,      p.B.a,              p.B.inv_a,
                                     grad_form};
-      const StepSchurTestF<V, JT> f{p, step, out, test};
+      const SchurTestF<V, JT> f{p, out, test};
       for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
     }
-    phaseStamp(p.stamps, trial, 3);
+    // The last block to finish sums the partials. (Every block summing them itself contended for the same L2
+    // lines: 9 us a trial at 100,000 contacts on an H100.)
+    __threadfence();  // this block's partials are visible before it counts itself
+    if (threadIdx.x == 0) last = atomicAdd(&p.st->blocks_done, 1u) == gridDim.x - 1;
+    __syncthreads();
+    if (last) {
+      __threadfence();
+      reducePartials<5>(p.slices, p.partial, sums);
+      if (threadIdx.x == 0) {
+        for (int m = 0; m < 5; ++m) p.st->sums[m] = sums[m];
+        p.st->blocks_done = 0;
+      }
+    }
+    phaseStamp(p.stamps, trial, 5);
     grid.sync();
-    phaseStamp(p.stamps, trial, 4);
-    reducePartials<5>(p.slices, p.partial, sums);  // every block: the same partials in the same order
-    if (threadIdx.x == 0) c.afterTest(sums);
+    if (threadIdx.x == 0) {
+      for (int m = 0; m < 5; ++m) sums[m] = __ldcg(p.st->sums + m);
+      c.afterTest(sums);
+    }
     __syncthreads();
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) p.st->c = c;
@@ -725,12 +748,11 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
   p.st = S.apgd.data();
   p.stamps = nullptr;
   if (d.phase_profile) {
-    S.stamps.resize(size_t(kPhaseStampTrials) * 5);
+    S.stamps.resize(size_t(kPhaseStampTrials) * kPhaseStamps);
     S.stamps.fillZero(d.stream);
     p.stamps = S.stamps.data();
   }
-  const void* kernel = d.persistent_blocks == 3 ? reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT, 3>)
-                                                : reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT, 4>);
+  const void* kernel = reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT>);
   int per_sm = 0;
   DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kBlock, 0));
   if (per_sm < 1) return false;
@@ -739,14 +761,13 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
   void* args[] = {&p};
   DVI_CUDA(cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlock), args, 0, d.stream));
   if (d.phase_profile) {  // DVISIM_APGD_PHASES: block 0's clock at each phase boundary of the first trials
-    std::vector<long long> h(size_t(kPhaseStampTrials) * 5);
+    std::vector<long long> h(size_t(kPhaseStampTrials) * kPhaseStamps);
     DVI_CUDA(cudaMemcpyAsync(h.data(), S.stamps.data(), sizeof(long long) * h.size(), cudaMemcpyDeviceToHost,
                              d.stream));
     DVI_CUDA(cudaStreamSynchronize(d.stream));
-    for (int t = 0; t + 1 < kPhaseStampTrials && h[5 * (t + 1)] != 0; ++t) {
-      const long long* a = h.data() + 5 * t;
-      const long long ph[5] = {a[1] - a[0], a[2] - a[1], a[3] - a[2], a[4] - a[3], a[5] - a[4]};
-      for (int j = 0; j < 5; ++j) d.phase_cycles[j] += double(ph[j]);
+    for (int t = 0; t + 1 < kPhaseStampTrials && h[size_t(kPhaseStamps * (t + 1))] != 0; ++t) {
+      const long long* a = h.data() + kPhaseStamps * t;
+      for (int j = 0; j < kPhaseStamps; ++j) d.phase_cycles[j] += double(a[j + 1] - a[j]);
       ++d.phase_trials;
     }
   }
@@ -767,7 +788,7 @@ struct GradientToFloatF {
 template <class V>
 void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, V* const* NX, real a,
                         real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
-                        bool graphs, bool persistent) {
+                        bool graphs, int64_t persistent_max) {
   SolverScratch& S = d.solver;
   S.apgd.resize(1);
   S.partial.resize(size_t(reduceBlocksFor(n)) * 5);
@@ -778,7 +799,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
-  if (persistent && apgdPersistent<V>(d, n, B)) {
+  if (n <= persistent_max && apgdPersistent<V>(d, n, B)) {
     DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
     DVI_CUDA(cudaStreamSynchronize(d.stream));
     c = h.c;
@@ -822,7 +843,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
 
 void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, real* const* NX, real a,
                          real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
-                         bool graphs, bool persistent, bool float_storage) {
+                         bool graphs, int64_t persistent_max, bool float_storage) {
   if constexpr (!std::is_same_v<real, float>) {
     if (float_storage) {
       SolverScratch& S = d.solver;
@@ -831,13 +852,13 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
       float* NXf[3];
       for (int i = 0; i < 3; ++i) NXf[i] = S.vf.data() + i * len;
       launchMap(d, len, GradientToFloatF{NX[c.ncur], r, NXf[c.ncur]}, "launch of GradientToFloatF (APGD start)");
-      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, graphs, persistent);
+      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, graphs, persistent_max);
       if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
       return;
     }
   }
   (void)float_storage;
-  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, graphs, persistent);
+  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, graphs, persistent_max);
   if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
 }
 
@@ -853,8 +874,8 @@ const char* functorName() {
 class GpuOps {
  public:
   static constexpr bool kDeviceLoop = true;
-  GpuOps(DeviceState& d, const ProblemView& p, bool graphs, bool persistent, bool float_storage)
-      : d_(d), p_(p), graphs_(graphs), persistent_(persistent), float_(float_storage) {
+  GpuOps(DeviceState& d, const ProblemView& p, bool graphs, int64_t persistent_max, bool float_storage)
+      : d_(d), p_(p), graphs_(graphs), persistent_max_(persistent_max), float_(float_storage) {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
     for (int i = 0; i < 7; ++i) {
@@ -891,7 +912,7 @@ class GpuOps {
   // (DeviceCcpResult), so the device loop keeps no per-iteration residuals (st is left as it is).
   void apgdIterate(algo::ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
                    SolverStats& /*st*/) {
-    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), graphs_, persistent_,
+    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), graphs_, persistent_max_,
                         float_);
   }
 
@@ -899,7 +920,7 @@ class GpuOps {
   DeviceState& d_;
   ProblemView p_;
   bool graphs_;
-  bool persistent_;
+  int64_t persistent_max_;
   bool float_;
   real* vec_[7] = {};
 };
@@ -1165,7 +1186,7 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, cfg.gpu_graphs, cfg.gpu_persistent_solver, floatStorage(cfg.solver_settings, true));
+  GpuOps ops(d, pv, cfg.gpu_graphs, cfg.gpu_persistent_max_blocks, floatStorage(cfg.solver_settings, true));
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout

@@ -99,6 +99,7 @@ struct ApgdDeviceState {
   real* schur_y;        // NX[c.nnw] (real storage)
   float* schur_yf;      // NX[c.nnw] (float storage, VectorStorage)
   unsigned int blocks_done;  // test-reduction blocks finished this trial (the last one updates c)
+  double sums[5];            // the persistent kernel's test sums of this trial (written by its last block)
 };
 
 struct SolverScratch {
@@ -146,11 +147,11 @@ struct DeviceState {
   int64_t pairs = 0;
   int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)
   bool cooperative = false;  // the device can launch cooperative kernels (grid-wide barriers: apgdPersistentKernel)
-  // DVISIM_APGD_PHASES set: the persistent APGD kernel's block 0 stamps its phases (gather, wait, step/Schur/test,
-  // wait, control) for the first trials of every solve; the sums (SM cycles) are printed when the system goes.
+  // DVISIM_APGD_PHASES set: the persistent APGD kernel's block 0 stamps its phases (step, wait, gather, wait,
+  // Schur/test, wait and control) for the first trials of every solve; the sums (SM cycles) are printed when the
+  // system goes (a profiling switch: one more read-back per solve).
   bool phase_profile = false;
-  int persistent_blocks = 4;  // DVISIM_APGD_PERSISTENT_BLOCKS (3 or 4): resident blocks per SM of that kernel
-  double phase_cycles[5] = {};
+  double phase_cycles[6] = {};
   int64_t phase_trials = 0;
   cudaEvent_t ev[kStageCount + 1] = {};
   size_t prev_count = 0;  // contacts of the previous step (warm start source)

@@ -71,12 +71,13 @@ for m in "$@"; do
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
     scaling) bench scaling --budget 5 ;;
     probe)  # unrecorded GPU timings (PROBE_SIZES, default 10k,100k,1M; PROBE_SCENES, default pile) for each APGD
-            # storage in PROBE_STORAGE (default "float real") and launch in PROBE_PERSISTENT (default "true false")
+            # storage in PROBE_STORAGE (default "float real") and --gpu-persistent-max in PROBE_PERSISTENT
+            # (default "1000000000 0": every solve in the persistent kernel, then none)
       for f in ${PROBE_STORAGE:-float real}; do
-        for pe in ${PROBE_PERSISTENT:-true false}; do
-          echo "-- storage $f, persistent APGD kernel $pe"
+        for pe in ${PROBE_PERSISTENT:-1000000000 0}; do
+          echo "-- storage $f, persistent APGD kernel up to $pe blocks"
           $BIN bench scaling --out "$LOGS/probe_${f}_$pe" --scenes ${PROBE_SCENES:-pile} --engines gpu \
-            --sizes ${PROBE_SIZES:-10k,100k,1M} --budget 3 --storage $f --gpu-persistent $pe 2>&1 | tr '\r' '\n' |
+            --sizes ${PROBE_SIZES:-10k,100k,1M} --budget 3 --storage $f --gpu-persistent-max $pe 2>&1 | tr '\r' '\n' |
             grep -E "^(gpu|engine) |copy|^  stages|^apgd phases"
         done
       done ;;
