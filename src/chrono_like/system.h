@@ -11,6 +11,8 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -83,11 +85,11 @@ struct SystemConfig {
   bool gpu_graphs = true;
   // GPU backend: an APGD problem of at most this many blocks (contacts, or row blocks) runs all its trials in one
   // cooperative kernel (grid-wide barriers between the step, the gather and the fused Schur/test pass; the
-  // control updated in every block): small problems are bound by launch latency, and this removes it. Larger
-  // ones are bound by their bytes and launch trial by trial (gpu_graphs). Both give bitwise the same iterates.
-  // 0: never; the default is the crossover measured on an H100 (src/gpu/NOTES.md). Jacobi and BB always launch
-  // kernel by kernel, and so does a device without cooperative launch.
-  int64_t gpu_persistent_max_blocks = 32768;
+  // control updated in every block), larger ones trial by trial (gpu_graphs). Both give bitwise the same iterates.
+  // 0: never. The default is every size: on an H100 the persistent kernel was faster from 10k to 1M spheres
+  // (src/gpu/NOTES.md). Jacobi and BB always launch kernel by kernel, and so does a device without cooperative
+  // launch.
+  int64_t gpu_persistent_max_blocks = std::numeric_limits<int64_t>::max();
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

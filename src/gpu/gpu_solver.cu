@@ -58,21 +58,30 @@ __device__ __forceinline__ void reduceBlockSlice(int64_t n, const F& f, double* 
   reduceSlice<M>(int(blockIdx.x), int(gridDim.x), n, f, partial);
 }
 
-// The partials of nblk blocks summed in order by one block; the result lands in out (thread 0's view only
-// is defined before the final __syncthreads).
+// The partials of nblk blocks summed in a fixed order by one block: strided per thread, then a fixed shuffle
+// tree per warp, then the warps' sums in order by thread 0 (one barrier: the 5 sums of the APGD test used to
+// take a cub::BlockReduce and a barrier each). The result lands in out (thread 0's view only is defined before
+// the final __syncthreads).
 template <int M>
 __device__ __forceinline__ void reducePartials(int nblk, const double* partial, double* out) {
   double acc[M];
   for (int m = 0; m < M; ++m) acc[m] = 0;
   for (int b = threadIdx.x; b < nblk; b += blockDim.x)
     for (int m = 0; m < M; ++m) acc[m] += __ldcg(partial + b * M + m);  // L2: written by other blocks
-  using BR = cub::BlockReduce<double, kBlock>;
-  __shared__ typename BR::TempStorage tmp;
-  for (int m = 0; m < M; ++m) {
-    const double s = BR(tmp).Sum(acc[m]);
-    if (threadIdx.x == 0) out[m] = s;
-    __syncthreads();
-  }
+  for (int m = 0; m < M; ++m)
+    for (int o = 16; o > 0; o >>= 1) acc[m] += __shfl_down_sync(0xffffffffu, acc[m], o);
+  __shared__ double warp_sum[M][kBlock / 32];
+  const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
+  if (lane == 0)
+    for (int m = 0; m < M; ++m) warp_sum[m][warp] = acc[m];
+  __syncthreads();
+  if (threadIdx.x == 0)
+    for (int m = 0; m < M; ++m) {
+      double s = 0;
+      for (int w = 0; w < kBlock / 32; ++w) s += warp_sum[m][w];
+      out[m] = s;
+    }
+  __syncthreads();
 }
 
 template <int M, class F>
@@ -571,12 +580,12 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<
 }
 
 template <class V>
-void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDeviceState* st) {
+void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDeviceState* st, int slices) {
   SolverScratch& S = d.solver;
   apgdStepKernel<V><<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
   cudaCheck(cudaGetLastError(), "launch of apgdStepKernel", __FILE__, __LINE__);
   schur<V>(d, nullptr, nullptr, schurXSlot(st), schurYSlot<V>(st), std::is_same_v<V, real> ? nullptr : B.r);
-  apgdTestKernel<V><<<reduceBlocksFor(n), kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
+  apgdTestKernel<V><<<slices, kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
   cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
 }
 
@@ -601,7 +610,7 @@ struct PersistentApgd {
   int64_t nc, ncb, n;  // contacts, contact blocks, blocks (contact blocks, then row blocks)
   int64_t nbodies;
   bool normal_only;
-  int slices;  // of the test reduction: reduceBlocksFor(n), as launchApgdTrial's grid
+  int slices;  // of the test reduction (apgdSlices), as launchApgdTrial's grid
   double* partial;
   const int32_t* heavy;
   int32_t n_heavy;
@@ -697,8 +706,10 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
     }
     // The last block to finish sums the partials. (Every block summing them itself contended for the same L2
     // lines: 9 us a trial at 100,000 contacts on an H100.)
-    __threadfence();  // this block's partials are visible before it counts itself
-    if (threadIdx.x == 0) last = atomicAdd(&p.st->blocks_done, 1u) == gridDim.x - 1;
+    if (threadIdx.x == 0) {  // thread 0 wrote this block's partials (reduceSlice)
+      __threadfence();       // they are visible before the block counts itself
+      last = atomicAdd(&p.st->blocks_done, 1u) == gridDim.x - 1;
+    }
     __syncthreads();
     if (last) {
       __threadfence();
@@ -719,12 +730,34 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
   if (blockIdx.x == 0 && threadIdx.x == 0) p.st->c = c;
 }
 
-// Runs the trials in apgdPersistentKernel; false when the device cannot run it (no cooperative launch), and
-// the caller then launches trial by trial. The control is in S.apgd on entry and on return.
 template <class V>
-bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
-  if (!d.cooperative) return false;
-  using JT = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
+using JacobianOf = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
+
+// Blocks of the persistent APGD kernel's grid that fit on the device at once (0: no cooperative launch).
+template <class V>
+int persistentGridMax(DeviceState& d) {
+  if (!d.cooperative) return 0;
+  int per_sm = 0;
+  DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(
+      &per_sm, reinterpret_cast<const void*>(&apgdPersistentKernel<V, JacobianOf<V>>), kBlock, 0));
+  return per_sm * d.multiprocessors;
+}
+
+// Slices of the APGD test reduction, the same on both paths (bitwise the same sums): at most one per block of
+// the persistent grid (497 slices over its 396 blocks made some blocks sum two at 100,000 contacts, and the
+// pass took twice as long for all to wait on).
+int apgdSlices(int64_t n, int grid_max) {
+  const int r = reduceBlocksFor(n);
+  return grid_max > 0 ? std::min(r, grid_max) : r;
+}
+
+// Runs the trials in apgdPersistentKernel over a grid of at most grid_max blocks; false when the device cannot
+// run it (grid_max 0), and the caller then launches trial by trial. The control is in S.apgd on entry and on
+// return.
+template <class V>
+bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid_max, int slices) {
+  if (grid_max < 1) return false;
+  using JT = JacobianOf<V>;
   SolverScratch& S = d.solver;
   const JT* jac = nullptr;
   if constexpr (std::is_same_v<JT, ContactJacobian>) jac = S.jac.data();
@@ -739,7 +772,7 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
   p.n = n;
   p.nbodies = int64_t(d.bodies.count);
   p.normal_only = d.normal_only;
-  p.slices = reduceBlocksFor(n);
+  p.slices = slices;
   p.partial = S.partial.data();
   p.heavy = S.heavy.data();
   p.n_heavy = int32_t(S.n_heavy);
@@ -753,11 +786,8 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B) {
     p.stamps = S.stamps.data();
   }
   const void* kernel = reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT>);
-  int per_sm = 0;
-  DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kBlock, 0));
-  if (per_sm < 1) return false;
   const int64_t want = std::max<int64_t>({blocksFor(n), blocksFor(p.nbodies), int64_t(p.n_heavy) * kHeavyChunks, 1});
-  const unsigned grid = unsigned(std::min<int64_t>(want, int64_t(per_sm) * d.multiprocessors));
+  const unsigned grid = unsigned(std::min<int64_t>(want, grid_max));
   void* args[] = {&p};
   DVI_CUDA(cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlock), args, 0, d.stream));
   if (d.phase_profile) {  // DVISIM_APGD_PHASES: block 0's clock at each phase boundary of the first trials
@@ -791,7 +821,9 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
                         bool graphs, int64_t persistent_max) {
   SolverScratch& S = d.solver;
   S.apgd.resize(1);
-  S.partial.resize(size_t(reduceBlocksFor(n)) * 5);
+  const int grid_max = persistentGridMax<V>(d);
+  const int slices = apgdSlices(n, grid_max);  // from the device alone: both paths sum alike
+  S.partial.resize(size_t(slices) * 5);
   const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
   ApgdDeviceState h{};
   h.c = c;
@@ -799,7 +831,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
-  if (n <= persistent_max && apgdPersistent<V>(d, n, B)) {
+  if (n <= persistent_max && apgdPersistent<V>(d, n, B, grid_max, slices)) {
     DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
     DVI_CUDA(cudaStreamSynchronize(d.stream));
     c = h.c;
@@ -810,7 +842,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
     cudaGraph_t graph = nullptr;
     DVI_CUDA(cudaStreamBeginCapture(d.stream, cudaStreamCaptureModeThreadLocal));
     try {
-      launchApgdTrial<V>(d, n, B, S.apgd.data());
+      launchApgdTrial<V>(d, n, B, S.apgd.data(), slices);
     } catch (...) {
       cudaStreamEndCapture(d.stream, &graph);
       if (graph) cudaGraphDestroy(graph);
@@ -827,7 +859,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
       const int batch = s.tolerance > 0 ? std::min(remaining, 16) : remaining;
       for (int b = 0; b < std::max(1, batch); ++b) {
         if (exec) DVI_CUDA(cudaGraphLaunch(exec, d.stream));
-        else launchApgdTrial<V>(d, n, B, S.apgd.data());
+        else launchApgdTrial<V>(d, n, B, S.apgd.data(), slices);
       }
       DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
       DVI_CUDA(cudaStreamSynchronize(d.stream));
