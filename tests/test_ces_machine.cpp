@@ -577,14 +577,22 @@ TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's; th
     auto cpu_sys = cesSystem(cfg, false);
     auto gpu_sys = cesSystem(cfg, true);
     CesMachine cpu(cfg, *cpu_sys), gpu(cfg, *gpu_sys);
+    // Under compute-sanitizer (DVISIM_SANITIZER_RUN, src/gpu/tools/run_device.sh) 0.05 s: the kernels all run
+    // (the first part above ran them against the CPU), and no particle reaches the bins that soon.
+    const bool sanitizer_run = std::getenv("DVISIM_SANITIZER_RUN") != nullptr;
     int64_t closes = 0, steps = 0;
-    while (gpu.time() < 0.45) {
+    while (gpu.time() < (sanitizer_run ? 0.05 : 0.45)) {
       cpu.step();
       gpu.step();
       ++steps;
       closes += gpu.balance().closes() && gpu.particlesInFlight() == gpu.balance().in_flight;
     }
     CHECK(closes == steps);
+    if (sanitizer_run) {
+      WARN("DVISIM_SANITIZER_RUN: the mass-balance run cut to 0.05 s; collection not judged");
+      CHECK(gpu.balance().lost == 0);
+      return;
+    }
     const MassBalance a = cpu.balance(), b = gpu.balance();
     INFO("collected CPU " << a.collected << " (" << a.collected_fg << " fg), GPU " << b.collected << " ("
                           << b.collected_fg << " fg); fed " << a.fed << " and " << b.fed);
