@@ -34,40 +34,11 @@ __global__ void mapKernel(int64_t n, F f) {
   if (i < n) f(i);
 }
 
-// Partial `slice` of `slices` of a deterministic reduction: the slice's grid-strided elements of f (element
-// slice*kBlock + t + j*slices*kBlock in thread t), summed in a fixed tree. A kernel's block is a slice
-// (reduceBlockSlice); the persistent APGD kernel runs the slices of a fixed count over whatever grid it has,
-// so both sum every element in the same order.
-template <int M, class F>
-__device__ __forceinline__ void reduceSlice(int slice, int slices, int64_t n, const F& f, double* partial) {
-  double acc[M];
-  for (int m = 0; m < M; ++m) acc[m] = 0;
-  for (int64_t i = int64_t(slice) * kBlock + threadIdx.x; i < n; i += int64_t(slices) * kBlock) f(i, acc);
-  using BR = cub::BlockReduce<double, kBlock>;
-  __shared__ typename BR::TempStorage tmp;
-  for (int m = 0; m < M; ++m) {
-    const double s = BR(tmp).Sum(acc[m]);
-    if (threadIdx.x == 0) partial[slice * M + m] = s;
-    __syncthreads();
-  }
-}
-
-// Block partials of a deterministic reduction: this block's grid-strided slice of f, summed in a fixed tree.
-template <int M, class F>
-__device__ __forceinline__ void reduceBlockSlice(int64_t n, const F& f, double* partial) {
-  reduceSlice<M>(int(blockIdx.x), int(gridDim.x), n, f, partial);
-}
-
-// The partials of nblk blocks summed in a fixed order by one block: strided per thread, then a fixed shuffle
-// tree per warp, then the warps' sums in order by thread 0 (one barrier: the 5 sums of the APGD test used to
-// take a cub::BlockReduce and a barrier each). The result lands in out (thread 0's view only is defined before
-// the final __syncthreads).
+// Sums acc[0..M) over the block in a fixed order: a fixed shuffle tree per warp, then the warps' sums in order
+// by thread 0, which alone holds the result (written to out; one barrier, where a cub::BlockReduce per value
+// took one each). Ends with a barrier, so the shared scratch can be used again at once.
 template <int M>
-__device__ __forceinline__ void reducePartials(int nblk, const double* partial, double* out) {
-  double acc[M];
-  for (int m = 0; m < M; ++m) acc[m] = 0;
-  for (int b = threadIdx.x; b < nblk; b += blockDim.x)
-    for (int m = 0; m < M; ++m) acc[m] += __ldcg(partial + b * M + m);  // L2: written by other blocks
+__device__ __forceinline__ void blockSumFixed(double* acc, double* out) {
   for (int m = 0; m < M; ++m)
     for (int o = 16; o > 0; o >>= 1) acc[m] += __shfl_down_sync(0xffffffffu, acc[m], o);
   __shared__ double warp_sum[M][kBlock / 32];
@@ -82,6 +53,35 @@ __device__ __forceinline__ void reducePartials(int nblk, const double* partial, 
       out[m] = s;
     }
   __syncthreads();
+}
+
+// Partial `slice` of `slices` of a deterministic reduction: the slice's grid-strided elements of f (element
+// slice*kBlock + t + j*slices*kBlock in thread t), summed in a fixed tree. A kernel's block is a slice
+// (reduceBlockSlice); the persistent APGD kernel runs the slices of a fixed count over whatever grid it has,
+// so both sum every element in the same order.
+template <int M, class F>
+__device__ __forceinline__ void reduceSlice(int slice, int slices, int64_t n, const F& f, double* partial) {
+  double acc[M];
+  for (int m = 0; m < M; ++m) acc[m] = 0;
+  for (int64_t i = int64_t(slice) * kBlock + threadIdx.x; i < n; i += int64_t(slices) * kBlock) f(i, acc);
+  blockSumFixed<M>(acc, partial + int64_t(slice) * M);
+}
+
+// Block partials of a deterministic reduction: this block's grid-strided slice of f, summed in a fixed tree.
+template <int M, class F>
+__device__ __forceinline__ void reduceBlockSlice(int64_t n, const F& f, double* partial) {
+  reduceSlice<M>(int(blockIdx.x), int(gridDim.x), n, f, partial);
+}
+
+// The partials of nblk blocks summed in a fixed order by one block (strided per thread, then blockSumFixed).
+// The result lands in out (thread 0's view only is defined before the final __syncthreads).
+template <int M>
+__device__ __forceinline__ void reducePartials(int nblk, const double* partial, double* out) {
+  double acc[M];
+  for (int m = 0; m < M; ++m) acc[m] = 0;
+  for (int b = threadIdx.x; b < nblk; b += blockDim.x)
+    for (int m = 0; m < M; ++m) acc[m] += __ldcg(partial + b * M + m);  // L2: written by other blocks
+  blockSumFixed<M>(acc, out);
 }
 
 template <int M, class F>
