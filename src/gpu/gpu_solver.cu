@@ -536,16 +536,28 @@ __host__ __device__ V** schurYSlot(ApgdDeviceState* st) {
   else return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_y));
 }
 
+// The trial's step and test functors for the control's current buffers (both launch paths).
+template <class V>
+__device__ __forceinline__ kern::ApgdStepT<V> apgdStepOf(const ApgdBuffers<V>& B, const algo::ApgdControl& c) {
+  constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
+  return kern::ApgdStepT<V>{B.bs,  pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold), B.r,
+                            B.eta, c.beta,          real(1) / c.L,   pickX(B, c.nw),    grad_form};
+}
+template <class V>
+__device__ __forceinline__ kern::ApgdTestT<V> apgdTestOf(const ApgdBuffers<V>& B, const algo::ApgdControl& c) {
+  constexpr bool grad_form = !std::is_same_v<V, real>;
+  return kern::ApgdTestT<V>{B.bs,           pickX(B, c.cur),  pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
+                            pickX(B, c.nw), pickNX(B, c.nnw), B.r,            B.eta,             c.beta,
+                            B.a,            B.inv_a,          grad_form};
+}
+
 template <class V>
 __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers<V> B, const ApgdDeviceState* st) {
   const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (k >= n) return;
   const algo::ApgdControl& c = st->c;
   if (c.done) return;
-  constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
-  const kern::ApgdStepT<V> f{B.bs,  pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold), B.r,
-                             B.eta, c.beta,          real(1) / c.L,   pickX(B, c.nw),    grad_form};
-  f(k);
+  apgdStepOf(B, c)(k);
 }
 
 // The test reduction, and in its last block to finish (a counter in st; the partials are then summed in
@@ -555,13 +567,7 @@ __global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<
                                                          double* partial) {
   const algo::ApgdControl& c = st->c;
   if (c.done) return;  // uniform: st->c changes only after every block has counted itself below
-  {
-    constexpr bool grad_form = !std::is_same_v<V, real>;
-    const kern::ApgdTestT<V> f{B.bs,           pickX(B, c.cur), pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
-                               pickX(B, c.nw), pickNX(B, c.nnw), B.r,           B.eta,           c.beta,
-                               B.a,            B.inv_a,         grad_form};
-    reduceBlockSlice<5>(n, f, partial);
-  }
+  reduceBlockSlice<5>(n, apgdTestOf(B, c), partial);
   __shared__ bool last;
   __threadfence();  // this block's partials are visible before it counts itself
   if (threadIdx.x == 0) last = atomicAdd(&st->blocks_done, 1u) == gridDim.x - 1;
@@ -598,8 +604,9 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
 //   terms fused per block (the thread that writes a block's N x sums its test terms); the last block to finish
 //   sums the partials in slice order into the control state; after the barrier every block reads the five sums
 //   and runs ApgdControl::afterTest itself, so all blocks hold the same control.
-// Large problems are bound by their bytes (~650 B per contact a trial), where a resident grid of 3 blocks per
-// SM moves them slower than full-occupancy launches; SystemConfig::gpu_persistent_max_blocks picks the path.
+// Large problems are bound by their bytes (~650 B per contact a trial); there it saves less, but it was still
+// faster at every size measured (10k to 1M spheres, H100 and H200: src/gpu/NOTES.md, session 8), so it is the
+// default; SystemConfig::gpu_persistent_max_blocks can send problems above a size trial by trial.
 // The slices and sums are those of the trial-by-trial launches (reduceSlice, reducePartials), so both paths
 // give bitwise the same iterates ([gpu] test "GPU APGD on the device").
 template <class V, class JT>
@@ -677,9 +684,7 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
     real* xn = pickX(p.B, c.nw);
     phaseStamp(p.stamps, trial, 0);
     {  // (1) the projected step
-      const kern::ApgdStepT<V> f{p.B.bs, pickX(p.B, c.cur), pickX(p.B, c.old), pickNX(p.B, c.ncur), pickNX(p.B, c.nold),
-                                 p.B.r,  p.B.eta,           c.beta,           real(1) / c.L,      xn,
-                                 grad_form};
+      const kern::ApgdStepT<V> f = apgdStepOf(p.B, c);
       for (int64_t k = tid; k < p.n; k += stride) f(k);
     }
     phaseStamp(p.stamps, trial, 1);
@@ -697,11 +702,7 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
     phaseStamp(p.stamps, trial, 4);
     {  // (3) Schur pass (b) and the test terms
       const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
-      const kern::ApgdTestT<V> test{p.B.bs,  pickX(p.B, c.cur), pickX(p.B, c.old),   pickNX(p.B, c.ncur),
-                                    pickNX(p.B, c.nold), xn, pickNX(p.B, c.nnw), p.B.r,
-                                    p.B.eta, c.beta,      p.B.a,              p.B.inv_a,
-                                    grad_form};
-      const SchurTestF<V, JT> f{p, out, test};
+      const SchurTestF<V, JT> f{p, out, apgdTestOf(p.B, c)};
       for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
     }
     // The last block to finish sums the partials. (Every block summing them itself contended for the same L2
