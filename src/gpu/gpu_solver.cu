@@ -275,25 +275,9 @@ struct GatherT {
     const real* xx = input();
     if (!xx) return;
     const int32_t e0 = off[i], e1 = off[i + 1];
-    if (e1 - e0 >= kHeavyDegree) return;  // heavyGatherChunk
+    if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
     Vec3 F{0, 0, 0}, T{0, 0, 0};
-    int32_t e = e0;
-    if (!L.normal_only) {
-      // Two contact entries at a time, their loads issued together: a body's entries are a chain of dependent
-      // loads (offset -> entry -> Jacobian and impulses), and at 100,000 contacts the gather waits on that
-      // latency (its data is in L2). The same sums in the same order as the loop below.
-      for (; e + 1 < e1; e += 2) {
-        const int32_t a = adj[e], b = adj[e + 1];
-        if (b >= 2 * L.nc) break;  // a row entry (rows sort after the contacts): the loop below
-        const ContactJacobian Ja = loadJacobian(jac[a >> 1]), Jb = loadJacobian(jac[b >> 1]);
-        const real* xa = xx + 3 * int64_t(a >> 1);
-        const real* xb = xx + 3 * int64_t(b >> 1);
-        const real ga[3] = {xa[0], xa[1], xa[2]}, gb[3] = {xb[0], xb[1], xb[2]};
-        accumulateContactImpulse(Ja, a & 1, ga, F, T);
-        accumulateContactImpulse(Jb, b & 1, gb, F, T);
-      }
-    }
-    for (; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
+    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
     delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
   }
 };
