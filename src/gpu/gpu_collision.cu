@@ -4,6 +4,7 @@
 // count -> scan -> write -> sort -> encode passes. The pair list comes out sorted by (a, b) and the contacts
 // by (shape_a, shape_b, feature), exactly as on the CPU.
 #include <cuda_runtime.h>
+#include <cooperative_groups.h>
 
 #include <algorithm>
 #include <cfloat>
@@ -214,19 +215,34 @@ __device__ void visitSlot(const PairSlots& S, int64_t s, Emit&& emit) {
   }
 }
 
-__global__ void pairCountKernel(PairSlots S, int64_t slots, uint64_t* count) {
-  const int64_t s = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (s > slots) return;
-  uint64_t c = 0;
-  if (s < slots) visitSlot(S, s, [&](int32_t, int32_t) { ++c; });
-  count[s] = c;
+// A pair's key: (a, b) in 2 x sh bits (sh = bitsFor(shapes - 1)), so that sorting the keys by their 2 sh low bits
+// orders the pairs by (a, b) in fewer radix passes than a 32-bit shift (5 instead of 7 at 100k shapes).
+__device__ __forceinline__ uint64_t packPair(int32_t a, int32_t b, int sh) {
+  return (uint64_t(uint32_t(a)) << sh) | uint32_t(b);
+}
+__device__ __forceinline__ void unpackPair(uint64_t key, int sh, int32_t& a, int32_t& b) {
+  a = int32_t(key >> sh);
+  b = int32_t(key & ((uint64_t(1) << sh) - 1));
 }
 
-__global__ void pairWriteKernel(PairSlots S, int64_t slots, const uint64_t* off, uint64_t* keys) {
+// One pass over the slots: each pair found takes the next place of a counter, aggregated over the warp's lanes
+// that emit at once (one atomic a group), and is written when it fits in cap. The keys are sorted afterwards,
+// so the order they land in does not matter; the count is exact either way (the caller re-runs with room for
+// it when it exceeds cap). Counting in a pass of its own and scanning the counts cost 80 us of a 100k-sphere
+// step on an H200 (ncu).
+__global__ void pairEmitKernel(PairSlots S, int64_t slots, int sh, uint64_t cap, unsigned long long* counter,
+                               uint64_t* keys) {
   const int64_t s = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (s >= slots) return;
-  uint64_t w = off[s];
-  visitSlot(S, s, [&](int32_t a, int32_t b) { keys[w++] = (uint64_t(uint32_t(a)) << 32) | uint32_t(b); });
+  visitSlot(S, s, [&](int32_t a, int32_t b) {
+    namespace cg = cooperative_groups;
+    const cg::coalesced_group g = cg::coalesced_threads();
+    unsigned long long base = 0;
+    if (g.thread_rank() == 0) base = atomicAdd(counter, static_cast<unsigned long long>(g.size()));
+    base = g.shfl(base, 0);
+    const uint64_t w = base + g.thread_rank();
+    if (w < cap) keys[w] = packPair(a, b, sh);
+  });
 }
 
 // ---- narrow phase ----
@@ -239,6 +255,7 @@ struct NarrowArgs {
   const Vec3* hull;
   const real* sweep;
   real envelope_rel;
+  int shift;  // of the pair keys (packPair)
 };
 
 struct PairPoses {
@@ -251,8 +268,7 @@ struct PairPoses {
 __device__ PairPoses pairPoses(const NarrowArgs& A, int64_t i) {
   PairPoses P;
   const uint64_t key = A.pairs[i];
-  P.a = int32_t(key >> 32);
-  P.b = int32_t(key & 0xFFFFFFFFu);
+  unpackPair(key, A.shift, P.a, P.b);
   P.sa = A.shapes[P.a];
   P.sb = A.shapes[P.b];
   P.wa = shapeWorldPose(Pose{A.pos[P.sa.body], A.rot[P.sa.body]}, P.sa);
@@ -363,8 +379,7 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
   int32_t a, b;
   if (n == 1) {
     const uint64_t key = A.pairs[i];
-    a = int32_t(key >> 32);
-    b = int32_t(key & 0xFFFFFFFFu);
+    unpackPair(key, A.shift, a, b);
     pts[0] = first[i];
   } else {
     collidePair(A, i, a, b, pts);  // deterministic: the same points as the count pass
@@ -484,10 +499,10 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats)
     }
   }
 
-  // 3. pairs: count -> scan -> write -> sort by (a, b)
+  // 3. pairs: emit (into the key buffer's capacity) -> sort by (a, b)
   const int64_t slots = ne + nb + nl;
-  B.pair_count.resize(slots + 1);
-  B.pair_off.resize(slots + 1);
+  const int sh = bitsFor(uint64_t(n - 1));
+  d.pair_shift = sh;
   PairSlots S{ne,
               nb,
               nl,
@@ -500,20 +515,25 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats)
               d.bodies.flags.data(),
               B.params.data()};
   if (nb <= 1) S.ne = 0;
-  pairCountKernel<<<blocksFor(slots + 1), kBlock, 0, st>>>(S, slots, B.pair_count.data());
-  DVI_CUDA_LAUNCH("pairCountKernel");
-  cubRun(d, "cub::DeviceScan::ExclusiveSum (pairs)", [&](void* t, size_t& b) {
-    return cub::DeviceScan::ExclusiveSum(t, b, B.pair_count.data(), B.pair_off.data(), slots + 1, st);
-  });
-  const int64_t np = int64_t(d.readValue(B.pair_off.data() + slots));
+  B.pair_counter.resize(1);
+  if (B.pair_key.capacity() == 0) B.pair_key.reserve(size_t(8) * size_t(n) + 1024);  // the first step's guess
+  int64_t np = 0;
+  for (;;) {  // at most twice: a second pass has room for the exact count of the first
+    const uint64_t cap = B.pair_key.capacity();
+    DVI_CUDA(cudaMemsetAsync(B.pair_counter.data(), 0, sizeof(unsigned long long), st));
+    if (slots > 0) {
+      pairEmitKernel<<<blocksFor(slots), kBlock, 0, st>>>(S, slots, sh, cap, B.pair_counter.data(), B.pair_key.data());
+      DVI_CUDA_LAUNCH("pairEmitKernel");
+    }
+    np = int64_t(d.readValue(B.pair_counter.data()));
+    if (uint64_t(np) <= cap) break;
+    B.pair_key.reserve(size_t(np));
+  }
   B.pair_key.resize(np);
   B.pair_key_sorted.resize(np);
   if (np > 0) {
-    pairWriteKernel<<<blocksFor(slots), kBlock, 0, st>>>(S, slots, B.pair_off.data(), B.pair_key.data());
-    DVI_CUDA_LAUNCH("pairWriteKernel");
-    const int end_bit = 32 + bitsFor(uint64_t(n - 1));
     cubRun(d, "cub::DeviceRadixSort::SortKeys (pairs)", [&](void* t, size_t& b) {
-      return cub::DeviceRadixSort::SortKeys(t, b, B.pair_key.data(), B.pair_key_sorted.data(), np, 0, end_bit, st);
+      return cub::DeviceRadixSort::SortKeys(t, b, B.pair_key.data(), B.pair_key_sorted.data(), np, 0, 2 * sh, st);
     });
   }
   d.pairs = np;
@@ -541,7 +561,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.off.resize(np + 1);
   N.first.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
-               d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel};
+               d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel, d.pair_shift};
   N.deferred.resize(np);
   N.deep.resize(np);
   N.deep_count.resize(1);

@@ -77,7 +77,7 @@ struct BroadScratch {
   DeviceBuffer<int32_t> entry_shape{"broad entry shapes"}, entry_shape_sorted{"broad sorted entry shapes"};
   DeviceBuffer<uint32_t> run_bin{"broad run bins"};
   DeviceBuffer<int32_t> run_len{"broad run lengths"}, num_runs{"broad run count"};  // statistics only
-  DeviceBuffer<uint64_t> pair_count{"broad pair counts"}, pair_off{"broad pair offsets"};
+  DeviceBuffer<unsigned long long> pair_counter{"broad pair counter"};  // pairEmitKernel's places taken
   DeviceBuffer<uint64_t> pair_key{"broad pair keys"}, pair_key_sorted{"broad sorted pair keys"};
   DeviceBuffer<BroadParams> params{"broad params"};
   DeviceBuffer<int64_t> tests{"broad bin pair tests"};
@@ -145,6 +145,7 @@ struct DeviceState {
   DeviceBuffer<double> step_scalars{"step scalars"};
   double* host_scalars = nullptr;  // pinned, for single-value read-backs
   int64_t pairs = 0;
+  int pair_shift = 32;  // the pair keys hold (a << pair_shift) | b (gpu_collision.cu: packPair)
   int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)
   bool cooperative = false;  // the device can launch cooperative kernels (grid-wide barriers: apgdPersistentKernel)
   // DVISIM_APGD_PHASES set: the persistent APGD kernel's block 0 stamps its phases (step, wait, gather, wait,

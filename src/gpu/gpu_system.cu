@@ -39,7 +39,7 @@ size_t DeviceState::bytes() const {
   add(broad.ext); add(broad.ext_sorted); add(broad.ext_prefix); add(broad.is_binned); add(broad.is_large);
   add(broad.bound_in); add(broad.binned); add(broad.large); add(broad.entry_count); add(broad.entry_off);
   add(broad.entry_bin); add(broad.entry_bin_sorted); add(broad.entry_shape); add(broad.entry_shape_sorted);
-  add(broad.run_bin); add(broad.run_len); add(broad.pair_count); add(broad.pair_off);
+  add(broad.run_bin); add(broad.run_len); add(broad.pair_counter);
   add(broad.pair_key); add(broad.pair_key_sorted);
   add(narrow.count); add(narrow.off); add(narrow.first);
   add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
