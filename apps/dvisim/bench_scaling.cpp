@@ -39,6 +39,7 @@
 #include <memory>
 #include <optional>
 #include <sstream>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -89,6 +90,16 @@ struct ScalingOptions {
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
+
+// How the GPU launches APGD's trials under cfg (SystemConfig::gpu_persistent_max_blocks, gpu_graphs).
+std::string gpuTrialsLabel(const dvi::SystemConfig& cfg) {
+  const std::string single = cfg.gpu_graphs ? "one CUDA graph each" : "kernel by kernel";
+  const int64_t m = cfg.gpu_persistent_max_blocks;
+  if (m <= 0) return single;
+  const std::string persistent = "all in one cooperative kernel per solve";
+  if (m == std::numeric_limits<int64_t>::max()) return persistent + " (" + single + " without cooperative launch)";
+  return persistent + " up to " + std::to_string(m) + " blocks, above that " + single;
+}
 
 std::string storageLabel(const dvi::SolverSettings& s, bool gpu) {
   if (sizeof(dvi::real) != 8) return "float";
@@ -686,9 +697,7 @@ int runScaling(const ScalingOptions& o) {
        << "\n- Bullet 3 OpenCL: " << (!has("bullet3_opencl") ? std::string("not in --engines") : b3_status.empty() ? b3_what : b3_status)
        << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
-       << "\n- GPU APGD trials: "
-       << "all in one cooperative kernel per solve up to " << cfg.gpu_persistent_max_blocks << " blocks, above that "
-       << (o.gpu_graphs ? "one CUDA graph each" : "kernel by kernel")
+       << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg)
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "

@@ -42,7 +42,7 @@ size_t DeviceState::bytes() const {
   add(broad.run_bin); add(broad.run_len); add(broad.pair_counter);
   add(broad.pair_key); add(broad.pair_key_sorted);
   add(narrow.count); add(narrow.off); add(narrow.first);
-  add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
+  add(solver.stamps); add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
   add(solver.jacobi_step); add(solver.colnorm); add(solver.rowsum); add(solver.bodyq);
   add(solver.prev_gamma); add(solver.prev_key); add(solver.adj_key); add(solver.adj_key_sorted);
   add(solver.adj_val); add(solver.adj_val_sorted); add(solver.adj_off);
