@@ -499,9 +499,10 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
 
 // APGD's scalar decisions (backtracking, restart, best iterate, stop) run on the device in ApgdControl, the
 // struct the CPU loop calls on the host (solver_algorithms.h). With a tolerance the device loop stops in
-// batches of trials: the iteration count of every step must equal the CPU's. The three ways of launching the
-// trials must give bitwise the same state: all trials in one cooperative kernel (the default), each trial as
-// one CUDA graph, and each trial's kernels one by one.
+// batches of trials: the iteration count of every step must equal the CPU's. The four ways of launching the
+// trials must give bitwise the same state: all trials in one cooperative kernel with each thread's blocks kept in
+// registers (the default at this size), the same kernel reading them from memory every trial, each trial as one
+// CUDA graph, and each trial's kernels one by one.
 TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, graph and kernel launches agree", "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
@@ -520,31 +521,36 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, 
   persistent_cfg.gpu_persistent_max_blocks = int64_t(1) << 40;
   System cpu(cfg);
   auto persistent = makeGpuSystem(persistent_cfg);
+  SystemConfig uncached_cfg = persistent_cfg;
+  uncached_cfg.gpu_apgd_register_cache = false;
+  auto uncached = makeGpuSystem(uncached_cfg);
   SystemConfig graphs_cfg = cfg;
   graphs_cfg.gpu_persistent_max_blocks = 0;
   auto graphs = makeGpuSystem(graphs_cfg);
   SystemConfig plain_cfg = graphs_cfg;
   plain_cfg.gpu_graphs = false;
   auto plain = makeGpuSystem(plain_cfg);
-  for (System* sys : {&cpu, persistent.get(), graphs.get(), plain.get()}) buildPile(*sys, 2000, 5, false, 1.7);
+  const std::vector<System*> all{&cpu, persistent.get(), uncached.get(), graphs.get(), plain.get()};
+  for (System* sys : all) buildPile(*sys, 2000, 5, false, 1.7);
   for (int s = 0; s < 5; ++s) {
-    for (System* sys : {&cpu, persistent.get(), graphs.get(), plain.get()}) sys->step();
+    for (System* sys : all) sys->step();
     INFO("step " << s << ": iterations CPU " << cpu.lastStats().iterations << ", GPU persistent "
                  << persistent->lastStats().iterations << ", GPU graphs " << graphs->lastStats().iterations
                  << ", GPU kernels " << plain->lastStats().iterations << " (tolerance " << cfg.solver_settings.tolerance
                  << ")");
     if (s == 0) CHECK(cpu.lastStats().iterations < 100);
     CHECK(persistent->lastStats().iterations == cpu.lastStats().iterations);
+    CHECK(uncached->lastStats().iterations == cpu.lastStats().iterations);
     CHECK(graphs->lastStats().iterations == cpu.lastStats().iterations);
     CHECK(plain->lastStats().iterations == cpu.lastStats().iterations);
   }
-  persistent->syncToHost();
-  graphs->syncToHost();
-  plain->syncToHost();
+  for (System* sys : all) sys->syncToHost();
   CHECK(relDiff(flatten(graphs->bodies().vel), flatten(plain->bodies().vel)) == 0);
   CHECK(relDiff(flatten(graphs->bodies().pos), flatten(plain->bodies().pos)) == 0);
   CHECK(relDiff(flatten(persistent->bodies().vel), flatten(plain->bodies().vel)) == 0);
   CHECK(relDiff(flatten(persistent->bodies().pos), flatten(plain->bodies().pos)) == 0);
+  CHECK(relDiff(flatten(uncached->bodies().vel), flatten(plain->bodies().vel)) == 0);
+  CHECK(relDiff(flatten(uncached->bodies().pos), flatten(plain->bodies().pos)) == 0);
   const double ev = relDiff(flatten(graphs->bodies().vel), flatten(cpu.bodies().vel));
   INFO("velocity difference GPU vs CPU after 5 steps " << ev);
   CHECK(ev < (kDouble ? 1e-9 : 1e-2));

@@ -87,6 +87,7 @@ struct ScalingOptions {
   std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
   bool gpu_graphs = true;
   long long gpu_persistent_max = -1;  // -1: SystemConfig's default
+  bool gpu_register_cache = true;
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
@@ -97,8 +98,12 @@ std::string gpuTrialsLabel(const dvi::SystemConfig& cfg) {
   const int64_t m = cfg.gpu_persistent_max_blocks;
   if (m <= 0) return single;
   const std::string persistent = "all in one cooperative kernel per solve";
-  if (m == std::numeric_limits<int64_t>::max()) return persistent + " (" + single + " without cooperative launch)";
-  return persistent + " up to " + std::to_string(m) + " blocks, above that " + single;
+  const std::string cache = cfg.gpu_apgd_register_cache
+                                ? ", each thread's blocks kept in registers between trials where they fit 2 a thread"
+                                : "";
+  if (m == std::numeric_limits<int64_t>::max())
+    return persistent + cache + " (" + single + " without cooperative launch)";
+  return persistent + cache + " up to " + std::to_string(m) + " blocks, above that " + single;
 }
 
 std::string storageLabel(const dvi::SolverSettings& s, bool gpu) {
@@ -568,6 +573,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.threads = int(threads);
   cfg.gpu_graphs = o.gpu_graphs;
   if (o.gpu_persistent_max >= 0) cfg.gpu_persistent_max_blocks = o.gpu_persistent_max;
+  cfg.gpu_apgd_register_cache = o.gpu_register_cache;
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
@@ -737,6 +743,9 @@ void registerBenchScaling(CLI::App& app) {
                   "APGD problems of at most this many blocks run all trials in one cooperative kernel (0: never; "
                   "default: SystemConfig's)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--gpu-register-cache", o->gpu_register_cache,
+                  "Persistent APGD kernel: keep each thread's blocks in registers between trials where the problem "
+                  "fits 2 blocks a thread (true, the default) or read them from memory every trial (false)");
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));

@@ -102,6 +102,21 @@ struct FillSqrtEta {  // e = S^1/2 1
 // grad_form: the Schur buffers hold the gradient N x + r, not N x (VectorStorage::Float: rounding then errs by a
 // float ulp of the gradient, which vanishes at the solution, not of N x, which does not). The extrapolation
 // keeps the form: its weights (1 + beta, -beta) sum to 1.
+// Block k of pass (1) from its values: c = g_k, o = g_{k-1}, nc = N g_k, no = N g_{k-1} (plus r when the Schur
+// buffers hold N x: r3 is block k's r, null in grad_form), te = t eta_k; x = g_{k+1}. The per-block arithmetic of
+// ApgdStepT, called as well by the GPU kernel that keeps a thread's blocks in registers between trials.
+template <class V>
+DVI_HD void apgdStepBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
+                          const real* r3, real te, real beta, real* x) {
+  for (int j = 0; j < 3; ++j) {
+    const real n0 = real(nc[j]);
+    const real y = c[j] + beta * (c[j] - o[j]);
+    const real Ny = n0 + beta * (n0 - real(no[j]));
+    x[j] = y - te * (r3 ? Ny + r3[j] : Ny);
+  }
+  projectBlock(s, k, x);
+}
+
 template <class V>
 struct ApgdStepT {
   BlockSet s;
@@ -112,16 +127,12 @@ struct ApgdStepT {
   real* gn;
   bool grad_form = false;
   DVI_HD void operator()(int64_t k) const {
-    real x[3];
-    const real te = t * eta[k];
+    real c[3], o[3], x[3];
+    V nc[3], no[3];
     for (int j = 0; j < 3; ++j) {
-      const int64_t i = 3 * k + j;
-      const real c = gc[i], nc = real(Nc[i]);
-      const real y = c + beta * (c - go[i]);
-      const real Ny = nc + beta * (nc - real(No[i]));
-      x[j] = y - te * (grad_form ? Ny : Ny + r[i]);
+      c[j] = gc[3 * k + j], o[j] = go[3 * k + j], nc[j] = Nc[3 * k + j], no[j] = No[3 * k + j];
     }
-    projectBlock(s, k, x);
+    apgdStepBlock<V>(s, k, c, o, nc, no, grad_form ? nullptr : r + 3 * k, t * eta[k], beta, x);
     for (int j = 0; j < 3; ++j) gn[3 * k + j] = x[j];
   }
 };
@@ -263,6 +274,29 @@ struct JacobiInverse {
 
 // APGD pass (2), 5 sums: d^T N d, d^T S^-1 d, residual^2 of g_{k+1}, grad(y)^T (g_{k+1} - g_k), f(g_{k+1}),
 // with d = g_{k+1} - y (see solveApgd). grad_form: as in ApgdStepT.
+// Block k of pass (2) from its values (see apgdStepBlock; g = g_{k+1}, ng its Schur buffer), added to acc.
+template <class V>
+DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
+                          const real* g, const V* ng, const real* r3, real eta, real beta, real a, real inv_a,
+                          bool grad_form, double* acc) {
+  real grad_n[3];
+  double dd = 0;
+  for (int j = 0; j < 3; ++j) {
+    const real n0 = real(nc[j]), Ng = real(ng[j]);
+    const real y = c[j] + beta * (c[j] - o[j]);
+    const real Ny = n0 + beta * (n0 - real(no[j]));
+    const real d = g[j] - y;
+    acc[0] += double(d) * (Ng - Ny);
+    dd += double(d) * d;
+    const real rr = grad_form ? real(0) : r3[j];  // the gradients are Ny + rr, Ng + rr
+    acc[3] += double(Ny + rr) * (g[j] - c[j]);
+    acc[4] += 0.5 * double(g[j]) * (Ng + rr + r3[j]);
+    grad_n[j] = Ng + rr;
+  }
+  if (eta > 0) acc[1] += dd / eta;  // a block between immovable bodies has no metric weight
+  acc[2] += blockResidual2(s, k, g, grad_n, a, inv_a);
+}
+
 template <class V>
 struct ApgdTestT {
   BlockSet s;
@@ -274,24 +308,13 @@ struct ApgdTestT {
   real beta, a, inv_a;
   bool grad_form = false;
   DVI_HD void operator()(int64_t k, double* acc) const {
-    real grad_n[3], g_n[3];
-    double dd = 0;
+    real c[3], o[3], g[3];
+    V nc[3], no[3], ng[3];
     for (int j = 0; j < 3; ++j) {
       const int64_t i = 3 * k + j;
-      const real c = gc[i], nc = real(Nc[i]), g = gn[i], Ng = real(Nn[i]);
-      const real y = c + beta * (c - go[i]);
-      const real Ny = nc + beta * (nc - real(No[i]));
-      const real d = g - y;
-      acc[0] += double(d) * (Ng - Ny);
-      dd += double(d) * d;
-      const real rr = grad_form ? real(0) : r[i];  // the gradients are Ny + rr, Ng + rr
-      acc[3] += double(Ny + rr) * (g - c);
-      acc[4] += 0.5 * double(g) * (Ng + rr + r[i]);
-      grad_n[j] = Ng + rr;
-      g_n[j] = g;
+      c[j] = gc[i], o[j] = go[i], nc[j] = Nc[i], no[j] = No[i], g[j] = gn[i], ng[j] = Nn[i];
     }
-    if (eta[k] > 0) acc[1] += dd / eta[k];  // a block between immovable bodies has no metric weight
-    acc[2] += blockResidual2(s, k, g_n, grad_n, a, inv_a);
+    apgdTestBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, eta[k], beta, a, inv_a, grad_form, acc);
   }
 };
 using ApgdTest = ApgdTestT<real>;

@@ -90,6 +90,10 @@ struct SystemConfig {
   // (src/gpu/NOTES.md). Jacobi and BB always launch kernel by kernel, and so does a device without cooperative
   // launch.
   int64_t gpu_persistent_max_blocks = std::numeric_limits<int64_t>::max();
+  // GPU backend: in the persistent APGD kernel, a problem of at most 2 blocks per thread of its grid (2 blocks of
+  // 256 per SM: ~135,000 blocks on an H100) keeps each thread's iterates and Schur values in registers from trial
+  // to trial instead of reading them again (bitwise the same iterates). false: every trial reads its buffers.
+  bool gpu_apgd_register_cache = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

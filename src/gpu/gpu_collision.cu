@@ -9,7 +9,10 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+
+#include <thrust/iterator/transform_iterator.h>
 
 #include "chrono_like/broadphase_kernels.h"
 #include "chrono_like/narrowphase.h"
@@ -75,6 +78,46 @@ __global__ void edgeKernel(int n, const real* se, const double* prefix, BroadPha
       const int max_large = s.max_large > 0 ? s.max_large : 0;
       if (big > max_large) edge = se[n - 1 - max_large] / s.large_factor;
     }
+    p->needs_sort = !(s.bin_size_factor >= real(1) && se[n - 1] <= s.large_factor * se[first]);
+  } else {
+    p->needs_sort = 0;
+  }
+  p->edge = edge;
+}
+
+// Count, sum, least and largest of the bounded extents (those >= 0).
+struct ExtentStats {
+  double sum;
+  real lo, hi;
+  int64_t count;
+};
+struct ExtentToStats {
+  __host__ __device__ ExtentStats operator()(real e) const {
+    if (e < real(0)) return ExtentStats{0, std::numeric_limits<real>::max(), std::numeric_limits<real>::lowest(), 0};
+    return ExtentStats{double(e), e, e, 1};
+  }
+};
+struct ExtentStatsMerge {
+  __host__ __device__ ExtentStats operator()(const ExtentStats& a, const ExtentStats& b) const {
+    return ExtentStats{a.sum + b.sum, a.lo < b.lo ? a.lo : b.lo, a.hi > b.hi ? a.hi : b.hi, a.count + b.count};
+  }
+};
+
+// edgeKernel's rule without the sort when bin_size_factor >= 1 and the largest bounded extent is at most
+// large_factor x the least: then the median m >= least, so every extent is <= large_factor x m and the mean
+// extent is the mean of all of them; and none exceeds large_factor x edge (>= large_factor x mean >= large_factor
+// x least), so no bounded shape is treated apart. Otherwise it sets needs_sort and the caller runs edgeKernel.
+// (The 64-bit radix sort of the extents, its prefix sums and edgeKernel took ~70 us of a 100k-sphere step on
+// an H200; ncu, src/gpu/NOTES.md session 8.) The mean differs from edgeKernel's in the sum's order only.
+__global__ void edgeFromStatsKernel(const ExtentStats* st, BroadPhaseSettings s, BroadParams* p) {
+  const ExtentStats t = *st;
+  real edge = 0;
+  p->needs_sort = 0;
+  if (t.count > 0) {
+    if (s.bin_size_factor >= real(1) && t.hi <= s.large_factor * t.lo)
+      edge = real(double(s.bin_size_factor) * t.sum / double(t.count));
+    else
+      p->needs_sort = 1;
   }
   p->edge = edge;
 }
@@ -411,33 +454,10 @@ void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
   DVI_CUDA_LAUNCH("aabbKernel");
 }
 
-void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats) {
-  const int n = int(d.shapes.count);
+// The large/binned split from the edge in B.params, the binned shapes' bounds and the grid (into B.params).
+static void classifyAndGrid(DeviceState& d, const BroadPhaseSettings& s, int n, const Aabb* box) {
   BroadScratch& B = d.broad;
   cudaStream_t st = d.stream;
-  d.pairs = 0;
-  if (n < 2) return;
-  const BroadPhaseSettings s = cfg.broadphase;
-  const Aabb* box = d.shapes.aabb.data();
-  const Shape* shapes = d.shapes.shape.data();
-
-  // 1. classification and grid
-  B.params.resize(1);
-  B.ext.resize(n);
-  B.ext_sorted.resize(n);
-  B.ext_prefix.resize(n);
-  extentKernel<<<blocksFor(n), kBlock, 0, st>>>(n, shapes, box, B.ext.data());
-  DVI_CUDA_LAUNCH("extentKernel");
-  cubRun(d, "cub::DeviceRadixSort::SortKeys (extents)", [&](void* t, size_t& b) {
-    return cub::DeviceRadixSort::SortKeys(t, b, B.ext.data(), B.ext_sorted.data(), n, 0, int(sizeof(real) * 8), st);
-  });
-  toDoubleKernel<<<blocksFor(n), kBlock, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data());
-  DVI_CUDA_LAUNCH("toDoubleKernel");
-  cubRun(d, "cub::DeviceScan::InclusiveSum (extents)", [&](void* t, size_t& b) {
-    return cub::DeviceScan::InclusiveSum(t, b, B.ext_prefix.data(), B.ext_prefix.data(), n, st);
-  });
-  edgeKernel<<<1, 1, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data(), s, B.params.data());
-  DVI_CUDA_LAUNCH("edgeKernel");
   B.entry_shape.resize(n + 1);  // reused as the binned flags (n + 1 for the scan)
   B.counts_sel.resize(n + 1);
   B.bound_in.resize(n + 1);
@@ -458,7 +478,57 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats)
   });
   gridKernel<<<1, 1, 0, st>>>(n, B.counts_sel.data(), B.bound_in.data() + n, s, B.params.data());
   DVI_CUDA_LAUNCH("gridKernel");
-  const BroadParams P = d.readValue(B.params.data());
+}
+
+void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats) {
+  const int n = int(d.shapes.count);
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
+  d.pairs = 0;
+  if (n < 2) return;
+  const BroadPhaseSettings s = cfg.broadphase;
+  const Aabb* box = d.shapes.aabb.data();
+  const Shape* shapes = d.shapes.shape.data();
+
+  // 1. classification and grid. The bin edge from the extents' statistics where they decide it, else (and
+  // from then on, while the scene needs it) from the sorted extents; a wrong guess costs one more pass.
+  B.params.resize(1);
+  B.ext.resize(n);
+  extentKernel<<<blocksFor(n), kBlock, 0, st>>>(n, shapes, box, B.ext.data());
+  DVI_CUDA_LAUNCH("extentKernel");
+  bool by_sort = B.edge_by_sort;
+  BroadParams P{};
+  for (;;) {
+    if (by_sort) {
+      B.ext_sorted.resize(n);
+      B.ext_prefix.resize(n);
+      cubRun(d, "cub::DeviceRadixSort::SortKeys (extents)", [&](void* t, size_t& b) {
+        return cub::DeviceRadixSort::SortKeys(t, b, B.ext.data(), B.ext_sorted.data(), n, 0, int(sizeof(real) * 8), st);
+      });
+      toDoubleKernel<<<blocksFor(n), kBlock, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data());
+      DVI_CUDA_LAUNCH("toDoubleKernel");
+      cubRun(d, "cub::DeviceScan::InclusiveSum (extents)", [&](void* t, size_t& b) {
+        return cub::DeviceScan::InclusiveSum(t, b, B.ext_prefix.data(), B.ext_prefix.data(), n, st);
+      });
+      edgeKernel<<<1, 1, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data(), s, B.params.data());
+      DVI_CUDA_LAUNCH("edgeKernel");
+    } else {
+      B.ext_stats.resize(sizeof(ExtentStats));
+      auto* stats_out = reinterpret_cast<ExtentStats*>(B.ext_stats.data());
+      const auto in = thrust::make_transform_iterator(B.ext.data(), ExtentToStats{});
+      const ExtentStats none = ExtentToStats{}(real(-1));
+      cubRun(d, "cub::DeviceReduce::Reduce (extent statistics)", [&](void* t, size_t& b) {
+        return cub::DeviceReduce::Reduce(t, b, in, stats_out, n, ExtentStatsMerge{}, none, st);
+      });
+      edgeFromStatsKernel<<<1, 1, 0, st>>>(stats_out, s, B.params.data());
+      DVI_CUDA_LAUNCH("edgeFromStatsKernel");
+    }
+    classifyAndGrid(d, s, n, box);
+    P = d.readValue(B.params.data());
+    if (by_sort || !P.needs_sort) break;
+    by_sort = true;  // the statistics could not decide the edge: once more from the sorted extents
+  }
+  B.edge_by_sort = P.needs_sort != 0;
   const int nb = P.binned, nl = P.large;
 
   // 2. count -> scan -> write (bin, shape) entries -> sort by bin -> run-length encode

@@ -361,14 +361,19 @@ struct ContactF {
   const JT* jac;
   const BodyDelta* delta;
   SchurOut<V> out;
-  __device__ void operator()(int64_t k) const {
+  // keep: when set, also the 3 values written (the register-cached APGD kernel)
+  __device__ void operator()(int64_t k, V* keep = nullptr) const {
     V* y = out.get();
     if (!y) return;
     const ContactJacobian J = loadJacobian(jac[k]);
     const BodyDelta A = delta[J.a], B = delta[J.b];
     real v[3];
     contactRelativeVelocity(J, A.v, A.w, B.v, B.w, v);
-    for (int j = 0; j < 3; ++j) y[3 * k + j] = out.value(v[j], 3 * k + j);
+    for (int j = 0; j < 3; ++j) {
+      const V w = out.value(v[j], 3 * k + j);
+      y[3 * k + j] = w;
+      if (keep) keep[j] = w;
+    }
   }
 };
 
@@ -378,16 +383,19 @@ struct NormalContactF {  // normal-only pass (b): y[k] over the 3 ncb rows (padd
   const BodyDelta* delta;
   int64_t nc;
   SchurOut<V> out;
-  __device__ void operator()(int64_t k) const {
+  __device__ void operator()(int64_t k, V* keep = nullptr) const {  // keep: as ContactF's, the value written
     V* y = out.get();
     if (!y) return;
+    V w;
     if (k >= nc) {
-      y[k] = out.value(0, k);
-      return;
+      w = out.value(0, k);
+    } else {
+      const ContactJacobian J = loadJacobian(jac[k]);
+      const BodyDelta A = delta[J.a], B = delta[J.b];
+      w = out.value(contactNormalVelocity(J, A.v, A.w, B.v, B.w), k);
     }
-    const ContactJacobian J = loadJacobian(jac[k]);
-    const BodyDelta A = delta[J.a], B = delta[J.b];
-    y[k] = out.value(contactNormalVelocity(J, A.v, A.w, B.v, B.w), k);
+    y[k] = w;
+    if (keep) *keep = w;
   }
 };
 
@@ -397,9 +405,12 @@ struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
   const BodyDelta* delta;
   SchurOut<V> out;
   int64_t first;  // y[first + i]: the row blocks follow the contact blocks
-  __device__ void operator()(int64_t i) const {
+  __device__ void operator()(int64_t i, V* keep = nullptr) const {  // keep: as ContactF's, the value written
     V* y = out.get();
-    if (y) y[first + i] = out.value(rowFromDeltas(rows[i], delta), first + i);
+    if (!y) return;
+    const V w = out.value(rowFromDeltas(rows[i], delta), first + i);
+    y[first + i] = w;
+    if (keep) *keep = w;
   }
 };
 
@@ -504,6 +515,14 @@ void schur(DeviceState& d, const real* x, V* y, const real* const* x_slot = null
 // buffers of the next trial (the Schur passes read them through the slots). Once the control is
 // done every kernel of a trial returns at once, so the host enqueues a whole batch of trials and reads the
 // control back once per batch.
+// How the trials of a solve are launched (SystemConfig::gpu_graphs, gpu_persistent_max_blocks,
+// gpu_apgd_register_cache).
+struct ApgdLaunch {
+  bool graphs = true;
+  int64_t persistent_max = 0;
+  bool register_cache = true;
+};
+
 template <class V>
 struct ApgdBuffers {
   BlockSet bs;
@@ -631,19 +650,20 @@ constexpr int kPhaseStampTrials = 64;
 constexpr int kPhaseStamps = 6;  // step | wait | gather | wait | Schur (b) + test (+ the last block's sums) | wait
 
 // Schur pass (b) of block i, the same functors as schur(): contact i (or the normal rows 3i..3i+2), or row
-// block i - ncb.
+// block i - ncb. keep: when set, also the block's 3 values written.
 template <class V, class JT>
-__device__ __forceinline__ void schurBlock(const PersistentApgd<V, JT>& p, int64_t i, const SchurOut<V>& out) {
+__device__ __forceinline__ void schurBlock(const PersistentApgd<V, JT>& p, int64_t i, const SchurOut<V>& out,
+                                           V* keep = nullptr) {
   if (i < p.ncb) {
     if (p.normal_only) {
       const NormalContactF<V, JT> f{p.g.jac, p.g.delta, p.nc, out};
-      for (int j = 0; j < 3; ++j) f(3 * i + j);
+      for (int j = 0; j < 3; ++j) f(3 * i + j, keep ? keep + j : nullptr);
     } else {
-      ContactF<V, JT>{p.g.jac, p.g.delta, out}(i);
+      ContactF<V, JT>{p.g.jac, p.g.delta, out}(i, keep);
     }
   } else {
     const RowSchurF<V> f{p.rows, p.g.delta, out, 3 * p.ncb};
-    for (int j = 0; j < 3; ++j) f(3 * (i - p.ncb) + j);
+    for (int j = 0; j < 3; ++j) f(3 * (i - p.ncb) + j, keep ? keep + j : nullptr);
   }
 }
 
@@ -661,14 +681,30 @@ struct SchurTestF {  // pass (3): block i's N x, then its test terms (which read
 // Blocks of 256 resident per SM (the cooperative grid must fit at once): at most 80 registers a thread (64 for
 // 4 blocks spilled the float kernel's loops, and the 100k pile's solve was 20% slower on an H100).
 constexpr int kPersistentBlocksPerSm = 3;
+// The register-cached form (K = kCachedBlocks): a thread keeps its K blocks' g_k, g_{k-1}, N g_k, N g_{k-1} and
+// the trial's g_{k+1} and N g_{k+1} in registers from trial to trial (27 registers a block), so the step reads
+// no iterate and the test none but r and eta (of ~650 B a contact a trial, ~200 B). It needs the problem to fit
+// K blocks a thread: 2 blocks of 256 per SM (128 registers), K = 2: 135,000 blocks on an H100 or H200.
+constexpr int kCachedBlocks = 2;
+constexpr int kCachedBlocksPerSm = 2;
+
+template <int K>
+constexpr int persistentBlocksPerSm() {
+  return K > 0 ? kCachedBlocksPerSm : kPersistentBlocksPerSm;
+}
 
 __device__ __forceinline__ void phaseStamp(long long* stamps, int trial, int j) {
   if (stamps && blockIdx.x == 0 && threadIdx.x == 0 && trial < kPhaseStampTrials)
     stamps[kPhaseStamps * trial + j] = clock64();
 }
 
-template <class V, class JT>
-__global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
+// One kernel for both forms. K = 0: every pass reads its inputs from the buffers. K > 0: thread tid owns the
+// blocks tid + j * stride (j < K) in the step and in the fused pass (3), whose test slice is then the thread's
+// block (the host launches it only when slices == grid, or when every block is in slice blockIdx.x's first
+// stride), so the sums are those of reduceSlice, bitwise. The buffers are written as in K = 0 (the gather and
+// the caller read them); the registers hold copies of the same values.
+template <class V, class JT, int K>
+__global__ void __launch_bounds__(kBlock, persistentBlocksPerSm<K>())
     apgdPersistentKernel(const __grid_constant__ PersistentApgd<V, JT> p) {
   namespace cg = cooperative_groups;
   cg::grid_group grid = cg::this_grid();
@@ -680,10 +716,36 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
   __syncthreads();
   constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
   const int64_t tid = int64_t(blockIdx.x) * kBlock + threadIdx.x, stride = int64_t(gridDim.x) * kBlock;
+  constexpr int KC = K > 0 ? K : 1;
+  real cur[KC][3], old[KC][3], nxt[KC][3];  // g_k, g_{k-1}, g_{k+1} of the thread's blocks (K > 0)
+  V ncur[KC][3], nold[KC][3], nnxt[KC][3];  // their Schur buffers
+  if constexpr (K > 0) {
+    const real *xc = pickX(p.B, c.cur), *xo = pickX(p.B, c.old);
+    const V *nc = pickNX(p.B, c.ncur), *no = pickNX(p.B, c.nold);
+#pragma unroll
+    for (int j = 0; j < K; ++j) {
+      const int64_t k = tid + j * stride;
+      if (k >= p.n) continue;
+      for (int m = 0; m < 3; ++m) {
+        cur[j][m] = xc[3 * k + m], old[j][m] = xo[3 * k + m];
+        ncur[j][m] = nc[3 * k + m], nold[j][m] = no[3 * k + m];
+      }
+    }
+  }
   for (int trial = 0; !c.done; ++trial) {  // c is the same in every block
     real* xn = pickX(p.B, c.nw);
     phaseStamp(p.stamps, trial, 0);
-    {  // (1) the projected step
+    if constexpr (K > 0) {  // (1) the projected step
+      const real t = real(1) / c.L;
+#pragma unroll
+      for (int j = 0; j < K; ++j) {
+        const int64_t k = tid + j * stride;
+        if (k >= p.n) continue;
+        kern::apgdStepBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], grad_form ? nullptr : p.B.r + 3 * k,
+                               t * p.B.eta[k], c.beta, nxt[j]);
+        for (int m = 0; m < 3; ++m) xn[3 * k + m] = nxt[j][m];
+      }
+    } else {
       const kern::ApgdStepT<V> f = apgdStepOf(p.B, c);
       for (int64_t k = tid; k < p.n; k += stride) f(k);
     }
@@ -702,12 +764,25 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
     phaseStamp(p.stamps, trial, 4);
     {  // (3) Schur pass (b) and the test terms
       const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
-      const SchurTestF<V, JT> f{p, out, apgdTestOf(p.B, c)};
-      for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
+      if constexpr (K > 0) {
+        double acc[5] = {0, 0, 0, 0, 0};
+#pragma unroll
+        for (int j = 0; j < K; ++j) {
+          const int64_t k = tid + j * stride;
+          if (k >= p.n) continue;
+          schurBlock(p, k, out, nnxt[j]);
+          kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
+                                 p.B.eta[k], c.beta, p.B.a, p.B.inv_a, grad_form, acc);
+        }
+        if (int(blockIdx.x) < p.slices) blockSumFixed<5>(acc, p.partial + int64_t(blockIdx.x) * 5);
+      } else {
+        const SchurTestF<V, JT> f{p, out, apgdTestOf(p.B, c)};
+        for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
+      }
     }
     // The last block to finish sums the partials. (Every block summing them itself contended for the same L2
     // lines: 9 us a trial at 100,000 contacts on an H100.)
-    if (threadIdx.x == 0) {  // thread 0 wrote this block's partials (reduceSlice)
+    if (threadIdx.x == 0) {  // thread 0 wrote this block's partials (blockSumFixed)
       __threadfence();       // they are visible before the block counts itself
       last = atomicAdd(&p.st->blocks_done, 1u) == gridDim.x - 1;
     }
@@ -727,6 +802,16 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
       c.afterTest(sums);
     }
     __syncthreads();
+    if constexpr (K > 0) {
+      if (c.accepted) {  // the rotation of afterTest: g_{k-1} <- g_k <- g_{k+1}, and their Schur buffers
+#pragma unroll
+        for (int j = 0; j < K; ++j)
+          for (int m = 0; m < 3; ++m) {
+            old[j][m] = cur[j][m], cur[j][m] = nxt[j][m];
+            nold[j][m] = ncur[j][m], ncur[j][m] = nnxt[j][m];
+          }
+      }
+    }
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) p.st->c = c;
 }
@@ -734,28 +819,36 @@ __global__ void __launch_bounds__(kBlock, kPersistentBlocksPerSm)
 template <class V>
 using JacobianOf = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
 
-// Blocks of the persistent APGD kernel's grid that fit on the device at once (0: no cooperative launch).
-template <class V>
+// Blocks of the persistent APGD kernel's grid (K: its register-cached form) that fit on the device at once
+// (0: no cooperative launch).
+template <class V, int K>
 int persistentGridMax(DeviceState& d) {
   if (!d.cooperative) return 0;
   int per_sm = 0;
   DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(
-      &per_sm, reinterpret_cast<const void*>(&apgdPersistentKernel<V, JacobianOf<V>>), kBlock, 0));
+      &per_sm, reinterpret_cast<const void*>(&apgdPersistentKernel<V, JacobianOf<V>, K>), kBlock, 0));
   return per_sm * d.multiprocessors;
 }
 
-// Slices of the APGD test reduction, the same on both paths (bitwise the same sums): at most one per block of
+// Slices of the APGD test reduction, the same on every path (bitwise the same sums): at most one per block of
 // the persistent grid (497 slices over its 396 blocks made some blocks sum two at 100,000 contacts, and the
-// pass took twice as long for all to wait on).
-int apgdSlices(int64_t n, int grid_max) {
-  const int r = reduceBlocksFor(n);
-  return grid_max > 0 ? std::min(r, grid_max) : r;
-}
+// pass took twice as long for all to wait on). A problem that fits the register-cached kernel takes that
+// kernel's smaller grid, whether or not the cache is enabled.
+struct ApgdGrids {
+  int plain = 0;   // persistentGridMax<V, 0>
+  int cached = 0;  // persistentGridMax<V, kCachedBlocks>
+  bool fitsCache(int64_t n) const { return cached > 0 && n <= int64_t(kCachedBlocks) * kBlock * cached; }
+  int slices(int64_t n) const {
+    const int r = reduceBlocksFor(n);
+    const int g = fitsCache(n) ? cached : plain;
+    return g > 0 ? std::min(r, g) : r;
+  }
+};
 
 // Runs the trials in apgdPersistentKernel over a grid of at most grid_max blocks; false when the device cannot
 // run it (grid_max 0), and the caller then launches trial by trial. The control is in S.apgd on entry and on
 // return.
-template <class V>
+template <class V, int K>
 bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid_max, int slices) {
   if (grid_max < 1) return false;
   using JT = JacobianOf<V>;
@@ -786,9 +879,13 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid
     S.stamps.fillZero(d.stream);
     p.stamps = S.stamps.data();
   }
-  const void* kernel = reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT>);
+  const void* kernel = reinterpret_cast<const void*>(&apgdPersistentKernel<V, JT, K>);
   const int64_t want = std::max<int64_t>({blocksFor(n), blocksFor(p.nbodies), int64_t(p.n_heavy) * kHeavyChunks, 1});
   const unsigned grid = unsigned(std::min<int64_t>(want, grid_max));
+  if (K > 0 && (n > int64_t(K) * kBlock * grid || (slices != int(grid) && n > int64_t(slices) * kBlock)))
+    throw std::logic_error("apgdPersistent: " + std::to_string(n) + " blocks do not fit the register-cached kernel's " +
+                           std::to_string(grid) + " x " + std::to_string(kBlock) + " threads and " +
+                           std::to_string(slices) + " slices");
   void* args[] = {&p};
   DVI_CUDA(cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlock), args, 0, d.stream));
   if (d.phase_profile) {  // DVISIM_APGD_PHASES: block 0's clock at each phase boundary of the first trials
@@ -819,11 +916,11 @@ struct GradientToFloatF {
 template <class V>
 void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, V* const* NX, real a,
                         real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
-                        bool graphs, int64_t persistent_max) {
+                        const ApgdLaunch& launch) {
   SolverScratch& S = d.solver;
   S.apgd.resize(1);
-  const int grid_max = persistentGridMax<V>(d);
-  const int slices = apgdSlices(n, grid_max);  // from the device alone: both paths sum alike
+  const ApgdGrids grids{persistentGridMax<V, 0>(d), persistentGridMax<V, kCachedBlocks>(d)};
+  const int slices = grids.slices(n);  // from the device and n alone: every path sums alike
   S.partial.resize(size_t(slices) * 5);
   const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
   ApgdDeviceState h{};
@@ -832,14 +929,17 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
-  if (n <= persistent_max && apgdPersistent<V>(d, n, B, grid_max, slices)) {
+  const bool cached = launch.register_cache && grids.fitsCache(n);
+  if (n <= launch.persistent_max &&
+      (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
+              : apgdPersistent<V, 0>(d, n, B, grids.plain, slices))) {
     DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
     DVI_CUDA(cudaStreamSynchronize(d.stream));
     c = h.c;
     return;
   }
   cudaGraphExec_t exec = nullptr;
-  if (graphs) {
+  if (launch.graphs) {
     cudaGraph_t graph = nullptr;
     DVI_CUDA(cudaStreamBeginCapture(d.stream, cudaStreamCaptureModeThreadLocal));
     try {
@@ -876,7 +976,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
 
 void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, real* const* NX, real a,
                          real inv_a, const SolverSettings& s, const BlockSet& bs, const real* r, const real* eta,
-                         bool graphs, int64_t persistent_max, bool float_storage) {
+                         const ApgdLaunch& launch, bool float_storage) {
   if constexpr (!std::is_same_v<real, float>) {
     if (float_storage) {
       SolverScratch& S = d.solver;
@@ -885,13 +985,13 @@ void apgdIterateOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* 
       float* NXf[3];
       for (int i = 0; i < 3; ++i) NXf[i] = S.vf.data() + i * len;
       launchMap(d, len, GradientToFloatF{NX[c.ncur], r, NXf[c.ncur]}, "launch of GradientToFloatF (APGD start)");
-      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, graphs, persistent_max);
+      apgdTrialsOnDevice<float>(d, n, c, X, NXf, a, inv_a, s, bs, r, eta, launch);
       if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
       return;
     }
   }
   (void)float_storage;
-  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, graphs, persistent_max);
+  apgdTrialsOnDevice<real>(d, n, c, X, NX, a, inv_a, s, bs, r, eta, launch);
   if (c.failed) algo::checkFinite(c.failed_value, "apgd", c.iterations);
 }
 
@@ -907,8 +1007,8 @@ const char* functorName() {
 class GpuOps {
  public:
   static constexpr bool kDeviceLoop = true;
-  GpuOps(DeviceState& d, const ProblemView& p, bool graphs, int64_t persistent_max, bool float_storage)
-      : d_(d), p_(p), graphs_(graphs), persistent_max_(persistent_max), float_(float_storage) {
+  GpuOps(DeviceState& d, const ProblemView& p, const ApgdLaunch& launch, bool float_storage)
+      : d_(d), p_(p), launch_(launch), float_(float_storage) {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
     for (int i = 0; i < 7; ++i) {
@@ -945,15 +1045,13 @@ class GpuOps {
   // (DeviceCcpResult), so the device loop keeps no per-iteration residuals (st is left as it is).
   void apgdIterate(algo::ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
                    SolverStats& /*st*/) {
-    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), graphs_, persistent_max_,
-                        float_);
+    apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), launch_, float_);
   }
 
  private:
   DeviceState& d_;
   ProblemView p_;
-  bool graphs_;
-  int64_t persistent_max_;
+  ApgdLaunch launch_;
   bool float_;
   real* vec_[7] = {};
 };
@@ -1219,7 +1317,8 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, cfg.gpu_graphs, cfg.gpu_persistent_max_blocks, floatStorage(cfg.solver_settings, true));
+  GpuOps ops(d, pv, ApgdLaunch{cfg.gpu_graphs, cfg.gpu_persistent_max_blocks, cfg.gpu_apgd_register_cache},
+             floatStorage(cfg.solver_settings, true));
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout

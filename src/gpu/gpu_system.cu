@@ -36,7 +36,7 @@ size_t DeviceState::bytes() const {
   add(contacts.shape_a); add(contacts.shape_b); add(contacts.body_a); add(contacts.body_b);
   add(contacts.normal); add(contacts.pa); add(contacts.pb); add(contacts.dist); add(contacts.mu);
   add(contacts.size); add(contacts.key);
-  add(broad.ext); add(broad.ext_sorted); add(broad.ext_prefix); add(broad.is_binned); add(broad.is_large);
+  add(broad.ext); add(broad.ext_sorted); add(broad.ext_prefix); add(broad.ext_stats); add(broad.is_binned); add(broad.is_large);
   add(broad.bound_in); add(broad.binned); add(broad.large); add(broad.entry_count); add(broad.entry_off);
   add(broad.entry_bin); add(broad.entry_bin_sorted); add(broad.entry_shape); add(broad.entry_shape_sorted);
   add(broad.run_bin); add(broad.run_len); add(broad.pair_counter);
