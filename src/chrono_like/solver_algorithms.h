@@ -14,6 +14,9 @@
 //   template <class F> void map(const F& f);     f(k) for every block k
 //   template <int M, class F> void reduce(const F& f, double* out);  out[m] = sum_k of f(k, acc)[m],
 //                                                deterministic (fixed summation order for any thread count)
+//   template <int M, class F> void reduceLater(const F& f, double* out);  the same sums, written to out by the
+//                                                next fetch() at the latest (the GPU reads several at once)
+//   void fetch();                                completes every reduceLater since the last fetch
 //   void copy(const real* src, real* dst);       3 blocks() reals
 //   static constexpr bool kDeviceLoop;           true: p.apgdIterate(...) runs the APGD iterations itself
 //                                                (same signature as algo::apgdIterate, same ApgdControl)
@@ -68,16 +71,25 @@ real residualGivenNx(Ops& p, const real* x, const real* Nx, real a) {
 // L0 = |N (g0 - g^0)| / |g0 - g^0|). Both are <= lambda_max: eta_k is 1 / (Gershgorin bound of N_kk) and
 // that bound is <= 3 max_i (N_kk)_ii, so some diagonal entry eta_k (N_kk)_ii of the scaled matrix is >= 1/3.
 // The backtracking only has to grow it. One Schur product (setup, not per iteration).
+// lipschitzProduct requests the sum (squares, by the next fetch), lipschitzBound turns it into the bound.
 template <class Ops>
-real lipschitzLowerBound(Ops& p, real* e, real* Ne) {
+void lipschitzProduct(Ops& p, real* e, real* Ne, double* squares) {
   p.map(kern::FillSqrtEta{p.blockSteps(), e});
   p.schur(e, Ne);
-  double s;
-  p.template reduce<1>(kern::ScaledSquares{e, Ne}, &s);
-  real L = real(std::sqrt(s / double(3 * p.blocks())));
+  p.template reduceLater<1>(kern::ScaledSquares{e, Ne}, squares);
+}
+inline real lipschitzBound(double squares, int64_t blocks) {
+  real L = real(std::sqrt(squares / double(3 * blocks)));
   L = std::max(L, real(1) / 3);
   if (!std::isfinite(L)) throw SolverError("solver: non-finite N (Lipschitz estimate is " + std::to_string(L) + ")");
   return L;
+}
+template <class Ops>
+real lipschitzLowerBound(Ops& p, real* e, real* Ne) {
+  double s;
+  lipschitzProduct(p, e, Ne, &s);
+  p.fetch();
+  return lipschitzBound(s, p.blocks());
 }
 
 // The start of every solver: x = P(warm start), then x <- s x with s = argmin_{s >= 0} f(s x), f(x) =
@@ -85,19 +97,29 @@ real lipschitzLowerBound(Ops& p, real* e, real* Ne) {
 // where both vanish or r^T x > 0): f(start) <= min(f(P(warm)), f(0) = 0). Nx = N x on entry is scaled
 // with x (no second Schur product). Returns the start's residual; throws SolverError on non-finite input.
 // (For row blocks whose box excludes 0 the ray scaling can leave the box; it is projected again.)
+// The scaling s from the StartSums of x (throws on non-finite sums), applied to x and N x.
 template <class Ops>
-real scaledStart(Ops& p, real* x, real* Nx, real a, const char* who) {
-  double sums[3];
-  p.template reduce<3>(kern::StartSums{x, Nx, p.rhs()}, sums);
+void scaleStart(Ops& p, real* x, real* Nx, const double* sums, const char* who) {
   if (!std::isfinite(sums[0]) || !std::isfinite(sums[1]) || !std::isfinite(sums[2]))
     throw SolverError(std::string(who) + ": non-finite right-hand side, N x or warm start");
   double sc = 1;
   if (sums[0] > 0) sc = std::max(0.0, -sums[1] / sums[0]);
   else if (sums[1] > 0 || sums[0] < 0) sc = 0;
   if (sc != 1) p.map(kern::Scale2{real(sc), x, Nx});
-  const real res = residualGivenNx(p, x, Nx, a);
+}
+inline real startResidual(double res2, const char* who) {
+  const real res = real(std::sqrt(res2));
   if (!std::isfinite(res)) throw SolverError(std::string(who) + ": non-finite residual at the start");
   return res;
+}
+template <class Ops>
+real scaledStart(Ops& p, real* x, real* Nx, real a, const char* who) {
+  double sums[3];
+  p.template reduce<3>(kern::StartSums{x, Nx, p.rhs()}, sums);
+  scaleStart(p, x, Nx, sums, who);
+  double res2;
+  p.template reduce<1>(kern::Residual{p.blockSet(), x, Nx, p.rhs(), a, real(1) / a}, &res2);
+  return startResidual(res2, who);
 }
 
 // ---------------------------------------------------------------------------------------------------
@@ -276,19 +298,29 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   real* X[4] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3)};
   real* NX[3] = {p.vec(4), p.vec(5), p.vec(6)};
 
-  // g_0 = s P(warm start)
-  checkWarmStart(p, gamma, "apgd");
+  // g_0 = s P(warm start). The sums of the start come in two fetches (on the GPU, two read-backs instead of
+  // five): the warm start's finiteness, the scaling's sums and the Lipschitz bound's (its product does not depend
+  // on the start), then the residual and f of the scaled start (f: the best-iterate rule).
   p.map(kern::CopyProject{bs, gamma, X[0]});
   ApgdControl c;
   p.schur(X[0], NX[0]);
-  c.res = c.best_res = scaledStart(p, X[0], NX[0], a, "apgd");
+  double warm = 0, start[3] = {0, 0, 0}, squares = 0, res2 = 0;
+  p.template reduceLater<1>(kern::NonFinite{gamma}, &warm);
+  p.template reduceLater<3>(kern::StartSums{X[0], NX[0], r}, start);
+  lipschitzProduct(p, X[1], NX[1], &squares);
+  p.fetch();
+  if (!(warm == 0)) throw SolverError("apgd: non-finite warm start");
+  scaleStart(p, X[0], NX[0], start, "apgd");
+  p.template reduceLater<1>(kern::Residual{bs, X[0], NX[0], r, a, inv_a}, &res2);
+  p.template reduceLater<1>(kern::Objective{X[0], NX[0], r}, &c.f0);
+  p.fetch();
+  c.res = c.best_res = startResidual(res2, "apgd");
   if (s.record_history) st.history.push_back(c.res);
   c.max_iterations = s.max_iterations;
   c.tolerance = s.tolerance;
   c.done = (s.tolerance > 0 && c.res < s.tolerance) || !(s.max_iterations > 0);
   if (!c.done) {
-    p.template reduce<1>(kern::Objective{X[0], NX[0], r}, &c.f0);  // f of the start (best-iterate rule)
-    c.L = lipschitzLowerBound(p, X[1], NX[1]);
+    c.L = lipschitzBound(squares, p.blocks());
     c.pick();
     if constexpr (Ops::kDeviceLoop) {
       p.apgdIterate(c, X, NX, a, inv_a, s, st);

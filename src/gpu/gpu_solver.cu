@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 #include <cooperative_groups.h>
 #include <cub/cub.cuh>
 #include <stdexcept>
@@ -107,16 +108,16 @@ void launchMap(DeviceState& d, int64_t n, const F& f, const char* what) {
 }
 
 // Sums M values over n elements; returns a pointer to M doubles on the host (valid until the next read)
-// or, with read = false, leaves them on the device only.
+// or, with read = false, leaves them on the device only (at S.scalars + slot).
 template <int M, class F>
-const double* launchReduce(DeviceState& d, int64_t n, const F& f, const char* what, bool read = true) {
+const double* launchReduce(DeviceState& d, int64_t n, const F& f, const char* what, bool read = true, int slot = 0) {
   SolverScratch& S = d.solver;
   const int nblk = reduceBlocksFor(n);
   S.partial.resize(size_t(nblk) * M);
-  S.scalars.resize(8);
+  S.scalars.resize(64);
   reduceKernel<M><<<nblk, kBlock, 0, d.stream>>>(n, f, S.partial.data());
   cudaCheck(cudaGetLastError(), what, __FILE__, __LINE__);
-  finalizeKernel<M><<<1, kBlock, 0, d.stream>>>(nblk, S.partial.data(), S.scalars.data());
+  finalizeKernel<M><<<1, kBlock, 0, d.stream>>>(nblk, S.partial.data(), S.scalars.data() + slot);
   cudaCheck(cudaGetLastError(), what, __FILE__, __LINE__);
   return read ? d.readScalars(S.scalars.data(), M) : nullptr;
 }
@@ -923,12 +924,14 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   const int slices = grids.slices(n);  // from the device and n alone: every path sums alike
   S.partial.resize(size_t(slices) * 5);
   const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
-  ApgdDeviceState h{};
+  // Staged in pinned memory: the copy does not wait for the stream (a pageable one would), and the host writes
+  // the staging again only after a read-back of this solve's control.
+  ApgdDeviceState& h = *d.host_apgd;
+  h = ApgdDeviceState{};
   h.c = c;
   *schurXSlot(&h) = X[c.nw];
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
-  DVI_CUDA(cudaStreamSynchronize(d.stream));  // h is on the stack
   const bool cached = launch.register_cache && grids.fitsCache(n);
   if (n <= launch.persistent_max &&
       (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
@@ -1037,6 +1040,23 @@ class GpuOps {
     const double* h = launchReduce<M>(d_, p_.nb, f, functorName<F>());
     for (int m = 0; m < M; ++m) out[m] = h[m];
   }
+  // The sums land in slots of 8 doubles of S.scalars, read back together by fetch().
+  template <int M, class F>
+  void reduceLater(const F& f, double* out) {
+    static_assert(M <= kSlotSize, "GpuOps::reduceLater: at most 8 sums a reduction");
+    if (pending_ == kSlots) fetch();
+    launchReduce<M>(d_, p_.nb, f, functorName<F>(), false, pending_ * kSlotSize);
+    pending_out_[pending_] = out;
+    pending_m_[pending_] = M;
+    ++pending_;
+  }
+  void fetch() {
+    if (pending_ == 0) return;
+    const double* h = d_.readScalars(d_.solver.scalars.data(), pending_ * kSlotSize);
+    for (int i = 0; i < pending_; ++i)
+      for (int m = 0; m < pending_m_[i]; ++m) pending_out_[i][m] = h[i * kSlotSize + m];
+    pending_ = 0;
+  }
   void copy(const real* src, real* dst) {
     if (src == dst) return;
     DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nb), cudaMemcpyDeviceToDevice, d_.stream));
@@ -1054,6 +1074,10 @@ class GpuOps {
   ApgdLaunch launch_;
   bool float_;
   real* vec_[7] = {};
+  static constexpr int kSlots = 8, kSlotSize = 8;  // 64 doubles: DeviceState::host_scalars
+  int pending_ = 0;
+  double* pending_out_[kSlots] = {};
+  int pending_m_[kSlots] = {};
 };
 
 ProblemView view(DeviceState& d, real max_diag) {
@@ -1255,12 +1279,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.heavy_count.resize(1);
   DVI_CUDA(cudaMemsetAsync(S.heavy_count.data(), 0, sizeof(int32_t), d.stream));
   launchMap(d, nb, HeavyListF{S.adj_off.data(), S.heavy.data(), S.heavy_count.data()}, "launch of HeavyListF");
-  S.n_heavy = d.readValue(S.heavy_count.data());
-  if (S.n_heavy > 0) {
-    S.heavy_partial.resize(size_t(S.n_heavy) * kHeavyChunks * 6);
-    S.heavy_ticket.resize(size_t(S.n_heavy));
-    DVI_CUDA(cudaMemsetAsync(S.heavy_ticket.data(), 0, sizeof(uint32_t) * size_t(S.n_heavy), d.stream));
-  }
+  // (the heavy count is read back with the maxima below)
   // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-block bounds. Only Jacobi
   // reads them: for the other solvers they are left out (the per-body sum runs in one thread per body, and
   // the CES drum's 15,000 entries made it 3.6 ms of every step's BuildRows on an H200).
@@ -1288,9 +1307,23 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   cubRun(d, "cub::DeviceReduce::Max (key order)", [&](void* t, size_t& b) {
     return cub::DeviceReduce::Max(t, b, S.v4.data(), out + 2, int(nc), d.stream);
   });
-  real host[3];
-  DVI_CUDA(cudaMemcpyAsync(host, out, 3 * sizeof(real), cudaMemcpyDeviceToHost, d.stream));
+  // with the heavy bodies' count, into the pinned scalars: one synchronisation
+  static_assert(3 * sizeof(real) + sizeof(int32_t) <= 64 * sizeof(double), "host_scalars holds the read-back");
+  char* hs = reinterpret_cast<char*>(d.host_scalars);
+  DVI_CUDA(cudaMemcpyAsync(hs, out, 3 * sizeof(real), cudaMemcpyDeviceToHost, d.stream));
+  DVI_CUDA(cudaMemcpyAsync(hs + 3 * sizeof(real), S.heavy_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost,
+                           d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));
+  real host[3];
+  std::memcpy(host, hs, sizeof host);
+  int32_t n_heavy = 0;
+  std::memcpy(&n_heavy, hs + 3 * sizeof(real), sizeof n_heavy);
+  S.n_heavy = n_heavy;
+  if (S.n_heavy > 0) {
+    S.heavy_partial.resize(size_t(S.n_heavy) * kHeavyChunks * 6);
+    S.heavy_ticket.resize(size_t(S.n_heavy));
+    DVI_CUDA(cudaMemsetAsync(S.heavy_ticket.data(), 0, sizeof(uint32_t) * size_t(S.n_heavy), d.stream));
+  }
   d.max_diag = host[0] > real(0) ? host[0] : real(1);
   *max_penetration = std::max(real(0), host[1]);
   d.keys_unsorted = host[2] > real(0);

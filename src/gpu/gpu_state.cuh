@@ -149,6 +149,7 @@ struct DeviceState {
   ByteBuffer cub_temp{"CUB temporary storage"};
   DeviceBuffer<double> step_scalars{"step scalars"};
   double* host_scalars = nullptr;  // pinned, for single-value read-backs
+  ApgdDeviceState* host_apgd = nullptr;  // pinned staging of the APGD control (copies without a synchronisation)
   int64_t pairs = 0;
   int pair_shift = 32;  // the pair keys hold (a << pair_shift) | b (gpu_collision.cu: packPair)
   int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)

@@ -126,6 +126,7 @@ GpuSystem::GpuSystem(SystemConfig config) : System(config), d_(std::make_unique<
   }
   for (auto& e : d_->ev) DVI_CUDA(cudaEventCreate(&e));
   DVI_CUDA(cudaMallocHost(&d_->host_scalars, 64 * sizeof(double)));
+  DVI_CUDA(cudaMallocHost(&d_->host_apgd, sizeof(ApgdDeviceState)));
   d_->step_scalars.resize(16);
 }
 
@@ -143,6 +144,7 @@ GpuSystem::~GpuSystem() {
   for (auto& e : d_->ev)
     if (e) cudaEventDestroy(e);
   if (d_->host_scalars) cudaFreeHost(d_->host_scalars);
+  if (d_->host_apgd) cudaFreeHost(d_->host_apgd);
   if (d_->stream) cudaStreamDestroy(d_->stream);
 }
 
