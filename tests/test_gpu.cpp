@@ -637,6 +637,93 @@ TEST_CASE("constraint rows on the GPU: a pendulum chain on a pile equals the CPU
   }
 }
 
+namespace {
+// Particles in a box for the broad phase: n shapes with largest sides from side to side x spread (a log-uniform
+// spread), a ground box, four walls and a plane, plus `extra_large` boxes 30 x side wide at random places.
+struct BroadScene {
+  ShapeArrays shapes;
+  BodyArrays bodies;
+  void add(ShapeType t, Aabb box, uint8_t flags) {
+    Shape s{};
+    s.type = t;
+    s.body = int32_t(bodies.flags.size());
+    s.local = Pose{{0, 0, 0}, quatIdentity()};
+    s.dims = {1, 1, 1};
+    s.size = 1;
+    s.group = 1;
+    s.mask = -1;
+    shapes.shape.push_back(s);
+    shapes.aabb.push_back(box);
+    bodies.flags.push_back(flags);
+  }
+};
+BroadScene broadScene(uint32_t seed, int n, double spread, int extra_large) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> U(0, 1);
+  BroadScene sc;
+  const real side = real(0.02), L = real(0.02 * std::cbrt(double(n)) * 1.6);
+  const real big = real(1e30);
+  sc.add(ShapeType::Plane, Aabb{{-big, -big, -big}, {big, big, big}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{-side, -side, -side}, {L + side, L + side, 0}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{-side, -side, 0}, {0, L + side, L}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{L, -side, 0}, {L + side, L + side, L}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{-side, -side, 0}, {L + side, 0, L}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{-side, L, 0}, {L + side, L + side, L}}, kBodyFixed);
+  for (int i = 0; i < n; ++i) {
+    const real h = real(0.5 * side * std::pow(spread, U(rng)));
+    const Vec3 c{real(U(rng) * L), real(U(rng) * L), real(U(rng) * L)};
+    sc.add(ShapeType::Sphere, Aabb{c - Vec3{h, h, h}, c + Vec3{h, h, h}}, 0);
+  }
+  for (int i = 0; i < extra_large; ++i) {
+    const real h = 15 * side;
+    const Vec3 c{real(U(rng) * L), real(U(rng) * L), real(U(rng) * L)};
+    sc.add(ShapeType::Box, Aabb{c - Vec3{h, h, side}, c + Vec3{h, h, side}}, kBodyFixed);
+  }
+  return sc;
+}
+}  // namespace
+
+// The GPU broad phase finds the bin edge from a split of the extents (gpu_collision.cu: edgeFromSplit) where
+// that decides it, else from the sorted extents as the CPU does; both must give the CPU's pairs and its bin edge
+// (to the rounding of a differently ordered sum), on the first run (which guesses the split) and the second
+// (which starts from the path the first found).
+TEST_CASE("GPU broad phase: pairs and bin edge equal the CPU's with and without the extents' sort", "[gpu]") {
+  if (!haveDevice()) return;
+  struct Case {
+    const char* name;
+    double spread;
+    int extra_large;
+    bool sorted;
+  };
+  const Case cases[] = {{"equal spheres in a box (split)", 1.0, 0, false},
+                        {"sizes over a factor 4 in a box (split)", 4.0, 0, false},
+                        {"sizes over a factor 40 (sorted)", 40.0, 0, true},
+                        {"100 large boxes, more than max_large (sorted, the edge grows)", 1.0, 100, true},
+                        {"40 large boxes (split)", 1.0, 40, false}};
+  for (const Case& c : cases)
+    for (int steps : {1, 2}) {
+      const BroadScene sc = broadScene(7, 3000, c.spread, c.extra_large);
+      BroadPhaseSettings settings;
+      BroadPhaseBins cpu(settings);
+      std::vector<ShapePair> want, got;
+      BroadPhaseStats cs, gs;
+      cpu.run(sc.shapes, sc.bodies, want, &cs);
+      bool sorted = false;
+      gpu::broadPhaseOnDevice(sc.shapes, sc.bodies, settings, steps, got, gs, sorted);
+      INFO(c.name << ", " << steps << " run(s): pairs CPU " << want.size() << " GPU " << got.size() << "; bin edge CPU "
+                  << cs.bin_edge << " GPU " << gs.bin_edge << "; large CPU " << cs.large_shapes << " GPU "
+                  << gs.large_shapes);
+      REQUIRE(want.size() > 100);
+      REQUIRE(got.size() == want.size());
+      bool same = true;
+      for (size_t i = 0; i < want.size(); ++i) same = same && want[i].a == got[i].a && want[i].b == got[i].b;
+      CHECK(same);
+      CHECK(sorted == c.sorted);
+      CHECK(gs.large_shapes == cs.large_shapes);
+      CHECK(std::fabs(double(gs.bin_edge) - double(cs.bin_edge)) <= (kDouble ? 1e-9 : 1e-4) * double(cs.bin_edge));
+    }
+}
+
 #endif  // DVISIM_HAVE_CUDA
 
 // A body with 512 or more adjacency entries is gathered by 32 blocks (gpu_solver.cu: HeavyGatherKernel, a ticketed

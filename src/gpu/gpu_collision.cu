@@ -59,6 +59,30 @@ __device__ int searchSorted(const real* sorted, int n, real x, bool strict) {
   return lo;
 }
 
+// The bin edge without sorting the extents. With lo the least bounded extent, split the bounded extents at
+// pivot = large_factor x lo into S (<= pivot: count cS, sum, largest hS) and B (> pivot: count cB, least lB).
+// When S holds more than half of them, the median m lies in S, so large_factor x m >= pivot keeps all of S;
+// when moreover lB > large_factor x hS, no extent of B is <= large_factor x m: the mean extent is S's mean and
+// edge = bin_size_factor x mean. With bin_size_factor >= 1, no extent of S exceeds large_factor x edge
+// (>= large_factor x lo); when lB also exceeds it, the shapes treated apart are exactly B's, and when there are
+// at most max_large of them edgeKernel's rule ends there. Those conditions are checked here; where one fails,
+// the caller sorts the extents (edgeKernel). A pile or mix in a box (walls in B) takes this path. The mean
+// differs from edgeKernel's in the sum's order only. (The 64-bit radix sort of the extents, its prefix sums and
+// edgeKernel took ~85 us of a 100k-sphere step on an H200; ncu, src/gpu/NOTES.md.)
+__device__ bool edgeFromSplit(int64_t cS, int64_t cB, double sumS, real hS, real lB, const BroadPhaseSettings& s,
+                              real* edge) {
+  if (cS + cB == 0) {
+    *edge = 0;
+    return true;
+  }
+  if (!(s.bin_size_factor >= real(1)) || cS <= cB || !(lB > s.large_factor * hS)) return false;
+  const real e = real(double(s.bin_size_factor) * sumS / double(cS));
+  if (cB > 0 && !(lB > s.large_factor * e)) return false;
+  if (cB > int64_t(s.max_large > 0 ? s.max_large : 0)) return false;
+  *edge = e;
+  return true;
+}
+
 // Bin edge before the max_bins growth: median of the bounded extents, mean of those <= large_factor x
 // median, capped so that at most max_large bounded shapes are treated apart (as BroadPhaseBins::run).
 __global__ void edgeKernel(int n, const real* se, const double* prefix, BroadPhaseSettings s, BroadParams* p) {
@@ -78,47 +102,56 @@ __global__ void edgeKernel(int n, const real* se, const double* prefix, BroadPha
       const int max_large = s.max_large > 0 ? s.max_large : 0;
       if (big > max_large) edge = se[n - 1 - max_large] / s.large_factor;
     }
-    p->needs_sort = !(s.bin_size_factor >= real(1) && se[n - 1] <= s.large_factor * se[first]);
+    // whether next step can do without the sort (edgeFromSplit on these extents)
+    const int up = searchSorted(se, n, s.large_factor * se[first], true);
+    const double sumS = prefix[up - 1] - (first > 0 ? prefix[first - 1] : 0.0);
+    real unused = 0;
+    p->needs_sort = edgeFromSplit(up - first, n - up, sumS, se[up - 1],
+                                  up < n ? se[up] : std::numeric_limits<real>::max(), s, &unused)
+                        ? 0
+                        : 1;
   } else {
     p->needs_sort = 0;
   }
   p->edge = edge;
 }
 
-// Count, sum, least and largest of the bounded extents (those >= 0).
-struct ExtentStats {
-  double sum;
-  real lo, hi;
-  int64_t count;
+struct ExtentMin {  // of the bounded extents (those >= 0); the largest real when there is none
+  __host__ __device__ real operator()(real e) const { return e < real(0) ? std::numeric_limits<real>::max() : e; }
 };
-struct ExtentToStats {
-  __host__ __device__ ExtentStats operator()(real e) const {
-    if (e < real(0)) return ExtentStats{0, std::numeric_limits<real>::max(), std::numeric_limits<real>::lowest(), 0};
-    return ExtentStats{double(e), e, e, 1};
+struct ExtentSplit {  // edgeFromSplit's sums
+  double sumS;
+  real hS, lB;
+  int64_t cS, cB;
+};
+struct ExtentToSplit {
+  const real* lo;  // ExtentMin's result, on the device
+  real large_factor;
+  __device__ ExtentSplit operator()(real e) const {
+    ExtentSplit t{0, std::numeric_limits<real>::lowest(), std::numeric_limits<real>::max(), 0, 0};
+    if (e < real(0)) return t;
+    if (e <= large_factor * *lo) {
+      t.sumS = double(e);
+      t.hS = e;
+      t.cS = 1;
+    } else {
+      t.lB = e;
+      t.cB = 1;
+    }
+    return t;
   }
 };
-struct ExtentStatsMerge {
-  __host__ __device__ ExtentStats operator()(const ExtentStats& a, const ExtentStats& b) const {
-    return ExtentStats{a.sum + b.sum, a.lo < b.lo ? a.lo : b.lo, a.hi > b.hi ? a.hi : b.hi, a.count + b.count};
+struct ExtentSplitMerge {
+  __host__ __device__ ExtentSplit operator()(const ExtentSplit& a, const ExtentSplit& b) const {
+    return ExtentSplit{a.sumS + b.sumS, a.hS > b.hS ? a.hS : b.hS, a.lB < b.lB ? a.lB : b.lB, a.cS + b.cS,
+                       a.cB + b.cB};
   }
 };
 
-// edgeKernel's rule without the sort when bin_size_factor >= 1 and the largest bounded extent is at most
-// large_factor x the least: then the median m >= least, so every extent is <= large_factor x m and the mean
-// extent is the mean of all of them; and none exceeds large_factor x edge (>= large_factor x mean >= large_factor
-// x least), so no bounded shape is treated apart. Otherwise it sets needs_sort and the caller runs edgeKernel.
-// (The 64-bit radix sort of the extents, its prefix sums and edgeKernel took ~70 us of a 100k-sphere step on
-// an H200; ncu, src/gpu/NOTES.md session 8.) The mean differs from edgeKernel's in the sum's order only.
-__global__ void edgeFromStatsKernel(const ExtentStats* st, BroadPhaseSettings s, BroadParams* p) {
-  const ExtentStats t = *st;
+__global__ void edgeFromSplitKernel(const ExtentSplit* st, BroadPhaseSettings s, BroadParams* p) {
+  const ExtentSplit t = *st;
   real edge = 0;
-  p->needs_sort = 0;
-  if (t.count > 0) {
-    if (s.bin_size_factor >= real(1) && t.hi <= s.large_factor * t.lo)
-      edge = real(double(s.bin_size_factor) * t.sum / double(t.count));
-    else
-      p->needs_sort = 1;
-  }
+  p->needs_sort = edgeFromSplit(t.cS, t.cB, t.sumS, t.hS, t.lB, s, &edge) ? 0 : 1;
   p->edge = edge;
 }
 
@@ -513,15 +546,20 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats)
       edgeKernel<<<1, 1, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data(), s, B.params.data());
       DVI_CUDA_LAUNCH("edgeKernel");
     } else {
-      B.ext_stats.resize(sizeof(ExtentStats));
-      auto* stats_out = reinterpret_cast<ExtentStats*>(B.ext_stats.data());
-      const auto in = thrust::make_transform_iterator(B.ext.data(), ExtentToStats{});
-      const ExtentStats none = ExtentToStats{}(real(-1));
-      cubRun(d, "cub::DeviceReduce::Reduce (extent statistics)", [&](void* t, size_t& b) {
-        return cub::DeviceReduce::Reduce(t, b, in, stats_out, n, ExtentStatsMerge{}, none, st);
+      B.ext_stats.resize(sizeof(ExtentSplit) + sizeof(real));
+      auto* split = reinterpret_cast<ExtentSplit*>(B.ext_stats.data());
+      real* lo = reinterpret_cast<real*>(B.ext_stats.data() + sizeof(ExtentSplit));
+      const auto mins = thrust::make_transform_iterator(B.ext.data(), ExtentMin{});
+      cubRun(d, "cub::DeviceReduce::Min (extents)", [&](void* t, size_t& b) {
+        return cub::DeviceReduce::Min(t, b, mins, lo, n, st);
       });
-      edgeFromStatsKernel<<<1, 1, 0, st>>>(stats_out, s, B.params.data());
-      DVI_CUDA_LAUNCH("edgeFromStatsKernel");
+      const auto parts = thrust::make_transform_iterator(B.ext.data(), ExtentToSplit{lo, s.large_factor});
+      const ExtentSplit none{0, std::numeric_limits<real>::lowest(), std::numeric_limits<real>::max(), 0, 0};
+      cubRun(d, "cub::DeviceReduce::Reduce (extents split)", [&](void* t, size_t& b) {
+        return cub::DeviceReduce::Reduce(t, b, parts, split, n, ExtentSplitMerge{}, none, st);
+      });
+      edgeFromSplitKernel<<<1, 1, 0, st>>>(split, s, B.params.data());
+      DVI_CUDA_LAUNCH("edgeFromSplitKernel");
     }
     classifyAndGrid(d, s, n, box);
     P = d.readValue(B.params.data());

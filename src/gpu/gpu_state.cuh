@@ -64,8 +64,8 @@ struct BroadParams {
   int32_t binned;  // shapes binned
   int32_t large;   // shapes treated apart
   int64_t bins;
-  // 1: the bounded extents span more than large_factor (or bin_size_factor < 1), so the edge needs the sorted
-  // extents (median, cut, max_large); 0: their mean alone gives it (gpu_collision.cu: edgeFromStatsKernel).
+  // 1: the edge needs the sorted extents (median, cut, max_large); 0: the split of the extents at large_factor x
+  // the least gives it (gpu_collision.cu: edgeFromSplit).
   int32_t needs_sort;
 };
 
@@ -83,7 +83,7 @@ struct BroadScratch {
   DeviceBuffer<unsigned long long> pair_counter{"broad pair counter"};  // pairEmitKernel's places taken
   DeviceBuffer<uint64_t> pair_key{"broad pair keys"}, pair_key_sorted{"broad sorted pair keys"};
   DeviceBuffer<BroadParams> params{"broad params"};
-  DeviceBuffer<unsigned char> ext_stats{"broad extent statistics"};  // one ExtentStats (gpu_collision.cu)
+  DeviceBuffer<unsigned char> ext_stats{"broad extent statistics"};  // ExtentSplit and the least extent (gpu_collision.cu)
   bool edge_by_sort = false;  // last step's BroadParams::needs_sort: start there
   DeviceBuffer<int64_t> tests{"broad bin pair tests"};
 };

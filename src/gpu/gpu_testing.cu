@@ -48,4 +48,31 @@ void collidePairsOnDevice(const std::vector<Shape>& a, const std::vector<Pose>& 
   dout.download(out);
 }
 
+void broadPhaseOnDevice(const ShapeArrays& shapes, const BodyArrays& bodies, const BroadPhaseSettings& settings,
+                        int steps, std::vector<ShapePair>& pairs, BroadPhaseStats& stats, bool& sorted) {
+  DeviceState d;
+  DVI_CUDA(cudaMallocHost(&d.host_scalars, 64 * sizeof(double)));
+  try {
+    d.shapes.shape.upload(shapes.shape);
+    d.shapes.aabb.upload(shapes.aabb);
+    d.shapes.count = shapes.shape.size();
+    d.bodies.flags.upload(bodies.flags);
+    d.bodies.count = bodies.flags.size();
+    SystemConfig cfg;
+    cfg.broadphase = settings;
+    for (int s = 0; s < steps; ++s) broadPhase(d, cfg, &stats);
+    sorted = d.broad.edge_by_sort;
+    std::vector<uint64_t> keys;
+    d.broad.pair_key_sorted.download(keys);
+    keys.resize(size_t(d.pairs));
+    pairs.clear();
+    const uint64_t mask = (uint64_t(1) << d.pair_shift) - 1;
+    for (uint64_t k : keys) pairs.push_back(ShapePair{int32_t(k >> d.pair_shift), int32_t(k & mask)});
+  } catch (...) {
+    cudaFreeHost(d.host_scalars);
+    throw;
+  }
+  cudaFreeHost(d.host_scalars);
+}
+
 }  // namespace dvi::gpu

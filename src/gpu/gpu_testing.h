@@ -4,7 +4,9 @@
 
 #include <vector>
 
+#include "chrono_like/broadphase.h"
 #include "chrono_like/contact.h"
+#include "chrono_like/data.h"
 #include "chrono_like/shape.h"
 
 namespace dvi::gpu {
@@ -15,5 +17,11 @@ void collidePairsOnDevice(const std::vector<Shape>& a, const std::vector<Pose>& 
                           const std::vector<Pose>& wb, const std::vector<Vec3>& hull,
                           const std::vector<real>& envelope, std::vector<int>& counts,
                           std::vector<ContactPoint>& out);
+
+// The GPU broad phase (gpu_collision.cu: broadPhase) over shapes.shape, shapes.aabb and bodies.flags, run
+// `steps` times on the same device state (the later runs start from the bin-edge path the earlier chose). pairs
+// and stats are those of the last run; sorted: whether its bin edge needed the sorted extents.
+void broadPhaseOnDevice(const ShapeArrays& shapes, const BodyArrays& bodies, const BroadPhaseSettings& settings,
+                        int steps, std::vector<ShapePair>& pairs, BroadPhaseStats& stats, bool& sorted);
 
 }  // namespace dvi::gpu
