@@ -639,7 +639,7 @@ TEST_CASE("constraint rows on the GPU: a pendulum chain on a pile equals the CPU
 
 namespace {
 // Particles in a box for the broad phase: n shapes with largest sides from side to side x spread (a log-uniform
-// spread), a ground box, four walls and a plane, plus `extra_large` boxes 30 x side wide at random places.
+// spread), a ground box, four high walls and a plane, plus `extra_large` boxes 30 x side wide at random places.
 struct BroadScene {
   ShapeArrays shapes;
   BodyArrays bodies;
@@ -664,11 +664,12 @@ BroadScene broadScene(uint32_t seed, int n, double spread, int extra_large) {
   const real side = real(0.02), L = real(0.02 * std::cbrt(double(n)) * 1.6);
   const real big = real(1e30);
   sc.add(ShapeType::Plane, Aabb{{-big, -big, -big}, {big, big, big}}, kBodyFixed);
-  sc.add(ShapeType::Box, Aabb{{-side, -side, -side}, {L + side, L + side, 0}}, kBodyFixed);
-  sc.add(ShapeType::Box, Aabb{{-side, -side, 0}, {0, L + side, L}}, kBodyFixed);
-  sc.add(ShapeType::Box, Aabb{{L, -side, 0}, {L + side, L + side, L}}, kBodyFixed);
-  sc.add(ShapeType::Box, Aabb{{-side, -side, 0}, {L + side, 0, L}}, kBodyFixed);
-  sc.add(ShapeType::Box, Aabb{{-side, L, 0}, {L + side, L + side, L}}, kBodyFixed);
+  const real H = 4 * L;  // walls 4 x the box's side high: well above large_factor x the particles' bin edge
+  sc.add(ShapeType::Box, Aabb{{-L, -L, -side}, {2 * L, 2 * L, 0}}, kBodyFixed);  // the ground, 3 x the box wide
+  sc.add(ShapeType::Box, Aabb{{-side, -side, 0}, {0, L + side, H}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{L, -side, 0}, {L + side, L + side, H}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{-side, -side, 0}, {L + side, 0, H}}, kBodyFixed);
+  sc.add(ShapeType::Box, Aabb{{-side, L, 0}, {L + side, L + side, H}}, kBodyFixed);
   for (int i = 0; i < n; ++i) {
     const real h = real(0.5 * side * std::pow(spread, U(rng)));
     const Vec3 c{real(U(rng) * L), real(U(rng) * L), real(U(rng) * L)};
