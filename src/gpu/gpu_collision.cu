@@ -365,26 +365,65 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
 // to narrowDeepKernel: its state goes to deferred[i] and its index to the deep list. The restarts of such a
 // pair cost up to ~25 MPR passes in one thread; one such thread set the length of the whole pass (3.7 ms of the
 // CES industrial feed's step on an H200, with 1.7 of 32 lanes active on average).
-__global__ void narrowCountKernel(NarrowArgs A, int64_t np, int64_t* count, ContactPoint* first,
-                                  np::MprDeferred* deferred, int32_t* deep, int32_t* deep_count) {
+// Appends i to list (warp-aggregated: one atomic per group of lanes that append at once); the order is free,
+// every result goes to index i.
+__device__ __forceinline__ void appendIndex(int64_t i, int64_t* list, unsigned long long* list_count) {
+  namespace cg = cooperative_groups;
+  const cg::coalesced_group g = cg::coalesced_threads();
+  unsigned long long base = 0;
+  if (g.thread_rank() == 0) base = atomicAdd(list_count, static_cast<unsigned long long>(g.size()));
+  base = g.shfl(base, 0);
+  list[base + g.thread_rank()] = i;
+}
+
+// Count pass, sphere pairs: collideSphereSphere (collideShapes' first case) in a kernel of few registers; every
+// other pair goes to the general list for narrowCountKernel. (collideShapes in one kernel takes 255 registers,
+// one block of 256 per SM: the 100k-sphere pile's count pass took 91 us on an H200, ncu.)
+__global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, ContactPoint* first, int64_t* general,
+                                   unsigned long long* general_count) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i > np) return;
   if (i == np) {
     count[np] = 0;
     return;
   }
-  ContactPoint pts[kMaxContactsPerPair];
   int32_t a, b;
-  np::MprDeferred d;
-  const int n = collidePair(A, i, a, b, pts, &d);
-  if (n == np::kMprDeferred) {
-    deferred[i] = d;
-    deep[atomicAdd(deep_count, 1)] = int32_t(i);  // list order is free: results go to index i
-    count[i] = 0;
+  unpackPair(A.pairs[i], A.shift, a, b);
+  if (A.shapes[a].type != ShapeType::Sphere || A.shapes[b].type != ShapeType::Sphere) {
+    appendIndex(i, general, general_count);
     return;
   }
+  const PairPoses P = pairPoses(A, i);
+  ContactPoint pts[kMaxContactsPerPair];
+  const int n = np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts);
   count[i] = n;
   if (n >= 1) first[i] = pts[0];
+}
+
+// Count pass, the general list: contacts per pair, keeping the first point (a fixed grid striding over the list,
+// whose length is on the device). A deep MPR pair (mpr.h: mprBegin's answer 2) is left to narrowDeepKernel: its
+// state goes to deferred[i] and its index to the deep list. The restarts of such a pair cost up to ~25 MPR passes
+// in one thread; one such thread set the length of the whole pass (3.7 ms of the CES industrial feed's step on an
+// H200, with 1.7 of 32 lanes active on average).
+__global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const unsigned long long* general_count,
+                                  int64_t* count, ContactPoint* first, np::MprDeferred* deferred, int32_t* deep,
+                                  int32_t* deep_count) {
+  const int64_t m = int64_t(*general_count);
+  for (int64_t j = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; j < m; j += int64_t(gridDim.x) * blockDim.x) {
+    const int64_t i = general[j];
+    ContactPoint pts[kMaxContactsPerPair];
+    int32_t a, b;
+    np::MprDeferred d;
+    const int n = collidePair(A, i, a, b, pts, &d);
+    if (n == np::kMprDeferred) {
+      deferred[i] = d;
+      deep[atomicAdd(deep_count, 1)] = int32_t(i);  // list order is free: results go to index i
+      count[i] = 0;
+      continue;
+    }
+    count[i] = n;
+    if (n >= 1) first[i] = pts[0];
+  }
 }
 
 // Deep MPR pairs, kDeepLanes lanes each (grid-stride over the deep list): lane l runs restart l of a round, every
@@ -445,24 +484,10 @@ struct ContactOut {
   uint64_t* key;
 };
 
-__global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count, const int64_t* off,
-                                  const ContactPoint* first, ContactOut out) {
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= np) return;
-  const int64_t n = count[i];
-  if (n == 0) return;
-  ContactPoint pts[kMaxContactsPerPair];
-  int32_t a, b;
-  if (n == 1) {
-    const uint64_t key = A.pairs[i];
-    unpackPair(key, A.shift, a, b);
-    pts[0] = first[i];
-  } else {
-    collidePair(A, i, a, b, pts);  // deterministic: the same points as the count pass
-  }
+__device__ __forceinline__ void writeContacts(const NarrowArgs& A, int32_t a, int32_t b, const ContactPoint* pts,
+                                              int n, int64_t k, const ContactOut& out) {
   const int32_t ba = A.shapes[a].body, bb = A.shapes[b].body;
-  int64_t k = off[i];
-  for (int j = 0; j < int(n); ++j, ++k) {
+  for (int j = 0; j < n; ++j, ++k) {
     out.shape_a[k] = a;
     out.shape_b[k] = b;
     out.body_a[k] = ba;
@@ -473,6 +498,46 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
     out.dist[k] = pts[j].dist;
     out.key[k] = contactKey(a, b, pts[j].feature);
   }
+}
+
+// Write pass, one thread per pair: a pair of one contact copies the count pass's point (a kernel of few
+// registers); a pair of more goes to the multi list for narrowMultiKernel.
+__global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count, const int64_t* off,
+                                  const ContactPoint* first, ContactOut out, int64_t* multi,
+                                  unsigned long long* multi_count) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= np) return;
+  const int64_t n = count[i];
+  if (n == 0) return;
+  if (n > 1) {
+    appendIndex(i, multi, multi_count);
+    return;
+  }
+  int32_t a, b;
+  unpackPair(A.pairs[i], A.shift, a, b);
+  writeContacts(A, a, b, first + i, 1, off[i], out);
+}
+
+// Write pass, pairs of several contacts (a fixed grid striding over the multi list): all their points again
+// (deterministic: the same points as the count pass).
+__global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsigned long long* multi_count,
+                                  const int64_t* count, const int64_t* off, ContactOut out) {
+  const int64_t m = int64_t(*multi_count);
+  for (int64_t j = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; j < m; j += int64_t(gridDim.x) * blockDim.x) {
+    const int64_t i = multi[j];
+    ContactPoint pts[kMaxContactsPerPair];
+    int32_t a, b;
+    collidePair(A, i, a, b, pts);
+    writeContacts(A, a, b, pts, int(count[i]), off[i], out);
+  }
+}
+
+// Blocks of kBlock threads of a kernel resident per SM (at least 1).
+template <class K>
+int residentBlocks(K* kernel) {
+  int n = 0;
+  DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&n, reinterpret_cast<const void*>(kernel), kBlock, 0));
+  return std::max(1, n);
 }
 
 }  // namespace
@@ -673,9 +738,19 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.deferred.resize(np);
   N.deep.resize(np);
   N.deep_count.resize(1);
+  N.list.resize(np);
+  N.list_count.resize(2);  // [0]: general pairs of the count pass, [1]: pairs of several contacts (write pass)
   DVI_CUDA(cudaMemsetAsync(N.deep_count.data(), 0, sizeof(int32_t), st));
-  narrowCountKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data(), N.deferred.data(),
-                                                          N.deep.data(), N.deep_count.data());
+  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 2 * sizeof(unsigned long long), st));
+  narrowSphereKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data(), N.list.data(),
+                                                           N.list_count.data());
+  DVI_CUDA_LAUNCH("narrowSphereKernel");
+  // the general kernel's grid: what fits on the device at once, striding over the list (its length is on the device)
+  const unsigned general_grid =
+      unsigned(std::min<int64_t>(blocksFor(np), int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel)));
+  narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), N.count.data(),
+                                                     N.first.data(), N.deferred.data(), N.deep.data(),
+                                                     N.deep_count.data());
   DVI_CUDA_LAUNCH("narrowCountKernel");
   // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
   narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(np * kDeepLanes, 128), 4 * d.multiprocessors)), 128, 0,
@@ -690,8 +765,14 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   DeviceContacts& c = d.contacts;
   ContactOut out{c.shape_a.data(), c.shape_b.data(), c.body_a.data(), c.body_b.data(), c.normal.data(),
                  c.pa.data(),      c.pb.data(),      c.dist.data(),   c.key.data()};
-  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), N.first.data(), out);
+  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), N.first.data(), out,
+                                                      N.list.data(), N.list_count.data() + 1);
   DVI_CUDA_LAUNCH("narrowWriteKernel");
+  const unsigned multi_grid =
+      unsigned(std::min<int64_t>(blocksFor(np), int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel)));
+  narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1, N.count.data(),
+                                                   N.off.data(), out);
+  DVI_CUDA_LAUNCH("narrowMultiKernel");
 }
 
 }  // namespace dvi::gpu

@@ -95,6 +95,9 @@ struct NarrowScratch {
   // deep MPR pairs, finished by narrowDeepKernel a lane per restart (mpr.h: MprRound)
   DeviceBuffer<np::MprDeferred> deferred{"narrow deferred MPR states"};  // per pair (only deep ones written)
   DeviceBuffer<int32_t> deep{"narrow deep pairs"}, deep_count{"narrow deep pair count"};
+  // pairs left by the sphere kernel to the general count kernel, then pairs of several contacts (write pass)
+  DeviceBuffer<int64_t> list{"narrow pair list"};
+  DeviceBuffer<unsigned long long> list_count{"narrow pair list counts"};
 };
 
 // The APGD control of the device loop (gpu_solver.cu: apgdIterateOnDevice), in device memory.
