@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 
@@ -400,26 +401,44 @@ __global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, Con
   if (n >= 1) first[i] = pts[0];
 }
 
-// Count pass, the general list: contacts per pair, keeping the first point (a fixed grid striding over the list,
-// whose length is on the device). A deep MPR pair (mpr.h: mprBegin's answer 2) is left to narrowDeepKernel: its
-// state goes to deferred[i] and its index to the deep list. The restarts of such a pair cost up to ~25 MPR passes
-// in one thread; one such thread set the length of the whole pass (3.7 ms of the CES industrial feed's step on an
-// H200, with 1.7 of 32 lanes active on average).
+// The next 32 items of a list for the calling warp (all its lanes call it together): a fixed grid takes work
+// from the list as it goes, so pairs of very different cost (MPR) do not leave threads with long fixed shares.
+__device__ __forceinline__ int64_t warpTake(unsigned long long* next) {
+  const unsigned lane = threadIdx.x & 31u;
+  unsigned long long base = 0;
+  if (lane == 0) base = atomicAdd(next, 32ull);
+  return int64_t(__shfl_sync(0xffffffffu, base, 0)) + lane;
+}
+
+// Count pass, the general list (its length and the work counter are on the device): contacts per pair, keeping
+// the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left to narrowDeepKernel: its state and index
+// go to slot k of the deferred and deep lists, k < deep_cap (the lists' room, last step's count and more); past
+// that, the thread finishes it itself (finishDeferredMpr, the same arithmetic). The restarts of such a pair cost
+// up to ~25 MPR passes in one thread; one such thread set the length of the whole pass (3.7 ms of the CES
+// industrial feed's step on an H200, with 1.7 of 32 lanes active on average).
 __global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const unsigned long long* general_count,
-                                  int64_t* count, ContactPoint* first, np::MprDeferred* deferred, int32_t* deep,
-                                  int32_t* deep_count) {
+                                  unsigned long long* next, int64_t* count, ContactPoint* first,
+                                  np::MprDeferred* deferred, int32_t* deep, int32_t* deep_count, int32_t deep_cap) {
   const int64_t m = int64_t(*general_count);
-  for (int64_t j = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; j < m; j += int64_t(gridDim.x) * blockDim.x) {
+  for (;;) {
+    const int64_t j = warpTake(next);
+    if (j - int64_t(threadIdx.x & 31u) >= m) break;  // the warp's whole batch is past the end
+    if (j >= m) continue;
     const int64_t i = general[j];
     ContactPoint pts[kMaxContactsPerPair];
     int32_t a, b;
     np::MprDeferred d;
-    const int n = collidePair(A, i, a, b, pts, &d);
+    int n = collidePair(A, i, a, b, pts, &d);
     if (n == np::kMprDeferred) {
-      deferred[i] = d;
-      deep[atomicAdd(deep_count, 1)] = int32_t(i);  // list order is free: results go to index i
-      count[i] = 0;
-      continue;
+      const int32_t k = atomicAdd(deep_count, 1);  // slot order is free: results go to index i
+      if (k < deep_cap) {
+        deferred[k] = d;
+        deep[k] = int32_t(i);
+        count[i] = 0;
+        continue;
+      }
+      const PairPoses P = pairPoses(A, i);
+      n = finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts);
     }
     count[i] = n;
     if (n >= 1) first[i] = pts[0];
@@ -453,15 +472,15 @@ __device__ np::MprResult deepRound(const np::MprShape& SA, const np::MprShape& S
 
 __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::MprDeferred* deferred,
                                                        const int32_t* deep, const int32_t* deep_count,
-                                                       int64_t* count, ContactPoint* first) {
+                                                       int32_t deep_cap, int64_t* count, ContactPoint* first) {
   const int lane = int(threadIdx.x % kDeepLanes), base = int(threadIdx.x % 32) - lane;
   const unsigned mask = ((1u << kDeepLanes) - 1u) << base;
   const int64_t groups = int64_t(gridDim.x) * blockDim.x / kDeepLanes;
-  const int32_t nd = *deep_count;
+  const int32_t nd = *deep_count < deep_cap ? *deep_count : deep_cap;
   for (int64_t g = (int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / kDeepLanes; g < nd; g += groups) {
     const int64_t i = deep[g];
     const PairPoses P = pairPoses(A, i);
-    np::MprDeferred d = deferred[i];
+    np::MprDeferred d = deferred[g];
     np::MprShape SA, SB;
     const Shape *fa, *fb;
     deferredMprShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d.swapped != 0, SA, SB, fa, fb);
@@ -518,12 +537,15 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
   writeContacts(A, a, b, first + i, 1, off[i], out);
 }
 
-// Write pass, pairs of several contacts (a fixed grid striding over the multi list): all their points again
+// Write pass, pairs of several contacts (a fixed grid taking the multi list by warps): all their points again
 // (deterministic: the same points as the count pass).
 __global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsigned long long* multi_count,
-                                  const int64_t* count, const int64_t* off, ContactOut out) {
+                                  unsigned long long* next, const int64_t* count, const int64_t* off, ContactOut out) {
   const int64_t m = int64_t(*multi_count);
-  for (int64_t j = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; j < m; j += int64_t(gridDim.x) * blockDim.x) {
+  for (;;) {
+    const int64_t j = warpTake(next);
+    if (j - int64_t(threadIdx.x & 31u) >= m) break;
+    if (j >= m) continue;
     const int64_t i = multi[j];
     ContactPoint pts[kMaxContactsPerPair];
     int32_t a, b;
@@ -735,31 +757,46 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.first.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
                d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel, d.pair_shift};
-  N.deferred.resize(np);
-  N.deep.resize(np);
+  // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
+  // are finished in the count pass (slower, the same contacts).
+  const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
+  N.deferred.resize(size_t(deep_cap));
+  N.deep.resize(size_t(deep_cap));
   N.deep_count.resize(1);
   N.list.resize(np);
-  N.list_count.resize(2);  // [0]: general pairs of the count pass, [1]: pairs of several contacts (write pass)
+  // [0]: general pairs of the count pass, [1]: pairs of several contacts (write pass), [2], [3]: the two lists'
+  // work counters (warpTake)
+  N.list_count.resize(4);
   DVI_CUDA(cudaMemsetAsync(N.deep_count.data(), 0, sizeof(int32_t), st));
-  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 2 * sizeof(unsigned long long), st));
+  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 4 * sizeof(unsigned long long), st));
   narrowSphereKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data(), N.list.data(),
                                                            N.list_count.data());
   DVI_CUDA_LAUNCH("narrowSphereKernel");
   // the general kernel's grid: what fits on the device at once, striding over the list (its length is on the device)
   const unsigned general_grid =
       unsigned(std::min<int64_t>(blocksFor(np), int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel)));
-  narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), N.count.data(),
-                                                     N.first.data(), N.deferred.data(), N.deep.data(),
-                                                     N.deep_count.data());
+  narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), N.list_count.data() + 2,
+                                                     N.count.data(), N.first.data(), N.deferred.data(), N.deep.data(),
+                                                     N.deep_count.data(), int32_t(deep_cap));
   DVI_CUDA_LAUNCH("narrowCountKernel");
   // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
-  narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(np * kDeepLanes, 128), 4 * d.multiprocessors)), 128, 0,
-                     st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), N.count.data(), N.first.data());
+  narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(deep_cap * kDeepLanes, 128), 4 * d.multiprocessors)), 128,
+                     0, st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), int32_t(deep_cap),
+                              N.count.data(), N.first.data());
   DVI_CUDA_LAUNCH("narrowDeepKernel");
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
   });
-  const int64_t nc = d.readValue(N.off.data() + np);
+  // the contact count and the deep pairs' count in one read-back (pinned)
+  char* hs = reinterpret_cast<char*>(d.host_scalars);
+  DVI_CUDA(cudaMemcpyAsync(hs, N.off.data() + np, sizeof(int64_t), cudaMemcpyDeviceToHost, st));
+  DVI_CUDA(cudaMemcpyAsync(hs + sizeof(int64_t), N.deep_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost, st));
+  DVI_CUDA(cudaStreamSynchronize(st));
+  int64_t nc = 0;
+  int32_t deep = 0;
+  std::memcpy(&nc, hs, sizeof nc);
+  std::memcpy(&deep, hs + sizeof(int64_t), sizeof deep);
+  N.deep_last = deep;
   d.contacts.resize(size_t(nc));
   if (nc == 0) return;
   DeviceContacts& c = d.contacts;
@@ -770,8 +807,8 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   DVI_CUDA_LAUNCH("narrowWriteKernel");
   const unsigned multi_grid =
       unsigned(std::min<int64_t>(blocksFor(np), int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel)));
-  narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1, N.count.data(),
-                                                   N.off.data(), out);
+  narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1,
+                                                   N.list_count.data() + 3, N.count.data(), N.off.data(), out);
   DVI_CUDA_LAUNCH("narrowMultiKernel");
 }
 

@@ -93,8 +93,9 @@ struct NarrowScratch {
   DeviceBuffer<int64_t> off{"narrow offsets"};
   DeviceBuffer<ContactPoint> first{"narrow first points"};
   // deep MPR pairs, finished by narrowDeepKernel a lane per restart (mpr.h: MprRound)
-  DeviceBuffer<np::MprDeferred> deferred{"narrow deferred MPR states"};  // per pair (only deep ones written)
+  DeviceBuffer<np::MprDeferred> deferred{"narrow deferred MPR states"};  // per deep pair (slot of the deep list)
   DeviceBuffer<int32_t> deep{"narrow deep pairs"}, deep_count{"narrow deep pair count"};
+  int64_t deep_last = 0;  // deep pairs of the last step (the room of the deferred and deep lists follows it)
   // pairs left by the sphere kernel to the general count kernel, then pairs of several contacts (write pass)
   DeviceBuffer<int64_t> list{"narrow pair list"};
   DeviceBuffer<unsigned long long> list_count{"narrow pair list counts"};
