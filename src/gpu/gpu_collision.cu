@@ -268,12 +268,23 @@ struct PairSlots {
 template <class Emit>
 __device__ void visitSlot(const PairSlots& S, int64_t s, Emit&& emit) {
   if (s < S.ne) {
-    // entries of one bin keep increasing shape order (stable sort of the per-shape writes): a < b
+    // Entry p of a bin of k entries tests the entries at cyclic distance 1 .. k/2 after it (at distance k/2,
+    // when k is even, from the lower position only): every pair once, and every entry ~k/2 tests. (Testing the
+    // entries after it only, entry p did k - 1 - p: a warp over one bin ran k - 1 rounds at half its lanes.)
+    // Entries of one bin keep increasing shape order (stable sort of the per-shape writes): the lower position
+    // holds the lower shape.
     const uint32_t bin = S.entry_bin[s];
-    const int32_t a = S.entry_shape[s];
+    int64_t lo = s, hi = s + 1;
+    while (lo > 0 && S.entry_bin[lo - 1] == bin) --lo;
+    while (hi < S.ne && S.entry_bin[hi] == bin) ++hi;
+    const int64_t k = hi - lo, p = s - lo, half = k / 2;
+    const int32_t me = S.entry_shape[s];
     const BinGrid g = S.p->grid;
-    for (int64_t j = s + 1; j < S.ne && S.entry_bin[j] == bin; ++j) {
-      const int32_t b = S.entry_shape[j];
+    for (int64_t d = 1; d <= half; ++d) {
+      if (2 * d == k && p >= half) break;
+      const int64_t q = p + d < k ? p + d : p + d - k;
+      const int32_t other = S.entry_shape[lo + q];
+      const int32_t a = p < q ? me : other, b = p < q ? other : me;
       if (binPairTest(g, bin, a, b, S.shapes, S.box, S.flags)) emit(a, b);
     }
   } else if (s < S.ne + S.nb) {
