@@ -313,6 +313,16 @@ __device__ __forceinline__ void unpackPair(uint64_t key, int sh, int32_t& a, int
   b = int32_t(key & ((uint64_t(1) << sh) - 1));
 }
 
+// The next free place of an append-only list whose length is *counter, taken by every lane that calls this at
+// once with one atomic for the group (cooperative_groups::coalesced_threads); the order within the list is free.
+__device__ __forceinline__ unsigned long long warpAggregatedSlot(unsigned long long* counter) {
+  namespace cg = cooperative_groups;
+  const cg::coalesced_group g = cg::coalesced_threads();
+  unsigned long long base = 0;
+  if (g.thread_rank() == 0) base = atomicAdd(counter, static_cast<unsigned long long>(g.size()));
+  return g.shfl(base, 0) + g.thread_rank();
+}
+
 // One pass over the slots: each pair found takes the next place of a counter, aggregated over the warp's lanes
 // that emit at once (one atomic a group), and is written when it fits in cap. The keys are sorted afterwards,
 // so the order they land in does not matter; the count is exact either way (the caller re-runs with room for
@@ -323,12 +333,7 @@ __global__ void pairEmitKernel(PairSlots S, int64_t slots, int sh, uint64_t cap,
   const int64_t s = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (s >= slots) return;
   visitSlot(S, s, [&](int32_t a, int32_t b) {
-    namespace cg = cooperative_groups;
-    const cg::coalesced_group g = cg::coalesced_threads();
-    unsigned long long base = 0;
-    if (g.thread_rank() == 0) base = atomicAdd(counter, static_cast<unsigned long long>(g.size()));
-    base = g.shfl(base, 0);
-    const uint64_t w = base + g.thread_rank();
+    const uint64_t w = warpAggregatedSlot(counter);
     if (w < cap) keys[w] = packPair(a, b, sh);
   });
 }
@@ -380,12 +385,7 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
 // Appends i to list (warp-aggregated: one atomic per group of lanes that append at once); the order is free,
 // every result goes to index i.
 __device__ __forceinline__ void appendIndex(int64_t i, int64_t* list, unsigned long long* list_count) {
-  namespace cg = cooperative_groups;
-  const cg::coalesced_group g = cg::coalesced_threads();
-  unsigned long long base = 0;
-  if (g.thread_rank() == 0) base = atomicAdd(list_count, static_cast<unsigned long long>(g.size()));
-  base = g.shfl(base, 0);
-  list[base + g.thread_rank()] = i;
+  list[warpAggregatedSlot(list_count)] = i;
 }
 
 // Count pass, sphere pairs: collideSphereSphere (collideShapes' first case) in a kernel of few registers; every
@@ -565,12 +565,14 @@ __global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsi
   }
 }
 
-// Blocks of kBlock threads of a kernel resident per SM (at least 1).
+// Blocks of kBlock threads of a kernel resident per SM (at least 1), asked once and kept in *cached.
 template <class K>
-int residentBlocks(K* kernel) {
+int residentBlocks(K* kernel, int* cached) {
+  if (*cached > 0) return *cached;
   int n = 0;
   DVI_CUDA(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&n, reinterpret_cast<const void*>(kernel), kBlock, 0));
-  return std::max(1, n);
+  *cached = std::max(1, n);
+  return *cached;
 }
 
 }  // namespace
@@ -784,8 +786,9 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
                                                            N.list_count.data());
   DVI_CUDA_LAUNCH("narrowSphereKernel");
   // the general kernel's grid: what fits on the device at once, striding over the list (its length is on the device)
-  const unsigned general_grid =
-      unsigned(std::min<int64_t>(blocksFor(np), int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel)));
+  const int64_t general_resident =
+      int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel, &N.count_blocks_per_sm);
+  const unsigned general_grid = unsigned(std::min<int64_t>(blocksFor(np), general_resident));
   narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), N.list_count.data() + 2,
                                                      N.count.data(), N.first.data(), N.deferred.data(), N.deep.data(),
                                                      N.deep_count.data(), int32_t(deep_cap));
@@ -816,8 +819,9 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), N.first.data(), out,
                                                       N.list.data(), N.list_count.data() + 1);
   DVI_CUDA_LAUNCH("narrowWriteKernel");
-  const unsigned multi_grid =
-      unsigned(std::min<int64_t>(blocksFor(np), int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel)));
+  const int64_t multi_resident =
+      int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel, &N.multi_blocks_per_sm);
+  const unsigned multi_grid = unsigned(std::min<int64_t>(blocksFor(np), multi_resident));
   narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1,
                                                    N.list_count.data() + 3, N.count.data(), N.off.data(), out);
   DVI_CUDA_LAUNCH("narrowMultiKernel");

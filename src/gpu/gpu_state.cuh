@@ -99,6 +99,8 @@ struct NarrowScratch {
   // pairs left by the sphere kernel to the general count kernel, then pairs of several contacts (write pass)
   DeviceBuffer<int64_t> list{"narrow pair list"};
   DeviceBuffer<unsigned long long> list_count{"narrow pair list counts"};
+  // resident blocks per SM of narrowCountKernel and narrowMultiKernel (their grids), 0 until first asked
+  int count_blocks_per_sm = 0, multi_blocks_per_sm = 0;
 };
 
 // The APGD control of the device loop (gpu_solver.cu: apgdIterateOnDevice), in device memory.
