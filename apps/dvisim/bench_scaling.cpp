@@ -88,6 +88,7 @@ struct ScalingOptions {
   bool gpu_graphs = true;
   long long gpu_persistent_max = -1;  // -1: SystemConfig's default
   bool gpu_register_cache = true;
+  double pair_margin = dvi::BroadPhaseSettings{}.pair_margin;
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
@@ -106,6 +107,15 @@ std::string gpuTrialsLabel(const dvi::SystemConfig& cfg) {
   return persistent + cache + " up to " + std::to_string(m) + " blocks, above that " + single;
 }
 
+std::string pairMarginLabel(dvi::real f) {
+  if (!(f > 0)) return "a build every step (--pair-margin 0)";
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", double(f));
+  return "last step's pairs kept while every box stays inside its box grown by " + std::string(b) +
+         " x the bin edge (BroadPhaseSettings::pair_margin; the same contacts as a build every step); the CSV's "
+         "pairs_kept_steps counts the timed steps that kept them";
+}
+
 std::string storageLabel(const dvi::SolverSettings& s, bool gpu) {
   if (sizeof(dvi::real) != 8) return "float";
   return dvi::floatStorage(s, gpu) ? "float gradients and Jacobians (iterates double)" : "double";
@@ -115,6 +125,7 @@ struct Row {
   std::string engine, scene, device, status = "ok";
   long n = 0, bodies = 0;
   int threads = 0, warmup = 0, steps = 0;
+  int pairs_kept = -1;  // timed steps whose BroadPhase kept the last step's pairs (ours; -1: not known)
   double setup_s = 0, ms = 0, broad = 0, narrow = 0, solve = 0, integrate = 0, other = 0;
   double solve_only_ms = 0;  // the Solve stage alone (the bandwidth's denominator)
   double contacts = 0, iterations = 0, max_pen_rel = 0, ref_length = 0;
@@ -225,6 +236,7 @@ Row runOurs(const std::string& engine, const dvi::bench::SceneSpec& spec, const 
   r.steps = p.steps;
   std::array<double, dvi::kStageCount> stage_ms{};
   double wall = 0, pen = 0;
+  int kept = 0;
   for (int s = 0; s < p.steps; ++s) {
     const auto t0 = Clock::now();
     sys->step();
@@ -234,11 +246,14 @@ Row runOurs(const std::string& engine, const dvi::bench::SceneSpec& spec, const 
     r.contacts += double(st.contacts) / p.steps;
     r.iterations += double(st.iterations) / p.steps;
     pen = std::max(pen, double(st.max_penetration));
+    kept += st.pairs_reused ? 1 : 0;
   }
+  r.pairs_kept = kept;
   r.ms = wall * 1e3 / p.steps;
   groupStages(r, stage_ms);
   {  // every stage of the named step (StageType), for the profile behind the grouped columns
-    std::string line = "  stages " + engine + " " + spec.name + " " + std::to_string(r.n) + " (ms/step):";
+    std::string line = "  stages " + engine + " " + spec.name + " " + std::to_string(r.n) + " (pairs kept " +
+                       std::to_string(kept) + "/" + std::to_string(p.steps) + "; ms/step):";
     for (int k = 0; k < dvi::kStageCount; ++k)
       if (stage_ms[size_t(k)] > 0) line += " " + std::string(dvi::stageName(dvi::StageType(k))) + " " + num(stage_ms[size_t(k)], "%.3f");
     std::printf("%s\n", line.c_str());
@@ -342,8 +357,8 @@ Row runBullet3Row(const dvi::bench::SceneSpec& spec, bool quick, double budget, 
 // ---------- outputs ----------
 
 const char* kCsvHeader =
-    "engine,scene,n,bodies,threads,warmup_steps,timed_steps,setup_s,ms_per_step,ms_broad,ms_narrow,ms_solve,"
-    "ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,"
+    "engine,scene,n,bodies,threads,warmup_steps,timed_steps,pairs_kept_steps,setup_s,ms_per_step,ms_broad,ms_narrow,"
+    "ms_solve,ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,"
     "copy_gbps,solve_pct_of_copy,device,status";
 
 std::string csvText(const std::vector<Row>& rows) {
@@ -354,7 +369,8 @@ std::string csvText(const std::vector<Row>& rows) {
     auto v = [&](double x) { return ok ? num(x) : std::string(); };
     o << r.engine << "," << r.scene << "," << r.n << "," << (ok ? std::to_string(r.bodies) : "") << ","
       << (ok ? std::to_string(r.threads) : "") << "," << (ok ? std::to_string(r.warmup) : "") << ","
-      << (ok ? std::to_string(r.steps) : "") << "," << v(r.setup_s) << "," << v(r.ms) << "," << v(r.broad) << ","
+      << (ok ? std::to_string(r.steps) : "") << "," << (ok && r.pairs_kept >= 0 ? std::to_string(r.pairs_kept) : "")
+      << "," << v(r.setup_s) << "," << v(r.ms) << "," << v(r.broad) << ","
       << v(r.narrow) << "," << v(r.solve) << "," << v(r.integrate) << "," << v(r.other) << "," << v(r.contacts) << ","
       << v(r.iterations) << "," << v(r.max_pen_rel) << "," << num(r.ref_length) << "," << v(r.device_mib) << ","
       << v(r.solve_gbps) << "," << v(r.copy_gbps) << "," << v(r.pct_copy) << "," << csvField(r.device) << ","
@@ -574,6 +590,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.gpu_graphs = o.gpu_graphs;
   if (o.gpu_persistent_max >= 0) cfg.gpu_persistent_max_blocks = o.gpu_persistent_max;
   cfg.gpu_apgd_register_cache = o.gpu_register_cache;
+  cfg.broadphase.pair_margin = dvi::real(o.pair_margin);
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
@@ -706,6 +723,7 @@ int runScaling(const ScalingOptions& o) {
        << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg)
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
+       << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.broadphase.pair_margin)
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
@@ -746,6 +764,10 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--gpu-register-cache", o->gpu_register_cache,
                   "Persistent APGD kernel: keep each thread's blocks in registers between trials where the problem "
                   "fits 2 blocks a thread (true, the default) or read them from memory every trial (false)");
+  cmd->add_option("--pair-margin", o->pair_margin,
+                  "BroadPhase keeps its pairs between steps within boxes grown by this fraction of the bin edge "
+                  "(BroadPhaseSettings::pair_margin; 0: a build every step; default 0.025)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));

@@ -12,7 +12,7 @@ run_bench scaling --quick --threads 1
 csv="$work/out/scaling.csv"
 [ -s "$csv" ] || fail "no $csv"
 
-expected="engine,scene,n,bodies,threads,warmup_steps,timed_steps,setup_s,ms_per_step,ms_broad,ms_narrow,ms_solve,ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,copy_gbps,solve_pct_of_copy,device,status"
+expected="engine,scene,n,bodies,threads,warmup_steps,timed_steps,pairs_kept_steps,setup_s,ms_per_step,ms_broad,ms_narrow,ms_solve,ms_integrate,ms_other,contacts,iterations,max_penetration_rel,ref_length_m,device_mib,solve_model_gbps,copy_gbps,solve_pct_of_copy,device,status"
 expect_header "$csv" "$expected"
 
 # Every engine x scene x N planned: gpu (measured or skipped), cpu and bullet (measured), bullet3_opencl

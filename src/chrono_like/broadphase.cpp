@@ -53,10 +53,15 @@ void sortByB(ShapePair* s, int32_t m) {
 
 void BroadPhaseBins::run(const ShapeArrays& shapes, const BodyArrays& bodies, std::vector<ShapePair>& out_pairs,
                          BroadPhaseStats* stats) {
+  if (shapes.aabb.size() < shapes.count())
+    throw std::invalid_argument("BroadPhaseBins::run: shapes.aabb not computed");
+  run(shapes, shapes.aabb.data(), bodies, out_pairs, stats);
+}
+
+void BroadPhaseBins::run(const ShapeArrays& shapes, const Aabb* box, const BodyArrays& bodies,
+                         std::vector<ShapePair>& out_pairs, BroadPhaseStats* stats) {
   const int32_t n = int32_t(shapes.count());
-  if (shapes.aabb.size() < size_t(n)) throw std::invalid_argument("BroadPhaseBins::run: shapes.aabb not computed");
   const Shape* sh = shapes.shape.data();
-  const Aabb* box = shapes.aabb.data();
   const uint8_t* flags = bodies.flags.data();
   const int nthreads = std::max(1, omp_get_max_threads());
 

@@ -38,6 +38,12 @@ struct BroadPhaseSettings {
   real large_factor = real(8);     // a shape larger than large_factor bin edges is treated apart
   int64_t max_bins = int64_t(1) << 24;
   int32_t max_large = 64;          // most bounded (non-plane) shapes treated apart
+  // Pairs kept between steps (broadphase_kernels.h: fatAabb, pairsStillHold): each build grows every box by
+  // pair_margin x the last build's bin edge (0 on the first build), and the next steps keep its pairs while
+  // every shape's box stays inside its grown box and no body's flags change; the contacts are the same as
+  // with a build every step. 0 builds every step. The default, 2.5% of the edge (about 5% of the mean
+  // extent: 1 mm for spheres of 1 cm radius), adds the pairs of neighbours within two margins of touching.
+  real pair_margin = real(0.025);
 };
 
 struct BroadPhaseStats {
@@ -60,6 +66,9 @@ class BroadPhaseBins {
   explicit BroadPhaseBins(BroadPhaseSettings s = {}) : settings_(s) {}
   // Reads shapes.shape, shapes.aabb, bodies.flags; writes out_pairs.
   void run(const ShapeArrays& shapes, const BodyArrays& bodies, std::vector<ShapePair>& out_pairs,
+           BroadPhaseStats* stats = nullptr);
+  // The same on other boxes than shapes.aabb (one per shape: the grown boxes of pair reuse).
+  void run(const ShapeArrays& shapes, const Aabb* boxes, const BodyArrays& bodies, std::vector<ShapePair>& out_pairs,
            BroadPhaseStats* stats = nullptr);
 
  private:

@@ -26,6 +26,29 @@ DVI_HD bool aabbOverlap(const Aabb& a, const Aabb& b) {
          b.lo.z <= a.hi.z;
 }
 
+// ---- pairs kept between steps (fat boxes) ----
+// A broad phase run on boxes grown by a margin m finds every pair whose grown boxes overlap. While each
+// shape's box stays inside its grown box and no body's flags change, that list stays a superset of the pairs
+// a fresh broad phase would find (two boxes that overlap lie inside grown boxes that overlap; pairAllowed
+// reads only the flags and the immutable shapes). The narrow phase keeps only contacts within each pair's
+// envelope, and the pairs stay sorted by (a, b), so the contacts and their order are those of a fresh broad
+// phase: only its cost is saved. This is the fat-AABB rule of Box2D's dynamic tree (b2_aabbMargin, Catto,
+// box2d.org) and Bullet's btDbvtBroadphase, applied to the binned grid.
+DVI_HD Aabb fatAabb(const Aabb& b, real m) {  // unbounded (+-1e30) and NaN coordinates stay as they are
+  return Aabb{{b.lo.x - m, b.lo.y - m, b.lo.z - m}, {b.hi.x + m, b.hi.y + m, b.hi.z + m}};
+}
+
+// in inside out (closed); false when either holds a NaN.
+DVI_HD bool aabbInside(const Aabb& in, const Aabb& out) {
+  return in.lo.x >= out.lo.x && in.lo.y >= out.lo.y && in.lo.z >= out.lo.z && in.hi.x <= out.hi.x &&
+         in.hi.y <= out.hi.y && in.hi.z <= out.hi.z;
+}
+
+// Shape i still fits the pairs of the last build: box inside the grown box of the build, body flags unchanged.
+DVI_HD bool pairsStillHold(const Aabb& box, const Aabb& fat, uint8_t flags, uint8_t fat_flags) {
+  return flags == fat_flags && aabbInside(box, fat);
+}
+
 // An AABB coordinate at or beyond this magnitude marks an unbounded shape (planes carry +-1e30).
 constexpr real kBroadPhaseHuge = real(1e29);
 

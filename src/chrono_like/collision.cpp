@@ -7,6 +7,7 @@
 
 #include <algorithm>
 
+#include "broadphase_kernels.h"
 #include "narrowphase.h"
 #include "system.h"
 
@@ -49,8 +50,34 @@ class NativeCollision final : public CollisionDetector {
     }
     double t1 = omp_get_wtime();
 
-    // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags; writes pairs_.
-    broad_.run(shapes, bodies, pairs_, &times.broad_stats);
+    // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
+    // fat_flags_ when it builds). Last step's pairs are kept while every box is inside its grown box
+    // (broadphase_kernels.h: pairsStillHold); else a build on the boxes grown by pair_margin x the last edge.
+    const real f = config.broadphase.pair_margin;
+    const uint8_t* flags = bodies.flags.data();
+    bool keep = f > real(0) && built_ && int64_t(fat_.size()) == ns;
+    if (keep) {
+      int moved = 0;
+#pragma omp parallel for schedule(static) reduction(| : moved)
+      for (int64_t i = 0; i < ns; ++i)
+        moved |= pairsStillHold(shapes.aabb[i], fat_[i], flags[sh[i].body], fat_flags_[i]) ? 0 : 1;
+      keep = moved == 0;
+    }
+    if (!keep) {
+      const real m = f > real(0) ? f * last_edge_ : real(0);
+      fat_.resize(size_t(ns));
+      fat_flags_.resize(size_t(ns));
+#pragma omp parallel for schedule(static)
+      for (int64_t i = 0; i < ns; ++i) {
+        fat_[i] = fatAabb(shapes.aabb[i], m);
+        fat_flags_[i] = flags[sh[i].body];
+      }
+      broad_.run(shapes, fat_.data(), bodies, pairs_, &last_stats_);
+      last_edge_ = last_stats_.bin_edge;
+      built_ = true;
+    }
+    times.broad_stats = last_stats_;
+    times.pairs_reused = keep;
     double t2 = omp_get_wtime();
 
     // NarrowPhase: reads pairs_, poses, shapes; writes the contact arrays.
@@ -104,6 +131,12 @@ class NativeCollision final : public CollisionDetector {
  private:
   BroadPhaseBins broad_;
   std::vector<ShapePair> pairs_;
+  // pair reuse: the grown boxes and body flags of the last build, its bin edge and statistics
+  std::vector<Aabb> fat_;
+  std::vector<uint8_t> fat_flags_;
+  real last_edge_ = 0;
+  bool built_ = false;
+  BroadPhaseStats last_stats_;
   std::vector<std::vector<PairContact>> blocks_;
   std::vector<int64_t> offsets_;
 };

@@ -58,6 +58,7 @@ inline void writeSummary(const std::string& path, const nlohmann::json& summary)
 //   stage_parts       the StagePart names ("Stage.Part") that ran in at least one step
 //   stages_left_out   [{name, reason}] for every stage and part that ran in no step
 //   normal_only_steps steps whose CCP had the normal rows only (no contact with mu > 0)
+//   pairs_reused_steps steps whose BroadPhase kept the last step's pairs (BroadPhaseSettings::pair_margin)
 inline void addStageSummary(nlohmann::json& summary, const StageLog& log) {
   summary["stages"] = nlohmann::json::array();
   summary["stage_seconds"] = nlohmann::json::object();
@@ -83,6 +84,7 @@ inline void addStageSummary(nlohmann::json& summary, const StageLog& log) {
     }
   }
   summary["normal_only_steps"] = log.normal_only_steps;
+  summary["pairs_reused_steps"] = log.pairs_reused_steps;
 }
 
 }  // namespace dvi

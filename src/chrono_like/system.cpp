@@ -268,6 +268,7 @@ void System::detectCollisions() {
   stats_.stage_ran[int(StageType::ComputeAabbs)] = stats_.stage_ran[int(StageType::BroadPhase)] =
       stats_.stage_ran[int(StageType::NarrowPhase)] = true;
   stats_.pairs = t.pairs;
+  stats_.pairs_reused = t.pairs_reused;
   stats_.contacts = int64_t(contacts_.count());
 }
 

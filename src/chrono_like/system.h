@@ -129,6 +129,7 @@ ShapeDesc makePlane(Vec3 normal, real d);
 struct StepStats {
   int64_t contacts = 0;
   int64_t pairs = 0;
+  bool pairs_reused = false;  // BroadPhase kept the last step's pairs (BroadPhaseSettings::pair_margin)
   real max_penetration = 0;  // largest -dist over contacts after the solve's input (>= 0)
   int iterations = 0;
   real residual = 0;
@@ -147,6 +148,7 @@ struct StepStats {
 struct StageLog {
   int64_t steps = 0;
   int64_t normal_only_steps = 0;
+  int64_t pairs_reused_steps = 0;  // steps whose BroadPhase kept the last step's pairs
   std::array<double, kStageCount> seconds{};
   std::array<bool, kStageCount> ran{};
   std::array<const char*, kStageCount> reason{};
@@ -155,6 +157,7 @@ struct StageLog {
   void add(const StepStats& s) {
     ++steps;
     normal_only_steps += s.normal_only ? 1 : 0;
+    pairs_reused_steps += s.pairs_reused ? 1 : 0;
     for (int i = 0; i < kStageCount; ++i) {
       seconds[size_t(i)] += s.stage_seconds[size_t(i)];
       ran[size_t(i)] = ran[size_t(i)] || s.stage_ran[size_t(i)];

@@ -38,6 +38,23 @@ __global__ void aabbKernel(int n, const Shape* shapes, const Vec3* pos, const Qu
 
 // ---- broad phase: classification and grid (the rule of broadphase.h, on the device) ----
 
+// Pair reuse (broadphase_kernels.h): *moved = 1 when a shape's box left the grown box of the last build or its
+// body's flags changed (every such thread stores the same value; *moved was 0 before).
+__global__ void pairsHoldKernel(int n, const Shape* shapes, const Aabb* box, const Aabb* fat, const uint8_t* flags,
+                                const uint8_t* fat_flags, int32_t* moved) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n && !pairsStillHold(box[i], fat[i], flags[shapes[i].body], fat_flags[i])) *moved = 1;
+}
+
+// The boxes of a build grown by m, and the body flags they were built with.
+__global__ void fatBoxKernel(int n, const Shape* shapes, const Aabb* box, const uint8_t* flags, real m, Aabb* fat,
+                             uint8_t* fat_flags) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  fat[i] = fatAabb(box[i], m);
+  fat_flags[i] = flags[shapes[i].body];
+}
+
 __global__ void extentKernel(int n, const Shape* shapes, const Aabb* box, real* ext) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
@@ -613,14 +630,14 @@ static void classifyAndGrid(DeviceState& d, const BroadPhaseSettings& s, int n, 
   DVI_CUDA_LAUNCH("gridKernel");
 }
 
-void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats) {
+void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats, const Aabb* boxes) {
   const int n = int(d.shapes.count);
   BroadScratch& B = d.broad;
   cudaStream_t st = d.stream;
   d.pairs = 0;
   if (n < 2) return;
   const BroadPhaseSettings s = cfg.broadphase;
-  const Aabb* box = d.shapes.aabb.data();
+  const Aabb* box = boxes ? boxes : d.shapes.aabb.data();
   const Shape* shapes = d.shapes.shape.data();
 
   // 1. classification and grid. The bin edge from the extents' statistics where they decide it, else (and
@@ -667,6 +684,7 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats)
     by_sort = true;  // the statistics could not decide the edge: once more from the sorted extents
   }
   B.edge_by_sort = P.needs_sort != 0;
+  B.last_edge = P.edge;
   const int nb = P.binned, nl = P.large;
 
   // 2. count -> scan -> write (bin, shape) entries -> sort by bin -> run-length encode
@@ -755,6 +773,32 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats)
     stats->occupied_bins = nb > 1 ? d.readValue(B.num_runs.data()) : (nb == 1 ? 1 : 0);
     for (int k = 0; k < 3; ++k) stats->grid[k] = P.grid.n[k];
   }
+}
+
+bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg) {
+  const int n = int(d.shapes.count);
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
+  const real f = cfg.broadphase.pair_margin;
+  if (f > real(0) && B.built && int64_t(B.fat.size()) == n && n >= 2) {
+    B.moved.resize(1);
+    DVI_CUDA(cudaMemsetAsync(B.moved.data(), 0, sizeof(int32_t), st));
+    pairsHoldKernel<<<blocksFor(n), kBlock, 0, st>>>(n, d.shapes.shape.data(), d.shapes.aabb.data(), B.fat.data(),
+                                                     d.bodies.flags.data(), B.fat_flags.data(), B.moved.data());
+    DVI_CUDA_LAUNCH("pairsHoldKernel");
+    if (d.readValue(B.moved.data()) == 0) return true;
+  }
+  B.fat.resize(n);
+  B.fat_flags.resize(n);
+  if (n > 0) {
+    fatBoxKernel<<<blocksFor(n), kBlock, 0, st>>>(n, d.shapes.shape.data(), d.shapes.aabb.data(),
+                                                  d.bodies.flags.data(), f > real(0) ? f * B.last_edge : real(0),
+                                                  B.fat.data(), B.fat_flags.data());
+    DVI_CUDA_LAUNCH("fatBoxKernel");
+  }
+  broadPhase(d, cfg, nullptr, B.fat.data());
+  B.built = true;
+  return false;
 }
 
 void narrowPhase(DeviceState& d, const SystemConfig& cfg) {

@@ -86,6 +86,13 @@ struct BroadScratch {
   DeviceBuffer<unsigned char> ext_stats{"broad extent statistics"};  // ExtentSplit and the least extent (gpu_collision.cu)
   bool edge_by_sort = false;  // last step's BroadParams::needs_sort: start there
   DeviceBuffer<int64_t> tests{"broad bin pair tests"};
+  // pair reuse (broadPhaseStep; broadphase_kernels.h: pairsStillHold): the last build's grown boxes and body
+  // flags per shape, its bin edge, and the count of shapes that left their grown box this step
+  DeviceBuffer<Aabb> fat{"broad grown boxes"};
+  DeviceBuffer<uint8_t> fat_flags{"broad build flags"};
+  DeviceBuffer<int32_t> moved{"broad moved count"};
+  real last_edge = 0;
+  bool built = false;
 };
 
 struct NarrowScratch {
@@ -190,7 +197,11 @@ struct DeviceState {
 
 // Stages (one .cu each), called by GpuSystem.
 void computeAabbs(DeviceState& d, const SystemConfig& cfg);
-void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats);
+// The binned broad phase on `boxes` (one per shape; null: d.shapes.aabb), every pair into d.pairs.
+void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats, const Aabb* boxes = nullptr);
+// The BroadPhase stage: last step's pairs kept while they hold (BroadPhaseSettings::pair_margin), else
+// broadPhase on the boxes grown by the margin. Returns true when the pairs were kept.
+bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg);
 void narrowPhase(DeviceState& d, const SystemConfig& cfg);
 
 struct DeviceCcpResult {

@@ -40,7 +40,7 @@ size_t DeviceState::bytes() const {
   add(broad.bound_in); add(broad.binned); add(broad.large); add(broad.entry_count); add(broad.entry_off);
   add(broad.entry_bin); add(broad.entry_bin_sorted); add(broad.entry_shape); add(broad.entry_shape_sorted);
   add(broad.run_bin); add(broad.run_len); add(broad.pair_counter);
-  add(broad.pair_key); add(broad.pair_key_sorted);
+  add(broad.pair_key); add(broad.pair_key_sorted); add(broad.fat); add(broad.fat_flags); add(broad.moved);
   add(narrow.count); add(narrow.off); add(narrow.first); add(narrow.deferred); add(narrow.deep); add(narrow.deep_count);
   add(narrow.list); add(narrow.list_count);
   add(solver.stamps); add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
@@ -264,7 +264,7 @@ void GpuSystem::detectCollisions() {
   cudaEvent_t* ev = d_->ev;
   computeAabbs(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::ComputeAabbs) + 1], d_->stream));
-  broadPhase(*d_, config_, nullptr);
+  stats_.pairs_reused = broadPhaseStep(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BroadPhase) + 1], d_->stream));
   narrowPhase(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::NarrowPhase) + 1], d_->stream));
