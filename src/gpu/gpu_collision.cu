@@ -405,10 +405,26 @@ __device__ __forceinline__ void appendIndex(int64_t i, int64_t* list, unsigned l
   list[warpAggregatedSlot(list_count)] = i;
 }
 
+// The count pass's first point of each touching pair, in a list of last step's size and half again (most pairs
+// of a step do not touch: a point a pair would be 80 B for every pair): slot[i] is pair i's place in pts, or
+// -1 when the list was full (the write pass then recomputes the pair with those of several contacts).
+struct FirstPoints {
+  ContactPoint* pts;
+  int32_t* slot;
+  unsigned long long* count;  // places taken (may exceed cap: the next step's room follows it)
+  unsigned long long cap;
+};
+
+__device__ __forceinline__ void keepFirst(const FirstPoints& F, int64_t i, const ContactPoint& p) {
+  const unsigned long long k = warpAggregatedSlot(F.count);
+  if (k < F.cap) F.pts[k] = p;
+  F.slot[i] = k < F.cap ? int32_t(k) : -1;
+}
+
 // Count pass, sphere pairs: collideSphereSphere (collideShapes' first case) in a kernel of few registers; every
 // other pair goes to the general list for narrowCountKernel. (collideShapes in one kernel takes 255 registers,
 // one block of 256 per SM: the 100k-sphere pile's count pass took 91 us on an H200, ncu.)
-__global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, ContactPoint* first, int64_t* general,
+__global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, FirstPoints first, int64_t* general,
                                    unsigned long long* general_count) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i > np) return;
@@ -426,7 +442,7 @@ __global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, Con
   ContactPoint pts[kMaxContactsPerPair];
   const int n = np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts);
   count[i] = n;
-  if (n >= 1) first[i] = pts[0];
+  if (n >= 1) keepFirst(first, i, pts[0]);
 }
 
 // The next 32 items of a list for the calling warp (all its lanes call it together): a fixed grid takes work
@@ -445,7 +461,7 @@ __device__ __forceinline__ int64_t warpTake(unsigned long long* next) {
 // up to ~25 MPR passes in one thread; one such thread set the length of the whole pass (3.7 ms of the CES
 // industrial feed's step on an H200, with 1.7 of 32 lanes active on average).
 __global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const unsigned long long* general_count,
-                                  unsigned long long* next, int64_t* count, ContactPoint* first,
+                                  unsigned long long* next, int64_t* count, FirstPoints first,
                                   np::MprDeferred* deferred, int32_t* deep, int32_t* deep_count, int32_t deep_cap) {
   const int64_t m = int64_t(*general_count);
   for (;;) {
@@ -469,7 +485,7 @@ __global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const un
       n = finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts);
     }
     count[i] = n;
-    if (n >= 1) first[i] = pts[0];
+    if (n >= 1) keepFirst(first, i, pts[0]);
   }
 }
 
@@ -500,7 +516,7 @@ __device__ np::MprResult deepRound(const np::MprShape& SA, const np::MprShape& S
 
 __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::MprDeferred* deferred,
                                                        const int32_t* deep, const int32_t* deep_count,
-                                                       int32_t deep_cap, int64_t* count, ContactPoint* first) {
+                                                       int32_t deep_cap, int64_t* count, FirstPoints first) {
   const int lane = int(threadIdx.x % kDeepLanes), base = int(threadIdx.x % 32) - lane;
   const unsigned mask = ((1u << kDeepLanes) - 1u) << base;
   const int64_t groups = int64_t(gridDim.x) * blockDim.x / kDeepLanes;
@@ -519,7 +535,7 @@ __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::
       const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts);
       if (d.swapped) np::flipContacts(pts, m);
       count[i] = m;
-      if (m >= 1) first[i] = pts[0];
+      if (m >= 1) keepFirst(first, i, pts[0]);
     }
   }
 }
@@ -548,21 +564,22 @@ __device__ __forceinline__ void writeContacts(const NarrowArgs& A, int32_t a, in
 }
 
 // Write pass, one thread per pair: a pair of one contact copies the count pass's point (a kernel of few
-// registers); a pair of more goes to the multi list for narrowMultiKernel.
+// registers); a pair of more, or one whose point found no room (FirstPoints), goes to the multi list for
+// narrowMultiKernel.
 __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count, const int64_t* off,
-                                  const ContactPoint* first, ContactOut out, int64_t* multi,
-                                  unsigned long long* multi_count) {
+                                  FirstPoints first, ContactOut out, int64_t* multi, unsigned long long* multi_count) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= np) return;
   const int64_t n = count[i];
   if (n == 0) return;
-  if (n > 1) {
+  const int32_t k = n == 1 ? first.slot[i] : -1;
+  if (k < 0) {
     appendIndex(i, multi, multi_count);
     return;
   }
   int32_t a, b;
   unpackPair(A.pairs[i], A.shift, a, b);
-  writeContacts(A, a, b, first + i, 1, off[i], out);
+  writeContacts(A, a, b, first.pts + k, 1, off[i], out);
 }
 
 // Write pass, pairs of several contacts (a fixed grid taking the multi list by warps): all their points again
@@ -811,7 +828,11 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   }
   N.count.resize(np + 1);
   N.off.resize(np + 1);
-  N.first.resize(np);
+  // first points: room for last step's touching pairs and half again (at least 1024, at most every pair)
+  const int64_t first_cap =
+      std::min<int64_t>({np, std::max<int64_t>(1024, N.first_last + N.first_last / 2), int64_t(INT32_MAX)});
+  N.first.resize(size_t(first_cap));
+  N.first_slot.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
                d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel, d.pair_shift};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
@@ -822,11 +843,13 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.deep_count.resize(1);
   N.list.resize(np);
   // [0]: general pairs of the count pass, [1]: pairs of several contacts (write pass), [2], [3]: the two lists'
-  // work counters (warpTake)
-  N.list_count.resize(4);
+  // work counters (warpTake), [4]: first points taken (FirstPoints)
+  N.list_count.resize(5);
   DVI_CUDA(cudaMemsetAsync(N.deep_count.data(), 0, sizeof(int32_t), st));
-  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 4 * sizeof(unsigned long long), st));
-  narrowSphereKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), N.first.data(), N.list.data(),
+  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 5 * sizeof(unsigned long long), st));
+  const FirstPoints first{N.first.data(), N.first_slot.data(), N.list_count.data() + 4,
+                          static_cast<unsigned long long>(first_cap)};
+  narrowSphereKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), first, N.list.data(),
                                                            N.list_count.data());
   DVI_CUDA_LAUNCH("narrowSphereKernel");
   // the general kernel's grid: what fits on the device at once, striding over the list (its length is on the device)
@@ -834,33 +857,37 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel, &N.count_blocks_per_sm);
   const unsigned general_grid = unsigned(std::min<int64_t>(blocksFor(np), general_resident));
   narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), N.list_count.data() + 2,
-                                                     N.count.data(), N.first.data(), N.deferred.data(), N.deep.data(),
+                                                     N.count.data(), first, N.deferred.data(), N.deep.data(),
                                                      N.deep_count.data(), int32_t(deep_cap));
   DVI_CUDA_LAUNCH("narrowCountKernel");
   // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
   narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(deep_cap * kDeepLanes, 128), 4 * d.multiprocessors)), 128,
                      0, st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), int32_t(deep_cap),
-                              N.count.data(), N.first.data());
+                              N.count.data(), first);
   DVI_CUDA_LAUNCH("narrowDeepKernel");
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
   });
-  // the contact count and the deep pairs' count in one read-back (pinned)
+  // the contact count, the first points taken and the deep pairs' count in one read-back (pinned)
   char* hs = reinterpret_cast<char*>(d.host_scalars);
   DVI_CUDA(cudaMemcpyAsync(hs, N.off.data() + np, sizeof(int64_t), cudaMemcpyDeviceToHost, st));
-  DVI_CUDA(cudaMemcpyAsync(hs + sizeof(int64_t), N.deep_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost, st));
+  DVI_CUDA(cudaMemcpyAsync(hs + 8, N.list_count.data() + 4, sizeof(unsigned long long), cudaMemcpyDeviceToHost, st));
+  DVI_CUDA(cudaMemcpyAsync(hs + 16, N.deep_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost, st));
   DVI_CUDA(cudaStreamSynchronize(st));
   int64_t nc = 0;
+  unsigned long long touching = 0;
   int32_t deep = 0;
   std::memcpy(&nc, hs, sizeof nc);
-  std::memcpy(&deep, hs + sizeof(int64_t), sizeof deep);
+  std::memcpy(&touching, hs + 8, sizeof touching);
+  std::memcpy(&deep, hs + 16, sizeof deep);
   N.deep_last = deep;
+  N.first_last = int64_t(touching);
   d.contacts.resize(size_t(nc));
   if (nc == 0) return;
   DeviceContacts& c = d.contacts;
   ContactOut out{c.shape_a.data(), c.shape_b.data(), c.body_a.data(), c.body_b.data(), c.normal.data(),
                  c.pa.data(),      c.pb.data(),      c.dist.data(),   c.key.data()};
-  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), N.first.data(), out,
+  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), first, out,
                                                       N.list.data(), N.list_count.data() + 1);
   DVI_CUDA_LAUNCH("narrowWriteKernel");
   const int64_t multi_resident =

@@ -98,7 +98,11 @@ struct BroadScratch {
 struct NarrowScratch {
   DeviceBuffer<int64_t> count{"narrow counts"};
   DeviceBuffer<int64_t> off{"narrow offsets"};
+  // the first point of each touching pair (gpu_collision.cu: FirstPoints): room for last step's count of
+  // touching pairs and half again, and each pair's place in it (-1: none kept)
   DeviceBuffer<ContactPoint> first{"narrow first points"};
+  DeviceBuffer<int32_t> first_slot{"narrow first point slots"};
+  int64_t first_last = 0;  // touching pairs of the last step
   // deep MPR pairs, finished by narrowDeepKernel a lane per restart (mpr.h: MprRound)
   DeviceBuffer<np::MprDeferred> deferred{"narrow deferred MPR states"};  // per deep pair (slot of the deep list)
   DeviceBuffer<int32_t> deep{"narrow deep pairs"}, deep_count{"narrow deep pair count"};

@@ -41,7 +41,7 @@ size_t DeviceState::bytes() const {
   add(broad.entry_bin); add(broad.entry_bin_sorted); add(broad.entry_shape); add(broad.entry_shape_sorted);
   add(broad.run_bin); add(broad.run_len); add(broad.pair_counter);
   add(broad.pair_key); add(broad.pair_key_sorted); add(broad.fat); add(broad.fat_flags); add(broad.moved);
-  add(narrow.count); add(narrow.off); add(narrow.first); add(narrow.deferred); add(narrow.deep); add(narrow.deep_count);
+  add(narrow.count); add(narrow.off); add(narrow.first); add(narrow.first_slot); add(narrow.deferred); add(narrow.deep); add(narrow.deep_count);
   add(narrow.list); add(narrow.list_count);
   add(solver.stamps); add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
   add(solver.jacobi_step); add(solver.colnorm); add(solver.rowsum); add(solver.bodyq);
