@@ -405,21 +405,17 @@ __device__ __forceinline__ void appendIndex(int64_t i, int64_t* list, unsigned l
   list[warpAggregatedSlot(list_count)] = i;
 }
 
-// The count pass's first point of each touching pair, in a list of last step's size and half again (most pairs
-// of a step do not touch: a point a pair would be 80 B for every pair): slot[i] is pair i's place in pts, or
-// -1 when the list was full (the write pass then recomputes the pair with those of several contacts).
+// The count pass's first point of a touching pair for the write pass, without 80 B for every pair (with pairs
+// kept between steps most pairs do not touch). slot[i] says where pair i's point is: a sphere pair's is
+// recomputed by the write pass (kSphereAgain: two loads and a few operations); a general pair's is kept at its
+// place j in the general list, in room for last step's general pairs and half again (cap); past that, -1, and
+// the write pass recomputes the pair with those of several contacts.
+constexpr int32_t kSphereAgain = -2;
 struct FirstPoints {
-  ContactPoint* pts;
-  int32_t* slot;
-  unsigned long long* count;  // places taken (may exceed cap: the next step's room follows it)
-  unsigned long long cap;
+  ContactPoint* pts;  // by place in the general list
+  int32_t* slot;      // by pair (read only where the pair has one contact)
+  int64_t cap;
 };
-
-__device__ __forceinline__ void keepFirst(const FirstPoints& F, int64_t i, const ContactPoint& p) {
-  const unsigned long long k = warpAggregatedSlot(F.count);
-  if (k < F.cap) F.pts[k] = p;
-  F.slot[i] = k < F.cap ? int32_t(k) : -1;
-}
 
 // Count pass, sphere pairs: collideSphereSphere (collideShapes' first case) in a kernel of few registers; every
 // other pair goes to the general list for narrowCountKernel. (collideShapes in one kernel takes 255 registers,
@@ -442,7 +438,7 @@ __global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, Fir
   ContactPoint pts[kMaxContactsPerPair];
   const int n = np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts);
   count[i] = n;
-  if (n >= 1) keepFirst(first, i, pts[0]);
+  if (n >= 1) first.slot[i] = kSphereAgain;
 }
 
 // The next 32 items of a list for the calling warp (all its lanes call it together): a fixed grid takes work
@@ -479,13 +475,17 @@ __global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const un
         deferred[k] = d;
         deep[k] = int32_t(i);
         count[i] = 0;
+        first.slot[i] = j < first.cap ? int32_t(j) : -1;  // where narrowDeepKernel puts its point
         continue;
       }
       const PairPoses P = pairPoses(A, i);
       n = finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts);
     }
     count[i] = n;
-    if (n >= 1) keepFirst(first, i, pts[0]);
+    if (n >= 1) {
+      if (j < first.cap) first.pts[j] = pts[0];
+      first.slot[i] = j < first.cap ? int32_t(j) : -1;
+    }
   }
 }
 
@@ -535,7 +535,8 @@ __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::
       const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts);
       if (d.swapped) np::flipContacts(pts, m);
       count[i] = m;
-      if (m >= 1) keepFirst(first, i, pts[0]);
+      const int32_t k = first.slot[i];  // set by the count pass
+      if (m >= 1 && k >= 0) first.pts[k] = pts[0];
     }
   }
 }
@@ -573,6 +574,15 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
   const int64_t n = count[i];
   if (n == 0) return;
   const int32_t k = n == 1 ? first.slot[i] : -1;
+  if (k == kSphereAgain) {
+    int32_t a, b;
+    unpackPair(A.pairs[i], A.shift, a, b);
+    const PairPoses P = pairPoses(A, i);
+    ContactPoint pts[kMaxContactsPerPair];
+    np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts);
+    writeContacts(A, a, b, pts, 1, off[i], out);
+    return;
+  }
   if (k < 0) {
     appendIndex(i, multi, multi_count);
     return;
@@ -828,9 +838,10 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   }
   N.count.resize(np + 1);
   N.off.resize(np + 1);
-  // first points: room for last step's touching pairs and half again (at least 1024, at most every pair)
+  // first points of general pairs: room for last step's general pairs and half again (at least 1024, at most
+  // every pair)
   const int64_t first_cap =
-      std::min<int64_t>({np, std::max<int64_t>(1024, N.first_last + N.first_last / 2), int64_t(INT32_MAX)});
+      std::min<int64_t>({np, std::max<int64_t>(1024, N.general_last + N.general_last / 2), int64_t(INT32_MAX)});
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
@@ -843,12 +854,11 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.deep_count.resize(1);
   N.list.resize(np);
   // [0]: general pairs of the count pass, [1]: pairs of several contacts (write pass), [2], [3]: the two lists'
-  // work counters (warpTake), [4]: first points taken (FirstPoints)
-  N.list_count.resize(5);
+  // work counters (warpTake)
+  N.list_count.resize(4);
   DVI_CUDA(cudaMemsetAsync(N.deep_count.data(), 0, sizeof(int32_t), st));
-  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 5 * sizeof(unsigned long long), st));
-  const FirstPoints first{N.first.data(), N.first_slot.data(), N.list_count.data() + 4,
-                          static_cast<unsigned long long>(first_cap)};
+  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 4 * sizeof(unsigned long long), st));
+  const FirstPoints first{N.first.data(), N.first_slot.data(), first_cap};
   narrowSphereKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), first, N.list.data(),
                                                            N.list_count.data());
   DVI_CUDA_LAUNCH("narrowSphereKernel");
@@ -868,20 +878,20 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
   });
-  // the contact count, the first points taken and the deep pairs' count in one read-back (pinned)
+  // the contact count, the general pairs' count and the deep pairs' count in one read-back (pinned)
   char* hs = reinterpret_cast<char*>(d.host_scalars);
   DVI_CUDA(cudaMemcpyAsync(hs, N.off.data() + np, sizeof(int64_t), cudaMemcpyDeviceToHost, st));
-  DVI_CUDA(cudaMemcpyAsync(hs + 8, N.list_count.data() + 4, sizeof(unsigned long long), cudaMemcpyDeviceToHost, st));
+  DVI_CUDA(cudaMemcpyAsync(hs + 8, N.list_count.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost, st));
   DVI_CUDA(cudaMemcpyAsync(hs + 16, N.deep_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost, st));
   DVI_CUDA(cudaStreamSynchronize(st));
   int64_t nc = 0;
-  unsigned long long touching = 0;
+  unsigned long long general = 0;
   int32_t deep = 0;
   std::memcpy(&nc, hs, sizeof nc);
-  std::memcpy(&touching, hs + 8, sizeof touching);
+  std::memcpy(&general, hs + 8, sizeof general);
   std::memcpy(&deep, hs + 16, sizeof deep);
   N.deep_last = deep;
-  N.first_last = int64_t(touching);
+  N.general_last = int64_t(general);
   d.contacts.resize(size_t(nc));
   if (nc == 0) return;
   DeviceContacts& c = d.contacts;

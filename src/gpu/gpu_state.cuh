@@ -98,11 +98,11 @@ struct BroadScratch {
 struct NarrowScratch {
   DeviceBuffer<int64_t> count{"narrow counts"};
   DeviceBuffer<int64_t> off{"narrow offsets"};
-  // the first point of each touching pair (gpu_collision.cu: FirstPoints): room for last step's count of
-  // touching pairs and half again, and each pair's place in it (-1: none kept)
+  // the first point of each touching general pair by its place in the general list (gpu_collision.cu:
+  // FirstPoints; room for last step's general pairs and half again), and where each pair's point is
   DeviceBuffer<ContactPoint> first{"narrow first points"};
   DeviceBuffer<int32_t> first_slot{"narrow first point slots"};
-  int64_t first_last = 0;  // touching pairs of the last step
+  int64_t general_last = 0;  // pairs of the general list in the last step
   // deep MPR pairs, finished by narrowDeepKernel a lane per restart (mpr.h: MprRound)
   DeviceBuffer<np::MprDeferred> deferred{"narrow deferred MPR states"};  // per deep pair (slot of the deep list)
   DeviceBuffer<int32_t> deep{"narrow deep pairs"}, deep_count{"narrow deep pair count"};
