@@ -204,7 +204,12 @@ TEST_CASE("GPU narrow phase equals the CPU's on random pairs of every shape comb
           wb = Pose{Vec3{0, 0, 0}, quatIdentity()};
         } else {
           Vec3 dir = normalized(Vec3{real(nd(rng)), real(nd(rng)), real(nd(rng))});
-          wb = Pose{dir * real((0.8 + 1.2 * u(rng)) * r), randomRotation(rng)};
+          Quat qb = randomRotation(rng);
+          if (k % 4 == 3) {  // stacked along a's y axis with a's orientation: flat faces meet (mpr.h: mprManifold)
+            qb = wa.q;
+            dir = rotate(wa.q, Vec3{0, 1, 0});
+          }
+          wb = Pose{dir * real((0.8 + 1.2 * u(rng)) * r), qb};
         }
         // half the pairs in swapped order, so both argument orders are exercised
         if (k % 2 && types[tb] != ShapeType::Plane) {

@@ -89,6 +89,7 @@ struct ScalingOptions {
   long long gpu_persistent_max = -1;  // -1: SystemConfig's default
   bool gpu_register_cache = true;
   double pair_margin = dvi::BroadPhaseSettings{}.pair_margin;
+  bool mpr_manifold = dvi::SystemConfig{}.mpr_manifold;
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
@@ -591,6 +592,7 @@ int runScaling(const ScalingOptions& o) {
   if (o.gpu_persistent_max >= 0) cfg.gpu_persistent_max_blocks = o.gpu_persistent_max;
   cfg.gpu_apgd_register_cache = o.gpu_register_cache;
   cfg.broadphase.pair_margin = dvi::real(o.pair_margin);
+  cfg.mpr_manifold = o.mpr_manifold;
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
@@ -724,6 +726,7 @@ int runScaling(const ScalingOptions& o) {
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.broadphase.pair_margin)
+       << "\n- NarrowPhase (ours): " << (cfg.mpr_manifold ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)" : "MPR's one point per pair (--mpr-manifold false)")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
@@ -768,6 +771,9 @@ void registerBenchScaling(CLI::App& app) {
                   "BroadPhase keeps its pairs between steps within boxes grown by this fraction of the bin edge "
                   "(BroadPhaseSettings::pair_margin; 0: a build every step; default 0.025)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--mpr-manifold", o->mpr_manifold,
+                  "MPR pairs of two flat features get up to 4 more points of their overlap (SystemConfig::mpr_manifold; "
+                  "true, the default, or false: MPR's one point)");
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));

@@ -91,7 +91,7 @@ DVI_HD_CALL int collideConvexTriangle(const Shape& a, const Pose& wa, const Shap
   if (!(face_dist < envelope)) return 0;
   // 2. MPR (signed distance and normal of the deepest feature pair).
   ContactPoint mpr[1];
-  if (collideMpr(a, wa, b, wb, hull_points, envelope, mpr) == 0) return 0;
+  if (collideMpr(a, wa, b, wb, hull_points, envelope, mpr, nullptr, false) == 0) return 0;
   // 3. Face contacts when the face axis is (nearly) the best one.
   const real tol = real(0.02) * a.size;
   if (face_dist >= mpr[0].dist - tol) {

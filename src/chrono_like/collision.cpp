@@ -97,7 +97,7 @@ class NativeCollision final : public CollisionDetector {
         Pose wb = shapeWorldPose(Pose{bodies.pos[b.body], bodies.rot[b.body]}, b);
         const real envelope =
             pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b]);
-        int n = collideShapes(a, wa, b, wb, hull, envelope, pts);
+        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }
     }

@@ -55,9 +55,11 @@ struct MprDeferred;
 // signed distance < envelope into out[], normals pointing from a to b, and returns how many. With `defer`, a
 // deep MPR pair is left unfinished: its state goes to *defer, the answer is np::kMprDeferred (-1), and
 // finishDeferredMpr completes it (the GPU narrow phase runs those apart, a lane per restart: mpr.h).
+// `manifold`: MPR pairs of two flat features get up to 4 more points (mpr.h: mprManifold;
+// SystemConfig::mpr_manifold).
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
                          const Vec3* hull_points, real envelope, ContactPoint* out,
-                         np::MprDeferred* defer = nullptr);
+                         np::MprDeferred* defer = nullptr, bool manifold = true);
 
 }  // namespace dvi
 

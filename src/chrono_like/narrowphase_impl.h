@@ -433,7 +433,7 @@ DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const S
 
 // Canonical order: a.type <= b.type.
 DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                          real envelope, ContactPoint* out, MprDeferred* defer = nullptr) {
+                          real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true) {
   if (b.type == ShapeType::Triangle) {  // static geometry: never against a plane or another triangle
     if (a.type == ShapeType::Plane || a.type == ShapeType::Triangle) return 0;
     return collideConvexTriangle(a, wa, b, wb, hull_points, envelope, out);
@@ -467,7 +467,7 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
       break;
     default: break;
   }
-  return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer);
+  return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer, manifold);
 }
 
 }  // namespace np
@@ -491,21 +491,48 @@ DVI_HD bool pairUsesMpr(ShapeType a, ShapeType b) {
   return true;
 }
 
+// A pair collided in the opposite order (collideShapes' canonical order) has its contacts flipped; its first MPR
+// point (np::kMprFirst) then says so, for mprManifoldAgain.
+constexpr int32_t kMprFirstSwapped = 2;
+DVI_HD void markFlippedMpr(ContactPoint* out, int m) {
+  if (m >= 1 && out[0].pad_ == np::kMprFirst) out[0].pad_ = kMprFirstSwapped;
+}
+
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                         real envelope, ContactPoint* out, np::MprDeferred* defer) {
+                         real envelope, ContactPoint* out, np::MprDeferred* defer, bool manifold) {
   if (a.type == ShapeType::Sphere && b.type == ShapeType::Sphere)  // the hot path
     return np::collideSphereSphere(a, wa, b, wb, envelope, out);
   if (int(a.type) <= int(b.type)) {
-    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer);
+    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer, manifold);
     if (m == np::kMprDeferred) defer->swapped = 0;
     return m;
   }
-  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer);
+  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer, manifold);
   if (m == np::kMprDeferred) {
     defer->swapped = 1;
     return m;
   }
   np::flipContacts(out, m);
+  markFlippedMpr(out, m);
+  return m;
+}
+
+// The points of a pair whose first point came from MPR (pad_ np::kMprFirst or kMprFirstSwapped) again from that
+// point: np::mprManifold in the order the pair was collided, the same arithmetic as collideShapes without MPR
+// (the GPU's write pass, which keeps only a pair's first point from the count pass).
+DVI_HD int mprManifoldAgain(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                            real envelope, const ContactPoint& first, ContactPoint* out) {
+  const bool swapped = first.pad_ == kMprFirstSwapped;
+  out[0] = first;
+  if (swapped) np::flipContacts(out, 1);  // its own inverse: the point as mprFinish wrote it
+  out[0].pad_ = np::kMprFirst;
+  const np::MprShape A = np::makeMprShape(swapped ? b : a, swapped ? wb : wa, hull_points, envelope);
+  const np::MprShape B = np::makeMprShape(swapped ? a : b, swapped ? wa : wb, hull_points, real(0));
+  const int m = np::mprManifold(A, B, hull_points, envelope, out);
+  if (swapped) {
+    np::flipContacts(out, m);
+    markFlippedMpr(out, m);
+  }
   return m;
 }
 
@@ -522,14 +549,17 @@ DVI_HD void deferredMprShapes(const Shape& a, const Pose& wa, const Shape& b, co
 
 // Finishes a pair that collideShapes left in `defer` (the GPU runs the same steps a lane per restart).
 DVI_HD int finishDeferredMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                             real envelope, np::MprDeferred d, ContactPoint* out) {
+                             real envelope, np::MprDeferred d, ContactPoint* out, bool manifold = true) {
   np::MprShape A, B;
   const Shape *fa, *fb;
   deferredMprShapes(a, wa, b, wb, hull_points, envelope, d.swapped != 0, A, B, fa, fb);
   np::mprRunRound(A, B, hull_points, d.round, d.best);
   if (np::mprTiltRound(A, *fa, *fb, d.best, d.round)) np::mprRunRound(A, B, hull_points, d.round, d.best);
-  const int m = np::mprFinish(A, B, hull_points, d.best, envelope, out);
-  if (d.swapped) np::flipContacts(out, m);
+  const int m = np::mprFinish(A, B, hull_points, d.best, envelope, out, manifold);
+  if (d.swapped) {
+    np::flipContacts(out, m);
+    markFlippedMpr(out, m);
+  }
   return m;
 }
 

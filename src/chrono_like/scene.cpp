@@ -134,6 +134,7 @@ SystemConfig systemConfigFromSettings(const SceneSettings& s) {
   c.collision = s.collision == "bullet" ? CollisionBackend::Bullet : CollisionBackend::Native;
   c.warm_start = s.warm_start;
   c.speculative = s.speculative;
+  c.mpr_manifold = s.mpr_manifold;
   return c;
 }
 
@@ -143,7 +144,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   c.object(j, path);
   c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "tolerance", "storage", "gravity", "friction_combine",
                    "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
-                   "speculative", "bullet_length_scale", "bullet_iterations"});
+                   "speculative", "mpr_manifold", "bullet_length_scale", "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
   if (j.contains("dt")) s.dt = real(c.positive(j["dt"], at("dt")));
   if (j.contains("steps") && j.contains("time")) c.fail(path, "give either steps or time, not both");
@@ -163,6 +164,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
   if (j.contains("warm_start")) s.warm_start = c.boolean(j["warm_start"], at("warm_start"));
   if (j.contains("speculative")) s.speculative = c.boolean(j["speculative"], at("speculative"));
+  if (j.contains("mpr_manifold")) s.mpr_manifold = c.boolean(j["mpr_manifold"], at("mpr_manifold"));
   if (j.contains("bullet_length_scale"))
     s.bullet_length_scale = real(c.nonNegative(j["bullet_length_scale"], at("bullet_length_scale")));
   if (j.contains("bullet_iterations"))

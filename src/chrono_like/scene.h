@@ -45,6 +45,7 @@ struct SceneSettings {
   int frames = 0;                    // VTK frames to write
   bool warm_start = true;
   bool speculative = true;
+  bool mpr_manifold = true;
   real bullet_length_scale = 0;      // Bullet peer unit scale; 0: automatic from the body sizes
   int bullet_iterations = 10;        // Bullet peer sequential-impulse iterations
 

@@ -75,6 +75,9 @@ struct SystemConfig {
   bool warm_start = true;
   bool gyroscopic = true;           // omega x I omega for bodies with non-spherical inertia
   bool speculative = true;          // speculative contacts: envelopes grow to the step's sweep (narrowphase.h)
+  // MPR pairs of two flat features (cylinder caps, hull faces, a box face on a cap) get up to 4 more points of
+  // their overlap (mpr.h: mprManifold): without them such stacks tip about MPR's one point and sink.
+  bool mpr_manifold = true;
   // Leave out the stages and rows the scene does not need (DESIGN §2): the normal row only when no contact
   // of the step has mu > 0, no gyroscopic term for spherical inertia, no row or field round trips without
   // row providers or fields. false runs every one of them (3 rows per contact even for mu = 0, the

@@ -365,7 +365,8 @@ struct NarrowArgs {
   const Vec3* hull;
   const real* sweep;
   real envelope_rel;
-  int shift;  // of the pair keys (packPair)
+  int shift;      // of the pair keys (packPair)
+  bool manifold;  // SystemConfig::mpr_manifold
 };
 
 struct PairPoses {
@@ -392,7 +393,7 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
   const PairPoses P = pairPoses(A, i);
   a = P.a;
   b = P.b;
-  return collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer);
+  return collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold);
 }
 
 // Count pass: contacts per pair, keeping the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left
@@ -479,7 +480,7 @@ __global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const un
         continue;
       }
       const PairPoses P = pairPoses(A, i);
-      n = finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts);
+      n = finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts, A.manifold);
     }
     count[i] = n;
     if (n >= 1) {
@@ -531,9 +532,12 @@ __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::
     d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
     if (np::mprTiltRound(SA, *fa, *fb, d.best, d.round)) d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
     if (lane == 0) {
-      ContactPoint pts[1];
-      const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts);
-      if (d.swapped) np::flipContacts(pts, m);
+      ContactPoint pts[kMaxContactsPerPair];
+      const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts, A.manifold);
+      if (d.swapped) {
+        np::flipContacts(pts, m);
+        markFlippedMpr(pts, m);
+      }
       count[i] = m;
       const int32_t k = first.slot[i];  // set by the count pass
       if (m >= 1 && k >= 0) first.pts[k] = pts[0];
@@ -594,8 +598,11 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
 
 // Write pass, pairs of several contacts (a fixed grid taking the multi list by warps): all their points again
 // (deterministic: the same points as the count pass).
+// A pair whose first point the count pass kept and marked as MPR's (mprFinish) gets its other points from it
+// (mprManifoldAgain: the flat-feature manifold without MPR again, the same arithmetic).
 __global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsigned long long* multi_count,
-                                  unsigned long long* next, const int64_t* count, const int64_t* off, ContactOut out) {
+                                  unsigned long long* next, const int64_t* count, const int64_t* off,
+                                  FirstPoints first, ContactOut out) {
   const int64_t m = int64_t(*multi_count);
   for (;;) {
     const int64_t j = warpTake(next);
@@ -604,7 +611,15 @@ __global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsi
     const int64_t i = multi[j];
     ContactPoint pts[kMaxContactsPerPair];
     int32_t a, b;
-    collidePair(A, i, a, b, pts);
+    const int32_t k = first.slot[i];
+    const int32_t mark = k >= 0 ? first.pts[k].pad_ : 0;
+    if (mark == np::kMprFirst || mark == kMprFirstSwapped) {
+      unpackPair(A.pairs[i], A.shift, a, b);
+      const PairPoses P = pairPoses(A, i);
+      mprManifoldAgain(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, first.pts[k], pts);
+    } else {
+      collidePair(A, i, a, b, pts);
+    }
     writeContacts(A, a, b, pts, int(count[i]), off[i], out);
   }
 }
@@ -845,7 +860,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
   NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
-               d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel, d.pair_shift};
+               d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel, d.pair_shift, cfg.mpr_manifold};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
@@ -904,7 +919,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel, &N.multi_blocks_per_sm);
   const unsigned multi_grid = unsigned(std::min<int64_t>(blocksFor(np), multi_resident));
   narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1,
-                                                   N.list_count.data() + 3, N.count.data(), N.off.data(), out);
+                                                   N.list_count.data() + 3, N.count.data(), N.off.data(), first, out);
   DVI_CUDA_LAUNCH("narrowMultiKernel");
 }
 
