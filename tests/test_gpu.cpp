@@ -331,6 +331,21 @@ void compareOneStep(bool mixed) {
     REQUIRE(gc.count() == cc.count());
     REQUIRE(gc.key == cc.key);
     const double en = relDiff(flatten(gc.normal), flatten(cc.normal));
+    {  // the contact whose normal differs most: what kind of pair, which point of its manifold
+      size_t worst = 0;
+      double wd = -1;
+      for (size_t k = 0; k < cc.count(); ++k) {
+        const double d = double(length(gc.normal[k] - cc.normal[k]));
+        if (d > wd) wd = d, worst = k;
+      }
+      if (wd > 0) {
+        const ShapeArrays& sh = cpu.shapes();
+        WARN((mixed ? "mixed" : "spheres") << " step " << s << ": largest normal difference " << wd << " at contact "
+                     << worst << " (" << shapeTypeName(sh.shape[size_t(cc.shape_a[worst])].type) << "-"
+                     << shapeTypeName(sh.shape[size_t(cc.shape_b[worst])].type) << ", feature "
+                     << (cc.key[worst] & 0xFF) << ", dist CPU " << cc.dist[worst] << " GPU " << gc.dist[worst] << ")");
+      }
+    }
     const double ed = relDiff(gc.dist, cc.dist);
     const double eg = relDiff(gpu->impulses(), cpu.impulses());
     const double ev = relDiff(flatten(gpu->bodies().vel), flatten(cpu.bodies().vel));
