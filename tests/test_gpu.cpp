@@ -428,12 +428,7 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
       for (size_t k = 0; k < gpu->contacts().count(); ++k)
         tang = std::max({tang, std::fabs(double(gpu->impulses()[3 * k + 1])), std::fabs(double(gpu->impulses()[3 * k + 2]))});
       CHECK(tang == 0);
-      // Step 0 to rounding. Step 1 starts from states 5e-19 apart, and an MPR pair resting along a line (a capsule's
-    // side on a cylinder's cap, kept parallel by the flat-feature manifold, mpr.h) has an ill-conditioned normal:
-    // the depth does not change as it turns about the line, and the two builds' roundings put it 1.1e-4 rad
-    // apart at the same depth (the random-pairs test above allows 1e-3 rad for MPR normals). The impulses then
-    // differ by 3.7e-7 (H200, 4b90844): float tolerance, as issue 3 asks of this comparison.
-    const double tol = kDouble ? (s == 0 ? 1e-9 : 1e-6) : 2e-3;
+      const double tol = kDouble ? 1e-9 : 2e-3;
       CHECK(eg < tol);
       CHECK(ev < tol);
       CHECK(ew < tol);
@@ -820,12 +815,7 @@ TEST_CASE("a plate under 2,025 spheres: the GPU's heavy-body gather equals the C
     WARN("plate step " << s << ": " << on_plate << " contacts on the plate; relative differences impulses " << eg
                        << ", v " << ev << ", omega " << ew << "; plate velocity CPU (" << cpu.bodies().vel[1].x << ", "
                        << cpu.bodies().vel[1].y << ", " << cpu.bodies().vel[1].z << "), GPU differs by " << length(dvp));
-    // Step 0 to rounding. Step 1 starts from states 5e-19 apart, and an MPR pair resting along a line (a capsule's
-    // side on a cylinder's cap, kept parallel by the flat-feature manifold, mpr.h) has an ill-conditioned normal:
-    // the depth does not change as it turns about the line, and the two builds' roundings put it 1.1e-4 rad
-    // apart at the same depth (the random-pairs test above allows 1e-3 rad for MPR normals). The impulses then
-    // differ by 3.7e-7 (H200, 4b90844): float tolerance, as issue 3 asks of this comparison.
-    const double tol = kDouble ? (s == 0 ? 1e-9 : 1e-6) : 2e-3;
+    const double tol = kDouble ? 1e-9 : 2e-3;
     CHECK(eg < tol);
     CHECK(ev < tol);
     CHECK(ew < tol);
