@@ -427,39 +427,43 @@ DVI_HD bool insideConvexPolygon(const real (*poly)[2], int n, real qx, real qy, 
   return true;
 }
 
+// The samples p[k] of one shape's feature along d0 (A's along +n, B's along -n): its supports along d0 tilted by
+// kManifoldTilt towards t1 cos + t2 sin of k x 45 degrees, and their spread (largest distance of opposite ones).
+// False when the feature is not flat: the spread is below kManifoldFlat x size, or draws in at a tenth of the
+// tilt. Spheres and ellipsoids are curved everywhere: false without sampling.
+DVI_HD bool manifoldSamples(const MprShape& S, Vec3 d0, Vec3 t1, Vec3 t2, const Vec3* hull_points, Vec3* p,
+                            real& spread) {
+  if (S.s->type == ShapeType::Sphere || S.s->type == ShapeType::Ellipsoid) return false;
+  const real ck[kManifoldDirs] = {1, kSqrtHalf, 0, -kSqrtHalf, -1, -kSqrtHalf, 0, kSqrtHalf};
+  const real sk[kManifoldDirs] = {0, kSqrtHalf, 1, kSqrtHalf, 0, -kSqrtHalf, -1, -kSqrtHalf};
+  for (int k = 0; k < kManifoldDirs; ++k)
+    p[k] = mprSupport(S, d0 * kManifoldCosTilt + (t1 * ck[k] + t2 * sk[k]) * kManifoldSinTilt, hull_points);
+  spread = 0;
+  for (int k = 0; k < kManifoldDirs / 2; ++k) spread = fmax(spread, length(p[k] - p[k + kManifoldDirs / 2]));
+  if (!(spread > kManifoldFlat * S.s->size)) return false;
+  real small = 0;
+  for (int k = 0; k < kManifoldDirs / 2; k += 2) {
+    const Vec3 dc = d0 * kManifoldCosSmall, es = (t1 * ck[k] + t2 * sk[k]) * kManifoldSinSmall;
+    small = fmax(small, length(mprSupport(S, dc + es, hull_points) - mprSupport(S, dc - es, hull_points)));
+  }
+  return small > real(0.5) * spread;
+}
+
 DVI_HD_CALL int mprManifold(const MprShape& A, const MprShape& B, const Vec3* hull_points, real envelope,
                             ContactPoint* out) {
   const Vec3 n = out[0].normal;
   Vec3 t1, t2;
   tangentBasis(n, t1, t2);
-  const real ck[kManifoldDirs] = {1, kSqrtHalf, 0, -kSqrtHalf, -1, -kSqrtHalf, 0, kSqrtHalf};
-  const real sk[kManifoldDirs] = {0, kSqrtHalf, 1, kSqrtHalf, 0, -kSqrtHalf, -1, -kSqrtHalf};
-  const Vec3 o = out[0].pa;
   Vec3 a3[kManifoldDirs], b3[kManifoldDirs];
+  real spread_a = 0, spread_b = 0;
+  if (!manifoldSamples(A, n, t1, t2, hull_points, a3, spread_a)) return 1;
+  if (!manifoldSamples(B, -n, t1, t2, hull_points, b3, spread_b)) return 1;
+  const Vec3 o = out[0].pa;
   real pa2[kManifoldDirs][2], pb2[kManifoldDirs][2];
   for (int k = 0; k < kManifoldDirs; ++k) {
-    const Vec3 e = t1 * ck[k] + t2 * sk[k];
-    a3[k] = mprSupport(A, n * kManifoldCosTilt + e * kManifoldSinTilt, hull_points);
-    b3[k] = mprSupport(B, e * kManifoldSinTilt - n * kManifoldCosTilt, hull_points);
     pa2[k][0] = dot(a3[k] - o, t1), pa2[k][1] = dot(a3[k] - o, t2);
     pb2[k][0] = dot(b3[k] - o, t1), pb2[k][1] = dot(b3[k] - o, t2);
   }
-  // flat features only: the samples spread (opposite directions) over kManifoldFlat x size, and as far at a
-  // tenth of the tilt along t1 and t2 (a curved surface's samples draw in with the tilt; a face's extremes stay)
-  real spread_a = 0, spread_b = 0, small_a = 0, small_b = 0;
-  for (int k = 0; k < kManifoldDirs / 2; ++k) {
-    const int j = k + kManifoldDirs / 2;
-    spread_a = fmax(spread_a, length(a3[k] - a3[j]));
-    spread_b = fmax(spread_b, length(b3[k] - b3[j]));
-  }
-  if (!(spread_a > kManifoldFlat * A.s->size) || !(spread_b > kManifoldFlat * B.s->size)) return 1;
-  for (int k = 0; k < kManifoldDirs / 2; k += 2) {
-    const Vec3 e = t1 * ck[k] + t2 * sk[k];
-    const Vec3 na = n * kManifoldCosSmall, es = e * kManifoldSinSmall;
-    small_a = fmax(small_a, length(mprSupport(A, na + es, hull_points) - mprSupport(A, na - es, hull_points)));
-    small_b = fmax(small_b, length(mprSupport(B, es - na, hull_points) - mprSupport(B, -na - es, hull_points)));
-  }
-  if (!(small_a > real(0.5) * spread_a) || !(small_b > real(0.5) * spread_b)) return 1;
   const real scale = fmax(spread_a, spread_b);
   const real eps = real(1e-9) * scale * scale;  // cross products of zero-length (repeated) polygon edges
   const real ha = dot(out[0].pa, n), hb = dot(out[0].pb, n);  // A's and B's support planes along n
