@@ -598,15 +598,15 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
   plain_cfg.gpu_graphs = false;
   plain_cfg.gpu_persistent_max_blocks = 0;
   auto plain = makeGpuSystem(plain_cfg);
-  buildPile(cpu, 10000, 7, true, 1.7);
-  buildPile(*gpu, 10000, 7, true, 1.7);
-  buildPile(*plain, 10000, 7, true, 1.7);
+  SystemConfig contact_gather_cfg = cfg;  // the gather reading each contact's record and full inverse masses
+  contact_gather_cfg.gpu_entry_gather = false;
+  auto contact_gather = makeGpuSystem(contact_gather_cfg);
+  for (System* sys : {&cpu, gpu.get(), plain.get(), contact_gather.get()}) buildPile(*sys, 10000, 7, true, 1.7);
   for (int s = 0; s < 3; ++s) {
-    cpu.step();
-    gpu->step();
-    plain->step();
+    for (System* sys : {&cpu, gpu.get(), plain.get(), contact_gather.get()}) sys->step();
     gpu->syncToHost();
     plain->syncToHost();
+    contact_gather->syncToHost();
     REQUIRE(gpu->contacts().count() == cpu.contacts().count());
     const double ev = relDiff(flatten(gpu->bodies().vel), flatten(cpu.bodies().vel));
     const double ew = relDiff(flatten(gpu->bodies().omega), flatten(cpu.bodies().omega));
@@ -622,6 +622,10 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
     CHECK(eg < 1e-2);
     // one persistent kernel or kernel by kernel: the same float rounding, bitwise
     CHECK(relDiff(flatten(plain->bodies().vel), flatten(gpu->bodies().vel)) == 0);
+    // the gather's entry records and isotropic inverse masses (gpu_entry_gather) add the same values in the same
+    // order as the contact records: bitwise
+    CHECK(relDiff(flatten(contact_gather->bodies().vel), flatten(gpu->bodies().vel)) == 0);
+    CHECK(relDiff(flatten(contact_gather->bodies().omega), flatten(gpu->bodies().omega)) == 0);
   }
 }
 

@@ -3,6 +3,7 @@
 // KKT conditions), analytic single-contact cases, and bitwise determinism across thread counts.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -244,6 +245,88 @@ TEST_CASE("contact problem operators equal the dense D^T M^-1 D", "[solver]") {
     CHECK(dot(u, rel) == Approx(Ng[3 * k + 1]).margin(1e-12 * scaleN * 10));
     CHECK(dot(w, rel) == Approx(Ng[3 * k + 2]).margin(1e-12 * scaleN * 10));
   }
+}
+
+// Float storage rounds each contact Jacobian to float and recomputes the tangent from the rounded normal
+// (jacobian.h: roundJacobian, ContactJacobianF); the GPU's gather reads each side of it from a per-entry record
+// (EntryJacobianF) and isotropic bodies' inverse masses from two numbers (BodyInverseIso). Checked against the
+// definitions: an orthonormal frame within float rounding of the real one, a rounding that is a fixed point (the
+// real and float copies of one step define the same rows), the entry record adding exactly the contact record's
+// impulse, which is (P, r x P) with P = n g0 + u g1 + w g2, and R diag(d) R^T.
+TEST_CASE("float Jacobians and the gather's compact records keep the contact rows and inverse masses", "[solver]") {
+  std::mt19937_64 rng(41);
+  std::uniform_real_distribution<double> U(-1, 1);
+  double worst_angle = 0, worst_frame = 0;
+  for (int t = 0; t < 2000; ++t) {
+    const Vec3 n = randomUnit(rng);
+    const Vec3 xa{U(rng), U(rng), U(rng)}, xb{U(rng), U(rng), U(rng)};
+    const Vec3 pa = xa + Vec3{U(rng), U(rng), U(rng)} * 0.05, pb = pa + n * (0.001 * U(rng));
+    const ContactJacobian J = makeContactJacobian(n, pa, pb, xa, xb, 3, 7);
+    const ContactJacobian R = roundJacobian(J);
+    // the frame: unit, orthogonal, near the real one
+    const Vec3 w = cross(R.n, R.u);
+    worst_frame = std::max({worst_frame, std::fabs(length(R.n) - 1), std::fabs(length(R.u) - 1), std::fabs(length(w) - 1),
+                            std::fabs(dot(R.n, R.u))});
+    worst_angle = std::max(worst_angle, length(cross(R.n, J.n)));
+    CHECK(length(R.rA - J.rA) <= 1e-7 * length(J.rA));
+    CHECK(length(R.rB - J.rB) <= 1e-7 * length(J.rB));
+    // a fixed point: rounding the rounded Jacobian changes no bit
+    const ContactJacobian R2 = roundJacobian(R);
+    CHECK(std::memcmp(&R2.n, &R.n, sizeof(Vec3)) == 0);
+    CHECK(std::memcmp(&R2.u, &R.u, sizeof(Vec3)) == 0);
+    CHECK(std::memcmp(&R2.rA, &R.rA, sizeof(Vec3)) == 0);
+    CHECK(std::memcmp(&R2.rB, &R.rB, sizeof(Vec3)) == 0);
+    // each side's entry record adds the contact record's impulse, bit for bit, and that is (P, r x P)
+    const ContactJacobianF f = toFloatJacobian(J);
+    const real g[3] = {real(U(rng) + 1), real(U(rng)), real(U(rng))};
+    for (int side = 0; side < 2; ++side) {
+      Vec3 F1{0.5, -0.25, 1}, T1{0.125, 2, -1}, F2 = F1, T2 = T1, F3 = F1, T3 = T1, F4 = F1, T4 = T1;
+      accumulateContactImpulse(R, side, g, F1, T1);
+      accumulateEntryContactImpulse(entryJacobian(f, side), side, g, F2, T2);
+      CHECK(std::memcmp(&F1, &F2, sizeof(Vec3)) == 0);
+      CHECK(std::memcmp(&T1, &T2, sizeof(Vec3)) == 0);
+      accumulateContactNormalImpulse(R, side, g[0], F3, T3);
+      accumulateEntryNormalImpulse(entryJacobian(f, side), side, g[0], F4, T4);
+      CHECK(std::memcmp(&F3, &F4, sizeof(Vec3)) == 0);
+      CHECK(std::memcmp(&T3, &T4, sizeof(Vec3)) == 0);
+      const double s = side ? 1 : -1;
+      const Vec3 P = R.n * g[0] + R.u * g[1] + w * g[2], r = side ? R.rB : R.rA;
+      CHECK(length(F1 - (Vec3{0.5, -0.25, 1} + P * s)) < 1e-12);
+      CHECK(length(T1 - (Vec3{0.125, 2, -1} + cross(r, P) * s)) < 1e-12);
+    }
+  }
+  INFO("worst frame defect " << worst_frame << ", worst normal rotation " << worst_angle << " rad");
+  CHECK(worst_frame < 2e-7);
+  CHECK(worst_angle < 1e-7);
+
+  // inverse masses: R diag(d) R^T, exactly d I for equal principal values, whose 16-byte form gives the same deltas
+  for (int t = 0; t < 500; ++t) {
+    const Quat q = randomQuat(rng);
+    const Mat33 M = matFromQuat(q);
+    const bool iso = t % 2 == 0;
+    const Vec3 d = iso ? Vec3{2.5, 2.5, 2.5} : Vec3{1 + U(rng), 2 + U(rng), 4 + U(rng)};
+    const BodyInverseMass B = makeBodyInverseMass(0.75, d, q);
+    const int ii[6] = {0, 1, 2, 0, 0, 1}, jj[6] = {0, 1, 2, 1, 2, 2};
+    const Vec3 rows[3] = {M.r0, M.r1, M.r2};
+    for (int e = 0; e < 6; ++e) {
+      const Vec3 ri = rows[ii[e]], rj = rows[jj[e]];
+      const double ref = ri.x * d.x * rj.x + ri.y * d.y * rj.y + ri.z * d.z * rj.z;
+      CHECK(B.I[e] == Approx(ref).margin(1e-14));
+    }
+    const BodyInverseIso I = isoInverse(B);
+    CHECK(I.m == 0.75);
+    if (!iso) {
+      CHECK(std::isnan(I.i));
+      continue;
+    }
+    CHECK((B.I[0] == 2.5 && B.I[1] == 2.5 && B.I[2] == 2.5 && B.I[3] == 0 && B.I[4] == 0 && B.I[5] == 0));
+    REQUIRE(I.i == 2.5);
+    const Vec3 F{U(rng), U(rng), U(rng)}, T{U(rng), U(rng), U(rng)};
+    const BodyDelta full = bodyDeltaFromImpulse(B, F, T), compact = bodyDeltaFromImpulse(I, F, T);
+    CHECK(std::memcmp(&full, &compact, sizeof(BodyDelta)) == 0);
+  }
+  CHECK(std::isnan(isoInverse(BodyInverseMass{1, {1, 1, 1, 0, 1e-30, 0}}).i));
+  CHECK(isoInverse(BodyInverseMass{0, {0, 0, 0, 0, 0, 0}}).i == 0);  // fixed bodies
 }
 
 // ------------------------------------------------------------------------------------------- solvers

@@ -90,6 +90,7 @@ struct ScalingOptions {
   bool gpu_register_cache = true;
   double pair_margin = dvi::BroadPhaseSettings{}.pair_margin;
   bool mpr_manifold = dvi::SystemConfig{}.mpr_manifold;
+  bool gpu_entry_gather = dvi::SystemConfig{}.gpu_entry_gather;
   std::string storage = "auto";
   std::string bullet3_device = "gpu";
 };
@@ -593,6 +594,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.gpu_apgd_register_cache = o.gpu_register_cache;
   cfg.broadphase.pair_margin = dvi::real(o.pair_margin);
   cfg.mpr_manifold = o.mpr_manifold;
+  cfg.gpu_entry_gather = o.gpu_entry_gather;
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
@@ -724,6 +726,8 @@ int runScaling(const ScalingOptions& o) {
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg)
        << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
+       << (cfg.gpu_entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and isotropic inverse masses as 16 B (gpu_entry_gather), "
+                                : "the gather reading each contact's Jacobian (--gpu-entry-gather false), ")
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.broadphase.pair_margin)
        << "\n- NarrowPhase (ours): " << (cfg.mpr_manifold ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)" : "MPR's one point per pair (--mpr-manifold false)")
@@ -774,6 +778,10 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--mpr-manifold", o->mpr_manifold,
                   "MPR pairs of two flat features get up to 4 more points of their overlap (SystemConfig::mpr_manifold; "
                   "true, the default, or false: MPR's one point)");
+  cmd->add_option("--gpu-entry-gather", o->gpu_entry_gather,
+                  "GPU float storage: the Schur product's gather reads each adjacency entry's side of the Jacobian in "
+                  "entry order and isotropic inverse masses as 16 bytes (SystemConfig::gpu_entry_gather; true, the "
+                  "default, or false: each contact's Jacobian and the full inverse mass)");
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));

@@ -64,23 +64,37 @@ DVI_HD ContactJacobian makeContactJacobian(Vec3 normal, Vec3 pa, Vec3 pb, Vec3 x
   return J;
 }
 
-// VectorStorage::Float: APGD's trials on the GPU read the contact Jacobians as 56 bytes of float. Both backends
-// then build the whole step's problem from the Jacobian rounded to float (roundJacobian), so every Schur
-// product, GPU or CPU, float copy or real, applies the same operator; the rounding moves a normal by ~1e-7 rad.
+// VectorStorage::Float: APGD's trials on the GPU read the contact Jacobians as float. Both backends then build the
+// whole step's problem from the Jacobian rounded to float (roundJacobian), so every Schur product, GPU or CPU,
+// float copy or real, applies the same operator; the rounding moves a normal by ~1e-7 rad. The tangent is not
+// stored: it is tangentBasis of the rounded normal, recomputed where it is used (a few flops against 12 bytes
+// read three times a trial), and roundJacobian sets it so, so the real Jacobian and the float record define the
+// same rows bit for bit (the device does not fuse multiply-adds: src/CMakeLists.txt).
+// 44 bytes, read in contact order by the Schur pass (b).
 struct ContactJacobianF {
-  float n[3], u[3], rA[3], rB[3];
+  float n[3], rA[3], rB[3];
   int32_t a, b;
 };
 
+// The first tangent of a contact with normal n (tangentBasis); the second is n x u.
+DVI_HD Vec3 contactTangent(Vec3 n) {
+  Vec3 u, w;
+  tangentBasis(n, u, w);
+  return u;
+}
+
+DVI_HD Vec3 toReal(const float* f) { return Vec3{real(f[0]), real(f[1]), real(f[2])}; }
+DVI_HD void toFloat3(Vec3 v, float* f) {
+  f[0] = float(v.x);
+  f[1] = float(v.y);
+  f[2] = float(v.z);
+}
+
 DVI_HD ContactJacobianF toFloatJacobian(const ContactJacobian& J) {
   ContactJacobianF f;
-  const Vec3* src[4] = {&J.n, &J.u, &J.rA, &J.rB};
-  float* dst[4] = {f.n, f.u, f.rA, f.rB};
-  for (int i = 0; i < 4; ++i) {
-    dst[i][0] = float(src[i]->x);
-    dst[i][1] = float(src[i]->y);
-    dst[i][2] = float(src[i]->z);
-  }
+  toFloat3(J.n, f.n);
+  toFloat3(J.rA, f.rA);
+  toFloat3(J.rB, f.rB);
   f.a = J.a;
   f.b = J.b;
   return f;
@@ -89,10 +103,10 @@ DVI_HD ContactJacobianF toFloatJacobian(const ContactJacobian& J) {
 DVI_HD ContactJacobian loadJacobian(const ContactJacobian& J) { return J; }
 DVI_HD ContactJacobian loadJacobian(const ContactJacobianF& f) {
   ContactJacobian J;
-  J.n = Vec3{real(f.n[0]), real(f.n[1]), real(f.n[2])};
-  J.u = Vec3{real(f.u[0]), real(f.u[1]), real(f.u[2])};
-  J.rA = Vec3{real(f.rA[0]), real(f.rA[1]), real(f.rA[2])};
-  J.rB = Vec3{real(f.rB[0]), real(f.rB[1]), real(f.rB[2])};
+  J.n = toReal(f.n);
+  J.u = contactTangent(J.n);
+  J.rA = toReal(f.rA);
+  J.rB = toReal(f.rB);
   J.a = f.a;
   J.b = f.b;
   return J;
@@ -100,11 +114,35 @@ DVI_HD ContactJacobian loadJacobian(const ContactJacobianF& f) {
 
 DVI_HD ContactJacobian roundJacobian(const ContactJacobian& J) { return loadJacobian(toFloatJacobian(J)); }
 
-// World inverse inertia R diag(d) R^T of a body with principal inverse inertia d and rotation q.
+// One side of a float contact Jacobian, in the order of the body's adjacency entries (GPU gather, jacobian.h's
+// float layout): the normal and this side's lever arm, 24 bytes read one after another by the body's thread
+// instead of a 44-byte record of each contact read at random (2 to 3 sectors for the 24 bytes used).
+struct EntryJacobianF {
+  float n[3], r[3];
+};
+
+DVI_HD EntryJacobianF entryJacobian(const ContactJacobianF& f, int side) {
+  EntryJacobianF e;
+  const float* r = side ? f.rB : f.rA;
+  for (int j = 0; j < 3; ++j) {
+    e.n[j] = f.n[j];
+    e.r[j] = r[j];
+  }
+  return e;
+}
+
+// World inverse inertia R diag(d) R^T of a body with principal inverse inertia d and rotation q. Equal principal
+// values (spheres, cubes) give d.x I exactly whatever q: R R^T = I, which the rotated product would meet only to
+// rounding, and the gather then reads the body as two numbers (BodyInverseIso).
 DVI_HD BodyInverseMass makeBodyInverseMass(real inv_mass, Vec3 d, Quat q) {
-  Mat33 R = matFromQuat(q);
   BodyInverseMass B;
   B.m = inv_mass;
+  if (d.x == d.y && d.y == d.z) {
+    B.I[0] = B.I[1] = B.I[2] = d.x;
+    B.I[3] = B.I[4] = B.I[5] = real(0);
+    return B;
+  }
+  Mat33 R = matFromQuat(q);
   auto e = [&](Vec3 ri, Vec3 rj) { return ri.x * d.x * rj.x + ri.y * d.y * rj.y + ri.z * d.z * rj.z; };
   B.I[0] = e(R.r0, R.r0);
   B.I[1] = e(R.r1, R.r1);
@@ -123,27 +161,50 @@ DVI_HD void contactRelativeVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, 
   y[2] = dot(contactW(J), rel);
 }
 
-// Adds the generalised impulse of contact k on one of its bodies (side 0 = A, 1 = B) to (F, T):
-// F += s P, T += s r x P with P = n g0 + u g1 + w g2 and s = -1 on A, +1 on B.
-// The world impulse P of a contact added to side `side` of it: +P on B, -P on A, with its moment.
-DVI_HD void accumulateSidedImpulse(const ContactJacobian& J, int side, Vec3 P, Vec3& F, Vec3& T) {
+// The world impulse of a contact with normal n and tangents u, w = n x u: P = n g0 + u g1 + w g2.
+DVI_HD Vec3 contactWorldImpulse(Vec3 n, Vec3 u, const real* g) { return n * g[0] + u * g[1] + cross(n, u) * g[2]; }
+
+// The world impulse P of a contact added to side `side` of it (lever arm r): +P on B, -P on A, with its moment
+// (F += s P, T += s r x P, s = -1 on A, +1 on B).
+DVI_HD void accumulateArmImpulse(Vec3 r, int side, Vec3 P, Vec3& F, Vec3& T) {
   if (side) {
     F += P;
-    T += cross(J.rB, P);
+    T += cross(r, P);
   } else {
     F -= P;
-    T -= cross(J.rA, P);
+    T -= cross(r, P);
   }
 }
 
+DVI_HD void accumulateSidedImpulse(const ContactJacobian& J, int side, Vec3 P, Vec3& F, Vec3& T) {
+  accumulateArmImpulse(side ? J.rB : J.rA, side, P, F, T);
+}
+
+// Adds the generalised impulse of contact k on one of its bodies (side 0 = A, 1 = B) to (F, T).
 DVI_HD void accumulateContactImpulse(const ContactJacobian& J, int side, const real* g, Vec3& F, Vec3& T) {
-  accumulateSidedImpulse(J, side, J.n * g[0] + J.u * g[1] + contactW(J) * g[2], F, T);
+  accumulateSidedImpulse(J, side, contactWorldImpulse(J.n, J.u, g), F, T);
 }
 
 // dv = m^-1 F, dw = I^-1 T.
 DVI_HD BodyDelta bodyDeltaFromImpulse(const BodyInverseMass& B, Vec3 F, Vec3 T) {
   return BodyDelta{F * B.m, symMul(B.I, T)};
 }
+
+// The inverse mass of a body as the GPU gather reads it: 16 bytes in double. i is the world inverse inertia's
+// value where it is i I (makeBodyInverseMass: equal principal values; fixed bodies, 0), else NaN and the gather
+// reads the full BodyInverseMass.
+struct BodyInverseIso {
+  real m, i;
+};
+
+DVI_HD BodyInverseIso isoInverse(const BodyInverseMass& B) {
+  const bool iso = B.I[3] == 0 && B.I[4] == 0 && B.I[5] == 0 && B.I[0] == B.I[1] && B.I[1] == B.I[2];
+  return BodyInverseIso{B.m, iso ? B.I[0] : real(NAN)};
+}
+
+// bodyDeltaFromImpulse of an isotropic body: the same values (symMul's off-diagonal terms add zeros), but for
+// the sign of a zero.
+DVI_HD BodyDelta bodyDeltaFromImpulse(const BodyInverseIso& B, Vec3 F, Vec3 T) { return BodyDelta{F * B.m, T * B.i}; }
 
 // Diagonal block N_kk = D_k^T M^-1 D_k (symmetric, [00, 11, 22, 01, 02, 12]). The linear parts give
 // (mA + mB) I3 because (n, u, w) is orthonormal; the angular parts (r x d_i)^T I^-1 (r x d_j) of each side.
@@ -266,6 +327,16 @@ DVI_HD real contactNormalVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, Ve
 // accumulateContactImpulse for the normal impulse gn alone.
 DVI_HD void accumulateContactNormalImpulse(const ContactJacobian& J, int side, real gn, Vec3& F, Vec3& T) {
   accumulateSidedImpulse(J, side, J.n * gn, F, T);
+}
+
+// The same two from one side's float record (EntryJacobianF): bit for bit what they add with the contact's
+// ContactJacobianF loaded (loadJacobian: the same conversions, the tangent recomputed by the same function).
+DVI_HD void accumulateEntryContactImpulse(const EntryJacobianF& e, int side, const real* g, Vec3& F, Vec3& T) {
+  const Vec3 n = toReal(e.n);
+  accumulateArmImpulse(toReal(e.r), side, contactWorldImpulse(n, contactTangent(n), g), F, T);
+}
+DVI_HD void accumulateEntryNormalImpulse(const EntryJacobianF& e, int side, real gn, Vec3& F, Vec3& T) {
+  accumulateArmImpulse(toReal(e.r), side, toReal(e.n) * gn, F, T);
 }
 
 // Entry N_ij = D_in^T M^-1 D_jn between the normal rows of contacts i and j: the sum over the bodies c they

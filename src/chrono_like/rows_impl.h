@@ -93,21 +93,34 @@ DVI_HD real entryColumnSum(int32_t ent, const EntryLayout& L, const real* colnor
   return colnorm[6 * (L.rb0 + i / 3) + 3 * (ent & 1) + i % 3];
 }
 
+// Adds row entry ent's (ent >= 2 nc) impulse on its body to (F, T), through the row's full Jacobian.
+DVI_HD void accumulateRowEntryImpulse(int32_t ent, const EntryLayout& L, const ConstraintRow* rows, const real* x,
+                                      Vec3& F, Vec3& T) {
+  const int64_t r = (int64_t(ent) - 2 * L.nc) >> 1;
+  const ConstraintRow& R = rows[r];
+  accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * L.rb0 + r], F, T);
+}
+
 // Adds adjacency entry ent's impulse on its body to (F, T): contacts through their compact Jacobian,
 // rows through their full one; x in the layout L. JT: ContactJacobian, or ContactJacobianF (jacobian.h).
 template <class JT>
 DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryLayout& L, const JT* jac, const ConstraintRow* rows,
                                    const real* x, Vec3& F, Vec3& T) {
-  if (ent < 2 * L.nc) {
-    const int32_t k = ent >> 1;
-    const ContactJacobian J = loadJacobian(jac[k]);
-    if (L.normal_only) accumulateContactNormalImpulse(J, ent & 1, x[k], F, T);
-    else accumulateContactImpulse(J, ent & 1, x + 3 * int64_t(k), F, T);
-  } else {
-    const int64_t r = (int64_t(ent) - 2 * L.nc) >> 1;
-    const ConstraintRow& R = rows[r];
-    accumulateRowImpulse((ent & 1) ? R.Jb : R.Ja, x[3 * L.rb0 + r], F, T);
-  }
+  if (ent >= 2 * L.nc) return accumulateRowEntryImpulse(ent, L, rows, x, F, T);
+  const int32_t k = ent >> 1;
+  const ContactJacobian J = loadJacobian(jac[k]);
+  if (L.normal_only) accumulateContactNormalImpulse(J, ent & 1, x[k], F, T);
+  else accumulateContactImpulse(J, ent & 1, x + 3 * int64_t(k), F, T);
+}
+
+// accumulateEntryImpulse with the contact side's float record of entry ent (EntryJacobianF, kept in the order of
+// the adjacency entries; unused for rows): the same sums as with ContactJacobianF, bit for bit.
+DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryJacobianF& e, const EntryLayout& L, const ConstraintRow* rows,
+                                   const real* x, Vec3& F, Vec3& T) {
+  if (ent >= 2 * L.nc) return accumulateRowEntryImpulse(ent, L, rows, x, F, T);
+  const int32_t k = ent >> 1;
+  if (L.normal_only) accumulateEntryNormalImpulse(e, ent & 1, x[k], F, T);
+  else accumulateEntryContactImpulse(e, ent & 1, x + 3 * int64_t(k), F, T);
 }
 
 }  // namespace dvi

@@ -97,6 +97,12 @@ struct SystemConfig {
   // 256 per SM: ~135,000 blocks on an H100) keeps each thread's iterates and Schur values in registers from trial
   // to trial instead of reading them again (bitwise the same iterates). false: every trial reads its buffers.
   bool gpu_apgd_register_cache = true;
+  // GPU backend, float storage (VectorStorage::Float): the Schur product's gather reads each adjacency entry's
+  // normal and lever arm from a 24-byte float record kept in entry order (written once a step by BuildRows), and
+  // each body's inverse mass from a 16-byte record where its world inverse inertia is a multiple of the identity,
+  // instead of each contact's 44-byte Jacobian at random and the 56-byte inverse mass (bitwise the same sums).
+  // false: the contact records (for measuring the difference).
+  bool gpu_entry_gather = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.

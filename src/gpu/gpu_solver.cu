@@ -135,9 +135,13 @@ struct BodyInverseF {
   const Quat* rot;
   const uint8_t* flags;
   BodyInverseMass* out;
+  BodyInverseIso* iso;  // the gather's 16-byte form (SystemConfig::gpu_entry_gather), else null
   __device__ void operator()(int64_t i) const {
     const bool fixed = flags[i] & (kBodyFixed | kBodyKinematic);
-    out[i] = fixed ? BodyInverseMass{0, {0, 0, 0, 0, 0, 0}} : makeBodyInverseMass(inv_mass[i], inv_inertia[i], rot[i]);
+    const BodyInverseMass B =
+        fixed ? BodyInverseMass{0, {0, 0, 0, 0, 0, 0}} : makeBodyInverseMass(inv_mass[i], inv_inertia[i], rot[i]);
+    out[i] = B;
+    if (iso) iso[i] = isoInverse(B);
   }
 };
 
@@ -232,6 +236,19 @@ struct NormalJacobiStepF {
   }
 };
 
+// Entry e of the sorted adjacency: its contact side's float record (row entries have none: the gather reads the
+// row's Jacobian).
+struct EntryJacobianOrderF {
+  const int32_t* adj;
+  const ContactJacobianF* jacf;
+  int64_t contact_entries;  // 2 nc
+  EntryJacobianF* out;
+  __device__ void operator()(int64_t e) const {
+    const int32_t v = adj[e];
+    if (v < contact_entries) out[e] = entryJacobian(jacf[v >> 1], v & 1);
+  }
+};
+
 struct AdjOffsetF {
   const uint32_t* keys;
   int64_t n;
@@ -272,15 +289,31 @@ struct GatherT {
   const real* x;
   BodyDelta* delta;
   const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
+  // SystemConfig::gpu_entry_gather: the contact entries' float records in entry order (jac's values; float
+  // storage only), and the bodies' 16-byte inverse masses; null: jac and inv
+  const EntryJacobianF* ej = nullptr;
+  const BodyInverseIso* iso = nullptr;
   __device__ const real* input() const { return x_slot ? *x_slot : x; }
+  // Adds entry e (of the sorted adjacency) to (F, T).
+  __device__ __forceinline__ void entry(int32_t e, const real* xx, Vec3& F, Vec3& T) const {
+    if (ej) accumulateEntryImpulse(adj[e], ej[e], L, rows, xx, F, T);
+    else accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
+  }
+  __device__ __forceinline__ BodyDelta bodyDelta(int64_t i, Vec3 F, Vec3 T) const {
+    if (iso) {
+      const BodyInverseIso q = iso[i];
+      if (q.i == q.i) return bodyDeltaFromImpulse(q, F, T);  // NaN: not isotropic
+    }
+    return bodyDeltaFromImpulse(inv[i], F, T);
+  }
   __device__ void operator()(int64_t i) const {
     const real* xx = input();
     if (!xx) return;
     const int32_t e0 = off[i], e1 = off[i + 1];
     if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
     Vec3 F{0, 0, 0}, T{0, 0, 0};
-    for (int32_t e = e0; e < e1; ++e) accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
-    delta[i] = bodyDeltaFromImpulse(inv[i], F, T);
+    for (int32_t e = e0; e < e1; ++e) entry(e, xx, F, T);
+    delta[i] = bodyDelta(i, F, T);
   }
 };
 
@@ -296,8 +329,7 @@ __device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, con
   const int32_t i = heavy[h];
   const int t = threadIdx.x;
   Vec3 F{0, 0, 0}, T{0, 0, 0};
-  for (int32_t e = g.off[i] + c * kBlock + t; e < g.off[i + 1]; e += kBlock * kHeavyChunks)
-    accumulateEntryImpulse(g.adj[e], g.L, g.jac, g.rows, x, F, T);
+  for (int32_t e = g.off[i] + c * kBlock + t; e < g.off[i + 1]; e += kBlock * kHeavyChunks) g.entry(e, x, F, T);
   __shared__ real sh[6][kBlock];
   __shared__ bool last;
   sh[0][t] = F.x, sh[1][t] = F.y, sh[2][t] = F.z, sh[3][t] = T.x, sh[4][t] = T.y, sh[5][t] = T.z;
@@ -323,7 +355,7 @@ __device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, con
   for (int k = 0; k < kHeavyChunks; ++k)
     for (int j = 0; j < 6; ++j) sum[j] += __ldcg(all + k * 6 + j);  // L2: written by other blocks
   ticket[h] = 0;
-  g.delta[i] = bodyDeltaFromImpulse(g.inv[i], Vec3{sum[0], sum[1], sum[2]}, Vec3{sum[3], sum[4], sum[5]});
+  g.delta[i] = g.bodyDelta(i, Vec3{sum[0], sum[1], sum[2]}, Vec3{sum[3], sum[4], sum[5]});
 }
 
 // Heavy bodies are gathered by kHeavyChunks blocks each (grid kHeavyChunks x n_heavy), block (c, h) summing
@@ -470,6 +502,21 @@ EntryLayout layoutOf(const DeviceState& d) {
   return EntryLayout{int64_t(d.contacts.count), d.contact_blocks, d.normal_only};
 }
 
+// The gather over jac (S.jac, or S.jacf for the float APGD trials), with the entry records and isotropic inverse
+// masses where BuildRows wrote them (SystemConfig::gpu_entry_gather; the entry records only with S.jacf, whose
+// values they copy).
+template <class JT>
+GatherT<JT> gatherOf(DeviceState& d, const JT* jac, const real* x, const real* const* x_slot) {
+  SolverScratch& S = d.solver;
+  GatherT<JT> g{S.adj_off.data(), S.adj_val_sorted.data(), jac, S.rows.data(), layoutOf(d),
+                d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
+  if (d.entry_gather) {
+    if constexpr (std::is_same_v<JT, ContactJacobianF>) g.ej = S.entry_jac.data();
+    g.iso = S.inv_iso.data();
+  }
+  return g;
+}
+
 // delta = M^-1 D x per body (Schur pass a, and the impulses' velocity change); x is *x_slot when that is set.
 // JT: the Jacobians read (jac: S.jac, or S.jacf for the float APGD trials).
 template <class JT = ContactJacobian>
@@ -479,8 +526,7 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
   if constexpr (std::is_same_v<JT, ContactJacobian>) {
     if (!jac) jac = S.jac.data();
   }
-  const GatherT<JT> g{S.adj_off.data(), S.adj_val_sorted.data(), jac, S.rows.data(), layoutOf(d),
-                     d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
+  const GatherT<JT> g = gatherOf(d, jac, x, x_slot);
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {
     HeavyGatherKernel<JT><<<dim3(kHeavyChunks, unsigned(S.n_heavy)), kBlock, 0, d.stream>>>(
@@ -862,8 +908,7 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid
   else jac = S.jacf.data();
   PersistentApgd<V, JT> p{};
   p.B = B;
-  p.g = GatherT<JT>{S.adj_off.data(), S.adj_val_sorted.data(), jac,    S.rows.data(), layoutOf(d),
-                    d.bodies.inv.data(), nullptr,          d.bodies.delta.data(), nullptr};
+  p.g = gatherOf<JT>(d, jac, nullptr, nullptr);
   p.rows = S.rows.data();
   p.nc = int64_t(d.contacts.count);
   p.ncb = d.contact_blocks;
@@ -1179,7 +1224,11 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.n_heavy = 0;  // set again once this step's adjacency exists
   DeviceBodies& B = d.bodies;
   DeviceContacts& C = d.contacts;
-  launchMap(d, nb, BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data()},
+  d.entry_gather = cfg.gpu_entry_gather;
+  if (d.entry_gather) S.inv_iso.resize(nb);
+  launchMap(d, nb,
+            BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data(),
+                         d.entry_gather ? S.inv_iso.data() : nullptr},
             "launch of BodyInverseF");
   // Combined friction first: friction rows only where mu > 0 (DESIGN §2). When no contact of the step has
   // mu > 0 the CCP has the normal rows only (jacobian.h), as on the CPU (System::buildAndSolve).
@@ -1278,6 +1327,11 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
                                            S.adj_val_sorted.data(), int(nent), 0, bits, d.stream);
   });
   launchMap(d, nb + 1, AdjOffsetF{S.adj_key_sorted.data(), nent, S.adj_off.data()}, "launch of AdjOffsetF");
+  if (float_jac && d.entry_gather) {  // the float trials' gather reads each entry's side of the Jacobian in order
+    S.entry_jac.resize(nent);
+    launchMap(d, nent, EntryJacobianOrderF{S.adj_val_sorted.data(), S.jacf.data(), 2 * nc, S.entry_jac.data()},
+              "launch of EntryJacobianOrderF");
+  }
   S.heavy.resize(nb);
   S.heavy_count.resize(1);
   DVI_CUDA(cudaMemsetAsync(S.heavy_count.data(), 0, sizeof(int32_t), d.stream));

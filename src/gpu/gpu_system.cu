@@ -48,6 +48,10 @@ size_t DeviceState::bytes() const {
   add(solver.prev_gamma); add(solver.prev_key); add(solver.adj_key); add(solver.adj_key_sorted);
   add(solver.adj_val); add(solver.adj_val_sorted); add(solver.adj_off);
   add(solver.v0); add(solver.v1); add(solver.v2); add(solver.v3); add(solver.v4); add(solver.v5); add(solver.v6);
+  add(solver.jacf); add(solver.entry_jac); add(solver.inv_iso); add(solver.vf); add(solver.x); add(solver.rows);
+  add(solver.row_lo); add(solver.row_hi); add(solver.heavy); add(solver.heavy_count); add(solver.heavy_partial);
+  add(solver.heavy_ticket); add(solver.order); add(solver.order_sorted); add(solver.partial); add(solver.scalars);
+  add(solver.apgd); add(step_scalars);
   add(cub_temp);
   return b;
 }

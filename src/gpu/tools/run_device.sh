@@ -10,6 +10,7 @@
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
 #   ncu        per-kernel device time of a GPU pile run (NCU_COUNT launches, NCU_STEPS divides)
 #   probe      unrecorded GPU pile timings, float and double APGD storage (PROBE_SIZES, PROBE_SCENES)
+#   ab         unrecorded GPU timings of option variants side by side (AB_VARIANTS, PROBE_SIZES, PROBE_SCENES)
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
@@ -79,6 +80,20 @@ for m in "$@"; do
           $BIN bench scaling --out "$LOGS/probe_${f}_$pe" --scenes ${PROBE_SCENES:-pile} --engines gpu \
             --sizes ${PROBE_SIZES:-10k,100k,1M} --budget 3 --storage $f --gpu-persistent-max $pe 2>&1 | tr '\r' '\n' |
             grep -E "^(gpu|engine) |copy|^  stages|^apgd phases"
+        done
+      done ;;
+    ab)  # unrecorded GPU timings of option variants side by side in one process each, interleaved twice:
+         # AB_VARIANTS holds the variants' bench options separated by '|' (e.g. "--gpu-entry-gather false|
+         # --gpu-entry-gather true"); PROBE_SIZES / PROBE_SCENES as for probe
+      IFS='|' read -r -a variants <<< "${AB_VARIANTS:-}"
+      for round in 1 2; do
+        for v in "${variants[@]}"; do
+          echo "-- round $round: $v"
+          # round 1 with the phase stamps (one more read-back per solve), round 2 without: its times are the ones
+          if [ $round = 1 ]; then export DVISIM_APGD_PHASES=1; else unset DVISIM_APGD_PHASES; fi
+          $BIN bench scaling --out "$LOGS/ab" --scenes ${PROBE_SCENES:-pile} \
+            --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} --budget ${AB_BUDGET:-3} $v 2>&1 | tr '\r' '\n' |
+            grep -E "^(gpu|engine) |^  stages|^apgd phases"
         done
       done ;;
     ncu)  # kernel durations (ncu, serialised, no launch gaps) of the first NCU_COUNT launches of a GPU pile run
