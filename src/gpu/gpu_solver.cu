@@ -1240,7 +1240,9 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
                        S.v6.data()},
             "launch of MuF");
   real max_mu = 0;
-  if (nc > 0 && cfg.prune) {
+  if (nc > 0 && cfg.prune && d.all_frictional) {
+    max_mu = 1;  // every contact's mu is positive (GpuSystem::uploadIfNeeded): no reduction, no read-back
+  } else if (nc > 0 && cfg.prune) {
     d.step_scalars.resize(16);
     real* mu_out = reinterpret_cast<real*>(d.step_scalars.data()) + 4;
     cubRun(d, "cub::DeviceReduce::Max (friction)", [&](void* t, size_t& b) {

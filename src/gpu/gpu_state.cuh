@@ -188,6 +188,7 @@ struct DeviceState {
   size_t row_count = 0;                  // constraint rows this step (before padding)
   bool normal_only = false;              // this step's CCP has the contacts' normal rows only (jacobian.h)
   bool entry_gather = false;             // SystemConfig::gpu_entry_gather of this step's BuildRows
+  bool all_frictional = false;           // every uploaded body has friction > 0 (GpuSystem::uploadIfNeeded)
   int64_t contact_blocks = 0;            // contact blocks: contacts, or ceil(contacts / 3) when normal_only
   std::vector<ConstraintRow> host_rows;  // host staging of the padded rows
   std::vector<real> host_lohi;           //   and of their bounds

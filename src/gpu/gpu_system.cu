@@ -185,6 +185,14 @@ void GpuSystem::uploadIfNeeded() {
   if (first_body == 0) gyro_bodies_ = false;
   for (size_t i = first_body; i < b.count && !gyro_bodies_; ++i)
     gyro_bodies_ = needsGyroscopic(bodies_.inv_inertia[i], bodies_.flags[i]);
+  // Every body frictional (f > 0 with f * f > 0): then every contact's combined friction is positive under each
+  // FrictionCombine rule (a product of two such values, their least, their mean), and BuildRows knows the CCP
+  // has friction rows without reducing mu on the device and reading it back.
+  if (first_body == 0) d_->all_frictional = true;
+  for (size_t i = first_body; i < b.count && d_->all_frictional; ++i) {
+    const real f = bodies_.friction[i];
+    d_->all_frictional = f > 0 && f * f > 0;
+  }
   b.v_free.resize(b.count);
   b.w_free.resize(b.count);
   b.inv.resize(b.count);

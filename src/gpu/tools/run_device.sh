@@ -82,15 +82,16 @@ for m in "$@"; do
             grep -E "^(gpu|engine) |copy|^  stages|^apgd phases"
         done
       done ;;
-    ab)  # unrecorded GPU timings of option variants side by side in one process each, interleaved twice:
-         # AB_VARIANTS holds the variants' bench options separated by '|' (e.g. "--gpu-entry-gather false|
-         # --gpu-entry-gather true"); PROBE_SIZES / PROBE_SCENES as for probe
+    ab)  # unrecorded GPU timings of option variants side by side, one process each, AB_ROUNDS (default 2) rounds
+         # interleaved: AB_VARIANTS holds the variants' bench options separated by '|' (e.g. "--gpu-entry-gather
+         # false|--gpu-entry-gather true"); PROBE_SIZES / PROBE_SCENES as for probe; AB_PHASES=1 stamps the
+         # persistent kernel's phases in the first round (one more read-back per solve: that round's times are not
+         # the ones to compare)
       IFS='|' read -r -a variants <<< "${AB_VARIANTS:-}"
-      for round in 1 2; do
+      for round in $(seq 1 ${AB_ROUNDS:-2}); do
         for v in "${variants[@]}"; do
           echo "-- round $round: $v"
-          # round 1 with the phase stamps (one more read-back per solve), round 2 without: its times are the ones
-          if [ $round = 1 ]; then export DVISIM_APGD_PHASES=1; else unset DVISIM_APGD_PHASES; fi
+          if [ "${AB_PHASES:-0}" = 1 ] && [ $round = 1 ]; then export DVISIM_APGD_PHASES=1; else unset DVISIM_APGD_PHASES; fi
           $BIN bench scaling --out "$LOGS/ab" --scenes ${PROBE_SCENES:-pile} \
             --engines gpu --sizes ${PROBE_SIZES:-10k,100k,1M} --budget ${AB_BUDGET:-3} $v 2>&1 | tr '\r' '\n' |
             grep -E "^(gpu|engine) |^  stages|^apgd phases"
