@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <cstdio>
 #include <cstdlib>
@@ -633,6 +634,58 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
     // order as the contact records: bitwise
     CHECK(relDiff(flatten(contact_gather->bodies().vel), flatten(gpu->bodies().vel)) == 0);
     CHECK(relDiff(flatten(contact_gather->bodies().omega), flatten(gpu->bodies().omega)) == 0);
+  }
+}
+
+// SolverSettings::apgd_speculation on the device: the test pass writes the next trial's step for either outcome
+// (in the register-cached persistent kernel, the plain one, and the trial-by-trial kernels), and a trial whose step
+// was speculated leaves out its step pass and, in the persistent kernel, a grid-wide barrier. The oracle is the
+// same path without speculation: bitwise the same trajectory, the same trials, and the steps left out exactly as
+// counted (every rejected trial with Both, never with None; Auto is Both only in the register-cached kernel).
+TEST_CASE("GPU APGD's speculated steps give bitwise the trajectory without speculation", "[gpu]") {
+  if (!haveDevice()) return;
+  const ApgdSpeculation kinds[4] = {ApgdSpeculation::None, ApgdSpeculation::Accepted, ApgdSpeculation::Both,
+                                    ApgdSpeculation::Auto};
+  for (const VectorStorage storage : {VectorStorage::Real, VectorStorage::Float}) {
+    for (int path = 0; path < 3; ++path) {  // register-cached persistent kernel, plain persistent, trial by trial
+      SystemConfig cfg = pileConfig();
+      cfg.solver_settings.storage = storage;
+      cfg.gpu_persistent_max_blocks = path < 2 ? int64_t(1) << 40 : 0;
+      cfg.gpu_apgd_register_cache = path == 0;
+      std::vector<std::unique_ptr<System>> sys;
+      for (const ApgdSpeculation k : kinds) {
+        SystemConfig c = cfg;
+        c.solver_settings.apgd_speculation = k;
+        sys.push_back(makeGpuSystem(c));
+        buildPile(*sys.back(), 3000, 11, true, 1.7);
+      }
+      int rejected = 0;
+      for (int step = 0; step < 4; ++step) {
+        for (auto& x : sys) x->step();
+        const StepStats& none = sys[0]->lastStats();
+        const int rej = none.trials - none.iterations;
+        rejected += rej;
+        INFO("storage " << (storage == VectorStorage::Real ? "real" : "float") << ", path " << path << ", step "
+                        << step << ": trials " << none.trials << ", iterations " << none.iterations
+                        << ", speculated (accepted, both, auto) " << sys[1]->lastStats().speculated << ", "
+                        << sys[2]->lastStats().speculated << ", " << sys[3]->lastStats().speculated);
+        CHECK(none.speculated == 0);
+        CHECK(sys[1]->lastStats().speculated > none.iterations / 2);
+        CHECK(sys[2]->lastStats().speculated == sys[1]->lastStats().speculated + rej);
+        CHECK(sys[3]->lastStats().speculated == sys[path == 0 ? 2 : 1]->lastStats().speculated);
+        for (int m = 1; m < 4; ++m) {
+          CHECK(sys[m]->lastStats().trials == none.trials);
+          CHECK(sys[m]->lastStats().iterations == none.iterations);
+        }
+      }
+      CHECK(rejected > 0);  // the rejected outcome was exercised
+      for (auto& x : sys) x->syncToHost();
+      for (int m = 1; m < 4; ++m) {
+        CHECK(relDiff(flatten(sys[m]->bodies().vel), flatten(sys[0]->bodies().vel)) == 0);
+        CHECK(relDiff(flatten(sys[m]->bodies().omega), flatten(sys[0]->bodies().omega)) == 0);
+        CHECK(relDiff(flatten(sys[m]->bodies().pos), flatten(sys[0]->bodies().pos)) == 0);
+      }
+    }
   }
 }
 

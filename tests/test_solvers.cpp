@@ -435,6 +435,49 @@ TEST_CASE("APGD with float storage reaches the dense reference to float precisio
   CHECK(result[1] != result[0]);  // float storage did round
 }
 
+// SolverSettings::apgd_speculation: the test pass computes the next trial's step for either outcome, and the next
+// trial leaves out its step pass when the speculation came true. The oracle is the loop without speculation: every
+// iterate, the residual history and the result must be bitwise the same, and the steps left out must be exactly
+// the trials the counting predicts (every rejected trial with Both, never with None).
+TEST_CASE("APGD's speculated steps give bitwise the iterates of the plain loop", "[solver]") {
+  Scene sc = randomScene(21, 6, 8);
+  ContactProblem cp;
+  cp.build(sc.bodies, sc.contacts, sc.vf.data(), sc.wf.data(), sc.ps);
+  const ApgdSpeculation kinds[4] = {ApgdSpeculation::None, ApgdSpeculation::Accepted, ApgdSpeculation::Both,
+                                    ApgdSpeculation::Auto};
+  for (const VectorStorage storage : {VectorStorage::Real, VectorStorage::Float}) {
+    std::vector<real> g[4];
+    SolverStats st[4];
+    for (int m = 0; m < 4; ++m) {
+      SolverSettings s;
+      s.max_iterations = 100;
+      s.storage = storage;
+      s.record_history = true;
+      s.apgd_speculation = kinds[m];
+      g[m].assign(size_t(cp.size()), 0);
+      st[m] = solveApgd(cp, g[m].data(), s);
+    }
+    INFO("storage " << (storage == VectorStorage::Real ? "real" : "float") << ": trials " << st[0].trials
+                    << ", iterations " << st[0].iterations << ", speculated (accepted, both) " << st[1].speculated
+                    << ", " << st[2].speculated);
+    const int rejected = st[0].trials - st[0].iterations;
+    REQUIRE(st[0].iterations == 100);
+    REQUIRE(rejected > 0);  // the scene exercises the rejected outcome
+    CHECK(st[0].speculated == 0);
+    // accepted outcome: every accepted trial but the last (done) and the restarts with beta != 0
+    CHECK(st[1].speculated > st[0].iterations / 2);
+    CHECK(st[1].speculated <= st[0].iterations - 1);
+    CHECK(st[2].speculated == st[1].speculated + rejected);  // and every rejected one (no 60-fold backtrack here)
+    CHECK(st[3].speculated == st[1].speculated);             // Auto on the CPU: the accepted outcome
+    for (int m = 1; m < 4; ++m) {
+      CHECK(st[m].trials == st[0].trials);
+      CHECK(st[m].iterations == st[0].iterations);
+      CHECK(st[m].history == st[0].history);
+      CHECK(g[m] == g[0]);
+    }
+  }
+}
+
 TEST_CASE("box resting on the ground with four contacts", "[solver]") {
   // Ground (fixed) and a box of half extents (0.5, 0.25, 0.3), mass 2, resting on its four bottom corners
   // with mu 0.5; gravity gives v_free = -g h. The impulses are not unique (four contacts, three

@@ -92,6 +92,7 @@ struct ScalingOptions {
   bool mpr_manifold = dvi::SystemConfig{}.mpr_manifold;
   bool gpu_entry_gather = dvi::SystemConfig{}.gpu_entry_gather;
   std::string storage = "auto";
+  std::string speculation = "auto";
   std::string bullet3_device = "gpu";
 };
 
@@ -107,6 +108,16 @@ std::string gpuTrialsLabel(const dvi::SystemConfig& cfg) {
   if (m == std::numeric_limits<int64_t>::max())
     return persistent + cache + " (" + single + " without cooperative launch)";
   return persistent + cache + " up to " + std::to_string(m) + " blocks, above that " + single;
+}
+
+std::string speculationLabel(dvi::ApgdSpeculation s) {
+  switch (s) {
+    case dvi::ApgdSpeculation::None: return "none (--apgd-speculation none)";
+    case dvi::ApgdSpeculation::Accepted: return "the accepted outcome's";
+    case dvi::ApgdSpeculation::Both: return "the accepted and the rejected outcome's";
+    case dvi::ApgdSpeculation::Auto: break;
+  }
+  return "auto (both outcomes' in the GPU's register-cached trials, else the accepted one's)";
 }
 
 std::string pairMarginLabel(dvi::real f) {
@@ -598,6 +609,10 @@ int runScaling(const ScalingOptions& o) {
   cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
+  cfg.solver_settings.apgd_speculation = o.speculation == "none"       ? dvi::ApgdSpeculation::None
+                                         : o.speculation == "accepted" ? dvi::ApgdSpeculation::Accepted
+                                         : o.speculation == "both"     ? dvi::ApgdSpeculation::Both
+                                                                       : dvi::ApgdSpeculation::Auto;
 
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
@@ -729,6 +744,7 @@ int runScaling(const ScalingOptions& o) {
        << (cfg.gpu_entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and isotropic inverse masses as 16 B (gpu_entry_gather), "
                                 : "the gather reading each contact's Jacobian (--gpu-entry-gather false), ")
        << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
+       << "; next step speculated by the test pass: " << speculationLabel(cfg.solver_settings.apgd_speculation)
        << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.broadphase.pair_margin)
        << "\n- NarrowPhase (ours): " << (cfg.mpr_manifold ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)" : "MPR's one point per pair (--mpr-manifold false)")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
@@ -785,6 +801,10 @@ void registerBenchScaling(CLI::App& app) {
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")
       ->check(CLI::IsMember({"auto", "real", "float"}));
+  cmd->add_option("--apgd-speculation", o->speculation,
+                  "APGD's test pass computes the next trial's step ahead (SolverSettings::apgd_speculation; the same "
+                  "iterates): auto (the default), none, accepted or both")
+      ->check(CLI::IsMember({"auto", "none", "accepted", "both"}));
   cmd->add_option("--bullet3-device", o->bullet3_device,
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
       ->check(CLI::IsMember({"gpu", "cpu", "any"}));

@@ -39,7 +39,7 @@ namespace {
 // Scratch kept per calling thread; it only grows, so a solve allocates at most on its first call for a
 // given size, and iterations never do.
 struct Workspace {
-  std::vector<real> v[8];
+  std::vector<real> v[9];
   std::vector<double> part;
   real* get(int i, int64_t n) {
     if (int64_t(v[i].size()) < n) v[i].resize(size_t(n));

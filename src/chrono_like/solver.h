@@ -58,6 +58,18 @@ enum class VectorStorage {
   Float,
 };
 
+// APGD: which of the next trial's steps the test pass computes ahead (kern::ApgdSpeculation). The iterates are
+// bitwise the same under each; only the work differs. A used speculation saves the next trial's step pass (a
+// read of the iterates and their Schur buffers, and on the GPU a grid-wide barrier); each speculated outcome
+// costs a write of the iterate in every trial. About 1 trial in 7 is rejected (backtracking) in the sphere
+// piles of bench/, and one accepted trial in 50 restarts the momentum (no speculation then).
+enum class ApgdSpeculation {
+  None,
+  Accepted,     // the accepted outcome's step (a rejected trial then runs its step pass again)
+  Both,         // the accepted and the rejected outcome's (two more iterate buffers)
+  Auto,         // GPU: Both where a thread keeps its blocks in registers, else Accepted; CPU: Accepted
+};
+
 struct SolverSettings {
   int max_iterations = 50;
   real tolerance = real(0);      // stop when the residual falls below it (0: run all iterations)
@@ -70,6 +82,7 @@ struct SolverSettings {
   bool record_history = false;   // keep the residual of every iteration
   BlockScaling block_scaling = BlockScaling::Scalar;  // Jacobi and Gauss-Seidel
   VectorStorage storage = VectorStorage::Auto;         // APGD (see VectorStorage)
+  ApgdSpeculation apgd_speculation = ApgdSpeculation::Auto;
 };
 
 // The storage a backend uses: Auto resolved to the backend's default.
@@ -79,6 +92,8 @@ inline bool floatStorage(const SolverSettings& s, bool gpu_backend) {
 
 struct SolverStats {
   int iterations = 0;
+  int trials = 0;      // APGD: steps tested (iterations plus backtracks)
+  int speculated = 0;  // APGD: trials whose step the previous trial's test pass had computed (apgd_speculation)
   real residual = 0;
   std::vector<real> history;  // when record_history: [0] the projected warm start's residual, [i] after
                               // iteration i (iterations + 1 entries)

@@ -9,7 +9,7 @@
 //   BlockSet blockSet() const;                   projection data
 //   const real *rhs(), *blockSteps(), *jacobiSteps(), *blockInverses() const;
 //   real maxDiagonal() const;
-//   real* vec(int i);                            scratch vector i (0..7) of 3 blocks() reals, kept between solves
+//   real* vec(int i);                            scratch vector i (0..8) of 3 blocks() reals, kept between solves
 //   void schur(const real* x, real* y);          y = N x
 //   template <class F> void map(const F& f);     f(k) for every block k
 //   template <int M, class F> void reduce(const F& f, double* out);  out[m] = sum_k of f(k, acc)[m],
@@ -197,8 +197,8 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
 // after every reduction; the GPU backend calls it in a one-thread kernel on the device (gpu_solver.cu), so
 // the device iterates without reading anything back and takes the very same decisions.
 struct ApgdControl {
-  // iterate buffers X[0..3] (cur: g_k, old: g_{k-1}, best pinned, nw: the trial g_{k+1}) and N x buffers
-  // NX[0..2] (ncur: N g_k, nold: N g_{k-1}, nnw: N of the trial)
+  // iterate buffers X[0..3] (cur: g_k, old: g_{k-1}, best pinned, nw: the trial g_{k+1}; with speculation
+  // X[4..5] as well) and N x buffers NX[0..2] (ncur: N g_k, nold: N g_{k-1}, nnw: N of the trial)
   int cur = 0, old = 0, best = 0, nw = 1;
   int ncur = 0, nold = 0, nnw = 1;
   int iterations = 0;  // accepted iterations
@@ -207,24 +207,60 @@ struct ApgdControl {
   int failed = 0;      // 1: non-finite test sums at iteration `iterations` (failed_value)
   int accepted = 0;    // the last afterTest accepted its trial; res is its residual
   int max_iterations = 0;
+  // Speculation (kern::ApgdSpeculation, set by speculate()): the trial's test pass writes the accepted outcome's
+  // next step to X[sa] and the rejected one's to X[sr] (-1: not speculated); ready: X[nw] already holds this
+  // trial's step (a speculation that came true), so its step pass is left out.
+  int sa = -1, sr = -1, ready = 0;
+  int spec_accepted = 0, spec_rejected = 0;  // which outcomes to speculate (set once per solve)
+  int trials = 0, speculated = 0;            // trials tested, and those whose step was speculated
+  int buffers = 4;                           // iterate buffers: 4, or 6 with speculation
   real tolerance = 0;
   real L = 1, theta = 1, beta = 0, res = 0, best_res = 0;
+  real spec_ta = 0, spec_ba = 0, spec_tr = 0;  // the speculated steps' t and the accepted one's momentum
   double f0 = 0, failed_value = 0;
 
-  DVI_HD static int freeBuf(int count, int a, int b, int c) {
+  DVI_HD static int freeBuf(int count, int a, int b, int c, int d = -1) {
     for (int i = 0; i < count; ++i)
-      if (i != a && i != b && i != c) return i;
+      if (i != a && i != b && i != c && i != d) return i;
     return -1;
   }
   DVI_HD static bool finite(double v) { return v - v == 0; }  // false for inf and NaN
+  // Nesterov's momentum after an accepted step from theta (Beck & Teboulle 2009, FISTA; the APGD paper's
+  // theta update): theta' solves theta'^2 = (1 - theta') theta^2, beta = theta (1 - theta) / (theta^2 + theta').
+  DVI_HD static void momentum(real theta, real& theta_new, real& beta) {
+    theta_new = (-theta * theta + theta * real(sqrt(double(theta * theta + 4)))) / 2;
+    beta = theta * (1 - theta) / (theta * theta + theta_new);
+  }
   DVI_HD void pick() {
-    nw = freeBuf(4, cur, old, best);
+    nw = freeBuf(buffers, cur, old, best);
     nnw = freeBuf(3, ncur, nold, -1);
+  }
+  // Where and with what the coming trial's test pass speculates (after pick() or afterTest()).
+  DVI_HD void speculate() {
+    sa = spec_accepted ? freeBuf(buffers, cur, old, best, nw) : -1;
+    sr = -1;
+    if (spec_rejected)
+      for (int i = 0; i < buffers; ++i)
+        if (i != cur && i != old && i != best && i != nw && i != sa) {
+          sr = i;
+          break;
+        }
+    real theta_new;
+    momentum(theta, theta_new, spec_ba);
+    spec_ta = real(1) / (L * real(0.9));  // the L of an accepted trial, below
+    spec_tr = real(1) / (L * 2);          // of a rejected one
+  }
+  // Speculation per solve: X holds `buffers` iterate vectors (4, or 6 when either outcome is speculated).
+  DVI_HD void setSpeculation(bool accepted_outcome, bool rejected_outcome) {
+    spec_accepted = accepted_outcome;
+    spec_rejected = rejected_outcome;
+    buffers = accepted_outcome || rejected_outcome ? 6 : 4;
   }
   // sums: d^T N d, d^T S^-1 d, residual^2, grad^T (g_{k+1} - g_k), f(g_{k+1}) of the trial in X[nw].
   DVI_HD void afterTest(const double* sums) {
     accepted = 0;
     if (done) return;
+    ++trials;
     if (!finite(sums[0]) || !finite(sums[2])) {
       failed = 1;
       failed_value = sums[0] + sums[2];
@@ -234,6 +270,10 @@ struct ApgdControl {
     if (sums[0] > double(L) * sums[1] && bt < 60) {  // sufficient decrease failed: L *= 2, redo the step
       L *= 2;
       ++bt;
+      ready = sr >= 0;  // the redone step is in X[sr]; else pass (1) writes it to X[nw] again
+      if (ready) nw = sr;
+      speculated += ready;
+      speculate();
       return;
     }
     bt = 0;
@@ -252,17 +292,28 @@ struct ApgdControl {
       done = 1;
       return;
     }
-    const real theta_new = (-theta * theta + theta * real(sqrt(double(theta * theta + 4)))) / 2;
-    beta = theta * (1 - theta) / (theta * theta + theta_new);
+    real theta_new;
+    momentum(theta, theta_new, beta);
     theta = theta_new;
     if (sums[3] > 0) {  // gradient restart (O'Donoghue & Candes 2015, as in the APGD paper)
       beta = 0;
       theta = 1;
     }
     L *= real(0.9);
+    // The speculated step is this trial's when its momentum is (a restart voids it unless beta' was 0 anyway).
+    ready = sa >= 0 && beta == spec_ba;
     pick();
+    if (ready) nw = sa;
+    speculated += ready;
+    speculate();
   }
 };
+
+// The trial's speculation (ApgdControl::speculate) as the test pass's output pointers.
+inline kern::ApgdSpeculation speculationOf(const ApgdControl& c, real* const* X) {
+  return kern::ApgdSpeculation{c.sa >= 0 ? X[c.sa] : nullptr, c.sr >= 0 ? X[c.sr] : nullptr, c.spec_ta, c.spec_ba,
+                               c.spec_tr};
+}
 
 // The APGD iterations on the host: one projected step, one Schur product and one test reduction per trial.
 // round: VectorStorage::Float, the Schur buffers hold the gradient N x + r rounded to float, as the GPU's float
@@ -274,13 +325,14 @@ void apgdIterate(Ops& p, ApgdControl& c, real* const* X, real* const* NX, real a
   const real* eta = p.blockSteps();
   const real* r = p.rhs();
   while (!c.done) {
-    p.map(kern::ApgdStep{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], r, eta, c.beta, real(1) / c.L, X[c.nw],
-                         round});
+    if (!c.ready)
+      p.map(kern::ApgdStep{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], r, eta, c.beta, real(1) / c.L, X[c.nw],
+                           round});
     p.schur(X[c.nw], NX[c.nnw]);
     if (round) p.map(kern::RoundToFloat{NX[c.nnw], r});
     double sums[5];
     p.template reduce<5>(kern::ApgdTest{bs, X[c.cur], X[c.old], NX[c.ncur], NX[c.nold], X[c.nw], NX[c.nnw], r, eta,
-                                        c.beta, a, inv_a, round},
+                                        c.beta, a, inv_a, round, speculationOf(c, X)},
                          sums);
     c.afterTest(sums);
     if (c.failed) checkFinite(c.failed_value, "apgd", c.iterations);
@@ -295,7 +347,12 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   const BlockSet bs = p.blockSet();
   const real* r = p.rhs();
   const real a = alphaOf(p, s), inv_a = real(1) / a;
-  real* X[4] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3)};
+  // Speculation (SolverSettings::apgd_speculation; Auto: the accepted outcome here, a GPU's loop may add the
+  // rejected one) needs two more iterate buffers.
+  const ApgdSpeculation spec =
+      s.apgd_speculation == ApgdSpeculation::Auto ? ApgdSpeculation::Accepted : s.apgd_speculation;
+  const bool specs = spec != ApgdSpeculation::None;
+  real* X[6] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3), specs ? p.vec(7) : nullptr, specs ? p.vec(8) : nullptr};
   real* NX[3] = {p.vec(4), p.vec(5), p.vec(6)};
 
   // g_0 = s P(warm start). The sums of the start come in two fetches (on the GPU, two read-backs instead of
@@ -321,7 +378,9 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   c.done = (s.tolerance > 0 && c.res < s.tolerance) || !(s.max_iterations > 0);
   if (!c.done) {
     c.L = lipschitzBound(squares, p.blocks());
+    c.setSpeculation(specs, spec == ApgdSpeculation::Both);
     c.pick();
+    c.speculate();
     if constexpr (Ops::kDeviceLoop) {
       p.apgdIterate(c, X, NX, a, inv_a, s, st);
     } else {
@@ -331,6 +390,8 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
     }
   }
   st.iterations = c.iterations;
+  st.trials = c.trials;
+  st.speculated = c.speculated;
   p.copy(X[c.best], gamma);
   st.residual = c.best_res;
   return st;

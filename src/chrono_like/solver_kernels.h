@@ -297,6 +297,28 @@ DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const rea
   acc[2] += blockResidual2(s, k, g, grad_n, a, inv_a);
 }
 
+// The next trial's step, speculated by the test pass (SolverSettings::apgd_speculation): its outcome is known only
+// once every block's sums are in, but either outcome's step is a function of values the test has already loaded:
+//   accepted: g_{k+2} = P(y' - t' S grad(y')), y' from (g_{k+1}, g_k), t' = 1 / (0.9 L), the momentum beta'
+//             of ApgdControl::momentum (a gradient restart, beta' = 0, makes it void unless beta' was 0 anyway);
+//   rejected: the same y, t' = 1 / (2 L).
+// Each is apgdStepBlock with those arguments, so a used speculation is bitwise the step the next trial's pass (1)
+// would compute, and that pass (a read of the iterates and a grid-wide barrier on the GPU) is left out.
+struct ApgdSpeculation {
+  real *xa = nullptr, *xr = nullptr;  // the accepted and the rejected outcome's g_{k+2} (null: not speculated)
+  real ta = 0, ba = 0, tr = 0;        // their step t (and the accepted one's momentum)
+};
+
+// Block k of the speculation from the test's values (names as in apgdTestBlock); xa3, xr3: block k's outputs.
+template <class V>
+DVI_HD void apgdSpeculateBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
+                               const real* g, const V* ng, const real* r3, real eta, real beta, bool grad_form,
+                               const ApgdSpeculation& sp, real* xa3, real* xr3) {
+  const real* rs = grad_form ? nullptr : r3;
+  if (xa3) apgdStepBlock<V>(s, k, g, c, ng, nc, rs, sp.ta * eta, sp.ba, xa3);
+  if (xr3) apgdStepBlock<V>(s, k, c, o, nc, no, rs, sp.tr * eta, beta, xr3);
+}
+
 template <class V>
 struct ApgdTestT {
   BlockSet s;
@@ -307,6 +329,7 @@ struct ApgdTestT {
   const real *r, *eta;
   real beta, a, inv_a;
   bool grad_form = false;
+  ApgdSpeculation spec = {};
   DVI_HD void operator()(int64_t k, double* acc) const {
     real c[3], o[3], g[3];
     V nc[3], no[3], ng[3];
@@ -314,7 +337,17 @@ struct ApgdTestT {
       const int64_t i = 3 * k + j;
       c[j] = gc[i], o[j] = go[i], nc[j] = Nc[i], no[j] = No[i], g[j] = gn[i], ng[j] = Nn[i];
     }
-    apgdTestBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, eta[k], beta, a, inv_a, grad_form, acc);
+    const real e = eta[k];
+    apgdTestBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, e, beta, a, inv_a, grad_form, acc);
+    if (spec.xa || spec.xr) {
+      real xa[3], xr[3];
+      apgdSpeculateBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, e, beta, grad_form, spec, spec.xa ? xa : nullptr,
+                            spec.xr ? xr : nullptr);
+      for (int j = 0; j < 3; ++j) {
+        if (spec.xa) spec.xa[3 * k + j] = xa[j];
+        if (spec.xr) spec.xr[3 * k + j] = xr[j];
+      }
+    }
   }
 };
 using ApgdTest = ApgdTestT<real>;

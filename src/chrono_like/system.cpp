@@ -367,6 +367,8 @@ void System::buildAndSolve() {
     if (problem_->normalOnly()) problem_->fromSolverLayout(x, gamma_.data());
     solution_ = x;
     stats_.iterations = s.iterations;
+    stats_.trials = s.trials;
+    stats_.speculated = s.speculated;
     stats_.residual = s.residual;
   });
   row_lambda_.assign(gamma_.begin() + 3 * nc, gamma_.begin() + 3 * nc + nrows);

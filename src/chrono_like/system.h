@@ -141,6 +141,7 @@ struct StepStats {
   bool pairs_reused = false;  // BroadPhase kept the last step's pairs (BroadPhaseSettings::pair_margin)
   real max_penetration = 0;  // largest -dist over contacts after the solve's input (>= 0)
   int iterations = 0;
+  int trials = 0, speculated = 0;  // APGD: steps tested, and those speculated by the trial before (SolverStats)
   real residual = 0;
   std::array<double, kStageCount> stage_seconds{};  // wall time of each stage in this step
   std::array<bool, kStageCount> stage_ran{};

@@ -575,7 +575,7 @@ template <class V>
 struct ApgdBuffers {
   BlockSet bs;
   const real *r, *eta;
-  real* X[4];
+  real* X[6];  // X[4..5]: the speculated steps' (null without speculation)
   V* NX[3];
   real a, inv_a;
 };
@@ -584,7 +584,7 @@ struct ApgdBuffers {
 // local memory in every thread (measured: +20% on the 1M-sphere solve, H200).
 template <class V>
 __device__ __forceinline__ real* pickX(const ApgdBuffers<V>& B, int i) {
-  return i == 0 ? B.X[0] : i == 1 ? B.X[1] : i == 2 ? B.X[2] : B.X[3];
+  return i == 0 ? B.X[0] : i == 1 ? B.X[1] : i == 2 ? B.X[2] : i == 3 ? B.X[3] : i == 4 ? B.X[4] : B.X[5];
 }
 template <class V>
 __device__ __forceinline__ V* pickNX(const ApgdBuffers<V>& B, int i) {
@@ -603,6 +603,14 @@ __host__ __device__ V** schurYSlot(ApgdDeviceState* st) {
   else return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_y));
 }
 
+// The trial's speculation (algo::speculationOf, on the device's buffers).
+template <class V>
+__device__ __forceinline__ kern::ApgdSpeculation apgdSpeculationOf(const ApgdBuffers<V>& B,
+                                                                   const algo::ApgdControl& c) {
+  return kern::ApgdSpeculation{c.sa >= 0 ? pickX(B, c.sa) : nullptr, c.sr >= 0 ? pickX(B, c.sr) : nullptr, c.spec_ta,
+                               c.spec_ba, c.spec_tr};
+}
+
 // The trial's step and test functors for the control's current buffers (both launch paths).
 template <class V>
 __device__ __forceinline__ kern::ApgdStepT<V> apgdStepOf(const ApgdBuffers<V>& B, const algo::ApgdControl& c) {
@@ -615,7 +623,7 @@ __device__ __forceinline__ kern::ApgdTestT<V> apgdTestOf(const ApgdBuffers<V>& B
   constexpr bool grad_form = !std::is_same_v<V, real>;
   return kern::ApgdTestT<V>{B.bs,           pickX(B, c.cur),  pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
                             pickX(B, c.nw), pickNX(B, c.nnw), B.r,            B.eta,             c.beta,
-                            B.a,            B.inv_a,          grad_form};
+                            B.a,            B.inv_a,          grad_form,       apgdSpeculationOf(B, c)};
 }
 
 template <class V>
@@ -623,7 +631,7 @@ __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers<
   const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (k >= n) return;
   const algo::ApgdControl& c = st->c;
-  if (c.done) return;
+  if (c.done || c.ready) return;  // ready: the last trial's test pass wrote this step (speculation)
   apgdStepOf(B, c)(k);
 }
 
@@ -783,23 +791,36 @@ __global__ void __launch_bounds__(kBlock, persistentBlocksPerSm<K>())
   for (int trial = 0; !c.done; ++trial) {  // c is the same in every block
     real* xn = pickX(p.B, c.nw);
     phaseStamp(p.stamps, trial, 0);
-    if constexpr (K > 0) {  // (1) the projected step
-      const real t = real(1) / c.L;
+    if (c.ready) {  // the last trial's pass (3) wrote this step, the same thread the same blocks (speculation)
+      if constexpr (K > 0) {
 #pragma unroll
-      for (int j = 0; j < K; ++j) {
-        const int64_t k = tid + j * stride;
-        if (k >= p.n) continue;
-        kern::apgdStepBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], grad_form ? nullptr : p.B.r + 3 * k,
-                               t * p.B.eta[k], c.beta, nxt[j]);
-        for (int m = 0; m < 3; ++m) xn[3 * k + m] = nxt[j][m];
+        for (int j = 0; j < K; ++j) {
+          const int64_t k = tid + j * stride;
+          if (k >= p.n) continue;
+          for (int m = 0; m < 3; ++m) nxt[j][m] = xn[3 * k + m];
+        }
       }
+      phaseStamp(p.stamps, trial, 1);
+      phaseStamp(p.stamps, trial, 2);
     } else {
-      const kern::ApgdStepT<V> f = apgdStepOf(p.B, c);
-      for (int64_t k = tid; k < p.n; k += stride) f(k);
+      if constexpr (K > 0) {  // (1) the projected step
+        const real t = real(1) / c.L;
+#pragma unroll
+        for (int j = 0; j < K; ++j) {
+          const int64_t k = tid + j * stride;
+          if (k >= p.n) continue;
+          kern::apgdStepBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], grad_form ? nullptr : p.B.r + 3 * k,
+                                 t * p.B.eta[k], c.beta, nxt[j]);
+          for (int m = 0; m < 3; ++m) xn[3 * k + m] = nxt[j][m];
+        }
+      } else {
+        const kern::ApgdStepT<V> f = apgdStepOf(p.B, c);
+        for (int64_t k = tid; k < p.n; k += stride) f(k);
+      }
+      phaseStamp(p.stamps, trial, 1);
+      grid.sync();
+      phaseStamp(p.stamps, trial, 2);
     }
-    phaseStamp(p.stamps, trial, 1);
-    grid.sync();
-    phaseStamp(p.stamps, trial, 2);
     {  // (2) Schur pass (a): the gather
       GatherT<JT> g = p.g;
       g.x = xn;
@@ -814,13 +835,24 @@ __global__ void __launch_bounds__(kBlock, persistentBlocksPerSm<K>())
       const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
       if constexpr (K > 0) {
         double acc[5] = {0, 0, 0, 0, 0};
+        const kern::ApgdSpeculation sp = apgdSpeculationOf(p.B, c);
 #pragma unroll
         for (int j = 0; j < K; ++j) {
           const int64_t k = tid + j * stride;
           if (k >= p.n) continue;
           schurBlock(p, k, out, nnxt[j]);
-          kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
-                                 p.B.eta[k], c.beta, p.B.a, p.B.inv_a, grad_form, acc);
+          const real e = p.B.eta[k];
+          kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k, e,
+                                 c.beta, p.B.a, p.B.inv_a, grad_form, acc);
+          if (sp.xa || sp.xr) {
+            real xa[3], xr[3];
+            kern::apgdSpeculateBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
+                                        e, c.beta, grad_form, sp, sp.xa ? xa : nullptr, sp.xr ? xr : nullptr);
+            for (int m = 0; m < 3; ++m) {
+              if (sp.xa) sp.xa[3 * k + m] = xa[m];
+              if (sp.xr) sp.xr[3 * k + m] = xr[m];
+            }
+          }
         }
         if (int(blockIdx.x) < p.slices) blockSumFixed<5>(acc, p.partial + int64_t(blockIdx.x) * 5);
       } else {
@@ -971,7 +1003,14 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   const ApgdGrids grids{persistentGridMax<V, 0>(d), persistentGridMax<V, kCachedBlocks>(d)};
   const int slices = grids.slices(n);  // from the device and n alone: every path sums alike
   S.partial.resize(size_t(slices) * 5);
-  const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3]}, {NX[0], NX[1], NX[2]}, a, inv_a};
+  const bool cached = launch.register_cache && grids.fitsCache(n);
+  // ApgdSpeculation::Auto: the rejected outcome too where the trial's step costs a grid-wide barrier and no read
+  // of the iterates (the register-cached kernel), only the accepted one elsewhere (apgd() set that).
+  if (s.apgd_speculation == ApgdSpeculation::Auto && cached && n <= launch.persistent_max && grids.cached > 0) {
+    c.setSpeculation(true, true);
+    c.speculate();
+  }
+  const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3], X[4], X[5]}, {NX[0], NX[1], NX[2]}, a, inv_a};
   // Staged in pinned memory: the copy does not wait for the stream (a pageable one would), and the host writes
   // the staging again only after a read-back of this solve's control.
   ApgdDeviceState& h = *d.host_apgd;
@@ -980,7 +1019,6 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurXSlot(&h) = X[c.nw];
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
-  const bool cached = launch.register_cache && grids.fitsCache(n);
   if (n <= launch.persistent_max &&
       (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
               : apgdPersistent<V, 0>(d, n, B, grids.plain, slices))) {
@@ -1061,11 +1099,9 @@ class GpuOps {
   GpuOps(DeviceState& d, const ProblemView& p, const ApgdLaunch& launch, bool float_storage)
       : d_(d), p_(p), launch_(launch), float_(float_storage) {
     SolverScratch& S = d.solver;
-    DeviceBuffer<real>* bufs[7] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6};
-    for (int i = 0; i < 7; ++i) {
-      bufs[i]->resize(size_t(3 * p.nb));
-      vec_[i] = bufs[i]->data();
-    }
+    DeviceBuffer<real>* bufs[kVecs] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6, &S.v7, &S.v8};
+    for (int i = 0; i < kVecs; ++i) bufs_[i] = bufs[i];
+    for (int i = 0; i < 7; ++i) vec(i);  // 7 and 8 (APGD's speculation) only when asked for
   }
   int64_t blocks() const { return p_.nb; }
   BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, p_.lo, p_.hi}; }
@@ -1075,8 +1111,9 @@ class GpuOps {
   const real* blockInverses() const { return p_.binv; }
   real maxDiagonal() const { return p_.max_diag; }
   real* vec(int i) {
-    if (i < 0 || i >= 7) throw std::logic_error("GpuOps: solver vector " + std::to_string(i) + " does not exist");
-    return vec_[i];
+    if (i < 0 || i >= kVecs) throw std::logic_error("GpuOps: solver vector " + std::to_string(i) + " does not exist");
+    bufs_[i]->resize(size_t(3 * p_.nb));
+    return bufs_[i]->data();
   }
   void schur(const real* x, real* y) { gpu::schur(d_, x, y); }
   template <class F>
@@ -1121,7 +1158,8 @@ class GpuOps {
   ProblemView p_;
   ApgdLaunch launch_;
   bool float_;
-  real* vec_[7] = {};
+  static constexpr int kVecs = 9;
+  DeviceBuffer<real>* bufs_[kVecs] = {};
   static constexpr int kSlots = 8, kSlotSize = 8;  // 64 doubles: DeviceState::host_scalars
   int pending_ = 0;
   double* pending_out_[kSlots] = {};
@@ -1431,6 +1469,8 @@ DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
               "launch of FromNormalLayout");
   DeviceCcpResult r;
   r.iterations = st.iterations;
+  r.trials = st.trials;
+  r.speculated = st.speculated;
   r.residual = st.residual;
   return r;
 }

@@ -48,6 +48,7 @@ size_t DeviceState::bytes() const {
   add(solver.prev_gamma); add(solver.prev_key); add(solver.adj_key); add(solver.adj_key_sorted);
   add(solver.adj_val); add(solver.adj_val_sorted); add(solver.adj_off);
   add(solver.v0); add(solver.v1); add(solver.v2); add(solver.v3); add(solver.v4); add(solver.v5); add(solver.v6);
+  add(solver.v7); add(solver.v8);
   add(solver.jacf); add(solver.entry_jac); add(solver.inv_iso); add(solver.vf); add(solver.x); add(solver.rows);
   add(solver.row_lo); add(solver.row_hi); add(solver.heavy); add(solver.heavy_count); add(solver.heavy_partial);
   add(solver.heavy_ticket); add(solver.order); add(solver.order_sorted); add(solver.partial); add(solver.scalars);
@@ -341,6 +342,8 @@ void GpuSystem::buildAndSolve() {
   DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
   DeviceCcpResult r = solveCcp(*d_, config_);
   stats_.iterations = r.iterations;
+  stats_.trials = r.trials;
+  stats_.speculated = r.speculated;
   stats_.residual = r.residual;
   stats_.stage_ran[int(StageType::Solve)] = true;
   keepImpulsesForWarmStart(*d_);
