@@ -117,7 +117,7 @@ std::string speculationLabel(dvi::ApgdSpeculation s) {
     case dvi::ApgdSpeculation::Both: return "the accepted and the rejected outcome's";
     case dvi::ApgdSpeculation::Auto: break;
   }
-  return "auto (both outcomes' in the GPU's register-cached trials, else the accepted one's)";
+  return "the accepted outcome's (auto)";
 }
 
 std::string pairMarginLabel(dvi::real f) {

@@ -16,7 +16,11 @@
 // code outgrew the instruction cache: a thread left alone with a deep MPR pair issued an instruction every ~10k
 // cycles of its ~400 MPR iterations, and that one thread set the pass's length (ncu, CES feed on an H200).
 #define DVI_HD_CALL __host__ __device__ __noinline__ inline
+// A loop over a block's 3 components unrolled in device code, so arrays indexed by its counter stay in registers
+// (a rolled loop puts them in local memory).
+#define DVI_UNROLL _Pragma("unroll")
 #else
+#define DVI_UNROLL
 #define DVI_HD inline
 #define DVI_HOST_DEVICE
 #define DVI_HD_CALL inline

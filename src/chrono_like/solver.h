@@ -61,13 +61,14 @@ enum class VectorStorage {
 // APGD: which of the next trial's steps the test pass computes ahead (kern::ApgdSpeculation). The iterates are
 // bitwise the same under each; only the work differs. A used speculation saves the next trial's step pass (a
 // read of the iterates and their Schur buffers, and on the GPU a grid-wide barrier); each speculated outcome
-// costs a write of the iterate in every trial. About 1 trial in 7 is rejected (backtracking) in the sphere
-// piles of bench/, and one accepted trial in 50 restarts the momentum (no speculation then).
+// costs a write of the iterate in every trial. About 1 trial in 10 is rejected (backtracking) in the sphere
+// piles of bench/, and about one accepted trial in 50 restarts the momentum (no speculation then).
 enum class ApgdSpeculation {
   None,
   Accepted,     // the accepted outcome's step (a rejected trial then runs its step pass again)
   Both,         // the accepted and the rejected outcome's (two more iterate buffers)
-  Auto,         // GPU: Both where a thread keeps its blocks in registers, else Accepted; CPU: Accepted
+  Auto,         // Accepted (H100, sphere piles of 10k-1M: Both was 4-5% slower than Accepted, its two
+                // projections a block on the test pass's path costing more than the rejected trials' steps)
 };
 
 struct SolverSettings {

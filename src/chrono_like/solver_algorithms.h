@@ -217,6 +217,7 @@ struct ApgdControl {
   real tolerance = 0;
   real L = 1, theta = 1, beta = 0, res = 0, best_res = 0;
   real spec_ta = 0, spec_ba = 0, spec_tr = 0;  // the speculated steps' t and the accepted one's momentum
+  real spec_theta = 1;                         // theta after an accepted trial (speculate() computes it)
   double f0 = 0, failed_value = 0;
 
   DVI_HD static int freeBuf(int count, int a, int b, int c, int d = -1) {
@@ -235,7 +236,9 @@ struct ApgdControl {
     nw = freeBuf(buffers, cur, old, best);
     nnw = freeBuf(3, ncur, nold, -1);
   }
-  // Where and with what the coming trial's test pass speculates (after pick() or afterTest()).
+  // Readies the coming trial (after pick() at the start, and at the end of afterTest(); afterTest relies on it):
+  // the momentum an acceptance will take, computed once a trial, and where and with what the trial's test pass
+  // speculates.
   DVI_HD void speculate() {
     sa = spec_accepted ? freeBuf(buffers, cur, old, best, nw) : -1;
     sr = -1;
@@ -245,10 +248,9 @@ struct ApgdControl {
           sr = i;
           break;
         }
-    real theta_new;
-    momentum(theta, theta_new, spec_ba);
-    spec_ta = real(1) / (L * real(0.9));  // the L of an accepted trial, below
-    spec_tr = real(1) / (L * 2);          // of a rejected one
+    momentum(theta, spec_theta, spec_ba);
+    if (sa >= 0) spec_ta = real(1) / (L * real(0.9));  // the L of an accepted trial, below
+    if (sr >= 0) spec_tr = real(1) / (L * 2);          // of a rejected one
   }
   // Speculation per solve: X holds `buffers` iterate vectors (4, or 6 when either outcome is speculated).
   DVI_HD void setSpeculation(bool accepted_outcome, bool rejected_outcome) {
@@ -292,9 +294,8 @@ struct ApgdControl {
       done = 1;
       return;
     }
-    real theta_new;
-    momentum(theta, theta_new, beta);
-    theta = theta_new;
+    beta = spec_ba;  // momentum(theta), by speculate()
+    theta = spec_theta;
     if (sums[3] > 0) {  // gradient restart (O'Donoghue & Candes 2015, as in the APGD paper)
       beta = 0;
       theta = 1;
@@ -347,8 +348,7 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   const BlockSet bs = p.blockSet();
   const real* r = p.rhs();
   const real a = alphaOf(p, s), inv_a = real(1) / a;
-  // Speculation (SolverSettings::apgd_speculation; Auto: the accepted outcome here, a GPU's loop may add the
-  // rejected one) needs two more iterate buffers.
+  // Speculation (SolverSettings::apgd_speculation; Auto: the accepted outcome) needs two more iterate buffers.
   const ApgdSpeculation spec =
       s.apgd_speculation == ApgdSpeculation::Auto ? ApgdSpeculation::Accepted : s.apgd_speculation;
   const bool specs = spec != ApgdSpeculation::None;

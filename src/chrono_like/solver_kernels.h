@@ -105,15 +105,19 @@ struct FillSqrtEta {  // e = S^1/2 1
 // Block k of pass (1) from its values: c = g_k, o = g_{k-1}, nc = N g_k, no = N g_{k-1} (plus r when the Schur
 // buffers hold N x: r3 is block k's r, null in grad_form), te = t eta_k; x = g_{k+1}. The per-block arithmetic of
 // ApgdStepT, called as well by the GPU kernel that keeps a thread's blocks in registers between trials.
+// Component j of pass (1) before the projection (r3 as below).
+template <class V>
+DVI_HD real apgdStepValue(real c, real o, V nc, V no, const real* r3, int j, real te, real beta) {
+  const real n0 = real(nc);
+  const real y = c + beta * (c - o);
+  const real Ny = n0 + beta * (n0 - real(no));
+  return y - te * (r3 ? Ny + r3[j] : Ny);
+}
+
 template <class V>
 DVI_HD void apgdStepBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
                           const real* r3, real te, real beta, real* x) {
-  for (int j = 0; j < 3; ++j) {
-    const real n0 = real(nc[j]);
-    const real y = c[j] + beta * (c[j] - o[j]);
-    const real Ny = n0 + beta * (n0 - real(no[j]));
-    x[j] = y - te * (r3 ? Ny + r3[j] : Ny);
-  }
+  for (int j = 0; j < 3; ++j) x[j] = apgdStepValue<V>(c[j], o[j], nc[j], no[j], r3, j, te, beta);
   projectBlock(s, k, x);
 }
 
@@ -272,15 +276,32 @@ struct JacobiInverse {
   }
 };
 
+// The next trial's step, speculated by the test pass (SolverSettings::apgd_speculation): its outcome is known only
+// once every block's sums are in, but either outcome's step is a function of values the test has already loaded:
+//   accepted: g_{k+2} = P(y' - t' S grad(y')), y' from (g_{k+1}, g_k), t' = 1 / (0.9 L), the momentum beta'
+//             of ApgdControl::momentum (a gradient restart, beta' = 0, makes it void unless beta' was 0 anyway);
+//   rejected: the same y, t' = 1 / (2 L).
+// Each is apgdStepValue and projectBlock with apgdStepBlock's arguments, so a used speculation is bitwise the step
+// the next trial's pass (1) would compute, and that pass (a read of the iterates and a grid-wide barrier on the GPU) is left out.
+struct ApgdSpeculation {
+  real *xa = nullptr, *xr = nullptr;  // the accepted and the rejected outcome's g_{k+2} (null: not speculated)
+  real ta = 0, ba = 0, tr = 0;        // their step t (and the accepted one's momentum)
+};
+
 // APGD pass (2), 5 sums: d^T N d, d^T S^-1 d, residual^2 of g_{k+1}, grad(y)^T (g_{k+1} - g_k), f(g_{k+1}),
 // with d = g_{k+1} - y (see solveApgd). grad_form: as in ApgdStepT.
 // Block k of pass (2) from its values (see apgdStepBlock; g = g_{k+1}, ng its Schur buffer), added to acc.
+// sp: also the speculated steps of the next trial (ApgdSpeculation; by value: a pointer to a functor's member put
+// the whole functor in local memory on the GPU), each component from the values the test has loaded, projected and
+// written to sp.xa and sp.xr where they are not null.
 template <class V>
 DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
                           const real* g, const V* ng, const real* r3, real eta, real beta, real a, real inv_a,
-                          bool grad_form, double* acc) {
-  real grad_n[3];
+                          bool grad_form, double* acc, const ApgdSpeculation sp = {}) {
+  real grad_n[3], xa[3], xr[3];
   double dd = 0;
+  const real* rs = grad_form ? nullptr : r3;  // the step's r (apgdStepBlock)
+  DVI_UNROLL
   for (int j = 0; j < 3; ++j) {
     const real n0 = real(nc[j]), Ng = real(ng[j]);
     const real y = c[j] + beta * (c[j] - o[j]);
@@ -292,31 +313,19 @@ DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const rea
     acc[3] += double(Ny + rr) * (g[j] - c[j]);
     acc[4] += 0.5 * double(g[j]) * (Ng + rr + r3[j]);
     grad_n[j] = Ng + rr;
+    if (sp.xa) xa[j] = apgdStepValue<V>(g[j], c[j], ng[j], nc[j], rs, j, sp.ta * eta, sp.ba);
+    if (sp.xr) xr[j] = apgdStepValue<V>(c[j], o[j], nc[j], no[j], rs, j, sp.tr * eta, beta);
   }
   if (eta > 0) acc[1] += dd / eta;  // a block between immovable bodies has no metric weight
   acc[2] += blockResidual2(s, k, g, grad_n, a, inv_a);
-}
-
-// The next trial's step, speculated by the test pass (SolverSettings::apgd_speculation): its outcome is known only
-// once every block's sums are in, but either outcome's step is a function of values the test has already loaded:
-//   accepted: g_{k+2} = P(y' - t' S grad(y')), y' from (g_{k+1}, g_k), t' = 1 / (0.9 L), the momentum beta'
-//             of ApgdControl::momentum (a gradient restart, beta' = 0, makes it void unless beta' was 0 anyway);
-//   rejected: the same y, t' = 1 / (2 L).
-// Each is apgdStepBlock with those arguments, so a used speculation is bitwise the step the next trial's pass (1)
-// would compute, and that pass (a read of the iterates and a grid-wide barrier on the GPU) is left out.
-struct ApgdSpeculation {
-  real *xa = nullptr, *xr = nullptr;  // the accepted and the rejected outcome's g_{k+2} (null: not speculated)
-  real ta = 0, ba = 0, tr = 0;        // their step t (and the accepted one's momentum)
-};
-
-// Block k of the speculation from the test's values (names as in apgdTestBlock); xa3, xr3: block k's outputs.
-template <class V>
-DVI_HD void apgdSpeculateBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
-                               const real* g, const V* ng, const real* r3, real eta, real beta, bool grad_form,
-                               const ApgdSpeculation& sp, real* xa3, real* xr3) {
-  const real* rs = grad_form ? nullptr : r3;
-  if (xa3) apgdStepBlock<V>(s, k, g, c, ng, nc, rs, sp.ta * eta, sp.ba, xa3);
-  if (xr3) apgdStepBlock<V>(s, k, c, o, nc, no, rs, sp.tr * eta, beta, xr3);
+  if (sp.xa) {
+    projectBlock(s, k, xa);
+    for (int j = 0; j < 3; ++j) sp.xa[3 * k + j] = xa[j];
+  }
+  if (sp.xr) {
+    projectBlock(s, k, xr);
+    for (int j = 0; j < 3; ++j) sp.xr[3 * k + j] = xr[j];
+  }
 }
 
 template <class V>
@@ -337,17 +346,7 @@ struct ApgdTestT {
       const int64_t i = 3 * k + j;
       c[j] = gc[i], o[j] = go[i], nc[j] = Nc[i], no[j] = No[i], g[j] = gn[i], ng[j] = Nn[i];
     }
-    const real e = eta[k];
-    apgdTestBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, e, beta, a, inv_a, grad_form, acc);
-    if (spec.xa || spec.xr) {
-      real xa[3], xr[3];
-      apgdSpeculateBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, e, beta, grad_form, spec, spec.xa ? xa : nullptr,
-                            spec.xr ? xr : nullptr);
-      for (int j = 0; j < 3; ++j) {
-        if (spec.xa) spec.xa[3 * k + j] = xa[j];
-        if (spec.xr) spec.xr[3 * k + j] = xr[j];
-      }
-    }
+    apgdTestBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, eta[k], beta, a, inv_a, grad_form, acc, spec);
   }
 };
 using ApgdTest = ApgdTestT<real>;

@@ -841,18 +841,8 @@ __global__ void __launch_bounds__(kBlock, persistentBlocksPerSm<K>())
           const int64_t k = tid + j * stride;
           if (k >= p.n) continue;
           schurBlock(p, k, out, nnxt[j]);
-          const real e = p.B.eta[k];
-          kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k, e,
-                                 c.beta, p.B.a, p.B.inv_a, grad_form, acc);
-          if (sp.xa || sp.xr) {
-            real xa[3], xr[3];
-            kern::apgdSpeculateBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
-                                        e, c.beta, grad_form, sp, sp.xa ? xa : nullptr, sp.xr ? xr : nullptr);
-            for (int m = 0; m < 3; ++m) {
-              if (sp.xa) sp.xa[3 * k + m] = xa[m];
-              if (sp.xr) sp.xr[3 * k + m] = xr[m];
-            }
-          }
+          kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
+                                 p.B.eta[k], c.beta, p.B.a, p.B.inv_a, grad_form, acc, sp);
         }
         if (int(blockIdx.x) < p.slices) blockSumFixed<5>(acc, p.partial + int64_t(blockIdx.x) * 5);
       } else {
@@ -1004,12 +994,6 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   const int slices = grids.slices(n);  // from the device and n alone: every path sums alike
   S.partial.resize(size_t(slices) * 5);
   const bool cached = launch.register_cache && grids.fitsCache(n);
-  // ApgdSpeculation::Auto: the rejected outcome too where the trial's step costs a grid-wide barrier and no read
-  // of the iterates (the register-cached kernel), only the accepted one elsewhere (apgd() set that).
-  if (s.apgd_speculation == ApgdSpeculation::Auto && cached && n <= launch.persistent_max && grids.cached > 0) {
-    c.setSpeculation(true, true);
-    c.speculate();
-  }
   const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3], X[4], X[5]}, {NX[0], NX[1], NX[2]}, a, inv_a};
   // Staged in pinned memory: the copy does not wait for the stream (a pageable one would), and the host writes
   // the staging again only after a read-back of this solve's control.
