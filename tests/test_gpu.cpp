@@ -646,7 +646,11 @@ TEST_CASE("GPU APGD's speculated steps give bitwise the trajectory without specu
   if (!haveDevice()) return;
   const ApgdSpeculation kinds[4] = {ApgdSpeculation::None, ApgdSpeculation::Accepted, ApgdSpeculation::Both,
                                     ApgdSpeculation::Auto};
-  for (const VectorStorage storage : {VectorStorage::Real, VectorStorage::Float}) {
+  // Under compute-sanitizer (DVISIM_SANITIZER_RUN, see the 1 s statistics test) racecheck ran past 120 s on the 24
+  // systems: there the float storage only (every kernel of the three paths runs in it).
+  const bool sanitizer_run = std::getenv("DVISIM_SANITIZER_RUN") != nullptr;
+  for (const VectorStorage storage : {VectorStorage::Float, VectorStorage::Real}) {
+    if (sanitizer_run && storage == VectorStorage::Real) break;
     for (int path = 0; path < 3; ++path) {  // register-cached persistent kernel, plain persistent, trial by trial
       SystemConfig cfg = pileConfig();
       cfg.solver_settings.storage = storage;
