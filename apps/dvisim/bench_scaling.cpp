@@ -439,7 +439,10 @@ std::string verdict(double value, double goal, bool at_most) {
   char b[128];
   const bool met = at_most ? value <= goal : value >= goal;
   if (met) return "met";
-  std::snprintf(b, sizeof b, "missed by %.1fx", at_most ? value / goal : goal / value);
+  const double f = at_most ? value / goal : goal / value;
+  // A near miss as a percentage ("missed by 1.0x" said nothing of 296.5x against 300x).
+  if (f < 1.1) std::snprintf(b, sizeof b, "missed by %.1f%%", 100 * (f - 1));
+  else std::snprintf(b, sizeof b, "missed by %.1fx", f);
   return b;
 }
 
