@@ -220,9 +220,9 @@ struct ApgdControl {
   real spec_theta = 1;                         // theta after an accepted trial (speculate() computes it)
   double f0 = 0, failed_value = 0;
 
-  DVI_HD static int freeBuf(int count, int a, int b, int c, int d = -1) {
+  DVI_HD static int freeBuf(int count, int a, int b, int c, int d = -1, int e = -1) {
     for (int i = 0; i < count; ++i)
-      if (i != a && i != b && i != c && i != d) return i;
+      if (i != a && i != b && i != c && i != d && i != e) return i;
     return -1;
   }
   DVI_HD static bool finite(double v) { return v - v == 0; }  // false for inf and NaN
@@ -241,13 +241,7 @@ struct ApgdControl {
   // speculates.
   DVI_HD void speculate() {
     sa = spec_accepted ? freeBuf(buffers, cur, old, best, nw) : -1;
-    sr = -1;
-    if (spec_rejected)
-      for (int i = 0; i < buffers; ++i)
-        if (i != cur && i != old && i != best && i != nw && i != sa) {
-          sr = i;
-          break;
-        }
+    sr = spec_rejected ? freeBuf(buffers, cur, old, best, nw, sa) : -1;
     momentum(theta, spec_theta, spec_ba);
     if (sa >= 0) spec_ta = real(1) / (L * real(0.9));  // the L of an accepted trial, below
     if (sr >= 0) spec_tr = real(1) / (L * 2);          // of a rejected one

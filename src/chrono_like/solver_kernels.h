@@ -102,10 +102,7 @@ struct FillSqrtEta {  // e = S^1/2 1
 // grad_form: the Schur buffers hold the gradient N x + r, not N x (VectorStorage::Float: rounding then errs by a
 // float ulp of the gradient, which vanishes at the solution, not of N x, which does not). The extrapolation
 // keeps the form: its weights (1 + beta, -beta) sum to 1.
-// Block k of pass (1) from its values: c = g_k, o = g_{k-1}, nc = N g_k, no = N g_{k-1} (plus r when the Schur
-// buffers hold N x: r3 is block k's r, null in grad_form), te = t eta_k; x = g_{k+1}. The per-block arithmetic of
-// ApgdStepT, called as well by the GPU kernel that keeps a thread's blocks in registers between trials.
-// Component j of pass (1) before the projection (r3 as below).
+// Component j of pass (1) before the projection (arguments as in apgdStepBlock below, one component of each).
 template <class V>
 DVI_HD real apgdStepValue(real c, real o, V nc, V no, const real* r3, int j, real te, real beta) {
   const real n0 = real(nc);
@@ -114,6 +111,9 @@ DVI_HD real apgdStepValue(real c, real o, V nc, V no, const real* r3, int j, rea
   return y - te * (r3 ? Ny + r3[j] : Ny);
 }
 
+// Block k of pass (1) from its values: c = g_k, o = g_{k-1}, nc = N g_k, no = N g_{k-1} (plus r when the Schur
+// buffers hold N x: r3 is block k's r, null in grad_form), te = t eta_k; x = g_{k+1}. The per-block arithmetic of
+// ApgdStepT, called as well by the GPU kernel that keeps a thread's blocks in registers between trials.
 template <class V>
 DVI_HD void apgdStepBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
                           const real* r3, real te, real beta, real* x) {
@@ -282,7 +282,8 @@ struct JacobiInverse {
 //             of ApgdControl::momentum (a gradient restart, beta' = 0, makes it void unless beta' was 0 anyway);
 //   rejected: the same y, t' = 1 / (2 L).
 // Each is apgdStepValue and projectBlock with apgdStepBlock's arguments, so a used speculation is bitwise the step
-// the next trial's pass (1) would compute, and that pass (a read of the iterates and a grid-wide barrier on the GPU) is left out.
+// the next trial's pass (1) would compute, and that pass (a read of the iterates and, on the GPU, a grid-wide
+// barrier) is left out.
 struct ApgdSpeculation {
   real *xa = nullptr, *xr = nullptr;  // the accepted and the rejected outcome's g_{k+2} (null: not speculated)
   real ta = 0, ba = 0, tr = 0;        // their step t (and the accepted one's momentum)

@@ -679,6 +679,8 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
 //   terms fused per block (the thread that writes a block's N x sums its test terms); the last block to finish
 //   sums the partials in slice order into the control state; after the barrier every block reads the five sums
 //   and runs ApgdControl::afterTest itself, so all blocks hold the same control.
+// With speculation (SolverSettings::apgd_speculation) pass (3) also writes the next trial's step for the accepted
+// outcome; when it comes true (ApgdControl::ready) the next trial starts at (2): two barriers a trial.
 // Large problems are bound by their bytes (~650 B per contact a trial); there it saves less, but it was still
 // faster at every size measured (10k to 1M spheres, H100 and H200: src/gpu/NOTES.md, session 8), so it is the
 // default; SystemConfig::gpu_persistent_max_blocks can send problems above a size trial by trial.
@@ -993,7 +995,6 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   const ApgdGrids grids{persistentGridMax<V, 0>(d), persistentGridMax<V, kCachedBlocks>(d)};
   const int slices = grids.slices(n);  // from the device and n alone: every path sums alike
   S.partial.resize(size_t(slices) * 5);
-  const bool cached = launch.register_cache && grids.fitsCache(n);
   const ApgdBuffers<V> B{bs, r, eta, {X[0], X[1], X[2], X[3], X[4], X[5]}, {NX[0], NX[1], NX[2]}, a, inv_a};
   // Staged in pinned memory: the copy does not wait for the stream (a pageable one would), and the host writes
   // the staging again only after a read-back of this solve's control.
@@ -1003,6 +1004,7 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurXSlot(&h) = X[c.nw];
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
+  const bool cached = launch.register_cache && grids.fitsCache(n);
   if (n <= launch.persistent_max &&
       (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
               : apgdPersistent<V, 0>(d, n, B, grids.plain, slices))) {
