@@ -66,7 +66,7 @@ enum class VectorStorage {
 enum class ApgdSpeculation {
   None,
   Accepted,     // the accepted outcome's step (a rejected trial then runs its step pass again)
-  Both,         // the accepted and the rejected outcome's (two more iterate buffers)
+  Both,         // the accepted and the rejected outcome's (one more iterate buffer than Accepted)
   Auto,         // Accepted (H100, sphere piles of 10k-1M: Both was 4-5% slower than Accepted, its two
                 // projections a block on the test pass's path costing more than the rejected trials' steps)
 };

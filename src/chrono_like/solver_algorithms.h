@@ -198,7 +198,7 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
 // the device iterates without reading anything back and takes the very same decisions.
 struct ApgdControl {
   // iterate buffers X[0..3] (cur: g_k, old: g_{k-1}, best pinned, nw: the trial g_{k+1}; with speculation
-  // X[4..5] as well) and N x buffers NX[0..2] (ncur: N g_k, nold: N g_{k-1}, nnw: N of the trial)
+  // X[4], and X[5] when both outcomes are speculated) and N x buffers NX[0..2] (ncur: N g_k, nold: N g_{k-1}, nnw: N of the trial)
   int cur = 0, old = 0, best = 0, nw = 1;
   int ncur = 0, nold = 0, nnw = 1;
   int iterations = 0;  // accepted iterations
@@ -213,7 +213,6 @@ struct ApgdControl {
   int sa = -1, sr = -1, ready = 0;
   int spec_accepted = 0, spec_rejected = 0;  // which outcomes to speculate (set once per solve)
   int trials = 0, speculated = 0;            // trials tested, and those whose step was speculated
-  int buffers = 4;                           // iterate buffers: 4, or 6 with speculation
   real tolerance = 0;
   real L = 1, theta = 1, beta = 0, res = 0, best_res = 0;
   real spec_ta = 0, spec_ba = 0, spec_tr = 0;  // the speculated steps' t and the accepted one's momentum
@@ -233,24 +232,25 @@ struct ApgdControl {
     beta = theta * (1 - theta) / (theta * theta + theta_new);
   }
   DVI_HD void pick() {
-    nw = freeBuf(buffers, cur, old, best);
+    nw = freeBuf(buffers(), cur, old, best);
     nnw = freeBuf(3, ncur, nold, -1);
   }
   // Readies the coming trial (after pick() at the start, and at the end of afterTest(); afterTest relies on it):
   // the momentum an acceptance will take, computed once a trial, and where and with what the trial's test pass
   // speculates.
   DVI_HD void speculate() {
-    sa = spec_accepted ? freeBuf(buffers, cur, old, best, nw) : -1;
-    sr = spec_rejected ? freeBuf(buffers, cur, old, best, nw, sa) : -1;
+    sa = spec_accepted ? freeBuf(buffers(), cur, old, best, nw) : -1;
+    sr = spec_rejected ? freeBuf(buffers(), cur, old, best, nw, sa) : -1;
     momentum(theta, spec_theta, spec_ba);
     if (sa >= 0) spec_ta = real(1) / (L * real(0.9));  // the L of an accepted trial, below
     if (sr >= 0) spec_tr = real(1) / (L * 2);          // of a rejected one
   }
-  // Speculation per solve: X holds `buffers` iterate vectors (4, or 6 when either outcome is speculated).
+  // Iterate buffers X holds: 4, and one more per speculated outcome (the four in use leave it free).
+  DVI_HD int buffers() const { return 4 + spec_accepted + spec_rejected; }
+  // Speculation per solve.
   DVI_HD void setSpeculation(bool accepted_outcome, bool rejected_outcome) {
     spec_accepted = accepted_outcome;
     spec_rejected = rejected_outcome;
-    buffers = accepted_outcome || rejected_outcome ? 6 : 4;
   }
   // sums: d^T N d, d^T S^-1 d, residual^2, grad^T (g_{k+1} - g_k), f(g_{k+1}) of the trial in X[nw].
   DVI_HD void afterTest(const double* sums) {
@@ -342,11 +342,12 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   const BlockSet bs = p.blockSet();
   const real* r = p.rhs();
   const real a = alphaOf(p, s), inv_a = real(1) / a;
-  // Speculation (SolverSettings::apgd_speculation; Auto: the accepted outcome) needs two more iterate buffers.
+  // Speculation (SolverSettings::apgd_speculation; Auto: the accepted outcome) needs an iterate buffer more per
+  // speculated outcome (ApgdControl::buffers).
   const ApgdSpeculation spec =
       s.apgd_speculation == ApgdSpeculation::Auto ? ApgdSpeculation::Accepted : s.apgd_speculation;
-  const bool specs = spec != ApgdSpeculation::None;
-  real* X[6] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3), specs ? p.vec(7) : nullptr, specs ? p.vec(8) : nullptr};
+  const bool specs = spec != ApgdSpeculation::None, both = spec == ApgdSpeculation::Both;
+  real* X[6] = {p.vec(0), p.vec(1), p.vec(2), p.vec(3), specs ? p.vec(7) : nullptr, both ? p.vec(8) : nullptr};
   real* NX[3] = {p.vec(4), p.vec(5), p.vec(6)};
 
   // g_0 = s P(warm start). The sums of the start come in two fetches (on the GPU, two read-backs instead of
@@ -372,7 +373,7 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   c.done = (s.tolerance > 0 && c.res < s.tolerance) || !(s.max_iterations > 0);
   if (!c.done) {
     c.L = lipschitzBound(squares, p.blocks());
-    c.setSpeculation(specs, spec == ApgdSpeculation::Both);
+    c.setSpeculation(specs, both);
     c.pick();
     c.speculate();
     if constexpr (Ops::kDeviceLoop) {

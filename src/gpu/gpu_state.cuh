@@ -152,7 +152,7 @@ struct SolverScratch {
   // solver vectors
   DeviceBuffer<real> v0{"solver vector 0"}, v1{"solver vector 1"}, v2{"solver vector 2"}, v3{"solver vector 3"},
       v4{"solver vector 4"}, v5{"solver vector 5"}, v6{"solver vector 6"}, v7{"solver vector 7"},
-      v8{"solver vector 8"};  // v7, v8: APGD's speculated steps only (SolverSettings::apgd_speculation)
+      v8{"solver vector 8"};  // v7 (v8): APGD's speculated step(s) only (SolverSettings::apgd_speculation)
   DeviceBuffer<double> partial{"reduction partials"};
   DeviceBuffer<double> scalars{"reduction results"};
   DeviceBuffer<ApgdDeviceState> apgd{"APGD device control"};
