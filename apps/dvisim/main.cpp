@@ -5,6 +5,8 @@
 //              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR] [--resume DIR]
 //   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (src/ces/ces_run.h).
 //   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
+//   dvisim sweep [SCENE] --grid KEY=v1,v2 | --grid KEY=lo:hi:n | --list FILE [--seeds N] [--jobs N] --out DIR
+//                [run options]                                    (sweep.cpp: design of experiments, docs/SWEEP.md)
 //   dvisim bench scaling --out DIR [--record] [--quick] [--sizes ...]     (bench_scaling.cpp; bench_common.h)
 //   dvisim bench accuracy | stability | ces --out DIR [--record] [--quick]  (bench_accuracy.cpp, bench_stability.cpp,
 //                                                                           bench_ces.cpp)
@@ -331,6 +333,8 @@ int fail(int code, const std::string& msg) {
 
 // `dvisim compare` (compare.cpp): registers the subcommand; the returned function runs it.
 std::function<int()> addCompareCommand(CLI::App& app);
+// `dvisim sweep` (sweep.cpp): design of experiments over a scene with replicate seeds, the same way.
+std::function<int()> addSweepCommand(CLI::App& app);
 // `dvisim bench scaling` (bench_scaling.cpp); runs through runBenchCommand() (bench_common.h).
 void registerBenchScaling(CLI::App& app);
 // `dvisim bench accuracy` (bench_accuracy.cpp) and `dvisim bench stability` (bench_stability.cpp), the same way.
@@ -362,6 +366,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
   run_cmd->add_option("--resume", o.resume, "CES machine: continue the run checkpointed in DIR (DIR/checkpoint/)");
   const std::function<int()> compare = addCompareCommand(app);
+  const std::function<int()> sweep = addSweepCommand(app);
   registerBenchScaling(app);
   registerBenchAccuracy(app);
   registerBenchStability(app);
@@ -376,6 +381,7 @@ int main(int argc, char** argv) {
   }
   try {
     if (app.got_subcommand("compare")) return compare();
+    if (app.got_subcommand("sweep")) return sweep();
     if (app.got_subcommand("bench")) return runBenchCommand();
     return run(o);
   } catch (const InputError& e) {
