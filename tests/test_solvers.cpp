@@ -419,6 +419,7 @@ TEST_CASE("APGD with float storage reaches the dense reference to float precisio
     for (int it : iters) {
       SolverSettings s;
       s.max_iterations = it;
+      s.tolerance = 0;  // a fixed count
       s.storage = kinds[m];
       std::vector<real> g(size_t(P.n), 0);
       const SolverStats st = solveApgd(cp, g.data(), s);
@@ -451,6 +452,7 @@ TEST_CASE("APGD's speculated steps give bitwise the iterates of the plain loop",
     for (int m = 0; m < 4; ++m) {
       SolverSettings s;
       s.max_iterations = 100;
+      s.tolerance = 0;  // a fixed count
       s.storage = storage;
       s.record_history = true;
       s.apgd_speculation = kinds[m];
@@ -661,6 +663,7 @@ TEST_CASE("solvers are bitwise identical with 1 and 2 threads", "[solver]") {
       if (bs == BlockScaling::Inverse3x3 && (t == SolverType::APGD || t == SolverType::BB)) continue;
       SolverSettings st;
       st.max_iterations = 25;
+      st.tolerance = 0;  // a fixed count
       st.record_history = true;
       st.block_scaling = bs;
       std::vector<real> g1(n, 0), g2(n, 0);

@@ -1,7 +1,8 @@
 // dvisim: runs a scene with the DVI engine (CPU, GPU when present) or with Bullet's own solver.
 //
 //   dvisim run [SCENE] [--backend auto|cpu|gpu|bullet] [--collision native|bullet]
-//              [--solver jacobi|gs|apgd|bb] [--iterations N] [--dt H] [--time T | --steps N]
+//              [--solver jacobi|gs|apgd|bb] [--iterations N] [--tolerance TOL] [--max-iterations N]
+//              [--dt H] [--time T | --steps N]
 //              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR] [--resume DIR]
 //   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (src/ces/ces_run.h).
 //   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
@@ -55,7 +56,7 @@ struct Options {
   std::string backend = "auto";
   std::string collision;
   std::string solver;
-  std::string iterations, dt, time, steps, threads, frames;
+  std::string iterations, tolerance, max_iterations, dt, time, steps, threads, frames;
   std::vector<std::string> sets;
   std::string out = "dvisim-out";
   std::string resume;  // CES machine: continue the run whose checkpoint is in this directory
@@ -148,6 +149,8 @@ std::vector<int64_t> frameSteps(int frames, int64_t steps) {
 int runCes(const Options& o) {
   dvi::ces::CesRunOptions c;
   c.scene = o.scene, c.sets = o.sets, c.backend = o.backend, c.collision = o.collision, c.solver = o.solver;
+  if (!o.tolerance.empty() || !o.max_iterations.empty())
+    throw InputError("--tolerance and --max-iterations: not available for a CES machine (it runs ces.solver.iterations)");
   c.iterations = o.iterations, c.dt = o.dt, c.time = o.time, c.steps = o.steps, c.threads = o.threads;
   c.frames = o.frames, c.out = o.out, c.resume = o.resume;
   return dvi::ces::runCesMachine(c);
@@ -176,6 +179,12 @@ int run(const Options& o) {
   if (time) st.time = dvi::real(*time), st.steps = -1;
   if (!o.steps.empty()) st.steps = parseInt("--steps", o.steps, 0, 1LL << 40);
   if (!o.iterations.empty()) st.iterations = int(parseInt("--iterations", o.iterations, 0, 1000000));
+  if (!o.max_iterations.empty()) st.max_iterations = int(parseInt("--max-iterations", o.max_iterations, 1, 1000000));
+  if (!o.tolerance.empty()) {
+    const double tol = parseReal("--tolerance", o.tolerance);
+    if (!(tol >= 0) || !std::isfinite(tol)) throw InputError("--tolerance: must be a finite number >= 0, got " + o.tolerance);
+    st.tolerance = dvi::real(tol);
+  }
   if (!o.threads.empty()) st.threads = int(parseInt("--threads", o.threads, 0, 4096));
   if (!o.frames.empty()) st.frames = int(parseInt("--frames", o.frames, 0, 1000000));
   if (!o.solver.empty()) st.solver = o.solver;
@@ -210,6 +219,7 @@ int run(const Options& o) {
 #endif
 
   nlohmann::json summary;
+  std::string not_converged;  // the warning line of a run whose steps missed the tolerance
   summary["scene"] = scene.source;
   summary["scene_name"] = scene.name;
   summary["bodies"] = bodies.size();
@@ -288,7 +298,7 @@ int run(const Options& o) {
       }
     };
     int64_t contacts = 0, iterations = 0;
-    dvi::real max_pen = 0, residual = 0;
+    dvi::real max_pen = 0, residual = 0, relative = 0;
     dvi::StageLog stage_log;
     runSteps(collect, [&] { sys->step(); }, [&] {
       const dvi::StepStats& s = sys->lastStats();
@@ -296,6 +306,7 @@ int run(const Options& o) {
       iterations += s.iterations;
       max_pen = std::fmax(max_pen, s.max_penetration);
       residual = s.residual;
+      relative = s.relative_residual;
       stage_log.add(s);
     });
     summary["backend"] = sys->backendName();
@@ -303,10 +314,13 @@ int run(const Options& o) {
     summary["solver"] = st.solver;
     summary["collision"] = st.collision;
     summary["iterations_mean"] = steps > 0 ? double(iterations) / double(steps) : 0.0;
-    summary["residual_final"] = residual;
+    summary["residual_final"] = relative;  // relative residual (solver.h)
+    summary["residual_final_abs"] = residual;
     summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
     summary["max_penetration"] = max_pen;
+    dvi::addConvergenceSummary(summary, sys->convergence(), cfg.solver_settings);
     dvi::addStageSummary(summary, stage_log);
+    not_converged = dvi::convergenceWarning(sys->convergence(), cfg.solver_settings);
     summary["prune"] = cfg.prune;
   }
   summary["sim_time"] = double(steps) * double(st.dt);
@@ -320,6 +334,10 @@ int run(const Options& o) {
   std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", out.c_str(),
               frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "", wall,
               steps > 0 ? 1000.0 * wall / double(steps) : 0.0);
+  if (!not_converged.empty()) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "%s\n", not_converged.c_str());
+  }
   return 0;
 }
 
@@ -354,7 +372,11 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--backend", o.backend, "auto|cpu|gpu|bullet (default auto)");
   run_cmd->add_option("--collision", o.collision, "native|bullet");
   run_cmd->add_option("--solver", o.solver, "jacobi|gs|apgd|bb");
-  run_cmd->add_option("--iterations", o.iterations, "Solver iterations per step");
+  run_cmd->add_option("--iterations", o.iterations,
+                      "A fixed number of solver iterations per step (alone: no tolerance stop; with --tolerance: the cap)");
+  run_cmd->add_option("--tolerance", o.tolerance,
+                      "Solver stop: relative residual, residual / residual of the zero impulse (default 1e-3; 0: none)");
+  run_cmd->add_option("--max-iterations", o.max_iterations, "Iteration cap of the tolerance stop (default 1000)");
   run_cmd->add_option("--dt", o.dt, "Time step in seconds");
   run_cmd->add_option("--time", o.time, "Simulated time in seconds");
   run_cmd->add_option("--steps", o.steps, "Number of steps");

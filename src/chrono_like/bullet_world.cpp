@@ -317,6 +317,7 @@ void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {
   if (m_internalPreTickCallback) (*m_internalPreTickCallback)(this, timeStep);
   syncIn(timeStep);
   system_->step();
+  convergence_.add(system_->lastStats(), substeps_);
   system_->syncToHost();
   syncOut();
   updateAabbs();

@@ -82,6 +82,9 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   int bodyIndex(const btRigidBody* body) const;  // System index, -1 if not (yet) in the System
   std::string backendName() const { return system_->backendName(); }
   int64_t subSteps() const { return substeps_; }
+  // The solver's convergence over every sub-step so far (ConvergenceLog: steps that missed the tolerance,
+  // the worst relative residual and its sub-step); the last sub-step's is system().lastStats().
+  const ConvergenceLog& convergence() const { return convergence_; }
   double simulatedTime() const { return sim_time_; }
   // Largest joint violation now: linear relative to the smaller body size, angular in radians.
   JointViolation maxJointViolation() const { return joints_->maxViolation(system_->bodies()); }
@@ -118,6 +121,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<WorldContact> contacts_;
   std::vector<btPersistentManifold*> manifolds_;
   int64_t substeps_ = 0;
+  ConvergenceLog convergence_;  // kept across rebuilds of the System
   double sim_time_ = 0;
 };
 

@@ -314,9 +314,11 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
     });
     return real(std::sqrt(sum));
   };
+  st.residual_scale = ccpResidualScale(*this, a);
+  const real thr = stopThreshold(s, st.residual_scale);
   real res = residualFromDeltas();
   if (s.record_history) st.history.push_back(res);
-  if (!(s.tolerance > 0 && res < s.tolerance)) {
+  if (!(res <= thr)) {
     for (int it = 0; it < s.max_iterations; ++it) {
       for (int64_t k = 0; k < nblk; ++k) {
         real* g = gamma + 3 * k;
@@ -385,12 +387,13 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
       if (need) {
         res = residualFromDeltas();
         if (s.record_history) st.history.push_back(res);
-        if (s.tolerance > 0 && res < s.tolerance) break;
+        if (res <= thr) break;
       }
     }
   }
   std::vector<real> scratch;
   st.residual = ccpResidual(*this, gamma, a, scratch);
+  finishStats(st, s);
   return st;
 }
 

@@ -3,6 +3,7 @@
 // into place, so a failure never leaves a half-written file nor destroys one written before.
 #pragma once
 
+#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,33 @@ inline void addStageSummary(nlohmann::json& summary, const StageLog& log) {
   }
   summary["normal_only_steps"] = log.normal_only_steps;
   summary["pairs_reused_steps"] = log.pairs_reused_steps;
+}
+
+// The solver's convergence over a run in summary.json (residuals are relative: solver.h):
+//   tolerance                 the relative residual a step must reach (judgedTolerance: the default one for a
+//                             fixed iteration count), max_iterations the cap (or the fixed count)
+//   steps_not_converged       steps whose solve ended above it
+//   worst_relative_residual   the largest relative residual of any step, worst_residual_step its step index
+inline void addConvergenceSummary(nlohmann::json& summary, const ConvergenceLog& log, const SolverSettings& s) {
+  summary["tolerance"] = judgedTolerance(s);
+  summary["tolerance_stop"] = s.tolerance > 0;
+  summary["max_iterations"] = s.max_iterations;
+  summary["steps_not_converged"] = log.steps_not_converged;
+  summary["worst_relative_residual"] = log.worst_relative_residual;
+  summary["worst_residual_step"] = log.worst_step;
+}
+
+// The one warning line of a run whose steps missed the tolerance (empty when every step converged).
+inline std::string convergenceWarning(const ConvergenceLog& log, const SolverSettings& s) {
+  if (log.steps_not_converged == 0) return {};
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "dvisim: warning: the solver missed the tolerance %.3g (relative residual) in %lld of %lld steps (worst "
+                "%.3g at step %lld); raise --max-iterations (now %d)%s",
+                double(judgedTolerance(s)), (long long)log.steps_not_converged, (long long)log.steps,
+                double(log.worst_relative_residual), (long long)log.worst_step, s.max_iterations,
+                s.tolerance > 0 ? " or loosen --tolerance" : ", or drop --iterations for the tolerance stop");
+  return buf;
 }
 
 }  // namespace dvi

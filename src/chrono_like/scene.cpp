@@ -120,8 +120,12 @@ SystemConfig systemConfigFromSettings(const SceneSettings& s) {
   else if (s.solver == "gs") c.solver = SolverType::GaussSeidel;
   else if (s.solver == "bb") c.solver = SolverType::BB;
   else c.solver = SolverType::APGD;
-  c.solver_settings.max_iterations = s.iterations;
-  c.solver_settings.tolerance = s.tolerance;
+  c.solver_settings.max_iterations = s.max_iterations >= 0 ? s.max_iterations
+                                     : s.iterations >= 0   ? s.iterations
+                                                           : kDefaultMaxIterations;
+  c.solver_settings.tolerance = s.tolerance >= 0                                ? s.tolerance
+                                : (s.iterations >= 0 && s.max_iterations < 0) ? real(0)  // a fixed count
+                                                                                : kDefaultTolerance;
   c.solver_settings.storage = s.storage == "real"    ? VectorStorage::Real
                               : s.storage == "float" ? VectorStorage::Float
                                                      : VectorStorage::Auto;
@@ -142,7 +146,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   Check c{origin};
   SceneSettings s;
   c.object(j, path);
-  c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "tolerance", "storage", "gravity", "friction_combine",
+  c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "max_iterations", "tolerance", "storage", "gravity", "friction_combine",
                    "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
                    "speculative", "mpr_manifold", "bullet_length_scale", "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
@@ -152,6 +156,8 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("time")) s.time = real(c.nonNegative(j["time"], at("time")));
   if (j.contains("solver")) s.solver = c.oneOf(j["solver"], at("solver"), {"jacobi", "gs", "apgd", "bb"});
   if (j.contains("iterations")) s.iterations = int(c.integer(j["iterations"], at("iterations"), 0, 1000000));
+  if (j.contains("max_iterations"))
+    s.max_iterations = int(c.integer(j["max_iterations"], at("max_iterations"), 1, 1000000));
   if (j.contains("tolerance")) s.tolerance = real(c.nonNegative(j["tolerance"], at("tolerance")));
   if (j.contains("storage")) s.storage = c.oneOf(j["storage"], at("storage"), {"auto", "real", "float"});
   if (j.contains("gravity")) s.gravity = c.vec3(j["gravity"], at("gravity"));

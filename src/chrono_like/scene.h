@@ -33,8 +33,12 @@ struct SceneSettings {
   int64_t steps = -1;        // number of steps; -1: from `time`
   real time = real(1);       // simulated time when steps < 0
   std::string solver = "apgd";  // jacobi | gs | apgd | bb
-  int iterations = 50;
-  real tolerance = 0;
+  // Solver stop (SolverSettings): -1 = not given. `iterations` alone is a fixed count (no tolerance);
+  // otherwise the solve stops at `tolerance` (relative residual; default kDefaultTolerance) or after
+  // `max_iterations` (default: `iterations` when given, else kDefaultMaxIterations).
+  int iterations = -1;
+  int max_iterations = -1;
+  real tolerance = -1;
   std::string storage = "auto";  // auto | real | float (APGD's vectors, VectorStorage)
   Vec3 gravity{0, real(-9.81), 0};
   std::string friction_combine = "product";  // product (Bullet's rule) | min | average

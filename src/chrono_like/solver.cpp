@@ -128,6 +128,12 @@ real ccpResidual(const CcpProblem& p, const real* gamma, real alpha, std::vector
   return algo::residualGivenNx(ops, gamma, scratch.data(), alpha);
 }
 
+real ccpResidualScale(const CcpProblem& p, real alpha) {
+  if (p.size() == 0) return 0;
+  CpuOps ops(p);
+  return algo::residualScale(ops, alpha);
+}
+
 SolverStats solveJacobi(const CcpProblem& p, real* gamma, const SolverSettings& s) {
   CpuOps ops(p);
   return algo::jacobi(ops, gamma, s);

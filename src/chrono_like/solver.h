@@ -12,6 +12,15 @@
 // drum). For a small fraction (default 1e-4) it approaches the norm of the gradient projected on the
 // tangent cone of Y at g: the contact velocity error of the contacts that push or stick.
 //
+// Convergence is judged on the RELATIVE residual res(g) / res(0): the residual divided by the residual of
+// the zero impulse, res(0) = || P_Y(-a r) / a || (for the contacts || P_Y(-r) ||: the approach velocity the
+// contacts would have with no impulse at all). It is the CCP's analogue of the relative residual
+// ||b - A x|| / ||b|| of a linear solve started from x = 0 (Barrett et al., "Templates for the Solution of
+// Linear Systems", SIAM 1994, sec. 4.2, stopping criterion 2), so one number means "converged" for mm grains
+// at h = 1e-4 s (res(0) ~ g h sqrt(contacts) ~ 1e-3 m/s) and metre boxes at h = 1/60 s (~ 0.2 m/s) alike; it
+// costs one reduction over r per solve. res(0) = 0 means g = 0 solves the CCP (every contact separates): the
+// stop threshold is then 0, met by the zero start. SolverStats keeps the absolute residual too.
+//
 // Determinism: every reduction sums fixed blocks of contacts (kReduceBlock) and then the block partials in
 // order, so results are bitwise identical for any thread count.
 #pragma once
@@ -71,9 +80,17 @@ enum class ApgdSpeculation {
                 // projections a block on the test pass's path costing more than the rejected trials' steps)
 };
 
+// The defaults, chosen by measurement (docs/ARCHITECTURE.md, Solve stage): the tolerance on the relative
+// residual, and the iteration cap that bounds the cost of a solve that does not reach it.
+constexpr real kDefaultTolerance = real(1e-3);
+constexpr int kDefaultMaxIterations = 1000;
+
 struct SolverSettings {
-  int max_iterations = 50;
-  real tolerance = real(0);      // stop when the residual falls below it (0: run all iterations)
+  // A solve stops at the first iterate whose relative residual (above) is <= tolerance, or after
+  // max_iterations. tolerance 0 runs all max_iterations (the fixed count of `--iterations N`); the result is
+  // still judged against kDefaultTolerance (SolverStats::converged).
+  int max_iterations = kDefaultMaxIterations;
+  real tolerance = kDefaultTolerance;
   // Jacobi relaxation. With Scalar scaling the step is omega / (Gershgorin row bound of the whole N), so
   // any omega in (0, 1] decreases the objective at every iteration (omega < 2 converges); with Inverse3x3
   // Chrono's 0.3 is the usual choice.
@@ -95,7 +112,10 @@ struct SolverStats {
   int iterations = 0;
   int trials = 0;      // APGD: steps tested (iterations plus backtracks)
   int speculated = 0;  // APGD: trials whose step the previous trial's test pass had computed (apgd_speculation)
-  real residual = 0;
+  real residual = 0;           // absolute residual of the result (m/s for contacts)
+  real residual_scale = 0;     // res(0), the residual of the zero impulse (the relative residual's scale)
+  real relative_residual = 0;  // residual / residual_scale (0 when both are 0; kHugeResidual when only the scale is)
+  bool converged = true;       // relative_residual <= tolerance (kDefaultTolerance when the tolerance is 0)
   std::vector<real> history;  // when record_history: [0] the projected warm start's residual, [i] after
                               // iteration i (iterations + 1 entries)
 };
@@ -135,11 +155,29 @@ class CcpProblem {
   void applyBlockInverse(const real* x, real* y) const;  // y = B^-1 x, B = block diagonal of N
 };
 
+// relative_residual where the scale is 0 but the residual is not (never met: see the scale above).
+constexpr real kHugeResidual = real(1e30);
+
+// The tolerance a solve's result is judged against: s.tolerance, or kDefaultTolerance for a fixed count.
+inline real judgedTolerance(const SolverSettings& s) { return s.tolerance > 0 ? s.tolerance : kDefaultTolerance; }
+
+// Fills relative_residual and converged from residual and residual_scale (every solver, CPU and GPU).
+inline void finishStats(SolverStats& st, const SolverSettings& s) {
+  st.relative_residual = st.residual_scale > 0 ? st.residual / st.residual_scale
+                                                : (st.residual > 0 ? kHugeResidual : real(0));
+  st.converged = st.relative_residual <= judgedTolerance(s);
+}
+
+// The absolute stop threshold of a solve: tolerance x res(0).
+inline real stopThreshold(const SolverSettings& s, real scale) { return s.tolerance > 0 ? s.tolerance * scale : real(0); }
+
 // The alpha the residual uses for this problem: s.residual_alpha / p.maxDiagonal().
 real residualAlpha(const CcpProblem& p, const SolverSettings& s);
 
 // Projected gradient residual, shared by every solver and the tests. scratch is resized as needed.
 real ccpResidual(const CcpProblem& p, const real* gamma, real alpha, std::vector<real>& scratch);
+// res(0), the residual of the zero impulse (the scale of the relative residual).
+real ccpResidualScale(const CcpProblem& p, real alpha);
 
 // Each solver improves gamma in place (it arrives warm-started). The warm start w is projected and then
 // scaled along its ray to s w, s = argmin_{s >= 0} f(s w) = max(0, -r^T w / w^T N w) (no extra Schur

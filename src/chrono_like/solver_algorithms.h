@@ -66,6 +66,14 @@ real residualGivenNx(Ops& p, const real* x, const real* Nx, real a) {
   return real(std::sqrt(s));
 }
 
+// res(0), the residual of the zero impulse: the scale of the relative residual (solver.h).
+template <class Ops>
+real residualScale(Ops& p, real a) {
+  double s;
+  p.template reduce<1>(kern::ZeroResidual{p.blockSet(), p.rhs(), a, real(1) / a}, &s);
+  return real(std::sqrt(s));
+}
+
 // Lower bound of lambda_max(S^1/2 N S^1/2), S = diag(eta_k I3) the preconditioner, to start the step
 // estimates: max(|S^1/2 N S^1/2 e| / |e|, 1/3), e = ones (the APGD paper, Mazhar et al. 2015, takes
 // L0 = |N (g0 - g^0)| / |g0 - g^0|). Both are <= lambda_max: eta_k is 1 / (Gershgorin bound of N_kk) and
@@ -140,6 +148,8 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
   real* other = p.vec(1);
 
   checkWarmStart(p, gamma, "jacobi");
+  st.residual_scale = residualScale(p, a);
+  const real thr = stopThreshold(s, st.residual_scale);
   p.map(kern::Project{bs, gamma});
   p.schur(gamma, Ng);
   scaledStart(p, gamma, Ng, a, "jacobi");
@@ -157,12 +167,13 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
     res = real(std::sqrt(sum));
     checkFinite(res, "jacobi", it);
     if (s.record_history) st.history.push_back(res);
-    if (last || (s.tolerance > 0 && res < s.tolerance)) break;
+    if (last || res <= thr) break;
     std::swap(cur, next);
     ++st.iterations;
   }
   if (cur != gamma) p.copy(cur, gamma);
   st.residual = res;
+  finishStats(st, s);
   return st;
 }
 
@@ -213,7 +224,7 @@ struct ApgdControl {
   int sa = -1, sr = -1, ready = 0;
   int spec_accepted = 0, spec_rejected = 0;  // which outcomes to speculate (set once per solve)
   int trials = 0, speculated = 0;            // trials tested, and those whose step was speculated
-  real tolerance = 0;
+  real tolerance = 0;  // absolute stop threshold: SolverSettings::tolerance x res(0) (stopThreshold)
   real L = 1, theta = 1, beta = 0, res = 0, best_res = 0;
   real spec_ta = 0, spec_ba = 0, spec_tr = 0;  // the speculated steps' t and the accepted one's momentum
   real spec_theta = 1;                         // theta after an accepted trial (speculate() computes it)
@@ -284,7 +295,7 @@ struct ApgdControl {
       best_res = res;
       best = cur;
     }
-    if ((tolerance > 0 && res < tolerance) || iterations >= max_iterations) {
+    if (res <= tolerance || iterations >= max_iterations) {
       done = 1;
       return;
     }
@@ -356,8 +367,9 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   p.map(kern::CopyProject{bs, gamma, X[0]});
   ApgdControl c;
   p.schur(X[0], NX[0]);
-  double warm = 0, start[3] = {0, 0, 0}, squares = 0, res2 = 0;
+  double warm = 0, start[3] = {0, 0, 0}, squares = 0, res2 = 0, scale2 = 0;
   p.template reduceLater<1>(kern::NonFinite{gamma}, &warm);
+  p.template reduceLater<1>(kern::ZeroResidual{bs, r, a, inv_a}, &scale2);
   p.template reduceLater<3>(kern::StartSums{X[0], NX[0], r}, start);
   lipschitzProduct(p, X[1], NX[1], &squares);
   p.fetch();
@@ -368,9 +380,10 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   p.fetch();
   c.res = c.best_res = startResidual(res2, "apgd");
   if (s.record_history) st.history.push_back(c.res);
+  st.residual_scale = real(std::sqrt(scale2));
   c.max_iterations = s.max_iterations;
-  c.tolerance = s.tolerance;
-  c.done = (s.tolerance > 0 && c.res < s.tolerance) || !(s.max_iterations > 0);
+  c.tolerance = stopThreshold(s, st.residual_scale);
+  c.done = c.res <= c.tolerance || !(s.max_iterations > 0);
   if (!c.done) {
     c.L = lipschitzBound(squares, p.blocks());
     c.setSpeculation(specs, both);
@@ -389,6 +402,7 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   st.speculated = c.speculated;
   p.copy(X[c.best], gamma);
   st.residual = c.best_res;
+  finishStats(st, s);
   return st;
 }
 
@@ -421,6 +435,8 @@ SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
   constexpr double kSigma = 1e-4;
 
   checkWarmStart(p, gamma, "bb");
+  st.residual_scale = residualScale(p, a);
+  const real thr = stopThreshold(s, st.residual_scale);
   p.map(kern::CopyProject{bs, gamma, X[0]});
   int cur = 0, best = 0;
   p.schur(X[cur], g);
@@ -433,7 +449,7 @@ SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
   for (double& v : fhist) v = f;
   if (s.record_history) st.history.push_back(res);
 
-  if (!(s.tolerance > 0 && res < s.tolerance) && s.max_iterations > 0) {
+  if (!(res <= thr) && s.max_iterations > 0) {
     const real L0 = lipschitzLowerBound(p, d, Nd);
     const real amin = real(1e-10) / L0, amax = real(1e10) / L0;
     real alpha = real(1) / L0;
@@ -473,13 +489,14 @@ SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
         best_res = res;
         best = cur;
       }
-      if (s.tolerance > 0 && res < s.tolerance) break;
+      if (res <= thr) break;
       alpha = q > 0 ? real(dd / q) : amax;
       alpha = std::min(amax, std::max(amin, alpha));
     }
   }
   p.copy(X[best], gamma);
   st.residual = best_res;
+  finishStats(st, s);
   return st;
 }
 

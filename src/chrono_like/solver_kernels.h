@@ -233,6 +233,16 @@ struct Residual {  // 1 sum: squared residual of x given N x
   }
 };
 
+struct ZeroResidual {  // 1 sum: squared residual of the zero impulse, res(0)^2 (the relative residual's scale)
+  BlockSet s;
+  const real* r;
+  real a, inv_a;
+  DVI_HD void operator()(int64_t k, double* acc) const {
+    const real zero[3] = {0, 0, 0};
+    acc[0] += blockResidual2(s, k, zero, r + 3 * k, a, inv_a);
+  }
+};
+
 // Jacobi with the scalar step: residual of cur; unless last, next = P(cur - w t_k (N cur + r)).
 struct JacobiScalar {
   BlockSet s;

@@ -261,6 +261,7 @@ void System::integrateForces() {
 
 void System::detectCollisions() {
   CollisionTimes t;
+  collision_->setFreeVelocities(v_free_.data(), w_free_.data());
   collision_->detect(bodies_, shapes_, config_, contacts_, t);
   stats_.stage_seconds[int(StageType::ComputeAabbs)] = t.aabbs;
   stats_.stage_seconds[int(StageType::BroadPhase)] = t.broad;
@@ -366,10 +367,7 @@ void System::buildAndSolve() {
     }
     if (problem_->normalOnly()) problem_->fromSolverLayout(x, gamma_.data());
     solution_ = x;
-    stats_.iterations = s.iterations;
-    stats_.trials = s.trials;
-    stats_.speculated = s.speculated;
-    stats_.residual = s.residual;
+    recordSolve(s);
   });
   row_lambda_.assign(gamma_.begin() + 3 * nc, gamma_.begin() + 3 * nc + nrows);
   for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)

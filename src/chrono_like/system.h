@@ -142,7 +142,9 @@ struct StepStats {
   real max_penetration = 0;  // largest -dist over contacts after the solve's input (>= 0)
   int iterations = 0;
   int trials = 0, speculated = 0;  // APGD: steps tested, and those speculated by the trial before (SolverStats)
-  real residual = 0;
+  real residual = 0;               // absolute residual the solve reached (m/s)
+  real relative_residual = 0;      // residual / res(0): the convergence measure (solver.h)
+  bool converged = true;           // relative_residual <= the tolerance (SolverStats::converged)
   std::array<double, kStageCount> stage_seconds{};  // wall time of each stage in this step
   std::array<bool, kStageCount> stage_ran{};
   // Why a stage did not run this step (null where it ran).
@@ -180,6 +182,24 @@ struct StageLog {
   }
 };
 
+// Convergence over a run: steps whose solve missed the tolerance, and the worst relative residual (the run
+// summary's steps_not_converged, worst_relative_residual, worst_residual_step). System keeps one
+// (System::convergence()); add() takes the step's index.
+struct ConvergenceLog {
+  int64_t steps = 0;
+  int64_t steps_not_converged = 0;
+  real worst_relative_residual = 0;
+  int64_t worst_step = -1;  // index of the step with the worst relative residual (-1: no step yet)
+  void add(const StepStats& s, int64_t step) {
+    ++steps;
+    steps_not_converged += s.converged ? 0 : 1;
+    if (worst_step < 0 || s.relative_residual > worst_relative_residual) {
+      worst_relative_residual = s.relative_residual;
+      worst_step = step;
+    }
+  }
+};
+
 class CollisionDetector;  // narrow + broad phase backend (native or Bullet's)
 class ContactProblem;
 
@@ -206,6 +226,8 @@ class System {
   // Impulses of the last step: 3 per contact, then the constraint rows' (3 per block of rows).
   const std::vector<real>& impulses() const { return gamma_; }
   const StepStats& lastStats() const { return stats_; }
+  // Every step's solve since construction: how many missed the tolerance, the worst relative residual.
+  const ConvergenceLog& convergence() const { return convergence_; }
   double time() const { return time_; }
   int64_t stepCount() const { return steps_; }
   virtual std::string backendName() const { return "cpu"; }
@@ -250,6 +272,16 @@ class System {
   // Does any dynamic body have non-spherical inertia (needsGyroscopic)? Scans the host arrays (they may have
   // been edited through mutableBodies()); the GPU system answers from its last upload instead.
   virtual bool hasGyroscopicBodies() const;
+  // The Solve stage's outcome into stats_ and convergence_ (both backends).
+  void recordSolve(const SolverStats& s) {
+    stats_.iterations = s.iterations;
+    stats_.trials = s.trials;
+    stats_.speculated = s.speculated;
+    stats_.residual = s.residual;
+    stats_.relative_residual = s.relative_residual;
+    stats_.converged = s.converged;
+    convergence_.add(stats_, steps_);
+  }
   // Records a stage as left out of this step.
   void leaveOut(StageType s, const char* why) {
     if (!stats_.stage_ran[int(s)]) stats_.stage_reason[int(s)] = why;
@@ -275,6 +307,7 @@ class System {
   size_t typed_shapes_ = 0;                 // shapes whose type is in shape_types_
   uint32_t shape_types_ = 0;                // bit t: the scene has a shape of type t
   StepStats stats_;
+  ConvergenceLog convergence_;
   double time_ = 0;
   int64_t steps_ = 0;
 };

@@ -1133,7 +1133,7 @@ class GpuOps {
     DVI_CUDA(cudaMemcpyAsync(dst, src, sizeof(real) * size_t(3 * p_.nb), cudaMemcpyDeviceToDevice, d_.stream));
   }
   // SolverSettings::record_history: the GPU step reports the iterations and the final residual only
-  // (DeviceCcpResult), so the device loop keeps no per-iteration residuals (st is left as it is).
+  // (solveCcp), so the device loop keeps no per-iteration residuals (st is left as it is).
   void apgdIterate(algo::ApgdControl& c, real* const* X, real* const* NX, real a, real inv_a, const SolverSettings& s,
                    SolverStats& /*st*/) {
     apgdIterateOnDevice(d_, p_.nb, c, X, NX, a, inv_a, s, blockSet(), rhs(), blockSteps(), launch_, float_);
@@ -1431,7 +1431,7 @@ void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda
 
 real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.solver.gamma.data(); }
 
-DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
+SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
   GpuOps ops(d, pv, ApgdLaunch{cfg.gpu_graphs, cfg.gpu_persistent_max_blocks, cfg.gpu_apgd_register_cache},
              floatStorage(cfg.solver_settings, true));
@@ -1453,12 +1453,7 @@ DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg) {
   if (d.normal_only)
     launchMap(d, int64_t(S.gamma.size()), kern::FromNormalLayout{S.x.data(), S.gamma.data(), nc, d.contact_blocks},
               "launch of FromNormalLayout");
-  DeviceCcpResult r;
-  r.iterations = st.iterations;
-  r.trials = st.trials;
-  r.speculated = st.speculated;
-  r.residual = st.residual;
-  return r;
+  return st;
 }
 
 void keepImpulsesForWarmStart(DeviceState& d) {

@@ -215,18 +215,14 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats,
 bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg);
 void narrowPhase(DeviceState& d, const SystemConfig& cfg);
 
-struct DeviceCcpResult {
-  int iterations = 0;
-  int trials = 0, speculated = 0;  // APGD (SolverStats)
-  real residual = 0;
-};
 // Builds rows (Jacobians, rhs, block inverses, the adjacency) for the current contacts.
 // rows: the constraint rows of this step from the host's RowProviders (may be empty).
 void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows, real* max_penetration);
 // Contacts from last step's impulses by key (when enabled), rows from row_lambda by index when it has
 // one value per row.
 void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda);
-DeviceCcpResult solveCcp(DeviceState& d, const SystemConfig& cfg);
+// The CCP solve; the stats hold no history (SolverSettings::record_history is not kept on the device).
+SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg);
 void keepImpulsesForWarmStart(DeviceState& d);
 // v = v_free + M^-1 D gamma for every body (and positions), the IntegrateVelocities/Positions stages.
 void applyImpulsesToBodies(DeviceState& d, const real* gamma);

@@ -340,11 +340,7 @@ void GpuSystem::buildAndSolve() {
   if (!config_.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::warm_start)");
   else if (!warm) leaveOut(StageType::WarmStart, "no contacts in the previous step");
   DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
-  DeviceCcpResult r = solveCcp(*d_, config_);
-  stats_.iterations = r.iterations;
-  stats_.trials = r.trials;
-  stats_.speculated = r.speculated;
-  stats_.residual = r.residual;
+  recordSolve(solveCcp(*d_, config_));
   stats_.stage_ran[int(StageType::Solve)] = true;
   keepImpulsesForWarmStart(*d_);
   if (!rows_.empty()) {  // the rows' impulses go back to their providers (a few values)

@@ -1,0 +1,355 @@
+// "Converged by default": the relative residual (solver.h), the tolerance stop at the default settings, and
+// stiff scenes (mass ratios, tall stacks) that must hold at those defaults on the CPU backend; the GPU
+// versions carry [gpu].
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <vector>
+
+#include <btBulletDynamicsCommon.h>
+
+#include "chrono_like/bullet_world.h"
+#include "chrono_like/gpu_factory.h"
+#include "chrono_like/system.h"
+#include "scaling/scaling_scenes.h"
+
+using namespace dvi;
+
+namespace {
+
+BodyDesc groundPlane(real mu) {
+  BodyDesc b;
+  b.mass = 0;
+  b.flags = kBodyFixed;
+  b.friction = mu;
+  b.shapes.push_back(makePlane(Vec3{0, 1, 0}, 0));
+  return b;
+}
+
+BodyDesc cube(real a, real mass, Vec3 pos, real mu) {
+  BodyDesc b;
+  b.pos = pos;
+  b.mass = mass;
+  const real I = mass * a * a * 2 / 3;  // solid cube of half size a: m (2a)^2 / 6
+  b.inertia = Vec3{I, I, I};
+  b.friction = mu;
+  b.shapes.push_back(makeBox(Vec3{a, a, a}));
+  return b;
+}
+
+BodyDesc ball(real r, real mass, Vec3 pos, real mu) {
+  BodyDesc b;
+  b.pos = pos;
+  b.mass = mass;
+  const real I = real(0.4) * mass * r * r;
+  b.inertia = Vec3{I, I, I};
+  b.friction = mu;
+  b.shapes.push_back(makeSphere(r));
+  return b;
+}
+
+struct RunResult {
+  double top_y0 = 0, top_y = 0;  // the top (last) body's height at the start and the end
+  double max_pen = 0;            // deepest penetration over the run (StepStats::max_penetration)
+  double mean_iterations = 0;
+  int max_iterations = 0;
+  ConvergenceLog log;
+  double seconds = 0;
+};
+
+std::unique_ptr<System> makeSystem(const SystemConfig& cfg, bool gpu) {
+  if (gpu) return makeGpuSystem(cfg);
+  return std::make_unique<System>(cfg);
+}
+
+// A ground plane and n cubes of half size a (1 kg each, the top one `ratio` times heavier), mu = 0.7, the
+// layout of `dvisim bench stability`'s stacks.
+RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig cfg, bool gpu = false) {
+  const real a = real(0.05);
+  cfg.dt = real(dt);
+  auto sys = makeSystem(cfg, gpu);
+  sys->addBody(groundPlane(real(0.7)));
+  int top = -1;
+  for (int i = 0; i < n; ++i)
+    top = sys->addBody(cube(a, i == n - 1 ? real(ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
+  RunResult r;
+  r.top_y0 = double(sys->bodies().pos[size_t(top)].y);
+  const int steps = int(std::lround(seconds / dt));
+  int64_t iters = 0;
+  for (int k = 0; k < steps; ++k) {
+    sys->step();
+    const StepStats& s = sys->lastStats();
+    r.max_pen = std::max(r.max_pen, double(s.max_penetration));
+    iters += s.iterations;
+    r.max_iterations = std::max(r.max_iterations, s.iterations);
+    r.seconds += s.stage_seconds[int(StageType::Solve)];
+  }
+  sys->syncToHost();
+  r.top_y = double(sys->bodies().pos[size_t(top)].y);
+  r.mean_iterations = double(iters) / steps;
+  r.log = sys->convergence();
+  return r;
+}
+
+// bench stability's particle case: 2x2 spheres (r 1 cm) in a tight box, a fifth `ratio` times heavier on top.
+RunResult runParticles(double ratio, int steps, SystemConfig cfg, bool gpu = false) {
+  const double r = 0.01, w = 4 * r * 1.001, t = 0.01, h = 4 * r;
+  cfg.dt = real(1e-3);
+  auto sys = makeSystem(cfg, gpu);
+  sys->addBody(groundPlane(real(0.7)));
+  for (int k = 0; k < 4; ++k) {
+    const bool xw = k < 2;
+    const double c0 = (k % 2 == 0) ? -t : w + t;
+    BodyDesc b;
+    b.mass = 0;
+    b.flags = kBodyFixed;
+    b.friction = real(0.7);
+    b.pos = xw ? Vec3{real(c0), real(h), real(w / 2)} : Vec3{real(w / 2), real(h), real(c0)};
+    b.shapes.push_back(makeBox(xw ? Vec3{real(t), real(h), real(w)} : Vec3{real(w), real(h), real(t)}));
+    sys->addBody(b);
+  }
+  const double m = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r;
+  for (int i = 0; i < 4; ++i)
+    sys->addBody(ball(real(r), real(m), Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
+                      real(0.7)));
+  const int top = sys->addBody(ball(real(r), real(m * ratio), Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)},
+                                    real(0.7)));
+  RunResult res;
+  res.top_y0 = double(sys->bodies().pos[size_t(top)].y);
+  int64_t iters = 0;
+  for (int k = 0; k < steps; ++k) {
+    sys->step();
+    const StepStats& s = sys->lastStats();
+    res.max_pen = std::max(res.max_pen, double(s.max_penetration));
+    iters += s.iterations;
+    res.max_iterations = std::max(res.max_iterations, s.iterations);
+    res.seconds += s.stage_seconds[int(StageType::Solve)];
+  }
+  sys->syncToHost();
+  res.top_y = double(sys->bodies().pos[size_t(top)].y);
+  res.mean_iterations = double(iters) / steps;
+  res.log = sys->convergence();
+  return res;
+}
+
+void report(const char* what, const RunResult& r) {
+  std::printf("%-40s top %+.4e m, pen %.3e m, iters mean %.1f max %d, not converged %lld/%lld, worst %.3g, solve %.3f s\n",
+              what, r.top_y - r.top_y0, r.max_pen, r.mean_iterations, r.max_iterations,
+              (long long)r.log.steps_not_converged, (long long)r.log.steps, double(r.log.worst_relative_residual),
+              r.seconds);
+}
+
+}  // namespace
+
+// res(0) analytically: a sphere resting on the ground (gap 0, at rest) has r = (-g h, 0, 0) at its one contact,
+// so the zero impulse's residual is g h; a solve of 0 iterations from the zero start reports exactly that as
+// its absolute residual and 1 as its relative one.
+TEST_CASE("relative residual: the zero impulse has residual g h on a resting sphere, relative 1", "[convergence]") {
+  for (double h : {1e-3, 1e-2}) {
+    SystemConfig cfg;
+    cfg.dt = real(h);
+    cfg.warm_start = false;
+    cfg.solver_settings.max_iterations = 0;
+    cfg.solver_settings.tolerance = 0;
+    System sys(cfg);
+    sys.addBody(groundPlane(real(0.5)));
+    sys.addBody(ball(real(0.1), real(2), Vec3{0, real(0.1), 0}, real(0.5)));
+    sys.step();
+    const StepStats& s = sys.lastStats();
+    REQUIRE(s.contacts == 1);
+    CHECK(double(s.residual) == Approx(9.81 * h).epsilon(1e-6));
+    CHECK(double(s.relative_residual) == Approx(1.0).epsilon(1e-9));
+    CHECK_FALSE(s.converged);  // g = 0 is far from the solution m g h
+  }
+}
+
+// Dimensional analysis: the same box scene in metres and scaled by s (lengths and gravity x s, masses x s^3, the
+// same h) has velocities, and so absolute residuals, x s; the relative residual and the iterations must not
+// change (the engine's envelopes and recovery speeds are relative to the sizes).
+TEST_CASE("relative residual is scale-free: a box scene in metres and in millimetres", "[convergence]") {
+  auto run = [](double sc, int iterations, std::vector<double>& abs_res, std::vector<double>& rel_res) {
+    SystemConfig cfg;
+    cfg.dt = real(1e-2);
+    cfg.gravity = Vec3{0, real(-9.81 * sc), 0};
+    cfg.solver_settings.max_iterations = iterations;
+    cfg.solver_settings.tolerance = 0;
+    System sys(cfg);
+    sys.addBody(groundPlane(real(0.6)));
+    const real a = real(0.05 * sc);
+    BodyDesc b = cube(a, real(sc * sc * sc), Vec3{0, real(0.05 * sc * 0.999), 0}, real(0.6));
+    b.vel = Vec3{real(0.3 * sc), 0, real(0.1 * sc)};  // sliding, then sticking
+    sys.addBody(b);
+    BodyDesc top = cube(a, real(10 * sc * sc * sc), Vec3{real(0.02 * sc), real(0.05 * sc * 2.998), 0}, real(0.6));
+    sys.addBody(top);
+    for (int k = 0; k < 20; ++k) {
+      sys.step();
+      abs_res.push_back(double(sys.lastStats().residual));
+      rel_res.push_back(double(sys.lastStats().relative_residual));
+    }
+  };
+  std::vector<double> am, rm, amm, rmm;
+  run(1.0, 7, am, rm);
+  run(1e-3, 7, amm, rmm);
+  REQUIRE(am.size() == amm.size());
+  int compared = 0;
+  for (size_t k = 0; k < am.size(); ++k) {
+    INFO("step " << k << ": abs " << am[k] << " vs " << amm[k] << ", rel " << rm[k] << " vs " << rmm[k]);
+    if (am[k] < 1e-12) continue;
+    CHECK(amm[k] / am[k] == Approx(1e-3).epsilon(1e-4));  // absolute: x s
+    CHECK(rmm[k] == Approx(rm[k]).epsilon(1e-4));         // relative: the same
+    ++compared;
+  }
+  CHECK(compared > 10);
+}
+
+// The users' case: ten 10 cm boxes, the top one 1000x heavier, h = 0.01 s, no solver option. A fixed 50
+// iterations let it fall (it did before the tolerance stop was the default).
+TEST_CASE("defaults: a 10-box stack with a 1000x heavier top stands for 3 s at h = 0.01 s", "[convergence]") {
+  const RunResult r = runStack(10, 1e3, 0.01, 3, SystemConfig{});
+  report("stack 10, 1e3, defaults", r);
+  const double size = 0.1;
+  CHECK(std::fabs(r.top_y - r.top_y0) < 0.01 * r.top_y0);
+  CHECK(r.max_pen < 0.01 * size);
+  CHECK(r.log.steps_not_converged == 0);
+  CHECK(r.log.steps == 300);
+  CHECK(double(r.log.worst_relative_residual) <= double(kDefaultTolerance));
+}
+
+TEST_CASE("defaults: a 30-box tower stands for 10 s at h = 1/60 s", "[convergence]") {
+  const RunResult r = runStack(30, 1, 1.0 / 60, 10, SystemConfig{});
+  report("tower 30, defaults", r);
+  const double a = 0.05;
+  CHECK(std::fabs(r.top_y - r.top_y0) < 0.1 * a);
+  CHECK(r.max_pen < 0.05 * a);
+  CHECK(r.log.steps_not_converged == 0);
+}
+
+// bench stability's particle mass-ratio cases (1e4 and 1e6: [.stiff], several seconds each; see the docs' table).
+TEST_CASE("defaults: particle mass ratio 1e2 holds (heavy sphere on 2x2 in a box)", "[convergence]") {
+  const RunResult r = runParticles(1e2, 300, SystemConfig{});
+  report("particles 1e2, defaults", r);
+  const double rad = 0.01;
+  CHECK(std::fabs(r.top_y - r.top_y0) < 0.05 * rad);
+  CHECK(r.max_pen < 0.05 * rad);
+  CHECK(r.log.steps_not_converged == 0);
+}
+
+TEST_CASE("defaults: particle mass ratios 1e4 and 1e6 hold", "[.stiff]") {
+  for (double ratio : {1e4, 1e6}) {
+    INFO("ratio " << ratio);
+    const RunResult r = runParticles(ratio, 1000, SystemConfig{});
+    report(ratio < 1e5 ? "particles 1e4, defaults" : "particles 1e6, defaults", r);
+    const double rad = 0.01;
+    CHECK(std::fabs(r.top_y - r.top_y0) < 0.05 * rad);
+    CHECK(r.max_pen < 0.05 * rad);
+  }
+}
+
+// A capped solve that misses the tolerance is counted, never silent: ConvergenceLog through the drop-in world.
+TEST_CASE("the drop-in world counts the sub-steps that missed the tolerance", "[convergence]") {
+  for (int cap : {2, 1000}) {
+    btDefaultCollisionConfiguration config;
+    btCollisionDispatcher dispatcher(&config);
+    btDbvtBroadphase broadphase;
+    btSequentialImpulseConstraintSolver solver;
+    DviWorldConfig c;
+    c.system.solver_settings.max_iterations = cap;
+    DviDynamicsWorld world(&dispatcher, &broadphase, &solver, &config, c);
+    world.setGravity(btVector3(0, btScalar(-9.81), 0));
+    btStaticPlaneShape plane(btVector3(0, 1, 0), 0);
+    btBoxShape box(btVector3(btScalar(0.05), btScalar(0.05), btScalar(0.05)));
+    std::vector<std::unique_ptr<btRigidBody>> bodies;
+    std::vector<std::unique_ptr<btDefaultMotionState>> states;
+    for (int i = 0; i <= 6; ++i) {
+      const btScalar mass = i == 0 ? 0 : (i == 6 ? 1000 : 1);
+      btVector3 inertia(0, 0, 0);
+      btCollisionShape* s = i == 0 ? static_cast<btCollisionShape*>(&plane) : &box;
+      if (mass > 0) s->calculateLocalInertia(mass, inertia);
+      btTransform t;
+      t.setIdentity();
+      t.setOrigin(btVector3(0, i == 0 ? 0 : btScalar(0.05 * (1.0002 + 2.0002 * (i - 1))), 0));
+      states.emplace_back(new btDefaultMotionState(t));
+      bodies.emplace_back(new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, states.back().get(), s, inertia)));
+      bodies.back()->setActivationState(DISABLE_DEACTIVATION);
+      world.addRigidBody(bodies.back().get());
+    }
+    for (int k = 0; k < 30; ++k) world.stepSimulation(btScalar(0.01), 0, btScalar(0.01));
+    const ConvergenceLog& log = world.convergence();
+    INFO("cap " << cap << ": " << log.steps_not_converged << " of " << log.steps << ", worst " << log.worst_relative_residual);
+    CHECK(log.steps == world.subSteps());
+    if (cap == 2) {
+      CHECK(log.steps_not_converged > 0);
+      CHECK(double(log.worst_relative_residual) > double(kDefaultTolerance));
+      CHECK(log.worst_step >= 0);
+    } else {
+      CHECK(log.steps_not_converged == 0);
+    }
+    for (auto& b : bodies) world.removeRigidBody(b.get());
+  }
+}
+
+// Measurements for docs/ARCHITECTURE.md (hidden: run with `dvisim_tests "[.measure]" -s`).
+TEST_CASE("measure: stiff scenes at the default and fixed settings", "[.measure]") {
+  for (double ratio : {1.0, 1e3, 1e6}) {
+    SystemConfig d;
+    char name[96];
+    std::snprintf(name, sizeof name, "stack 10 ratio %.0e default", ratio);
+    report(name, runStack(10, ratio, 0.01, 3, d));
+    SystemConfig f;
+    f.solver_settings.max_iterations = 50;
+    f.solver_settings.tolerance = 0;
+    std::snprintf(name, sizeof name, "stack 10 ratio %.0e fixed 50", ratio);
+    report(name, runStack(10, ratio, 0.01, 3, f));
+  }
+  {
+    SystemConfig d;
+    report("tower 30 h=1/60 10 s default", runStack(30, 1, 1.0 / 60, 10, d));
+  }
+  for (double ratio : {1e2, 1e4, 1e6}) {
+    SystemConfig d;
+    char name[96];
+    std::snprintf(name, sizeof name, "particles ratio %.0e default", ratio);
+    report(name, runParticles(ratio, 1000, d));
+  }
+}
+
+// The pile of `dvisim bench scaling` (hidden: `dvisim_tests "[.pile]" -s`; DVISIM_PILE_N, DVISIM_PILE_STEPS).
+TEST_CASE("measure: sphere pile at the default and fixed settings", "[.pile]") {
+  const long n = std::getenv("DVISIM_PILE_N") ? std::atol(std::getenv("DVISIM_PILE_N")) : 10000;
+  const int steps = std::getenv("DVISIM_PILE_STEPS") ? std::atoi(std::getenv("DVISIM_PILE_STEPS")) : 300;
+  const bench::SceneSpec spec = bench::makePileSpec(n);
+  for (int mode = 0; mode < 2; ++mode) {
+    SystemConfig cfg;
+    if (mode == 1) cfg.solver_settings.max_iterations = 50, cfg.solver_settings.tolerance = 0;
+    System sys(cfg);
+    bench::addToSystem(spec, sys);
+    double wall = 0, iters = 0, rel = 0, pen = 0;
+    for (int k = 0; k < steps; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      sys.step();
+      wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const StepStats& s = sys.lastStats();
+      iters += s.iterations;
+      rel += double(s.relative_residual);
+      pen = std::max(pen, double(s.max_penetration));
+      if ((k + 1) % 50 == 0) {
+        double ke = 0, ymean = 0;
+        const BodyArrays& b = sys.bodies();
+        for (size_t i = 0; i < b.count(); ++i) {
+          if (b.inv_mass[i] == 0) continue;
+          ke += 0.5 / double(b.inv_mass[i]) * double(dot(b.vel[i], b.vel[i]));
+          ymean += double(b.pos[i].y);
+        }
+        std::printf("%s n %ld steps %d: ms/step %.2f iters %.1f rel %.3g pen/r %.3g KE %.4g ymean %.5f notconv %lld\n",
+                    mode ? "fixed50" : "default", n, k + 1, 1e3 * wall / (k + 1), iters / (k + 1), rel / (k + 1),
+                    pen / 0.01, ke, ymean / double(n), (long long)sys.convergence().steps_not_converged);
+        std::fflush(stdout);
+      }
+    }
+  }
+}
