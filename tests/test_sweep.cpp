@@ -98,7 +98,8 @@ TEST_CASE("sweep: full-factorial expansion, list rows and linspace levels", "[sw
 }
 
 TEST_CASE("sweep: Student-t 95% interval against tabulated quantiles and hand-computed intervals", "[sweep]") {
-  // t_{0.975,nu}, Montgomery & Runger, Applied Statistics and Probability for Engineers, Table V.
+  // t_{0.975,nu}, Montgomery & Runger, Applied Statistics and Probability for Engineers, 6th ed., Appendix A,
+  // percentage points of the t distribution.
   const std::map<int, double> table = {{1, 12.706}, {2, 4.303}, {3, 3.182}, {4, 2.776}, {9, 2.262},
                                        {10, 2.228}, {20, 2.086}, {29, 2.045}, {40, 2.021}, {120, 1.980}};
   for (const auto& [nu, t] : table) {

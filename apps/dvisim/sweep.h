@@ -193,7 +193,8 @@ struct MeanCi {
 };
 
 // Mean and the Student-t 95% confidence half-width t_{0.975,n-1} s / sqrt(n), s the sample standard deviation
-// (divisor n-1): Montgomery & Runger, Applied Statistics and Probability for Engineers, 6th ed. (2014), eq. 8-16.
+// (divisor n-1): Montgomery & Runger, Applied Statistics and Probability for Engineers, 6th ed. (2014), sec. 8-2
+// (confidence interval on the mean of a normal distribution, variance unknown).
 inline MeanCi meanCi(const std::vector<double>& x) {
   MeanCi r;
   r.n = x.size();
