@@ -35,16 +35,19 @@ class NativeCollision final : public CollisionDetector {
     const Shape* sh = shapes.shape.data();
     const Vec3* hull = shapes.hull_points.data();
 
-    // ComputeAabbs: reads bodies.pos/rot/vel/omega, shapes.shape; writes shapes.sweep, shapes.aabb.
+    // ComputeAabbs: reads bodies.pos/rot, the free velocities, shapes.shape; writes shapes.sweep, shapes.aabb.
     double t0 = omp_get_wtime();
     shapes.aabb.resize(size_t(ns));
     shapes.sweep.resize(size_t(ns));
     const real h_sweep = config.speculative ? config.dt : real(0);
+    const bool free_given = v_free_ && w_free_;
+    const Vec3* vel = free_given ? v_free_ : bodies.vel.data();
+    const Vec3* omega = free_given ? w_free_ : bodies.omega.data();
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < ns; ++i) {
       const Shape& s = sh[i];
       Pose body{bodies.pos[s.body], bodies.rot[s.body]};
-      const real sweep = shapeSweep(s, hull, bodies.vel[s.body], bodies.omega[s.body], h_sweep);
+      const real sweep = shapeSweep(s, hull, vel[s.body], omega[s.body], h_sweep);
       shapes.sweep[i] = sweep;
       shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, config.envelope_rel, sweep));
     }
@@ -80,7 +83,8 @@ class NativeCollision final : public CollisionDetector {
     times.pairs_reused = keep;
     double t2 = omp_get_wtime();
 
-    // NarrowPhase: reads pairs_, poses, shapes; writes the contact arrays.
+    // NarrowPhase: reads pairs_, poses, velocities, shapes; writes the contact arrays (speculative points of
+    // pairs that do not close within the step left out: narrowphase.h keepSpeculative).
     const int64_t np = int64_t(pairs_.size());
     const int64_t nblocks = (np + kPairsPerBlock - 1) / kPairsPerBlock;
     if (int64_t(blocks_.size()) < nblocks) blocks_.resize(size_t(nblocks));
@@ -98,6 +102,9 @@ class NativeCollision final : public CollisionDetector {
         const real envelope =
             pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b]);
         int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
+        const PairMotion m{bodies.pos[a.body], vel[a.body], omega[a.body],
+                           bodies.pos[b.body], vel[b.body], omega[b.body]};
+        n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), config.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }
     }

@@ -28,6 +28,17 @@ class CollisionDetector {
   // size afterwards. Contacts are ordered by (shape_a, shape_b, feature) whatever the thread count.
   virtual void detect(const BodyArrays& bodies, ShapeArrays& shapes, const SystemConfig& config,
                       ContactArrays& out, CollisionTimes& times) = 0;
+  // The velocities after this step's forces (the System's v_free, w_free; one per body, valid during the next
+  // detect): the native backend's sweeps and speculative-contact rule read them (narrowphase.h). Unset (null):
+  // bodies.vel and bodies.omega.
+  void setFreeVelocities(const Vec3* v, const Vec3* w) {
+    v_free_ = v;
+    w_free_ = w;
+  }
+
+ protected:
+  const Vec3* v_free_ = nullptr;
+  const Vec3* w_free_ = nullptr;
 };
 
 std::unique_ptr<CollisionDetector> makeNativeCollision(const BroadPhaseSettings& settings);

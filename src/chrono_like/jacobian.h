@@ -273,7 +273,13 @@ DVI_HD real blockStepFromDiagonal(const real* N) {
   return g > real(0) ? real(1) / g : real(0);
 }
 
-// b_k normal entry: dist / h, with the separating speed a penetration asks for clamped to v_rec.
+// b_k normal entry: dist / h, with the separating speed a penetration asks for clamped to v_rec = recovery_rel x
+// size per second (Anitescu & Hart 2004's stabilisation; Chrono's contact_recovery_speed, "max speed of
+// penetration recovery", is the absolute-length analogue). With dist > 0 (a speculative contact, narrowphase.h:
+// keepSpeculative) the entry lets the gap close within the step and no further. A penetration is undone at no
+// more than v_rec, and that speed stays in the body after the overlap is gone (it is a velocity-level bias, not a
+// split impulse): a body lifts by at most v_rec^2 / (2 g). Speculative contacts keep penetrations from arising
+// on impact, so the clamp acts on initial overlaps and solver residuals only.
 DVI_HD real contactBias(real dist, real h, real recovery_rel, real size) {
   const real b = dist / h;
   const real lo = -recovery_rel * size;

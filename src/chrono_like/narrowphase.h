@@ -3,7 +3,8 @@
 // Pairs with a closed form (sphere, plane, box, capsule, cylinder cases) use it; every other pair of
 // convex support functions uses Minkowski Portal Refinement (Snethen, "XenoCollide: Complex Collision
 // Made Simple", Game Programming Gems 7, 2008). Points are reported while the shapes are closer than
-// the collision envelope, so contacts exist before they touch and the solver sees them one step early.
+// the collision envelope, so contacts exist before they touch; the envelope is widened to the step's sweep
+// and the speculative points kept only for pairs that close within the step (keepSpeculative).
 #pragma once
 
 #include "contact.h"
@@ -23,10 +24,10 @@ DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points);
 DVI_HD Aabb shapeAabb(const Shape& s, const Pose& world, const Vec3* hull_points, real envelope);
 
 // Speculative contacts (E. Catto, "Continuous Collision", GDC 2013): a bound on how far any point of shape s
-// moves in one step of length h, from its body's velocity v and angular velocity w. A pair is collided with
-// an envelope of at least the sum of the two sweeps, so a contact exists before a fast body reaches a thin
-// obstacle; the contact's bias dist/h (jacobian.h contactBias) lets it push only if the bodies would close
-// the gap within the step, so a speculative contact costs nothing physically (no tunnelling, no early stop).
+// moves in one step of length h, from its body's velocity v and angular velocity w (the velocities after this
+// step's forces, so a body released from rest is swept by its fall too). A pair is collided with an envelope
+// of at least the sum of the two sweeps (pairEnvelope), so every approach that could close the gap within the
+// step is seen before it penetrates, however thin the obstacle.
 DVI_HD real shapeSweep(const Shape& s, const Vec3* hull_points, Vec3 v, Vec3 w, real h) {
   if (s.type == ShapeType::Plane) return h * length(v);
   return h * (length(v) + length(w) * (length(s.local.p) + boundingRadius(s, hull_points)));
@@ -35,16 +36,60 @@ DVI_HD real shapeSweep(const Shape& s, const Vec3* hull_points, Vec3 v, Vec3 w, 
 // AABB growth of a shape: its relative collision envelope, or its sweep when that is larger.
 DVI_HD real shapeMargin(const Shape& s, real envelope_rel, real sweep) { return fmax(envelope_rel * s.size, sweep); }
 
-// Envelope of a pair: the relative envelope of the smaller shape, or the sum of the sweeps when the pair can
-// cross a large part of its thickness in one step (sweeps above half the sum of the two sizes). Slower pairs
-// keep the plain envelope: the cone complementarity's relaxation makes an active, sliding contact separate at
-// mu |u_t| (Anitescu, "Optimization-based simulation of nonsmooth rigid multibody dynamics", Math. Program.
-// 105, 2006; Tasora & Anitescu, CMAME 200, 2011), and a wide speculative envelope would keep such a contact
-// active, and pushing, well beyond touching (it lifted a charged particle off the CES drum). Never more than
-// the two AABB margins together, so every pair within it is found by the broad phase.
+// Plain envelope of a pair: the relative envelope of the smaller shape. Points closer than this are contacts
+// whatever the bodies' motion.
+DVI_HD real plainEnvelope(const Shape& a, const Shape& b, real envelope_rel) {
+  return envelope_rel * fmin(a.size, b.size);
+}
+
+// Envelope a pair is collided with: the plain envelope or the sum of the two sweeps, whichever is larger. Never
+// more than the two AABB margins together (shapeMargin), so every pair within it is found by the broad phase.
+// Points found between the plain envelope and this one are speculative: keepSpeculative decides which stay.
 DVI_HD real pairEnvelope(const Shape& a, const Shape& b, real envelope_rel, real sweep_a, real sweep_b) {
-  const real envelope = envelope_rel * fmin(a.size, b.size), sweep = sweep_a + sweep_b;
-  return sweep > real(0.5) * (a.size + b.size) ? fmax(envelope, sweep) : envelope;
+  return fmax(plainEnvelope(a, b, envelope_rel), sweep_a + sweep_b);
+}
+
+// The two bodies of a pair in this step: centres of mass and velocities after the step's forces.
+struct PairMotion {
+  Vec3 xa, va, wa;
+  Vec3 xb, vb, wb;
+};
+
+// Relative normal velocity of the two material points of contact c (positive: separating), u_n = n . (v_B(pb) -
+// v_A(pa)) with v(p) = v + w x (p - x).
+DVI_HD real contactApproachVelocity(const ContactPoint& c, const PairMotion& m) {
+  const Vec3 ua = m.va + cross(m.wa, c.pa - m.xa), ub = m.vb + cross(m.wb, c.pb - m.xb);
+  return dot(c.normal, ub - ua);
+}
+
+// The speculative-contact rule (Catto, GDC 2013): a point closer than the plain envelope is a contact; a point
+// farther (found only because the sweeps widened the pair's envelope) is kept only when the pair's relative normal
+// velocity brings it within the plain envelope during the step, dist + h u_n < plain. A kept speculative contact
+// with gap dist > 0 gets the bias dist / h (jacobian.h contactBias): it pushes only if the bodies would otherwise
+// penetrate, so it stops a fast body at the surface in the step it arrives instead of one step late and deep.
+// The rule leaves out the speculative points of pairs that are not closing: an active contact of the cone
+// complementarity separates a sliding pair at mu |u_t| (Anitescu, "Optimization-based simulation of nonsmooth
+// rigid multibody dynamics", Math. Program. 105, 2006; Tasora & Anitescu, CMAME 200, 2011), so a contact kept
+// active far beyond touching holds a pressed, sliding body off its support (a charged particle off the CES
+// drum). Such a point is not lost: if the pair closes in a later step, it is kept then, before it touches.
+DVI_HD bool keepSpeculative(const ContactPoint& c, real plain, real h, const PairMotion& m) {
+  return c.dist < plain || c.dist + h * contactApproachVelocity(c, m) < plain;
+}
+
+// keepSpeculative over the n points of one pair, kept in order (their feature indices, and so their warm-start
+// keys, unchanged); returns how many stay. A point that moves to a lower index loses its pad_ mark: only the point
+// MPR wrote first (index 0, never moved) may carry np::kMprFirst (the GPU's write pass relies on it).
+DVI_HD int keepSpeculativePoints(ContactPoint* pts, int n, real plain, real h, const PairMotion& m) {
+  int kept = 0;
+  for (int j = 0; j < n; ++j) {
+    if (!keepSpeculative(pts[j], plain, h, m)) continue;
+    if (kept != j) {
+      pts[kept] = pts[j];
+      pts[kept].pad_ = 0;
+    }
+    ++kept;
+  }
+  return kept;
 }
 
 namespace np {

@@ -362,9 +362,12 @@ struct NarrowArgs {
   const Shape* shapes;
   const Vec3* pos;
   const Quat* rot;
+  const Vec3* vel;    // the bodies' velocities after this step's forces (v_free, w_free): keepSpeculative
+  const Vec3* omega;
   const Vec3* hull;
   const real* sweep;
   real envelope_rel;
+  real h;
   int shift;      // of the pair keys (packPair)
   bool manifold;  // SystemConfig::mpr_manifold
 };
@@ -373,7 +376,8 @@ struct PairPoses {
   int32_t a, b;
   Shape sa, sb;
   Pose wa, wb;
-  real envelope;
+  real envelope;  // the pair's (sweep-widened) envelope, and its plain one (narrowphase.h)
+  real plain;
 };
 
 __device__ PairPoses pairPoses(const NarrowArgs& A, int64_t i) {
@@ -385,7 +389,19 @@ __device__ PairPoses pairPoses(const NarrowArgs& A, int64_t i) {
   P.wa = shapeWorldPose(Pose{A.pos[P.sa.body], A.rot[P.sa.body]}, P.sa);
   P.wb = shapeWorldPose(Pose{A.pos[P.sb.body], A.rot[P.sb.body]}, P.sb);
   P.envelope = pairEnvelope(P.sa, P.sb, A.envelope_rel, A.sweep[P.a], A.sweep[P.b]);
+  P.plain = plainEnvelope(P.sa, P.sb, A.envelope_rel);
   return P;
+}
+
+// keepSpeculativePoints on the pair's n points (n = np::kMprDeferred is returned as it is). Every pass that makes a
+// pair's points (count, deep, write, multi) calls it, so they agree on the count; the first point keeps its MPR
+// mark only where it is MPR's own first point (a moved point's mark is cleared), so the multi pass's
+// mprManifoldAgain starts only from that point.
+__device__ int keepPoints(const NarrowArgs& A, const PairPoses& P, ContactPoint* pts, int n) {
+  if (n <= 0) return n;
+  const int32_t ba = P.sa.body, bb = P.sb.body;
+  const PairMotion m{A.pos[ba], A.vel[ba], A.omega[ba], A.pos[bb], A.vel[bb], A.omega[bb]};
+  return keepSpeculativePoints(pts, n, P.plain, A.h, m);
 }
 
 __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& b, ContactPoint* pts,
@@ -393,7 +409,7 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
   const PairPoses P = pairPoses(A, i);
   a = P.a;
   b = P.b;
-  return collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold);
+  return keepPoints(A, P, pts, collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold));
 }
 
 // Count pass: contacts per pair, keeping the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left
@@ -437,7 +453,7 @@ __global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, Fir
   }
   const PairPoses P = pairPoses(A, i);
   ContactPoint pts[kMaxContactsPerPair];
-  const int n = np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts);
+  const int n = keepPoints(A, P, pts, np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts));
   count[i] = n;
   if (n >= 1) first.slot[i] = kSphereAgain;
 }
@@ -480,7 +496,7 @@ __global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const un
         continue;
       }
       const PairPoses P = pairPoses(A, i);
-      n = finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts, A.manifold);
+      n = keepPoints(A, P, pts, finishDeferredMpr(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d, pts, A.manifold));
     }
     count[i] = n;
     if (n >= 1) {
@@ -533,11 +549,12 @@ __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::
     if (np::mprTiltRound(SA, *fa, *fb, d.best, d.round)) d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
     if (lane == 0) {
       ContactPoint pts[kMaxContactsPerPair];
-      const int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts, A.manifold);
+      int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts, A.manifold);
       if (d.swapped) {
         np::flipContacts(pts, m);
         markFlippedMpr(pts, m);
       }
+      m = keepPoints(A, P, pts, m);
       count[i] = m;
       const int32_t k = first.slot[i];  // set by the count pass
       if (m >= 1 && k >= 0) first.pts[k] = pts[0];
@@ -583,7 +600,7 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
     unpackPair(A.pairs[i], A.shift, a, b);
     const PairPoses P = pairPoses(A, i);
     ContactPoint pts[kMaxContactsPerPair];
-    np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts);
+    keepPoints(A, P, pts, np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts));
     writeContacts(A, a, b, pts, 1, off[i], out);
     return;
   }
@@ -616,7 +633,7 @@ __global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsi
     if (mark == np::kMprFirst || mark == kMprFirstSwapped) {
       unpackPair(A.pairs[i], A.shift, a, b);
       const PairPoses P = pairPoses(A, i);
-      mprManifoldAgain(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, first.pts[k], pts);
+      keepPoints(A, P, pts, mprManifoldAgain(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, first.pts[k], pts));
     } else {
       collidePair(A, i, a, b, pts);
     }
@@ -640,8 +657,8 @@ void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
   const int n = int(d.shapes.count);
   if (n == 0) return;
   aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(
-      n, d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(), d.bodies.vel.data(), d.bodies.omega.data(),
-      d.shapes.hull.data(), cfg.envelope_rel, cfg.speculative ? cfg.dt : real(0), d.shapes.sweep.data(),
+      n, d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(), d.bodies.v_free.data(),
+      d.bodies.w_free.data(), d.shapes.hull.data(), cfg.envelope_rel, cfg.speculative ? cfg.dt : real(0), d.shapes.sweep.data(),
       d.shapes.aabb.data());
   DVI_CUDA_LAUNCH("aabbKernel");
 }
@@ -859,8 +876,18 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       std::min<int64_t>({np, std::max<int64_t>(1024, N.general_last + N.general_last / 2), int64_t(INT32_MAX)});
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
-  NarrowArgs A{d.broad.pair_key_sorted.data(), d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(),
-               d.shapes.hull.data(), d.shapes.sweep.data(), cfg.envelope_rel, d.pair_shift, cfg.mpr_manifold};
+  NarrowArgs A{d.broad.pair_key_sorted.data(),
+               d.shapes.shape.data(),
+               d.bodies.pos.data(),
+               d.bodies.rot.data(),
+               d.bodies.v_free.data(),
+               d.bodies.w_free.data(),
+               d.shapes.hull.data(),
+               d.shapes.sweep.data(),
+               cfg.envelope_rel,
+               cfg.dt,
+               d.pair_shift,
+               cfg.mpr_manifold};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
