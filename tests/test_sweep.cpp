@@ -147,6 +147,7 @@ TEST_CASE("sweep: bad input exits 2 with one line naming the problem", "[sweep]"
   expectInputError("sweep --grid drum.rpm=10:20:1 --time 0" + out, "(n)");
   expectInputError("sweep --grid drum.rpm=10,20 --seeds 0 --time 0" + out, "--seeds");
   expectInputError("sweep --time 0" + out, "nothing to sweep");
+  expectInputError("sweep --grid drum.rpm=10,20 --backend cuda --time 0" + out, "unknown backend 'cuda'");
   expectInputError("sweep --grid drum.rpm=10,20 --grid drum.rpm=30 --time 0" + out, "swept twice");
   expectInputError("sweep --grid seed=1,2 --time 0" + out, "seed key");
   expectInputError("sweep --grid drum.rpm=10,20 --set drum.rpm=5 --time 0" + out, "also swept");

@@ -143,7 +143,8 @@ std::vector<std::string> overrides(const SweepOptions& o, const Design& d, size_
 // Loads the scene with every setting of the design (seed 1), so that an unknown key or a bad value is reported
 // before any run starts; checks the pass-through options the same way `dvisim run` does.
 void validate(const SweepOptions& o, const Design& d) {
-  dvi::benchutil::selectNames("--backend", {o.backend}, {"auto", "cpu", "gpu", "bullet"});
+  if (o.backend != "auto" && o.backend != "cpu" && o.backend != "gpu" && o.backend != "bullet")
+    throw InputError("unknown backend '" + o.backend + "' (expected auto|cpu|gpu|bullet)");
   if (!o.time.empty() && !o.steps.empty()) throw InputError("--time and --steps are mutually exclusive");
   if (!o.time.empty() && !(dvi::parseReal("--time", o.time) >= 0)) throw InputError("--time: must be >= 0, got " + o.time);
   if (!o.dt.empty() && !(dvi::parseReal("--dt", o.dt) > 0)) throw InputError("--dt: the time step must be > 0, got " + o.dt);
@@ -292,7 +293,8 @@ Slots planSlots(const SweepOptions& o) {
   s.gpus = gpuDevices(o.backend);
   const int cores = std::max(1, int(std::thread::hardware_concurrency()));
   s.jobs = !o.jobs.empty() ? int(dvi::parseInt("--jobs", o.jobs, 1, 4096)) : s.gpus.empty() ? cores : int(s.gpus.size());
-  s.child_threads = !o.threads.empty() || !s.gpus.empty() ? o.threads : std::to_string(std::max(1, cores / s.jobs));
+  // The runs together use the cores once (a GPU run's host side too): cores / jobs threads each unless --threads.
+  s.child_threads = !o.threads.empty() ? o.threads : std::to_string(std::max(1, cores / s.jobs));
   return s;
 }
 
