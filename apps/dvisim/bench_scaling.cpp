@@ -93,6 +93,7 @@ struct ScalingOptions {
   bool gpu_entry_gather = dvi::SystemConfig{}.gpu_entry_gather;
   std::string storage = "auto";
   std::string speculation = "auto";
+  std::string stop_compare = "on";  // run ours again at the solver's default stop (ratio to the fixed 50)
   std::string bullet3_device = "gpu";
 };
 
@@ -676,6 +677,33 @@ int runScaling(const ScalingOptions& o) {
     return r;
   };
   std::map<std::string, long> b3_failed_at;  // scene -> the N at which Bullet 3 failed (larger N are not run)
+  // The solver's default stop (tolerance on the relative residual, SolverSettings) against the fixed 50 iterations
+  // of the rows: each of our rows is run again at the defaults and the ratio printed side by side (one line per row,
+  // repeated after the table). The CSV keeps the fixed-50 rows.
+  dvi::SystemConfig cfg_default = cfg;
+  cfg_default.solver_settings.max_iterations = dvi::SolverSettings{}.max_iterations;
+  cfg_default.solver_settings.tolerance = dvi::SolverSettings{}.tolerance;
+  std::string stop_lines;
+  auto compareStop = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, double copy) {
+    const Row& fixed = rows.back();
+    if (!fixed.ok() || o.stop_compare == "off") return;
+    std::string line;
+    try {
+      const Row d = runOurs(engine, spec, cfg_default, o.quick, budget, copy);
+      char buf[400];
+      std::snprintf(buf, sizeof buf, "  stop   %-4s %-4s %6s: default stop (tolerance %g, cap %d) %.2f ms/step, %.1f iterations; fixed 50 "
+                     "%.2f ms/step; ratio %.3f",
+                     engine.c_str(), spec.name.c_str(), countLabel(fixed.n).c_str(),
+                     double(cfg_default.solver_settings.tolerance), cfg_default.solver_settings.max_iterations, d.ms,
+                     d.iterations, fixed.ms, d.ms / fixed.ms);
+      line = buf;
+    } catch (const std::exception& e) {
+      line = "  stop   " + engine + " " + spec.name + " " + countLabel(fixed.n) + ": default stop failed: " + e.what();
+    }
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+    stop_lines += line + "\n";
+  };
   for (long n : sizes) {
     for (const std::string& scene : scenes) {
       const dvi::bench::SceneSpec spec = dvi::bench::makeSceneSpec(scene, n);
@@ -690,7 +718,8 @@ int runScaling(const ScalingOptions& o) {
       };
       if (has("gpu")) {
         if (have_gpu)
-          attempt("gpu", [&] { return runOurs("gpu", spec, cfg, o.quick, budget, dev_copy); });
+          attempt("gpu", [&] { return runOurs("gpu", spec, cfg, o.quick, budget, dev_copy); }),
+              compareStop("gpu", spec, dev_copy);
         else
           rows.push_back(failed("gpu", spec, gpu_status)), report(rows.back());
       }
@@ -706,7 +735,9 @@ int runScaling(const ScalingOptions& o) {
         }
       }
       if (n <= cpu_max) {
-        if (has("cpu")) attempt("cpu", [&] { return runOurs("cpu", spec, cfg, o.quick, budget, host_copy); });
+        if (has("cpu"))
+          attempt("cpu", [&] { return runOurs("cpu", spec, cfg, o.quick, budget, host_copy); }),
+              compareStop("cpu", spec, host_copy);
         if (has("bullet")) attempt("bullet", [&] { return runBullet(spec, o.quick, budget); });
       }
       flush();
@@ -729,6 +760,9 @@ int runScaling(const ScalingOptions& o) {
   const std::string table = tableText(rows, b3_status), goals = goalsText(rows, gpu_status),
                     notes = notesText(dev_copy, host_copy, b3_note);
   std::printf("\n%s\n%s\n%s", table.c_str(), goals.c_str(), notes.c_str());
+  if (!stop_lines.empty())
+    std::printf("solver stop, default against the rows' fixed 50 iterations (ratio = default / fixed ms per step):\n%s",
+                stop_lines.c_str());
   std::printf("results: %s/scaling.csv\n", dir.c_str());
   std::printf("%s\n", makePlot(dir).c_str());
 
@@ -808,6 +842,10 @@ void registerBenchScaling(CLI::App& app) {
                   "APGD's test pass computes the next trial's step ahead (SolverSettings::apgd_speculation; the same "
                   "iterates): auto (the default), none, accepted or both")
       ->check(CLI::IsMember({"auto", "none", "accepted", "both"}));
+  cmd->add_option("--stop-compare", o->stop_compare,
+                  "on (the default): each of our rows (fixed 50 APGD iterations) runs again at the solver's default stop "
+                  "(relative tolerance, iteration cap) and the ms/step ratio is printed; off: not")
+      ->check(CLI::IsMember({"on", "off"}));
   cmd->add_option("--bullet3-device", o->bullet3_device,
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
       ->check(CLI::IsMember({"gpu", "cpu", "any"}));

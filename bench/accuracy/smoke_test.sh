@@ -8,7 +8,7 @@ source "$(dirname "$0")/../smoke_common.sh" "$@"
 run_bench accuracy --quick --threads 1
 csv="$work/out/accuracy.csv"
 [ -s "$csv" ] || fail "no $csv"
-expected="scene,engine,solver,sweep,iterations,dt_s,steps,wall_s,ms_per_step,residual_mean,residual_last,max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status,run_s"
+expected="scene,engine,solver,sweep,iterations,dt_s,steps,wall_s,ms_per_step,residual_mean,residual_last,max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status,run_s,residual_abs_mean_mps,residual_abs_last_mps"
 expect_header "$csv" "$expected"
 for scene in pile mix stack; do
   for solver in jacobi gs apgd bb bullet-si; do
