@@ -352,7 +352,9 @@ int runCesMachine(const CesRunOptions& o) {
   summary["solver"] = cfg.solver;
   summary["collision"] = collision;
   summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
-  summary["residual_final"] = tot.residual;
+  summary["residual_final"] = m.system().lastStats().relative_residual;  // relative (solver.h)
+  summary["residual_final_abs"] = tot.residual;
+  addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver_settings);
   summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
   summary["max_penetration"] = tot.max_penetration;
   addStageSummary(summary, tot.log);
@@ -419,6 +421,8 @@ int runCesMachine(const CesRunOptions& o) {
               cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
               frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
               wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
+  const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver_settings);
+  if (!unconverged.empty()) std::fprintf(stderr, "%s\n", unconverged.c_str());
   return 0;
 }
 
