@@ -161,7 +161,7 @@ TEST_CASE("sweep: bad input exits 2 with one line naming the problem", "[sweep]"
   fs::remove_all(d);
 }
 
-TEST_CASE("sweep: resume reruns only the runs without a done marker; other arguments are refused", "[sweep]") {
+TEST_CASE("sweep: resume reruns only the runs without a done marker, other arguments are refused", "[sweep]") {
   const fs::path d = clitest::tempDir("sweep_resume");
   spit(d / "scene.json", kPileScene);
   const std::string args = "sweep " + quote((d / "scene.json").string()) +
