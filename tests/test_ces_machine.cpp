@@ -113,22 +113,41 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
     }
   };
   walk(file, schema, "");
-  // The parsed defaults are the machine of DESIGN §5.
+  // The parsed defaults: the composite machine of docs/CES.md (corona wire + static tube on one supply).
   const CesConfig c = configWith({});
   CHECK(c.drum_diameter == Approx(0.320));
   CHECK(c.drum_width == Approx(0.300));
   CHECK(c.drum_rpm == 44.8);
-  CHECK(c.electrode.diameter == Approx(0.038));
-  CHECK(c.electrode.distance == Approx(0.267));
-  CHECK(c.electrode.angle == Approx(M_PI / 6));
-  CHECK(c.electrode.voltage == Approx(-35000));
+  CHECK(c.field_model == "corona");
+  CHECK(c.wire.enabled);
+  CHECK(c.wire.diameter == Approx(0.25e-3));
+  CHECK(c.wire.distance == Approx(0.205));
+  CHECK(c.wire.angle == Approx(M_PI / 3));
+  CHECK(c.tube.enabled);
+  CHECK(c.tube.diameter == Approx(0.038));
+  CHECK(c.tube.distance == Approx(0.230));
+  CHECK(c.tube.angle == Approx(M_PI / 6));
+  CHECK(c.voltage == Approx(-35000));
+  CHECK(c.wire.voltage == c.voltage);
+  CHECK(c.tube.voltage == c.voltage);
   CHECK(c.brush_diameter == Approx(0.106));
   CHECK(c.materials.size() == 3);
-  CHECK(std::isinf(c.materials[1].relaxation_time));
+  // Plastic: conductivity 1e-14 S/m, eps_r 2.5 -> tau = 8.8541878128e-12 * 2.5 / 1e-14 = 2213.5 s.
+  CHECK(c.materials[1].relaxation_time == Approx(2213.546953).epsilon(1e-9));
+  CHECK(c.materials[0].relaxation_time == 0);
+  CHECK(c.grade_target_conductor == 0.95);
+  CHECK(c.grade_target_nonconductor == 0.95);
   // --set on the required keys.
   const CesConfig s = configWith({"electrode.voltage_kV=-30", "drum.rpm=60", "feed.mass_flow_g_s=2", "duration_s=0.5",
                                   "splitters.s1_mm=50", "ces.splitters.s2_mm=150"});
-  CHECK(s.electrode.voltage == Approx(-30000));
+  CHECK(s.voltage == Approx(-30000));
+  CHECK(s.wire.voltage == Approx(-30000));
+  CHECK(configWith({"electrode.voltage_kV=0"}).voltage == 0);  // the supply off is a valid machine
+  const CesConfig t = configWith({"electrode.wire.enabled=false", "field.model=two_cylinder", "electrode.tube.angle_deg=40",
+                                  "splitters.grade_targets.conductor=0.9"});
+  CHECK_FALSE(t.wire.enabled);
+  CHECK(t.tube.angle == Approx(40 * M_PI / 180));
+  CHECK(t.grade_target_conductor == 0.9);
   CHECK(s.drum_rpm == 60);
   CHECK(s.feed_mass_flow == Approx(2e-3));
   CHECK(s.duration == 0.5);
@@ -151,23 +170,31 @@ TEST_CASE("CES config: bad values are InputErrors naming the key", "[ces][ces_ma
   };
   fails({"drum.colour=3"}, "ces.drum.colour: unknown key");
   fails({"electrode.voltage_kV=nan"}, "ces.electrode.voltage_kV");
-  fails({"electrode.voltage_kV=0"}, "nonzero");
+  fails({"electrode.diameter_mm=38"}, "ces.electrode.diameter_mm: unknown key");
+  fails({"corona.charging_field_kV_cm=6"}, "ces.corona.charging_field_kV_cm: unknown key");
+  fails({"field.model=two_cylinder"}, "ces.field.model: two_cylinder is the tube alone");
+  fails({"electrode.wire.enabled=false"}, "ces.field.model: the corona model needs the corona wire");
+  fails({"electrode.wire.distance_mm=230", "electrode.wire.angle_deg=30"}, "the wire and the tube overlap");
+  fails({"feed.materials.1.conductivity_S_m=1e-12", "feed.materials.1.relaxation_time_s=1"}, "not both");
+  fails({"splitters.grade_targets.conductor=1.5"}, "ces.splitters.grade_targets.conductor");
   fails({"feed.mass_flow_g_s=-1"}, "ces.feed.mass_flow_g_s: must be >= 0");
   fails({"drum.diameter_mm=-320"}, "ces.drum.diameter_mm: must be > 0");
-  fails({"electrode.distance_mm=100"}, "outside the drum");
-  fails({"splitters.s1_mm=170"}, "ces.splitters.s2_mm: must be >= s1_mm");
+  fails({"electrode.tube.distance_mm=100"}, "outside the drum");
+  fails({"splitters.s1_mm=250"}, "ces.splitters.s2_mm: must be >= s1_mm");
   fails({"feed.materials.0.kind=gold"}, "ces.feed.materials[0].kind");
   fails({"field.extra_electrodes=[{\"diameter_mm\": 1, \"distance_mm\": 250, \"angle_deg\": 60, \"voltage_kV\": -30}]"},
         "use \"model\": \"csm\"");
+  fails({"field.model=csm", "electrode.wire.enabled=false", "electrode.tube.enabled=false"}, "no electrode");
 }
 
 TEST_CASE("CES machine: the field inside the machine, exact and charge-simulation models agree", "[ces][ces_machine]") {
-  CesConfig a = configWith({"feed.mass_flow_g_s=0"});
-  CesConfig b = configWith({"feed.mass_flow_g_s=0", "field.model=csm"});
+  // The tube alone (the single-electrode machine): exact two-cylinder and CSM fields.
+  CesConfig a = configWith({"feed.mass_flow_g_s=0", "electrode.wire.enabled=false", "field.model=two_cylinder"});
+  CesConfig b = configWith({"feed.mass_flow_g_s=0", "electrode.wire.enabled=false", "field.model=csm"});
   System sa, sb;
   CesMachine ma(a, sa), mb(b, sb);
-  const double R = a.drumRadius(), U = a.electrode.voltage, Re = a.electrode.diameter / 2;
-  const Vec3 ec{real(a.electrode.distance * std::cos(a.electrode.angle)), real(a.electrode.distance * std::sin(a.electrode.angle)), 0};
+  const double R = a.drumRadius(), U = a.voltage, Re = a.tube.diameter / 2;
+  const Vec3 ec{real(a.tube.distance * std::cos(a.tube.angle)), real(a.tube.distance * std::sin(a.tube.angle)), 0};
   double worst = 0, emax = 0;
   for (int i = 0; i < 360; ++i) {
     const double t = 2 * M_PI * (i + 0.5) / 360;
@@ -187,7 +214,7 @@ TEST_CASE("CES machine: the field inside the machine, exact and charge-simulatio
     csmRaw(v.charges, v.nCharges, v.phiInf, real(pe[0]), real(pe[1]), phi, ex, ey);
     CHECK(std::fabs(double(phi) - U) <= 1e-9 * std::fabs(U));
     // The CSM model reproduces the exact field in the gas.
-    for (double r : {R + 0.002, R + 0.03, 0.5 * (R + a.electrode.distance)}) {
+    for (double r : {R + 0.002, R + 0.03, 0.5 * (R + a.tube.distance)}) {
       const Vec3 p{real(r * std::cos(t)), real(r * std::sin(t)), 0};
       const FieldSample x = ma.field(p), y = mb.field(p);
       if (x.region != 0) continue;
@@ -202,13 +229,14 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
           "[ces][ces_machine]") {
   // A heavy, non-rolling sphere (inertia x 1e6) with pair friction 200 on the drum rides with the surface
   // until the normal force vanishes: m g sin(theta) = m omega^2 (R + r) (theta above the horizontal, on
-  // the electrode side). No charge (corona zone depth 0, plastic), no air (viscosity 1e-12, density 0).
+  // the electrode side). No charge (supply off, plastic), no air (viscosity 1e-12, density 0).
   // Both drives: the kinematic drum and (when the core solves constraint rows) the rheonomic one.
   std::vector<std::string> drives{"kinematic"};
   if (coreSolvesConstraintRows()) drives.push_back("rheonomic");
   for (const std::string& drive : drives) {
   INFO("drum drive " << drive);
-  CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "corona.depth_mm=0", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
+  CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false",
+                              "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
                               "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=" + drive,
                               "feed.materials=[{\"kind\": \"plastic\", \"mass_fraction\": 1, \"density_kg_m3\": 8000}]"});
   SystemConfig sc;
@@ -248,65 +276,110 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
   }
 }
 
-TEST_CASE("CES machine: an insulator with its corona charge stays on the drum until the brush", "[ces][ces_machine]") {
-  CesConfig cfg = configWith({"feed.mass_flow_g_s=0"});
+TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal force balance gravity",
+          "[ces][ces_machine]") {
+  // A copper sphere (d = 1 mm, rotation locked, friction 200) carried by the drum under the tube alone at
+  // -60 kV (exact two-cylinder field, no ions): on the drum it carries the Félici charge of the local E.n and
+  // feels the lift (zeta(3) + 1/6) 4 pi eps0 r^2 En^2 (Lebedev & Skal'skaya). It leaves at the first angle
+  // theta (coming down from 80 deg) where lift/m + omega^2 (R + r) >= g sin(theta); found here by a scan
+  // over the field alone.
+  CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=-60", "electrode.wire.enabled=false",
+                              "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
+                              "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=kinematic",
+                              "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
   SystemConfig sc;
   sc.dt = real(cfg.dt);
+  sc.solver_settings.max_iterations = 100;
   System sys(sc);
   CesMachine m(cfg, sys);
   SplitMix64 rng;
-  // A plastic sphere whose rotation is locked (inertia x 1e6): shredded plastic is irregular and does not
-  // roll; a free sphere rolls down the descending side (no rolling resistance in the model) and leaves by
-  // its own speed, which is not what this test is about.
-  ParticleSpec s = makeParticleSpec(1, ParticleShape::Sphere, 0.75e-3, 946, rng);
+  ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8900, rng);
   s.inertia = s.inertia * real(1e6);
-  const double R = cfg.drumRadius(), r = s.radius, w = -cfg.omegaDrum(), Rc = R + r;
-  const double th0 = 40 * M_PI / 180;  // in the corona zone (30 +- 20 deg)
+  const double R = cfg.drumRadius(), r = s.radius, w = -cfg.omegaDrum(), Rc = R + r, g = 9.81;
+  const double mass = double(s.mass_fg) * kFemtogram;
+  double th_star = -1;
+  for (double th = 80; th > 0; th -= 0.005) {
+    const double t = th * M_PI / 180;
+    const FieldSample f = m.field(Vec3{real(Rc * std::cos(t)), real(Rc * std::sin(t)), 0});
+    const double En = double(f.E.x) * std::cos(t) + double(f.E.y) * std::sin(t);
+    const double lift = (1.2020569031595942 + 1.0 / 6.0) * 4 * M_PI * 8.8541878128e-12 * r * r * En * En;
+    if (lift / mass + w * w * Rc >= g * std::sin(t)) {
+      th_star = t;
+      break;
+    }
+  }
+  INFO("analytic leaving angle " << th_star * 180 / M_PI << " deg (bare drum: " << std::asin(w * w * Rc / g) * 180 / M_PI << ")");
+  REQUIRE(th_star > 35 * M_PI / 180);  // well above the bare drum's 21 deg: the lift matters
+  const double th0 = 80 * M_PI / 180;
   const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
   const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
   const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
-  m.step();
-  const double q0 = double(m.particles().charge[size_t(id)]);
-  const FieldSample f = m.field(sys.bodies().pos[size_t(id)]);
-  // Pauthenier's saturation charge in the charging field max(|E|, corona field), negative corona.
-  const double Ec = std::max(double(length(f.E)), cfg.corona_field);
-  CHECK(q0 == Approx(-4 * M_PI * 8.8541878128e-12 * r * r * Ec * 3 * 2.5 / 4.5).epsilon(1e-3));
-  const double brush_travel = th0 - (cfg.brush_angle);  // clockwise from the start to the brush: 175 deg
-  const double corona_end = th0 - (cfg.electrode.angle - cfg.corona_half_angle) + 2 * M_PI / 180;
-  double unwrapped = th0, prev = th0, max_gap = 0, q1 = 0;
-  bool left = false;
-  double left_at = 0;
-  for (int k = 0; k < 12000 && !left; ++k) {
+  double th_leave = -1, q_leave = 0;
+  for (int k = 0; k < 6000 && th_leave < 0; ++k) {
     m.step();
     const Vec3 p = sys.bodies().pos[size_t(id)];
-    double a = angleOf(p), d = a - prev;
-    if (d > M_PI) d -= 2 * M_PI;
-    if (d < -M_PI) d += 2 * M_PI;
-    unwrapped += d;
-    prev = a;
-    const double travelled = th0 - unwrapped;  // clockwise, from the start
-    const double gap = std::hypot(double(p.x), double(p.y)) - R - r;
-    const double q = double(m.particles().charge[size_t(id)]);
-    if (travelled < brush_travel - 10 * M_PI / 180) {
-      max_gap = std::max(max_gap, gap);
-      if (travelled < corona_end) q1 = q;     // still charging in the corona zone
-      else CHECK(q == q1);                     // then a perfect insulator keeps its charge
-    } else if (gap > 0.005) {
-      left = true;
-      left_at = th0 - travelled;
+    if (std::hypot(double(p.x), double(p.y)) - Rc > 1e-7) {
+      th_leave = angleOf(p);
+      q_leave = double(m.particles().charge[size_t(id)]);
     }
   }
-  INFO("largest gap before the brush " << max_gap << " m");
-  CHECK(max_gap < 0.1 * r);
-  CHECK(q1 < 0);
-  REQUIRE(left);
-  // It left near the brush (within 20 degrees past it) and the brush discharged it.
-  INFO("left at " << left_at * 180 / M_PI << " deg");
-  CHECK(left_at * 180 / M_PI > -135 - 20);
-  CHECK(left_at * 180 / M_PI < -135 + 10);
-  const double left_charge = double(m.particles().charge[size_t(id)]) / q1;
-  INFO("charge left after the brush: " << left_charge << " of the corona charge");
-  CHECK(left_charge < 0.01);
+  INFO("simulated leaving angle " << th_leave * 180 / M_PI << " deg");
+  CHECK(std::fabs(th_leave - th_star) < 0.5 * M_PI / 180);
+  CHECK(q_leave > 0);  // induced: opposite to the negative electrode
+}
+
+TEST_CASE("CES machine: above corona onset an insulator takes ion charge and is pinned until the brush; below it is not",
+          "[ces][ces_machine]") {
+  // A plastic sphere (d = 0.75 mm, rotation locked: shredded plastic does not roll) placed on the drum at
+  // 80 deg, before the corona wire (60 deg), on the default composite machine.
+  for (const double U : {-35.0, -8.0}) {
+    INFO("U = " << U << " kV");
+    CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=" + std::to_string(U)});
+    SystemConfig sc;
+    sc.dt = real(cfg.dt);
+    System sys(sc);
+    CesMachine m(cfg, sys);
+    const bool ionised = m.coronaInfo().ionised;
+    INFO("onset " << m.coronaInfo().onset_voltage << " V");
+    CHECK(ionised == (U < m.coronaInfo().onset_voltage * 1e-3));
+    SplitMix64 rng;
+    ParticleSpec s = makeParticleSpec(1, ParticleShape::Sphere, 0.75e-3, 946, rng);
+    s.inertia = s.inertia * real(1e6);
+    const double R = cfg.drumRadius(), r = s.radius, w = -cfg.omegaDrum(), Rc = R + r;
+    const double th0 = 80 * M_PI / 180;
+    const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
+    const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
+    const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
+    double unwrapped = th0, prev = th0, qmin = 0, left_at = 1e9;
+    for (int k = 0; k < 12000 && left_at > 1e8; ++k) {
+      m.step();
+      const Vec3 p = sys.bodies().pos[size_t(id)];
+      double a = angleOf(p), d = a - prev;
+      if (d > M_PI) d -= 2 * M_PI;
+      if (d < -M_PI) d += 2 * M_PI;
+      unwrapped += d;
+      prev = a;
+      qmin = std::min(qmin, double(m.particles().charge[size_t(id)]));
+      if (std::hypot(double(p.x), double(p.y)) - R - r > 0.005) left_at = unwrapped;
+    }
+    INFO("left the drum at " << left_at * 180 / M_PI << " deg, most negative charge " << qmin << " C");
+    REQUIRE(left_at < 1e8);
+    if (ionised) {
+      // Negative ions: charged negative, to at most Pauthenier's saturation charge in the strongest field on
+      // the way (< 30 kV/cm, the breakdown field of air); held until the brush (-135 deg) and discharged there.
+      CHECK(qmin < -1e-12);
+      CHECK(-qmin < 4 * M_PI * 8.8541878128e-12 * r * r * 3e6 * 3 * 2.5 / 4.5);
+      CHECK(left_at * 180 / M_PI < -135 + 10);
+      CHECK(left_at * 180 / M_PI > -135 - 20);
+      CHECK((m.particles().flags[size_t(id)] & kFlagPinned) != 0);
+      CHECK(std::fabs(double(m.particles().charge[size_t(id)])) < 0.01 * std::fabs(qmin));
+    } else {
+      // No ions below onset: no ion charge, nothing pins it; it leaves where gravity wins (above the horizontal).
+      CHECK(std::fabs(qmin) < 1e-15);
+      CHECK(left_at > 0);
+      CHECK((m.particles().flags[size_t(id)] & kFlagPinned) == 0);
+    }
+  }
 }
 
 TEST_CASE("CES machine: the mass balance closes exactly and nothing is lost", "[ces][ces_machine]") {
@@ -324,8 +397,9 @@ TEST_CASE("CES machine: the mass balance closes exactly and nothing is lost", "[
     ++steps;
     CHECK(sys.bodies().count() >= prev_count);  // bodies are never removed
     prev_count = sys.bodies().count();
-    closes += m.balance().closes();
-    agree += m.particlesInFlight() == m.balance().in_flight;
+    const MassBalance b = m.balance();
+    closes += b.closes();
+    agree += m.particlesInFlight() == b.in_flight + b.held_up;
   }
   CHECK(closes == steps);
   CHECK(agree == steps);
@@ -336,7 +410,19 @@ TEST_CASE("CES machine: the mass balance closes exactly and nothing is lost", "[
   CHECK(b.in_flight > 0);
   CHECK(b.lost == 0);
   CHECK(b.fed_fg == m.feederMassFg());
-  CHECK(b.fed_fg == b.collected_fg + b.in_flight_fg + b.lost_fg);
+  CHECK(b.fed_fg == b.collected_fg + b.in_flight_fg + b.held_up_fg + b.lost_fg);
+  // Held up: exactly the particles in the machine touching the brush, or touching the drum after being
+  // pinned (counted here from the positions and flags directly).
+  int64_t held = 0;
+  for (size_t k = size_t(m.firstParticleBody()); k < m.particles().count(); ++k) {
+    if (m.particles().status[k] != kStatusInFlight) continue;
+    const Vec3 p = sys.bodies().pos[k];
+    const double tol = 1.1 * m.particles().bound[k];
+    const double db = std::hypot(p.x - m.model().brush.cx, p.y - m.model().brush.cy) - m.model().brush.R;
+    const double dd = std::hypot(p.x, p.y) - cfg.drumRadius();
+    held += db <= tol || ((m.particles().flags[k] & kFlagPinned) && dd <= tol && std::fabs(p.z) <= cfg.drum_width / 2);
+  }
+  CHECK(held == b.held_up);
   // The feed rate: fed mass = flow x feed time within one particle mass.
   int64_t heaviest = 0;
   for (const ParticleSpec& s : m.specs()) heaviest = std::max(heaviest, s.mass_fg);
@@ -398,6 +484,52 @@ TEST_CASE("CES splitters: direct binning and cumulative sums agree; grade and re
   CHECK(s.grade_plastic == Approx(2.0 / 3.0));
   CHECK(s.recovery_plastic == Approx(2.0 / 3.0));
   CHECK(s.score == Approx(0.5 * ((0.75 - 0) + (2.0 / 3.0 - 0.25))));
+  // Relative to the fed mass (metal 8 ug fed, plastic 6 ug: 4 and 3 ug held up or in flight).
+  SplitterBasis fed;
+  fed.fed_fg = {8000000000, 6000000000, 5000000000};
+  const SplitterCell sf = splitterCell(c, 0.080, 0.140, fed);
+  CHECK(sf.recovery_metal == Approx(3.0 / 8.0));
+  CHECK(sf.recovery_plastic == Approx(2.0 / 6.0));
+  CHECK(sf.grade_metal == 1.0);
+  CHECK(sf.middling_fraction == Approx(6.0 / 19.0));  // plastic 1 + middling 5 of 19 fed
+  // The optimiser: the largest R_m + R_p among settings meeting both grade targets, by brute force here.
+  fed.target_conductor = 0.9;
+  fed.target_nonconductor = 0.9;
+  const SplitterTable opt = splitterAnalysis(c, 0, 0.2, 41, fed);
+  REQUIRE(opt.targets_met);
+  double best = -1;
+  for (double s1 = 0; s1 <= 0.2 + 1e-12; s1 += 0.005)
+    for (double s2 = s1; s2 <= 0.2 + 1e-12; s2 += 0.005) {
+      int64_t mc = 0, ac = 0, pn = 0, an = 0;
+      for (const CollectedParticle& p : c) {
+        if (p.x >= s2) ac += p.mass_fg, mc += p.kind == MaterialKind::Metal ? p.mass_fg : 0;
+        if (p.x < s1) an += p.mass_fg, pn += p.kind == MaterialKind::Plastic ? p.mass_fg : 0;
+      }
+      if (ac == 0 || an == 0 || double(mc) / double(ac) < 0.9 || double(pn) / double(an) < 0.9) continue;
+      best = std::max(best, double(mc) / 8e9 + double(pn) / 6e9);
+    }
+  const SplitterCell& ob = opt.cells[opt.best];
+  CHECK(ob.recovery_metal + ob.recovery_plastic == Approx(best));
+  CHECK(best == Approx(3.0 / 8.0 + 2.0 / 6.0));  // metal at 150 mm alone, plastic at 20 mm alone
+  CHECK(ob.s1 > 0.020);
+  CHECK(ob.s1 <= 0.050);   // the metal at 50 mm must not join the nonconductor product
+  CHECK(ob.s2 > 0.120);    // the plastic at 120 mm is left in the middlings
+  CHECK(ob.s2 <= 0.150);
+  CHECK(ob.middling_fraction > 0);
+  // Unreachable targets (a plastic particle where the best metal lands): the closest setting, flagged.
+  std::vector<CollectedParticle> mixed = c;
+  mixed.push_back(P(MaterialKind::Plastic, 150, 1));
+  fed.target_conductor = 1.0;
+  fed.target_nonconductor = 1.0;
+  CHECK_FALSE(splitterAnalysis(mixed, 0, 0.2, 41, fed).targets_met);
+  // The grade-recovery curve: the conductor product x' >= s, the nonconductor product x' < s, by hand at s = 0.1.
+  const std::vector<GradeRecoveryPoint> gr = gradeRecoveryCurve(splitterAnalysis(c, 0, 0.2, 41, SplitterBasis{fed.fed_fg}));
+  REQUIRE(gr.size() == 41);
+  CHECK(gr[20].s == Approx(0.1));
+  CHECK(gr[20].grade_metal == Approx(3.0 / 9.0));     // x' >= 0.1: metal 3, plastic 1, middling 5 (on the splitter)
+  CHECK(gr[20].recovery_metal == Approx(3.0 / 8.0));
+  CHECK(gr[20].grade_plastic == Approx(2.0 / 3.0));   // x' < 0.1: plastic 2, metal 1
+  CHECK(gr[20].recovery_plastic == Approx(2.0 / 6.0));
   // A particle exactly on a splitter goes to the bin above it.
   CHECK(splitterCell(c, 0.050, 0.150).mass.fg[kBinConductor][0] == 3000000000);
   CHECK(splitterCell(c, 0.050, 0.150).mass.fg[kBinMiddling][0] == 1000000000);
@@ -467,7 +599,19 @@ TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors
   CHECK(slurp(d / "a" / "ces_particles.csv") == slurp(d / "c" / "ces_particles.csv"));
   const json s = json::parse(slurp(d / "a" / "summary.json"));
   REQUIRE(s.contains("ces"));
-  for (const char* k : {"fed_mass_kg", "collected_mass_kg", "in_flight_mass_kg", "lost_mass_kg"}) CHECK(s["ces"].contains(k));
+  for (const char* k : {"fed_mass_kg", "collected_mass_kg", "in_flight_mass_kg", "held_up_mass_kg", "lost_mass_kg"})
+    CHECK(s["ces"].contains(k));
+  // The flat metrics object the sweep reads: every name present; the fractions of the feed add up to 1.
+  const json& mt = s["ces"]["metrics"];
+  for (const char* k : {"copper.mean_landing_mm", "copper.mean_charge_C", "copper.recovery", "conductor.grade",
+                        "conductor.recovery", "nonconductor.grade", "nonconductor.recovery", "middling.mass_fraction",
+                        "holdup.mass_fraction", "pinned.plastic", "pinned.copper", "onset_voltage_kV",
+                        "corona_current_uA_per_m"})
+    CHECK(mt.contains(k));
+  const double fed = s["ces"]["fed_mass_kg"];
+  CHECK(double(mt["holdup.mass_fraction"]) * fed == Approx(double(s["ces"]["held_up_mass_kg"])).epsilon(1e-9));
+  CHECK(double(mt["onset_voltage_kV"]) < 0);  // negative corona
+  CHECK(fs::exists(d / "a" / "ces_grade_recovery.csv"));
   for (const char* bin : {"conductor", "middling", "nonconductor"})
     for (const char* k : {"metal_kg", "plastic_kg", "middling_kg"}) CHECK(s["ces"]["bins"][bin].contains(k));
   CHECK(s["ces"]["lost_mass_kg"] == 0.0);
@@ -585,7 +729,8 @@ TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's; th
       cpu.step();
       gpu.step();
       ++steps;
-      closes += gpu.balance().closes() && gpu.particlesInFlight() == gpu.balance().in_flight;
+      const MassBalance bg = gpu.balance();
+      closes += bg.closes() && gpu.particlesInFlight() == bg.in_flight + bg.held_up;
     }
     CHECK(closes == steps);
     if (sanitizer_run) {

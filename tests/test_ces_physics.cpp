@@ -10,6 +10,7 @@
 #include "ces/field_csm.h"
 #include "ces/field_two_cylinder.h"
 #include "ces/forces.h"
+#include "ces/particle_model.h"
 #include "chrono_like/errors.h"
 
 using namespace dvi;
@@ -23,7 +24,7 @@ struct Geometry {
   double R1, R2, L, alphaDeg, U, cx, cy;
 };
 
-// The default machine (DESIGN §5) and three harder variants: a 1 mm gap, a far electrode, an
+// The old default machine (one tube) and three harder variants: a 1 mm gap, a far electrode, an
 // off-centre drum with a positive electrode below the horizontal.
 const Geometry kGeometries[] = {
     {0.160, 0.019, 0.267, 30.0, -35000.0, 0.0, 0.0},
@@ -375,17 +376,127 @@ TEST_CASE("CES drag: Schiller-Naumann, its Stokes limit and the Newton regime", 
   CHECK(schillerNaumannCd(999.999) == Approx(0.44).epsilon(0.01));
 }
 
-TEST_CASE("CES default machine parameters (DESIGN §5)", "[ces]") {
+// ---------------------------------------------------------------------------------------------------
+// The per-particle model (particle_model.h) on hand-made fields
+// ---------------------------------------------------------------------------------------------------
+
+namespace {
+
+// A model with the drum at the origin (R = 0.16 m, width 0.3 m), one metal, one plastic (eps_r 2.5, tau 10 s)
+// and one middling (eps_r 10, tau 0.5 s); no air; the brush far away.
+CesModel handModel() {
+  CesModel m{};
+  m.drum = DrumGeometry{0, 0, 0.16, 0, 0.15, 5e-3};
+  m.polarity = -1;
+  m.ion_mobility = 2.1e-4;
+  m.pin_dy = -0.16 * std::cos(20 * M_PI / 180);
+  m.brush = CylinderXY{10, 10, 0.05};
+  m.brush_tau = 1e-3;
+  m.n_electrodes = 0;
+  m.air_density = 0;
+  m.air_viscosity = 1e-12;
+  m.contact_tol = 1.1;
+  m.n_materials = 3;
+  m.kind[0] = 0, m.eps_r[0] = INFINITY, m.tau[0] = 0;
+  m.kind[1] = 1, m.eps_r[1] = 2.5, m.tau[1] = 10;
+  m.kind[2] = 2, m.eps_r[2] = 10, m.tau[2] = 0.5;
+  return m;
+}
+
+// A uniform sampled field E = (0, Ey) with ion density N everywhere (a 4 x 4 grid over the box).
+struct UniformGrid {
+  std::vector<float> ex, ey, phi, n;
+  GridFieldView view{};
+  UniformGrid(double Ey, double N) : ex(16, 0.f), ey(16, float(Ey)), phi(16, 0.f), n(16, float(N)) {
+    view.x0 = -1, view.y0 = -1, view.dx = view.dy = 2.0 / 3.0, view.nx = view.ny = 4;
+    view.Ex = ex.data(), view.Ey = ey.data(), view.phi = phi.data(), view.ion_density = n.data();
+    view.nConductors = 0;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("CES lift of a conductor on the drum: Lebedev-Skal'skaya 0.832 q E, image included, none added", "[ces]") {
+  // (zeta(3) + 1/6) / (pi^2/6) = (1.2020569032 + 0.1666666667) / 1.6449340668 = 1.3687235698 / 1.6449340668
+  // = 0.8320842.
+  CHECK(double(kFeliciLiftFactor) == Approx(0.8320842).epsilon(1e-6));
+  CesModel m = handModel();
+  UniformGrid g(8e5, 0);  // 8 kV/cm, upward: E.n > 0 on top of the drum
+  m.field.model = 2;
+  m.field.grid = g.view;
+  const double r = 0.5e-3, En = 8e5;
+  const Vec3 top{0, real(0.16 + r), 0};
+  const double qF = feliciCharge(r, En);  // the induced charge, hand value above: 3.66047e-11 C at 8e5 V/m
+  CHECK(qF == Approx(2.0 / 3.0 * std::pow(M_PI, 3) * 8.8541878128e-12 * r * r * En).epsilon(1e-12));
+  // On the drum: F = (zeta(3) + 1/6) 4 pi eps0 r^2 En^2 along the normal, nothing else (v = 0: no drag).
+  const Vec3 F = cesParticleForce(m, 0, top, Vec3{0, 0, 0}, real(qF), real(r), real(r));
+  CHECK(F.y == Approx((1.2020569031595942 + 1.0 / 6.0) * 4 * M_PI * 8.8541878128e-12 * r * r * En * En).epsilon(1e-9));
+  CHECK(F.x == 0);
+  // In flight (2 mm off the drum): q E, no image.
+  const Vec3 up{0, real(0.16 + 2e-3), 0};
+  CHECK(cesParticleForce(m, 0, up, Vec3{0, 0, 0}, real(qF), real(r), real(r)).y == Approx(qF * En).epsilon(1e-12));
+  // An insulator with the same charge on the drum: q E minus the image attraction q^2/(16 pi eps0 r^2).
+  const double img = qF * qF / (16 * M_PI * 8.8541878128e-12 * r * r);
+  CHECK(cesParticleForce(m, 1, top, Vec3{0, 0, 0}, real(qF), real(r), real(r)).y == Approx(qF * En - img).epsilon(1e-9));
+  // The charge update: a metal touching the drum takes the Félici charge at once, with the sign of E.n
+  // (positive here, under a field that points away from the drum: the electrode is negative).
+  uint8_t flags = 0;
+  CHECK(cesChargeUpdate(m, 0, top, real(-5e-11), real(r), real(r), real(2e-4), flags) == Approx(qF).epsilon(1e-12));
+  CHECK(flags == 0);  // the top of the drum is not where particles are pinned
+}
+
+TEST_CASE("CES charging: Pauthenier with the local field and ion density, relaxation on the drum, pinning", "[ces]") {
+  CesModel m = handModel();
+  const double E = 6e5, N = 2e14, r = 0.4e-3, h = 2e-4, mu = 2.1e-4;
+  UniformGrid g(E, N);
+  m.field.model = 2;
+  m.field.grid = g.view;
+  // Hand values: q_s = 4 pi eps0 r^2 E p, p = 3 eps_r/(eps_r + 2); tau_c = 4 eps0/(N e mu).
+  const double eps0 = 8.8541878128e-12, e = 1.602176634e-19;
+  const double qs_plastic = 4 * M_PI * eps0 * r * r * E * 3 * 2.5 / 4.5, qs_metal = 4 * M_PI * eps0 * r * r * E * 3;
+  const double tc = 4 * eps0 / (N * e * mu);  // 8.41 ms
+  const Vec3 free{0.1, 0.3, 0};               // in the gas, away from the drum
+  uint8_t flags = 0;
+  // From 0, one step: q = -q_s h/(h + tau_c) (negative corona); ten steps of h = one of 10 h.
+  CHECK(cesChargeUpdate(m, 1, free, 0, real(r), real(r), real(h), flags) == Approx(-qs_plastic * h / (h + tc)).epsilon(1e-6));
+  real q = 0;
+  for (int k = 0; k < 10; ++k) q = cesChargeUpdate(m, 1, free, q, real(r), real(r), real(h), flags);
+  CHECK(double(q) == Approx(-qs_plastic * 10 * h / (10 * h + tc)).epsilon(1e-6));
+  // A conductor in flight charges with p = 3, starting from its induced (opposite) charge q0 = +q_s: the
+  // Pauthenier equation dq/dt = (q_s/tau)(1 - q/q_s)^2 in the ions' polarity, integrated here by RK4.
+  auto rhs = [&](double x) { return (qs_metal / tc) * (1 - x / qs_metal) * (1 - x / qs_metal); };
+  double x = -qs_metal;  // +q_s in volts' sign = -q_s in the ions' polarity
+  for (int k = 0; k < 2000; ++k) {
+    const double dt = h / 2000;
+    const double k1 = rhs(x), k2 = rhs(x + dt / 2 * k1), k3 = rhs(x + dt / 2 * k2), k4 = rhs(x + dt * k3);
+    x += dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4);
+  }
+  CHECK(double(cesChargeUpdate(m, 0, free, real(qs_metal), real(r), real(r), real(h), flags)) == Approx(-x).epsilon(1e-9));
+  // No ions, no charging: the same place with N = 0 (below onset) leaves the charge alone.
+  UniformGrid g0(E, 0);
+  m.field.grid = g0.view;
+  CHECK(cesChargeUpdate(m, 1, free, real(-3e-12), real(r), real(r), real(h), flags) == real(-3e-12));
+  // On the drum, an insulator relaxes toward the induced charge with tau = eps0 eps_r / sigma (10 s here),
+  // a middling with its 0.5 s; exactly q_F + (q - q_F) exp(-h/tau).
+  const Vec3 bottom{0, real(-(0.16 + r)), 0};  // E = (0, 6e5) points into the drum here: E.n = -6e5
+  const double qF = 2.0 / 3.0 * std::pow(M_PI, 3) * eps0 * r * r * (-E);
+  const double q0 = -2e-11;
+  CHECK(double(cesChargeUpdate(m, 1, bottom, real(q0), real(r), real(r), real(h), flags)) ==
+        Approx(qF + (q0 - qF) * std::exp(-h / 10)).epsilon(1e-12));
+  CHECK(double(cesChargeUpdate(m, 2, bottom, real(q0), real(r), real(r), real(h), flags)) ==
+        Approx(qF + (q0 - qF) * std::exp(-h / 0.5)).epsilon(1e-12));
+  // Touching the drum at its lowest point: pinned.
+  CHECK((flags & kFlagPinned) != 0);
+  uint8_t f2 = 0;
+  cesChargeUpdate(m, 1, Vec3{0, real(-(0.16 + 3 * r)), 0}, real(q0), real(r), real(r), real(h), f2);
+  CHECK(f2 == 0);  // 2 radii off the drum: not touching, not pinned
+}
+
+TEST_CASE("CES default machine parameters", "[ces]") {
   const CesMachineParams m;
   CHECK(m.drumRadius() == Approx(0.16));
   CHECK(m.electrodeRadius() == Approx(0.019));
   CHECK(m.brushRadius() == Approx(0.053));
   CHECK(m.drumOmega() == Approx(44.8 * 2 * M_PI / 60));  // 4.6914 rad/s
-  CHECK(m.electrodeAngle() == Approx(M_PI / 6));
-  CHECK(m.electrode_voltage == -35000);
   CHECK(kEps0 == 8.8541878128e-12);
-  // The default machine's two-cylinder field is valid (electrode outside the drum).
-  TwoCylinderField f;
-  CHECK(makeTwoCylinderField(m.drumRadius(), m.electrodeRadius(), m.electrode_distance, m.electrodeAngle(),
-                             m.electrode_voltage, m.drum_center_x, m.drum_center_y, f));
 }

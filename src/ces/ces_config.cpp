@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "ces/ces_constants.h"
+#include "ces/charging.h"
 #include "chrono_like/errors.h"
 
 namespace dvi {
@@ -43,16 +44,20 @@ const char* defaultCesJson() {
   return R"JSON({
   "$schema": "schema/ces.schema.json",
   "name": "ces-default",
-  "description": "Roll-type corona electrostatic separator of DESIGN.md section 5: copper, plastic and middlings of 0.5-1 mm",
+  "description": "Roll-type corona-electrostatic separator (docs/CES.md): corona wire and static tube on one supply; copper, plastic and middlings of 0.5-1 mm",
   "ces": {
     "duration_s": 2.0,
     "time_step_s": 0.0002,
     "seed": 1,
     "solver": { "type": "apgd", "iterations": 30, "gyroscopic": true },
     "drum": { "diameter_mm": 320, "width_mm": 300, "rpm": 44.8, "drive": "auto", "mass_kg": 30 },
-    "electrode": { "diameter_mm": 38, "distance_mm": 267, "angle_deg": 30, "voltage_kV": -35 },
-    "field": { "model": "two_cylinder", "extra_electrodes": [] },
-    "corona": { "half_angle_deg": 20, "depth_mm": 5, "charging_time_s": 0, "charging_field_kV_cm": 6, "image_cutoff_mm": 5 },
+    "electrode": {
+      "voltage_kV": -35,
+      "wire": { "enabled": true, "angle_deg": 60, "distance_mm": 205, "diameter_mm": 0.25 },
+      "tube": { "enabled": true, "angle_deg": 30, "distance_mm": 230, "diameter_mm": 38 }
+    },
+    "field": { "model": "corona", "extra_electrodes": [] },
+    "corona": { "ion_mobility_m2_Vs": 2.1e-4, "rel_air_density": 1.0, "roughness": 1.0, "grid_mm": 1.0, "image_cutoff_mm": 5 },
     "brush": { "diameter_mm": 106, "angle_deg": -135, "rpm": 120, "gap_mm": 0.2, "discharge_time_s": 0.001 },
     "air": { "viscosity_Pa_s": 1.81e-5, "density_kg_m3": 1.225 },
     "friction": { "particle_particle": 0.2, "particle_drum": 0.5, "particle_brush": 0.5, "particle_wall": 0.3 },
@@ -70,7 +75,7 @@ const char* defaultCesJson() {
           "eps_r": "inf", "relaxation_time_s": 0,
           "shapes": { "sphere": 0.4, "wire": 0.3, "flake": 0.3 } },
         { "name": "plastic", "kind": "plastic", "mass_fraction": 0.5, "density_kg_m3": [946, 946],
-          "eps_r": 2.5, "relaxation_time_s": "inf",
+          "eps_r": 2.5, "conductivity_S_m": 1e-14,
           "shapes": { "sphere": 0.3, "flake": 0.2, "ellipsoid": 0.3, "fragment": 0.2 } },
         { "name": "middling", "kind": "middling", "mass_fraction": 0.1, "density_kg_m3": [2500, 4500],
           "eps_r": 10, "relaxation_time_s": 0.5,
@@ -78,7 +83,8 @@ const char* defaultCesJson() {
       ]
     },
     "collection": { "y_mm": -350, "x0_mm": 0 },
-    "splitters": { "s1_mm": 90, "s2_mm": 160, "range_mm": [0, 200], "positions": 60 },
+    "splitters": { "s1_mm": 60, "s2_mm": 200, "range_mm": [-100, 500], "positions": 61,
+                   "grade_targets": { "conductor": 0.95, "nonconductor": 0.95 } },
     "output": { "frames": 0, "histogram_bin_mm": 2, "plots": true, "checkpoint_every_s": 0 }
   }
 }
@@ -96,6 +102,7 @@ using Checker = jsoncheck::JsonCheck;
 constexpr double kMm = 1e-3;
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
+// An extra electrode of the charge-simulation model (its own voltage).
 ElectrodeConfig parseElectrode(const Checker& c, const json& e, const std::string& p, const ElectrodeConfig& def) {
   c.object(e, p, {"diameter_mm", "distance_mm", "angle_deg", "voltage_kV"});
   ElectrodeConfig out = def;
@@ -103,13 +110,22 @@ ElectrodeConfig parseElectrode(const Checker& c, const json& e, const std::strin
   if (e.contains("distance_mm")) out.distance = c.positive(e["distance_mm"], p + ".distance_mm") * kMm;
   if (e.contains("angle_deg")) out.angle = c.range(e["angle_deg"], p + ".angle_deg", -360, 360) * kDeg;
   if (e.contains("voltage_kV")) out.voltage = c.range(e["voltage_kV"], p + ".voltage_kV", -500, 500) * 1e3;
-  // The sign is the corona polarity (negative corona is usual); zero would be no machine at all.
-  if (out.voltage == 0) c.fail(p + ".voltage_kV", "must be nonzero (its sign is the corona polarity)");
+  return out;
+}
+
+// The wire or the tube (on the supply: no voltage of its own).
+ElectrodeConfig parseSupplied(const Checker& c, const json& e, const std::string& p, const ElectrodeConfig& def) {
+  c.object(e, p, {"enabled", "diameter_mm", "distance_mm", "angle_deg"});
+  ElectrodeConfig out = def;
+  if (e.contains("enabled")) out.enabled = c.boolean(e["enabled"], p + ".enabled");
+  if (e.contains("diameter_mm")) out.diameter = c.positive(e["diameter_mm"], p + ".diameter_mm") * kMm;
+  if (e.contains("distance_mm")) out.distance = c.positive(e["distance_mm"], p + ".distance_mm") * kMm;
+  if (e.contains("angle_deg")) out.angle = c.range(e["angle_deg"], p + ".angle_deg", -360, 360) * kDeg;
   return out;
 }
 
 MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string& p) {
-  c.object(m, p, {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "shapes"});
+  c.object(m, p, {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "conductivity_S_m", "shapes"});
   MaterialConfig out;
   if (!m.contains("kind")) c.fail(p + ".kind", "missing (metal|plastic|middling)");
   const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling"});
@@ -133,7 +149,15 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
     out.eps_r = c.nonNegativeOrInf(m["eps_r"], p + ".eps_r");
     if (!(out.eps_r >= 1)) c.fail(p + ".eps_r", "relative permittivity must be >= 1, got " + num(out.eps_r));
   }
+  if (m.contains("relaxation_time_s") && m.contains("conductivity_S_m"))
+    c.fail(p + ".conductivity_S_m", "give either relaxation_time_s or conductivity_S_m, not both");
   if (m.contains("relaxation_time_s")) out.relaxation_time = c.nonNegativeOrInf(m["relaxation_time_s"], p + ".relaxation_time_s");
+  if (m.contains("conductivity_S_m")) {
+    // tau = eps0 eps_r / sigma (Haus & Melcher, "Electromagnetic Fields and Energy", 1989, §7.7).
+    out.conductivity = c.nonNegativeOrInf(m["conductivity_S_m"], p + ".conductivity_S_m");
+    out.relaxation_time = std::isinf(out.conductivity) ? 0.0 : double(relaxationTime(real(out.eps_r), real(out.conductivity)));
+    if (std::isinf(out.eps_r) && !std::isinf(out.conductivity)) out.relaxation_time = 0.0;  // a metal
+  }
   if (m.contains("shapes")) {
     const json& s = c.object(m["shapes"], p + ".shapes", {"sphere", "flake", "wire", "ellipsoid", "fragment"});
     double sum = 0;
@@ -192,10 +216,17 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
     if (has(s, "drive")) cfg.drum_drive = c.oneOf(s["drive"], "ces.drum.drive", {"auto", "kinematic", "rheonomic"});
     if (has(s, "mass_kg")) cfg.drum_mass = c.positive(s["mass_kg"], "ces.drum.mass_kg");
   }
-  if (has(j, "electrode")) cfg.electrode = parseElectrode(c, j["electrode"], "ces.electrode", cfg.electrode);
+  if (has(j, "electrode")) {
+    const json& s = c.object(j["electrode"], "ces.electrode", {"voltage_kV", "wire", "tube"});
+    // 0 is the supply off; the sign is the corona's polarity (negative corona is usual).
+    if (has(s, "voltage_kV")) cfg.voltage = c.range(s["voltage_kV"], "ces.electrode.voltage_kV", -500, 500) * 1e3;
+    if (has(s, "wire")) cfg.wire = parseSupplied(c, s["wire"], "ces.electrode.wire", cfg.wire);
+    if (has(s, "tube")) cfg.tube = parseSupplied(c, s["tube"], "ces.electrode.tube", cfg.tube);
+  }
+  cfg.wire.voltage = cfg.tube.voltage = cfg.voltage;
   if (has(j, "field")) {
     const json& s = c.object(j["field"], "ces.field", {"model", "extra_electrodes"});
-    if (has(s, "model")) cfg.field_model = c.oneOf(s["model"], "ces.field.model", {"two_cylinder", "csm"});
+    if (has(s, "model")) cfg.field_model = c.oneOf(s["model"], "ces.field.model", {"corona", "csm", "two_cylinder"});
     if (has(s, "extra_electrodes")) {
       const json& a = s["extra_electrodes"];
       if (!a.is_array()) c.fail("ces.field.extra_electrodes", "expected an array, got " + describe(a));
@@ -204,14 +235,20 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
             parseElectrode(c, a[i], "ces.field.extra_electrodes[" + std::to_string(i) + "]", ElectrodeConfig{}));
     }
   }
-  if (cfg.field_model == "two_cylinder" && !cfg.extra_electrodes.empty())
-    c.fail("ces.field.extra_electrodes", "the exact two_cylinder model has one electrode; use \"model\": \"csm\"");
+  if (cfg.field_model != "csm" && !cfg.extra_electrodes.empty())
+    c.fail("ces.field.extra_electrodes", "only the csm field model takes extra electrodes; use \"model\": \"csm\"");
+  if (cfg.field_model == "two_cylinder" && (cfg.wire.enabled || !cfg.tube.enabled))
+    c.fail("ces.field.model", "two_cylinder is the tube alone: set electrode.wire.enabled = false and keep the tube");
+  if (cfg.field_model == "corona" && !cfg.wire.enabled)
+    c.fail("ces.field.model", "the corona model needs the corona wire (electrode.wire.enabled); use csm or two_cylinder without it");
+  if (cfg.field_model == "csm" && !cfg.wire.enabled && !cfg.tube.enabled && cfg.extra_electrodes.empty())
+    c.fail("ces.electrode", "no electrode: enable the wire or the tube");
   if (has(j, "corona")) {
-    const json& s = c.object(j["corona"], "ces.corona", {"half_angle_deg", "depth_mm", "charging_time_s", "charging_field_kV_cm", "image_cutoff_mm"});
-    if (has(s, "charging_field_kV_cm")) cfg.corona_field = c.nonNegative(s["charging_field_kV_cm"], "ces.corona.charging_field_kV_cm") * 1e5;
-    if (has(s, "half_angle_deg")) cfg.corona_half_angle = c.range(s["half_angle_deg"], "ces.corona.half_angle_deg", 0, 180) * kDeg;
-    if (has(s, "depth_mm")) cfg.corona_depth = c.nonNegative(s["depth_mm"], "ces.corona.depth_mm") * kMm;
-    if (has(s, "charging_time_s")) cfg.corona_charging_time = c.nonNegative(s["charging_time_s"], "ces.corona.charging_time_s");
+    const json& s = c.object(j["corona"], "ces.corona", {"ion_mobility_m2_Vs", "rel_air_density", "roughness", "grid_mm", "image_cutoff_mm"});
+    if (has(s, "ion_mobility_m2_Vs")) cfg.ion_mobility = c.range(s["ion_mobility_m2_Vs"], "ces.corona.ion_mobility_m2_Vs", 0, 1, true);
+    if (has(s, "rel_air_density")) cfg.rel_air_density = c.range(s["rel_air_density"], "ces.corona.rel_air_density", 0, 10, true);
+    if (has(s, "roughness")) cfg.roughness = c.range(s["roughness"], "ces.corona.roughness", 0, 1, true);
+    if (has(s, "grid_mm")) cfg.corona_grid = c.range(s["grid_mm"], "ces.corona.grid_mm", 0.05, 20) * kMm;
     if (has(s, "image_cutoff_mm")) cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
   }
   if (has(j, "brush")) {
@@ -274,7 +311,13 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
   if (!(cfg.collection_y < -cfg.drumRadius()))
     c.fail("ces.collection.y_mm", "the collection plane must lie below the drum (y < " + num(-cfg.drumRadius() / kMm) + " mm)");
   if (has(j, "splitters")) {
-    const json& s = c.object(j["splitters"], "ces.splitters", {"s1_mm", "s2_mm", "range_mm", "positions"});
+    const json& s = c.object(j["splitters"], "ces.splitters", {"s1_mm", "s2_mm", "range_mm", "positions", "grade_targets"});
+    if (has(s, "grade_targets")) {
+      const json& g = c.object(s["grade_targets"], "ces.splitters.grade_targets", {"conductor", "nonconductor"});
+      if (has(g, "conductor")) cfg.grade_target_conductor = c.range(g["conductor"], "ces.splitters.grade_targets.conductor", 0, 1);
+      if (has(g, "nonconductor"))
+        cfg.grade_target_nonconductor = c.range(g["nonconductor"], "ces.splitters.grade_targets.nonconductor", 0, 1);
+    }
     if (has(s, "s1_mm")) cfg.s1 = c.range(s["s1_mm"], "ces.splitters.s1_mm", -1e5, 1e5) * kMm;
     if (has(s, "s2_mm")) cfg.s2 = c.range(s["s2_mm"], "ces.splitters.s2_mm", -1e5, 1e5) * kMm;
     if (has(s, "range_mm")) {
@@ -294,14 +337,21 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
     if (has(s, "plots")) cfg.plots = c.boolean(s["plots"], "ces.output.plots");
     if (has(s, "checkpoint_every_s")) cfg.checkpoint_every = c.nonNegative(s["checkpoint_every_s"], "ces.output.checkpoint_every_s");
   }
-  // Geometry: the electrodes outside the drum, the brush beside it.
+  // Geometry: the electrodes outside the drum and apart from each other.
   auto electrodeOk = [&](const ElectrodeConfig& e, const std::string& p) {
     if (!(e.distance > cfg.drumRadius() + e.diameter / 2))
       c.fail(p + ".distance_mm", "the electrode must lie outside the drum (distance > drum radius + electrode radius)");
   };
-  electrodeOk(cfg.electrode, "ces.electrode");
+  if (cfg.wire.enabled) electrodeOk(cfg.wire, "ces.electrode.wire");
+  if (cfg.tube.enabled) electrodeOk(cfg.tube, "ces.electrode.tube");
   for (size_t i = 0; i < cfg.extra_electrodes.size(); ++i)
     electrodeOk(cfg.extra_electrodes[i], "ces.field.extra_electrodes[" + std::to_string(i) + "]");
+  if (cfg.wire.enabled && cfg.tube.enabled) {
+    const double dx = cfg.wire.distance * std::cos(cfg.wire.angle) - cfg.tube.distance * std::cos(cfg.tube.angle);
+    const double dy = cfg.wire.distance * std::sin(cfg.wire.angle) - cfg.tube.distance * std::sin(cfg.tube.angle);
+    if (!(std::hypot(dx, dy) > (cfg.wire.diameter + cfg.tube.diameter) / 2))
+      c.fail("ces.electrode.wire", "the wire and the tube overlap");
+  }
   return cfg;
 }
 

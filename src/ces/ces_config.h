@@ -3,12 +3,12 @@
 // out-of-range number is an InputError naming the key path ("ces.electrode.voltage_kV: ...").
 //
 // Units are in the key names (mm, kV, rpm, g/s, deg); CesConfig holds SI values (m, V, rad/s, kg/s,
-// rad), converted once here. Defaults are the machine of DESIGN §5 (ces_constants.h); the embedded
+// rad), converted once here. Defaults are the machine of docs/CES.md (ces_constants.h); the embedded
 // default document (defaultCesJson(), identical to scenes/ces_default.json, tested) is what
 // `dvisim run` runs without a scene.
 //
-// Sign conventions (docs/CES.md): the drum axis is z, gravity is -y, the electrode lies at angle
-// electrode.angle_deg counter-clockwise from +x. drum.rpm > 0 turns the drum clockwise seen from +z, so
+// Sign conventions (docs/CES.md): the drum axis is z, gravity is -y, the electrodes lie at angles
+// electrode.{wire,tube}.angle_deg counter-clockwise from +x. drum.rpm > 0 turns the drum clockwise seen from +z, so
 // that its top moves toward the electrode (+x): omega_z = -2 pi rpm / 60. brush.rpm uses the same
 // convention; with both positive the two surfaces move against each other where they meet (the brush
 // sweeps the drum).
@@ -39,16 +39,21 @@ struct MaterialConfig {
   double mass_fraction = 1;              // share of the fed mass (normalised over the materials)
   double density_min = 946, density_max = 946;  // kg/m^3, uniform
   double eps_r = 2.5;                    // relative permittivity (inf for a metal)
-  double relaxation_time = 0;            // s, charge relaxation through the drum contact tau = eps/sigma (inf: none)
+  // s, charge relaxation through the drum contact tau = eps0 eps_r / sigma (inf: none). Given directly
+  // (relaxation_time_s) or through the effective conductivity (conductivity_S_m).
+  double relaxation_time = 0;
+  double conductivity = -1;              // S/m as given (-1: not given)
   double shape_weight[kParticleShapes] = {1, 0, 0, 0, 0};  // relative frequency of each shape (by count)
 };
 
-// A further cylindrical electrode for the charge-simulation field model (corona wire, static tube).
+// A cylindrical electrode (axis along z): the corona wire, the static tube, or a further electrode of the
+// charge-simulation model. The wire and the tube are on the machine's one supply (CesConfig::voltage).
 struct ElectrodeConfig {
+  bool enabled = true;
   double diameter = 0.038;   // m
-  double distance = 0.267;   // m, centre distance from the drum axis
+  double distance = 0.230;   // m, centre distance from the drum axis
   double angle = 0;          // rad, counter-clockwise from +x
-  double voltage = -35000;   // V
+  double voltage = -35000;   // V (extra electrodes only; the wire and tube take the supply's)
 };
 
 struct CesConfig {
@@ -69,21 +74,23 @@ struct CesConfig {
   std::string drum_drive = "auto";
   double drum_mass = 30;      // kg, for the rheonomic drive (a steel shell; any large value works)
 
-  // Main static electrode and field model ("two_cylinder": exact, one electrode; "csm": charge
-  // simulation for the main electrode plus extra_electrodes).
-  ElectrodeConfig electrode{0.038, 0.267, 0.5235987755982988, -35000};
-  std::string field_model = "two_cylinder";
+  // The electrodes on the one high-voltage supply: a thin corona wire (ionising) and a static tube
+  // (shaping the field). voltage = 0 is the supply off.
+  double voltage = -35000;   // V
+  ElectrodeConfig wire{true, 0.00025, 0.205, 1.0471975511965976, 0};
+  ElectrodeConfig tube{true, 0.038, 0.230, 0.5235987755982988, 0};
+  // Field model: "corona" (the steady ionised field of the wire with the tube, field_corona.h; Laplace
+  // below onset), "csm" (Laplace field of the wire, the tube and extra_electrodes, no ions) or
+  // "two_cylinder" (exact Laplace field of the drum and the tube alone; the wire must be disabled).
+  std::string field_model = "corona";
   std::vector<ElectrodeConfig> extra_electrodes;
 
-  // Corona zone: particles within corona_depth of the drum surface, at angles within
-  // corona_half_angle of the electrode direction, take Pauthenier's charge.
-  double corona_half_angle = 0.3490658503988659;  // rad (20 deg)
-  double corona_depth = 0.005;                     // m
-  double corona_charging_time = 0;                 // s, Pauthenier's tau_c (0: saturation at once)
-  // Charging field of the ionised zone (V/m): Pauthenier's charge uses max(|E_Laplace|, this). The electrode
-  // field models are Laplace fields (no ion space charge); the space charge of a corona raises the field at
-  // the grounded drum. 6 kV/cm [assumed]; 0 uses the Laplace field alone.
-  double corona_field = 6e5;
+  // Corona: ion mobility (Pauthenier's charging time), the air's relative density and the wire's
+  // roughness factor (Peek's onset field), the solver's grid spacing; the image-force cutoff.
+  double ion_mobility = 2.1e-4;                    // m^2/(V s), negative ions in air
+  double rel_air_density = 1.0;                    // delta, 1 at 20 C and 101.3 kPa
+  double roughness = 1.0;                          // Peek's m (1: smooth wire)
+  double corona_grid = 0.001;                      // m, grid spacing of the ionised-field solver
   double image_cutoff = 0.005;                     // m, image force acts within this distance of the drum surface
 
   // Brush (grounded, rotating cylinder).
@@ -110,9 +117,12 @@ struct CesConfig {
   double collection_y = -0.35, collection_x0 = 0;
 
   // Splitters (virtual): bins nonconductor x' < s1 <= middling < s2 <= conductor.
-  double s1 = 0.090, s2 = 0.160;
-  double splitter_lo = 0, splitter_hi = 0.200;
-  int splitter_positions = 60;
+  double s1 = 0.060, s2 = 0.200;
+  double splitter_lo = -0.100, splitter_hi = 0.500;
+  int splitter_positions = 61;
+  // Grade targets of the optimiser: the conductor product's metal grade and the nonconductor product's
+  // plastic grade that the best setting must reach (0: none).
+  double grade_target_conductor = 0.95, grade_target_nonconductor = 0.95;
 
   // Outputs.
   int frames = 0;

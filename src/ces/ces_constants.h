@@ -1,4 +1,4 @@
-// Physical constants and the default machine of the corona electrostatic separator (DESIGN.md §5).
+// Physical constants and the default machine of the corona electrostatic separator (docs/CES.md).
 //
 // Coordinates of the CES model: the drum axis is the z axis of the machine, the field problems are
 // solved in the (x, y) cross-section with y up (gravity along -y), angles are measured
@@ -26,58 +26,54 @@ constexpr real kInv2PiEps0 = real(1) / (real(2) * kPi * kEps0);
 DVI_HD constexpr real degToRad(real deg) { return deg * kPi / real(180); }
 DVI_HD constexpr real rpmToRadPerSec(real rpm) { return rpm * real(2) * kPi / real(60); }
 
-// The default machine. Values marked [DESIGN §5] are the project's specification (taken from the
-// public Chrono CES demo machine); values marked [assumed] are placeholders chosen here for the parts
-// DESIGN §5 leaves open and are to be confirmed by whoever builds the machine model.
+// Machine constants. Values marked [spec] are the project's specification (drum, particles, air, from the
+// public Chrono CES demo machine); [assumed] values are placeholders. The electrodes of the default machine
+// (corona wire and static tube) are in scenes/ces_default.json and docs/CES.md; electrode_* here is the
+// single tube of the old demo machine.
 struct CesMachineParams {
   // --- drum (grounded, phi = 0) ---
-  real drum_diameter = real(0.320);         // m [DESIGN §5]
-  real drum_width = real(0.300);            // m, extent along z; electric forces act for |z| <= width/2 [DESIGN §5]
-  real drum_rpm = real(44.8);               // rev/min [DESIGN §5]
+  real drum_diameter = real(0.320);         // m [spec]
+  real drum_width = real(0.300);            // m, extent along z; electric forces act for |z| <= width/2 [spec]
+  real drum_rpm = real(44.8);               // rev/min [spec]
   real drum_center_x = real(0);             // m, axis position in the cross-section [assumed: origin]
   real drum_center_y = real(0);             // m
-  real drum_friction = real(0.5);           // particle-drum Coulomb friction [DESIGN §5]
+  real drum_friction = real(0.5);           // particle-drum Coulomb friction [spec]
 
   // --- static electrode (tube, phi = U) ---
-  real electrode_diameter = real(0.038);    // m [DESIGN §5]
-  real electrode_distance = real(0.267);    // m, centre distance L from the drum axis [DESIGN §5]
-  real electrode_angle_deg = real(30);      // deg above the horizontal, alpha [DESIGN §5]
-  real electrode_voltage = real(-35000);    // V, U [DESIGN §5]
+  real electrode_diameter = real(0.038);    // m [spec]
+  real electrode_distance = real(0.267);    // m, centre distance L from the drum axis [spec]
+  real electrode_angle_deg = real(30);      // deg above the horizontal, alpha [spec]
+  real electrode_voltage = real(-35000);    // V, U [spec]
 
   // --- brush (rotating cylinder that sweeps insulators off the drum) ---
-  real brush_diameter = real(0.106);        // m [DESIGN §5]
+  real brush_diameter = real(0.106);        // m [spec]
   real brush_angle_deg = real(-135);        // deg, direction of the brush axis from the drum axis [assumed]
   real brush_rpm = real(-120);              // rev/min, sign = sense of rotation [assumed]
   real brush_discharge_time = real(1e-3);   // s, relaxation time of a particle's charge in brush contact [assumed]
 
   // --- air ---
-  real air_viscosity = real(1.81e-5);       // Pa s, eta [DESIGN §5]
-  real air_density = real(1.225);           // kg/m^3, rho [DESIGN §5]
+  real air_viscosity = real(1.81e-5);       // Pa s, eta [spec]
+  real air_density = real(1.225);           // kg/m^3, rho [spec]
 
   // --- particles and materials ---
-  real particle_diameter_min = real(0.5e-3);  // m [DESIGN §5]
-  real particle_diameter_max = real(1.0e-3);  // m [DESIGN §5]
-  real metal_density_min = real(8400);        // kg/m^3 [DESIGN §5]
-  real metal_density_max = real(8900);        // kg/m^3 [DESIGN §5]
-  real plastic_density = real(946);           // kg/m^3 [DESIGN §5]
-  real plastic_eps_r = real(2.5);             // relative permittivity of the insulator [DESIGN §5]
-  real particle_friction = real(0.2);         // particle-particle Coulomb friction [DESIGN §5]
-  // Charge relaxation time constants tau = eps/sigma through the drum contact (DESIGN §5: infinite
+  real particle_diameter_min = real(0.5e-3);  // m [spec]
+  real particle_diameter_max = real(1.0e-3);  // m [spec]
+  real metal_density_min = real(8400);        // kg/m^3 [spec]
+  real metal_density_max = real(8900);        // kg/m^3 [spec]
+  real plastic_density = real(946);           // kg/m^3 [spec]
+  real plastic_eps_r = real(2.5);             // relative permittivity of the insulator [spec]
+  real particle_friction = real(0.2);         // particle-particle Coulomb friction [spec]
+  // Charge relaxation time constants tau = eps/sigma through the drum contact (infinite
   // for plastics, ~0 for metals, in between for non-liberated middlings).
   real metal_relaxation_time = real(0);                                   // s
   real plastic_relaxation_time = std::numeric_limits<real>::infinity();   // s
   real middling_relaxation_time = real(0.5);                              // s [assumed]
 
-  // --- corona charging ---
-  // Ion-charging time constant of Pauthenier's law tau_c = 4 eps0 / (N0 e mu); 0 means a particle in
-  // the corona zone takes its saturation charge at once [assumed default].
-  real corona_charging_time = real(0);       // s
-
   // --- electric force model ---
   real image_force_cutoff = real(5e-3);      // m, image force acts for charge-to-drum-surface distance <= cutoff [assumed]
 
   // --- integration ---
-  real time_step = real(1e-4);               // s, h in [1e-4, 1e-3] [DESIGN §5]
+  real time_step = real(1e-4);               // s, h in [1e-4, 1e-3] [spec]
 
   // Derived helpers.
   DVI_HD real drumRadius() const { return drum_diameter / 2; }

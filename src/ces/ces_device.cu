@@ -17,20 +17,23 @@ constexpr int kThreads = 256;
 
 int blocks(int64_t n) { return int((n + kThreads - 1) / kThreads); }
 
-__global__ void forceKernel(int64_t n, const CesModel* m, const uint8_t* status, const real* charge,
-                            const real* radius, const Vec3* pos, const Vec3* vel, const uint8_t* flags, Vec3* force) {
+__global__ void forceKernel(int64_t n, const CesModel* m, const uint8_t* status, const int32_t* material,
+                            const real* charge, const real* radius, const real* bound, const Vec3* pos, const Vec3* vel,
+                            const uint8_t* flags, Vec3* force) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n || status[i] != kStatusInFlight || (flags[i] & kBodyFixed)) return;
-  force[i] += cesParticleForce(*m, pos[i], vel[i], charge[i], radius[i]);
+  force[i] += cesParticleForce(*m, material[i], pos[i], vel[i], charge[i], radius[i], bound[i]);
 }
 
 // Charge update and classification (CesMachine::postStep's loop); a changed status is appended to the list.
 __global__ void postStepKernel(int64_t n, const CesModel* m, real h, uint8_t* status, const int32_t* material,
-                               real* charge, const real* radius, const real* bound, const Vec3* pos,
+                               real* charge, uint8_t* pflags, const real* radius, const real* bound, const Vec3* pos,
                                int32_t* changed, uint8_t* changed_status, int32_t* n_changed) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n || status[i] != kStatusInFlight) return;
-  charge[i] = cesChargeUpdate(*m, material[i], pos[i], charge[i], radius[i], bound[i], h);
+  uint8_t f = pflags[i];
+  charge[i] = cesChargeUpdate(*m, material[i], pos[i], charge[i], radius[i], bound[i], h, f);
+  pflags[i] = f;
   const uint8_t next = cesClassify(*m, pos[i]);
   if (next != status[i]) {
     status[i] = next;
@@ -51,6 +54,19 @@ class CudaCesDevice final : public CesDevice {
       m.field.csm.charges = charges_.data();
       m.field.csm.conductors = conductors_.data();
     }
+    if (m.field.model == 2) {  // the corona grid: its four arrays to the device once, the view pointed at them
+      const GridFieldView& g = m.field.grid;
+      const size_t nn = size_t(g.nx) * size_t(g.ny);
+      grid_ex_.upload(g.Ex, nn);
+      grid_ey_.upload(g.Ey, nn);
+      grid_phi_.upload(g.phi, nn);
+      grid_ions_.upload(g.ion_density, nn);
+      DVI_CUDA(cudaDeviceSynchronize());
+      m.field.grid.Ex = grid_ex_.data();
+      m.field.grid.Ey = grid_ey_.data();
+      m.field.grid.phi = grid_phi_.data();
+      m.field.grid.ion_density = grid_ions_.data();
+    }
     model_.upload(&m, 1);
     DVI_CUDA(cudaDeviceSynchronize());
     n_changed_.resize(1);
@@ -60,6 +76,7 @@ class CudaCesDevice final : public CesDevice {
     status_.uploadTail(p.status, first);
     material_.uploadTail(p.material, first);
     charge_.uploadTail(p.charge, first);
+    pflags_.uploadTail(p.flags, first);
     radius_.uploadTail(p.radius, first);
     bound_.uploadTail(p.bound, first);
     count_ = p.count();
@@ -69,8 +86,9 @@ class CudaCesDevice final : public CesDevice {
   void forces(const DeviceBodyRefs& b, Vec3* force) override {
     const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
     if (n == 0) return;
-    forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), status_.data(), charge_.data(),
-                                                        radius_.data(), b.pos, b.vel, b.flags, force);
+    forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), status_.data(), material_.data(),
+                                                        charge_.data(), pflags_.data(), radius_.data(), bound_.data(), b.pos, b.vel,
+                                                        b.flags, force);
     DVI_CUDA_LAUNCH("CES forceKernel");
   }
 
@@ -83,7 +101,7 @@ class CudaCesDevice final : public CesDevice {
     changed_status_.resize(size_t(n));
     DVI_CUDA(cudaMemsetAsync(n_changed_.data(), 0, sizeof(int32_t), s));
     postStepKernel<<<blocks(n), kThreads, 0, s>>>(n, model_.data(), h, status_.data(), material_.data(),
-                                                   charge_.data(), radius_.data(), bound_.data(), b.pos,
+                                                   charge_.data(), pflags_.data(), radius_.data(), bound_.data(), b.pos,
                                                    changed_.data(), changed_status_.data(), n_changed_.data());
     DVI_CUDA_LAUNCH("CES postStepKernel");
     std::vector<int32_t> count;
@@ -99,6 +117,7 @@ class CudaCesDevice final : public CesDevice {
   }
 
   void downloadCharges(std::vector<real>& charge) override { charge_.download(charge, count_, 0); }
+  void downloadFlags(std::vector<uint8_t>& flags) override { pflags_.download(flags, count_, 0); }
 
   void setCharge(int32_t body, real q) override {
     if (body < 0 || size_t(body) >= count_) return;
@@ -111,7 +130,9 @@ class CudaCesDevice final : public CesDevice {
   gpu::DeviceBuffer<CesModel> model_{"CES model"};
   gpu::DeviceBuffer<CsmLineCharge> charges_{"CES CSM line charges"};
   gpu::DeviceBuffer<CsmConductor> conductors_{"CES CSM conductors"};
-  gpu::DeviceBuffer<uint8_t> status_{"CES particle status"};
+  gpu::DeviceBuffer<float> grid_ex_{"CES corona grid Ex"}, grid_ey_{"CES corona grid Ey"};
+  gpu::DeviceBuffer<float> grid_phi_{"CES corona grid phi"}, grid_ions_{"CES corona grid ion density"};
+  gpu::DeviceBuffer<uint8_t> status_{"CES particle status"}, pflags_{"CES particle flags"};
   gpu::DeviceBuffer<int32_t> material_{"CES particle material"};
   gpu::DeviceBuffer<real> charge_{"CES particle charge"}, radius_{"CES particle radius"}, bound_{"CES particle bound"};
   gpu::DeviceBuffer<int32_t> changed_{"CES changed particles"}, n_changed_{"CES changed count"};

@@ -1,4 +1,4 @@
-// The CES machine's per-particle work on a device backend (issue 5, DESIGN §5): the force field (Coulomb,
+// The CES machine's per-particle work on a device backend (docs/CES.md): the force field (Coulomb,
 // image, drag), the charge update and the classification run as CUDA kernels on the GPU system's body
 // arrays, through the same DVI_HD functions the host runs (cesParticleForce, cesChargeUpdate, cesClassify in
 // particle_model.h). Per step only the particles whose status changed come back to the host (collected or
@@ -21,7 +21,7 @@ struct CesParticles;  // machine.h
 class CesDevice {
  public:
   virtual ~CesDevice() = default;
-  // Uploads particles [first, p.count()): status, material, charge, radius, bounding radius.
+  // Uploads particles [first, p.count()): status, material, charge, flags, radius, bounding radius.
   virtual void append(const CesParticles& p, size_t first) = 0;
   // Adds the CES force of every in-flight, movable particle to force (a device array, one per body).
   virtual void forces(const DeviceBodyRefs& b, Vec3* force) = 0;
@@ -29,6 +29,7 @@ class CesDevice {
   // follows. changed: the particles whose status changed (body, new status), in body order.
   virtual void postStep(const DeviceBodyRefs& b, real h, std::vector<std::pair<int32_t, uint8_t>>& changed) = 0;
   virtual void downloadCharges(std::vector<real>& charge) = 0;  // resized to the uploaded count
+  virtual void downloadFlags(std::vector<uint8_t>& flags) = 0;  // ParticleFlag bits, resized likewise
   virtual void setCharge(int32_t body, real q) = 0;
 };
 

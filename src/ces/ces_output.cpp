@@ -201,6 +201,7 @@ distribution.png  collected mass per mm along the collection plane for each mate
                   with the configured splitters
 splitters.png     separation score (mean Newton efficiency) over (s1, s2), the best setting, and grade/recovery
                   of metal (conductor bin) and plastic (nonconductor bin) through the best setting
+grade_recovery.png the grade-recovery curve of each product and the optimised setting
 """
 import csv, json, os, sys
 
@@ -272,6 +273,25 @@ a2.set_title("through the best setting s1 = %.1f mm, s2 = %.1f mm" % (best["s1_m
 a2.legend(fontsize=7, loc="lower center")
 fig.tight_layout()
 fig.savefig(os.path.join(d, "splitters.png"), dpi=120)
+
+gr = list(csv.DictReader(open(os.path.join(d, "ces_grade_recovery.csv"))))
+fig, ax = plt.subplots(figsize=(6, 5))
+for prod, col in (("conductor", colors["metal"]), ("nonconductor", colors["plastic"])):
+    pts = [(float(r[prod + "_recovery"]), float(r[prod + "_grade"])) for r in gr if float(r[prod + "_grade"]) > 0]
+    if pts:
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, color=col, label=prod + " product")
+tg = ces.get("grade_targets", {})
+for prod, col in (("conductor", colors["metal"]), ("nonconductor", colors["plastic"])):
+    if prod in tg:
+        ax.axhline(tg[prod], color=col, ls=":", lw=1)
+ax.plot([best["recovery_metal"]], [best["grade_metal"]], "*", color=colors["metal"], ms=12)
+ax.plot([best["recovery_plastic"]], [best["grade_plastic"]], "*", color=colors["plastic"], ms=12)
+ax.set_xlabel("recovery (of the fed mass)")
+ax.set_ylabel("grade")
+ax.set_title("grade-recovery curves (one splitter swept); stars: the optimised setting", fontsize=9)
+ax.legend(fontsize=8)
+fig.tight_layout()
+fig.savefig(os.path.join(d, "grade_recovery.png"), dpi=120)
 )PY";
 }
 

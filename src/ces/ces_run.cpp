@@ -85,11 +85,20 @@ json binsJson(const BinMasses& m) {
 }
 
 json cellJson(const SplitterCell& c) {
-  return json{{"s1_mm", c.s1 * 1e3},           {"s2_mm", c.s2 * 1e3},
-              {"grade_metal", c.grade_metal},     {"recovery_metal", c.recovery_metal},
-              {"grade_plastic", c.grade_plastic}, {"recovery_plastic", c.recovery_plastic},
-              {"score", c.score},                 {"bins", binsJson(c.mass)}};
+  return json{{"s1_mm", c.s1 * 1e3},
+              {"s2_mm", c.s2 * 1e3},
+              {"grade_metal", c.grade_metal},
+              {"recovery_metal", c.recovery_metal},
+              {"grade_plastic", c.grade_plastic},
+              {"recovery_plastic", c.recovery_plastic},
+              {"middling_fraction", c.middling_fraction},
+              {"score", c.score},
+              {"meets_targets", c.meets_targets},
+              {"bins", binsJson(c.mass)}};
 }
+
+// A number, or null when undefined (no particle to average over, no corona model).
+json numberOrNull(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
 
 void writeCheckpoint(const CesMachine& m, const json& doc, const std::string& dir) {
   std::error_code ec;
@@ -175,10 +184,12 @@ json massBalanceJson(const MassBalance& bal) {
   c["fed_mass_kg"] = double(bal.fed_fg) * kFemtogram;
   c["collected_mass_kg"] = double(bal.collected_fg) * kFemtogram;
   c["in_flight_mass_kg"] = double(bal.in_flight_fg) * kFemtogram;
+  c["held_up_mass_kg"] = double(bal.held_up_fg) * kFemtogram;
   c["lost_mass_kg"] = double(bal.lost_fg) * kFemtogram;
   c["fed_particles"] = bal.fed;
   c["collected_particles"] = bal.collected;
   c["in_flight_particles"] = bal.in_flight;
+  c["held_up_particles"] = bal.held_up;
   c["lost_particles"] = bal.lost;
   c["balance_closes"] = bal.closes();
   c["mass_unit_kg"] = kFemtogram;
@@ -187,13 +198,92 @@ json massBalanceJson(const MassBalance& bal) {
 
 std::string massBalanceLine(const MassBalance& bal) {
   const double g = kFemtogram * 1e3;
-  char b[400];
+  char b[480];
   std::snprintf(b, sizeof b,
-                "fed %.6g g = collected %.6g g + in flight %.6g g + lost %.6g g (%lld = %lld + %lld + %lld particles)%s",
+                "fed %.6g g = collected %.6g g + in flight %.6g g + held up %.6g g + lost %.6g g "
+                "(%lld = %lld + %lld + %lld + %lld particles)%s",
                 double(bal.fed_fg) * g, double(bal.collected_fg) * g, double(bal.in_flight_fg) * g,
-                double(bal.lost_fg) * g, (long long)bal.fed, (long long)bal.collected, (long long)bal.in_flight,
-                (long long)bal.lost, bal.closes() ? ", closes exactly" : ", DOES NOT CLOSE");
+                double(bal.held_up_fg) * g, double(bal.lost_fg) * g, (long long)bal.fed, (long long)bal.collected,
+                (long long)bal.in_flight, (long long)bal.held_up, (long long)bal.lost,
+                bal.closes() ? ", closes exactly" : ", DOES NOT CLOSE");
   return b;
+}
+
+SplitterBasis splitterBasis(const CesMachine& m) {
+  SplitterBasis basis;
+  const CesParticles& p = m.particles();
+  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i)
+    basis.fed_fg[size_t(m.config().materials[size_t(p.material[i])].kind)] += p.mass_fg[i];
+  basis.target_conductor = m.config().grade_target_conductor;
+  basis.target_nonconductor = m.config().grade_target_nonconductor;
+  return basis;
+}
+
+json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalance& bal) {
+  const CesConfig& cfg = m.config();
+  const CesParticles& p = m.particles();
+  const SplitterCell& best = table.cells[table.best];
+  const size_t nm = cfg.materials.size();
+  std::vector<int64_t> fed(nm, 0), pinned(nm, 0), binned(nm, 0), col_fg(nm, 0), col_n(nm, 0), positive(nm, 0);
+  std::vector<double> x_fg(nm, 0), q_sum(nm, 0);
+  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) {
+    const size_t k = size_t(p.material[i]);
+    fed[k] += p.mass_fg[i];
+    if (p.flags[i] & kFlagPinned) pinned[k] += p.mass_fg[i];
+  }
+  // The bin each kind belongs in: metal -> conductor, plastic -> nonconductor, middling -> middling.
+  auto ownBin = [](MaterialKind kind) {
+    return kind == MaterialKind::Metal ? kBinConductor : kind == MaterialKind::Plastic ? kBinNonconductor : kBinMiddling;
+  };
+  for (const CollectedParticle& c : m.collected()) {
+    const size_t k = size_t(c.material);
+    col_fg[k] += c.mass_fg;
+    ++col_n[k];
+    x_fg[k] += c.x * double(c.mass_fg);
+    const double q = double(p.charge[size_t(c.body)]);
+    q_sum[k] += q;
+    positive[k] += q > 0;
+    const int bin = c.x < best.s1 ? kBinNonconductor : c.x < best.s2 ? kBinMiddling : kBinConductor;
+    if (bin == ownBin(c.kind)) binned[k] += c.mass_fg;
+  }
+  auto frac = [](int64_t a, int64_t b) { return b > 0 ? double(a) / double(b) : std::nan(""); };
+  json o = json::object();
+  for (size_t k = 0; k < nm; ++k) {
+    const std::string n = cfg.materials[k].name;
+    o[n + ".fed_mass_kg"] = double(fed[k]) * kFemtogram;
+    o[n + ".collected_fraction"] = numberOrNull(frac(col_fg[k], fed[k]));
+    o[n + ".mean_landing_mm"] = numberOrNull(col_fg[k] > 0 ? 1e3 * x_fg[k] / double(col_fg[k]) : std::nan(""));
+    o[n + ".mean_charge_C"] = numberOrNull(col_n[k] > 0 ? q_sum[k] / double(col_n[k]) : std::nan(""));
+    o[n + ".positive_charge_fraction"] = numberOrNull(frac(positive[k], col_n[k]));
+    o[n + ".recovery"] = numberOrNull(frac(binned[k], fed[k]));
+    o["pinned." + n] = numberOrNull(frac(pinned[k], fed[k]));
+  }
+  o["conductor.grade"] = best.grade_metal;
+  o["conductor.recovery"] = best.recovery_metal;
+  o["nonconductor.grade"] = best.grade_plastic;
+  o["nonconductor.recovery"] = best.recovery_plastic;
+  o["middling.mass_fraction"] = best.middling_fraction;
+  o["splitters.s1_mm"] = best.s1 * 1e3;
+  o["splitters.s2_mm"] = best.s2 * 1e3;
+  o["splitters.targets_met"] = table.targets_met ? 1 : 0;
+  // The same at the configured splitters (fixed.*): trends over a sweep at fixed splitter positions.
+  const SplitterCell fixed = splitterCell(m.collected(), cfg.s1, cfg.s2, splitterBasis(m));
+  o["fixed.conductor.grade"] = fixed.grade_metal;
+  o["fixed.conductor.recovery"] = fixed.recovery_metal;
+  o["fixed.nonconductor.grade"] = fixed.grade_plastic;
+  o["fixed.nonconductor.recovery"] = fixed.recovery_plastic;
+  o["fixed.middling.mass_fraction"] = fixed.middling_fraction;
+  o["holdup.mass_fraction"] = numberOrNull(frac(bal.held_up_fg, bal.fed_fg));
+  o["in_flight.mass_fraction"] = numberOrNull(frac(bal.in_flight_fg, bal.fed_fg));
+  o["lost.mass_fraction"] = numberOrNull(frac(bal.lost_fg, bal.fed_fg));
+  const CoronaInfo ci = m.coronaInfo();
+  o["onset_voltage_kV"] = numberOrNull(ci.onset_voltage * 1e-3);
+  o["corona_current_uA_per_m"] = numberOrNull(ci.current_per_m * 1e6);
+  o["ionised"] = ci.ionised ? 1 : 0;
+  o["voltage_kV"] = cfg.voltage * 1e-3;
+  o["drum_rpm"] = cfg.drum_rpm;
+  o["feed_g_s"] = cfg.feed_mass_flow * 1e3;
+  return o;
 }
 
 bool isCesScene(const std::string& path) {
@@ -278,7 +368,7 @@ int runCesMachine(const CesRunOptions& o) {
   const int64_t first = m.steps();
   std::printf("ces machine: %s, %s field, drum %s at %g rpm, U = %g kV, feed %g g/s for %g s; %lld steps of %g s%s\n",
               origin.c_str(), cfg.field_model.c_str(), m.rheonomicDrive() ? "rheonomic" : "kinematic", cfg.drum_rpm,
-              cfg.electrode.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.dt,
+              cfg.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.dt,
               resume ? (" (resumed at t = " + fmt(m.time()) + " s)").c_str() : "");
   if (m.system().backendName() != "cpu")
     std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
@@ -334,9 +424,11 @@ int runCesMachine(const CesRunOptions& o) {
   // Results.
   const MassBalance bal = m.balance();
   if (!bal.closes()) throw std::logic_error("CES mass balance does not close (internal error)");
-  const SplitterTable table = splitterAnalysis(m.collected(), cfg.splitter_lo, cfg.splitter_hi, cfg.splitter_positions);
+  const SplitterBasis basis = splitterBasis(m);
+  const SplitterTable table =
+      splitterAnalysis(m.collected(), cfg.splitter_lo, cfg.splitter_hi, cfg.splitter_positions, basis);
   const BinMasses at = binDirect(m.collected(), cfg.s1, cfg.s2);
-  const SplitterCell configured = splitterCell(m.collected(), cfg.s1, cfg.s2);
+  const SplitterCell configured = splitterCell(m.collected(), cfg.s1, cfg.s2, basis);
   const Distribution dist = massDistribution(m.collected(), cfg.histogram_bin);
 
   const int64_t steps_run = total - first;
@@ -367,6 +459,17 @@ int runCesMachine(const CesRunOptions& o) {
   c["bins"] = binsJson(at);
   c["at_splitters"] = cellJson(configured);
   c["best"] = cellJson(table.cells[table.best]);
+  c["best"]["targets_met"] = table.targets_met;
+  c["grade_targets"] = {{"conductor", cfg.grade_target_conductor}, {"nonconductor", cfg.grade_target_nonconductor}};
+  c["metrics"] = cesMetrics(m, table, bal);
+  {
+    const CoronaInfo ci = m.coronaInfo();
+    c["corona"] = {{"ionised", ci.ionised},
+                   {"onset_voltage_kV", numberOrNull(ci.onset_voltage * 1e-3)},
+                   {"wire_field_on_kV_cm", numberOrNull(ci.wire_field_on * 1e-5)},
+                   {"current_uA_per_m", numberOrNull(ci.current_per_m * 1e6)}};
+  }
+  c["voltage_kV"] = cfg.voltage * 1e-3;
   c["splitter_positions"] = cfg.splitter_positions;
   c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};
   c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
@@ -398,6 +501,7 @@ int runCesMachine(const CesRunOptions& o) {
   writeFileAtomic(out + "/ces_collected.csv", cesCollectedCsv(m));
   writeFileAtomic(out + "/ces_distribution.csv", distributionCsv(dist));
   writeFileAtomic(out + "/ces_splitters.csv", splittersCsv(table));
+  writeFileAtomic(out + "/ces_grade_recovery.csv", gradeRecoveryCsv(gradeRecoveryCurve(table)));
   writeSummary(out + "/summary.json", summary);
   if (cfg.plots) {
     const std::string err = cesMakePlots(out);
@@ -411,12 +515,20 @@ int runCesMachine(const CesRunOptions& o) {
   std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
   if (bal.lost > 0) std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n", (long long)bal.lost);
   const SplitterCell& best = table.cells[table.best];
+  {
+    const CoronaInfo ci = m.coronaInfo();
+    if (cfg.field_model == "corona")
+      std::printf("corona: onset %.3g kV, %s, current %.4g uA/m\n", ci.onset_voltage * 1e-3,
+                  ci.ionised ? "ionised" : "below onset (Laplace field, no ions)", ci.current_per_m * 1e6);
+  }
   std::printf("bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g (nonconductor/middling/conductor)\n",
               cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
               double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
-  std::printf("best splitters: s1 = %.1f mm, s2 = %.1f mm (score %.3f; metal grade %.3f recovery %.3f; plastic grade %.3f recovery %.3f)\n",
-              best.s1 * 1e3, best.s2 * 1e3, best.score, best.grade_metal, best.recovery_metal, best.grade_plastic,
-              best.recovery_plastic);
+  std::printf("best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
+              "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
+              best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
+              cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic,
+              best.recovery_plastic, best.middling_fraction);
   std::printf("results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n", out.c_str(),
               cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
               frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",

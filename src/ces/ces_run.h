@@ -12,6 +12,7 @@
 
 #include "ces/ces_config.h"
 #include "ces/machine.h"
+#include "ces/splitters.h"
 #include "chrono_like/system.h"
 
 namespace dvi {
@@ -60,10 +61,15 @@ struct CesRunTotals {
   nlohmann::json stageSeconds() const;  // {name: seconds summed over the run}
 };
 
-// fed/collected/in flight/lost in kg and particles, balance_closes, mass_unit_kg (summary.json: ces).
+// fed/collected/in flight/held up/lost in kg and particles, balance_closes, mass_unit_kg (summary.json: ces).
 nlohmann::json massBalanceJson(const MassBalance& b);
-// "fed X g = collected X g + in flight X g + lost X g (n = n + n + n particles), closes exactly"
+// "fed X g = collected X g + in flight X g + held up X g + lost X g (n = n + n + n + n particles), closes exactly"
 std::string massBalanceLine(const MassBalance& b);
+
+// The fed mass per kind and the grade targets of the configuration (splitters.h).
+SplitterBasis splitterBasis(const CesMachine& m);
+// summary.json ces.metrics: a flat object name -> number (null when undefined), docs/CES.md "Outputs".
+nlohmann::json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalance& bal);
 
 }  // namespace ces
 }  // namespace dvi

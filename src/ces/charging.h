@@ -24,6 +24,15 @@ DVI_HD real feliciCharge(real r, real En) {
 // Vector form: n is the unit outward normal of the drum at the contact.
 DVI_HD real feliciCharge(real r, Vec3 E, Vec3 n) { return feliciCharge(r, dot(E, n)); }
 
+// Force on that sphere, resting on the electrode in the field En: F = (zeta(3) + 1/6) 4 pi eps0 r^2 En^2
+// along the normal (Lebedev & Skal'skaya 1962; Félici 1966), the attraction of the sphere's own image
+// in the electrode included. In terms of its charge q_F = (pi^2/6) 4 pi eps0 r^2 En:
+//     F = k_L q_F En,   k_L = (zeta(3) + 1/6) / (pi^2/6) = 0.8321.
+// So the lift is 0.832 q E with the image already in it: no separate image force may be added for a
+// conductor in contact. zeta(3) = 1.2020569031595942 (Apéry's constant).
+constexpr real kZeta3 = real(1.2020569031595942);
+constexpr real kFeliciLiftFactor = (kZeta3 + real(1) / real(6)) / (kPi * kPi / real(6));
+
 // Pauthenier's field-charging factor p = 3 eps_r / (eps_r + 2) (p -> 3 for a conductor, eps_r -> inf).
 DVI_HD real pauthenierFactor(real eps_r) {
   if (std::isinf(eps_r)) return real(3);
@@ -47,9 +56,11 @@ DVI_HD real pauthenierTimeConstant(real ionDensity, real ionMobility) {
 }
 
 // Field charging in a constant field: dq/dt = (q_s / tau_c)(1 - q/q_s)^2, whose solution from q = 0 is
-// q(t) = q_s t / (t + tau_c) (Pauthenier & Moreau-Hanot 1932). Exact update over a step h of the
-// magnitude q (0 <= q): the equivalent time t0 = tau_c q / (q_s - q), then q(t0 + h). q >= q_s does not
-// change (field charging stops at saturation); tau_c <= 0 means instantaneous saturation.
+// q(t) = q_s t / (t + tau_c) (Pauthenier & Moreau-Hanot 1932). Exact update over a step h of the charge
+// q counted in the ions' polarity (q < 0: a particle charged against the ions, which attracts them
+// faster, as the same equation says): the equivalent time t0 = tau_c q / (q_s - q) in (-tau_c, inf),
+// then q(t0 + h). q >= q_s does not change (field charging stops at saturation); tau_c <= 0 means
+// instantaneous saturation.
 DVI_HD real pauthenierChargeUpdate(real q, real qs, real h, real tau_c) {
   if (q >= qs) return q;
   if (!(tau_c > real(0))) return qs;

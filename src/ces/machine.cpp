@@ -91,7 +91,8 @@ void CesForceField::apply(const BodyArrays& b, double, real, Vec3* force, Vec3*)
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i) {
     if (p.status[size_t(i)] != kStatusInFlight || (b.flags[size_t(i)] & kBodyFixed)) continue;
-    force[i] += cesParticleForce(model, b.pos[size_t(i)], b.vel[size_t(i)], p.charge[size_t(i)], p.radius[size_t(i)]);
+    force[i] += cesParticleForce(model, p.material[size_t(i)], b.pos[size_t(i)], b.vel[size_t(i)], p.charge[size_t(i)],
+                                 p.radius[size_t(i)], p.bound[size_t(i)]);
   }
 }
 
@@ -142,7 +143,7 @@ void DrumDrive::impulses(const real* lambda, size_t count) {
 CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys), feeder_(cfg_) {
   if (sys_.bodies().count() != 0) throw InputError("CES machine: the system must be empty");
   if (cfg_.materials.size() > size_t(kMaxMaterials)) throw InputError("CES machine: at most 64 materials");
-  if (cfg_.extra_electrodes.size() + 1 > size_t(kMaxElectrodes)) throw InputError("CES machine: at most 7 extra electrodes");
+  if (cfg_.extra_electrodes.size() + 2 > size_t(kMaxElectrodes)) throw InputError("CES machine: at most 6 extra electrodes");
   sys_.mutableConfig().gyroscopic = cfg_.gyroscopic;  // see CesConfig::gyroscopic
   const real R = real(cfg_.drumRadius()), W = real(cfg_.drum_width);
   // Pair coefficients under the product rule (Bullet's, the core's default): f_particle^2 = mu_pp and
@@ -151,29 +152,63 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   const real fp = particle_friction_;
 
   // Field.
-  const ElectrodeConfig& e = cfg_.electrode;
-  model_.field.model = cfg_.field_model == "csm" ? 1 : 0;
-  if (model_.field.model == 0) {
-    if (!makeTwoCylinderField(R, real(e.diameter / 2), real(e.distance), real(e.angle), real(e.voltage), 0, 0, model_.field.tc))
-      throw InputError("ces.electrode: the two-cylinder field needs the electrode outside the drum");
-  } else {
+  std::vector<ElectrodeConfig> supplied;  // the enabled wire and tube (both at the supply's voltage)
+  if (cfg_.wire.enabled) supplied.push_back(cfg_.wire);
+  if (cfg_.tube.enabled) supplied.push_back(cfg_.tube);
+  if (cfg_.field_model == "two_cylinder") {
+    const ElectrodeConfig& e = cfg_.tube;
+    model_.field.model = 0;
+    if (!makeTwoCylinderField(R, real(e.diameter / 2), real(e.distance), real(e.angle), real(cfg_.voltage), 0, 0, model_.field.tc))
+      throw InputError("ces.electrode.tube: the two-cylinder field needs the tube outside the drum");
+  } else if (cfg_.field_model == "csm") {
+    model_.field.model = 1;
     csm_.addCylinder(0, 0, R, 0);
-    std::vector<ElectrodeConfig> all{e};
+    std::vector<ElectrodeConfig> all = supplied;
     all.insert(all.end(), cfg_.extra_electrodes.begin(), cfg_.extra_electrodes.end());
     for (const ElectrodeConfig& x : all)
       csm_.addCylinder(real(x.distance * std::cos(x.angle)), real(x.distance * std::sin(x.angle)), real(x.diameter / 2),
                        real(x.voltage));
     csm_.solve();
     model_.field.csm = csm_.view();
+  } else {  // corona: wire + optional tube on the supply
+    model_.field.model = 2;
+    CoronaSetup st;
+    auto cyl = [](const ElectrodeConfig& e) {
+      return CoronaCylinder{real(e.distance * std::cos(e.angle)), real(e.distance * std::sin(e.angle)), real(e.diameter / 2),
+                            e.enabled};
+    };
+    st.drum = CoronaCylinder{0, 0, R, true};
+    st.wire = cyl(cfg_.wire);
+    st.tube = cyl(cfg_.tube);
+    st.U = real(cfg_.voltage);
+    st.ion_mobility = real(cfg_.ion_mobility);
+    st.rel_air_density = real(cfg_.rel_air_density);
+    st.roughness = real(cfg_.roughness);
+    // The box covers every place a particle reaches before it is collected or lost: the drum, the
+    // electrodes, the trajectories down to below the collection plane (outside it the box's edge value is
+    // used; the field there is a small fraction of the drum's).
+    const real h = real(cfg_.corona_grid);
+    st.box_x0 = -R - real(0.10);
+    st.box_x1 = real(0.45);
+    st.box_y0 = std::min(real(cfg_.collection_y) - real(0.02), -R - real(0.02));
+    st.box_y1 = R + real(0.10);
+    for (const ElectrodeConfig* e : {&cfg_.wire, &cfg_.tube})
+      if (e->enabled) {
+        st.box_x1 = std::max(st.box_x1, real(e->distance * std::cos(e->angle) + e->diameter / 2) + real(0.02));
+        st.box_y1 = std::max(st.box_y1, real(e->distance * std::sin(e->angle) + e->diameter / 2) + real(0.02));
+      }
+    st.spacing = h;
+    const CoronaSolution& sol = corona_field_.solve(st);
+    model_.field.grid = corona_field_.view();
+    corona_.ionised = sol.ionised;
+    corona_.onset_voltage = double(sol.onset_voltage);
+    corona_.wire_field_on = double(sol.wire_field_on);
+    corona_.current_per_m = double(sol.current_per_m);
   }
   model_.drum = DrumGeometry{0, 0, R, 0, W / 2, real(cfg_.image_cutoff)};
-  model_.polarity = e.voltage < 0 ? real(-1) : real(1);
-  model_.corona_ex = real(std::cos(e.angle));
-  model_.corona_ey = real(std::sin(e.angle));
-  model_.corona_cos_half = real(std::cos(cfg_.corona_half_angle));
-  model_.corona_depth = real(cfg_.corona_depth);
-  model_.corona_tau = real(cfg_.corona_charging_time);
-  model_.corona_field = real(cfg_.corona_field);
+  model_.polarity = cfg_.voltage < 0 ? real(-1) : cfg_.voltage > 0 ? real(1) : real(0);
+  model_.ion_mobility = real(cfg_.ion_mobility);
+  model_.pin_dy = -R * real(std::cos(20.0 * 3.14159265358979323846 / 180.0));  // within 20 deg of the lowest point
   const real rb = real(cfg_.brush_diameter / 2), db = R + rb + real(cfg_.brush_gap);
   model_.brush = CylinderXY{db * real(std::cos(cfg_.brush_angle)), db * real(std::sin(cfg_.brush_angle)), rb};
   model_.brush_tau = real(cfg_.brush_discharge_time);
@@ -182,7 +217,7 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
     model_.electrodes[model_.n_electrodes++] =
         CylinderXY{real(x.distance * std::cos(x.angle)), real(x.distance * std::sin(x.angle)), real(x.diameter / 2)};
   };
-  addElectrode(e);
+  for (const ElectrodeConfig& x : supplied) addElectrode(x);
   for (const ElectrodeConfig& x : cfg_.extra_electrodes) addElectrode(x);
   model_.air_density = real(cfg_.air_density);
   model_.air_viscosity = real(cfg_.air_viscosity);
@@ -271,6 +306,7 @@ int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spe
   p_.status.push_back(material < 0 ? kStatusMachine : kStatusInFlight);
   p_.material.push_back(material);
   p_.charge.push_back(charge);
+  p_.flags.push_back(0);
   p_.radius.push_back(spec ? spec->radius : real(0));
   p_.bound.push_back(spec ? spec->bound : real(0));
   p_.mass_fg.push_back(spec ? spec->mass_fg : 0);
@@ -350,6 +386,9 @@ void CesMachine::syncCharges() const {
   std::vector<real> q;
   dev_->downloadCharges(q);
   std::copy(q.begin(), q.begin() + std::ptrdiff_t(std::min(q.size(), dev_uploaded_)), p_.charge.begin());
+  std::vector<uint8_t> f;
+  dev_->downloadFlags(f);
+  std::copy(f.begin(), f.begin() + std::ptrdiff_t(std::min(f.size(), dev_uploaded_)), p_.flags.begin());
   charges_stale_ = false;
 }
 
@@ -358,7 +397,8 @@ void CesMachine::stepDevice() {
   std::vector<int32_t> ids{drum_, brush_};  // their omega is set below
   for (const RecentSpawn& r : recent_) ids.push_back(r.body);  // the feeder's overlap test
   sys_.syncBodiesToHost(ids);
-  syncCharges();  // the host copy is whole before new particles append to it
+  // The host's charges and flags of earlier particles may be stale here: append() uploads only the new
+  // ones, and syncCharges() fetches the first dev_uploaded_ when an output asks.
   emit();
   if (!drive_) sys_.mutableBodies().omega[size_t(drum_)] = Vec3{0, 0, real(cfg_.omegaDrum())};
   sys_.mutableBodies().omega[size_t(brush_)] = Vec3{0, 0, real(cfg_.omegaBrush())};
@@ -417,7 +457,7 @@ void CesMachine::postStep() {
     const size_t k = size_t(i);
     next[k] = p_.status[k];
     if (p_.status[k] != kStatusInFlight) continue;
-    p_.charge[k] = cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h);
+    p_.charge[k] = cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h, p_.flags[k]);
     next[k] = cesClassify(m, b.pos[k]);
   }
   for (int64_t i = n_machine_; i < n; ++i)
@@ -449,7 +489,16 @@ void CesMachine::settle(size_t k, uint8_t next) {
   b.vel[k] = b.omega[k] = Vec3{0, 0, 0};
 }
 
+bool CesMachine::heldUp(size_t k) const {
+  if (p_.status[k] != kStatusInFlight) return false;
+  const Vec3 p = sys_.bodies().pos[k];
+  const real tol = model_.contact_tol * p_.bound[k];
+  if (distanceToCylinderSurface(model_.brush, p) <= tol) return true;
+  return (p_.flags[k] & kFlagPinned) && touchesDrum(model_, p, p_.bound[k]);
+}
+
 MassBalance CesMachine::balance() const {
+  syncCharges();  // the flags
   MassBalance r;
   for (const ParticleSpec& s : specs_) r.fed_fg += s.mass_fg;  // the feeder's and any added by hand
   for (size_t k = size_t(n_machine_); k < p_.count(); ++k) {
@@ -458,7 +507,10 @@ MassBalance CesMachine::balance() const {
     switch (p_.status[k]) {
       case kStatusCollected: r.collected_fg += mg, ++r.collected; break;
       case kStatusLost: r.lost_fg += mg, ++r.lost; break;
-      default: r.in_flight_fg += mg, ++r.in_flight; break;
+      default:
+        if (heldUp(k)) r.held_up_fg += mg, ++r.held_up;
+        else r.in_flight_fg += mg, ++r.in_flight;
+        break;
     }
   }
   return r;
@@ -469,7 +521,7 @@ MassBalance CesMachine::balance() const {
 // ---------------------------------------------------------------------------------------------------
 
 namespace {
-constexpr char kMagic[8] = {'D', 'V', 'I', 'C', 'E', 'S', '0', '1'};
+constexpr char kMagic[8] = {'D', 'V', 'I', 'C', 'E', 'S', '0', '2'};
 }
 
 void CheckpointSystem::saveCore(std::ostream& o) const {
@@ -514,6 +566,7 @@ void CesMachine::save(std::ostream& o) const {
   putVec(o, p_.status);
   putVec(o, p_.material);
   putVec(o, p_.charge);
+  putVec(o, p_.flags);
   putVec(o, collected_);
   putVec(o, recent_);
   const BodyArrays& b = sys_.bodies();
@@ -561,17 +614,21 @@ void CesMachine::load(std::istream& in) {
   std::vector<uint8_t> status;
   std::vector<int32_t> material;
   std::vector<real> charge;
+  std::vector<uint8_t> pflags;
   getVec(in, status);
   getVec(in, material);
   getVec(in, charge);
+  getVec(in, pflags);
   getVec(in, collected_);
   getVec(in, recent_);
-  if (status.size() != p_.count() || material.size() != p_.count() || charge.size() != p_.count())
+  if (status.size() != p_.count() || material.size() != p_.count() || charge.size() != p_.count() ||
+      pflags.size() != p_.count())
     throw InputError("checkpoint: body count differs from the particle records");
   p_.status = status;
   lost_ = int64_t(std::count(status.begin(), status.end(), uint8_t(kStatusLost)));
   p_.material = material;
   p_.charge = charge;
+  p_.flags = pflags;
   BodyArrays& b = sys_.mutableBodies();
   std::vector<Vec3> pos, vel, omega;
   std::vector<Quat> rot;

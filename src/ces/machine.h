@@ -1,4 +1,4 @@
-// The corona electrostatic separator as a plug-in of a dvi::System (DESIGN §5, issue 5).
+// The corona electrostatic separator as a plug-in of a dvi::System (docs/CES.md).
 //
 // Bodies (added in this order, before any particle):
 //   drum      cylinder, axis z, grounded; turned at omega(t) either as a kinematic body (omega set each
@@ -11,7 +11,7 @@
 // Machine parts only collide with particles (collision group 2, mask 1; particles group 1).
 // Particles are appended by the feeder (System::addBody) in feed order.
 //
-// One machine step (CesMachine::step), in the order of DESIGN §2:
+// One machine step (CesMachine::step):
 //   1. Feeder: emit the particles due in this step.
 //   2. Drive: the drum's (and brush's) prescribed angular velocity.
 //   3. System::step(); in its IntegrateForces stage the CesForceField adds Coulomb + image + drag to every
@@ -19,16 +19,17 @@
 //      cesParticleForce), and the machine copies only the bodies it reads or edits (the recent spawns, the
 //      drum and the brush, the particles that change status). A device backend without the CES kernels
 //      gets the old path: all bodies synced to the host, the field applied there, the host marked dirty.
-//   4. Post-step (CesParticles; on the device with CesDevice): charge update (corona, drum contact, electrode
-//      contact, brush) and status:
+//   4. Post-step (CesParticles; on the device with CesDevice): charge update (ions, drum contact, electrode
+//      contact, brush), the pinned flag, and status:
 //      a particle whose centre crosses the collection plane is collected: its crossing point is recorded
 //      and the body is frozen (kBodyFixed, zero velocity) 5 cm below the plane, in the "bin"; one that leaves
 //      the domain is lost (frozen where it is). Bodies are never removed: the body count only grows, and
-//      fed = collected + in flight + lost holds exactly (masses in whole femtograms).
+//      fed = collected + in flight + held up + lost holds exactly (masses in whole femtograms).
 //
 // Per-particle state lives here, in arrays indexed by body (machine parts included, status kStatusMachine).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
@@ -48,6 +49,7 @@ struct CesParticles {
   std::vector<uint8_t> status;     // ParticleStatus
   std::vector<int32_t> material;   // index into CesConfig::materials (-1 for machine parts)
   std::vector<real> charge;        // C
+  std::vector<uint8_t> flags;      // ParticleFlag bits (kFlagPinned)
   std::vector<real> radius;        // volume-equivalent radius, m
   std::vector<real> bound;         // bounding radius, m
   std::vector<int64_t> mass_fg;    // femtograms
@@ -63,13 +65,28 @@ struct CollectedParticle {
   double x, z, t;
 };
 
+// Where every fed particle is: collected (crossed the collection plane), lost (left the machine's domain
+// otherwise; must be 0), held up (neither, and at this moment in contact with the brush, or in contact
+// with the drum after having been carried, touching it, to within 20 degrees of its lowest point, where
+// only electric forces hold a particle: material the brush has not yet removed), or in flight (the rest:
+// falling, bouncing, or riding the drum before its lowest point). Masses in whole femtograms.
 struct MassBalance {
-  int64_t fed_fg = 0, collected_fg = 0, in_flight_fg = 0, lost_fg = 0;
-  int64_t fed = 0, collected = 0, in_flight = 0, lost = 0;  // particle counts
-  bool closes() const { return fed_fg == collected_fg + in_flight_fg + lost_fg && fed == collected + in_flight + lost; }
+  int64_t fed_fg = 0, collected_fg = 0, in_flight_fg = 0, held_up_fg = 0, lost_fg = 0;
+  int64_t fed = 0, collected = 0, in_flight = 0, held_up = 0, lost = 0;  // particle counts
+  bool closes() const {
+    return fed_fg == collected_fg + in_flight_fg + held_up_fg + lost_fg && fed == collected + in_flight + held_up + lost;
+  }
 };
 
 class CesMachine;
+
+// The corona of the "corona" field model (field_corona.h); NaN and not ionised for the Laplace models.
+struct CoronaInfo {
+  bool ionised = false;
+  double onset_voltage = std::nan("");   // V (signed like the supply)
+  double wire_field_on = std::nan("");   // V/m, Peek's onset field at the wire surface
+  double current_per_m = std::nan("");   // A/m, corona current per metre of wire
+};
 
 // Coulomb + image + drag on every particle in flight (IntegrateForces).
 class CesForceField : public ForceField {
@@ -84,7 +101,7 @@ class CesForceField : public ForceField {
 };
 
 // Rheonomic drive of the drum: 3 rows fix its centre, 2 keep its axis along z, 1 prescribes omega_z(t)
-// (Psi/h + dPsi/dt, DESIGN §3). The drive row's impulse / h is the drive torque.
+// (Psi/h + dPsi/dt, docs/ARCHITECTURE.md). The drive row's impulse / h is the drive torque.
 class DrumDrive : public RowProvider {
  public:
   DrumDrive(int body, Vec3 centre, double omega) : body_(body), centre_(centre), omega_(omega) {}
@@ -130,8 +147,12 @@ class CesMachine {
   const std::vector<ParticleSpec>& specs() const { return specs_; }  // particle k is body firstParticleBody() + k
   int firstParticleBody() const { return n_machine_; }
   const std::vector<CollectedParticle>& collected() const { return collected_; }
+  // On a device backend the positions are the host's copy (synced at the end of a run).
   MassBalance balance() const;
-  // Particles in flight now, in O(1) (balance() walks every particle): fed - collected - lost.
+  // Particle body k is held up (MassBalance) at the host's positions.
+  bool heldUp(size_t k) const;
+  // Particles in the machine now (in flight or held up), in O(1) (balance() walks every particle):
+  // fed - collected - lost.
   int64_t particlesInFlight() const { return int64_t(p_.count()) - n_machine_ - int64_t(collected_.size()) - lost_; }
   int64_t feederMassFg() const { return feeder_.fedMassFg(); }  // what the feeder delivered (excludes particles added by hand)
   int drumBody() const { return drum_; }
@@ -139,6 +160,7 @@ class CesMachine {
   bool rheonomicDrive() const { return drive_ != nullptr; }
   double driveTorque() const { return drive_ ? drive_->torque() : 0.0; }
   double drumOmega() const { return cfg_.omegaDrum(); }
+  const CoronaInfo& coronaInfo() const { return corona_; }
   // Exact field at a point (region 0 in the gas).
   FieldSample field(Vec3 p) const { return evalField(model_.field, p); }
 
@@ -168,10 +190,12 @@ class CesMachine {
   System& sys_;
   CesModel model_{};
   CsmField csm_;
+  CoronaField corona_field_;  // the corona model's solution (its grid backs model_.field.grid)
+  CoronaInfo corona_;
   Feeder feeder_;
   std::shared_ptr<CesForceField> field_;
   std::shared_ptr<DrumDrive> drive_;
-  mutable CesParticles p_;  // charges refreshed from the device by syncCharges()
+  mutable CesParticles p_;  // charges and flags refreshed from the device by syncCharges()
   std::vector<ParticleSpec> specs_;
   std::vector<CollectedParticle> collected_;
   struct RecentSpawn {

@@ -1,9 +1,8 @@
-// The per-particle operations of the CES plug-in, written once as DVI_HD functions over plain data
-// (DESIGN §2 "single source"): the field at a point, the force on a particle (Coulomb + image + drag),
-// the charge update of one step (corona charging, relaxation through a grounded contact, brush
-// discharge) and the particle's status (in flight / collected / lost). The CPU calls them from OpenMP
-// loops (machine.cpp); a CUDA kernel can call them on a device copy of CesModel (the CSM charges would
-// then point to device memory).
+// The per-particle operations of the CES plug-in, written once as DVI_HD functions over plain data: the
+// field at a point, the force on a particle (Coulomb or the conductor's lift, image, drag), the charge
+// update of one step (ion charging, relaxation through a grounded contact, brush discharge) and the
+// particle's status (in flight / collected / lost). The CPU calls them from OpenMP loops (machine.cpp),
+// the CUDA kernels (ces_device.cu) on a device copy of CesModel whose field arrays point to device memory.
 //
 // Every formula lives in forces.h / charging.h / field_*.h with its reference; this file only decides
 // where each applies (docs/CES.md, "Where each force and charge applies").
@@ -13,6 +12,7 @@
 #include <cstdint>
 
 #include "ces/charging.h"
+#include "ces/field_corona.h"
 #include "ces/field_csm.h"
 #include "ces/field_two_cylinder.h"
 #include "ces/forces.h"
@@ -23,16 +23,22 @@ namespace ces {
 constexpr int kMaxMaterials = 64;
 constexpr int kMaxElectrodes = 8;
 
-// Field model: the exact two-cylinder solution or a charge-simulation model (field_csm.h).
+// Field model: the exact two-cylinder solution or a charge-simulation model (field_csm.h), both Laplace
+// fields without ions, or the steady ionised field of the corona wire sampled on a grid (field_corona.h:
+// the Laplace field below onset, with ion density 0).
 struct FieldView {
-  int32_t model;  // 0: two-cylinder, 1: CSM
+  int32_t model;  // 0: two-cylinder, 1: CSM, 2: corona grid
   TwoCylinderField tc;
   CsmFieldView csm;
+  GridFieldView grid;
 };
 
 DVI_HD FieldSample evalField(const FieldView& f, Vec3 p) {
-  return f.model == 0 ? evalTwoCylinder(f.tc, p) : evalCsm(f.csm, p);
+  return f.model == 0 ? evalTwoCylinder(f.tc, p) : f.model == 1 ? evalCsm(f.csm, p) : evalGrid(f.grid, p);
 }
+
+// Ion number density (1/m^3) at p: the corona model's; zero in the Laplace models.
+DVI_HD real ionDensity(const FieldView& f, Vec3 p) { return f.model == 2 ? ionDensityAt(f.grid, p) : real(0); }
 
 // A grounded or energised cylinder (axis along z) a particle can touch: the brush, an electrode.
 struct CylinderXY {
@@ -41,16 +47,18 @@ struct CylinderXY {
 
 DVI_HD real distanceToCylinderSurface(const CylinderXY& c, Vec3 p) { return std::hypot(p.x - c.cx, p.y - c.cy) - c.R; }
 
+// Per-particle flags (CesParticles::flags).
+enum ParticleFlag : uint8_t {
+  kFlagPinned = 1,  // touched the drum near its lowest point (see CesModel::pin_dy): held by electric forces
+};
+
 // Everything the kernels read. Plain data: copyable to the device as one struct.
 struct CesModel {
   FieldView field;
   DrumGeometry drum;         // axis, radius, width, image-force cutoff (forces.h)
-  real polarity;             // sign of the corona ions (sign of the corona electrode's potential)
-  real corona_ex, corona_ey; // unit vector from the drum axis toward the corona electrode
-  real corona_cos_half;      // cos of the corona zone's half angle
-  real corona_depth;         // m, distance to the drum surface within which particles are charged
-  real corona_tau;           // s, Pauthenier's charging time constant (0: at once)
-  real corona_field;         // V/m, charging field of the ionised zone (Pauthenier uses max(|E|, this))
+  real polarity;             // sign of the corona ions = sign of the supply voltage (0: supply off)
+  real ion_mobility;         // m^2/(V s), of the corona's ions (Pauthenier's charging time)
+  real pin_dy;               // a particle touching the drum with y - y_axis < pin_dy is pinned (kFlagPinned)
   CylinderXY brush;
   real brush_tau;            // s, discharge time constant in brush contact
   int32_t n_electrodes;
@@ -62,25 +70,15 @@ struct CesModel {
   real domain_x_lo, domain_x_hi, domain_y_hi, domain_half_z;
   // Per material.
   int32_t n_materials;
-  int32_t kind[kMaxMaterials];  // MaterialKind
+  int32_t kind[kMaxMaterials];  // MaterialKind (0 metal, 1 plastic, 2 middling)
   real eps_r[kMaxMaterials];
-  real tau[kMaxMaterials];      // charge relaxation time through a grounded contact
+  real tau[kMaxMaterials];      // charge relaxation time through a grounded contact, eps0 eps_r / sigma
 };
+
+constexpr int32_t kKindMetal = 0;  // MaterialKind::Metal (ces_config.h), as a plain int for the kernels
 
 // Particle status (per body; machine parts have kStatusMachine).
 enum ParticleStatus : uint8_t { kStatusMachine = 0, kStatusInFlight = 1, kStatusCollected = 2, kStatusLost = 3 };
-
-// Force on a particle of volume-equivalent radius r, charge q, at p with velocity v: Coulomb + image force
-// (forces.h: zero outside the drum width, image force only near the drum) + Schiller-Naumann drag of the
-// volume-equivalent sphere in still air.
-DVI_HD Vec3 cesParticleForce(const CesModel& m, Vec3 p, Vec3 v, real q, real r) {
-  Vec3 F = dragForceSphere(Vec3{0, 0, 0}, v, real(2) * r, m.air_density, m.air_viscosity);
-  if (q != real(0)) {
-    const FieldSample s = evalField(m.field, p);
-    F += electricForce(m.drum, p, q, r, s.E);
-  }
-  return F;
-}
 
 // True when a particle with bounding radius `bound` at p touches the drum (centre within the contact
 // tolerance of the surface, inside the drum's width).
@@ -88,46 +86,61 @@ DVI_HD bool touchesDrum(const CesModel& m, Vec3 p, real bound) {
   return insideDrumWidth(m.drum, p) && distanceToDrumSurface(m.drum, p) <= m.contact_tol * bound;
 }
 
-// In the corona zone: near the drum surface, within the zone's angle around the electrode direction.
-DVI_HD bool inCoronaZone(const CesModel& m, Vec3 p) {
-  if (!insideDrumWidth(m.drum, p)) return false;
-  const real dx = p.x - m.drum.cx, dy = p.y - m.drum.cy;
-  const real rho = std::hypot(dx, dy);
-  if (!(rho > real(0)) || rho - m.drum.R > m.corona_depth) return false;
-  return (dx * m.corona_ex + dy * m.corona_ey) >= m.corona_cos_half * rho;
+// Force on a particle of material mat, volume-equivalent radius r, bounding radius bound, charge q, at p
+// with velocity v: Schiller-Naumann drag of the volume-equivalent sphere in still air, and inside the
+// drum width the electric force:
+//  - a conductor (metal) touching the drum: the Lebedev-Skal'skaya lift k_L q E (k_L = 0.832), which
+//    already holds the sphere's image in the drum (charging.h: kFeliciLiftFactor); no image term;
+//  - a conductor in flight: q E (its image in the drum is below 0.1 q E a diameter away and is left out,
+//    so the force does not drop below the contact value as it lifts off);
+//  - insulators and middlings: q E plus the image force of their charge toward the drum (forces.h).
+DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound) {
+  Vec3 F = dragForceSphere(Vec3{0, 0, 0}, v, real(2) * r, m.air_density, m.air_viscosity);
+  if (q == real(0) || !insideDrumWidth(m.drum, p)) return F;
+  const FieldSample s = evalField(m.field, p);
+  if (m.kind[mat] == kKindMetal) {
+    F += (touchesDrum(m, p, bound) ? kFeliciLiftFactor : real(1)) * coulombForce(q, s.E);
+  } else {
+    F += electricForce(m.drum, p, q, r, s.E);
+  }
+  return F;
 }
 
-// One step h of a particle's charge q (material mat, volume-equivalent radius r, bounding radius bound):
-//  1. corona zone: field charging by the corona ions toward Pauthenier's saturation charge (polarity of
-//     the corona) in the charging field max(|E|, corona_field), every material (a conductor gives its ion
-//     charge to the drum in step 2);
-//  2. drum contact: relaxation with the material's tau toward the induced (Félici) charge in the local
-//     field (tau = 0 metals: the Félici charge at once; tau = inf plastics: unchanged);
+// One step h of a particle's charge q (material mat, volume-equivalent radius r, bounding radius bound);
+// flags gains kFlagPinned when the particle touches the drum near its lowest point. In this order:
+//  1. ion (field) charging wherever the corona's ions are (ion density N > 0, inside the drum width):
+//     Pauthenier's law with the LOCAL field |E| and the LOCAL ion density, q_s = 4 pi eps0 r^2 |E| p,
+//     tau_c = 4 eps0 / (N e mu), in the ions' polarity, for every material (conductors with p = 3);
+//  2. drum contact: relaxation with the material's tau = eps0 eps_r / sigma toward the induced (Félici)
+//     charge in the local field: a metal (tau = 0) takes it at once, so it leaves the drum with the sign
+//     of E.n (opposite to the electrode's) and any ion charge goes to earth; an insulator (tau ~ hours)
+//     keeps its ion charge; a middling moves toward the induced charge in its own time;
 //  3. contact with an electrode: the same relaxation toward the induced charge of that electrode
 //     (outward normal of the electrode: a conductor touching it is recharged and repelled);
 //  4. brush contact: discharge with the brush time constant.
-// Charges never change in free flight.
-DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, real bound, real h) {
+// Away from ions and contacts the charge does not change.
+DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, real bound, real h, uint8_t& flags) {
   const real eps = m.eps_r[mat], tau = m.tau[mat];
-  const bool corona = inCoronaZone(m, p);
+  const bool inside = insideDrumWidth(m.drum, p);
   const bool drum = touchesDrum(m, p, bound);
-  if (corona || drum) {
+  const real N = inside && m.polarity != real(0) ? ionDensity(m.field, p) : real(0);
+  if (N > real(0) || drum) {
     const FieldSample s = evalField(m.field, p);
-    if (corona) {
-      const real qs = pauthenierSaturationCharge(r, std::fmax(length(s.E), m.corona_field), eps);
-      real qm = q * m.polarity;
-      if (qm < real(0)) qm = real(0);
-      q = m.polarity * pauthenierChargeUpdate(qm, qs, h, m.corona_tau);
+    if (N > real(0) && s.region == 0) {
+      const real qs = pauthenierSaturationCharge(r, length(s.E), eps);
+      const real tc = pauthenierTimeConstant(N, m.ion_mobility);
+      q = m.polarity * pauthenierChargeUpdate(q * m.polarity, qs, h, tc);
     }
     if (drum) {
       const real dx = p.x - m.drum.cx, dy = p.y - m.drum.cy, rho = std::hypot(dx, dy);
       const Vec3 n{dx / rho, dy / rho, real(0)};
       q = relaxCharge(q, feliciCharge(r, s.E, n), h, tau);
+      if (dy < m.pin_dy) flags = uint8_t(flags | kFlagPinned);
     }
   }
   for (int k = 0; k < m.n_electrodes; ++k) {
     const CylinderXY& e = m.electrodes[k];
-    if (!insideDrumWidth(m.drum, p) || distanceToCylinderSurface(e, p) > m.contact_tol * bound) continue;
+    if (!inside || distanceToCylinderSurface(e, p) > m.contact_tol * bound) continue;
     const real dx = p.x - e.cx, dy = p.y - e.cy, rho = std::hypot(dx, dy);
     if (!(rho > real(0))) continue;
     const Vec3 n{dx / rho, dy / rho, real(0)};

@@ -31,22 +31,45 @@ std::vector<double> gridPositions(double lo, double hi, int n) {
 double ratio(int64_t a, int64_t b) { return b > 0 ? double(a) / double(b) : 0.0; }
 
 // Grade, recovery and score of a cell from its masses.
-void finishCell(SplitterCell& c) {
+void finishCell(SplitterCell& c, const SplitterBasis& basis) {
   const auto& f = c.mass.fg;
   const int M = int(MaterialKind::Metal), P = int(MaterialKind::Plastic);
-  const int64_t metal = f[0][M] + f[1][M] + f[2][M], plastic = f[0][P] + f[1][P] + f[2][P];
+  std::array<int64_t, kMaterialKinds> fed{};
+  int64_t all = 0;
+  for (int k = 0; k < kMaterialKinds; ++k) {
+    fed[size_t(k)] = basis.fed_fg[size_t(k)] > 0 ? basis.fed_fg[size_t(k)] : f[0][size_t(k)] + f[1][size_t(k)] + f[2][size_t(k)];
+    all += fed[size_t(k)];
+  }
+  const int64_t metal = fed[size_t(M)], plastic = fed[size_t(P)];
   c.grade_metal = ratio(f[kBinConductor][M], c.mass.total(kBinConductor));
   c.recovery_metal = ratio(f[kBinConductor][M], metal);
   c.grade_plastic = ratio(f[kBinNonconductor][P], c.mass.total(kBinNonconductor));
   c.recovery_plastic = ratio(f[kBinNonconductor][P], plastic);
+  c.middling_fraction = ratio(c.mass.total(kBinMiddling), all);
   c.score = 0.5 * ((c.recovery_metal - ratio(f[kBinConductor][P], plastic)) +
                    (c.recovery_plastic - ratio(f[kBinNonconductor][M], metal)));
+  c.meets_targets = c.grade_metal >= basis.target_conductor && c.grade_plastic >= basis.target_nonconductor &&
+                    (basis.target_conductor <= 0 || c.mass.total(kBinConductor) > 0) &&
+                    (basis.target_nonconductor <= 0 || c.mass.total(kBinNonconductor) > 0);
 }
 
-void pickBest(SplitterTable& t) {
+// The best cell (splitters.h): the largest recovery sum among the cells that meet both targets, else the
+// cell closest to them.
+void pickBest(SplitterTable& t, const SplitterBasis& basis) {
+  auto shortfall = [&](const SplitterCell& c) {
+    return std::min(c.grade_metal - basis.target_conductor, c.grade_plastic - basis.target_nonconductor);
+  };
+  auto better = [&](const SplitterCell& a, const SplitterCell& b) {  // a strictly better than b
+    if (a.meets_targets != b.meets_targets) return a.meets_targets;
+    const double ra = a.recovery_metal + a.recovery_plastic, rb = b.recovery_metal + b.recovery_plastic;
+    if (a.meets_targets) return ra > rb;
+    const double sa = shortfall(a), sb = shortfall(b);
+    return sa > sb || (sa == sb && ra > rb);
+  };
   t.best = 0;
   for (size_t k = 1; k < t.cells.size(); ++k)
-    if (t.cells[k].score > t.cells[t.best].score) t.best = k;
+    if (better(t.cells[k], t.cells[t.best])) t.best = k;
+  t.targets_met = !t.cells.empty() && t.cells[t.best].meets_targets;
 }
 
 }  // namespace
@@ -57,27 +80,29 @@ BinMasses binDirect(const std::vector<CollectedParticle>& c, double s1, double s
   return m;
 }
 
-SplitterCell splitterCell(const std::vector<CollectedParticle>& c, double s1, double s2) {
+SplitterCell splitterCell(const std::vector<CollectedParticle>& c, double s1, double s2, const SplitterBasis& basis) {
   SplitterCell cell{};
   cell.s1 = s1;
   cell.s2 = s2;
   cell.mass = binDirect(c, s1, s2);
-  finishCell(cell);
+  finishCell(cell, basis);
   return cell;
 }
 
-SplitterTable splittersDirect(const std::vector<CollectedParticle>& c, double lo, double hi, int n) {
+SplitterTable splittersDirect(const std::vector<CollectedParticle>& c, double lo, double hi, int n,
+                              const SplitterBasis& basis) {
   SplitterTable t;
   t.positions = gridPositions(lo, hi, n);
   for (int i = 0; i < n; ++i)
     for (int j = i; j < n; ++j) {
-      t.cells.push_back(splitterCell(c, t.positions[size_t(i)], t.positions[size_t(j)]));
+      t.cells.push_back(splitterCell(c, t.positions[size_t(i)], t.positions[size_t(j)], basis));
     }
-  pickBest(t);
+  pickBest(t, basis);
   return t;
 }
 
-SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, double lo, double hi, int n) {
+SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, double lo, double hi, int n,
+                                  const SplitterBasis& basis) {
   SplitterTable t;
   t.positions = gridPositions(lo, hi, n);
   std::vector<const CollectedParticle*> sorted;
@@ -109,16 +134,17 @@ SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, doubl
         cell.mass.fg[kBinMiddling][size_t(k)] = below[size_t(j)][size_t(k)] - below[size_t(i)][size_t(k)];
         cell.mass.fg[kBinConductor][size_t(k)] = all[size_t(k)] - below[size_t(j)][size_t(k)];
       }
-      finishCell(cell);
+      finishCell(cell, basis);
       t.cells.push_back(cell);
     }
-  pickBest(t);
+  pickBest(t, basis);
   return t;
 }
 
-SplitterTable splitterAnalysis(const std::vector<CollectedParticle>& c, double lo, double hi, int n) {
-  SplitterTable a = splittersDirect(c, lo, hi, n);
-  const SplitterTable b = splittersCumulative(c, lo, hi, n);
+SplitterTable splitterAnalysis(const std::vector<CollectedParticle>& c, double lo, double hi, int n,
+                               const SplitterBasis& basis) {
+  SplitterTable a = splittersDirect(c, lo, hi, n, basis);
+  const SplitterTable b = splittersCumulative(c, lo, hi, n, basis);
   if (a.cells.size() != b.cells.size()) throw std::logic_error("splitters: the two methods give different table sizes");
   for (size_t k = 0; k < a.cells.size(); ++k)
     if (!(a.cells[k].mass == b.cells[k].mass))
@@ -160,16 +186,41 @@ std::string splittersCsv(const SplitterTable& t) {
   std::string o =
       "s1_mm,s2_mm,nonconductor_metal_kg,nonconductor_plastic_kg,nonconductor_middling_kg,middling_metal_kg,"
       "middling_plastic_kg,middling_middling_kg,conductor_metal_kg,conductor_plastic_kg,conductor_middling_kg,"
-      "grade_metal,recovery_metal,grade_plastic,recovery_plastic,score\n";
+      "grade_metal,recovery_metal,grade_plastic,recovery_plastic,middling_fraction,score,meets_targets\n";
   char buf[512];
   for (const SplitterCell& c : t.cells) {
     const auto& f = c.mass.fg;
-    std::snprintf(buf, sizeof buf, "%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6f,%.6f,%.6f,%.6f,%.6f\n",
+    std::snprintf(buf, sizeof buf, "%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%d\n",
                   c.s1 * 1e3, c.s2 * 1e3, double(f[0][0]) * kFemtogram, double(f[0][1]) * kFemtogram,
                   double(f[0][2]) * kFemtogram, double(f[1][0]) * kFemtogram, double(f[1][1]) * kFemtogram,
                   double(f[1][2]) * kFemtogram, double(f[2][0]) * kFemtogram, double(f[2][1]) * kFemtogram,
                   double(f[2][2]) * kFemtogram, c.grade_metal, c.recovery_metal, c.grade_plastic, c.recovery_plastic,
-                  c.score);
+                  c.middling_fraction, c.score, c.meets_targets ? 1 : 0);
+    o += buf;
+  }
+  return o;
+}
+
+std::vector<GradeRecoveryPoint> gradeRecoveryCurve(const SplitterTable& t) {
+  // Cells (0, j) have s1 = positions[0]: their conductor product is x' >= positions[j]; cells (i, n-1) have
+  // s2 = positions[n-1]: their nonconductor product is x' < positions[i].
+  const size_t n = t.positions.size();
+  std::vector<GradeRecoveryPoint> g(n);
+  auto cellIndex = [n](size_t i, size_t j) { return i * n - i * (i - 1) / 2 + (j - i); };  // i <= j, i major
+  for (size_t i = 0; i < n; ++i) {
+    const SplitterCell& c = t.cells[cellIndex(0, i)];
+    const SplitterCell& d = t.cells[cellIndex(i, n - 1)];
+    g[i] = GradeRecoveryPoint{t.positions[i], c.grade_metal, c.recovery_metal, d.grade_plastic, d.recovery_plastic};
+  }
+  return g;
+}
+
+std::string gradeRecoveryCsv(const std::vector<GradeRecoveryPoint>& g) {
+  std::string o = "s_mm,conductor_grade,conductor_recovery,nonconductor_grade,nonconductor_recovery\n";
+  char buf[200];
+  for (const GradeRecoveryPoint& p : g) {
+    std::snprintf(buf, sizeof buf, "%.6g,%.6f,%.6f,%.6f,%.6f\n", p.s * 1e3, p.grade_metal, p.recovery_metal,
+                  p.grade_plastic, p.recovery_plastic);
     o += buf;
   }
   return o;
