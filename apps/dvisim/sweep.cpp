@@ -424,6 +424,14 @@ void writeSummaryCsv(const SweepOptions& o, const Design& d, const std::vector<C
   dvi::writeFileAtomic(o.out + "/summary.csv", s.str());
 }
 
+// scripts/plot_sweep.py plots the grade and recovery metrics (names containing "grade" or "recovery").
+std::string plots(const std::string& out, const std::vector<Row>& rows) {
+  for (const std::string& n : metricNames(rows))
+    if (n.find("grade") != std::string::npos || n.find("recovery") != std::string::npos)
+      return dvi::benchutil::runPlot("plot_sweep.py", out, "sweep_<key>.png");
+  return "no plots: no grade or recovery metric to plot";
+}
+
 int runSweep(const SweepOptions& o) {
   const Design d = makeDesign(o);
   validate(o, d);
@@ -449,7 +457,7 @@ int runSweep(const SweepOptions& o) {
                    (cases[i].dir / "run.log").c_str());
     }
   std::printf("results: %s/ (sweep.json, runs.csv, summary.csv, runs/)\n", o.out.c_str());
-  if (!o.no_plots) std::printf("%s\n", dvi::benchutil::runPlot("plot_sweep.py", o.out, "sweep_<key>.png").c_str());
+  if (!o.no_plots) std::printf("%s\n", plots(o.out, rows).c_str());
   if (failed) std::fprintf(stderr, "dvisim: error: %zu of %zu runs failed\n", failed, cases.size());
   return failed ? 1 : 0;
 }
