@@ -87,7 +87,7 @@ class CudaCesDevice final : public CesDevice {
     const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
     if (n == 0) return;
     forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), status_.data(), material_.data(),
-                                                        charge_.data(), pflags_.data(), radius_.data(), bound_.data(), b.pos, b.vel,
+                                                        charge_.data(), radius_.data(), bound_.data(), b.pos, b.vel,
                                                         b.flags, force);
     DVI_CUDA_LAUNCH("CES forceKernel");
   }
