@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -298,6 +299,17 @@ Slots planSlots(const SweepOptions& o) {
   return s;
 }
 
+// The running children by job slot (0: none), so that a sweep stopped by SIGINT or SIGTERM stops its runs too
+// instead of leaving them to write into DIR after it is gone.
+volatile sig_atomic_t g_child[4096];
+
+void stopChildren(int sig) {
+  for (volatile sig_atomic_t& pid : g_child)
+    if (pid > 0) ::kill(pid_t(pid), sig);
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+
 // Runs the unfinished cases, up to s.jobs at a time. Returns the exit code of each case run now (index -> code).
 std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std::vector<Case>& cases, const Slots& s) {
   std::vector<size_t> todo;
@@ -312,6 +324,8 @@ std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std
   for (int k = s.jobs - 1; k >= 0; --k) free_slots.push_back(k);
   std::map<size_t, int> codes;
   size_t next = 0, done = 0;
+  std::signal(SIGINT, stopChildren);
+  std::signal(SIGTERM, stopChildren);
   while (next < todo.size() || !running.empty()) {
     while (next < todo.size() && !free_slots.empty()) {
       const Case& c = cases[todo[next]];
@@ -321,7 +335,9 @@ std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std
       free_slots.pop_back();
       slot_of[todo[next]] = slot;
       const std::string gpu = s.gpus.empty() ? "" : s.gpus[size_t(slot) % s.gpus.size()];
-      running[spawnChild(childArgs(o, d, c, s.child_threads), c.dir / "run.log", gpu)] = {todo[next], Clock::now()};
+      const pid_t pid = spawnChild(childArgs(o, d, c, s.child_threads), c.dir / "run.log", gpu);
+      g_child[slot] = pid;
+      running[pid] = {todo[next], Clock::now()};
       ++next;
     }
     int status = 0;
@@ -332,12 +348,15 @@ std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std
     const size_t i = it->second.first;
     const double wall = std::chrono::duration<double>(Clock::now() - it->second.second).count();
     running.erase(it);
+    g_child[slot_of[i]] = 0;
     free_slots.push_back(slot_of[i]);
     codes[i] = recordExit(cases[i], status, wall);
     std::printf("[%zu/%zu] %s: %s (%.1f s)\n", ++done, todo.size(), cases[i].id.c_str(),
                 codes[i] == 0 ? "ok" : ("FAILED, exit " + std::to_string(codes[i])).c_str(), wall);
     std::fflush(stdout);
   }
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
   return codes;
 }
 
