@@ -333,6 +333,58 @@ TEST_CASE("CES corona: evalGrid reproduces a linear field exactly and the fine f
   CHECK(worstSurf < 0.02);
 }
 
+TEST_CASE("CES corona: Cartesian nodes hold the direct CSM sum plus the conformal space-charge field",
+          "[ces][corona]") {
+  // The grid evaluates the CSM part through per-cylinder Laurent expansions truncated at 1e-11 of the
+  // cylinder's summed |charge| (field_corona.cpp); at the nodes it must equal the direct CSM sum of an
+  // independent model plus sampleConformal to the float storage (6e-8 relative). Also the nodes just inside
+  // the drum and the tube, which hold the CSM field continued inwards plus the space-charge part of the
+  // nearest surface point.
+  CoronaField cf;
+  const CoronaSetup s = machine(-30000);
+  const CoronaSolution& sol = cf.solve(s);
+  REQUIRE(sol.ionised);
+  const CsmField csm = csmOf(s);
+  const GridField& g = sol.grid;
+  double worstE = 0, worstPhi = 0, worstN = 0;
+  int outside = 0, inside = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const int i = int(std::fmod(0.6180339887 * (k + 1), 1.0) * g.nx), j = int(std::fmod(0.7548776662 * (k + 1), 1.0) * g.ny);
+    const double x = g.x0 + i * g.dx, y = g.y0 + j * g.dy;
+    const size_t n = size_t(j) * g.nx + i;
+    double sx = x, sy = y;
+    bool skip = false, in = false;
+    for (const CsmConductor& c : csm.conductors()) {
+      const double d = std::hypot(x - c.cx, y - c.cy);
+      if (d >= c.R) continue;
+      in = true;
+      if (d < c.R - 2 * s.spacing || c.R < 1e-3) skip = true;  // deep inside, or the wire
+      sx = c.cx + (x - c.cx) * c.R * (1 + 1e-9) / d;
+      sy = c.cy + (y - c.cy) * c.R * (1 + 1e-9) / d;
+    }
+    if (skip) continue;
+    real ph, ex, ey;
+    csmRaw(csm.charges().data(), int(csm.charges().size()), csm.phiInfinity(), x, y, ph, ex, ey);
+    const ConformalSample c = sampleConformal(cf.problem(), cf.conformal(), sx, sy);
+    ph += c.phi_sc;
+    ex += c.Ex_sc;
+    ey += c.Ey_sc;
+    const double emag = std::hypot(ex, ey);
+    worstE = std::max(worstE, std::hypot(g.Ex[n] - ex, g.Ey[n] - ey) / emag);
+    worstPhi = std::max(worstPhi, std::fabs(g.phi[n] - ph) / std::fabs(s.U));
+    const double ions = c.rho_abs / kElementaryCharge;
+    if (ions > 0) worstN = std::max(worstN, std::fabs(g.ion_density[n] - ions) / ions);
+    ++(in ? inside : outside);
+  }
+  INFO("nodes " << outside << " + " << inside << " inside; worst |dE|/|E| " << worstE << ", |dphi|/|U| " << worstPhi
+                << ", ion density " << worstN);
+  CHECK(outside > 5000);
+  CHECK(inside > 20);
+  CHECK(worstE < 2e-7);
+  CHECK(worstPhi < 2e-7);
+  CHECK(worstN < 2e-7);
+}
+
 TEST_CASE("CES corona: bad input is an InputError", "[ces][corona]") {
   CoronaField cf;
   CoronaSetup s = machine(-30000);

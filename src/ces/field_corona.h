@@ -175,7 +175,7 @@ struct ConformalCoronaProblem {
   bool frame_earthed = true;  // the frame cells are Dirichlet phi = 0 for the space-charge potential
   real tolerance = 1e-4;      // on max |change of the space-charge potential| / |U| per iteration
   int max_iterations = 300;
-  real relaxation = 0.4;      // of the space-charge potential; 0.7 diverges at -40 kV on the default machine
+  real relaxation = 0.4;      // damping of the (Anderson-accelerated) update of the space-charge potential
   // The Laplace field (phi, Ex, Ey at a point of the gas). Empty: the solver solves Laplace's equation on
   // the conformal grid itself (exact on the coaxial grid, where phi is linear in tau).
   std::function<void(real x, real y, real& phi, real& Ex, real& Ey)> laplace;
