@@ -232,7 +232,7 @@ TEST_CASE("defaults: a 30-box tower stands for 10 s at h = 1/60 s", "[convergenc
   CHECK(r.log.steps_not_converged == 0);
 }
 
-// bench stability's particle mass-ratio cases (1e4 and 1e6: [.stiff], several seconds each; see the docs' table).
+// bench stability's particle mass-ratio cases (1e4 and 1e6 run into the iteration cap on most steps: a few seconds).
 TEST_CASE("defaults: particle mass ratio 1e2 holds (heavy sphere on 2x2 in a box)", "[convergence]") {
   const RunResult r = runParticles(1e2, 300, SystemConfig{});
   report("particles 1e2, defaults", r);
@@ -242,7 +242,7 @@ TEST_CASE("defaults: particle mass ratio 1e2 holds (heavy sphere on 2x2 in a box
   CHECK(r.log.steps_not_converged == 0);
 }
 
-TEST_CASE("defaults: particle mass ratios 1e4 and 1e6 hold", "[.stiff]") {
+TEST_CASE("defaults: particle mass ratios 1e4 and 1e6 hold", "[convergence]") {
   for (double ratio : {1e4, 1e6}) {
     INFO("ratio " << ratio);
     const RunResult r = runParticles(ratio, 1000, SystemConfig{});
@@ -401,8 +401,14 @@ TEST_CASE("CLI: a run whose steps miss the tolerance warns once and counts them 
 
 // Measurements for docs/ARCHITECTURE.md (hidden: run with `dvisim_tests "[.measure]" -s`).
 TEST_CASE("measure: stiff scenes at the default and fixed settings", "[.measure]") {
-  for (double ratio : {1.0, 1e3, 1e6}) {
+  const char* tol_env = std::getenv("DVISIM_TOL");  // another tolerance for the "default" rows
+  auto defaults = [&] {
     SystemConfig d;
+    if (tol_env) d.solver_settings.tolerance = real(std::atof(tol_env));
+    return d;
+  };
+  for (double ratio : {1.0, 1e3, 1e6}) {
+    SystemConfig d = defaults();
     char name[96];
     std::snprintf(name, sizeof name, "stack 10 ratio %.0e default", ratio);
     report(name, runStack(10, ratio, 0.01, 3, d));
@@ -413,11 +419,11 @@ TEST_CASE("measure: stiff scenes at the default and fixed settings", "[.measure]
     report(name, runStack(10, ratio, 0.01, 3, f));
   }
   {
-    SystemConfig d;
+    SystemConfig d = defaults();
     report("tower 30 h=1/60 10 s default", runStack(30, 1, 1.0 / 60, 10, d));
   }
   for (double ratio : {1e2, 1e4, 1e6}) {
-    SystemConfig d;
+    SystemConfig d = defaults();
     char name[96];
     std::snprintf(name, sizeof name, "particles ratio %.0e default", ratio);
     report(name, runParticles(ratio, 1000, d));
@@ -429,9 +435,11 @@ TEST_CASE("measure: sphere pile at the default and fixed settings", "[.pile]") {
   const long n = std::getenv("DVISIM_PILE_N") ? std::atol(std::getenv("DVISIM_PILE_N")) : 10000;
   const int steps = std::getenv("DVISIM_PILE_STEPS") ? std::atoi(std::getenv("DVISIM_PILE_STEPS")) : 300;
   const bench::SceneSpec spec = bench::makePileSpec(n);
-  for (int mode = 0; mode < 2; ++mode) {
+  const double tol = std::getenv("DVISIM_PILE_TOL") ? std::atof(std::getenv("DVISIM_PILE_TOL")) : double(kDefaultTolerance);
+  for (int mode = std::getenv("DVISIM_PILE_SKIP_FIXED") ? 0 : 1; mode >= 0; --mode) {
     SystemConfig cfg;
     if (mode == 1) cfg.solver_settings.max_iterations = 50, cfg.solver_settings.tolerance = 0;
+    else cfg.solver_settings.tolerance = real(tol);
     System sys(cfg);
     bench::addToSystem(spec, sys);
     double wall = 0, iters = 0, rel = 0, pen = 0;
@@ -443,7 +451,7 @@ TEST_CASE("measure: sphere pile at the default and fixed settings", "[.pile]") {
       iters += s.iterations;
       rel += double(s.relative_residual);
       pen = std::max(pen, double(s.max_penetration));
-      if ((k + 1) % 50 == 0) {
+      if ((k + 1) % 25 == 0) {
         double ke = 0, ymean = 0;
         const BodyArrays& b = sys.bodies();
         for (size_t i = 0; i < b.count(); ++i) {

@@ -318,7 +318,7 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   const real thr = stopThreshold(s, st.residual_scale);
   real res = residualFromDeltas();
   if (s.record_history) st.history.push_back(res);
-  if (!(res <= thr)) {
+  if (!reachedStop(res, thr, 0, s.min_iterations)) {
     for (int it = 0; it < s.max_iterations; ++it) {
       for (int64_t k = 0; k < nblk; ++k) {
         real* g = gamma + 3 * k;
@@ -387,7 +387,7 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
       if (need) {
         res = residualFromDeltas();
         if (s.record_history) st.history.push_back(res);
-        if (res <= thr) break;
+        if (reachedStop(res, thr, st.iterations, s.min_iterations)) break;
       }
     }
   }

@@ -167,7 +167,7 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
     res = real(std::sqrt(sum));
     checkFinite(res, "jacobi", it);
     if (s.record_history) st.history.push_back(res);
-    if (last || res <= thr) break;
+    if (last || reachedStop(res, thr, it, s.min_iterations)) break;
     std::swap(cur, next);
     ++st.iterations;
   }
@@ -218,6 +218,7 @@ struct ApgdControl {
   int failed = 0;      // 1: non-finite test sums at iteration `iterations` (failed_value)
   int accepted = 0;    // the last afterTest accepted its trial; res is its residual
   int max_iterations = 0;
+  int min_iterations = 0;  // SolverSettings::min_iterations (reachedStop)
   // Speculation (kern::ApgdSpeculation, set by speculate()): the trial's test pass writes the accepted outcome's
   // next step to X[sa] and the rejected one's to X[sr] (-1: not speculated); ready: X[nw] already holds this
   // trial's step (a speculation that came true), so its step pass is left out.
@@ -295,7 +296,7 @@ struct ApgdControl {
       best_res = res;
       best = cur;
     }
-    if (res <= tolerance || iterations >= max_iterations) {
+    if (reachedStop(res, tolerance, iterations, min_iterations) || iterations >= max_iterations) {
       done = 1;
       return;
     }
@@ -383,7 +384,8 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   st.residual_scale = real(std::sqrt(scale2));
   c.max_iterations = s.max_iterations;
   c.tolerance = stopThreshold(s, st.residual_scale);
-  c.done = c.res <= c.tolerance || !(s.max_iterations > 0);
+  c.min_iterations = s.min_iterations;
+  c.done = reachedStop(c.res, c.tolerance, 0, s.min_iterations) || !(s.max_iterations > 0);
   if (!c.done) {
     c.L = lipschitzBound(squares, p.blocks());
     c.setSpeculation(specs, both);
@@ -449,7 +451,7 @@ SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
   for (double& v : fhist) v = f;
   if (s.record_history) st.history.push_back(res);
 
-  if (!(res <= thr) && s.max_iterations > 0) {
+  if (!reachedStop(res, thr, 0, s.min_iterations) && s.max_iterations > 0) {
     const real L0 = lipschitzLowerBound(p, d, Nd);
     const real amin = real(1e-10) / L0, amax = real(1e10) / L0;
     real alpha = real(1) / L0;
@@ -489,7 +491,7 @@ SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
         best_res = res;
         best = cur;
       }
-      if (res <= thr) break;
+      if (reachedStop(res, thr, st.iterations, s.min_iterations)) break;
       alpha = q > 0 ? real(dd / q) : amax;
       alpha = std::min(amax, std::max(amin, alpha));
     }
