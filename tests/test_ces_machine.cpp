@@ -131,6 +131,9 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
   CHECK(c.wire.voltage == c.voltage);
   CHECK(c.tube.voltage == c.voltage);
   CHECK(c.brush_diameter == Approx(0.106));
+  CHECK(c.brush_core_diameter == Approx(0.066));  // bristles 20 mm long, their tips on the drum
+  CHECK(c.brush_gap == 0);
+  CHECK(c.brush_sweep_time == Approx(0.002));
   CHECK(c.materials.size() == 3);
   // Plastic: conductivity 1e-14 S/m, eps_r 2.5 -> tau = 8.8541878128e-12 * 2.5 / 1e-14 = 2213.5 s.
   CHECK(c.materials[1].relaxation_time == Approx(2213.546953).epsilon(1e-9));
@@ -169,6 +172,7 @@ TEST_CASE("CES config: bad values are InputErrors naming the key", "[ces][ces_ma
     }
   };
   fails({"drum.colour=3"}, "ces.drum.colour: unknown key");
+  fails({"brush.core_diameter_mm=120"}, "ces.brush.core_diameter_mm");
   fails({"electrode.voltage_kV=nan"}, "ces.electrode.voltage_kV");
   fails({"electrode.diameter_mm=38"}, "ces.electrode.diameter_mm: unknown key");
   fails({"corona.charging_field_kV_cm=6"}, "ces.corona.charging_field_kV_cm: unknown key");

@@ -391,7 +391,9 @@ CesModel handModel() {
   m.ion_mobility = 2.1e-4;
   m.pin_dy = -0.16 * std::cos(20 * M_PI / 180);
   m.brush = CylinderXY{10, 10, 0.05};
+  m.brush_omega = -12.566370614359172;
   m.brush_tau = 1e-3;
+  m.brush_sweep_tau = 2e-3;
   m.n_electrodes = 0;
   m.air_density = 0;
   m.air_viscosity = 1e-12;
@@ -429,15 +431,15 @@ TEST_CASE("CES lift of a conductor on the drum: Lebedev-Skal'skaya 0.832 q E, im
   const double qF = feliciCharge(r, En);  // the induced charge, hand value above: 3.66047e-11 C at 8e5 V/m
   CHECK(qF == Approx(2.0 / 3.0 * std::pow(M_PI, 3) * 8.8541878128e-12 * r * r * En).epsilon(1e-12));
   // On the drum: F = (zeta(3) + 1/6) 4 pi eps0 r^2 En^2 along the normal, nothing else (v = 0: no drag).
-  const Vec3 F = cesParticleForce(m, 0, top, Vec3{0, 0, 0}, real(qF), real(r), real(r));
+  const Vec3 F = cesParticleForce(m, 0, top, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4));
   CHECK(F.y == Approx((1.2020569031595942 + 1.0 / 6.0) * 4 * M_PI * 8.8541878128e-12 * r * r * En * En).epsilon(1e-9));
   CHECK(F.x == 0);
   // In flight (2 mm off the drum): q E, no image.
   const Vec3 up{0, real(0.16 + 2e-3), 0};
-  CHECK(cesParticleForce(m, 0, up, Vec3{0, 0, 0}, real(qF), real(r), real(r)).y == Approx(qF * En).epsilon(1e-12));
+  CHECK(cesParticleForce(m, 0, up, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4)).y == Approx(qF * En).epsilon(1e-12));
   // An insulator with the same charge on the drum: q E minus the image attraction q^2/(16 pi eps0 r^2).
   const double img = qF * qF / (16 * M_PI * 8.8541878128e-12 * r * r);
-  CHECK(cesParticleForce(m, 1, top, Vec3{0, 0, 0}, real(qF), real(r), real(r)).y == Approx(qF * En - img).epsilon(1e-9));
+  CHECK(cesParticleForce(m, 1, top, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4)).y == Approx(qF * En - img).epsilon(1e-9));
   // The charge update: a metal touching the drum takes the Félici charge at once, with the sign of E.n
   // (positive here, under a field that points away from the drum: the electrode is negative).
   uint8_t flags = 0;
@@ -490,6 +492,45 @@ TEST_CASE("CES charging: Pauthenier with the local field and ion density, relaxa
   uint8_t f2 = 0;
   cesChargeUpdate(m, 1, Vec3{0, real(-(0.16 + 3 * r)), 0}, real(q0), real(r), real(r), real(h), f2);
   CHECK(f2 == 0);  // 2 radii off the drum: not touching, not pinned
+}
+
+TEST_CASE("CES brush: the bristles' sweep relaxes the velocity exactly over a step, and they discharge", "[ces]") {
+  // One step of the core's semi-implicit Euler update v' = v + h F/m with the sweep force is the exact
+  // solution of dv/dt = (v_b - v)/tau_s: v' = v_b + (v - v_b) exp(-h/tau_s); tau_s = 0 gives v' = v_b.
+  const double m = 3e-7, h = 2e-4;
+  const Vec3 v{0.7, -0.2, 0.05}, vb{-0.3, 0.4, 0};
+  for (const double tau : {2e-3, 1e-4, 0.0}) {
+    INFO("tau_s = " << tau);
+    const Vec3 F = bristleSweepForce(real(m), v, vb, real(h), real(tau));
+    const double e = tau > 0 ? std::exp(-h / tau) : 0.0;
+    const Vec3 v1 = v + real(h / m) * F;
+    CHECK(double(v1.x) == Approx(-0.3 + 1.0 * e).epsilon(1e-12));
+    CHECK(double(v1.y) == Approx(0.4 - 0.6 * e).epsilon(1e-12));
+    CHECK(double(v1.z) == Approx(0.05 * e).margin(1e-15));
+  }
+  // In the model: a brush with its axis at (0.3, 0), bristle tips at radius 0.05 m, turning at -4 pi rad/s
+  // (120 rpm clockwise). The bristles at p move with omega z x (p - c): at p = (0.27, 0.01, 0),
+  // v_b = -4 pi (-0.01, -0.03, 0) = (0.125664, 0.376991, 0). No air (drag ~ 0), no charge.
+  CesModel md = handModel();
+  md.brush = CylinderXY{0.3, 0, 0.05};
+  md.brush_omega = real(-4 * M_PI);
+  const double r = 0.4e-3, mass = 946 * 4.0 / 3.0 * M_PI * r * r * r;
+  const Vec3 p{0.27, 0.01, 0}, vp{0, -1, 0};
+  const Vec3 Fb = cesParticleForce(md, 1, p, vp, 0, real(r), real(r), real(mass), real(h));
+  const double f = -std::expm1(-h / 2e-3);
+  CHECK(double(Fb.x) == Approx(mass * f / h * (4 * M_PI * 0.01 - 0)).epsilon(1e-6));
+  CHECK(double(Fb.y) == Approx(mass * f / h * (4 * M_PI * 0.03 + 1)).epsilon(1e-6));
+  // Touching the tips from outside (centre 1.05 bounding radii beyond them): among the bristles; 1.2 radii
+  // beyond: not (the contact tolerance is 1.1 radii), only the (negligible) drag.
+  CHECK(length(cesParticleForce(md, 1, Vec3{real(0.35 + 1.05 * r), 0, 0}, vp, 0, real(r), real(r), real(mass), real(h))) >
+        0.01 * mass / h);  // the sweep: mass (1 - e^(-0.1))/h x 0.372 m/s
+  CHECK(length(cesParticleForce(md, 1, Vec3{real(0.35 + 1.2 * r), 0, 0}, vp, 0, real(r), real(r), real(mass), real(h))) <
+        1e-9 * mass / h);
+  // Among the bristles the charge decays with the brush's time constant (1 ms here); outside it is kept.
+  uint8_t flags = 0;
+  CHECK(double(cesChargeUpdate(md, 1, p, real(-4e-12), real(r), real(r), real(h), flags)) ==
+        Approx(-4e-12 * std::exp(-h / 1e-3)).epsilon(1e-12));
+  CHECK(cesChargeUpdate(md, 1, Vec3{0.4, 0, 0}, real(-4e-12), real(r), real(r), real(h), flags) == real(-4e-12));
 }
 
 TEST_CASE("CES default machine parameters", "[ces]") {

@@ -58,7 +58,8 @@ const char* defaultCesJson() {
     },
     "field": { "model": "corona", "extra_electrodes": [] },
     "corona": { "ion_mobility_m2_Vs": 2.1e-4, "rel_air_density": 1.0, "roughness": 1.0, "grid_mm": 1.0, "image_cutoff_mm": 5 },
-    "brush": { "diameter_mm": 106, "angle_deg": -135, "rpm": 120, "gap_mm": 0.2, "discharge_time_s": 0.001 },
+    "brush": { "diameter_mm": 106, "core_diameter_mm": 66, "angle_deg": -135, "rpm": 120, "gap_mm": 0,
+               "discharge_time_s": 0.001, "sweep_time_s": 0.002 },
     "air": { "viscosity_Pa_s": 1.81e-5, "density_kg_m3": 1.225 },
     "friction": { "particle_particle": 0.2, "particle_drum": 0.5, "particle_brush": 0.5, "particle_wall": 0.3 },
     "feed": {
@@ -83,7 +84,7 @@ const char* defaultCesJson() {
       ]
     },
     "collection": { "y_mm": -350, "x0_mm": 0 },
-    "splitters": { "s1_mm": 60, "s2_mm": 200, "range_mm": [-100, 500], "positions": 61,
+    "splitters": { "s1_mm": 0, "s2_mm": 200, "range_mm": [-200, 500], "positions": 71,
                    "grade_targets": { "conductor": 0.95, "nonconductor": 0.95 } },
     "output": { "frames": 0, "histogram_bin_mm": 2, "plots": true, "checkpoint_every_s": 0 }
   }
@@ -252,12 +253,19 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
     if (has(s, "image_cutoff_mm")) cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
   }
   if (has(j, "brush")) {
-    const json& s = c.object(j["brush"], "ces.brush", {"diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s"});
+    const json& s = c.object(j["brush"], "ces.brush",
+                             {"diameter_mm", "core_diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s", "sweep_time_s"});
     if (has(s, "diameter_mm")) cfg.brush_diameter = c.positive(s["diameter_mm"], "ces.brush.diameter_mm") * kMm;
+    cfg.brush_core_diameter = has(s, "core_diameter_mm")
+                                  ? c.positive(s["core_diameter_mm"], "ces.brush.core_diameter_mm") * kMm
+                                  : cfg.brush_diameter;  // no bristles named: a smooth cylinder
+    if (cfg.brush_core_diameter > cfg.brush_diameter)
+      c.fail("ces.brush.core_diameter_mm", "larger than diameter_mm (the diameter over the bristle tips)");
     if (has(s, "angle_deg")) cfg.brush_angle = c.range(s["angle_deg"], "ces.brush.angle_deg", -360, 360) * kDeg;
     if (has(s, "rpm")) cfg.brush_rpm = c.range(s["rpm"], "ces.brush.rpm", -10000, 10000);
     if (has(s, "gap_mm")) cfg.brush_gap = c.nonNegative(s["gap_mm"], "ces.brush.gap_mm") * kMm;
     if (has(s, "discharge_time_s")) cfg.brush_discharge_time = c.nonNegative(s["discharge_time_s"], "ces.brush.discharge_time_s");
+    if (has(s, "sweep_time_s")) cfg.brush_sweep_time = c.nonNegative(s["sweep_time_s"], "ces.brush.sweep_time_s");
   }
   if (has(j, "air")) {
     const json& s = c.object(j["air"], "ces.air", {"viscosity_Pa_s", "density_kg_m3"});

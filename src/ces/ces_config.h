@@ -93,9 +93,14 @@ struct CesConfig {
   double corona_grid = 0.001;                      // m, grid spacing of the ionised-field solver
   double image_cutoff = 0.005;                     // m, image force acts within this distance of the drum surface
 
-  // Brush (grounded, rotating cylinder).
-  double brush_diameter = 0.106, brush_angle = -2.356194490192345, brush_rpm = 120, brush_gap = 0.0002;
+  // Brush (grounded, rotating): a rigid core of brush_core_diameter (the body particles collide with) set with
+  // bristles out to brush_diameter, whose tips are brush_gap from the drum (0: they touch it). Among the
+  // bristles a particle is discharged (brush_discharge_time) and swept toward their velocity
+  // (brush_sweep_time). brush_core_diameter = brush_diameter is a smooth rigid cylinder.
+  double brush_diameter = 0.106, brush_core_diameter = 0.066, brush_angle = -2.356194490192345, brush_rpm = 120,
+         brush_gap = 0;
   double brush_discharge_time = 1e-3;              // s
+  double brush_sweep_time = 2e-3;                  // s
 
   // Air.
   double air_viscosity = 1.81e-5, air_density = 1.225;
@@ -117,9 +122,9 @@ struct CesConfig {
   double collection_y = -0.35, collection_x0 = 0;
 
   // Splitters (virtual): bins nonconductor x' < s1 <= middling < s2 <= conductor.
-  double s1 = 0.060, s2 = 0.200;
-  double splitter_lo = -0.100, splitter_hi = 0.500;
-  int splitter_positions = 61;
+  double s1 = 0.0, s2 = 0.200;
+  double splitter_lo = -0.200, splitter_hi = 0.500;
+  int splitter_positions = 71;
   // Grade targets of the optimiser: the conductor product's metal grade and the nonconductor product's
   // plastic grade that the best setting must reach (0: none).
   double grade_target_conductor = 0.95, grade_target_nonconductor = 0.95;

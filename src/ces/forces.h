@@ -59,6 +59,18 @@ DVI_HD Vec3 electricForce(const DrumGeometry& g, Vec3 p, real q, real r, Vec3 E)
   return coulombForce(q, E) + imageForce(g, p, q, r);
 }
 
+// Sweep of a rotating brush's bristles on a particle among them: the particle's velocity v relaxes toward the
+// bristles' local velocity v_b with the time constant tau_s, dv/dt = (v_b - v)/tau_s. As a force for a step h
+// of the core's semi-implicit Euler update (v' = v + h F/m) it is the exact solution of that relaxation over the
+// step, v' - v_b = (v - v_b) e^(-h/tau_s):
+//   F = m (v_b - v) (1 - e^(-h/tau_s)) / h,
+// stable for any h/tau_s; tau_s = 0 sets the velocity to v_b within the step (before the contacts act).
+DVI_HD Vec3 bristleSweepForce(real mass, Vec3 v, Vec3 vBristle, real h, real tau) {
+  if (!(h > real(0))) return Vec3{0, 0, 0};
+  const real f = tau > real(0) ? -std::expm1(-h / tau) : real(1);
+  return (mass * f / h) * (vBristle - v);
+}
+
 // Particle Reynolds number Re = rho_f |v_rel| d / eta.
 DVI_HD real reynoldsNumber(real speed, real d, real rhoFluid, real eta) { return rhoFluid * speed * d / eta; }
 

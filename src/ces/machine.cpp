@@ -84,7 +84,7 @@ bool coreSolvesConstraintRows() {
 // Plug-ins
 // ---------------------------------------------------------------------------------------------------
 
-void CesForceField::apply(const BodyArrays& b, double, real, Vec3* force, Vec3*) {
+void CesForceField::apply(const BodyArrays& b, double, real dt, Vec3* force, Vec3*) {
   const CesParticles& p = m_.p_;
   const CesModel& model = m_.model_;
   const int64_t n = int64_t(std::min(p.count(), b.count()));
@@ -92,13 +92,13 @@ void CesForceField::apply(const BodyArrays& b, double, real, Vec3* force, Vec3*)
   for (int64_t i = 0; i < n; ++i) {
     if (p.status[size_t(i)] != kStatusInFlight || (b.flags[size_t(i)] & kBodyFixed)) continue;
     force[i] += cesParticleForce(model, p.material[size_t(i)], b.pos[size_t(i)], b.vel[size_t(i)], p.charge[size_t(i)],
-                                 p.radius[size_t(i)], p.bound[size_t(i)]);
+                                 p.radius[size_t(i)], p.bound[size_t(i)], p.mass[size_t(i)], dt);
   }
 }
 
-bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, double, real, Vec3* force, Vec3*) {
+bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, double, real dt, Vec3* force, Vec3*) {
   if (!m_.dev_) return false;
-  m_.dev_->forces(b, force);
+  m_.dev_->forces(b, dt, force);
   return true;
 }
 
@@ -209,9 +209,12 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   model_.polarity = cfg_.voltage < 0 ? real(-1) : cfg_.voltage > 0 ? real(1) : real(0);
   model_.ion_mobility = real(cfg_.ion_mobility);
   model_.pin_dy = -R * real(std::cos(20.0 * 3.14159265358979323846 / 180.0));  // within 20 deg of the lowest point
-  const real rb = real(cfg_.brush_diameter / 2), db = R + rb + real(cfg_.brush_gap);
+  // The brush's axis: its bristle tips (radius rb) brush_gap from the drum; its rigid core (radius rc) is the body.
+  const real rb = real(cfg_.brush_diameter / 2), rc = real(cfg_.brush_core_diameter / 2), db = R + rb + real(cfg_.brush_gap);
   model_.brush = CylinderXY{db * real(std::cos(cfg_.brush_angle)), db * real(std::sin(cfg_.brush_angle)), rb};
+  model_.brush_omega = real(cfg_.omegaBrush());
   model_.brush_tau = real(cfg_.brush_discharge_time);
+  model_.brush_sweep_tau = real(cfg_.brush_sweep_time);
   model_.n_electrodes = 0;
   auto addElectrode = [&](const ElectrodeConfig& x) {
     model_.electrodes[model_.n_electrodes++] =
@@ -269,7 +272,7 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
     d.mass = 0;
     d.flags = kBodyKinematic;
     d.friction = real(cfg_.mu_particle_brush) / fp;
-    d.shapes.push_back(machineShape(makeCylinder(rb, W / 2)));
+    d.shapes.push_back(machineShape(makeCylinder(rc, W / 2)));
     brush_ = addBody(d, -1, nullptr, 0);
   }
   for (int k = 0; k < model_.n_electrodes; ++k) {  // electrodes
@@ -310,6 +313,7 @@ int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spe
   p_.radius.push_back(spec ? spec->radius : real(0));
   p_.bound.push_back(spec ? spec->bound : real(0));
   p_.mass_fg.push_back(spec ? spec->mass_fg : 0);
+  p_.mass.push_back(spec ? real(double(spec->mass_fg) * kFemtogram) : real(0));
   if (spec) specs_.push_back(*spec);
   return id;
 }
@@ -492,8 +496,7 @@ void CesMachine::settle(size_t k, uint8_t next) {
 bool CesMachine::heldUp(size_t k) const {
   if (p_.status[k] != kStatusInFlight) return false;
   const Vec3 p = sys_.bodies().pos[k];
-  const real tol = model_.contact_tol * p_.bound[k];
-  if (distanceToCylinderSurface(model_.brush, p) <= tol) return true;
+  if (amongBristles(model_, p, p_.bound[k])) return true;
   return (p_.flags[k] & kFlagPinned) && touchesDrum(model_, p, p_.bound[k]);
 }
 

@@ -5,7 +5,9 @@
 //             step) or, when the core solves constraint rows, as a dynamic body held by a rheonomic
 //             RowProvider (DrumDrive: revolute joint to the fixed truss + angular-velocity drive, which
 //             reports the drive torque). drum.drive = auto picks the rheonomic one when available.
-//   brush     kinematic cylinder beside the drum (gap brush.gap_mm), turning at brush.rpm
+//   brush     kinematic cylinder, the brush's rigid core (brush.core_diameter_mm), turning at brush.rpm; its
+//             bristles (out to brush.diameter_mm, brush.gap_mm from the drum) are no body: a zone where
+//             particles are discharged and swept (particle_model.h: amongBristles)
 //   electrodes fixed cylinders (the static electrode and, with the CSM field, the extra electrodes)
 //   walls     two fixed planes at the drum's ends (z = +-width/2)
 // Machine parts only collide with particles (collision group 2, mask 1; particles group 1).
@@ -53,6 +55,7 @@ struct CesParticles {
   std::vector<real> radius;        // volume-equivalent radius, m
   std::vector<real> bound;         // bounding radius, m
   std::vector<int64_t> mass_fg;    // femtograms
+  std::vector<real> mass;          // kg, the same mass (the brush's sweep force)
   size_t count() const { return status.size(); }
 };
 
@@ -66,7 +69,7 @@ struct CollectedParticle {
 };
 
 // Where every fed particle is: collected (crossed the collection plane), lost (left the machine's domain
-// otherwise; must be 0), held up (neither, and at this moment in contact with the brush, or in contact
+// otherwise; must be 0), held up (neither, and at this moment among the brush's bristles, or in contact
 // with the drum after having been carried, touching it, to within 20 degrees of its lowest point, where
 // only electric forces hold a particle: material the brush has not yet removed), or in flight (the rest:
 // falling, bouncing, or riding the drum before its lowest point). Masses in whole femtograms.

@@ -1,11 +1,11 @@
 // The per-particle operations of the CES plug-in, written once as DVI_HD functions over plain data: the
-// field at a point, the force on a particle (Coulomb or the conductor's lift, image, drag), the charge
-// update of one step (ion charging, relaxation through a grounded contact, brush discharge) and the
-// particle's status (in flight / collected / lost). The CPU calls them from OpenMP loops (machine.cpp),
+// field at a point, the force on a particle (Coulomb or the conductor's lift, image, drag, the brush's
+// sweep), the charge update of one step (ion charging, relaxation through a grounded contact, brush
+// discharge) and the particle's status (in flight / collected / lost). The CPU calls them from OpenMP loops (machine.cpp),
 // the CUDA kernels (ces_device.cu) on a device copy of CesModel whose field arrays point to device memory.
 //
 // Every formula lives in forces.h / charging.h / field_*.h with its reference; this file only decides
-// where each applies (docs/CES.md, "Where each force and charge applies").
+// where each applies (docs/CES.md, "Charges" and "Forces").
 #pragma once
 
 #include <cmath>
@@ -59,8 +59,13 @@ struct CesModel {
   real polarity;             // sign of the corona ions = sign of the supply voltage (0: supply off)
   real ion_mobility;         // m^2/(V s), of the corona's ions (Pauthenier's charging time)
   real pin_dy;               // a particle touching the drum with y - y_axis < pin_dy is pinned (kFlagPinned)
+  // The brush: a rigid core (the collision body, not here) set with bristles up to `brush` (the circle of the
+  // bristle tips, reaching the drum). A particle touching that circle or inside it is among the bristles:
+  // discharged with brush_tau and swept toward the bristles' velocity omega_b z x (p - c) with brush_sweep_tau.
   CylinderXY brush;
-  real brush_tau;            // s, discharge time constant in brush contact
+  real brush_omega;          // rad/s about +z
+  real brush_tau;            // s, discharge time constant among the bristles
+  real brush_sweep_tau;      // s, velocity relaxation time toward the bristles' velocity
   int32_t n_electrodes;
   CylinderXY electrodes[kMaxElectrodes];
   real air_density, air_viscosity;
@@ -86,16 +91,29 @@ DVI_HD bool touchesDrum(const CesModel& m, Vec3 p, real bound) {
   return insideDrumWidth(m.drum, p) && distanceToDrumSurface(m.drum, p) <= m.contact_tol * bound;
 }
 
-// Force on a particle of material mat, volume-equivalent radius r, bounding radius bound, charge q, at p
-// with velocity v: Schiller-Naumann drag of the volume-equivalent sphere in still air, and inside the
-// drum width the electric force:
+// True when a particle with bounding radius `bound` at p is among the brush's bristles: its centre within the
+// contact tolerance of the bristle tips' circle, or inside it.
+DVI_HD bool amongBristles(const CesModel& m, Vec3 p, real bound) {
+  return distanceToCylinderSurface(m.brush, p) <= m.contact_tol * bound;
+}
+
+// Velocity of the bristles at p (rigid rotation of the brush about its axis).
+DVI_HD Vec3 bristleVelocity(const CesModel& m, Vec3 p) {
+  return Vec3{-m.brush_omega * (p.y - m.brush.cy), m.brush_omega * (p.x - m.brush.cx), real(0)};
+}
+
+// Force on a particle of material mat, mass `mass`, volume-equivalent radius r, bounding radius bound, charge
+// q, at p with velocity v, for a step h: Schiller-Naumann drag of the volume-equivalent sphere in still air;
+// among the brush's bristles their sweep (forces.h: bristleSweepForce); inside the drum width the electric
+// force:
 //  - a conductor (metal) touching the drum: the Lebedev-Skal'skaya lift k_L q E (k_L = 0.832), which
 //    already holds the sphere's image in the drum (charging.h: kFeliciLiftFactor); no image term;
 //  - a conductor in flight: q E (its image in the drum is below 0.1 q E a diameter away and is left out,
 //    so the force does not drop below the contact value as it lifts off);
 //  - insulators and middlings: q E plus the image force of their charge toward the drum (forces.h).
-DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound) {
+DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound, real mass, real h) {
   Vec3 F = dragForceSphere(Vec3{0, 0, 0}, v, real(2) * r, m.air_density, m.air_viscosity);
+  if (amongBristles(m, p, bound)) F += bristleSweepForce(mass, v, bristleVelocity(m, p), h, m.brush_sweep_tau);
   if (q == real(0) || !insideDrumWidth(m.drum, p)) return F;
   const FieldSample s = evalField(m.field, p);
   if (m.kind[mat] == kKindMetal) {
@@ -117,7 +135,7 @@ DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q,
 //     keeps its ion charge; a middling moves toward the induced charge in its own time;
 //  3. contact with an electrode: the same relaxation toward the induced charge of that electrode
 //     (outward normal of the electrode: a conductor touching it is recharged and repelled);
-//  4. brush contact: discharge with the brush time constant.
+//  4. among the brush's bristles: discharge with the brush time constant.
 // Away from ions and contacts the charge does not change.
 DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, real bound, real h, uint8_t& flags) {
   const real eps = m.eps_r[mat], tau = m.tau[mat];
@@ -148,7 +166,7 @@ DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, 
     const FieldSample s = evalField(m.field, p);
     q = relaxCharge(q, feliciCharge(r, s.E, n), h, tau);
   }
-  if (distanceToCylinderSurface(m.brush, p) <= m.contact_tol * bound) q = brushDischarge(q, h, m.brush_tau);
+  if (amongBristles(m, p, bound)) q = brushDischarge(q, h, m.brush_tau);
   return q;
 }
 
