@@ -533,7 +533,8 @@ int runCesMachine(const CesRunOptions& o) {
               cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
               frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
               wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
-  const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver_settings);
+  const std::string remedy = "raise --set solver.iterations (now " + std::to_string(cfg.iterations) + ")";
+  const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver_settings, remedy);
   if (!unconverged.empty()) std::fprintf(stderr, "%s\n", unconverged.c_str());
   return 0;
 }
