@@ -11,6 +11,7 @@
 #   ncu        per-kernel device time of a GPU pile run (NCU_COUNT launches, NCU_STEPS divides)
 #   probe      unrecorded GPU pile timings, float and double APGD storage (PROBE_SIZES, PROBE_SCENES)
 #   ab         unrecorded GPU timings of option variants side by side (AB_VARIANTS, PROBE_SIZES, PROBE_SCENES)
+#   settle     the 100k pile at the default solver stop and at fixed 50 iterations, statistics side by side
 #   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
@@ -103,6 +104,15 @@ for m in "$@"; do
         --budget 0.01 > "$LOGS/ncu.csv" 2> "$LOGS/ncu.err"
       echo "ncu rc=$?"; tail -3 "$LOGS/ncu.err"
       python3 src/gpu/tools/ncu_summary.py "$LOGS/ncu.csv" ${NCU_STEPS:-1} ;;
+    settle)  # scenes/pile_100k.json on the GPU at the solver's default stop and at fixed 50 iterations, side by side
+             # (SETTLE_TIME s of machine time, default 1); the table goes to $OUT/settle.md
+      for v in fixed50 default; do
+        a=""; [ $v = fixed50 ] && a="--iterations 50"
+        $BIN run scenes/pile_100k.json --backend gpu --time ${SETTLE_TIME:-1} $a --out "$LOGS/settle_$v" > "$LOGS/settle_$v.log" 2>&1
+        echo "settle $v rc=$?"; tail -2 "$LOGS/settle_$v.log"
+      done
+      python3 bench/settle/compare_runs.py --radius 0.01 --skip 5 fixed50="$LOGS/settle_fixed50" default="$LOGS/settle_default" \
+        | tee "$OUT/settle.md" ;;
     accuracy|stability) bench $m ;;
     pruning) bench pruning --backend gpu ;;
     cesbench) bench ces --backend gpu ;;
