@@ -236,8 +236,8 @@ TEST_CASE("GPU narrow phase equals the CPU's on random pairs of every shape comb
   // (1e-6 x size: MPR's tolerance is 1e-9 x size, but its normal is found to about 1e-4): the points
   // agree along the normal, but where the Minkowski difference is flat near the contact (a box face, a
   // cylinder cap) the support vertices tie and rounding picks the tie, so the reported point may slide
-  // tangentially within the contact patch. That slide is reported, not failed (see DESIGN §4 note in
-  // src/gpu/NOTES.md). In float every tolerance is 1e-2.
+  // tangentially within the contact patch. That slide is reported, not failed (docs/GPU_PERFORMANCE.md,
+  // narrow phase). In float every tolerance is 1e-2.
   auto closedForm = [](ShapeType a, ShapeType b) {
     if (a > b) std::swap(a, b);
     if (b == ShapeType::Plane) return true;
@@ -362,7 +362,7 @@ void compareOneStep(bool mixed) {
     // side on a cylinder's cap, kept parallel by the flat-feature manifold, mpr.h) has an ill-conditioned normal:
     // the depth does not change as it turns about the line, and the two builds' roundings put it 1.1e-4 rad
     // apart at the same depth (the random-pairs test above allows 1e-3 rad for MPR normals). The impulses then
-    // differ by 3.7e-7 (H200, 4b90844): float tolerance, as issue 3 asks of this comparison.
+    // differ by 3.7e-7 (H200, 4b90844): float tolerance, as this comparison allows.
     const double tol = kDouble ? (s == 0 ? 1e-9 : 1e-6) : 2e-3;
     CHECK(eg < tol);
     CHECK(ev < tol);
@@ -387,7 +387,7 @@ TEST_CASE("one step of a 10,000-body mixed pile: GPU impulses and velocities equ
   compareOneStep(true);
 }
 
-// Friction rows only where mu > 0 (DESIGN §2): a frictionless pile solves the normal rows only, packed three
+// Friction rows only where mu > 0 (docs/MODEL.md §6): a frictionless pile solves the normal rows only, packed three
 // per block (jacobian.h), on both backends through the same functors; every solver the GPU has.
 TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the CPU's", "[gpu][pruning]") {
   if (!haveDevice()) return;

@@ -1,4 +1,4 @@
-// Leaving out what a scene does not need (DESIGN §2, issue 6 part 3): the normal-only CCP of a frictionless
+// Leaving out what a scene does not need (docs/MODEL.md §6): the normal-only CCP of a frictionless
 // step against the full three-row problem (the existing, tested code path: with mu = 0 its tangential
 // impulses are projected to 0, so both must reach the same solution), a mixed scene, and the stage list.
 #include <catch2/catch.hpp>

@@ -1,6 +1,6 @@
 // dvisim bench accuracy --out DIR [--quick] [--record] [--threads N]
 //
-// Work-precision benchmark of issue 6 (part 1): run time against error for each CCP solver (Jacobi, Gauss-Seidel
+// Work-precision benchmark: run time against error for each CCP solver (Jacobi, Gauss-Seidel
 // on the CPU, APGD, BB) on our CPU backend (and the GPU backend when a device is present), with Bullet's own
 // sequential-impulse solver as one more line, on standard scenes: a sphere pile (100k spheres in full mode), a
 // mixed-shape pile, the 10-box stack with a 1000x heavy top (scenes/stack.json's tower) and the CES machine. Per scene, solver
@@ -506,7 +506,7 @@ int runAccuracy(const AccOptions& o) {
   const long goal_n = o.quick ? 2000 : 100000;
   const int cap = o.quick ? 3000 : 5000;
   std::ostringstream goal;
-  goal << "Goal (issue 6): time for the CCP solve to reach relative residual 1e-4 on the " << goal_n
+  goal << "Goal: time for the CCP solve to reach relative residual 1e-4 on the " << goal_n
        << "-sphere pile, APGD vs Jacobi, the same CCP (5 settling steps, then one step per solver from the same state; "
           "Solve-stage time, tolerance stop, Jacobi capped at "
        << cap << " iterations):\n";

@@ -1,6 +1,6 @@
 // dvisim bench pruning --out DIR [--quick] [--record] [--backend cpu|gpu|auto] [--n N] [--threads N]
 //
-// What leaving out the stages a scene does not need saves (issue 6, part 3; DESIGN §2): the same pile of
+// What leaving out the stages a scene does not need saves (docs/MODEL.md §6): the same pile of
 // spheres (bench/scaling/scaling_scenes.h) stepped by two systems side by side in one run, one with
 // SystemConfig::prune = true (the default: a frictionless step solves one row per contact, no gyroscopic
 // term for spheres, no empty row or field stages) and one with prune = false (every stage and three rows
@@ -161,12 +161,12 @@ int runPruning(const PruneOptions& o) {
   }
   std::snprintf(line, sizeof line,
                 "\nSaving of prune = true against prune = false (measured side by side in this run):\n"
-                "- frictionless pile: %.1f%% -> goal (issue 6) >= 30%%: %s\n"
+                "- frictionless pile: %.1f%% -> goal >= 30%%: %s\n"
                 "- frictional pile (control, every contact needs its friction rows): %.1f%%\n",
                 s0, pass ? "MET" : "NOT MET", s1);
   md << line;
   std::printf("%s", md.str().c_str());
-  std::printf("Goal (issue 6): pruning saves >= 30%% on a frictionless all-sphere scene: %s (%.1f%%)\n",
+  std::printf("Goal: pruning saves >= 30%% on a frictionless all-sphere scene: %s (%.1f%%)\n",
               pass ? "MET" : "NOT MET", s0);
 
   std::ostringstream head;

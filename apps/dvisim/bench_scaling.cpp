@@ -2,7 +2,7 @@
 //                      [--engines gpu,cpu,bullet,bullet3_opencl] [--cpu-max 100k] [--threads N] [--budget S]
 //                      [--bullet3-device gpu|cpu|any] [--results-dir DIR]
 //
-// The scaling benchmark of issue 3 (a benchmark, not a test): a pile of N spheres (r = 1 cm, mu = 0.5) and a
+// The scaling benchmark (a benchmark, not a test): a pile of N spheres (r = 1 cm, mu = 0.5) and a
 // multidisperse mix (bench/scaling/scaling_scenes.h), h = 1e-3 s, APGD 50 iterations, stepped side by side
 // in one run by our GPU backend (every N), Bullet 3's OpenCL GPU pipeline (every N until it fails at one;
 // bench/scaling/bullet3_peer.h, each configuration in a child process: bench_scaling_bullet3.h), our CPU
@@ -447,11 +447,11 @@ std::string verdict(double value, double goal, bool at_most) {
   return b;
 }
 
-// The goals of issue 3 read from this run, then the same ratios for the mix.
+// The performance goals read from this run, then the same ratios for the mix.
 std::string goalsText(const std::vector<Row>& rows, const std::string& gpu_status) {
   std::ostringstream o;
   char b[512];
-  o << "Goals (issue 3), from this run:\n";
+  o << "Goals, from this run:\n";
   const bool gpu = std::any_of(rows.begin(), rows.end(), [](const Row& r) { return r.ok() && r.engine == "gpu"; });
   if (!gpu) o << "  GPU: " << gpu_status << " -- the GPU goals are not evaluated in this run.\n";
   for (const std::string scene : {"pile", "mix"}) {
@@ -506,7 +506,7 @@ std::string notesText(double dev_copy, double host_copy, const std::string& bull
        "Solve; integrate = IntegrateForces + IntegrateVelocities + IntegratePositions; ms/step is the wall time of "
        "step().\n"
     << "- Solver bandwidth is a model: (contacts x 200 B + bodies x 50 B) per iteration x iterations / Solve-stage time "
-       "(DESIGN section 6, src/gpu/NOTES.md). It is compared with the copy bandwidth measured in this run (read + "
+       "(docs/MODEL.md §8, docs/GPU_PERFORMANCE.md). It is compared with the copy bandwidth measured in this run (read + "
        "write): device "
     << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("not measured (no GPU)")) << ", host "
     << num(host_copy, "%.0f") << " GB/s (parallel memcpy over the CPU backend's threads).\n"

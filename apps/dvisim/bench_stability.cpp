@@ -1,6 +1,6 @@
 // dvisim bench stability --out DIR [--quick] [--record] [--threads N]
 //
-// The stability suite of issue 6 (part 2): stiff and extreme cases, each stepped by our CPU backend (APGD), our
+// The stability suite: stiff and extreme cases, each stepped by our CPU backend (APGD), our
 // GPU backend when there is a device, and Bullet's own btDiscreteDynamicsWorld (sequential impulse, at its
 // default 10 iterations and at 100 iterations; ours at the solver's default stop), each with a stated pass criterion
 // and a verdict. Every engine steps the same Bullet bodies (ours through importBullet, Bullet through the

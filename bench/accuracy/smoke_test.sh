@@ -38,7 +38,7 @@ NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
   }
 }
 END { exit bad }' "$csv" || fail "bad values in $csv"
-grep -q "Goal (issue 6)" "$work/stdout.txt" || fail "no goal line on stdout"
+grep -q "Goal: time" "$work/stdout.txt" || fail "no goal line on stdout"
 grep -q "APGD .* Jacobi .* ratio" "$work/stdout.txt" || fail "no APGD/Jacobi ratio on stdout"
 
 expect2 bench accuracy --quick --out "$work/e1" --bogus

@@ -28,7 +28,7 @@ NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
   if (pr == "false" && !index($col["parts_ran"], "BuildRows.FrictionRows")) { print "row " NR ": friction rows did not run"; bad = 1 }
 }
 END { exit bad }' "$csv" || fail "bad values in $csv"
-grep -q "Goal (issue 6): pruning saves >= 30% on a frictionless all-sphere scene: " "$work/stdout.txt" || fail "no goal line"
+grep -q "Goal: pruning saves >= 30% on a frictionless all-sphere scene: " "$work/stdout.txt" || fail "no goal line"
 grep -q "do not edit by hand" "$work/out/pruning.md" || fail "pruning.md header"
 
 expect2 bench pruning --quick --out "$work/e1" --bogus

@@ -1,6 +1,6 @@
 // The Bullet 3 peer of the scaling benchmark: a benchmark scene (scaling_scenes.h) stepped by Bullet 3's
 // OpenCL GPU pipeline (b3GpuRigidBodyPipeline: SAP broad phase, b3GpuNarrowPhase, batched PGS contact
-// solver), so `dvisim bench scaling` can put it beside our engines and Bullet 2 (DESIGN section 6).
+// solver), so `dvisim bench scaling` can put it beside our engines and Bullet 2 (docs/MODEL.md §8).
 //
 // Built only where Debian's libbullet-dev ships Bullet3OpenCL and OpenCL is found (bench/scaling/CMakeLists.txt);
 // elsewhere bullet3PeerBuilt() says why and the constructor throws. The benchmark runs each configuration

@@ -92,7 +92,7 @@ struct BulletScene {
 };
 BulletScene makeBulletScene(const SceneSpec& spec);
 
-// Bytes one matrix-free CCP iteration must move at least (DESIGN §6, src/gpu/NOTES.md): each contact's
+// Bytes one matrix-free CCP iteration must move at least (docs/MODEL.md §8, docs/GPU_PERFORMANCE.md): each contact's
 // Jacobian, impulse and right-hand side (about 200 B) and each body's velocity update (about 50 B).
 inline double solverIterationBytes(double contacts, double bodies) { return contacts * 200.0 + bodies * 50.0; }
 

@@ -54,7 +54,7 @@ NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
 END { exit bad }' "$1" || fail "bad values in $1"
 }
 check_rows "$csv"
-grep -q "Goals (issue 3)" "$work/stdout.txt" || fail "no goals table on stdout"
+grep -q "Goals, from this run" "$work/stdout.txt" || fail "no goals table on stdout"
 
 # The Bullet 3 peer on an OpenCL CPU device (pocl), where one exists: its rows measured through the worker
 # process, or "not run: ..." where this build has no peer or the machine no OpenCL CPU device (CI).

@@ -1,4 +1,4 @@
-// Euclidean projection onto one friction cone (DESIGN §3), a per-element DVI_HD operation shared by the
+// Euclidean projection onto one friction cone (docs/MODEL.md §3), a per-element DVI_HD operation shared by the
 // CPU solvers and, later, the CUDA kernels.
 //
 //   K_mu = {(gn, gu, gw) : sqrt(gu^2 + gw^2) <= mu gn}          (a second-order cone, half-angle atan(mu))
@@ -51,7 +51,7 @@ DVI_HD void projectCone(real mu, real& gn, real& gu, real& gw) {
 // Projects the block g[0..2] = (gn, gu, gw) in place.
 DVI_HD void projectConeBlock(real mu, real* g) { projectCone(mu, g[0], g[1], g[2]); }
 
-// Squared contribution of one contact to the projected-gradient residual (DESIGN §3):
+// Squared contribution of one contact to the projected-gradient residual (docs/MODEL.md §4):
 // |(g - P(g - a grad)) / a|^2 for the block g with gradient grad = (N g + r)_k.
 // inv_a = 1 / a is passed too, to keep divisions out of the solvers' loops.
 DVI_HD real projectedGradientResidual2(real mu, const real* g, const real* grad, real a, real inv_a) {

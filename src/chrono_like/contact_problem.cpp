@@ -1,4 +1,4 @@
-// Assembly of the contact CCP and its matrix-free operators (DESIGN §3; layout in contact_problem.h and
+// Assembly of the contact CCP and its matrix-free operators (docs/MODEL.md §3; layout in contact_problem.h and
 // jacobian.h). The per-element work is in jacobian.h and cone.h, shared with the CUDA kernels.
 #include "contact_problem.h"
 

@@ -2,7 +2,7 @@
 // motors, rheonomic drives; BuildRows / Solve). Plug-ins (the CES machine, the Bullet drop-in world's
 // joints) implement these; the core never knows what they model.
 //
-// Constraint rows (DESIGN §3; Tasora & Anitescu, "A matrix-free cone complementarity approach for solving
+// Constraint rows (docs/MODEL.md §2-3; Tasora & Anitescu, "A matrix-free cone complementarity approach for solving
 // large-scale, nonsmooth, rigid body dynamics", CMAME 200 (2011), eq. 14 for bilateral rows): row i acts
 // on bodies a and b with Jacobian rows Ja, Jb (linear part first, then angular, world frame) and impulse
 // l_i, solved together with the contacts as part of one CCP:

@@ -1,4 +1,4 @@
-// Per-body integration, written once for host and device (DESIGN §3, eqs. 8-14 of Critelli et al. 2015):
+// Per-body integration, written once for host and device (docs/MODEL.md §2, eqs. 8-14 of Critelli et al. 2015):
 // semi-implicit Euler on velocities, then positions with the updated velocities and the rotation
 // updated by the exponential map of h*omega (exact for any angle; keeps the quaternion unit).
 #pragma once

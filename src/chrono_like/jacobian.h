@@ -1,4 +1,4 @@
-// Per-contact Jacobian blocks of the contact CCP and the per-element operations on them (DESIGN §3),
+// Per-contact Jacobian blocks of the contact CCP and the per-element operations on them (docs/MODEL.md §3),
 // written once as DVI_HD functions: the OpenMP loops of contact_problem.cpp call them, and so will the
 // CUDA kernels.
 //
@@ -317,7 +317,7 @@ DVI_HD real contactJacobiStep(const real* cn, const real* rs, real Qa, real Qb) 
   return g > real(0) ? real(1) / g : real(0);
 }
 
-// ---- frictionless contacts: the normal row only (DESIGN §2, "leave out what a scene does not need") ----
+// ---- frictionless contacts: the normal row only (docs/MODEL.md §6, "leave out what a scene does not need") ----
 // A contact with mu = 0 has only its normal row: its tangential impulses are projected to 0 by the cone
 // (cone.h, mu = 0), so dropping the rows u, w leaves the CCP's solution unchanged (Anitescu & Tasora 2010:
 // the frictionless CCP is the LCP 0 <= gn _|_ N_nn gn + r_n >= 0). In a normal-only problem the normal rows

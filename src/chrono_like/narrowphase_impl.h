@@ -475,7 +475,7 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
 // Whether the narrow phase may run MPR for a pair of shape types (in either order): the pairs without a
 // closed form in collideOrdered's dispatch above (keep the two in step), and convex-triangle pairs (the face
 // axis, then MPR for edge and vertex contacts). Pairs that never collide (plane-plane, triangle-plane,
-// triangle-triangle) do not. The System reports the NarrowPhase.Mpr part from it (DESIGN §2).
+// triangle-triangle) do not. The System reports the NarrowPhase.Mpr part from it (docs/MODEL.md §6).
 DVI_HD bool pairUsesMpr(ShapeType a, ShapeType b) {
   if (b < a) {
     const ShapeType t = a;

@@ -53,7 +53,7 @@ inline void writeSummary(const std::string& path, const nlohmann::json& summary)
   writeFileAtomic(path, summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
-// The stages of a run in summary.json (DESIGN §2: "the run summary lists the stages that ran"):
+// The stages of a run in summary.json (docs/MODEL.md §6: "the run summary lists the stages that ran"):
 //   stages            the StageType names that ran in at least one step, in step order
 //   stage_seconds     their total wall time
 //   stage_parts       the StagePart names ("Stage.Part") that ran in at least one step

@@ -1,4 +1,4 @@
-// CCP solvers on the CcpProblem operator interface (DESIGN §3): the algorithms of solver_algorithms.h
+// CCP solvers on the CcpProblem operator interface (docs/MODEL.md §4): the algorithms of solver_algorithms.h
 // (shared with the GPU backend) instantiated with OpenMP loops. Every vector operation is a fused loop
 // over blocks; reductions go through detail::blockReduce so results are bitwise identical for any thread
 // count.

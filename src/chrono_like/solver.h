@@ -1,4 +1,4 @@
-// CCP solvers (DESIGN §3). A solver sees only the Schur product y = N x (N = D^T M^-1 D, never formed),
+// CCP solvers (docs/MODEL.md §4). A solver sees only the Schur product y = N x (N = D^T M^-1 D, never formed),
 // the friction cones, the right-hand side r and the per-contact block scalings (Chrono::Multicore's
 // ChSolverMulticore interface). It does not know how contacts were assembled, so the same solver code
 // serves the CPU and GPU problems.

@@ -318,7 +318,7 @@ void System::buildAndSolve() {
       max_mu = fmax(max_mu, contacts_.mu[k]);
     }
     stats_.max_penetration = max_pen;
-    // Friction rows only where mu > 0 (DESIGN §2): a step whose contacts are all frictionless solves the
+    // Friction rows only where mu > 0 (docs/MODEL.md §6): a step whose contacts are all frictionless solves the
     // normal rows alone (jacobian.h); the solution is the same (its tangential impulses would be 0).
     const bool normal_only = config_.prune && nc > 0 && !(max_mu > 0);
     stats_.normal_only = normal_only;

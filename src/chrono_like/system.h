@@ -1,5 +1,5 @@
 // The DVI system: owns the flat arrays of one simulation and runs the time step as a list of named
-// stages (DESIGN §2, §3; the stage list follows Box2D v3's b2SolverStageType). The profiler, the run
+// stages (docs/MODEL.md §6, §2; the stage list follows Box2D v3's b2SolverStageType). The profiler, the run
 // summary and docs/ARCHITECTURE.md use the same names.
 //
 // One step of size h:
@@ -40,7 +40,7 @@ enum class StageType : int {
 constexpr int kStageCount = int(StageType::Count);
 const char* stageName(StageType s);
 
-// Parts of the stages that the System leaves out when the scene does not need them (DESIGN §2: "the system
+// Parts of the stages that the System leaves out when the scene does not need them (docs/MODEL.md §6: "the system
 // assembles its stages from the scene"). Each part belongs to a StageType; its name is "Stage.Part" with the
 // stage's name (stagePartName), so the run summary lists stages and parts under the profiler's names.
 enum class StagePart : int {
@@ -78,7 +78,7 @@ struct SystemConfig {
   // MPR pairs of two flat features (cylinder caps, hull faces, a box face on a cap) get up to 4 more points of
   // their overlap (mpr.h: mprManifold): without them such stacks tip about MPR's one point and sink.
   bool mpr_manifold = true;
-  // Leave out the stages and rows the scene does not need (DESIGN §2): the normal row only when no contact
+  // Leave out the stages and rows the scene does not need (docs/MODEL.md §6): the normal row only when no contact
   // of the step has mu > 0, no gyroscopic term for spherical inertia, no row or field round trips without
   // row providers or fields. false runs every one of them (3 rows per contact even for mu = 0, the
   // gyroscopic Newton step for every body, the row and field stages when empty): for benchmarks and tests.
@@ -90,7 +90,7 @@ struct SystemConfig {
   // cooperative kernel (grid-wide barriers between the step, the gather and the fused Schur/test pass; the
   // control updated in every block), larger ones trial by trial (gpu_graphs). Both give bitwise the same iterates.
   // 0: never. The default is every size: on an H100 the persistent kernel was faster from 10k to 1M spheres
-  // (src/gpu/NOTES.md). Jacobi and BB always launch kernel by kernel, and so does a device without cooperative
+  // (docs/GPU_PERFORMANCE.md). Jacobi and BB always launch kernel by kernel, and so does a device without cooperative
   // launch.
   int64_t gpu_persistent_max_blocks = std::numeric_limits<int64_t>::max();
   // GPU backend: in the persistent APGD kernel, a problem of at most 2 blocks per thread of its grid (2 blocks of

@@ -1,6 +1,6 @@
 // Every CUDA runtime call and every kernel launch is checked; a failure throws std::runtime_error naming
 // the call (as written at the call site), the file, the line and CUDA's own error string. Device errors
-// are never ignored (DESIGN §7: Bullet's OpenCL pipeline ignores its allocation failures).
+// are never ignored (docs/MODEL.md §8: Bullet's OpenCL pipeline ignores its allocation failures).
 //
 //   DVI_CUDA(cudaMemcpyAsync(...));          // a runtime call
 //   kernel<<<grid, block, 0, stream>>>(...);

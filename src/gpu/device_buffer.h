@@ -1,7 +1,7 @@
 // RAII device array with capacity growth, so per-step buffers are allocated once and reused; a buffer
 // that must hold more grows (x1.5 headroom) instead of dropping elements. An allocation that cannot be
 // served throws std::runtime_error stating the bytes asked for, the buffer's name and the free memory:
-// never a silent truncation (DESIGN §7).
+// never a silent truncation (docs/MODEL.md §8).
 #pragma once
 
 #include <cuda_runtime.h>

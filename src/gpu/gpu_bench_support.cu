@@ -1,4 +1,4 @@
-// Device copy bandwidth, measured by the benchmarks themselves (DESIGN §6: report achieved bandwidth
+// Device copy bandwidth, measured by the benchmarks themselves (docs/MODEL.md §8: report achieved bandwidth
 // against the copy ceiling measured on the same device).
 #include <cuda_runtime.h>
 

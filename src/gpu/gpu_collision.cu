@@ -86,7 +86,7 @@ __device__ int searchSorted(const real* sorted, int n, real x, bool strict) {
 // at most max_large of them edgeKernel's rule ends there. Those conditions are checked here; where one fails,
 // the caller sorts the extents (edgeKernel). A pile or mix in a box (walls in B) takes this path. The mean
 // differs from edgeKernel's in the sum's order only. (The 64-bit radix sort of the extents, its prefix sums and
-// edgeKernel took ~85 us of a 100k-sphere step on an H200; ncu, src/gpu/NOTES.md.)
+// edgeKernel took ~85 us of a 100k-sphere step on an H200; ncu, docs/GPU_PERFORMANCE.md.)
 __device__ bool edgeFromSplit(int64_t cS, int64_t cB, double sumS, real hS, real lB, const BroadPhaseSettings& s,
                               real* edge) {
   if (cS + cB == 0) {

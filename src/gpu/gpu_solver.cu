@@ -682,7 +682,7 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
 // With speculation (SolverSettings::apgd_speculation) pass (3) also writes the next trial's step for the accepted
 // outcome; when it comes true (ApgdControl::ready) the next trial starts at (2): two barriers a trial.
 // Large problems are bound by their bytes (~650 B per contact a trial); there it saves less, but it was still
-// faster at every size measured (10k to 1M spheres, H100 and H200: src/gpu/NOTES.md, session 8), so it is the
+// faster at every size measured (10k to 1M spheres, H100 and H200: docs/GPU_PERFORMANCE.md), so it is the
 // default; SystemConfig::gpu_persistent_max_blocks can send problems above a size trial by trial.
 // The slices and sums are those of the trial-by-trial launches (reduceSlice, reducePartials), so both paths
 // give bitwise the same iterates ([gpu] test "GPU APGD on the device").
@@ -1254,7 +1254,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
             BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data(),
                          d.entry_gather ? S.inv_iso.data() : nullptr},
             "launch of BodyInverseF");
-  // Combined friction first: friction rows only where mu > 0 (DESIGN §2). When no contact of the step has
+  // Combined friction first: friction rows only where mu > 0 (docs/MODEL.md §6). When no contact of the step has
   // mu > 0 the CCP has the normal rows only (jacobian.h), as on the CPU (System::buildAndSolve).
   C.mu.resize(nc);
   C.size.resize(nc);

@@ -1,4 +1,4 @@
-// The GPU system: a System whose per-step arrays live on the device (DESIGN §2, issue 3).
+// The GPU system: a System whose per-step arrays live on the device (docs/MODEL.md §6; docs/ARCHITECTURE.md).
 //
 // The host arrays of System (bodies_, shapes_, contacts_, gamma_) are the upload source and the download
 // target only: the step reads and writes device mirrors (structure of arrays, the same layout), and the
