@@ -524,8 +524,12 @@ TEST_CASE("GPU defaults: the tolerance stop takes the CPU's iterations on the st
     const StepStats &a = cpu->lastStats(), &b = gpu->lastStats();
     INFO("step " << k << ": iterations " << a.iterations << " / " << b.iterations << ", relative " << a.relative_residual
                  << " / " << b.relative_residual);
-    differing += a.iterations != b.iterations;
-    CHECK(double(b.relative_residual) == Approx(double(a.relative_residual)).epsilon(1e-3).margin(1e-9));
+    // Once the stack rests, the relative residual is round-off (below 1e-6: differences of nearly equal
+    // velocities, reduced in another order on each backend), and an exact zero on one backend ends its solve
+    // early (reachedStop). Iteration counts are compared only while the residual is above round-off.
+    const bool roundoff = a.relative_residual < real(1e-6) && b.relative_residual < real(1e-6);
+    if (!roundoff) differing += a.iterations != b.iterations;
+    CHECK(double(b.relative_residual) == Approx(double(a.relative_residual)).epsilon(1e-3).margin(1e-6));
     CHECK(b.converged == a.converged);
   }
   CHECK(differing <= 2);  // the first steps are identical; rounding may shift a stop by a trial later on

@@ -370,7 +370,7 @@ int runCesMachine(const CesRunOptions& o) {
               origin.c_str(), cfg.field_model.c_str(), m.rheonomicDrive() ? "rheonomic" : "kinematic", cfg.drum_rpm,
               cfg.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.dt,
               resume ? (" (resumed at t = " + fmt(m.time()) + " s)").c_str() : "");
-  if (m.system().backendName() != "cpu")
+  if (m.system().backendName() != "cpu" && !m.deviceParticles())
     std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
                 m.system().backendName().c_str());
   std::fflush(stdout);
