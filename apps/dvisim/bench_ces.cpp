@@ -214,7 +214,8 @@ int runCesBench(const CesBenchOptions& o) {
   const double fed_flow_g_s = reached > 0 ? double(bal.fed_fg) * dvi::ces::kFemtogram * 1e3 / reached : 0.0;
   const std::string device = m.system().deviceName();
   const std::string commit = commitId(), date = utcNow("%Y-%m-%dT%H:%M:%SZ"), stamp = utcNow("%Y%m%d-%H%M%S");
-  const bool counts_agree = bal.in_flight == m.particlesInFlight();
+  // particlesInFlight() counts every particle still in the machine: in flight or held up.
+  const bool counts_agree = bal.in_flight + bal.held_up == m.particlesInFlight();
 
   // The goal's verdict.
   std::vector<std::string> why_not;

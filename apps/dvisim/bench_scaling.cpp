@@ -788,7 +788,12 @@ int runScaling(const ScalingOptions& o) {
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
        << ", host " << num(host_copy, "%.0f") << " GB/s\n\n"
-       << "```\n" << table << "```\n\n" << goals << "\n" << notes << "\nThe rows: " << base << ".csv\n";
+       << "```\n" << table << "```\n\n" << goals << "\n" << notes
+       << (stop_lines.empty() ? std::string()
+                              : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
+                                "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
+                                    stop_lines + "```\n")
+       << "\nThe rows: " << base << ".csv\n";
     for (const std::string& d : {results_dir, dir}) {
       writeFile(d + "/" + base + ".md", md.str());
       writeFile(d + "/" + base + ".csv", csvText(rows));
