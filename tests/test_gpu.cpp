@@ -381,7 +381,7 @@ TEST_CASE("one step of a 10,000-sphere pile: GPU impulses and velocities equal t
 
 // Mixed shapes go through MPR, whose support ties and branch tests resolve by rounding: the device is built
 // without FMA contraction (DVISIM_CUDA_FMAD=OFF) so it rounds as the host does; with FMA the MPR point could
-// slide within a flat patch and the impulses differed by 1.3e-5 (H100, session 2).
+// slide within a flat patch and the impulses differed by 1.3e-5 (measured on an H100).
 TEST_CASE("one step of a 10,000-body mixed pile: GPU impulses and velocities equal the CPU's", "[gpu]") {
   if (!haveDevice()) return;
   compareOneStep(true);

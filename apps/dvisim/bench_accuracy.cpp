@@ -25,7 +25,7 @@
 //    between the collected mass distributions over (bin, material kind) at the configured splitters (the
 //    reference there: APGD 200 iterations, h0/2, on the CPU: its ~200 bodies are launch-bound on a GPU; its
 //    sweep is shorter: iterations 10, 30, 100 and steps 2 h0, h0/2; no Bullet line, Bullet has no CES machine).
-// Also the goal: on the pile, after a few settling steps, two identical systems (deterministic, so the
+// Also the goal: on the pile, after a few settling steps, two identical systems (deterministic, so the
 // same state and the same CCP) solve the next step's CCP with APGD and with Jacobi down to relative residual 1e-4
 // (tolerance stop; record_history on); the ratio of the Solve-stage times is printed (goal >= 10x); and every
 // solver's time to the default tolerance (SolverSettings) on the same CCP.

@@ -16,7 +16,7 @@
 //
 // Outputs in DIR: scaling.csv (one row per engine x scene x N, `status` ok or why not), scaling.png
 // (scripts/plot_scaling.py, when python3 + matplotlib are present; a copy of the script is left in DIR) and
-// the table on stdout with the ratios of the goals. --record also writes
+// the table on stdout with the ratios of the performance goals. --record also writes
 // bench/results/scaling_<device>_<date>.md and .csv (copies in DIR too). Without a GPU the GPU rows say
 // they were skipped and why; the Bullet 3 rows say "not run: ..." where this build has no Bullet 3 peer or
 // no OpenCL device of --bullet3-device's type exists (Bullet 3's logs and kernel cache: DIR/bullet3/).

@@ -132,7 +132,7 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
   const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling"});
   out.kind = kind == "metal" ? MaterialKind::Metal : kind == "plastic" ? MaterialKind::Plastic : MaterialKind::Middling;
   out.name = m.contains("name") ? c.string(m["name"], p + ".name") : kind;
-  // Defaults by kind (DESIGN §5): tau = 0 for metals, infinite for plastics, 0.5 s middlings [assumed].
+  // Defaults by kind (docs/CES.md, Charges): tau = 0 for metals, infinite for plastics, 0.5 s middlings [assumed].
   const CesMachineParams d;
   out.relaxation_time = out.kind == MaterialKind::Metal     ? double(d.metal_relaxation_time)
                         : out.kind == MaterialKind::Plastic ? std::numeric_limits<double>::infinity()

@@ -1,4 +1,4 @@
-// The vibrating feeder: a multidisperse emitter with a constant mass flow (DESIGN §5; issue 5, item 4).
+// The vibrating feeder: a multidisperse emitter with a constant mass flow (docs/CES.md, Feed).
 //
 // Each particle has a volume-equivalent diameter d uniform in [d_min, d_max], a material chosen so that
 // the fed mass follows the materials' mass fractions (the material furthest below its share of the mass
