@@ -48,6 +48,7 @@ inline std::string quote(const std::string& s) {
 struct CliResult {
   int code = -1;  // exit code; 1000 + signal when killed
   std::string out, err;
+  int errLines() const { return int(std::count(err.begin(), err.end(), '\n')); }
 };
 
 // Runs `dvisim ARGS` (ARGS as shell words) and captures its exit code, stdout and stderr.

@@ -22,6 +22,7 @@
 #include "ces/splitters.h"
 #include "chrono_like/errors.h"
 #include "chrono_like/gpu_factory.h"
+#include "cli_test_util.h"
 
 using namespace dvi;
 using namespace dvi::ces;
@@ -30,49 +31,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-fs::path tempDir(const std::string& tag) {
-  const fs::path d = fs::temp_directory_path() / ("dvisim_ces_" + tag + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
-
-std::string quote(const std::string& s) { return "'" + s + "'"; }
-
-struct CliResult {
-  int code = -1;
-  std::string out, err;
-};
-
-CliResult runCli(const std::string& args) {
-  const fs::path d = tempDir("io");
-  const std::string cmd = std::string("exec ") + quote(DVISIM_CLI_PATH) + " " + args + " >" + quote((d / "out").string()) +
-                          " 2>" + quote((d / "err").string());
-  const int status = std::system(cmd.c_str());
-  CliResult r;
-  r.out = slurp(d / "out");
-  r.err = slurp(d / "err");
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 1000;
-  fs::remove_all(d);
-  return r;
-}
-
-void expectInputError(const std::string& args, const std::string& needle) {
-  INFO("dvisim " << args);
-  const CliResult r = runCli(args);
-  INFO("stdout: " << r.out << "\nstderr: " << r.err);
-  CHECK(r.code == 2);
-  CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
-  CHECK(r.err.rfind("dvisim: error: ", 0) == 0);
-  CHECK(r.err.find(needle) != std::string::npos);
-}
+using clitest::CliResult;
+using clitest::expectInputError;
+using clitest::quote;
+using clitest::runCli;
+using clitest::slurp;
+using clitest::spit;
+using clitest::tempDir;
 
 CesConfig configWith(const std::vector<std::string>& sets) {
   return parseCesDocument(json::parse(defaultCesJson()), sets, "<test>");

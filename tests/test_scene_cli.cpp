@@ -24,74 +24,20 @@
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/narrowphase.h"
 #include "chrono_like/scene.h"
+#include "cli_test_util.h"
 
 using namespace dvi;
 namespace fs = std::filesystem;
 
 namespace {
 
-fs::path tempDir(const std::string& tag) {
-  static std::atomic<int> counter{0};
-  fs::path d = fs::temp_directory_path() /
-               ("dvisim_cli_" + tag + "_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-void spit(const fs::path& p, const std::string& text) {
-  std::ofstream f(p, std::ios::binary);
-  f << text;
-}
-
-std::string quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-struct CliResult {
-  int code = -1;
-  std::string out, err;
-  int errLines() const {
-    int n = 0;
-    for (char c : err) n += c == '\n';
-    return n;
-  }
-};
-
-// Runs `dvisim <args>` and captures its exit code, stdout and stderr.
-CliResult runCli(const std::string& args) {
-  const fs::path d = tempDir("io");
-  const std::string cmd = std::string("exec ") + quote(DVISIM_CLI_PATH) + " " + args + " >" + quote((d / "out").string()) +
-                          " 2>" + quote((d / "err").string());
-  const int status = std::system(cmd.c_str());
-  CliResult r;
-  r.out = slurp(d / "out");
-  r.err = slurp(d / "err");
-  if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
-  else r.code = 1000 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-  fs::remove_all(d);
-  return r;
-}
-
-// Expects exit code 2 and exactly one stderr line "dvisim: error: ..." that contains `needle`.
-void expectInputError(const std::string& args, const std::string& needle) {
-  INFO("dvisim " << args);
-  const CliResult r = runCli(args);
-  INFO("stderr: " << r.err);
-  CHECK(r.code == 2);
-  CHECK(r.errLines() == 1);
-  CHECK(r.err.rfind("dvisim: error: ", 0) == 0);
-  CHECK(r.err.find(needle) != std::string::npos);
-}
+using clitest::CliResult;
+using clitest::expectInputError;
+using clitest::quote;
+using clitest::runCli;
+using clitest::slurp;
+using clitest::spit;
+using clitest::tempDir;
 
 const char* kTinyScene = R"({
   "name": "tiny",
