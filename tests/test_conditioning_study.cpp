@@ -45,41 +45,16 @@
 
 #include "chrono_like/contact_problem.h"
 #include "chrono_like/solver_algorithms.h"
+#include "body_builders.h"
 #include "chrono_like/system.h"
 
 using namespace dvi;
 
 namespace {
 
-// ---------------------------------------------------------------- scenes (as tests/test_convergence.cpp)
-BodyDesc groundPlane(real mu) {
-  BodyDesc b;
-  b.mass = 0;
-  b.flags = kBodyFixed;
-  b.friction = mu;
-  b.shapes.push_back(makePlane(Vec3{0, 1, 0}, 0));
-  return b;
-}
-BodyDesc cube(real a, real mass, Vec3 pos, real mu) {
-  BodyDesc b;
-  b.pos = pos;
-  b.mass = mass;
-  const real I = mass * a * a * 2 / 3;
-  b.inertia = Vec3{I, I, I};
-  b.friction = mu;
-  b.shapes.push_back(makeBox(Vec3{a, a, a}));
-  return b;
-}
-BodyDesc ball(real r, real mass, Vec3 pos, real mu) {
-  BodyDesc b;
-  b.pos = pos;
-  b.mass = mass;
-  const real I = real(0.4) * mass * r * r;
-  b.inertia = Vec3{I, I, I};
-  b.friction = mu;
-  b.shapes.push_back(makeSphere(r));
-  return b;
-}
+using testbodies::ball;
+using testbodies::cube;
+using testbodies::groundPlane;
 
 // ---------------------------------------------------------------- a problem to solve
 struct Problem {

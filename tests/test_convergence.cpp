@@ -19,6 +19,7 @@
 #include "chrono_like/bullet_world.h"
 #include "cli_test_util.h"
 #include "chrono_like/gpu_factory.h"
+#include "body_builders.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"
 
@@ -26,36 +27,9 @@ using namespace dvi;
 
 namespace {
 
-BodyDesc groundPlane(real mu) {
-  BodyDesc b;
-  b.mass = 0;
-  b.flags = kBodyFixed;
-  b.friction = mu;
-  b.shapes.push_back(makePlane(Vec3{0, 1, 0}, 0));
-  return b;
-}
-
-BodyDesc cube(real a, real mass, Vec3 pos, real mu) {
-  BodyDesc b;
-  b.pos = pos;
-  b.mass = mass;
-  const real I = mass * a * a * 2 / 3;  // solid cube of half size a: m (2a)^2 / 6
-  b.inertia = Vec3{I, I, I};
-  b.friction = mu;
-  b.shapes.push_back(makeBox(Vec3{a, a, a}));
-  return b;
-}
-
-BodyDesc ball(real r, real mass, Vec3 pos, real mu) {
-  BodyDesc b;
-  b.pos = pos;
-  b.mass = mass;
-  const real I = real(0.4) * mass * r * r;
-  b.inertia = Vec3{I, I, I};
-  b.friction = mu;
-  b.shapes.push_back(makeSphere(r));
-  return b;
-}
+using testbodies::ball;
+using testbodies::cube;
+using testbodies::groundPlane;
 
 struct RunResult {
   double top_y0 = 0, top_y = 0;  // the top (last) body's height at the start and the end
