@@ -114,6 +114,11 @@ struct BulletWorldFixture {
     ptrs.back()->setLinearVelocity(btVector3(0.3f, 0, 0));
     add(keep(new btSphereShape(0.1f)), 1, btVector3(-3, 1, 0));
     ptrs.back()->setGravity(btVector3(0, -1, 0));
+    // Bodies of mass other than 1, with the world's gravity and with their own: Bullet serialises the gravity
+    // force m g beside the acceleration g, and only the acceleration is a body's gravity.
+    add(keep(new btSphereShape(0.1f)), 7.5f, btVector3(-4, 1, 0));
+    add(keep(new btSphereShape(0.1f)), 1000, btVector3(-5, 1, 0));
+    ptrs.back()->setGravity(btVector3(0, -2, 0));
   }
   ~BulletWorldFixture() {
     for (auto& b : bodies) world.removeRigidBody(b.get());
@@ -544,6 +549,10 @@ TEST_CASE("Bullet files: every supported shape survives Bullet's serializer and 
     CHECK(from_file.bodies().gravity[1].y == Approx(-9.81));
     CHECK(from_world.bodies().gravity[1].y == Approx(-9.81));
     CHECK(from_file.bodies().flags[16] == kBodyKinematic);
+    for (System* sys : {&from_file, &from_world}) {
+      CHECK(sys->bodies().gravity[18].y == Approx(-9.81));  // 7.5 kg: the acceleration, not the force -73.6 N
+      CHECK(sys->bodies().gravity[19].y == Approx(-2));     // 1000 kg with its own gravity, not -2000
+    }
   }
 
   for (const char* backend : {"cpu", "bullet"}) {

@@ -751,7 +751,10 @@ btVector3 vec(const btVector3DoubleData& d) {
 
 template <class Data>
 void restoreBodyState(btRigidBody* rb, const Data* d, const btVector3& world_gravity) {
-  const btVector3 v = vec(d->m_linearVelocity), w = vec(d->m_angularVelocity), g = vec(d->m_gravity);
+  // Bullet serialises two gravities: m_gravity is the FORCE mass x g (btRigidBody::setGravity stores
+  // acceleration / inverse mass there), m_gravity_acceleration the acceleration getGravity() returns. Reading
+  // the force as an acceleration made a 1000 kg body fall at 1000 g.
+  const btVector3 v = vec(d->m_linearVelocity), w = vec(d->m_angularVelocity), g = vec(d->m_gravity_acceleration);
   const int flags = d->m_collisionObjectData.m_collisionFlags;
   if (flags & btCollisionObject::CF_KINEMATIC_OBJECT) {
     rb->setCollisionFlags(rb->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
