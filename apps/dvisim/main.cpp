@@ -375,7 +375,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--iterations", o.iterations,
                       "A fixed number of solver iterations per step (alone: no tolerance stop; with --tolerance: the cap)");
   run_cmd->add_option("--tolerance", o.tolerance,
-                      "Solver stop: relative residual, residual / residual of the zero impulse (default 0.1; 0: none)");
+                      "Solver stop: relative residual, residual / residual of the zero impulse (default 0.15; 0: none)");
   run_cmd->add_option("--max-iterations", o.max_iterations, "Iteration cap of the tolerance stop (default 1000)");
   run_cmd->add_option("--dt", o.dt, "Time step in seconds");
   run_cmd->add_option("--time", o.time, "Simulated time in seconds");

@@ -81,10 +81,11 @@ enum class ApgdSpeculation {
 };
 
 // The defaults, chosen by measurement (docs/ARCHITECTURE.md, Solve stage): the tolerance on the relative
-// residual, and the iteration cap that bounds the cost of a solve that does not reach it. 0.1 is what the fixed
-// 50 APGD iterations of the sphere piles reached (0.07-0.095), so a pile costs the same; the stiff stacks that fell
-// at 50 iterations need up to a few hundred iterations on their first steps to reach it, and then hold.
-constexpr real kDefaultTolerance = real(0.1);
+// residual, and the iteration cap that bounds the cost of a solve that does not reach it. With the floor of 50
+// iterations below, 0.15 costs a sphere pile what the fixed 50 APGD iterations did (0.1 cost 7-17% more on the
+// impact steps of a 100k pile: 50 iterations reach 0.07-0.13 there), and the stiff stacks that fell at 50
+// iterations take up to a few hundred iterations on their first steps to reach it, and then hold.
+constexpr real kDefaultTolerance = real(0.15);
 constexpr int kDefaultMaxIterations = 1000;
 // The tolerance stop comes no sooner than the old fixed count: a tolerance of 0.1 alone stopped some impacts,
 // joints and cylinder stacks before 50 iterations with deeper penetrations than the fixed 50 gave (tests).
