@@ -8,6 +8,7 @@
 #include <memory>
 #include <vector>
 
+#include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/collision.h"
 #include "chrono_like/errors.h"
@@ -207,7 +208,7 @@ struct Arrays {
     bodies.size[size_t(b)] = size;
     return b;
   }
-  void detect() { det->detect(bodies, shapes, config, contacts, times); }
+  void detect() { det->detect(bodies, shapes, collisionSettings(config), contacts, times); }
 };
 
 const Quat kId{1, 0, 0, 0};
@@ -440,7 +441,7 @@ TEST_CASE("Bullet collision backend inside System: resting heights as the native
     c.collision = be;
     c.dt = 1e-3;
     c.threads = 1;  // 4 bodies: OpenMP barriers would cost more than the step on a loaded 2-core host
-    System s(c);
+    System s(c, makeBulletCollision);
     BodyDesc g;
     g.flags = kBodyFixed;
     g.mass = 0;

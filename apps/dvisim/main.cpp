@@ -37,6 +37,7 @@
 #include "chrono_like/parse.h"
 #include "bench_common.h"
 #include "ces/ces_run.h"
+#include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/gpu_factory.h"
@@ -287,7 +288,8 @@ int run(const Options& o) {
   } else {
     const dvi::SystemConfig cfg = dvi::systemConfigFromSettings(st);
     std::unique_ptr<dvi::System> sys =
-        backend == "gpu" ? dvi::makeGpuSystem(cfg) : std::make_unique<dvi::System>(cfg);
+        backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
+                         : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
     const std::vector<int> ids = dvi::importBullet(*sys, bodies);
     auto collect = [&] {
       sys->syncToHost();  // a device backend copies its state into the host arrays

@@ -301,7 +301,7 @@ real deepestPenetration(const SceneSpec& spec, const std::vector<Vec3>& pos, con
   ShapeArrays shapes = sys.shapes();
   ContactArrays contacts;
   CollisionTimes times;
-  makeNativeCollision(cfg.broadphase)->detect(bodies, shapes, cfg, contacts, times);
+  makeNativeCollision(cfg.broadphase)->detect(bodies, shapes, collisionSettings(cfg), contacts, times);
   real deepest = 0;
   for (size_t k = 0; k < contacts.count(); ++k) deepest = std::max(deepest, -contacts.dist[k]);
   return deepest;

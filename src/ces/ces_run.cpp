@@ -18,6 +18,7 @@
 #include "ces/ces_output.h"
 #include "ces/machine.h"
 #include "ces/splitters.h"
+#include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/errors.h"
 #include "chrono_like/gpu_factory.h"
 #include "chrono_like/output.h"
@@ -149,8 +150,8 @@ std::unique_ptr<System> makeCesSystem(const CesConfig& cfg, const std::string& b
   // The particle cloud spans the machine (0.8 x 0.6 x 0.3 m) sparsely: a grid of 2^24 bins of 2 mm costs
   // more to scan than the pairs it finds (measured 7.5 ms/step); 2^20 bins of ~5 mm keep every bin sparse.
   sc.broadphase.max_bins = int64_t(1) << 20;
-  if (backend == "gpu") return makeGpuSystem(sc);
-  return std::make_unique<CheckpointSystem>(sc);
+  if (backend == "gpu") return makeGpuSystem(sc, makeBulletCollision);
+  return std::make_unique<CheckpointSystem>(sc, makeBulletCollision);
 }
 
 void CesRunTotals::add(const CesMachine& m) {

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 
+#include "bullet_collision_backend.h"
 #include "bullet_import.h"
 #include "gpu_factory.h"
 #include "triangle_mesh.h"
@@ -69,7 +70,8 @@ BodyDesc describe(const btRigidBody& body) {
 // with disableCollisionsBetweenLinkedBodies, CF_NO_CONTACT_RESPONSE) are dropped after the narrow phase.
 class FilteredCpuSystem final : public System {
  public:
-  FilteredCpuSystem(const SystemConfig& c, std::function<bool(int, int)> keep) : System(c), keep_(std::move(keep)) {}
+  FilteredCpuSystem(const SystemConfig& c, std::function<bool(int, int)> keep)
+      : System(c, makeBulletCollision), keep_(std::move(keep)) {}
 
  protected:
   void detectCollisions() override {
@@ -119,7 +121,7 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
   std::unique_ptr<System> s;
   const bool gpu = config_.backend == WorldBackend::Gpu || (config_.backend == WorldBackend::Auto && gpuAvailable());
   if (gpu)
-    s = makeGpuSystem(c);  // throws InputError naming why when no device is usable
+    s = makeGpuSystem(c, makeBulletCollision);  // throws InputError naming why when no device is usable
   else
     s = std::make_unique<FilteredCpuSystem>(c, [this](int a, int b) { return keepPair(a, b); });
   s->addRowProvider(joints_);

@@ -9,7 +9,6 @@
 
 #include "broadphase_kernels.h"
 #include "narrowphase.h"
-#include "system.h"
 
 namespace dvi {
 
@@ -29,7 +28,7 @@ class NativeCollision final : public CollisionDetector {
   explicit NativeCollision(const BroadPhaseSettings& s) : broad_(s) {}
   const char* name() const override { return "native"; }
 
-  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const SystemConfig& config, ContactArrays& out,
+  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, ContactArrays& out,
               CollisionTimes& times) override {
     const int64_t ns = int64_t(shapes.count());
     const Shape* sh = shapes.shape.data();
@@ -56,7 +55,7 @@ class NativeCollision final : public CollisionDetector {
     // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
     // fat_flags_ when it builds). Last step's pairs are kept while every box is inside its grown box
     // (broadphase_kernels.h: pairsStillHold); else a build on the boxes grown by pair_margin x the last edge.
-    const real f = config.broadphase.pair_margin;
+    const real f = config.pair_margin;
     const uint8_t* flags = bodies.flags.data();
     bool keep = f > real(0) && built_ && int64_t(fat_.size()) == ns;
     if (keep) {

@@ -1,6 +1,7 @@
 // Collision backends: AABBs + broad phase + narrow phase, producing the contact arrays of a step.
 // Native is our binning broad phase with the analytic/MPR narrow phase (the algorithms the GPU runs);
-// Bullet is Bullet's own CPU pipeline (btCollisionDispatcher, GJK/EPA), kept as the reference.
+// Bullet is Bullet's own CPU pipeline (btCollisionDispatcher, GJK/EPA), kept as the reference
+// (bullet_collision_backend.h).
 #pragma once
 
 #include <memory>
@@ -10,7 +11,15 @@
 
 namespace dvi {
 
-struct SystemConfig;
+// What a collision backend reads of the System's configuration (system.h: collisionSettings(SystemConfig)), so
+// that the backends do not depend on the System.
+struct CollisionSettings {
+  real dt = 0;                // the step (the sweep of speculative contacts and their rule)
+  real envelope_rel = 0;      // SystemConfig::envelope_rel
+  bool speculative = false;   // SystemConfig::speculative
+  bool mpr_manifold = false;  // SystemConfig::mpr_manifold
+  real pair_margin = 0;       // BroadPhaseSettings::pair_margin
+};
 
 struct CollisionTimes {
   double aabbs = 0, broad = 0, narrow = 0;  // seconds
@@ -26,7 +35,7 @@ class CollisionDetector {
   // Reads bodies.{pos, rot, flags}, shapes.shape, shapes.hull_points; writes shapes.aabb and the
   // geometric fields of `out` (shape_a/b, body_a/b, normal, pa, pb, dist, key). The system fills mu and
   // size afterwards. Contacts are ordered by (shape_a, shape_b, feature) whatever the thread count.
-  virtual void detect(const BodyArrays& bodies, ShapeArrays& shapes, const SystemConfig& config,
+  virtual void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
                       ContactArrays& out, CollisionTimes& times) = 0;
   // The velocities after this step's forces (the System's v_free, w_free; one per body, valid during the next
   // detect): the native backend's sweeps and speculative-contact rule read them (narrowphase.h). Unset (null):
@@ -42,6 +51,9 @@ class CollisionDetector {
 };
 
 std::unique_ptr<CollisionDetector> makeNativeCollision(const BroadPhaseSettings& settings);
-std::unique_ptr<CollisionDetector> makeBulletCollision();
+
+// Makes a collision backend that lives outside the core: the System takes one for CollisionBackend::Bullet
+// (bullet_collision_backend.h: makeBulletCollision).
+using CollisionFactory = std::unique_ptr<CollisionDetector> (*)();
 
 }  // namespace dvi

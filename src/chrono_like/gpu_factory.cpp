@@ -16,13 +16,14 @@ bool gpuAvailable(std::string* name) {
 #endif
 }
 
-std::unique_ptr<System> makeGpuSystem(const SystemConfig& config) {
+std::unique_ptr<System> makeGpuSystem(const SystemConfig& config, CollisionFactory bullet_collision) {
 #if defined(DVISIM_HAVE_CUDA)
   std::string why;
   if (!gpu::queryDevice(&why)) throw InputError("--backend gpu: " + why);
-  return std::make_unique<GpuSystem>(config);
+  return std::make_unique<GpuSystem>(config, bullet_collision);
 #else
   (void)config;
+  (void)bullet_collision;
   throw InputError("--backend gpu: this build has no CUDA backend");
 #endif
 }

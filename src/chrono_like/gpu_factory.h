@@ -15,7 +15,7 @@ namespace dvi {
 bool gpuAvailable(std::string* name = nullptr);
 
 // The GPU system (src/gpu/gpu_system.h). Throws InputError when the build has no CUDA backend or no
-// device is present.
-std::unique_ptr<System> makeGpuSystem(const SystemConfig& config);
+// device is present. bullet_collision: as for System.
+std::unique_ptr<System> makeGpuSystem(const SystemConfig& config, CollisionFactory bullet_collision = nullptr);
 
 }  // namespace dvi

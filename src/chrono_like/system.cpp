@@ -115,11 +115,16 @@ void validateShape(const ShapeDesc& d, int body_index) {
 
 }  // namespace
 
-System::System(SystemConfig config) : config_(config), problem_(std::make_unique<ContactProblem>()) {
+System::System(SystemConfig config, CollisionFactory bullet_collision)
+    : config_(config), problem_(std::make_unique<ContactProblem>()) {
   if (!(config_.dt > 0) || !std::isfinite(config_.dt)) throw InputError("time step dt must be positive, got " + std::to_string(config_.dt));
   if (config_.solver_settings.max_iterations < 0) throw InputError("solver iterations must be >= 0");
-  collision_ = config_.collision == CollisionBackend::Native ? makeNativeCollision(config_.broadphase)
-                                                            : makeBulletCollision();
+  if (config_.collision == CollisionBackend::Native)
+    collision_ = makeNativeCollision(config_.broadphase);
+  else if (bullet_collision)
+    collision_ = bullet_collision();
+  else
+    throw InputError("collision backend 'bullet': this System was made without Bullet's collision backend");
 }
 
 System::~System() = default;
@@ -262,7 +267,7 @@ void System::integrateForces() {
 void System::detectCollisions() {
   CollisionTimes t;
   collision_->setFreeVelocities(v_free_.data(), w_free_.data());
-  collision_->detect(bodies_, shapes_, config_, contacts_, t);
+  collision_->detect(bodies_, shapes_, collisionSettings(config_), contacts_, t);
   stats_.stage_seconds[int(StageType::ComputeAabbs)] = t.aabbs;
   stats_.stage_seconds[int(StageType::BroadPhase)] = t.broad;
   stats_.stage_seconds[int(StageType::NarrowPhase)] = t.narrow;

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "broadphase.h"
+#include "collision.h"
 #include "data.h"
 #include "errors.h"
 #include "extensions.h"
@@ -200,12 +201,25 @@ struct ConvergenceLog {
   }
 };
 
-class CollisionDetector;  // narrow + broad phase backend (native or Bullet's)
+// The part of the configuration the collision backends read (collision.h).
+inline CollisionSettings collisionSettings(const SystemConfig& c) {
+  CollisionSettings s;
+  s.dt = c.dt;
+  s.envelope_rel = c.envelope_rel;
+  s.speculative = c.speculative;
+  s.mpr_manifold = c.mpr_manifold;
+  s.pair_margin = c.broadphase.pair_margin;
+  return s;
+}
+
 class ContactProblem;
 
 class System {
  public:
-  explicit System(SystemConfig config = {});
+  // `bullet_collision` makes the collision backend when config.collision is CollisionBackend::Bullet
+  // (bullet_collision_backend.h: makeBulletCollision): the core does not build Bullet's pipeline itself, so a
+  // caller whose configuration may ask for it passes it. Asked for without one: InputError.
+  explicit System(SystemConfig config = {}, CollisionFactory bullet_collision = nullptr);
   virtual ~System();
   System(const System&) = delete;
   System& operator=(const System&) = delete;
@@ -300,7 +314,7 @@ class System {
   std::vector<ConstraintRow> rows_;         // constraint rows of this step
   std::vector<real> row_lambda_;            // their impulses
   std::vector<size_t> provider_rows_;       // rows of each provider this step, in order
-  std::unique_ptr<CollisionDetector> collision_;
+  std::unique_ptr<CollisionDetector> collision_;  // narrow + broad phase backend (native or Bullet's)
   std::unique_ptr<ContactProblem> problem_;
   std::vector<real> x_;                     // solution in the problem's layout when it is normal-only
   const real* solution_ = nullptr;          // gamma_ or x_: what IntegrateVelocities applies

@@ -115,7 +115,8 @@ __global__ void integratePositionsKernel(int n, Vec3* pos, Quat* rot, const Vec3
 
 using namespace gpu;
 
-GpuSystem::GpuSystem(SystemConfig config) : System(config), d_(std::make_unique<DeviceState>()) {
+GpuSystem::GpuSystem(SystemConfig config, CollisionFactory bullet_collision)
+    : System(config, bullet_collision), d_(std::make_unique<DeviceState>()) {
   std::string why;
   if (!queryDevice(&why)) throw InputError("GPU backend: " + why);
   if (config_.solver == SolverType::GaussSeidel)

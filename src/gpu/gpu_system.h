@@ -42,7 +42,8 @@ struct BodyRecord {
 
 class GpuSystem : public System {
  public:
-  explicit GpuSystem(SystemConfig config = {});
+  // bullet_collision: as for System (the device steps run the native collision whatever config.collision says).
+  explicit GpuSystem(SystemConfig config = {}, CollisionFactory bullet_collision = nullptr);
   ~GpuSystem() override;
 
   void step() override;

@@ -1,4 +1,4 @@
-// Bullet collision backend (collision.h, makeBulletCollision): Bullet's own CPU pipeline
+// Bullet collision backend (bullet_collision_backend.h, collision.h): Bullet's own CPU pipeline
 // (btDbvtBroadphase + btCollisionDispatcher with btDefaultCollisionConfiguration: analytic sphere pairs,
 // ODE's box-box, convex-plane, GJK/EPA) run on OUR shape records, kept as the reference backend.
 //
@@ -37,6 +37,8 @@
 // Convention: Bullet's m_normalWorldOnB points from B to A (pointA = pointB + normalOnB * distance);
 // ours points from A to B, so normal = -m_normalWorldOnB, pa = positionWorldOnA, pb = positionWorldOnB,
 // dist = getDistance() = dot(pb - pa, normal).
+#include "bullet_collision_backend.h"
+
 #include <btBulletCollisionCommon.h>
 
 #include <algorithm>
@@ -48,7 +50,6 @@
 #include "bullet_convert.h"
 #include "collision.h"
 #include "errors.h"
-#include "system.h"
 
 namespace dvi {
 
@@ -126,7 +127,7 @@ class BulletCollision final : public CollisionDetector {
   ~BulletCollision() override { destroyWorld(); }
   const char* name() const override { return "bullet"; }
 
-  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const SystemConfig& config, ContactArrays& out,
+  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, ContactArrays& out,
               CollisionTimes& times) override;
 
   // Distance up to which points of objects i and j are generated and kept in their manifold.
@@ -146,8 +147,8 @@ class BulletCollision final : public CollisionDetector {
   }
 
  private:
-  bool needsRebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const SystemConfig& config) const;
-  void rebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const SystemConfig& config);
+  bool needsRebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config) const;
+  void rebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config);
   void destroyWorld();
   btCollisionShape* makeShape(const Shape& s, const std::vector<Vec3>& hull, real size);
   int32_t shapeOf(int object, int child_index) const {
@@ -221,7 +222,7 @@ void relativeNearCallback(btBroadphasePair& pair, btCollisionDispatcher& dispatc
 }
 
 bool BulletCollision::needsRebuild(const BodyArrays& bodies, const ShapeArrays& shapes,
-                                   const SystemConfig& config) const {
+                                   const CollisionSettings& config) const {
   if (!built_ || shapes.count() != shapes_.size() || bodies.count() != flags_.size() ||
       shapes.hull_points.size() != hull_point_count_ || config.envelope_rel != envelope_rel_)
     return true;
@@ -300,7 +301,7 @@ btCollisionShape* BulletCollision::makeShape(const Shape& s, const std::vector<V
   return out;
 }
 
-void BulletCollision::rebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const SystemConfig& config) {
+void BulletCollision::rebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config) {
   destroyWorld();
   shapes_ = shapes.shape;
   flags_ = bodies.flags;
@@ -381,7 +382,7 @@ void BulletCollision::rebuild(const BodyArrays& bodies, const ShapeArrays& shape
   built_ = true;
 }
 
-void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, const SystemConfig& config,
+void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
                              ContactArrays& out, CollisionTimes& times) {
   const auto t0 = Clock::now();
   if (needsRebuild(bodies, shapes, config)) rebuild(bodies, shapes, config);
