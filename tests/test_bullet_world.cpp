@@ -1,4 +1,4 @@
-// The Bullet drop-in world (bullet_world.h) and its joints (joints.h), against plain Bullet and closed forms.
+// The Bullet drop-in world (bullet_world.h) and its joints (bullet_joints.h, joints.h), against plain Bullet and closed forms.
 #include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
 #include <BulletDynamics/ConstraintSolver/btGearConstraint.h>
@@ -19,7 +19,7 @@
 #include "../demos/bullet_drop_in/demo_scene.h"
 #include "chrono_like/bullet_world.h"
 #include "chrono_like/gpu_factory.h"
-#include "chrono_like/joints.h"
+#include "chrono_like/bullet_joints.h"
 #include "chrono_like/triangle_mesh.h"
 
 using namespace dvi;
@@ -174,7 +174,7 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
   settings.drift_feedforward = false;  // the bias must be exactly C / h here (J = dC/dt is tested)
   const real dt = real(0.01), d = real(1e-6);
   for (auto& c : cs) {
-    const JointSpec j = JointSpec::fromBullet(*c);
+    const JointSpec j = jointSpecFromBullet(*c);
     INFO(j.kind);
     for (int trial = 0; trial < 20; ++trial) {
       JointBody A;
@@ -234,7 +234,7 @@ TEST_CASE("joint rows: the hinge angle follows Bullet's getHingeAngle", "[world]
   btRigidBody* b = w.make(box, 1, btVector3(1, 0, 0), false);
   for (bool refA : {false, true}) {
     btHingeConstraint h(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), refA);
-    const JointSpec j = JointSpec::fromBullet(h);
+    const JointSpec j = jointSpecFromBullet(h);
     for (double angle : {-2.5, -1.0, -0.2, 0.3, 1.2, 2.9}) {
       btTransform tb(btQuaternion(btVector3(0, 0, 1), btScalar(angle)), btVector3(1, 0, 0));
       JointBody A, B;
@@ -666,8 +666,8 @@ TEST_CASE("a .bullet scene with each shape and joint type round-trips through th
   }
   // Joints: the same rows (modes, frames, motor, limits, springs).
   for (int i = 0; i < dst.world->getNumConstraints(); ++i) {
-    const JointSpec a = JointSpec::fromBullet(*src.world->getConstraint(i));
-    const JointSpec b = JointSpec::fromBullet(*dst.world->getConstraint(i));
+    const JointSpec a = jointSpecFromBullet(*src.world->getConstraint(i));
+    const JointSpec b = jointSpecFromBullet(*dst.world->getConstraint(i));
     INFO("constraint " << i << ": " << a.kind << " -> " << b.kind);
     CHECK(int(a.ang) == int(b.ang));
     for (int k = 0; k < 3; ++k) {

@@ -32,7 +32,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "joints.h"
+#include "bullet_joints.h"
 #include "system.h"
 
 class btPersistentManifold;
@@ -69,7 +69,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void addRigidBody(btRigidBody* body) override;
   void addRigidBody(btRigidBody* body, int group, int mask) override;
   void removeRigidBody(btRigidBody* body) override;
-  // Constraints become DVI rows (joints.h); a type or feature we cannot represent is refused with an
+  // Constraints become DVI rows (bullet_joints.h); a type or feature we cannot represent is refused with an
   // InputError naming it (never ignored).
   void addConstraint(btTypedConstraint* constraint, bool disableCollisionsBetweenLinkedBodies = false) override;
   void removeConstraint(btTypedConstraint* constraint) override;

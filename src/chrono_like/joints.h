@@ -1,9 +1,10 @@
-// Bullet constraints as DVI constraint rows (extensions.h): the joints of the Bullet drop-in world.
+// Joints as DVI constraint rows (extensions.h): a JointSpec and the rows, violations and spring forces it gives at
+// the bodies' states. The Bullet drop-in world reads its constraints into JointSpecs (bullet_joints.h).
 //
-// Every supported btTypedConstraint is read, each step, into a JointSpec: two joint frames (one per body, in
-// the body's centre-of-mass frame), a mode per linear axis of frame A (free / locked at a value / limited to
-// [lo, hi]) and an angular mode (orientation locked, a hinge about one axis of frame A, or free), plus the
-// hinge's limit and motor, the slider's linear motor and springs. The spec gives the rows:
+// A JointSpec holds two joint frames (one per body, in the body's centre-of-mass frame), a mode per linear axis of
+// frame A (free / locked at a value / limited to [lo, hi]) and an angular mode (orientation locked, a hinge about one
+// axis of frame A, or free), plus the hinge's limit and motor, the slider's linear motor and springs. The spec gives
+// the rows:
 //   linear axis e of frame A, d = pB - pA (frame origins), s = e.d:
 //       J v = e.(vB + wB x rB) - e.(vA + wA x (pB - xA)) = ds/dt      (A-fixed axis: exact derivative)
 //   locked orientation: qe = qFB conj(qFA), theta = rotation vector of qe;
@@ -15,26 +16,15 @@
 // Bilateral rows have bias = C / h, clamped to a recovery speed relative to the body size; unilateral rows
 // allow any approach speed (bias = C / h when C > 0). Sign conventions relative to Bullet (hinge angle,
 // motor velocities) are those of Bullet's own getHingeAngle and solver and are checked by the tests.
-//
-// Supported (anything else is refused by JointSpec::fromBullet with an InputError naming the type or the
-// feature): point-to-point; hinge with limit and angular motor; slider with linear limits, linear motor and
-// locked or free rotation; fixed; generic 6-DoF (btGeneric6DofConstraint, btGeneric6DofSpringConstraint,
-// btGeneric6DofSpring2Constraint) with locked, free or limited linear axes, and angular axes all locked at
-// zero, two locked at zero (a hinge), or all free; springs on free linear axes, and on the free axis of a
-// hinge-like 6-DoF. Refused: cone-twist, gear, contact constraints, 6-DoF motors, angular limit ranges of
-// a 6-DoF or slider, a single locked rotational axis, non-zero locked angles, slider angular motors.
 #pragma once
 
-#include <memory>
-#include <string>
-#include <unordered_map>
+#include <cstdint>
 #include <vector>
 
 #include "extensions.h"
 #include "math.h"
 
-class btRigidBody;
-class btTypedConstraint;
+class btRigidBody;  // a joint's bodies are identified by their Bullet handles (bullet_joints.h reads them)
 
 namespace dvi {
 
@@ -63,13 +53,7 @@ struct JointSpec {
   };
   std::vector<Spring> springs;
   const char* kind = "";
-
-  // Reads a Bullet constraint; throws InputError naming the constraint type or the unsupported feature.
-  static JointSpec fromBullet(const btTypedConstraint& c);
 };
-
-// Name of a Bullet constraint type (btTypedConstraintType), e.g. "cone-twist (btConeTwistConstraint)".
-std::string constraintTypeName(int type);
 
 struct JointSettings {
   real recovery_rel = real(10);   // bilateral rows correct at most recovery_rel x size per second (linear)
@@ -100,35 +84,8 @@ JointViolation jointViolation(const JointSpec& j, const JointBody& A, const Join
 // The hinge angle theta (B relative to A about the hinge axis), radians in (-pi, pi].
 real jointHingeAngle(const JointSpec& j, const JointBody& A, const JointBody& B);
 
-// The joints of a drop-in world: a RowProvider over Bullet constraints. Bodies are found through the
-// world's map from btRigidBody to system index; bodies outside the system (Bullet's fixed body) are the
-// ground.
-class BulletJoints final : public RowProvider {
- public:
-  explicit BulletJoints(const std::unordered_map<const btRigidBody*, int>* index, JointSettings s = {})
-      : index_(index), settings_(s) {}
-
-  void add(btTypedConstraint* c);  // validates (JointSpec::fromBullet)
-  void remove(btTypedConstraint* c);
-  size_t size() const { return joints_.size(); }
-  const std::vector<btTypedConstraint*>& constraints() const { return joints_; }
-
-  void rows(const BodyArrays& bodies, double t, real dt, std::vector<ConstraintRow>& out) override;
-  void impulses(const real* lambda, size_t count) override;
-
-  // Spring forces of the 6-DoF springs, added to force/torque (system body indices).
-  void springForces(const BodyArrays& bodies, Vec3* force, Vec3* torque) const;
-
-  // State of one side of constraint c's joint from the system's arrays.
-  JointBody side(const BodyArrays& bodies, const btRigidBody* body) const;
-  // Largest violation over all enabled joints (linear relative to the smaller body size, angular in rad).
-  JointViolation maxViolation(const BodyArrays& bodies) const;
-
- private:
-  const std::unordered_map<const btRigidBody*, int>* index_;
-  JointSettings settings_;
-  std::vector<btTypedConstraint*> joints_;
-  std::vector<int> row_joint_;  // joint of each row of the last step
-};
+// Forces and torques of the joint's springs at the given states, added to force/torque (system body indices; a side
+// with index -1 gets none).
+void jointSpringForces(const JointSpec& j, const JointBody& A, const JointBody& B, Vec3* force, Vec3* torque);
 
 }  // namespace dvi

@@ -1,0 +1,298 @@
+// Bullet constraints read into JointSpecs, and the drop-in world's joints (bullet_joints.h).
+#include "bullet_joints.h"
+#include "bullet_convert.h"
+
+#include <btBulletDynamicsCommon.h>
+#include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
+#include <BulletDynamics/ConstraintSolver/btGeneric6DofSpring2Constraint.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "errors.h"
+
+namespace dvi {
+
+namespace {
+
+std::string axisName(int i) { return i < 3 ? std::string(1, "xyz"[i]) : std::string("rotation ") + "xyz"[i - 3]; }
+
+// Six degrees of freedom of a 6-DoF constraint (Bullet's order: linear x y z, angular x y z).
+struct Dof6 {
+  real lo[6], hi[6];
+  bool motor[6] = {false, false, false, false, false, false};
+  bool spring[6] = {false, false, false, false, false, false};
+  real k[6] = {0, 0, 0, 0, 0, 0}, c[6] = {0, 0, 0, 0, 0, 0}, eq[6] = {0, 0, 0, 0, 0, 0};
+};
+
+void fromDof6(const Dof6& d, const char* kind, JointSpec& j) {
+  auto refuse = [&](const std::string& what) { throw InputError(std::string(kind) + ": " + what + " is not supported"); };
+  for (int i = 0; i < 3; ++i) {
+    if (d.lo[i] == d.hi[i]) j.lin[i] = JointSpec::Axis::Locked;
+    else if (d.lo[i] > d.hi[i]) j.lin[i] = JointSpec::Axis::Free;
+    else j.lin[i] = JointSpec::Axis::Limited;
+    j.lin_lo[i] = d.lo[i];
+    j.lin_hi[i] = d.hi[i];
+  }
+  int locked = 0, free_axis = -1;
+  for (int i = 0; i < 3; ++i) {
+    const real lo = d.lo[3 + i], hi = d.hi[3 + i];
+    if (lo == hi) {
+      ++locked;
+      if (lo != 0) refuse("a rotational axis locked at a non-zero angle (" + axisName(3 + i) + ")");
+    } else if (lo > hi) {
+      free_axis = i;
+    } else {
+      refuse("an angular limit range on " + axisName(3 + i) + " (only locked or free rotational axes)");
+    }
+  }
+  if (locked == 3) j.ang = JointSpec::Angular::Locked;
+  else if (locked == 2) {
+    j.ang = JointSpec::Angular::Hinge;
+    j.hinge_axis = free_axis;
+  } else if (locked == 0) j.ang = JointSpec::Angular::Free;
+  else refuse("a single locked rotational axis");
+  for (int i = 0; i < 6; ++i) {
+    if (d.motor[i] && !d.spring[i]) refuse("a motor on " + axisName(i));
+    if (!d.spring[i]) continue;
+    if (i < 3) {
+      if (j.lin[i] != JointSpec::Axis::Locked) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
+    } else if (j.ang == JointSpec::Angular::Hinge && i - 3 == j.hinge_axis) {
+      j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
+    } else if (!(j.ang == JointSpec::Angular::Locked)) {
+      refuse("a spring on " + axisName(i) + " (angular springs only on the free axis of a hinge-like 6-DoF)");
+    }
+  }
+}
+
+}  // namespace
+
+std::string constraintTypeName(int type) {
+  switch (type) {
+    case POINT2POINT_CONSTRAINT_TYPE: return "point-to-point (btPoint2PointConstraint)";
+    case HINGE_CONSTRAINT_TYPE: return "hinge (btHingeConstraint)";
+    case CONETWIST_CONSTRAINT_TYPE: return "cone-twist (btConeTwistConstraint)";
+    case D6_CONSTRAINT_TYPE: return "generic 6-DoF (btGeneric6DofConstraint)";
+    case SLIDER_CONSTRAINT_TYPE: return "slider (btSliderConstraint)";
+    case CONTACT_CONSTRAINT_TYPE: return "contact (btContactConstraint)";
+    case D6_SPRING_CONSTRAINT_TYPE: return "generic 6-DoF spring (btGeneric6DofSpringConstraint)";
+    case GEAR_CONSTRAINT_TYPE: return "gear (btGearConstraint)";
+    case FIXED_CONSTRAINT_TYPE: return "fixed (btFixedConstraint)";
+    case D6_SPRING_2_CONSTRAINT_TYPE: return "generic 6-DoF spring 2 (btGeneric6DofSpring2Constraint)";
+    default: return "constraint type " + std::to_string(type);
+  }
+}
+
+JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
+  JointSpec j;
+  j.a = &c.getRigidBodyA();
+  j.b = &c.getRigidBodyB();
+  auto& mc = const_cast<btTypedConstraint&>(c);  // several Bullet getters are not const
+  switch (c.getConstraintType()) {
+    case POINT2POINT_CONSTRAINT_TYPE: {
+      const auto& p = static_cast<const btPoint2PointConstraint&>(c);
+      j.kind = "point-to-point";
+      j.frame_a = Pose{fromBt(p.getPivotInA()), {1, 0, 0, 0}};
+      j.frame_b = Pose{fromBt(p.getPivotInB()), {1, 0, 0, 0}};
+      for (auto& a : j.lin) a = JointSpec::Axis::Locked;
+      j.ang = JointSpec::Angular::Free;
+      return j;
+    }
+    case HINGE_CONSTRAINT_TYPE: {
+      auto& h = static_cast<btHingeConstraint&>(mc);
+      j.kind = "hinge";
+      j.frame_a = fromBt(h.getAFrame());
+      j.frame_b = fromBt(h.getBFrame());
+      for (auto& a : j.lin) a = JointSpec::Axis::Locked;
+      j.ang = JointSpec::Angular::Hinge;
+      j.hinge_axis = 2;
+      // Bullet's hinge angle is s * theta with s = -referenceSign (referenceSign = -1 with reference frame A).
+      const real s = h.getUseReferenceFrameA() ? real(1) : real(-1);
+      if (h.hasLimit()) {
+        j.hinge_limit = true;
+        const real lo = s * real(h.getLowerLimit()), hi = s * real(h.getUpperLimit());
+        j.hinge_lo = std::min(lo, hi);
+        j.hinge_hi = std::max(lo, hi);
+      }
+      if (h.getEnableAngularMotor()) {
+        j.hinge_motor = true;
+        j.hinge_motor_velocity = s * real(h.getMotorTargetVelocity());
+        j.hinge_motor_max_impulse = real(h.getMaxMotorImpulse());
+      }
+      return j;
+    }
+    case SLIDER_CONSTRAINT_TYPE: {
+      auto& s = static_cast<btSliderConstraint&>(mc);
+      j.kind = "slider";
+      j.frame_a = fromBt(s.getFrameOffsetA());
+      j.frame_b = fromBt(s.getFrameOffsetB());
+      const real lo = s.getLowerLinLimit(), hi = s.getUpperLinLimit();
+      j.lin[0] = lo == hi ? JointSpec::Axis::Locked : (lo > hi ? JointSpec::Axis::Free : JointSpec::Axis::Limited);
+      j.lin_lo[0] = lo;
+      j.lin_hi[0] = hi;
+      j.lin[1] = j.lin[2] = JointSpec::Axis::Locked;
+      const real alo = s.getLowerAngLimit(), ahi = s.getUpperAngLimit();
+      if (alo == ahi && alo == 0) {
+        j.ang = JointSpec::Angular::Locked;
+      } else if (alo > ahi) {
+        j.ang = JointSpec::Angular::Hinge;
+        j.hinge_axis = 0;
+      } else {
+        throw InputError("slider: an angular limit range or a non-zero locked angle is not supported");
+      }
+      if (s.getPoweredAngMotor()) throw InputError("slider: an angular motor is not supported");
+      if (s.getPoweredLinMotor()) {
+        j.lin_motor = true;
+        j.lin_motor_velocity = s.getTargetLinMotorVelocity();
+        j.lin_motor_max_force = s.getMaxLinMotorForce();
+      }
+      return j;
+    }
+    case D6_CONSTRAINT_TYPE:
+    case D6_SPRING_CONSTRAINT_TYPE: {
+      auto& g = static_cast<btGeneric6DofConstraint&>(mc);
+      const bool spring = c.getConstraintType() == D6_SPRING_CONSTRAINT_TYPE;
+      j.kind = spring ? "generic 6-DoF spring" : "generic 6-DoF";
+      j.frame_a = fromBt(g.getFrameOffsetA());
+      j.frame_b = fromBt(g.getFrameOffsetB());
+      Dof6 d;
+      btVector3 llo, lhi, alo, ahi;
+      g.getLinearLowerLimit(llo);
+      g.getLinearUpperLimit(lhi);
+      g.getAngularLowerLimit(alo);
+      g.getAngularUpperLimit(ahi);
+      for (int i = 0; i < 3; ++i) {
+        d.lo[i] = llo[i];
+        d.hi[i] = lhi[i];
+        d.lo[3 + i] = alo[i];
+        d.hi[3 + i] = ahi[i];
+        d.motor[i] = g.getTranslationalLimitMotor()->m_enableMotor[i];
+        d.motor[3 + i] = g.getRotationalLimitMotor(i)->m_enableMotor;
+      }
+      if (spring) {
+        auto& sp = static_cast<btGeneric6DofSpringConstraint&>(mc);
+        for (int i = 0; i < 6; ++i) {
+          d.spring[i] = sp.isSpringEnabled(i);
+          d.k[i] = sp.getStiffness(i);
+          d.c[i] = 0;  // Bullet's damping here is a motor factor, not a physical coefficient (docs/DROP_IN.md)
+          d.eq[i] = sp.getEquilibriumPoint(i);
+        }
+      }
+      fromDof6(d, j.kind, j);
+      return j;
+    }
+    case FIXED_CONSTRAINT_TYPE:
+    case D6_SPRING_2_CONSTRAINT_TYPE: {
+      auto& g = static_cast<btGeneric6DofSpring2Constraint&>(mc);
+      j.kind = c.getConstraintType() == FIXED_CONSTRAINT_TYPE ? "fixed" : "generic 6-DoF spring 2";
+      j.frame_a = fromBt(g.getFrameOffsetA());
+      j.frame_b = fromBt(g.getFrameOffsetB());
+      Dof6 d;
+      btTranslationalLimitMotor2* t = g.getTranslationalLimitMotor();
+      for (int i = 0; i < 3; ++i) {
+        btRotationalLimitMotor2* r = g.getRotationalLimitMotor(i);
+        d.lo[i] = t->m_lowerLimit[i];
+        d.hi[i] = t->m_upperLimit[i];
+        d.motor[i] = t->m_enableMotor[i];
+        d.spring[i] = t->m_enableSpring[i];
+        d.k[i] = t->m_springStiffness[i];
+        d.c[i] = t->m_springDamping[i];
+        d.eq[i] = t->m_equilibriumPoint[i];
+        d.lo[3 + i] = r->m_loLimit;
+        d.hi[3 + i] = r->m_hiLimit;
+        d.motor[3 + i] = r->m_enableMotor;
+        d.spring[3 + i] = r->m_enableSpring;
+        d.k[3 + i] = r->m_springStiffness;
+        d.c[3 + i] = r->m_springDamping;
+        d.eq[3 + i] = r->m_equilibriumPoint;
+      }
+      fromDof6(d, j.kind, j);
+      return j;
+    }
+    default:
+      throw InputError("unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
+                       " (supported: point-to-point, hinge, slider, fixed, generic 6-DoF [spring, spring 2])");
+  }
+}
+
+void BulletJoints::add(btTypedConstraint* c) {
+  if (!c) throw InputError("null constraint");
+  (void)jointSpecFromBullet(*c);  // throws for what cannot be represented
+  if (std::find(joints_.begin(), joints_.end(), c) == joints_.end()) joints_.push_back(c);
+}
+
+void BulletJoints::remove(btTypedConstraint* c) { joints_.erase(std::remove(joints_.begin(), joints_.end(), c), joints_.end()); }
+
+JointBody BulletJoints::side(const BodyArrays& bodies, const btRigidBody* body) const {
+  JointBody s;
+  auto it = index_->find(body);
+  if (it != index_->end() && it->second >= 0 && size_t(it->second) < bodies.count()) {
+    const size_t i = size_t(it->second);
+    s.index = it->second;
+    s.x = bodies.pos[i];
+    s.q = bodies.rot[i];
+    s.v = bodies.vel[i];
+    s.w = bodies.omega[i];
+    s.size = bodies.size[i];
+  } else {  // Bullet's fixed body, or a body outside the system: the ground at its Bullet pose
+    const Pose p = fromBt(body->getCenterOfMassTransform());
+    s.x = p.p;
+    s.q = p.q;
+    s.size = real(1e30);
+  }
+  return s;
+}
+
+void BulletJoints::rows(const BodyArrays& bodies, double /*t*/, real dt, std::vector<ConstraintRow>& out) {
+  row_joint_.clear();
+  for (size_t k = 0; k < joints_.size(); ++k) {
+    btTypedConstraint* c = joints_[k];
+    if (!c->isEnabled()) continue;
+    const JointSpec j = jointSpecFromBullet(*c);
+    const size_t before = out.size();
+    jointRows(j, side(bodies, j.a), side(bodies, j.b), dt, settings_, out);
+    row_joint_.resize(out.size(), int(k));
+    (void)before;
+  }
+}
+
+void BulletJoints::impulses(const real* lambda, size_t count) {
+  const size_t n = std::min(count, row_joint_.size());
+  std::vector<real> peak(joints_.size(), 0);
+  for (size_t r = 0; r < n; ++r) {
+    real& p = peak[size_t(row_joint_[r])];
+    p = std::max(p, std::fabs(lambda[r]));
+  }
+  for (size_t k = 0; k < joints_.size(); ++k) {
+    btTypedConstraint* c = joints_[k];
+    if (!c->isEnabled()) continue;
+    c->internalSetAppliedImpulse(btScalar(peak[k]));
+    // Bullet's rule: a row impulse at or above the threshold breaks the constraint.
+    if (peak[k] >= real(c->getBreakingImpulseThreshold())) c->setEnabled(false);
+  }
+}
+
+void BulletJoints::springForces(const BodyArrays& bodies, Vec3* force, Vec3* torque) const {
+  for (btTypedConstraint* c : joints_) {
+    if (!c->isEnabled()) continue;
+    const JointSpec j = jointSpecFromBullet(*c);
+    if (j.springs.empty()) continue;
+    jointSpringForces(j, side(bodies, j.a), side(bodies, j.b), force, torque);
+  }
+}
+
+JointViolation BulletJoints::maxViolation(const BodyArrays& bodies) const {
+  JointViolation m;
+  for (btTypedConstraint* c : joints_) {
+    if (!c->isEnabled()) continue;
+    const JointSpec j = jointSpecFromBullet(*c);
+    const JointBody A = side(bodies, j.a), B = side(bodies, j.b);
+    const JointViolation v = jointViolation(j, A, B);
+    m.linear = std::max(m.linear, v.linear / std::min(A.size, B.size));
+    m.angular = std::max(m.angular, v.angular);
+  }
+  return m;
+}
+
+}  // namespace dvi
