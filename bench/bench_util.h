@@ -27,7 +27,7 @@
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/errors.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/math.h"
 #include "chrono_like/system.h"
 

@@ -18,7 +18,7 @@
 
 #include "../demos/bullet_drop_in/demo_scene.h"
 #include "chrono_like/bullet_world.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/bullet_joints.h"
 #include "chrono_like/triangle_mesh.h"
 
@@ -41,6 +41,8 @@ struct TestWorld {
     if (dvi) {
       DviWorldConfig c;
       c.backend = backend;
+      c.make_gpu_system = makeGpuSystem;
+      c.gpu_available = gpuAvailable;
       world = std::make_unique<DviDynamicsWorld>(&dispatcher, &broadphase, &solver, &config, c);
     } else {
       world = std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &broadphase, &solver, &config);

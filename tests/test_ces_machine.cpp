@@ -21,7 +21,7 @@
 #include "ces/machine.h"
 #include "ces/splitters.h"
 #include "chrono_like/errors.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "cli_test_util.h"
 
 using namespace dvi;

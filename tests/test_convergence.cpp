@@ -18,7 +18,7 @@
 
 #include "chrono_like/bullet_world.h"
 #include "cli_test_util.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "body_builders.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/narrowphase.h"
 #include "chrono_like/system.h"
 #if defined(DVISIM_HAVE_CUDA)

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"
 

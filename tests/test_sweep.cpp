@@ -13,7 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "../apps/dvisim/sweep.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "cli_test_util.h"
 
 using namespace dvi::sweep;

@@ -53,7 +53,7 @@
 #include "ces/ces_run.h"
 #include "ces/machine.h"
 #include "ces/splitters.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/jacobian.h"
 #include "chrono_like/solver.h"
 #include "chrono_like/system.h"

@@ -23,7 +23,7 @@
 
 #include "bench_common.h"
 #include "bench_util.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"
 

@@ -51,7 +51,7 @@
 #include "bench_scaling_bullet3.h"
 #include "bench_util.h"
 #include "chrono_like/bullet_peer.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"
 #if defined(DVISIM_HAVE_CUDA)

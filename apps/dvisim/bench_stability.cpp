@@ -33,7 +33,7 @@
 #include "bench_common.h"
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/solver.h"
 #include "chrono_like/system.h"
 #include "bench_util.h"

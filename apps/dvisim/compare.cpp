@@ -23,7 +23,7 @@
 #include <vector>
 
 #include "chrono_like/bullet_world.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/scene.h"
 
 namespace {
@@ -127,6 +127,7 @@ EngineResult runEngine(const std::string& name, const CompareOptions& o, const d
   } else {
     dvi::DviWorldConfig c;
     c.backend = name == "gpu" ? dvi::WorldBackend::Gpu : dvi::WorldBackend::Cpu;
+    c.make_gpu_system = dvi::makeGpuSystem;
     c.system = dvi::systemConfigFromSettings(s.settings);
     auto w = std::make_unique<dvi::DviDynamicsWorld>(&e.dispatcher, &e.broadphase, &e.solver, &e.config, c);
     r.device = w->system().deviceName();

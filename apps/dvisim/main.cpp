@@ -40,7 +40,7 @@
 #include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/output.h"
 #include "chrono_like/scene.h"
 #include "chrono_like/system.h"

@@ -39,7 +39,7 @@
 #include "bench_util.h"
 #include "ces/ces_config.h"
 #include "ces/ces_run.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/output.h"
 #include "chrono_like/scene.h"
 

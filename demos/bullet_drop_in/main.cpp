@@ -16,6 +16,7 @@
 
 #ifdef DVISIM_DROP_IN
 #include "chrono_like/bullet_world.h"
+#include "gpu/gpu_factory.h"
 #endif
 
 int main(int argc, char** argv) {
@@ -31,7 +32,10 @@ int main(int argc, char** argv) {
     btSequentialImpulseConstraintSolver solver;
 #ifdef DVISIM_DROP_IN
     dvi::DviWorldConfig dvi_config;  // the CPU backend by default; "gpu" on the command line picks the GPU
-    if (argc > 2 && std::strcmp(argv[2], "gpu") == 0) dvi_config.backend = dvi::WorldBackend::Gpu;
+    if (argc > 2 && std::strcmp(argv[2], "gpu") == 0) {
+      dvi_config.backend = dvi::WorldBackend::Gpu;
+      dvi_config.make_gpu_system = dvi::makeGpuSystem;  // the world takes the GPU backend from the app
+    }
     dvi::DviDynamicsWorld world(&dispatcher, &broadphase, &solver, &config, dvi_config);
     const char* engine = "dvisim DVI world";
 #else

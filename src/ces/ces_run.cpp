@@ -20,7 +20,7 @@
 #include "ces/splitters.h"
 #include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/errors.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 #include "chrono_like/output.h"
 #include "chrono_like/scene.h"
 

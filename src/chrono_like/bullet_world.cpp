@@ -11,7 +11,6 @@
 
 #include "bullet_collision_backend.h"
 #include "bullet_import.h"
-#include "gpu_factory.h"
 #include "triangle_mesh.h"
 
 namespace dvi {
@@ -119,11 +118,15 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
   c.gravity = fromBt(m_gravity);
   if (!(c.dt > 0)) c.dt = real(1) / 60;
   std::unique_ptr<System> s;
-  const bool gpu = config_.backend == WorldBackend::Gpu || (config_.backend == WorldBackend::Auto && gpuAvailable());
-  if (gpu)
-    s = makeGpuSystem(c, makeBulletCollision);  // throws InputError naming why when no device is usable
-  else
+  const bool gpu = config_.backend == WorldBackend::Gpu ||
+                   (config_.backend == WorldBackend::Auto && config_.gpu_available && config_.gpu_available(nullptr));
+  if (gpu) {
+    if (!config_.make_gpu_system)
+      throw InputError("WorldBackend::Gpu: DviWorldConfig::make_gpu_system is not set (gpu/gpu_factory.h: makeGpuSystem)");
+    s = config_.make_gpu_system(c, makeBulletCollision);  // throws InputError naming why when no device is usable
+  } else {
     s = std::make_unique<FilteredCpuSystem>(c, [this](int a, int b) { return keepPair(a, b); });
+  }
   s->addRowProvider(joints_);
   return s;
 }

@@ -39,13 +39,19 @@ class btPersistentManifold;
 
 namespace dvi {
 
-enum class WorldBackend { Cpu, Gpu, Auto };  // Auto: the GPU when one is usable, else the CPU
+// Auto: the GPU when one is usable, else the CPU. Gpu and Auto need DviWorldConfig's GPU functions.
+enum class WorldBackend { Cpu, Gpu, Auto };
 
 struct DviWorldConfig {
   WorldBackend backend = WorldBackend::Cpu;
   SystemConfig system;       // solver, iterations, threads, envelope...; dt and gravity come from Bullet
   JointSettings joints;
   bool fill_manifolds = true;  // mirror the contacts into Bullet's persistent manifolds (dispatcher)
+  // The GPU backend for WorldBackend::Gpu and Auto, given by the app (gpu/gpu_factory.h: dvi::makeGpuSystem and
+  // dvi::gpuAvailable) so that the world does not depend on the GPU code. Gpu without make_gpu_system is refused
+  // with an InputError; Auto without gpu_available runs on the CPU.
+  std::unique_ptr<System> (*make_gpu_system)(const SystemConfig&, CollisionFactory) = nullptr;
+  bool (*gpu_available)(std::string* why) = nullptr;
 };
 
 // A contact of the last sub-step, as the app reads it (DviDynamicsWorld::contacts()).

@@ -1,5 +1,5 @@
 // Device discovery for the GPU backend (CUDA builds only; the always-linked entry points are in
-// chrono_like/gpu_factory.h).
+// gpu/gpu_factory.h).
 #pragma once
 
 #include <string>

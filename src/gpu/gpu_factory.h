@@ -1,12 +1,13 @@
-// Entry points to the GPU backend that link in every build: without CUDA, gpuAvailable() is false and
-// makeGpuSystem() throws InputError, so the CLI and the C++ API need no #ifdef (`--backend gpu` on a
-// machine without a device fails with a clear message; `--backend auto` picks the CPU).
+// Entry points to the GPU backend that link in every build (gpu_factory.cpp is compiled with or without CUDA):
+// without CUDA, gpuAvailable() is false and makeGpuSystem() throws InputError, so the CLI and the C++ API need no
+// #ifdef (`--backend gpu` on a machine without a device fails with a clear message; `--backend auto` picks the
+// CPU). The core does not include this file: the drop-in world takes these functions through DviWorldConfig.
 #pragma once
 
 #include <memory>
 #include <string>
 
-#include "system.h"
+#include "chrono_like/system.h"
 
 namespace dvi {
 

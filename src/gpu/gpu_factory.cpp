@@ -1,4 +1,4 @@
-#include "gpu_factory.h"
+#include "gpu/gpu_factory.h"
 
 #if defined(DVISIM_HAVE_CUDA)
 #include "gpu/gpu_info.h"
