@@ -13,9 +13,9 @@
 #include <cstdint>
 #include <vector>
 
-#include "broadphase_kernels.h"
-#include "data.h"
-#include "hd.h"
+#include "chrono_like/broadphase_kernels.h"
+#include "chrono_like/data.h"
+#include "chrono_like/hd.h"
 
 namespace dvi {
 

@@ -7,10 +7,10 @@
 
 #include <cstdint>
 
-#include "data.h"
-#include "hd.h"
-#include "math.h"
-#include "shape.h"
+#include "chrono_like/data.h"
+#include "chrono_like/hd.h"
+#include "chrono_like/math.h"
+#include "chrono_like/shape.h"
 
 namespace dvi {
 

@@ -37,7 +37,7 @@
 // Convention: Bullet's m_normalWorldOnB points from B to A (pointA = pointB + normalOnB * distance);
 // ours points from A to B, so normal = -m_normalWorldOnB, pa = positionWorldOnA, pb = positionWorldOnB,
 // dist = getDistance() = dot(pb - pa, normal).
-#include "bullet_collision_backend.h"
+#include "chrono_like/bullet_collision_backend.h"
 
 #include <btBulletCollisionCommon.h>
 
@@ -46,10 +46,10 @@
 #include <limits>
 #include <string>
 
-#include "broadphase.h"
-#include "bullet_convert.h"
-#include "collision.h"
-#include "errors.h"
+#include "chrono_like/broadphase.h"
+#include "chrono_like/bullet_convert.h"
+#include "chrono_like/collision.h"
+#include "chrono_like/errors.h"
 
 namespace dvi {
 

@@ -5,7 +5,7 @@
 
 #include <memory>
 
-#include "collision.h"
+#include "chrono_like/collision.h"
 
 namespace dvi {
 

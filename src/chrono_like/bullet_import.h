@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "system.h"
+#include "chrono_like/system.h"
 
 class btRigidBody;
 class btCollisionShape;

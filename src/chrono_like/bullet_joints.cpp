@@ -1,6 +1,6 @@
 // Bullet constraints read into JointSpecs, and the drop-in world's joints (bullet_joints.h).
-#include "bullet_joints.h"
-#include "bullet_convert.h"
+#include "chrono_like/bullet_joints.h"
+#include "chrono_like/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
@@ -10,7 +10,7 @@
 #include <cmath>
 #include <string>
 
-#include "errors.h"
+#include "chrono_like/errors.h"
 
 namespace dvi {
 

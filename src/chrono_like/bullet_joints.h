@@ -14,7 +14,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "joints.h"
+#include "chrono_like/joints.h"
 
 class btRigidBody;
 class btTypedConstraint;

@@ -13,7 +13,7 @@
 #include <memory>
 #include <vector>
 
-#include "math.h"
+#include "chrono_like/math.h"
 
 class btRigidBody;
 

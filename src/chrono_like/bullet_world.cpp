@@ -1,6 +1,6 @@
 // The Bullet drop-in world (bullet_world.h).
-#include "bullet_world.h"
-#include "bullet_convert.h"
+#include "chrono_like/bullet_world.h"
+#include "chrono_like/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 
@@ -9,9 +9,9 @@
 #include <functional>
 #include <map>
 
-#include "bullet_collision_backend.h"
-#include "bullet_import.h"
-#include "triangle_mesh.h"
+#include "chrono_like/bullet_collision_backend.h"
+#include "chrono_like/bullet_import.h"
+#include "chrono_like/triangle_mesh.h"
 
 namespace dvi {
 

@@ -32,8 +32,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "bullet_joints.h"
-#include "system.h"
+#include "chrono_like/bullet_joints.h"
+#include "chrono_like/system.h"
 
 class btPersistentManifold;
 

@@ -7,10 +7,10 @@
 // C. Ericson, "Real-Time Collision Detection", 2005, §5.1.9 (closest points of two segments).
 #pragma once
 
-#include "contact.h"
-#include "math.h"
-#include "shape.h"
-#include "support.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/shape.h"
+#include "chrono_like/support.h"
 
 namespace dvi {
 namespace np {

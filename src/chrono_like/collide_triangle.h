@@ -20,11 +20,11 @@
 //     edge or vertex contact.
 #pragma once
 
-#include "contact.h"
-#include "math.h"
-#include "mpr.h"
-#include "shape.h"
-#include "support.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/mpr.h"
+#include "chrono_like/shape.h"
+#include "chrono_like/support.h"
 
 namespace dvi {
 namespace np {

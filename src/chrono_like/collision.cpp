@@ -1,14 +1,14 @@
 // Native collision backend: AABBs -> binning broad phase -> analytic/MPR narrow phase, on the CPU with
 // OpenMP. The per-element work is the DVI_HD code the GPU backend runs (narrowphase.h,
 // broadphase_kernels.h).
-#include "collision.h"
+#include "chrono_like/collision.h"
 
 #include <omp.h>
 
 #include <algorithm>
 
-#include "broadphase_kernels.h"
-#include "narrowphase.h"
+#include "chrono_like/broadphase_kernels.h"
+#include "chrono_like/narrowphase.h"
 
 namespace dvi {
 

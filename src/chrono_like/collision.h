@@ -6,8 +6,8 @@
 
 #include <memory>
 
-#include "broadphase.h"
-#include "data.h"
+#include "chrono_like/broadphase.h"
+#include "chrono_like/data.h"
 
 namespace dvi {
 

@@ -17,7 +17,7 @@
 
 #include <cmath>
 
-#include "hd.h"
+#include "chrono_like/hd.h"
 
 namespace dvi {
 

@@ -3,7 +3,7 @@
 
 #include <cstdint>
 
-#include "math.h"
+#include "chrono_like/math.h"
 
 namespace dvi {
 

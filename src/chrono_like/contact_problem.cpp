@@ -1,6 +1,6 @@
 // Assembly of the contact CCP and its matrix-free operators (docs/MODEL.md §3; layout in contact_problem.h and
 // jacobian.h). The per-element work is in jacobian.h and cone.h, shared with the CUDA kernels.
-#include "contact_problem.h"
+#include "chrono_like/contact_problem.h"
 
 #include <omp.h>
 
@@ -9,10 +9,10 @@
 #include <limits>
 #include <string>
 
-#include "cone.h"
-#include "errors.h"
-#include "rows_impl.h"
-#include "solver_kernels.h"
+#include "chrono_like/cone.h"
+#include "chrono_like/errors.h"
+#include "chrono_like/rows_impl.h"
+#include "chrono_like/solver_kernels.h"
 
 namespace dvi {
 

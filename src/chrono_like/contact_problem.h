@@ -22,11 +22,11 @@
 #include <cstdint>
 #include <vector>
 
-#include "data.h"
-#include "extensions.h"
-#include "jacobian.h"
-#include "rows_impl.h"
-#include "solver.h"
+#include "chrono_like/data.h"
+#include "chrono_like/extensions.h"
+#include "chrono_like/jacobian.h"
+#include "chrono_like/rows_impl.h"
+#include "chrono_like/solver.h"
 
 namespace dvi {
 

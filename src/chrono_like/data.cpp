@@ -1,4 +1,4 @@
-#include "data.h"
+#include "chrono_like/data.h"
 
 namespace dvi {
 

@@ -7,9 +7,9 @@
 #include <cstdint>
 #include <vector>
 
-#include "contact.h"
-#include "math.h"
-#include "shape.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/shape.h"
 
 namespace dvi {
 

@@ -17,9 +17,9 @@
 #include <limits>
 #include <vector>
 
-#include "data.h"
-#include "hd.h"
-#include "math.h"
+#include "chrono_like/data.h"
+#include "chrono_like/hd.h"
+#include "chrono_like/math.h"
 
 namespace dvi {
 

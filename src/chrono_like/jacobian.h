@@ -18,8 +18,8 @@
 #include <cmath>
 #include <cstdint>
 
-#include "hd.h"
-#include "math.h"
+#include "chrono_like/hd.h"
+#include "chrono_like/math.h"
 
 namespace dvi {
 

@@ -21,8 +21,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "extensions.h"
-#include "math.h"
+#include "chrono_like/extensions.h"
+#include "chrono_like/math.h"
 
 class btRigidBody;  // a joint's bodies are identified by their Bullet handles (bullet_joints.h reads them)
 

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "errors.h"
-#include "math.h"
+#include "chrono_like/errors.h"
+#include "chrono_like/math.h"
 
 namespace dvi {
 namespace jsoncheck {

@@ -34,10 +34,10 @@
 // h(n) is kept, so an extra pass can only improve the answer.
 #pragma once
 
-#include "contact.h"
-#include "math.h"
-#include "shape.h"
-#include "support.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/shape.h"
+#include "chrono_like/support.h"
 
 namespace dvi {
 namespace np {

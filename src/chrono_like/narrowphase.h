@@ -7,9 +7,9 @@
 // and the speculative points kept only for pairs that close within the step (keepSpeculative).
 #pragma once
 
-#include "contact.h"
-#include "math.h"
-#include "shape.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/shape.h"
 
 namespace dvi {
 
@@ -108,4 +108,4 @@ DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const P
 
 }  // namespace dvi
 
-#include "narrowphase_impl.h"
+#include "chrono_like/narrowphase_impl.h"

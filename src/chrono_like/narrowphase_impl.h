@@ -11,13 +11,13 @@
 // cylinder-cylinder, cylinder-capsule, ...).
 #pragma once
 
-#include "collide_box.h"
-#include "collide_triangle.h"
-#include "contact.h"
-#include "math.h"
-#include "mpr.h"
-#include "shape.h"
-#include "support.h"
+#include "chrono_like/collide_box.h"
+#include "chrono_like/collide_triangle.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/mpr.h"
+#include "chrono_like/shape.h"
+#include "chrono_like/support.h"
 
 namespace dvi {
 

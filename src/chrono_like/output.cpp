@@ -1,4 +1,4 @@
-#include "output.h"
+#include "chrono_like/output.h"
 
 #include <unistd.h>
 

@@ -9,8 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "math.h"
-#include "system.h"
+#include "chrono_like/math.h"
+#include "chrono_like/system.h"
 
 namespace dvi {
 

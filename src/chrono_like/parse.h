@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "errors.h"
+#include "chrono_like/errors.h"
 
 namespace dvi {
 

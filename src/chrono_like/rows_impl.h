@@ -5,9 +5,9 @@
 
 #include <cstdint>
 
-#include "extensions.h"
-#include "hd.h"
-#include "jacobian.h"
+#include "chrono_like/extensions.h"
+#include "chrono_like/hd.h"
+#include "chrono_like/jacobian.h"
 
 namespace dvi {
 

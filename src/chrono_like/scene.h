@@ -17,8 +17,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "math.h"
-#include "system.h"
+#include "chrono_like/math.h"
+#include "chrono_like/system.h"
 
 class btRigidBody;
 class btCollisionShape;

@@ -1,4 +1,4 @@
-#include "shape.h"
+#include "chrono_like/shape.h"
 
 namespace dvi {
 

@@ -5,7 +5,7 @@
 
 #include <cstdint>
 
-#include "math.h"
+#include "chrono_like/math.h"
 
 namespace dvi {
 

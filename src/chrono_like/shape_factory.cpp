@@ -6,7 +6,7 @@
 #include <cmath>
 #include <limits>
 
-#include "system.h"
+#include "chrono_like/system.h"
 
 namespace dvi {
 

@@ -30,8 +30,8 @@
 #include <string>
 #include <vector>
 
-#include "hd.h"
-#include "solver_kernels.h"
+#include "chrono_like/hd.h"
+#include "chrono_like/solver_kernels.h"
 
 namespace dvi {
 

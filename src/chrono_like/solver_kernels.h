@@ -15,9 +15,9 @@
 #include <cmath>
 #include <cstdint>
 
-#include "cone.h"
-#include "hd.h"
-#include "math.h"
+#include "chrono_like/cone.h"
+#include "chrono_like/hd.h"
+#include "chrono_like/math.h"
 
 namespace dvi {
 

@@ -2,9 +2,9 @@
 // Included by narrowphase_impl.h (after the declarations in narrowphase.h); host and device code.
 #pragma once
 
-#include "contact.h"
-#include "math.h"
-#include "shape.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/math.h"
+#include "chrono_like/shape.h"
 
 namespace dvi {
 namespace np {

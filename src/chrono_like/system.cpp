@@ -1,4 +1,4 @@
-#include "system.h"
+#include "chrono_like/system.h"
 
 #include <omp.h>
 
@@ -10,10 +10,10 @@
 #include <sstream>
 #include <type_traits>
 
-#include "collision.h"
-#include "contact_problem.h"
-#include "integrate.h"
-#include "narrowphase.h"
+#include "chrono_like/collision.h"
+#include "chrono_like/contact_problem.h"
+#include "chrono_like/integrate.h"
+#include "chrono_like/narrowphase.h"
 
 namespace dvi {
 

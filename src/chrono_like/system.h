@@ -17,12 +17,12 @@
 #include <string>
 #include <vector>
 
-#include "broadphase.h"
-#include "collision.h"
-#include "data.h"
-#include "errors.h"
-#include "extensions.h"
-#include "solver.h"
+#include "chrono_like/broadphase.h"
+#include "chrono_like/collision.h"
+#include "chrono_like/data.h"
+#include "chrono_like/errors.h"
+#include "chrono_like/extensions.h"
+#include "chrono_like/solver.h"
 
 namespace dvi {
 

@@ -1,6 +1,6 @@
 // Static triangle geometry from Bullet (triangle_mesh.h).
-#include "triangle_mesh.h"
-#include "bullet_convert.h"
+#include "chrono_like/triangle_mesh.h"
+#include "chrono_like/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btConcaveShape.h>
@@ -8,7 +8,7 @@
 
 #include <cmath>
 
-#include "bullet_import.h"
+#include "chrono_like/bullet_import.h"
 
 namespace dvi {
 

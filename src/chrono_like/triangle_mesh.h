@@ -5,7 +5,7 @@
 
 #include <vector>
 
-#include "system.h"
+#include "chrono_like/system.h"
 
 class btCollisionShape;
 
