@@ -1,4 +1,4 @@
-// Generic constraint rows (extensions.h) solved with the contacts: checks against closed forms.
+// Generic constraint rows (constraint_row.h) solved with the contacts: checks against closed forms.
 #include <catch2/catch.hpp>
 
 #include <cmath>

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "ces/particle_model.h"
-#include "chrono_like/extensions.h"
+#include "chrono_like/force_field.h"
 
 namespace dvi {
 namespace ces {

@@ -11,7 +11,7 @@
 
 #include "chrono_like/cone.h"
 #include "chrono_like/errors.h"
-#include "chrono_like/rows_impl.h"
+#include "chrono_like/row_kernels.h"
 #include "chrono_like/solver_kernels.h"
 
 namespace dvi {

@@ -14,7 +14,7 @@
 // Fixed and kinematic bodies (inverse mass and inertia 0) take no part in the Schur product (their
 // velocity change is 0) but their v_free enters r.
 //
-// Constraint rows (extensions.h) follow the contacts as blocks of three rows (the last block padded
+// Constraint rows (constraint_row.h) follow the contacts as blocks of three rows (the last block padded
 // with rows lo = hi = 0 on no body). A row stores its full Jacobian (12 reals): there are few of them
 // (joints, drives), so they are not compressed.
 #pragma once
@@ -23,9 +23,9 @@
 #include <vector>
 
 #include "chrono_like/data.h"
-#include "chrono_like/extensions.h"
+#include "chrono_like/constraint_row.h"
 #include "chrono_like/jacobian.h"
-#include "chrono_like/rows_impl.h"
+#include "chrono_like/row_kernels.h"
 #include "chrono_like/solver.h"
 
 namespace dvi {

@@ -402,7 +402,7 @@ DVI_HD real normalBlockJacobiStep(const ContactJacobian* J, int cnt, const real*
   return g > real(0) ? real(1) / g : real(0);
 }
 
-// ---- generic constraint rows (extensions.h): J = (linear[3], angular[3]) per side ----
+// ---- generic constraint rows (constraint_row.h): J = (linear[3], angular[3]) per side ----
 
 // J . (v, w)
 DVI_HD real rowDot(const real* J, Vec3 v, Vec3 w) {

@@ -1,4 +1,4 @@
-// Joints as DVI constraint rows (extensions.h): a JointSpec and the rows, violations and spring forces it gives at
+// Joints as DVI constraint rows (constraint_row.h): a JointSpec and the rows, violations and spring forces it gives at
 // the bodies' states. The Bullet drop-in world reads its constraints into JointSpecs (bullet_joints.h).
 //
 // A JointSpec holds two joint frames (one per body, in the body's centre-of-mass frame), a mode per linear axis of
@@ -21,7 +21,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/extensions.h"
+#include "chrono_like/constraint_row.h"
 #include "chrono_like/math.h"
 
 class btRigidBody;  // a joint's bodies are identified by their Bullet handles (bullet_joints.h reads them)

@@ -135,7 +135,7 @@ constexpr int64_t kSerialContacts = 2048;
 
 // The operator interface a solver works on. Vectors are plain arrays of size() reals, laid out in blocks
 // of 3: first the contacts (normal, tangent u, tangent w; projected onto their friction cone), then the
-// blocks of generic constraint rows (extensions.h; each row projected onto its box [lo, hi]). See
+// blocks of generic constraint rows (constraint_row.h; each row projected onto its box [lo, hi]). See
 // solver_kernels.h.
 class CcpProblem {
  public:

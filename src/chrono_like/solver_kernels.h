@@ -4,7 +4,7 @@
 //
 // Vectors are laid out in blocks of 3 reals. Blocks [0, nc) are contacts (normal, tangent u, tangent w)
 // projected onto their friction cone (cone.h); blocks [nc, nb) hold generic constraint rows
-// (extensions.h: joints, drives), three rows per block, each row projected onto its box [lo, hi]
+// (constraint_row.h: joints, drives), three rows per block, each row projected onto its box [lo, hi]
 // (Tasora & Anitescu, CMAME 200 (2011): bilateral rows have the whole line as their "cone"; a motor with
 // a force limit or a unilateral limit has an interval). Padding rows have lo = hi = 0.
 //

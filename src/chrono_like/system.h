@@ -19,9 +19,10 @@
 
 #include "chrono_like/broadphase.h"
 #include "chrono_like/collision.h"
+#include "chrono_like/constraint_row.h"
 #include "chrono_like/data.h"
 #include "chrono_like/errors.h"
-#include "chrono_like/extensions.h"
+#include "chrono_like/force_field.h"
 #include "chrono_like/solver.h"
 
 namespace dvi {
@@ -257,10 +258,10 @@ class System {
   // bodies between steps without moving the whole state. No-op on the CPU.
   virtual void syncBodiesToHost(const std::vector<int32_t>& /*ids*/) {}
   virtual void markBodiesDirty(const std::vector<int32_t>& /*ids*/) {}
-  // A device backend's body arrays (extensions.h), for plug-ins with device code; false on the CPU.
+  // A device backend's body arrays (force_field.h), for plug-ins with device code; false on the CPU.
   virtual bool deviceBodies(DeviceBodyRefs& /*out*/) { return false; }
 
-  // Plug-ins (extensions.h). Force fields run in IntegrateForces in the order added; row providers add
+  // Plug-ins (force_field.h, constraint_row.h). Force fields run in IntegrateForces in the order added; row providers add
   // their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).
   void addForceField(std::shared_ptr<ForceField> field) { fields_.push_back(std::move(field)); }
   void addRowProvider(std::shared_ptr<RowProvider> rows) { row_providers_.push_back(std::move(rows)); }

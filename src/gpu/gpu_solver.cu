@@ -19,7 +19,7 @@
 #include "chrono_like/cone.h"
 #include "chrono_like/jacobian.h"
 #include "chrono_like/solver.h"
-#include "chrono_like/rows_impl.h"
+#include "chrono_like/row_kernels.h"
 #include "chrono_like/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
@@ -1279,7 +1279,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   const int64_t ncb = normal ? (nc + 2) / 3 : nc;
   d.contact_blocks = ncb;
   const int64_t nbox = normal ? 3 * ncb : 0;  // box entries of the normal blocks, before the rows'
-  // Constraint rows from the host (RowProvider plug-ins), padded to blocks of three (rows_impl.h).
+  // Constraint rows from the host (RowProvider plug-ins), padded to blocks of three (row_kernels.h).
   const int64_t nrb = (int64_t(rows.size()) + 2) / 3;
   const int64_t nblk = ncb + nrb;
   d.row_count = rows.size();

@@ -292,7 +292,7 @@ void GpuSystem::buildAndSolve() {
   cudaEvent_t* ev = d_->ev;
   const size_t nc = d_->contacts.count;
   if (stats_.part_ran[int(StagePart::ConstraintRows)]) {  // with prune = false even without providers
-    // Row providers are host plug-ins (extensions.h) that read the body state: it comes to the host
+    // Row providers are host plug-ins (constraint_row.h) that read the body state: it comes to the host
     // here, only in scenes with constraint rows (docs/ARCHITECTURE.md), and only the bodies they name
     // when every provider names them (RowProvider::bodiesRead; the CES drum drive reads the drum alone).
     std::vector<int32_t> ids;

@@ -1,6 +1,6 @@
-// Extension points of the System: force fields (IntegrateForces) and generic constraint rows (joints,
-// motors, rheonomic drives; BuildRows / Solve). Plug-ins (the CES machine, the Bullet drop-in world's
-// joints) implement these; the core never knows what they model.
+// Generic constraint rows, the System's extension point for joints, motors and rheonomic drives (BuildRows /
+// Solve): plug-ins (the Bullet drop-in world's joints, the CES drum drive) implement RowProvider; the core never
+// knows what the rows model. Force fields, the other extension point, are in force_field.h.
 //
 // Constraint rows (docs/MODEL.md §2-3; Tasora & Anitescu, "A matrix-free cone complementarity approach for solving
 // large-scale, nonsmooth, rigid body dynamics", CMAME 200 (2011), eq. 14 for bilateral rows): row i acts
@@ -32,19 +32,6 @@ struct ConstraintRow {
   real hi = std::numeric_limits<real>::infinity();
 };
 
-// Raw device pointers to a device backend's body arrays (System::deviceBodies), for plug-ins with device code
-// (the CES machine's field and charging kernels). stream: the backend's cudaStream_t; work enqueued on it is
-// ordered with the step's.
-struct DeviceBodyRefs {
-  Vec3* pos = nullptr;
-  Quat* rot = nullptr;
-  Vec3* vel = nullptr;
-  Vec3* omega = nullptr;
-  uint8_t* flags = nullptr;
-  int64_t count = 0;
-  void* stream = nullptr;
-};
-
 // Produces the rows of this step from the current state (positions, velocities at the start of the
 // step). Called once per step, in BuildRows, before the solve. t is the time at the end of the step.
 class RowProvider {
@@ -57,22 +44,6 @@ class RowProvider {
   // The bodies rows() reads, when it reads only a few: a device backend then copies just those to the host
   // before calling rows() (instead of every body). false (the default): any body.
   virtual bool bodiesRead(std::vector<int32_t>& /*ids*/) const { return false; }
-};
-
-// Adds forces and torques (world frame, N and N m, acting at the centre of mass) to every body it
-// models. Called once per step in IntegrateForces, before the velocities are updated. t is the time
-// at the start of the step.
-class ForceField {
- public:
-  virtual ~ForceField() = default;
-  virtual void apply(const BodyArrays& bodies, double t, real dt, Vec3* force, Vec3* torque) = 0;
-  // A device backend first offers the field its device arrays (force, torque: device pointers, one per body,
-  // to add to). true: applied there, no host round trip; false (the default): the backend copies the bodies
-  // to the host and calls apply().
-  virtual bool applyOnDevice(const DeviceBodyRefs& /*bodies*/, double /*t*/, real /*dt*/, Vec3* /*force*/,
-                             Vec3* /*torque*/) {
-    return false;
-  }
 };
 
 }  // namespace dvi

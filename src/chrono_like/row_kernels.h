@@ -1,11 +1,11 @@
-// Per-element operations on generic constraint rows (extensions.h), written once as DVI_HD functions:
+// Per-element operations on generic constraint rows (constraint_row.h), written once as DVI_HD functions:
 // ContactProblem (CPU) and the GPU backend's BuildRows / Schur kernels call these. A row block holds
 // three rows (the last block of a step is padded with rows that have lo = hi = 0 and no bodies).
 #pragma once
 
 #include <cstdint>
 
-#include "chrono_like/extensions.h"
+#include "chrono_like/constraint_row.h"
 #include "chrono_like/hd.h"
 #include "chrono_like/jacobian.h"
 
