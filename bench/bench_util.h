@@ -26,9 +26,9 @@
 
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 #include "chrono_like/system.h"
 
 namespace dvi::benchutil {

@@ -8,8 +8,8 @@
 #include <cmath>
 #include <vector>
 
-#include "chrono_like/data.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/math.h"
 #include "chrono_like/solver.h"
 
 namespace refsolver {

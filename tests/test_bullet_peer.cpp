@@ -11,7 +11,8 @@
 #include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/bullet_peer.h"
 #include "chrono_like/collision.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/system.h"
 
 using namespace dvi;

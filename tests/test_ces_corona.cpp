@@ -9,7 +9,7 @@
 #include "ces/ces_constants.h"
 #include "ces/field_corona.h"
 #include "ces/field_csm.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 using namespace dvi;
 using namespace dvi::ces;

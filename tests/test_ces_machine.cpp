@@ -20,7 +20,7 @@
 #include "ces/ces_run.h"
 #include "ces/machine.h"
 #include "ces/splitters.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"
 #include "cli_test_util.h"
 

@@ -11,7 +11,7 @@
 #include "ces/field_two_cylinder.h"
 #include "ces/forces.h"
 #include "ces/particle_model.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 using namespace dvi;
 using namespace dvi::ces;

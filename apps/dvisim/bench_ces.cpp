@@ -46,7 +46,7 @@
 #include "ces/ces_run.h"
 #include "ces/feeder.h"
 #include "ces/machine.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/parse.h"
 
 namespace {

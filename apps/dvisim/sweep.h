@@ -16,7 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/parse.h"
 
 namespace dvi::sweep {

@@ -41,7 +41,7 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "scaling/scaling_scenes.h"
 
 namespace dvi::bench {

@@ -9,7 +9,7 @@
 
 #include "ces/ces_constants.h"
 #include "ces/charging.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 namespace ces {

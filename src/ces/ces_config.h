@@ -20,7 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 namespace ces {

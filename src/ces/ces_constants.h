@@ -8,7 +8,7 @@
 
 #include <limits>
 
-#include "chrono_like/hd.h"
+#include "chrono_like/base/hd.h"
 
 namespace dvi {
 namespace ces {

@@ -19,7 +19,7 @@
 #include "ces/machine.h"
 #include "ces/splitters.h"
 #include "chrono_like/bullet_collision_backend.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"
 #include "chrono_like/output.h"
 #include "chrono_like/scene.h"

@@ -9,7 +9,7 @@
 #include <cmath>
 
 #include "ces/ces_constants.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 namespace ces {

@@ -1,7 +1,7 @@
 // What a CES field model returns at a point: the potential and the electric field.
 #pragma once
 
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 namespace ces {

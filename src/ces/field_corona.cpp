@@ -13,7 +13,7 @@
 #include <string>
 #include <utility>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 namespace ces {

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <string>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 namespace ces {

@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "ces/ces_constants.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 namespace ces {

@@ -9,7 +9,7 @@
 #include <istream>
 #include <ostream>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 namespace ces {

@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "chrono_like/broadphase_kernels.h"
-#include "chrono_like/data.h"
-#include "chrono_like/hd.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/hd.h"
 
 namespace dvi {
 

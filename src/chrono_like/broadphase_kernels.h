@@ -7,10 +7,10 @@
 
 #include <cstdint>
 
-#include "chrono_like/data.h"
-#include "chrono_like/hd.h"
-#include "chrono_like/math.h"
-#include "chrono_like/shape.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/hd.h"
+#include "chrono_like/base/math.h"
+#include "chrono_like/base/shape.h"
 
 namespace dvi {
 

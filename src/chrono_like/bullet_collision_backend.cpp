@@ -49,7 +49,8 @@
 #include "chrono_like/broadphase.h"
 #include "chrono_like/bullet_convert.h"
 #include "chrono_like/collision.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/contact.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 

@@ -5,7 +5,7 @@
 #include <LinearMath/btTransform.h>
 #include <LinearMath/btVector3.h>
 
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

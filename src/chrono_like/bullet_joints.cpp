@@ -10,7 +10,7 @@
 #include <cmath>
 #include <string>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 

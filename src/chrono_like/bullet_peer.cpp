@@ -18,7 +18,7 @@
 #include <chrono>
 #include <string>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 

@@ -13,7 +13,7 @@
 #include <memory>
 #include <vector>
 
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 class btRigidBody;
 

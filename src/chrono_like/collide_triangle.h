@@ -21,9 +21,9 @@
 #pragma once
 
 #include "chrono_like/contact.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 #include "chrono_like/mpr.h"
-#include "chrono_like/shape.h"
+#include "chrono_like/base/shape.h"
 #include "chrono_like/support.h"
 
 namespace dvi {

@@ -7,7 +7,7 @@
 #include <memory>
 
 #include "chrono_like/broadphase.h"
-#include "chrono_like/data.h"
+#include "chrono_like/base/data.h"
 
 namespace dvi {
 

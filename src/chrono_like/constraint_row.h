@@ -17,9 +17,9 @@
 #include <limits>
 #include <vector>
 
-#include "chrono_like/data.h"
-#include "chrono_like/hd.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/hd.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

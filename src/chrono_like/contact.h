@@ -3,7 +3,7 @@
 
 #include <cstdint>
 
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

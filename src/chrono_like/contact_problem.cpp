@@ -10,7 +10,7 @@
 #include <string>
 
 #include "chrono_like/cone.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/row_kernels.h"
 #include "chrono_like/solver_kernels.h"
 

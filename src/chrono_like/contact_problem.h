@@ -22,7 +22,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/data.h"
+#include "chrono_like/base/data.h"
 #include "chrono_like/constraint_row.h"
 #include "chrono_like/jacobian.h"
 #include "chrono_like/row_kernels.h"

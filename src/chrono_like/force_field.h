@@ -5,8 +5,8 @@
 
 #include <cstdint>
 
-#include "chrono_like/data.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

@@ -3,8 +3,8 @@
 // updated by the exponential map of h*omega (exact for any angle; keeps the quaternion unit).
 #pragma once
 
-#include "chrono_like/data.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

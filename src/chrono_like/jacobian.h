@@ -18,8 +18,8 @@
 #include <cmath>
 #include <cstdint>
 
-#include "chrono_like/hd.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/hd.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

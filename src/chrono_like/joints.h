@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "chrono_like/constraint_row.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 
 class btRigidBody;  // a joint's bodies are identified by their Bullet handles (bullet_joints.h reads them)
 

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/errors.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/errors.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 namespace jsoncheck {

@@ -14,9 +14,9 @@
 #include "chrono_like/collide_box.h"
 #include "chrono_like/collide_triangle.h"
 #include "chrono_like/contact.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 #include "chrono_like/mpr.h"
-#include "chrono_like/shape.h"
+#include "chrono_like/base/shape.h"
 #include "chrono_like/support.h"
 
 namespace dvi {

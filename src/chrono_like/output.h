@@ -9,7 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "chrono_like/math.h"
+#include "chrono_like/base/math.h"
 #include "chrono_like/system.h"
 
 namespace dvi {

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "chrono_like/errors.h"
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 

@@ -6,7 +6,7 @@
 #include <cstdint>
 
 #include "chrono_like/constraint_row.h"
-#include "chrono_like/hd.h"
+#include "chrono_like/base/hd.h"
 #include "chrono_like/jacobian.h"
 
 namespace dvi {

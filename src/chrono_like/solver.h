@@ -30,7 +30,7 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/hd.h"
+#include "chrono_like/base/hd.h"
 #include "chrono_like/solver_kernels.h"
 
 namespace dvi {

@@ -16,8 +16,8 @@
 #include <cstdint>
 
 #include "chrono_like/cone.h"
-#include "chrono_like/hd.h"
-#include "chrono_like/math.h"
+#include "chrono_like/base/hd.h"
+#include "chrono_like/base/math.h"
 
 namespace dvi {
 

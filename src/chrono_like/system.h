@@ -20,8 +20,8 @@
 #include "chrono_like/broadphase.h"
 #include "chrono_like/collision.h"
 #include "chrono_like/constraint_row.h"
-#include "chrono_like/data.h"
-#include "chrono_like/errors.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/force_field.h"
 #include "chrono_like/solver.h"
 

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "chrono_like/broadphase.h"
-#include "chrono_like/data.h"
+#include "chrono_like/base/data.h"
 #include "chrono_like/jacobian.h"
 #include "chrono_like/narrowphase.h"
 #include "chrono_like/solver_algorithms.h"

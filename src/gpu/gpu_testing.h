@@ -6,8 +6,8 @@
 
 #include "chrono_like/broadphase.h"
 #include "chrono_like/contact.h"
-#include "chrono_like/data.h"
-#include "chrono_like/shape.h"
+#include "chrono_like/base/data.h"
+#include "chrono_like/base/shape.h"
 
 namespace dvi::gpu {
 

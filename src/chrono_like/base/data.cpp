@@ -1,4 +1,4 @@
-#include "chrono_like/data.h"
+#include "chrono_like/base/data.h"
 
 namespace dvi {
 

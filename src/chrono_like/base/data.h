@@ -7,9 +7,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/contact.h"
-#include "chrono_like/math.h"
-#include "chrono_like/shape.h"
+#include "chrono_like/base/math.h"
+#include "chrono_like/base/shape.h"
 
 namespace dvi {
 

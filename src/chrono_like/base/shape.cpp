@@ -1,4 +1,4 @@
-#include "chrono_like/shape.h"
+#include "chrono_like/base/shape.h"
 
 namespace dvi {
 

@@ -5,7 +5,7 @@
 
 #include <cmath>
 
-#include "chrono_like/hd.h"
+#include "chrono_like/base/hd.h"
 
 namespace dvi {
 
