@@ -245,6 +245,39 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
   }
 }
 
+// Rolling resistance (forces.h drumRollingTorque) by its definition: mu_r is the tangent of the steepest slope on
+// which it holds a particle (Ai et al. 2011). A 1 mm copper sphere at rest on the still drum, theta from the top
+// (the local slope), friction 0.5 so that it rolls rather than slides: with mu_r = 0.1 it stays at 4 degrees
+// (tan 0.070) and rolls off at 8 degrees (tan 0.141); with mu_r = 0 it rolls off at 4 degrees. No field, no air.
+TEST_CASE("CES machine: rolling resistance holds a sphere on the drum up to the slope tan(theta) = mu_r",
+          "[ces][ces_machine]") {
+  auto roll = [](double theta_deg, const std::string& mu_r) {
+    CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false",
+                                "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
+                                "drum.rpm=0", "drum.drive=kinematic", "friction.rolling_drum=" + mu_r,
+                                "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
+    SystemConfig sc;
+    sc.dt = real(cfg.dt);
+    System sys(sc);
+    CesMachine m(cfg, sys);
+    SplitMix64 rng;
+    const ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8900, rng);
+    const double Rc = cfg.drumRadius() + 0.5e-3, th0 = (90 - theta_deg) * M_PI / 180;
+    const int id = m.addParticle(s, Vec3{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0}, Quat{1, 0, 0, 0},
+                                 Vec3{0, 0, 0}, Vec3{0, 0, 0});
+    for (int k = 0; k < int(0.3 / cfg.dt); ++k) m.step();
+    return (th0 - angleOf(sys.bodies().pos[size_t(id)])) * Rc;  // arc length rolled down, m
+  };
+  const double held = roll(4, "0.1"), rolled = roll(8, "0.1"), free_roll = roll(4, "0");
+  INFO("arc rolled in 0.3 s: 4 deg mu_r 0.1: " << held << " m; 8 deg mu_r 0.1: " << rolled << " m; 4 deg mu_r 0: "
+                                               << free_roll << " m");
+  // Rolling freely down a slope of 4 degrees: s = (5/7) g sin(theta) t^2 / 2 = 22 mm in 0.3 s (more as the slope
+  // steepens). Held: a creep of at most ~g h per step.
+  CHECK(free_roll > 0.015);
+  CHECK(rolled > 0.005);
+  CHECK(std::fabs(held) < 1e-3);
+}
+
 TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal force balance gravity",
           "[ces][ces_machine]") {
   // A copper sphere (d = 1 mm, rotation locked, friction 200) carried by the drum under the tube alone at

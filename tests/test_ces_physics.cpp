@@ -541,3 +541,46 @@ TEST_CASE("CES default machine parameters", "[ces]") {
   CHECK(m.drumOmega() == Approx(44.8 * 2 * M_PI / 60));  // 4.6914 rad/s
   CHECK(kEps0 == 8.8541878128e-12);
 }
+
+// Rolling resistance on the drum (forces.h: drumRollingTorque), against its definition: the moment mu_r r F_n
+// opposing the rolling relative to the drum, F_n from the particle's equation of motion normal to the drum.
+TEST_CASE("CES rolling resistance: mu_r r F_n against the relative rolling, limited to stopping it", "[ces]") {
+  const DrumGeometry g{0, 0, 0.16, 0, 0.15, 0.005};
+  const double r = 0.5e-3, m = 4e-6, I = 0.4 * m * r * r, h = 2e-4, mu_r = 0.1, gy = -9.81;
+  const Vec3 grav{0, real(gy), 0};
+  const double th = 60 * M_PI / 180, rho = 0.16 + r;
+  const Vec3 n{real(std::cos(th)), real(std::sin(th)), 0};
+  const Vec3 p = real(rho) * n;
+  const Vec3 none{0, 0, 0};
+  // At rest on a still drum, rolling backwards at 50 rad/s about z: F_n = m g sin(theta) (the normal component of
+  // gravity), the moment mu_r r F_n about +z (against w = -50 z).
+  {
+    const Vec3 M = drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I), real(mu_r), real(h));
+    const double Fn = m * 9.81 * std::sin(th);
+    CHECK(double(M.z) == Approx(mu_r * r * Fn).epsilon(1e-5));
+    CHECK(std::fabs(double(M.x)) + std::fabs(double(M.y)) < 1e-20);
+  }
+  // Relative to the drum: a particle turning with the drum (w = w_drum) feels none.
+  CHECK(length(drumRollingTorque(g, p, none, Vec3{0, 0, -4.7}, Vec3{0, 0, -4.7}, none, grav, real(m), real(r), real(I),
+                                 real(mu_r), real(h))) == 0);
+  // The spin about the normal is not rolling.
+  CHECK(length(drumRollingTorque(g, p, none, real(30) * n, none, none, grav, real(m), real(r), real(I), real(mu_r),
+                                 real(h))) < 1e-20);
+  // Slow rolling: limited to the moment that stops it within the step, I |w| / h.
+  {
+    const Vec3 M = drumRollingTorque(g, p, none, Vec3{0, 0, 1e-3}, none, none, grav, real(m), real(r), real(I),
+                                     real(mu_r), real(h));
+    CHECK(double(M.z) == Approx(-I * 1e-3 / h).epsilon(1e-5));
+  }
+  // Other forces pressing in add to F_n; fast enough about the axis (v_phi^2 / rho > the inward push) it leaves: 0.
+  {
+    const Vec3 F = real(-2 * m * 9.81) * n;  // 2 m g toward the axis (an image force, say)
+    const Vec3 M = drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, F, grav, real(m), real(r), real(I), real(mu_r), real(h));
+    CHECK(double(M.z) == Approx(mu_r * r * m * 9.81 * (std::sin(th) + 2)).epsilon(1e-5));
+    const double v_leave = std::sqrt(9.81 * std::sin(th) * rho) * 1.01;
+    const Vec3 e_phi{-n.y, n.x, 0};
+    CHECK(length(drumRollingTorque(g, p, real(v_leave) * e_phi, Vec3{0, 0, -50}, none, none, grav, real(m), real(r),
+                                   real(I), real(mu_r), real(h))) == 0);
+  }
+  CHECK(length(drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I), 0, real(h))) == 0);
+}

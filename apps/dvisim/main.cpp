@@ -364,6 +364,8 @@ void registerBenchStability(CLI::App& app);
 void registerBenchCes(CLI::App& app);
 // `dvisim bench pruning` (bench_pruning.cpp): prune on against off, side by side.
 void registerBenchPruning(CLI::App& app);
+// `dvisim bench dropin` (bench_dropin.cpp): Bullet's benchmark scenes on stock Bullet and on the drop-in world.
+void registerBenchDropin(CLI::App& app);
 
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
@@ -396,6 +398,7 @@ int main(int argc, char** argv) {
   registerBenchStability(app);
   registerBenchCes(app);
   registerBenchPruning(app);
+  registerBenchDropin(app);
 
   try {
     app.parse(argc, argv);

@@ -61,7 +61,8 @@ const char* defaultCesJson() {
     "brush": { "diameter_mm": 106, "core_diameter_mm": 66, "angle_deg": -135, "rpm": 120, "gap_mm": 0,
                "discharge_time_s": 0.001, "sweep_time_s": 0.002 },
     "air": { "viscosity_Pa_s": 1.81e-5, "density_kg_m3": 1.225 },
-    "friction": { "particle_particle": 0.2, "particle_drum": 0.5, "particle_brush": 0.5, "particle_wall": 0.3 },
+    "friction": { "particle_particle": 0.2, "particle_drum": 0.5, "particle_brush": 0.5, "particle_wall": 0.3,
+                  "rolling_drum": 0 },
     "feed": {
       "mass_flow_g_s": 0.5,
       "start_s": 0,
@@ -273,11 +274,13 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
     if (has(s, "density_kg_m3")) cfg.air_density = c.nonNegative(s["density_kg_m3"], "ces.air.density_kg_m3");
   }
   if (has(j, "friction")) {
-    const json& s = c.object(j["friction"], "ces.friction", {"particle_particle", "particle_drum", "particle_brush", "particle_wall"});
+    const json& s = c.object(j["friction"], "ces.friction", {"particle_particle", "particle_drum", "particle_brush", "particle_wall",
+                                                          "rolling_drum"});
     if (has(s, "particle_particle")) cfg.mu_particle_particle = c.nonNegative(s["particle_particle"], "ces.friction.particle_particle");
     if (has(s, "particle_drum")) cfg.mu_particle_drum = c.nonNegative(s["particle_drum"], "ces.friction.particle_drum");
     if (has(s, "particle_brush")) cfg.mu_particle_brush = c.nonNegative(s["particle_brush"], "ces.friction.particle_brush");
     if (has(s, "particle_wall")) cfg.mu_particle_wall = c.nonNegative(s["particle_wall"], "ces.friction.particle_wall");
+    if (has(s, "rolling_drum")) cfg.mu_rolling_drum = c.nonNegative(s["rolling_drum"], "ces.friction.rolling_drum");
   }
   if (!(cfg.mu_particle_particle > 0))
     c.fail("ces.friction.particle_particle", "must be > 0 (the other pairs are expressed through it under the product rule)");

@@ -107,6 +107,9 @@ struct CesConfig {
 
   // Pair friction coefficients (converted to per-body values under the product rule).
   double mu_particle_particle = 0.2, mu_particle_drum = 0.5, mu_particle_brush = 0.5, mu_particle_wall = 0.3;
+  // Rolling resistance of the particles on the drum, mu_r = the tangent of the steepest slope a particle rests on
+  // by it alone (forces.h drumRollingTorque; 0: particles roll freely).
+  double mu_rolling_drum = 0;
 
   // Feed: a vibrating conveyor's outlet, a line across the drum width above the drum.
   double feed_mass_flow = 0.5e-3;  // kg/s

@@ -18,11 +18,15 @@ constexpr int kThreads = 256;
 int blocks(int64_t n) { return int((n + kThreads - 1) / kThreads); }
 
 __global__ void forceKernel(int64_t n, const CesModel* m, real h, const uint8_t* status, const int32_t* material,
-                            const real* charge, const real* radius, const real* bound, const real* mass, const Vec3* pos,
-                            const Vec3* vel, const uint8_t* flags, Vec3* force) {
+                            const real* charge, const real* radius, const real* bound, const real* mass,
+                            const real* moment, const Vec3* pos, const Vec3* vel, const Vec3* omega,
+                            const uint8_t* flags, Vec3* force, Vec3* torque) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n || status[i] != kStatusInFlight || (flags[i] & kBodyFixed)) return;
-  force[i] += cesParticleForce(*m, material[i], pos[i], vel[i], charge[i], radius[i], bound[i], mass[i], h);
+  const Vec3 F = cesParticleForce(*m, material[i], pos[i], vel[i], charge[i], radius[i], bound[i], mass[i], h);
+  force[i] += F;
+  torque[i] += cesParticleTorque(*m, pos[i], vel[i], omega[i], omega[m->drum_body], F, radius[i], bound[i], mass[i],
+                                 moment[i], h);
 }
 
 // Charge update and classification (CesMachine::postStep's loop); a changed status is appended to the list.
@@ -80,16 +84,17 @@ class CudaCesDevice final : public CesDevice {
     radius_.uploadTail(p.radius, first);
     bound_.uploadTail(p.bound, first);
     mass_.uploadTail(p.mass, first);
+    moment_.uploadTail(p.moment, first);
     count_ = p.count();
     DVI_CUDA(cudaDeviceSynchronize());  // the host vectors may grow (reallocate) after we return
   }
 
-  void forces(const DeviceBodyRefs& b, real h, Vec3* force) override {
+  void forces(const DeviceBodyRefs& b, real h, Vec3* force, Vec3* torque) override {
     const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
     if (n == 0) return;
     forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), h, status_.data(), material_.data(),
                                                         charge_.data(), radius_.data(), bound_.data(), mass_.data(),
-                                                        b.pos, b.vel, b.flags, force);
+                                                        moment_.data(), b.pos, b.vel, b.omega, b.flags, force, torque);
     DVI_CUDA_LAUNCH("CES forceKernel");
   }
 
@@ -136,7 +141,7 @@ class CudaCesDevice final : public CesDevice {
   gpu::DeviceBuffer<uint8_t> status_{"CES particle status"}, pflags_{"CES particle flags"};
   gpu::DeviceBuffer<int32_t> material_{"CES particle material"};
   gpu::DeviceBuffer<real> charge_{"CES particle charge"}, radius_{"CES particle radius"}, bound_{"CES particle bound"};
-  gpu::DeviceBuffer<real> mass_{"CES particle mass"};
+  gpu::DeviceBuffer<real> mass_{"CES particle mass"}, moment_{"CES particle moment"};
   gpu::DeviceBuffer<int32_t> changed_{"CES changed particles"}, n_changed_{"CES changed count"};
   gpu::DeviceBuffer<uint8_t> changed_status_{"CES changed status"};
   size_t count_ = 0;

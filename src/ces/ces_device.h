@@ -24,7 +24,7 @@ class CesDevice {
   // Uploads particles [first, p.count()): status, material, charge, flags, radius, bounding radius, mass.
   virtual void append(const CesParticles& p, size_t first) = 0;
   // Adds the CES force of every in-flight, movable particle for a step h to force (a device array, one per body).
-  virtual void forces(const DeviceBodyRefs& b, real h, Vec3* force) = 0;
+  virtual void forces(const DeviceBodyRefs& b, real h, Vec3* force, Vec3* torque) = 0;
   // Charge update and classification of every in-flight particle after a step of h; the device's status
   // follows. changed: the particles whose status changed (body, new status), in body order.
   virtual void postStep(const DeviceBodyRefs& b, real h, std::vector<std::pair<int32_t, uint8_t>>& changed) = 0;

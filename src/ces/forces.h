@@ -105,5 +105,42 @@ DVI_HD Vec3 dragForceSphere(Vec3 vFluid, Vec3 vParticle, real d, real rhoFluid, 
   return dragForce(vFluid, vParticle, d, kPi * d * d / real(4), rhoFluid, eta);
 }
 
+// Rolling resistance of a particle on the drum: the constant-moment model ("type A" in Ai, Chen, Rotter & Ooi,
+// "Assessment of rolling resistance models in discrete element simulations", Powder Technology 206 (2011)
+// 269-282, eq. 5; Zhou et al., Physica A 269 (1999) 536): a moment of magnitude mu_r r F_n opposing the particle's
+// rolling relative to the drum surface, where mu_r is the tangent of the steepest slope on which the moment
+// alone holds a particle against gravity (a body at rest on a slope of angle theta stays when tan theta <= mu_r),
+// r the rolling radius and F_n the normal force. It stands for what makes real granules (irregular, flattened,
+// rough) roll less freely than the rigid spheres and cylinders of the model.
+//  - w_rel = w - w_drum, its part in the contact's tangent plane (normal n = radial, outward) is the rolling;
+//  - F_n from the particle's equation of motion normal to the drum while it rides it: the drum pushes with what
+//    gravity and the other forces F press inward, less the centripetal force m v_phi^2 / rho of its motion about
+//    the axis (rho = distance of the centre to the axis): F_n = -(m g + F).n - m v_phi^2 / rho, and 0 when that
+//    is <= 0 (the particle is leaving);
+//  - explicit: the moment acts in IntegrateForces, before the contacts are solved, and is limited to the one
+//    that stops the relative rolling within the step (I_min |w_rel,t| / h, I_min the smallest principal
+//    moment), so it never reverses it; a particle held on a slope by it creeps by at most ~g h per step.
+// Zero for mu_r = 0 or when the particle does not touch the drum (touching: centre within contact_tol x bound
+// of the surface, the charge model's test, particle_model.h).
+DVI_HD Vec3 drumRollingTorque(const DrumGeometry& g, Vec3 p, Vec3 v, Vec3 w, Vec3 w_drum, Vec3 F, Vec3 gravity,
+                              real mass, real r, real moment, real mu_r, real h) {
+  if (!(mu_r > real(0)) || !(moment > real(0)) || !(h > real(0))) return Vec3{0, 0, 0};
+  const real dx = p.x - g.cx, dy = p.y - g.cy, rho = std::hypot(dx, dy);
+  if (!(rho > real(0))) return Vec3{0, 0, 0};
+  const Vec3 n{dx / rho, dy / rho, real(0)};
+  const Vec3 e_phi{-n.y, n.x, real(0)};  // azimuthal direction, z x n
+  const real v_phi = dot(v, e_phi);
+  const real Fn = -dot(mass * gravity + F, n) - mass * v_phi * v_phi / rho;
+  if (!(Fn > real(0))) return Vec3{0, 0, 0};
+  const Vec3 wr = w - w_drum;
+  const Vec3 wt = wr - dot(wr, n) * n;
+  const real wt_len = length(wt);
+  if (!(wt_len > real(0))) return Vec3{0, 0, 0};
+  const real M_model = mu_r * r * Fn;
+  const real M_stop = moment * wt_len / h;
+  const real M = M_model < M_stop ? M_model : M_stop;
+  return (-M / wt_len) * wt;
+}
+
 }  // namespace ces
 }  // namespace dvi

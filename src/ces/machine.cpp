@@ -84,21 +84,26 @@ bool coreSolvesConstraintRows() {
 // Plug-ins
 // ---------------------------------------------------------------------------------------------------
 
-void CesForceField::apply(const BodyArrays& b, double, real dt, Vec3* force, Vec3*) {
+void CesForceField::apply(const BodyArrays& b, double, real dt, Vec3* force, Vec3* torque) {
   const CesParticles& p = m_.p_;
   const CesModel& model = m_.model_;
   const int64_t n = int64_t(std::min(p.count(), b.count()));
+  const Vec3 w_drum = b.omega[size_t(model.drum_body)];
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i) {
-    if (p.status[size_t(i)] != kStatusInFlight || (b.flags[size_t(i)] & kBodyFixed)) continue;
-    force[i] += cesParticleForce(model, p.material[size_t(i)], b.pos[size_t(i)], b.vel[size_t(i)], p.charge[size_t(i)],
-                                 p.radius[size_t(i)], p.bound[size_t(i)], p.mass[size_t(i)], dt);
+    const size_t k = size_t(i);
+    if (p.status[k] != kStatusInFlight || (b.flags[k] & kBodyFixed)) continue;
+    const Vec3 F = cesParticleForce(model, p.material[k], b.pos[k], b.vel[k], p.charge[k], p.radius[k], p.bound[k],
+                                    p.mass[k], dt);
+    force[i] += F;
+    torque[i] += cesParticleTorque(model, b.pos[k], b.vel[k], b.omega[k], w_drum, F, p.radius[k], p.bound[k],
+                                   p.mass[k], p.moment[k], dt);
   }
 }
 
-bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, double, real dt, Vec3* force, Vec3*) {
+bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, double, real dt, Vec3* force, Vec3* torque) {
   if (!m_.dev_) return false;
-  m_.dev_->forces(b, dt, force);
+  m_.dev_->forces(b, dt, force, torque);
   return true;
 }
 
@@ -225,6 +230,8 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   model_.air_density = real(cfg_.air_density);
   model_.air_viscosity = real(cfg_.air_viscosity);
   model_.contact_tol = real(1.1);
+  model_.rolling_drum = real(cfg_.mu_rolling_drum);
+  model_.gravity = sys_.config().gravity;
   model_.collect_y = real(cfg_.collection_y);
   model_.domain_x_lo = real(-1);
   model_.domain_x_hi = real(1);
@@ -259,6 +266,7 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
       d.flags = kBodyKinematic;
     }
     drum_ = addBody(d, -1, nullptr, 0);
+    model_.drum_body = drum_;
     if (drive == "rheonomic") {
       drive_ = std::make_shared<DrumDrive>(drum_, Vec3{0, 0, 0}, cfg_.omegaDrum());
       sys_.addRowProvider(drive_);
@@ -314,6 +322,7 @@ int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spe
   p_.bound.push_back(spec ? spec->bound : real(0));
   p_.mass_fg.push_back(spec ? spec->mass_fg : 0);
   p_.mass.push_back(spec ? real(double(spec->mass_fg) * kFemtogram) : real(0));
+  p_.moment.push_back(spec ? std::min(spec->inertia.x, std::min(spec->inertia.y, spec->inertia.z)) : real(0));
   if (spec) specs_.push_back(*spec);
   return id;
 }

@@ -56,6 +56,7 @@ struct CesParticles {
   std::vector<real> bound;         // bounding radius, m
   std::vector<int64_t> mass_fg;    // femtograms
   std::vector<real> mass;          // kg, the same mass (the brush's sweep force)
+  std::vector<real> moment;        // kg m^2, the smallest principal moment of inertia (the rolling resistance)
   size_t count() const { return status.size(); }
 };
 

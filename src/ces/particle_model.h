@@ -70,6 +70,9 @@ struct CesModel {
   CylinderXY electrodes[kMaxElectrodes];
   real air_density, air_viscosity;
   real contact_tol;          // a particle touches a surface when its centre is within contact_tol x its bounding radius
+  real rolling_drum;         // mu_r of the particles on the drum (forces.h drumRollingTorque; 0: none)
+  int32_t drum_body;         // the drum's body index (its angular velocity, for the rolling resistance)
+  Vec3 gravity;              // m/s^2 (the rolling resistance's normal force)
   // Collection plane and the domain outside which a particle is lost.
   real collect_y;
   real domain_x_lo, domain_x_hi, domain_y_hi, domain_half_z;
@@ -122,6 +125,15 @@ DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q,
     F += electricForce(m.drum, p, q, r, s.E);
   }
   return F;
+}
+
+// Torque on a particle touching the drum: its rolling resistance (forces.h: drumRollingTorque), with F the
+// particle's other forces (cesParticleForce) and w_drum the drum's angular velocity. moment: the particle's
+// smallest principal moment of inertia.
+DVI_HD Vec3 cesParticleTorque(const CesModel& m, Vec3 p, Vec3 v, Vec3 w, Vec3 w_drum, Vec3 F, real r, real bound,
+                              real mass, real moment, real h) {
+  if (!(m.rolling_drum > real(0)) || !touchesDrum(m, p, bound)) return Vec3{0, 0, 0};
+  return drumRollingTorque(m.drum, p, v, w, w_drum, F, m.gravity, mass, r, moment, m.rolling_drum, h);
 }
 
 // One step h of a particle's charge q (material mat, volume-equivalent radius r, bounding radius bound);
