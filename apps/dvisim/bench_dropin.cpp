@@ -39,9 +39,9 @@
 
 #include "bench_common.h"
 #include "bench_util.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/bullet_world.h"
-#include "chrono_like/errors.h"
-#include "chrono_like/gpu_factory.h"
+#include "gpu/gpu_factory.h"
 
 namespace {
 
@@ -116,6 +116,8 @@ std::unique_ptr<World> makeWorld(const std::string& engine, int threads) {
   } else {
     dvi::DviWorldConfig c;
     c.backend = engine == "gpu" ? dvi::WorldBackend::Gpu : dvi::WorldBackend::Cpu;
+    c.make_gpu_system = dvi::makeGpuSystem;
+    c.gpu_available = dvi::gpuAvailable;
     c.system.threads = threads;
     auto* ours = new dvi::DviDynamicsWorld(w->dispatcher.get(), w->broadphase.get(), w->solver.get(), w->config.get(), c);
     w->ours = ours;
