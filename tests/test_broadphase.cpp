@@ -11,7 +11,7 @@
 
 #include <catch2/catch.hpp>
 
-#include "chrono_like/broadphase.h"
+#include "chrono_like/collision/broadphase.h"
 
 using namespace dvi;
 

@@ -10,8 +10,8 @@
 
 #include "chrono_like/bullet_collision_backend.h"
 #include "chrono_like/bullet_peer.h"
-#include "chrono_like/collision.h"
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/collision.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/system.h"
 

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "gpu/gpu_factory.h"
-#include "chrono_like/narrowphase.h"
+#include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/system.h"
 #if defined(DVISIM_HAVE_CUDA)
 #include "gpu/gpu_testing.h"

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/narrowphase.h"
+#include "chrono_like/collision/narrowphase.h"
 
 using namespace dvi;
 

@@ -8,7 +8,7 @@
 #include <cmath>
 #include <cstdint>
 
-#include "chrono_like/collision.h"
+#include "chrono_like/collision/collision.h"
 
 namespace dvi::bench {
 

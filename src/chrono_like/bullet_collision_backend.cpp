@@ -46,10 +46,10 @@
 #include <limits>
 #include <string>
 
-#include "chrono_like/broadphase.h"
+#include "chrono_like/collision/broadphase.h"
 #include "chrono_like/bullet_convert.h"
-#include "chrono_like/collision.h"
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/collision.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/errors.h"
 
 namespace dvi {

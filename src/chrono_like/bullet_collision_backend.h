@@ -5,7 +5,7 @@
 
 #include <memory>
 
-#include "chrono_like/collision.h"
+#include "chrono_like/collision/collision.h"
 
 namespace dvi {
 

@@ -10,10 +10,10 @@
 #include <sstream>
 #include <type_traits>
 
-#include "chrono_like/collision.h"
+#include "chrono_like/collision/collision.h"
 #include "chrono_like/contact_problem.h"
 #include "chrono_like/integrate.h"
-#include "chrono_like/narrowphase.h"
+#include "chrono_like/collision/narrowphase.h"
 
 namespace dvi {
 

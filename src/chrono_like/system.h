@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/broadphase.h"
-#include "chrono_like/collision.h"
+#include "chrono_like/collision/broadphase.h"
+#include "chrono_like/collision/collision.h"
 #include "chrono_like/constraint_row.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/errors.h"

@@ -15,8 +15,8 @@
 
 #include <thrust/iterator/transform_iterator.h>
 
-#include "chrono_like/broadphase_kernels.h"
-#include "chrono_like/narrowphase.h"
+#include "chrono_like/collision/broadphase_kernels.h"
+#include "chrono_like/collision/narrowphase.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
 

@@ -1,6 +1,6 @@
 #include "gpu/gpu_testing.h"
 
-#include "chrono_like/narrowphase.h"
+#include "chrono_like/collision/narrowphase.h"
 #include "gpu/device_buffer.h"
 #include "gpu/gpu_state.cuh"
 

@@ -4,8 +4,8 @@
 
 #include <vector>
 
-#include "chrono_like/broadphase.h"
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/broadphase.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/shape.h"
 

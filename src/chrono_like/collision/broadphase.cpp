@@ -5,7 +5,7 @@
 // radix sort, the run-length encoding) or produces a set of pairs that is unique by construction (the
 // owner-bin rule; large shapes tested once per pair) and then sorted by (a, b) with a key-based sort. So
 // the output does not depend on the thread count or the schedule.
-#include "chrono_like/broadphase.h"
+#include "chrono_like/collision/broadphase.h"
 
 #include <omp.h>
 

@@ -34,10 +34,10 @@
 // h(n) is kept, so an extra pass can only improve the answer.
 #pragma once
 
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
-#include "chrono_like/support.h"
+#include "chrono_like/collision/support.h"
 
 namespace dvi {
 namespace np {

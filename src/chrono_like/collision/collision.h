@@ -6,7 +6,7 @@
 
 #include <memory>
 
-#include "chrono_like/broadphase.h"
+#include "chrono_like/collision/broadphase.h"
 #include "chrono_like/base/data.h"
 
 namespace dvi {

@@ -20,11 +20,11 @@
 //     edge or vertex contact.
 #pragma once
 
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
-#include "chrono_like/mpr.h"
+#include "chrono_like/collision/mpr.h"
 #include "chrono_like/base/shape.h"
-#include "chrono_like/support.h"
+#include "chrono_like/collision/support.h"
 
 namespace dvi {
 namespace np {

@@ -7,7 +7,7 @@
 // and the speculative points kept only for pairs that close within the step (keepSpeculative).
 #pragma once
 
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
 
@@ -108,4 +108,4 @@ DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const P
 
 }  // namespace dvi
 
-#include "chrono_like/narrowphase_impl.h"
+#include "chrono_like/collision/narrowphase_impl.h"

@@ -11,13 +11,13 @@
 // cylinder-cylinder, cylinder-capsule, ...).
 #pragma once
 
-#include "chrono_like/collide_box.h"
-#include "chrono_like/collide_triangle.h"
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/collide_box.h"
+#include "chrono_like/collision/collide_triangle.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
-#include "chrono_like/mpr.h"
+#include "chrono_like/collision/mpr.h"
 #include "chrono_like/base/shape.h"
-#include "chrono_like/support.h"
+#include "chrono_like/collision/support.h"
 
 namespace dvi {
 

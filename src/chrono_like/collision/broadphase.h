@@ -13,7 +13,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/broadphase_kernels.h"
+#include "chrono_like/collision/broadphase_kernels.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/hd.h"
 

@@ -2,7 +2,7 @@
 // Included by narrowphase_impl.h (after the declarations in narrowphase.h); host and device code.
 #pragma once
 
-#include "chrono_like/contact.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
 

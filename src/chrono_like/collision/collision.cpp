@@ -1,14 +1,14 @@
 // Native collision backend: AABBs -> binning broad phase -> analytic/MPR narrow phase, on the CPU with
 // OpenMP. The per-element work is the DVI_HD code the GPU backend runs (narrowphase.h,
 // broadphase_kernels.h).
-#include "chrono_like/collision.h"
+#include "chrono_like/collision/collision.h"
 
 #include <omp.h>
 
 #include <algorithm>
 
-#include "chrono_like/broadphase_kernels.h"
-#include "chrono_like/narrowphase.h"
+#include "chrono_like/collision/broadphase_kernels.h"
+#include "chrono_like/collision/narrowphase.h"
 
 namespace dvi {
 
