@@ -18,7 +18,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS_DIR = os.path.join(ROOT, "bench", "results")
 RESULTS_MD = os.path.join(ROOT, "bench", "RESULTS.md")
 
-KINDS = ["scaling", "ces", "accuracy", "pruning", "stability"]
+KINDS = ["scaling", "ces", "accuracy", "pruning", "stability", "dropin"]
 DASH = "-"
 
 
@@ -299,12 +299,38 @@ STABILITY_INTRO = (
     "fails the case's criterion. Bullet counts its default 10 and 100 iterations as separate runs."
 )
 
+# --- dropin ----------------------------------------------------------------------------------
+DROPIN_SCENES = ["boxes", "pyramid", "ragdolls", "hulls", "terrain", "boxes100k"]
+
+
+def dropin(text):
+    r = common(text, device_names=("GPU", "CPU") if field(text, "GPU") not in (None, "none") else ("CPU",))
+    for scene in DROPIN_SCENES:
+        for engine in ("cpu", "gpu"):
+            m = re.search(r"^\| " + scene + r" \| " + engine + r" \| [^|]*\| [^|]*\| [^|]*\| ([\d.]+x) \|", text, re.M)
+            r["%s %s" % (scene, engine)] = m.group(1) if m else None
+    m = re.search(r"^Goal: our CPU drop-in at <= 1.0x Bullet's time on every scene: ([A-Z ]+ \(\d+ of \d+ scenes\))",
+                  text, re.M)
+    r["cpu goal"] = m.group(1) if m else None
+    return r
+
+
+DROPIN_COLS = [("date", "date"), ("device", "device"), ("commit", "commit")] + [
+    ("%s %s" % (s, e), "%s %s" % (s, e.upper())) for s in DROPIN_SCENES for e in ("cpu", "gpu")] + [
+    ("cpu goal", "CPU <= 1.0x Bullet")]
+DROPIN_INTRO = (
+    "Bullet's benchmark scenes, our drop-in world's ms/step over stock Bullet's (btDiscreteDynamicsWorld, one "
+    "thread), measured side by side in the same run: below 1.0x we are faster. The record has the absolute times, "
+    "contact points, the deepest penetration and each scene's drift."
+)
+
 PARSERS = {
     "scaling": (scaling, SCALING_COLS, SCALING_INTRO, "Scaling (`dvisim bench scaling`)"),
     "ces": (ces, CES_COLS, CES_INTRO, "CES industrial feed (`dvisim bench ces`)"),
     "accuracy": (accuracy, ACCURACY_COLS, ACCURACY_INTRO, "Accuracy (`dvisim bench accuracy`)"),
     "pruning": (pruning, PRUNING_COLS, PRUNING_INTRO, "Pruning (`dvisim bench pruning`)"),
     "stability": (stability, STABILITY_COLS, STABILITY_INTRO, "Stability (`dvisim bench stability`)"),
+    "dropin": (dropin, DROPIN_COLS, DROPIN_INTRO, "Drop-in world on Bullet's scenes (`dvisim bench dropin`)"),
 }
 
 
