@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "chrono_like/bullet_world.h"
-#include "chrono_like/jacobian.h"
+#include "chrono_like/solver/jacobian.h"
 #include "chrono_like/system.h"
 
 using namespace dvi;

@@ -34,7 +34,7 @@
 #include "chrono_like/bullet_import.h"
 #include "chrono_like/bullet_peer.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/solver.h"
 #include "chrono_like/system.h"
 #include "bench_util.h"
 

@@ -21,7 +21,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/constraint_row.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/math.h"
 
 class btRigidBody;  // a joint's bodies are identified by their Bullet handles (bullet_joints.h reads them)
