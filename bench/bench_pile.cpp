@@ -21,8 +21,8 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/bullet_import.h"
-#include "chrono_like/bullet_peer.h"
+#include "chrono_like/bullet/bullet_import.h"
+#include "chrono_like/bullet/bullet_peer.h"
 #include "chrono_like/system.h"
 
 namespace {

@@ -10,7 +10,7 @@
 
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/math.h"
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/solver.h"
 
 namespace refsolver {
 

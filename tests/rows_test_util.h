@@ -3,7 +3,7 @@
 
 #include <vector>
 
-#include "chrono_like/constraint_row.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/system.h"
 
 namespace rowstest {

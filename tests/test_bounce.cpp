@@ -19,8 +19,8 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/bullet_world.h"
-#include "chrono_like/jacobian.h"
+#include "chrono_like/bullet/bullet_world.h"
+#include "chrono_like/solver/jacobian.h"
 #include "chrono_like/system.h"
 
 using namespace dvi;

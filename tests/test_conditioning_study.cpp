@@ -43,8 +43,8 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/contact_problem.h"
-#include "chrono_like/solver_algorithms.h"
+#include "chrono_like/solver/contact_problem.h"
+#include "chrono_like/solver/solver_algorithms.h"
 #include "body_builders.h"
 #include "chrono_like/system.h"
 

@@ -16,7 +16,7 @@
 
 #include <btBulletDynamicsCommon.h>
 
-#include "chrono_like/bullet_world.h"
+#include "chrono_like/bullet/bullet_world.h"
 #include "cli_test_util.h"
 #include "gpu/gpu_factory.h"
 #include "body_builders.h"

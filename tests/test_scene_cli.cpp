@@ -21,7 +21,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "chrono_like/bullet_import.h"
+#include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/scene.h"
 #include "cli_test_util.h"

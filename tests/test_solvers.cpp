@@ -10,9 +10,9 @@
 #include <random>
 #include <vector>
 
-#include "chrono_like/cone.h"
-#include "chrono_like/contact_problem.h"
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/cone.h"
+#include "chrono_like/solver/contact_problem.h"
+#include "chrono_like/solver/solver.h"
 #include "reference_solver.h"
 
 using namespace dvi;

@@ -50,7 +50,7 @@
 #include "bench_common.h"
 #include "bench_scaling_bullet3.h"
 #include "bench_util.h"
-#include "chrono_like/bullet_peer.h"
+#include "chrono_like/bullet/bullet_peer.h"
 #include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"

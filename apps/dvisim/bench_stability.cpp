@@ -31,10 +31,10 @@
 #include <vector>
 
 #include "bench_common.h"
-#include "chrono_like/bullet_import.h"
-#include "chrono_like/bullet_peer.h"
+#include "chrono_like/bullet/bullet_import.h"
+#include "chrono_like/bullet/bullet_peer.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/solver.h"
 #include "chrono_like/system.h"
 #include "bench_util.h"
 

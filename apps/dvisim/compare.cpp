@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/bullet_world.h"
+#include "chrono_like/bullet/bullet_world.h"
 #include "gpu/gpu_factory.h"
 #include "chrono_like/scene.h"
 

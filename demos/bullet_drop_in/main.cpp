@@ -15,7 +15,7 @@
 #include "demo_scene.h"
 
 #ifdef DVISIM_DROP_IN
-#include "chrono_like/bullet_world.h"
+#include "chrono_like/bullet/bullet_world.h"
 #include "gpu/gpu_factory.h"
 #endif
 

@@ -9,7 +9,7 @@
 #include <memory>
 #include <vector>
 
-#include "chrono_like/bullet_import.h"
+#include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/system.h"
 
 int main(int argc, char** argv) {

@@ -18,7 +18,7 @@
 #include "ces/ces_output.h"
 #include "ces/machine.h"
 #include "ces/splitters.h"
-#include "chrono_like/bullet_collision_backend.h"
+#include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"
 #include "chrono_like/output.h"

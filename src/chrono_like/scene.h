@@ -3,7 +3,7 @@
 // btBulletWorldImporter), or the embedded default (a granular pile of mixed shapes in a box).
 //
 // Bullet stays the source of bodies and shapes: the scene builds btRigidBody/btCollisionShape objects,
-// and the engine imports them with importBullet (bullet_import.h); the Bullet peer steps the same ones.
+// and the engine imports them with importBullet (bullet/bullet_import.h); the Bullet peer steps the same ones.
 //
 // Every bad input throws dvi::InputError with a one-line message naming the file, the key path and the
 // value (unknown keys, wrong types, non-finite numbers, negative mass, non-positive dimensions, unknown

@@ -11,7 +11,7 @@
 #include <type_traits>
 
 #include "chrono_like/collision/collision.h"
-#include "chrono_like/contact_problem.h"
+#include "chrono_like/solver/contact_problem.h"
 #include "chrono_like/integrate.h"
 #include "chrono_like/collision/narrowphase.h"
 

@@ -19,11 +19,11 @@
 
 #include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/collision.h"
-#include "chrono_like/constraint_row.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/force_field.h"
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/solver.h"
 
 namespace dvi {
 
@@ -218,7 +218,7 @@ class ContactProblem;
 class System {
  public:
   // `bullet_collision` makes the collision backend when config.collision is CollisionBackend::Bullet
-  // (bullet_collision_backend.h: makeBulletCollision): the core does not build Bullet's pipeline itself, so a
+  // (bullet/bullet_collision_backend.h: makeBulletCollision): the core does not build Bullet's pipeline itself, so a
   // caller whose configuration may ask for it passes it. Asked for without one: InputError.
   explicit System(SystemConfig config = {}, CollisionFactory bullet_collision = nullptr);
   virtual ~System();
@@ -261,8 +261,8 @@ class System {
   // A device backend's body arrays (force_field.h), for plug-ins with device code; false on the CPU.
   virtual bool deviceBodies(DeviceBodyRefs& /*out*/) { return false; }
 
-  // Plug-ins (force_field.h, constraint_row.h). Force fields run in IntegrateForces in the order added; row providers add
-  // their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).
+  // Plug-ins (force_field.h, solver/constraint_row.h). Force fields run in IntegrateForces in the order added; row
+  // providers add their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).
   void addForceField(std::shared_ptr<ForceField> field) { fields_.push_back(std::move(field)); }
   void addRowProvider(std::shared_ptr<RowProvider> rows) { row_providers_.push_back(std::move(rows)); }
   const std::vector<ConstraintRow>& constraintRows() const { return rows_; }   // last step's rows

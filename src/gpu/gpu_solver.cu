@@ -16,11 +16,11 @@
 #include <string>
 #include <type_traits>
 
-#include "chrono_like/cone.h"
-#include "chrono_like/jacobian.h"
-#include "chrono_like/solver.h"
-#include "chrono_like/row_kernels.h"
-#include "chrono_like/solver_algorithms.h"
+#include "chrono_like/solver/cone.h"
+#include "chrono_like/solver/jacobian.h"
+#include "chrono_like/solver/solver.h"
+#include "chrono_like/solver/row_kernels.h"
+#include "chrono_like/solver/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
 

@@ -8,9 +8,9 @@
 
 #include "chrono_like/collision/broadphase.h"
 #include "chrono_like/base/data.h"
-#include "chrono_like/jacobian.h"
+#include "chrono_like/solver/jacobian.h"
 #include "chrono_like/collision/narrowphase.h"
-#include "chrono_like/solver_algorithms.h"
+#include "chrono_like/solver/solver_algorithms.h"
 #include "chrono_like/system.h"
 #include "gpu/device_buffer.h"
 #include "gpu/gpu_system.h"

@@ -1,7 +1,7 @@
 // Collision backends: AABBs + broad phase + narrow phase, producing the contact arrays of a step.
 // Native is our binning broad phase with the analytic/MPR narrow phase (the algorithms the GPU runs);
 // Bullet is Bullet's own CPU pipeline (btCollisionDispatcher, GJK/EPA), kept as the reference
-// (bullet_collision_backend.h).
+// (bullet/bullet_collision_backend.h).
 #pragma once
 
 #include <memory>
@@ -53,7 +53,7 @@ class CollisionDetector {
 std::unique_ptr<CollisionDetector> makeNativeCollision(const BroadPhaseSettings& settings);
 
 // Makes a collision backend that lives outside the core: the System takes one for CollisionBackend::Bullet
-// (bullet_collision_backend.h: makeBulletCollision).
+// (bullet/bullet_collision_backend.h: makeBulletCollision).
 using CollisionFactory = std::unique_ptr<CollisionDetector> (*)();
 
 }  // namespace dvi

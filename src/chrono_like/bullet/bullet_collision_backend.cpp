@@ -37,7 +37,7 @@
 // Convention: Bullet's m_normalWorldOnB points from B to A (pointA = pointB + normalOnB * distance);
 // ours points from A to B, so normal = -m_normalWorldOnB, pa = positionWorldOnA, pb = positionWorldOnB,
 // dist = getDistance() = dot(pb - pa, normal).
-#include "chrono_like/bullet_collision_backend.h"
+#include "chrono_like/bullet/bullet_collision_backend.h"
 
 #include <btBulletCollisionCommon.h>
 
@@ -47,7 +47,7 @@
 #include <string>
 
 #include "chrono_like/collision/broadphase.h"
-#include "chrono_like/bullet_convert.h"
+#include "chrono_like/bullet/bullet_convert.h"
 #include "chrono_like/collision/collision.h"
 #include "chrono_like/collision/contact.h"
 #include "chrono_like/base/errors.h"

@@ -1,6 +1,6 @@
 // Bullet constraints read into JointSpecs, and the drop-in world's joints (bullet_joints.h).
-#include "chrono_like/bullet_joints.h"
-#include "chrono_like/bullet_convert.h"
+#include "chrono_like/bullet/bullet_joints.h"
+#include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>

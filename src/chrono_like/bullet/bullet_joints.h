@@ -14,7 +14,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "chrono_like/joints.h"
+#include "chrono_like/solver/joints.h"
 
 class btRigidBody;
 class btTypedConstraint;

@@ -23,10 +23,10 @@
 #include <vector>
 
 #include "chrono_like/base/data.h"
-#include "chrono_like/constraint_row.h"
-#include "chrono_like/jacobian.h"
-#include "chrono_like/row_kernels.h"
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/constraint_row.h"
+#include "chrono_like/solver/jacobian.h"
+#include "chrono_like/solver/row_kernels.h"
+#include "chrono_like/solver/solver.h"
 
 namespace dvi {
 

@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "chrono_like/base/hd.h"
-#include "chrono_like/solver_kernels.h"
+#include "chrono_like/solver/solver_kernels.h"
 
 namespace dvi {
 

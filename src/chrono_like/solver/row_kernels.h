@@ -5,9 +5,9 @@
 
 #include <cstdint>
 
-#include "chrono_like/constraint_row.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/hd.h"
-#include "chrono_like/jacobian.h"
+#include "chrono_like/solver/jacobian.h"
 
 namespace dvi {
 

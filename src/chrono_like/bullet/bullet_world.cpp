@@ -1,6 +1,6 @@
 // The Bullet drop-in world (bullet_world.h).
-#include "chrono_like/bullet_world.h"
-#include "chrono_like/bullet_convert.h"
+#include "chrono_like/bullet/bullet_world.h"
+#include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 
@@ -9,9 +9,9 @@
 #include <functional>
 #include <map>
 
-#include "chrono_like/bullet_collision_backend.h"
-#include "chrono_like/bullet_import.h"
-#include "chrono_like/triangle_mesh.h"
+#include "chrono_like/bullet/bullet_collision_backend.h"
+#include "chrono_like/bullet/bullet_import.h"
+#include "chrono_like/bullet/triangle_mesh.h"
 
 namespace dvi {
 

@@ -8,8 +8,8 @@
 //    them by the margin on the outside; we take the geometry as given, without that shell.
 // Axis-symmetric shapes are canonical along +Y here; Bullet's X and Z variants become a child pose
 // rotated so that the record's +Y maps onto Bullet's up axis (a cone keeps its apex at +height/2).
-#include "chrono_like/bullet_import.h"
-#include "chrono_like/bullet_convert.h"
+#include "chrono_like/bullet/bullet_import.h"
+#include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>

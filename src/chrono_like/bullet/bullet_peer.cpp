@@ -9,8 +9,8 @@
 // What is NOT scaled: collision margins. Every cloned shape gets Bullet's default margin for its type
 // (0.04, or btBoxShape's/btCylinderShape's "safe margin" for small boxes), i.e. exactly what a user who
 // built the scene in Bullet units would run: that is the point of the peer.
-#include "chrono_like/bullet_peer.h"
-#include "chrono_like/bullet_convert.h"
+#include "chrono_like/bullet/bullet_peer.h"
+#include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 

@@ -1,6 +1,6 @@
 // Assembly of the contact CCP and its matrix-free operators (docs/MODEL.md §3; layout in contact_problem.h and
 // jacobian.h). The per-element work is in jacobian.h and cone.h, shared with the CUDA kernels.
-#include "chrono_like/contact_problem.h"
+#include "chrono_like/solver/contact_problem.h"
 
 #include <omp.h>
 
@@ -9,10 +9,10 @@
 #include <limits>
 #include <string>
 
-#include "chrono_like/cone.h"
+#include "chrono_like/solver/cone.h"
 #include "chrono_like/base/errors.h"
-#include "chrono_like/row_kernels.h"
-#include "chrono_like/solver_kernels.h"
+#include "chrono_like/solver/row_kernels.h"
+#include "chrono_like/solver/solver_kernels.h"
 
 namespace dvi {
 

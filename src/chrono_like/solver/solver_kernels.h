@@ -15,7 +15,7 @@
 #include <cmath>
 #include <cstdint>
 
-#include "chrono_like/cone.h"
+#include "chrono_like/solver/cone.h"
 #include "chrono_like/base/hd.h"
 #include "chrono_like/base/math.h"
 

@@ -2,14 +2,14 @@
 // (shared with the GPU backend) instantiated with OpenMP loops. Every vector operation is a fused loop
 // over blocks; reductions go through detail::blockReduce so results are bitwise identical for any thread
 // count.
-#include "chrono_like/solver.h"
+#include "chrono_like/solver/solver.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
 
-#include "chrono_like/solver_algorithms.h"
+#include "chrono_like/solver/solver_algorithms.h"
 
 namespace dvi {
 

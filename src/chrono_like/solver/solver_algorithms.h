@@ -27,8 +27,8 @@
 #include <string>
 #include <type_traits>
 
-#include "chrono_like/solver.h"
-#include "chrono_like/solver_kernels.h"
+#include "chrono_like/solver/solver.h"
+#include "chrono_like/solver/solver_kernels.h"
 
 namespace dvi {
 namespace algo {

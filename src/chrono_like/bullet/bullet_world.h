@@ -32,7 +32,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "chrono_like/bullet_joints.h"
+#include "chrono_like/bullet/bullet_joints.h"
 #include "chrono_like/system.h"
 
 class btPersistentManifold;

@@ -1,5 +1,5 @@
 // Joint rows, violations and spring forces from a JointSpec (joints.h).
-#include "chrono_like/joints.h"
+#include "chrono_like/solver/joints.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,6 +1,6 @@
 // Static triangle geometry from Bullet (triangle_mesh.h).
-#include "chrono_like/triangle_mesh.h"
-#include "chrono_like/bullet_convert.h"
+#include "chrono_like/bullet/triangle_mesh.h"
+#include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btConcaveShape.h>
@@ -8,7 +8,7 @@
 
 #include <cmath>
 
-#include "chrono_like/bullet_import.h"
+#include "chrono_like/bullet/bullet_import.h"
 
 namespace dvi {
 

@@ -1,5 +1,5 @@
 // Joints as DVI constraint rows (constraint_row.h): a JointSpec and the rows, violations and spring forces it gives at
-// the bodies' states. The Bullet drop-in world reads its constraints into JointSpecs (bullet_joints.h).
+// the bodies' states. The Bullet drop-in world reads its constraints into JointSpecs (bullet/bullet_joints.h).
 //
 // A JointSpec holds two joint frames (one per body, in the body's centre-of-mass frame), a mode per linear axis of
 // frame A (free / locked at a value / limited to [lo, hi]) and an angular mode (orientation locked, a hinge about one
@@ -21,10 +21,10 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/constraint_row.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/math.h"
 
-class btRigidBody;  // a joint's bodies are identified by their Bullet handles (bullet_joints.h reads them)
+class btRigidBody;  // a joint's bodies are known by their Bullet handles (bullet/bullet_joints.h reads them)
 
 namespace dvi {
 
