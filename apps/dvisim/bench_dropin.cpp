@@ -40,7 +40,7 @@
 #include "bench_common.h"
 #include "bench_util.h"
 #include "chrono_like/base/errors.h"
-#include "chrono_like/bullet_world.h"
+#include "chrono_like/bullet/bullet_world.h"
 #include "gpu/gpu_factory.h"
 
 namespace {
