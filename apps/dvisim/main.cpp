@@ -41,8 +41,8 @@
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/output.h"
-#include "chrono_like/scene.h"
+#include "chrono_like/io/output.h"
+#include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
 
 namespace {
