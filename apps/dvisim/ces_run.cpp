@@ -1,7 +1,7 @@
 // `dvisim run` for a CES machine (ces_run.h).
-#include "ces/ces_run.h"
+#include "ces_run.h"
 
-#include "chrono_like/parse.h"
+#include "parse.h"
 
 #include <unistd.h>
 
