@@ -17,7 +17,6 @@
 #include <nlohmann/json.hpp>
 
 #include "ces/ces_config.h"
-#include "ces/ces_run.h"
 #include "ces/machine.h"
 #include "ces/splitters.h"
 #include "chrono_like/base/errors.h"

@@ -18,7 +18,7 @@
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/system.h"
 #if defined(DVISIM_HAVE_CUDA)
-#include "gpu/gpu_testing.h"
+#include "gpu_testing.h"
 #include "rows_test_util.h"
 #endif
 

@@ -23,7 +23,7 @@
 
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/collision/narrowphase.h"
-#include "chrono_like/scene.h"
+#include "chrono_like/io/scene.h"
 #include "cli_test_util.h"
 
 using namespace dvi;

@@ -50,7 +50,7 @@
 
 #include "bench_common.h"
 #include "ces/ces_config.h"
-#include "ces/ces_run.h"
+#include "ces_run.h"
 #include "ces/machine.h"
 #include "ces/splitters.h"
 #include "gpu/gpu_factory.h"

@@ -43,11 +43,11 @@
 #include "bench_common.h"
 #include "bench_util.h"
 #include "ces/ces_config.h"
-#include "ces/ces_run.h"
+#include "ces_run.h"
 #include "ces/feeder.h"
 #include "ces/machine.h"
 #include "chrono_like/base/errors.h"
-#include "chrono_like/parse.h"
+#include "parse.h"
 
 namespace {
 

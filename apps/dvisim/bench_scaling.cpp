@@ -57,7 +57,7 @@
 #if defined(DVISIM_HAVE_CUDA)
 #include "gpu/gpu_system.h"
 namespace dvi::gpu {
-double measureCopyBandwidth(size_t bytes);  // src/gpu/gpu_bench_support.cu
+double measureCopyBandwidth(size_t bytes);  // bench/scaling/gpu_bench_support.cu
 }
 #endif
 

@@ -24,7 +24,7 @@
 
 #include "chrono_like/bullet/bullet_world.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/scene.h"
+#include "chrono_like/io/scene.h"
 
 namespace {
 

@@ -4,7 +4,7 @@
 //              [--solver jacobi|gs|apgd|bb] [--iterations N] [--tolerance TOL] [--max-iterations N]
 //              [--dt H] [--time T | --steps N]
 //              [--threads N] [--frames N] [--set KEY=VALUE ...] [--out DIR] [--resume DIR]
-//   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (src/ces/ces_run.h).
+//   Without SCENE, or with a .json whose top level has "ces", it runs a CES machine (ces_run.h).
 //   dvisim compare SCENE [--time T | --steps N] [--dt H] [--out DIR]   (compare.cpp: Bullet vs our CPU/GPU)
 //   dvisim sweep [SCENE] --grid KEY=v1,v2 | --grid KEY=lo:hi:n | --list FILE [--seeds N] [--jobs N] --out DIR
 //                [run options]                                    (sweep.cpp: design of experiments, docs/SWEEP.md)
@@ -34,15 +34,15 @@
 #include <omp.h>
 #endif
 
-#include "chrono_like/parse.h"
+#include "parse.h"
 #include "bench_common.h"
-#include "ces/ces_run.h"
+#include "ces_run.h"
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/output.h"
-#include "chrono_like/scene.h"
+#include "chrono_like/io/output.h"
+#include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
 
 namespace {

@@ -38,10 +38,10 @@
 
 #include "bench_util.h"
 #include "ces/ces_config.h"
-#include "ces/ces_run.h"
+#include "ces_run.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/output.h"
-#include "chrono_like/scene.h"
+#include "chrono_like/io/output.h"
+#include "chrono_like/io/scene.h"
 
 extern char** environ;
 

@@ -17,7 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "chrono_like/base/errors.h"
-#include "chrono_like/parse.h"
+#include "parse.h"
 
 namespace dvi::sweep {
 

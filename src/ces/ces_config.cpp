@@ -1,7 +1,7 @@
 // CES configuration: strict JSON parsing (see ces_config.h) and the embedded default machine.
 #include "ces/ces_config.h"
 
-#include "chrono_like/json_check.h"
+#include "chrono_like/io/json_check.h"
 
 #include <cmath>
 #include <limits>

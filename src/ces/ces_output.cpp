@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-#include "chrono_like/output.h"
+#include "chrono_like/io/output.h"
 
 namespace dvi {
 namespace ces {

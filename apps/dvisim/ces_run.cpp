@@ -1,7 +1,7 @@
 // `dvisim run` for a CES machine (ces_run.h).
-#include "ces/ces_run.h"
+#include "ces_run.h"
 
-#include "chrono_like/parse.h"
+#include "parse.h"
 
 #include <unistd.h>
 
@@ -21,8 +21,8 @@
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"
-#include "chrono_like/output.h"
-#include "chrono_like/scene.h"
+#include "chrono_like/io/output.h"
+#include "chrono_like/io/scene.h"
 
 namespace dvi {
 namespace ces {

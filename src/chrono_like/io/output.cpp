@@ -1,4 +1,4 @@
-#include "chrono_like/output.h"
+#include "chrono_like/io/output.h"
 
 #include <unistd.h>
 

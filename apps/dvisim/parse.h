@@ -1,5 +1,5 @@
-// Command-line value parsing shared by the dvisim CLI and the plug-ins' run drivers: one-line InputError
-// (exit code 2 in the CLI) that names the option and the bad value.
+// Command-line value parsing of the dvisim CLI (its commands, the CES run, dvisim sweep and dvisim bench): one-line
+// InputError (exit code 2) that names the option and the bad value.
 #pragma once
 
 #include <cmath>

@@ -1,9 +1,9 @@
 // Scenes: JSON (our schema, scenes/schema/scene.schema.json), .bullet files and the embedded default.
 // See scene.h. Everything here validates before it builds: a bad input is an InputError naming the
 // file, the key path and the value, never a crash inside Bullet.
-#include "chrono_like/scene.h"
+#include "chrono_like/io/scene.h"
 
-#include "chrono_like/json_check.h"
+#include "chrono_like/io/json_check.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>

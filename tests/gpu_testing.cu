@@ -1,4 +1,4 @@
-#include "gpu/gpu_testing.h"
+#include "gpu_testing.h"
 
 #include "chrono_like/collision/narrowphase.h"
 #include "gpu/device_buffer.h"

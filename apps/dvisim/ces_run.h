@@ -1,5 +1,6 @@
 // `dvisim run` on a CES machine: the command-line options the CLI hands over, the dispatch test, and the
-// run itself (feed, step, frames, checkpoints, results, plots). apps/dvisim/main.cpp only calls these.
+// run itself (feed, step, frames, checkpoints, results, plots), on the CES model and machine of src/ces/.
+// main.cpp only calls these; dvisim bench ces and dvisim sweep share its pieces.
 #pragma once
 
 #include <array>
