@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "ces/ces_constants.h"
-#include "ces/field_corona.h"
-#include "ces/field_csm.h"
+#include "ces/field/field_corona.h"
+#include "ces/field/field_csm.h"
 #include "chrono_like/base/errors.h"
 
 using namespace dvi;

@@ -18,7 +18,7 @@
 
 #include "ces/ces_config.h"
 #include "ces/machine.h"
-#include "ces/splitters.h"
+#include "ces/output/splitters.h"
 #include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"
 #include "cli_test_util.h"

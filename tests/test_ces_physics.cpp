@@ -7,8 +7,8 @@
 
 #include "ces/ces_constants.h"
 #include "ces/charging.h"
-#include "ces/field_csm.h"
-#include "ces/field_two_cylinder.h"
+#include "ces/field/field_csm.h"
+#include "ces/field/field_two_cylinder.h"
 #include "ces/forces.h"
 #include "ces/particle_model.h"
 #include "chrono_like/base/errors.h"

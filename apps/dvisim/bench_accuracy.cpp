@@ -52,7 +52,7 @@
 #include "ces/ces_config.h"
 #include "ces_run.h"
 #include "ces/machine.h"
-#include "ces/splitters.h"
+#include "ces/output/splitters.h"
 #include "gpu/gpu_factory.h"
 #include "chrono_like/solver/jacobian.h"
 #include "chrono_like/solver/solver.h"

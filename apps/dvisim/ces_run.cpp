@@ -15,9 +15,9 @@
 #include <nlohmann/json.hpp>
 
 #include "ces/ces_config.h"
-#include "ces/ces_output.h"
+#include "ces/output/ces_output.h"
 #include "ces/machine.h"
-#include "ces/splitters.h"
+#include "ces/output/splitters.h"
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/base/errors.h"
 #include "gpu/gpu_factory.h"

@@ -13,7 +13,7 @@
 
 #include "ces/ces_config.h"
 #include "ces/machine.h"
-#include "ces/splitters.h"
+#include "ces/output/splitters.h"
 #include "chrono_like/system.h"
 
 namespace dvi {

@@ -12,9 +12,9 @@
 #include <cstdint>
 
 #include "ces/charging.h"
-#include "ces/field_corona.h"
-#include "ces/field_csm.h"
-#include "ces/field_two_cylinder.h"
+#include "ces/field/field_corona.h"
+#include "ces/field/field_csm.h"
+#include "ces/field/field_two_cylinder.h"
 #include "ces/forces.h"
 
 namespace dvi {

@@ -1,5 +1,5 @@
 // Splitter statistics and the mass distribution (splitters.h).
-#include "ces/splitters.h"
+#include "ces/output/splitters.h"
 
 #include <algorithm>
 #include <cmath>

@@ -46,7 +46,7 @@
 #include <vector>
 
 #include "ces/ces_constants.h"
-#include "ces/field_common.h"
+#include "ces/field/field_common.h"
 
 namespace dvi {
 namespace ces {

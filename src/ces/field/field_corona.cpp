@@ -1,6 +1,6 @@
 // The ionised field of the corona wire: conformal-grid solver and Cartesian sampling (see field_corona.h
 // and docs/CES_FIELD.md for the model and the references).
-#include "ces/field_corona.h"
+#include "ces/field/field_corona.h"
 
 #include <eigen3/Eigen/Sparse>
 #include <eigen3/Eigen/SparseCholesky>

@@ -1,5 +1,5 @@
 // CES outputs (ces_output.h).
-#include "ces/ces_output.h"
+#include "ces/output/ces_output.h"
 
 #include <cmath>
 #include <cstdio>

@@ -38,7 +38,7 @@
 #include <cmath>
 
 #include "ces/ces_constants.h"
-#include "ces/field_common.h"
+#include "ces/field/field_common.h"
 
 namespace dvi {
 namespace ces {

@@ -25,8 +25,8 @@
 #include <vector>
 
 #include "ces/ces_constants.h"
-#include "ces/field_common.h"
-#include "ces/field_csm.h"
+#include "ces/field/field_common.h"
+#include "ces/field/field_csm.h"
 
 namespace dvi {
 namespace ces {

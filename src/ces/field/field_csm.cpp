@@ -1,5 +1,5 @@
 // Charge-simulation method: assembly and dense solve (see field_csm.h for the method and references).
-#include "ces/field_csm.h"
+#include "ces/field/field_csm.h"
 
 #include <eigen3/Eigen/Dense>
 #include <algorithm>
