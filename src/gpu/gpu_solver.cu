@@ -18,8 +18,8 @@
 
 #include "chrono_like/solver/cone.h"
 #include "chrono_like/solver/jacobian.h"
-#include "chrono_like/solver/solver.h"
 #include "chrono_like/solver/row_kernels.h"
+#include "chrono_like/solver/solver.h"
 #include "chrono_like/solver/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
