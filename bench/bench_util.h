@@ -24,12 +24,12 @@
 #include <string>
 #include <vector>
 
+#include "chrono_like/base/errors.h"
+#include "chrono_like/base/math.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
-#include "chrono_like/base/errors.h"
-#include "gpu/gpu_factory.h"
-#include "chrono_like/base/math.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 
 namespace dvi::benchutil {
 

@@ -4,10 +4,10 @@
 
 #include <vector>
 
-#include "chrono_like/collision/broadphase.h"
-#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/shape.h"
+#include "chrono_like/collision/broadphase.h"
+#include "chrono_like/collision/contact.h"
 
 namespace dvi::gpu {
 

@@ -8,11 +8,11 @@
 #include <memory>
 #include <vector>
 
+#include "chrono_like/base/errors.h"
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_peer.h"
 #include "chrono_like/collision/collision.h"
 #include "chrono_like/collision/contact.h"
-#include "chrono_like/base/errors.h"
 #include "chrono_like/system.h"
 
 using namespace dvi;

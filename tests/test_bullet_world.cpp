@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "../demos/bullet_drop_in/demo_scene.h"
-#include "chrono_like/bullet/bullet_world.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/bullet/bullet_joints.h"
+#include "chrono_like/bullet/bullet_world.h"
 #include "chrono_like/bullet/triangle_mesh.h"
+#include "gpu/gpu_factory.h"
 
 using namespace dvi;
 

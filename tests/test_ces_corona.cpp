@@ -1,4 +1,4 @@
-// The corona (ionised) field of the CES (src/ces/field_corona.h): Peek's law by hand, the onset voltage
+// The corona (ionised) field of the CES (src/ces/field/field_corona.h): Peek's law by hand, the onset voltage
 // against the coaxial formula and the CSM model, the coaxial current against the analytic space-charge
 // I-V relation integrated here, the machine's field against Kaptzov's condition, Gauss's law and charge
 // conservation, and the Cartesian sampling against analytic and CSM fields.

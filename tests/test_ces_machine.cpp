@@ -20,8 +20,8 @@
 #include "ces/machine.h"
 #include "ces/output/splitters.h"
 #include "chrono_like/base/errors.h"
-#include "gpu/gpu_factory.h"
 #include "cli_test_util.h"
+#include "gpu/gpu_factory.h"
 
 using namespace dvi;
 using namespace dvi::ces;

@@ -43,9 +43,9 @@
 #include <string>
 #include <vector>
 
+#include "body_builders.h"
 #include "chrono_like/solver/contact_problem.h"
 #include "chrono_like/solver/solver_algorithms.h"
-#include "body_builders.h"
 #include "chrono_like/system.h"
 
 using namespace dvi;

@@ -16,11 +16,11 @@
 
 #include <btBulletDynamicsCommon.h>
 
+#include "body_builders.h"
 #include "chrono_like/bullet/bullet_world.h"
+#include "chrono_like/system.h"
 #include "cli_test_util.h"
 #include "gpu/gpu_factory.h"
-#include "body_builders.h"
-#include "chrono_like/system.h"
 #include "scaling/scaling_scenes.h"
 
 using namespace dvi;

@@ -14,9 +14,9 @@
 #include <string>
 #include <vector>
 
-#include "gpu/gpu_factory.h"
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 #if defined(DVISIM_HAVE_CUDA)
 #include "gpu_testing.h"
 #include "rows_test_util.h"

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 #include "scaling/scaling_scenes.h"
 
 using namespace dvi;

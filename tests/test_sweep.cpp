@@ -13,8 +13,8 @@
 #include <nlohmann/json.hpp>
 
 #include "../apps/dvisim/sweep.h"
-#include "gpu/gpu_factory.h"
 #include "cli_test_util.h"
+#include "gpu/gpu_factory.h"
 
 using namespace dvi::sweep;
 using clitest::expectInputError;

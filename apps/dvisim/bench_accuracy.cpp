@@ -49,16 +49,16 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_common.h"
+#include "bench_util.h"
 #include "ces/ces_config.h"
-#include "ces_run.h"
 #include "ces/machine.h"
 #include "ces/output/splitters.h"
-#include "gpu/gpu_factory.h"
+#include "ces_run.h"
 #include "chrono_like/solver/jacobian.h"
 #include "chrono_like/solver/solver.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 #include "scaling/scaling_scenes.h"
-#include "bench_util.h"
 
 namespace {
 

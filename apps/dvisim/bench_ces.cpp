@@ -43,9 +43,9 @@
 #include "bench_common.h"
 #include "bench_util.h"
 #include "ces/ces_config.h"
-#include "ces_run.h"
 #include "ces/feeder.h"
 #include "ces/machine.h"
+#include "ces_run.h"
 #include "chrono_like/base/errors.h"
 #include "parse.h"
 

@@ -23,8 +23,8 @@
 
 #include "bench_common.h"
 #include "bench_util.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 #include "scaling/scaling_scenes.h"
 
 namespace {

@@ -51,8 +51,8 @@
 #include "bench_scaling_bullet3.h"
 #include "bench_util.h"
 #include "chrono_like/bullet/bullet_peer.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 #include "scaling/scaling_scenes.h"
 #if defined(DVISIM_HAVE_CUDA)
 #include "gpu/gpu_system.h"

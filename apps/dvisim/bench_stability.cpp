@@ -31,12 +31,12 @@
 #include <vector>
 
 #include "bench_common.h"
+#include "bench_util.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/solver/solver.h"
 #include "chrono_like/system.h"
-#include "bench_util.h"
+#include "gpu/gpu_factory.h"
 
 namespace {
 

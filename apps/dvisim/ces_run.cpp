@@ -15,14 +15,14 @@
 #include <nlohmann/json.hpp>
 
 #include "ces/ces_config.h"
-#include "ces/output/ces_output.h"
 #include "ces/machine.h"
+#include "ces/output/ces_output.h"
 #include "ces/output/splitters.h"
-#include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/base/errors.h"
-#include "gpu/gpu_factory.h"
+#include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
+#include "gpu/gpu_factory.h"
 
 namespace dvi {
 namespace ces {

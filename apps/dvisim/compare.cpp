@@ -23,8 +23,8 @@
 #include <vector>
 
 #include "chrono_like/bullet/bullet_world.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/io/scene.h"
+#include "gpu/gpu_factory.h"
 
 namespace {
 

@@ -34,16 +34,16 @@
 #include <omp.h>
 #endif
 
-#include "parse.h"
 #include "bench_common.h"
 #include "ces_run.h"
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
+#include "parse.h"
 
 namespace {
 

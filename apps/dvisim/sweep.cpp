@@ -39,9 +39,9 @@
 #include "bench_util.h"
 #include "ces/ces_config.h"
 #include "ces_run.h"
-#include "gpu/gpu_factory.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
+#include "gpu/gpu_factory.h"
 
 extern char** environ;
 

@@ -11,9 +11,9 @@
 #include <type_traits>
 
 #include "chrono_like/collision/collision.h"
-#include "chrono_like/solver/contact_problem.h"
-#include "chrono_like/integrate.h"
 #include "chrono_like/collision/narrowphase.h"
+#include "chrono_like/integrate.h"
+#include "chrono_like/solver/contact_problem.h"
 
 namespace dvi {
 

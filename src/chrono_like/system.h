@@ -17,12 +17,12 @@
 #include <string>
 #include <vector>
 
-#include "chrono_like/collision/broadphase.h"
-#include "chrono_like/collision/collision.h"
-#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/errors.h"
+#include "chrono_like/collision/broadphase.h"
+#include "chrono_like/collision/collision.h"
 #include "chrono_like/force_field.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/solver/solver.h"
 
 namespace dvi {

@@ -1,6 +1,6 @@
 // BuildRows, WarmStart, Solve and the impulse application on the device. The per-contact and per-body
 // work is jacobian.h / cone.h (the functions ContactProblem calls on the CPU); the solvers are the very
-// templates of chrono_like/solver_algorithms.h with their kern:: functors, instantiated with GpuOps
+// templates of chrono_like/solver/solver_algorithms.h with their kern:: functors, instantiated with GpuOps
 // (CUDA kernels over the device vectors) where the CPU instantiates them with OpenMP loops. Reductions are deterministic: a fixed grid sums
 // fixed slices, then one block sums the partials in order.
 #include <cuda_runtime.h>
@@ -18,8 +18,8 @@
 
 #include "chrono_like/solver/cone.h"
 #include "chrono_like/solver/jacobian.h"
-#include "chrono_like/solver/solver.h"
 #include "chrono_like/solver/row_kernels.h"
+#include "chrono_like/solver/solver.h"
 #include "chrono_like/solver/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
 #include "gpu/gpu_state.cuh"
@@ -1076,7 +1076,7 @@ const char* functorName() {
   return __PRETTY_FUNCTION__;
 }
 
-// The CUDA execution backend of the solver templates (chrono_like/solver_algorithms.h): the CPU's
+// The CUDA execution backend of the solver templates (chrono_like/solver/solver_algorithms.h): the CPU's
 // algorithms and kern:: functors, run as kernels over the device vectors. Reductions are deterministic
 // (fixed grid, partials summed in order) and read back to the host, where the scalar logic runs.
 class GpuOps {

@@ -6,10 +6,10 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/collision/broadphase.h"
 #include "chrono_like/base/data.h"
-#include "chrono_like/solver/jacobian.h"
+#include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/narrowphase.h"
+#include "chrono_like/solver/jacobian.h"
 #include "chrono_like/solver/solver_algorithms.h"
 #include "chrono_like/system.h"
 #include "gpu/device_buffer.h"

@@ -46,11 +46,11 @@
 #include <limits>
 #include <string>
 
-#include "chrono_like/collision/broadphase.h"
+#include "chrono_like/base/errors.h"
 #include "chrono_like/bullet/bullet_convert.h"
+#include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/collision.h"
 #include "chrono_like/collision/contact.h"
-#include "chrono_like/base/errors.h"
 
 namespace dvi {
 

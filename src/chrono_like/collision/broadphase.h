@@ -13,9 +13,9 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/collision/broadphase_kernels.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/hd.h"
+#include "chrono_like/collision/broadphase_kernels.h"
 
 namespace dvi {
 

@@ -7,9 +7,9 @@
 // C. Ericson, "Real-Time Collision Detection", 2005, §5.1.9 (closest points of two segments).
 #pragma once
 
-#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/collision/support.h"
 
 namespace dvi {

@@ -20,10 +20,10 @@
 //     edge or vertex contact.
 #pragma once
 
-#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
-#include "chrono_like/collision/mpr.h"
 #include "chrono_like/base/shape.h"
+#include "chrono_like/collision/contact.h"
+#include "chrono_like/collision/mpr.h"
 #include "chrono_like/collision/support.h"
 
 namespace dvi {

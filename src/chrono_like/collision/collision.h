@@ -6,8 +6,8 @@
 
 #include <memory>
 
-#include "chrono_like/collision/broadphase.h"
 #include "chrono_like/base/data.h"
+#include "chrono_like/collision/broadphase.h"
 
 namespace dvi {
 

@@ -34,9 +34,9 @@
 // h(n) is kept, so an extra pass can only improve the answer.
 #pragma once
 
-#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/collision/support.h"
 
 namespace dvi {

@@ -7,9 +7,9 @@
 // and the speculative points kept only for pairs that close within the step (keepSpeculative).
 #pragma once
 
-#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
+#include "chrono_like/collision/contact.h"
 
 namespace dvi {
 

@@ -11,12 +11,12 @@
 // cylinder-cylinder, cylinder-capsule, ...).
 #pragma once
 
+#include "chrono_like/base/math.h"
+#include "chrono_like/base/shape.h"
 #include "chrono_like/collision/collide_box.h"
 #include "chrono_like/collision/collide_triangle.h"
 #include "chrono_like/collision/contact.h"
-#include "chrono_like/base/math.h"
 #include "chrono_like/collision/mpr.h"
-#include "chrono_like/base/shape.h"
 #include "chrono_like/collision/support.h"
 
 namespace dvi {

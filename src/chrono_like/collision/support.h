@@ -2,9 +2,9 @@
 // Included by narrowphase_impl.h (after the declarations in narrowphase.h); host and device code.
 #pragma once
 
-#include "chrono_like/collision/contact.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
+#include "chrono_like/collision/contact.h"
 
 namespace dvi {
 namespace np {

@@ -9,8 +9,8 @@
 #include <limits>
 #include <string>
 
-#include "chrono_like/solver/cone.h"
 #include "chrono_like/base/errors.h"
+#include "chrono_like/solver/cone.h"
 #include "chrono_like/solver/row_kernels.h"
 #include "chrono_like/solver/solver_kernels.h"
 

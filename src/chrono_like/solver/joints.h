@@ -21,8 +21,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/math.h"
+#include "chrono_like/solver/constraint_row.h"
 
 class btRigidBody;  // a joint's bodies are known by their Bullet handles (bullet/bullet_joints.h reads them)
 

@@ -5,8 +5,8 @@
 
 #include <cstdint>
 
-#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/base/hd.h"
+#include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/solver/jacobian.h"
 
 namespace dvi {

@@ -15,9 +15,9 @@
 #include <cmath>
 #include <cstdint>
 
-#include "chrono_like/solver/cone.h"
 #include "chrono_like/base/hd.h"
 #include "chrono_like/base/math.h"
+#include "chrono_like/solver/cone.h"
 
 namespace dvi {
 
