@@ -474,3 +474,12 @@ TEST_CASE("Bullet collision backend inside System: resting heights as the native
     CHECK(s.lastStats().max_penetration < 2e-4);
   }
 }
+
+TEST_CASE("Bullet collision backend: the System builds it only through the factory its caller passes", "[bullet]") {
+  SystemConfig c;
+  c.collision = CollisionBackend::Bullet;
+  CHECK_THROWS_AS(System{c}, InputError);
+  CHECK_NOTHROW(System{c, makeBulletCollision});
+  c.collision = CollisionBackend::Native;
+  CHECK_NOTHROW(System{c});
+}

@@ -701,3 +701,17 @@ TEST_CASE("drop-in world on the GPU backend: the demo's stack rests as on Bullet
     CHECK(double(drop_in::Scene::position(scene.stack[i]).y()) == Approx(0.25 + 0.5 * double(i)).margin(1e-3));
   scene.destroy(*w.world);
 }
+
+TEST_CASE("drop-in world: the GPU backend comes from the app, Gpu without it is refused, Auto without it runs on the CPU",
+          "[world]") {
+  btDefaultCollisionConfiguration config;
+  btCollisionDispatcher dispatcher(&config);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  DviWorldConfig c;
+  c.backend = WorldBackend::Gpu;
+  CHECK_THROWS_AS(DviDynamicsWorld(&dispatcher, &broadphase, &solver, &config, c), InputError);
+  c.backend = WorldBackend::Auto;
+  DviDynamicsWorld world(&dispatcher, &broadphase, &solver, &config, c);
+  CHECK(world.backendName() == "cpu");
+}
