@@ -559,14 +559,16 @@ void CheckpointSystem::loadCore(std::istream& i) {
   getVec(i, rows);
   getVec(i, lambda);
   // The warm-start cache is looked up by binary search and read 3 impulses a contact; rows name bodies.
-  if (!(std::isfinite(time) && time >= 0) || steps < 0) throw InputError("checkpoint: corrupt core clock");
+  if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(config().dt)) || steps < 0 || steps > (int64_t(1) << 40))
+    throw InputError("checkpoint: corrupt core clock");
   if (gamma.size() != 3 * keys.size() || !std::is_sorted(keys.begin(), keys.end()))
     throw InputError("checkpoint: corrupt warm-start cache");
+  // impulses (N s) of particles and of the drum's drive: 1e6 is far beyond either, and keeps the solve finite
   for (real g : gamma)
-    if (!std::isfinite(g)) throw InputError("checkpoint: non-finite warm-start impulse");
+    if (!(std::fabs(g) <= real(1e6))) throw InputError("checkpoint: corrupt warm-start impulse");
   if (!lambda.empty() && lambda.size() != rows.size()) throw InputError("checkpoint: corrupt constraint impulses");
   for (real l : lambda)
-    if (!std::isfinite(l)) throw InputError("checkpoint: non-finite constraint impulse");
+    if (!(std::fabs(l) <= real(1e6))) throw InputError("checkpoint: corrupt constraint impulse");
   const int32_t n = int32_t(bodies().count());
   for (const ConstraintRow& r : rows) {
     bool ok = r.a >= -1 && r.a < n && r.b >= -1 && r.b < n && std::isfinite(r.bias) && !(r.lo > r.hi) && !std::isnan(r.lo) &&
@@ -621,10 +623,45 @@ void CesMachine::save(std::ostream& o) const {
   if (!o) throw std::runtime_error("checkpoint: write error");
 }
 
+namespace {
+
+// A particle record as the feeder makes it (makeParticleSpec): a diameter 2 x radius and a density mass / volume
+// within the configuration's ranges, and for the shapes the feeder builds from the diameter alone (all but the
+// fragment) the same dimensions, moments and bound; a fragment's hull within its bound and moments that a body
+// of its mass and bound can have. Anything else (a moment of 1e-300 makes the next solve non-finite) is refused.
+bool plausibleSpec(const ParticleSpec& s, const CesConfig& cfg) {
+  constexpr double kPi = 3.14159265358979323846;
+  const double tol = 1e-5;  // rounding of the stored values (real may be float)
+  const double d = 2 * double(s.radius), m = double(s.mass_fg) * kFemtogram;
+  if (!(s.mass_fg > 0 && d >= cfg.diameter_min * (1 - tol) && d <= cfg.diameter_max * (1 + tol))) return false;
+  const MaterialConfig& mat = cfg.materials[size_t(s.material)];
+  const double V = kPi * d * d * d / 6, rho = m / V, slack = kFemtogram / V;  // mass_fg is rounded to 1 fg
+  if (!(rho >= mat.density_min * (1 - tol) - slack && rho <= mat.density_max * (1 + tol) + slack)) return false;
+  auto close = [&](double a, double b) { return std::fabs(a - b) <= tol * std::fmax(std::fabs(a), std::fabs(b)) + 1e-30; };
+  if (s.shape != ParticleShape::Fragment) {
+    SplitMix64 unused{1};
+    const ParticleSpec e = makeParticleSpec(s.material, s.shape, d, rho, unused);
+    return s.hull.empty() && close(s.dims.x, e.dims.x) && close(s.dims.y, e.dims.y) && close(s.dims.z, e.dims.z) &&
+           close(s.inertia.x, e.inertia.x) && close(s.inertia.y, e.inertia.y) && close(s.inertia.z, e.inertia.z) &&
+           close(s.bound, e.bound);
+  }
+  if (s.hull.size() < 4 || s.hull.size() > 64 || !(s.bound >= s.radius * real(1 - tol) && s.bound <= 10 * s.radius)) return false;
+  for (const Vec3& p : s.hull)
+    if (!(isFinite(p) && length(p) <= s.bound * real(1 + tol))) return false;
+  const double I[3] = {s.inertia.x, s.inertia.y, s.inertia.z}, r = double(s.radius), b = double(s.bound);
+  for (int k = 0; k < 3; ++k)  // a moment is at most m b^2; the triangle inequality of principal moments
+    if (!(I[k] >= 0.01 * m * r * r && I[k] <= m * b * b * (1 + tol) && I[(k + 1) % 3] + I[(k + 2) % 3] >= I[k] * (1 - tol)))
+      return false;
+  return true;
+}
+
+}  // namespace
+
 // A checkpoint is input like a scene file: every count is checked against the bytes left before anything is
-// allocated, every index and enum against its range, every number for finiteness (and positions, sizes and the
-// feeder's debt for plausibility: a particle of 1e30 m or a debt of 1e30 kg would make the next step allocate
-// without bound), and the whole file must be consumed. Problems are InputErrors "checkpoint: ...".
+// allocated, every index and enum against its range, every number for finiteness and plausibility (a particle of
+// 1e30 m, a moment of inertia of 1e-300, a velocity of 1e300 m/s or a feeder debt of 1e30 kg would make the next
+// step non-finite or allocate without bound), and the whole file must be consumed. Problems are InputErrors
+// "checkpoint: ...".
 void CesMachine::load(std::istream& in) {
   char magic[8];
   in.read(magic, 8);
@@ -639,16 +676,16 @@ void CesMachine::load(std::istream& in) {
   getVec(in, fs.fed_fg);
   if (fs.fed_fg.size() != cfg_.materials.size()) throw InputError("checkpoint: the materials differ from the configuration");
   // The feeder emits while its debt is >= 0 and stops below 0: a saved debt is <= 0 and above minus one particle.
-  if (!(std::isfinite(fs.owed_kg) && fs.owed_kg <= 0 && fs.owed_kg > -1.0) || fs.fed_total_fg < 0)
-    throw InputError("checkpoint: corrupt feeder state");
+  // (masses in whole femtograms: 1 kg is 1e18 fg, and the balance adds them up in 64 bits)
+  int64_t fed_sum = 0;
   for (int64_t f : fs.fed_fg)
-    if (f < 0) throw InputError("checkpoint: corrupt feeder state");
+    if (f < 0 || f > int64_t(4e18) || __builtin_add_overflow(fed_sum, f, &fed_sum)) throw InputError("checkpoint: corrupt feeder state");
+  if (!(std::isfinite(fs.owed_kg) && fs.owed_kg <= 0 && fs.owed_kg > -1.0) || fs.fed_total_fg != fed_sum)
+    throw InputError("checkpoint: corrupt feeder state");
   feeder_.setState(fs);
   uint64_t ns = 0;
   get(in, ns);
   if (ns > bytesLeft(in) / 64) throw InputError("checkpoint: corrupt particle count " + std::to_string(ns));  // >= 64 bytes each
-  // Particle sizes: at most 10 times the largest fed diameter (a spec's bound is its bounding radius).
-  const double max_size = 10 * std::fmax(cfg_.diameter_max, 1e-3);
   for (uint64_t k = 0; k < ns; ++k) {
     ParticleSpec s;
     get(in, s.material);
@@ -662,12 +699,8 @@ void CesMachine::load(std::istream& in) {
     const std::string what = "checkpoint: particle " + std::to_string(k) + ": ";
     if (s.material < 0 || size_t(s.material) >= cfg_.materials.size() || int(s.shape) < 0 || int(s.shape) >= kParticleShapes)
       throw InputError(what + "corrupt record (material or shape out of range)");
-    if (s.mass_fg <= 0 || !(s.radius > 0 && s.bound > 0 && s.bound <= real(max_size) && s.radius <= s.bound * real(1.001)))
-      throw InputError(what + "corrupt record (mass or size out of range)");
-    if (!(isFinite(s.dims) && maxComponent(vabs(s.dims)) <= s.bound * real(1.001)))
-      throw InputError(what + "corrupt record (dimensions out of range)");
-    for (const Vec3& p : s.hull)
-      if (!(isFinite(p) && length(p) <= s.bound * real(1.001))) throw InputError(what + "corrupt record (hull point out of range)");
+    if (!plausibleSpec(s, cfg_))
+      throw InputError(what + "corrupt record (its size, mass, shape dimensions or moments are not what the feeder makes)");
     try {
       addParticle(s, Vec3{0, 0, 0}, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0});
     } catch (const InputError& e) {
@@ -692,13 +725,14 @@ void CesMachine::load(std::istream& in) {
     if (machine ? (status[i] != kStatusMachine || material[i] != p_.material[i])
                 : (status[i] < kStatusInFlight || status[i] > kStatusLost || material[i] != p_.material[i]))
       throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt status or material");
-    if (!std::isfinite(charge[i]) || (pflags[i] & ~uint8_t(kFlagPinned)))
+    if (!(std::fabs(charge[i]) <= real(1e-6)) || (pflags[i] & ~uint8_t(kFlagPinned)))  // 1e-6 C: 1000x the Pauthenier limit of a 1 mm particle
       throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt charge or flags");
   }
   const int64_t nbodies = int64_t(p_.count());
   for (const CollectedParticle& c : collected_)
     if (c.body < n_machine_ || c.body >= nbodies || c.material != p_.material[size_t(c.body)] || int(c.kind) < 0 ||
-        int(c.kind) >= kMaterialKinds || c.mass_fg <= 0 || !std::isfinite(c.x) || !std::isfinite(c.z) || !std::isfinite(c.t))
+        int(c.kind) >= kMaterialKinds || c.mass_fg != p_.mass_fg[size_t(c.body)] || !std::isfinite(c.x) || !std::isfinite(c.z) ||
+        !std::isfinite(c.t))
       throw InputError("checkpoint: corrupt collected-particle record");
   for (const RecentSpawn& r : recent_)
     if (r.body < n_machine_ || r.body >= nbodies || r.step < 0 || r.step > steps_)
@@ -723,10 +757,10 @@ void CesMachine::load(std::istream& in) {
   for (size_t i = 0; i < pos.size(); ++i) {
     const Quat& q = rot[i];
     const real qn = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
-    // within 1 km of the machine (it spans about a metre), a unit rotation, finite velocities; a machine part
-    // keeps its kind (fixed, kinematic or dynamic), a particle is dynamic or frozen (collected or lost)
+    // within 1 km of the machine (it spans about a metre), a unit rotation, speeds below 1 km/s and 1e6 rad/s; a
+    // machine part keeps its kind (fixed, kinematic or dynamic), a particle is dynamic or frozen (collected or lost)
     if (!(isFinite(pos[i]) && maxComponent(vabs(pos[i])) <= real(1e3)) || !(std::fabs(qn - 1) < real(1e-3)) ||
-        !isFinite(vel[i]) || !isFinite(omega[i]))
+        !(isFinite(vel[i]) && length(vel[i]) <= real(1e3)) || !(isFinite(omega[i]) && length(omega[i]) <= real(1e6)))
       throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt position, rotation or velocity");
     const bool machine = i < size_t(n_machine_);
     if (machine ? flags[i] != b.flags[i] : (flags[i] != 0 && flags[i] != kBodyFixed))
