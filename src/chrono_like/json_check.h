@@ -30,16 +30,21 @@ inline void describeInto(const json& v, std::string& out) {
     for (auto it = v.begin(); it != v.end() && out.size() <= 48; ++it) {
       if (!first) out += ',';
       first = false;
-      if (v.is_object()) out += json(it.key()).dump() + ":";
+      if (v.is_object()) out += json(it.key()).dump(-1, ' ', false, json::error_handler_t::replace) + ":";
       describeInto(*it, out);
     }
     out += v.is_array() ? ']' : '}';
     return;
   }
-  std::string s = v.is_string() && v.get_ref<const std::string&>().size() > 64
-                      ? json(v.get_ref<const std::string&>().substr(0, 64)).dump()
-                      : v.dump();
-  out += s;
+  if (v.is_string() && v.get_ref<const std::string&>().size() > 64) {
+    // the first 64 bytes, cut back to a UTF-8 character boundary (dump() throws on a broken sequence)
+    const std::string& str = v.get_ref<const std::string&>();
+    size_t n = 64;
+    while (n > 0 && (static_cast<unsigned char>(str[n]) & 0xC0) == 0x80) --n;
+    out += json(str.substr(0, n)).dump(-1, ' ', false, json::error_handler_t::replace);
+    return;
+  }
+  out += v.dump(-1, ' ', false, json::error_handler_t::replace);
 }
 inline std::string describe(const json& v) {
   std::string s;
