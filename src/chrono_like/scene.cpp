@@ -767,7 +767,7 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin, co
     if (g && g->contains("counts") && (*g)["counts"].is_array() && (*g)["counts"].size() == 3) {
       for (const json& k : (*g)["counts"]) n *= k.is_number_integer() ? std::clamp<int64_t>(k.get<int64_t>(), 1, 1 << 20) : 1;
     }
-    total += std::min<int64_t>(n, int64_t(1) << 40);
+    total = std::min<int64_t>(total + std::min<int64_t>(n, int64_t(1) << 40), int64_t(1) << 62);  // saturates
   }
   checkBodyBudget(total, origin + ": bodies");
   Builder b(c, *scene.owned_);
