@@ -406,6 +406,36 @@ TEST_CASE("Hardening: .bullet files with a corrupt structure are refused before 
   }
 }
 
+TEST_CASE("Hardening: compounds that share children are refused when they expand beyond the limit", "[hardening]") {
+  // Three levels of 300 children, each level the same compound: Bullet's serializer writes each shape once, and
+  // Bullet's importer (like ours) expands a shared child every time it is used: 300^3 = 2.7e7 spheres, minutes
+  // of allocation, from a 76 KB file.
+  btDefaultCollisionConfiguration config;
+  btCollisionDispatcher dispatcher(&config);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  btDiscreteDynamicsWorld world(&dispatcher, &broadphase, &solver, &config);
+  btSphereShape sphere(0.01f);
+  btCompoundShape c(false), b(false), a(false);
+  for (int i = 0; i < 300; ++i) {
+    const btTransform t(btQuaternion::getIdentity(), btVector3(btScalar(i) * 0.01f, 0, 0));
+    c.addChildShape(t, &sphere);
+    b.addChildShape(t, &c);
+    a.addChildShape(t, &b);
+  }
+  btVector3 inertia;
+  a.calculateLocalInertia(1, inertia);
+  btRigidBody body(btRigidBody::btRigidBodyConstructionInfo(1, nullptr, &a, inertia));
+  world.addRigidBody(&body);
+  btDefaultSerializer ser;
+  world.serialize(&ser);
+  world.removeRigidBody(&body);
+  const std::string f(reinterpret_cast<const char*>(ser.getBufferPointer()), size_t(ser.getCurrentBufferSize()));
+  const auto t0 = std::chrono::steady_clock::now();
+  refusedInProcess(f, "the shapes expand to more than 16777216 primitives");
+  CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 10);
+}
+
 TEST_CASE("Hardening: every single-bit flip of a .bullet file is refused or loads; none crashes or hangs", "[hardening]") {
   // Bullet's own loader crashed or hung on 5.6% of the flips of this kind of file's blocks and on 15.6% of those of
   // its DNA (docs/HARDENING.md). Every bit of the blocks, every 11th bit of the DNA, in this process: a crash fails

@@ -167,6 +167,10 @@ struct Dna {
     tag("TYPE");
     const int32_t ntypes = count("type");
     strings(ntypes, types, "type");
+    {
+      std::set<std::string> unique(types.begin(), types.end());
+      if (unique.size() != types.size()) fail(std::string(what) + ": a type name appears twice");
+    }
     align();
     tag("TLEN");
     need(int64_t(ntypes) * 2 + (ntypes & 1) * 2);
@@ -538,10 +542,21 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
                                       {13, "cylinder", "btCylinderShapeData"},
                                       {28, "static plane", "btStaticPlaneShapeData"},
                                       {31, "compound", "btCompoundShapeData"}};
+  // Per shape block: checked yet, on the current path (a cycle), how many compounds deep it nests (itself
+  // included) and how many shapes it expands to. A shape checked before is not walked again, but its nesting
+  // counts from where it is used; Bullet's importer and ours expand shared children every time they are used,
+  // so the expansion (2^24 at most over the file) bounds their work.
+  constexpr int64_t kMaxExpanded = int64_t(1) << 24;
   std::vector<char> on_stack(blocks.size(), 0), shape_done(blocks.size(), 0);
+  std::vector<int> height(blocks.size(), 0);
+  std::vector<int64_t> expanded(blocks.size(), 1);
+  auto tooDeep = [&](int depth, size_t i) {
+    if (depth + height[i] > max_compound_depth)
+      throw InputError(origin + ": compound shapes nested deeper than " + std::to_string(max_compound_depth) + " levels (the limit)");
+  };
   std::function<void(size_t, int)> shape = [&](size_t i, int depth) {
     if (on_stack[i]) fail(where(i) + ": a compound shape contains itself");
-    if (shape_done[i]) return;
+    if (shape_done[i]) return tooDeep(depth, i);
     mark(i, kShape);
     const Block& b = blocks[i];
     if (b.dna < 0 || !dna.derivesFrom(b.dna, "btCollisionShapeData")) fail(where(i) + " is not a collision shape");
@@ -574,6 +589,8 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
       if (n < 0) fail(where(i) + ": a compound of " + std::to_string(n) + " children");
       const char* p = field(i, 0, {"*m_childShapePtr"}, nullptr);
       array(i, p, n, "btCompoundShapeChildData", false);
+      height[i] = 1;
+      expanded[i] = 0;
       if (n > 0) {
         const size_t c = size_t(pointee(rd64(p)));
         on_stack[i] = 1;
@@ -582,12 +599,15 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
           const int64_t ci = child ? pointee(child) : -1;
           if (ci < 0) fail(where(c) + ": compound child " + std::to_string(k) + " has no shape");
           shape(size_t(ci), depth + 1);
+          height[i] = std::max(height[i], 1 + height[size_t(ci)]);
+          expanded[i] = std::min(expanded[i] + expanded[size_t(ci)], kMaxExpanded + 1);
         }
         on_stack[i] = 0;
       }
     } else if (type == 9) {
       const int32_t n = rd32(field(i, 0, {"m_localPositionArraySize"}, "int"));
       if (n < 1) fail(where(i) + ": a multi-sphere of " + std::to_string(n) + " spheres");
+      expanded[i] = n;
       array(i, field(i, 0, {"*m_localPositionArrayPtr"}, nullptr), n, "btPositionAndRadius", false);
     } else if (type == 4) {
       const int32_t n = rd32(field(i, 0, {"m_numUnscaledPoints"}, "int"));
@@ -601,6 +621,7 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
   const std::string body_struct = dbl ? "btRigidBodyDoubleData" : "btRigidBodyFloatData";
   const std::string world_struct = dbl ? "btDynamicsWorldDoubleData" : "btDynamicsWorldFloatData";
   size_t bodies = 0;
+  int64_t body_shapes = 0;  // shapes the engine's import makes, over all bodies
   int body_dna = -1;
   int64_t name_off = 0, shape_off = 0;
   for (size_t i = 0; i < blocks.size(); ++i) {
@@ -623,6 +644,7 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
       const int64_t si = s ? pointee(s) : -1;
       if (si < 0) fail(where(i) + ": the rigid body has no shape (its shape pointer leads to no block)");
       shape(size_t(si), 0);
+      body_shapes = std::min(body_shapes + expanded[size_t(si)], kMaxExpanded + 1);
       ++bodies;
     } else if (b.code == "DWLD") {
       if (b.dna < 0 || dna.structName(b.dna) != world_struct)
@@ -634,6 +656,12 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
     }
   }
   if (bodies == 0) refuse("the .bullet file holds no rigid bodies");
+  int64_t converted = 0;  // shapes Bullet's importer makes: every kept shape block, expanded
+  for (size_t i = 0; i < blocks.size(); ++i)
+    if (keep[i] == kShape) converted = std::min(converted + expanded[i], kMaxExpanded + 1);
+  if (converted > kMaxExpanded || body_shapes > kMaxExpanded)
+    throw InputError(origin + ": the shapes expand to more than " + std::to_string(kMaxExpanded) +
+                     " primitives (compounds sharing children multiply them; the limit)");
   if (rigid_bodies) *rigid_bodies = int64_t(bodies);
 
   // The copy: header, the kept blocks in file order, the DNA block; then Bullet's DNA scan must find that DNA.
