@@ -315,7 +315,7 @@ TEST_CASE("Hardening: huge and tiny plane normals and rotation axes keep their d
   CHECK(std::fabs(double(q.w())) == Approx(h));
 }
 
-TEST_CASE("Hardening: CLI numbers are plain decimals; an empty value is an error, not a missing option", "[hardening][cli]") {
+TEST_CASE("Hardening: CLI numbers are plain decimals and an empty value is an error, not a missing option", "[hardening][cli]") {
   const fs::path d = tempDir("num");
   const std::string dir = d.string();
   spit(d / "tiny.json", sceneWith(std::string(kPlane) + R"(, { "shape": { "type": "sphere", "radius": 0.1 } })"));
@@ -436,7 +436,7 @@ TEST_CASE("Hardening: compounds that share children are refused when they expand
   CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 10);
 }
 
-TEST_CASE("Hardening: every single-bit flip of a .bullet file is refused or loads; none crashes or hangs", "[hardening]") {
+TEST_CASE("Hardening: every single-bit flip of a .bullet file is refused or loads, none crashes or hangs", "[hardening]") {
   // Bullet's own loader crashed or hung on 5.6% of the flips of this kind of file's blocks and on 15.6% of those of
   // its DNA (docs/HARDENING.md). Every bit of the blocks, every 11th bit of the DNA, in this process: a crash fails
   // the test by ending it, a flip that loads must import into a System.
