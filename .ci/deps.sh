@@ -2,8 +2,10 @@
 # Installs dvisim's build dependencies from Debian 12's packages, only those missing.
 # Needs root (or sudo). Safe to run again: it does nothing when everything is present.
 set -euo pipefail
+# clang, libclang-rt-14-dev (libFuzzer and the sanitizer runtimes) and libomp-dev (OpenMP for clang): the fuzz
+# tests (CTest label fuzz, docs/HARDENING.md) build an instrumented tree with them.
 pkgs=(build-essential cmake pkg-config libbullet-dev libbullet-extras-dev libeigen3-dev catch2
-      nlohmann-json3-dev libcli11-dev python3 python3-matplotlib)
+      nlohmann-json3-dev libcli11-dev python3 python3-matplotlib clang libclang-rt-14-dev libomp-dev)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -11,7 +11,7 @@ Layers of src/chrono_like, lowest first; a file may include its own layer and th
     solver/     base/, collision/
     the files at the top of src/chrono_like (the System):  base/, collision/, solver/
     bullet/     base/, collision/, solver/, the top
-    io/         base/, collision/, solver/, the top
+    io/         base/, collision/, solver/, the top, bullet/ (a .bullet scene is read through the bridge)
 src/gpu may include src/chrono_like; src/ces may include src/chrono_like and src/gpu. Nothing in src/ includes
 apps/, bench/, tests/ or demos/ (nor anything else outside src/). Prints one line per violation and exits 1 when
 there is any.
@@ -32,7 +32,8 @@ ALLOWED = {
     "chrono_like/solver": {"chrono_like/base", "chrono_like/collision"},
     "chrono_like": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver"},
     "chrono_like/bullet": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver", "chrono_like"},
-    "chrono_like/io": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver", "chrono_like"},
+    "chrono_like/io": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver", "chrono_like",
+                       "chrono_like/bullet"},
     "gpu": {"chrono_like/*"},
     "ces": {"chrono_like/*", "gpu"},
 }
@@ -110,8 +111,8 @@ def self_test():
         "src/chrono_like/collision/b.h": '#include "chrono_like/base/ok.h"\n',
         "src/chrono_like/solver/c.h": '#include "chrono_like/collision/b.h"\n#include "gpu/g.h"\n',  # core -> gpu
         "src/chrono_like/system.h": '#include "chrono_like/solver/c.h"\n#include <chrono_like/bullet/w.h>\n',  # up
-        "src/chrono_like/io/s.h": '#include "chrono_like/system.h"\n#include "chrono_like/bullet/w.h"\n',  # sideways
-        "src/chrono_like/bullet/w.h": '#include "chrono_like/system.h"\n',
+        "src/chrono_like/io/s.h": '#include "chrono_like/system.h"\n#include "chrono_like/bullet/w.h"\n',
+        "src/chrono_like/bullet/w.h": '#include "chrono_like/system.h"\n#include "chrono_like/io/s.h"\n',  # up
         "src/chrono_like/x.cpp": '#include "../../apps/p.h"\n',  # outside src/
         "src/gpu/g.h": '#include "chrono_like/io/s.h"\n#include "ces/e.h"\n',  # gpu -> ces
         "src/ces/e.h": '#include "gpu/g.h"\n#include "chrono_like/base/a.h"\n',
@@ -120,7 +121,7 @@ def self_test():
     }
     files.update({"src/ces/many/n%02d.txt" % i: "" for i in range(MAX_FILES_PER_FOLDER + 1)})  # a full folder
     expected = {"src/chrono_like/base/a.h", "src/chrono_like/solver/c.h", "src/chrono_like/system.h",
-                "src/chrono_like/io/s.h", "src/chrono_like/x.cpp", "src/gpu/g.h", "src/stray.h", "src/ces/many/"}
+                "src/chrono_like/bullet/w.h", "src/chrono_like/x.cpp", "src/gpu/g.h", "src/stray.h", "src/ces/many/"}
     with tempfile.TemporaryDirectory() as root:
         for rel, text in files.items():
             os.makedirs(os.path.dirname(os.path.join(root, rel)), exist_ok=True)

@@ -122,7 +122,7 @@ TEST_CASE("BulletPeer: a kinematic body moves with its velocity, in scene units"
   CHECK(std::abs(peer.velocity(0).x - 0.5) < 1e-4);
 }
 
-TEST_CASE("BulletPeer: every supported shape clones; unsupported ones are refused by name", "[bullet]") {
+TEST_CASE("BulletPeer: every supported shape clones, unsupported ones are refused by name", "[bullet]") {
   BulletScene scene;
   scene.add(scene.keep(new btStaticPlaneShape(btVector3(0, 1, 0), 0)), 0, btVector3(0, 0, 0));
   scene.add(scene.keep(new btBoxShape(btVector3(0.1f, 0.2f, 0.3f))), 1, btVector3(0, 1, 0));
@@ -404,7 +404,7 @@ TEST_CASE("Bullet collision: box-box face contact", "[bullet]") {
   }
 }
 
-TEST_CASE("Bullet collision: compounds map children to shapes; filters as pairAllowed", "[bullet]") {
+TEST_CASE("Bullet collision: compounds map children to shapes, filters as pairAllowed", "[bullet]") {
   Arrays a;
   a.addBody({0, 0, 0}, kId, kBodyFixed, {makePlane({0, 1, 0}, 0)});
   // One body with two overlapping spheres (never in contact with each other) resting on the plane.

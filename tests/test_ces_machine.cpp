@@ -329,7 +329,7 @@ TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal 
   CHECK(q_leave > 0);  // induced: opposite to the negative electrode
 }
 
-TEST_CASE("CES machine: above corona onset an insulator takes ion charge and is pinned until the brush; below it is not",
+TEST_CASE("CES machine: above corona onset an insulator takes ion charge and is pinned until the brush, below it is not",
           "[ces][ces_machine]") {
   // A plastic sphere (d = 0.75 mm, rotation locked: shredded plastic does not roll) placed on the drum at
   // 80 deg, before the corona wire (60 deg), on the default composite machine.
@@ -470,7 +470,7 @@ TEST_CASE("CES feeder: the expected particle mass matches a large sample drawn b
   CHECK(per_material[2] > 0);
 }
 
-TEST_CASE("CES splitters: direct binning and cumulative sums agree; grade and recovery by hand", "[ces][ces_machine]") {
+TEST_CASE("CES splitters: direct binning and cumulative sums agree, grade and recovery by hand", "[ces][ces_machine]") {
   // By hand: metal 3 ug at 150 mm, 1 ug at 50 mm; plastic 2 ug at 20 mm, 1 ug at 120 mm; middling 5 ug at 100 mm.
   auto P = [](MaterialKind k, double x_mm, int64_t ug) { return CollectedParticle{0, 0, k, ug * 1000000000, x_mm * 1e-3, 0, 0}; };
   std::vector<CollectedParticle> c{P(MaterialKind::Metal, 150, 3), P(MaterialKind::Metal, 50, 1), P(MaterialKind::Plastic, 20, 2),
@@ -663,7 +663,7 @@ double relL2(const std::vector<double>& a, const std::vector<double>& b) {
 // cesChargeUpdate) give the CPU's positions, velocities and charges to rounding; then the mass-balance run of
 // the test above (collection plane raised): the particles collected and their masses agree, nothing is lost,
 // every collected body is frozen on the device, and the balance closes at every step.
-TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's; the mass balance closes", "[gpu][ces]") {
+TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's, the mass balance closes", "[gpu][ces]") {
   std::string why;
   if (!gpuAvailable(&why)) {
     WARN("no CUDA device: skipping (" << why << ")");

@@ -964,7 +964,7 @@ TEST_CASE("shapeAabb contains the support points at any rotation, and is tight",
   CHECK(pb.hi.y >= 1e29);
 }
 
-TEST_CASE("every pair: deep overlap and coincident centres give finite contacts; far apart gives none",
+TEST_CASE("every pair: deep overlap and coincident centres give finite contacts, far apart gives none",
           "[narrowphase]") {
   Rng rng(12);
   std::vector<Vec3> pts;

@@ -602,7 +602,7 @@ TEST_CASE("sphere sliding and sticking on the ground: CCP friction impulse", "[s
   }
 }
 
-TEST_CASE("warm start at the solution stays there; Inverse3x3 scaling converges on a resting stack", "[solver]") {
+TEST_CASE("warm start at the solution stays there, Inverse3x3 scaling converges on a resting stack", "[solver]") {
   // Three spheres stacked on the ground, frictionless: every block of N is diagonal with equal normal
   // entries along the stack, the block inverse and the scalar step share fixed points here.
   Scene s;

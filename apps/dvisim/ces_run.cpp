@@ -20,6 +20,7 @@
 #include "ces/output/splitters.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/bullet/bullet_collision_backend.h"
+#include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
 #include "gpu/gpu_factory.h"
@@ -34,15 +35,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// A regular file within the size limit (a FIFO named .json would block the read forever).
 std::string readText(const std::string& path, const std::string& what) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw InputError(what + ": no such file");
-  if (fs::is_directory(path, ec)) throw InputError(what + ": is a directory, not a file");
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw InputError(what + ": cannot open");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
+  return readRegularFile(path, what, inputLimits().max_json_bytes, ", not a file");
 }
 
 json parseJson(const std::string& text, const std::string& origin) {
@@ -291,7 +286,8 @@ bool isCesScene(const std::string& path) {
   if (path.empty()) return true;
   if (fs::path(path).extension() != ".json") return false;
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) return false;
+  // Not a regular file, or too large: the scene loader reports why.
+  if (!fs::is_regular_file(path, ec) || fs::file_size(path, ec) > inputLimits().max_json_bytes || ec) return false;
   std::ifstream f(path, std::ios::binary);
   std::ostringstream ss;
   ss << f.rdbuf();
@@ -347,7 +343,7 @@ int runCesMachine(const CesRunOptions& o) {
   if (resume && cfg.dt != dt_before)
     throw InputError("--resume: the time step cannot change (checkpoint " + fmt(dt_before) + " s, now " + fmt(cfg.dt) + " s)");
   const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
-  const int64_t total = int64_t(std::llround(cfg.duration / cfg.dt));
+  const int64_t total = checkedStepCount(cfg.duration, cfg.dt, origin + ": ces.duration_s");
 
   const std::string backend = resolveCesBackend(o.backend);
   std::error_code ec;
@@ -360,8 +356,8 @@ int runCesMachine(const CesRunOptions& o) {
   CesMachine m(cfg, *sys);
   if (resume) {
     const std::string path = o.resume + "/checkpoint/state.bin";
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError("--resume " + o.resume + ": no checkpoint/state.bin");
+    std::istringstream in(readRegularFile(path, "--resume " + o.resume + ": checkpoint/state.bin", inputLimits().max_binary_bytes),
+                          std::ios::binary);
     m.load(in);
     if (m.steps() > total)
       throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) + " s, beyond duration_s = " + fmt(cfg.duration));
@@ -381,7 +377,9 @@ int runCesMachine(const CesRunOptions& o) {
   if (cfg.frames == 1) frame_at.push_back(total);
   for (int k = 0; cfg.frames > 1 && k < cfg.frames; ++k)
     frame_at.push_back(int64_t(std::llround(double(k) * double(total) / double(cfg.frames - 1))));
-  const int64_t ckpt_every = cfg.checkpoint_every > 0 ? std::max<int64_t>(1, std::llround(cfg.checkpoint_every / cfg.dt)) : 0;
+  // Steps between checkpoints; an interval longer than the run is none before the end (and no overflow).
+  const double ckpt_steps = cfg.checkpoint_every > 0 ? std::round(cfg.checkpoint_every / cfg.dt) : 0;
+  const int64_t ckpt_every = ckpt_steps <= 0 ? 0 : ckpt_steps > double(total) ? total + 1 : std::max<int64_t>(1, int64_t(ckpt_steps));
   const std::string ckpt_dir = o.out + "/checkpoint";
   CesFrameWriter frames(o.out);
   if (cfg.frames > 0) writeFileAtomic(o.out + "/machine.vtp", cesMachineVtp(m));

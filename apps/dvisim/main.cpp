@@ -343,6 +343,18 @@ int run(const Options& o) {
   return 0;
 }
 
+// An option given an empty value (--dt "") is refused, not taken as "not given" (the run options test
+// value.empty() for that): every option with a value, of every subcommand on the command line.
+void refuseEmptyValues(const CLI::App& app) {
+  for (const CLI::App* sub : app.get_subcommands()) {
+    for (const CLI::Option* opt : sub->get_options())
+      if (opt->count() > 0 && opt->get_expected_min() > 0)
+        for (const std::string& v : opt->results())
+          if (v.empty()) throw InputError(opt->get_name() + ": empty value");
+    refuseEmptyValues(*sub);
+  }
+}
+
 int fail(int code, const std::string& msg) {
   std::fflush(stdout);
   std::fprintf(stderr, "dvisim: error: %s\n", oneLine(msg).c_str());
@@ -407,6 +419,7 @@ int main(int argc, char** argv) {
     return fail(2, e.what());
   }
   try {
+    refuseEmptyValues(app);
     if (app.got_subcommand("compare")) return compare();
     if (app.got_subcommand("sweep")) return sweep();
     if (app.got_subcommand("bench")) return runBenchCommand();

@@ -39,6 +39,7 @@
 #include "bench_util.h"
 #include "ces/ces_config.h"
 #include "ces_run.h"
+#include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
 #include "gpu/gpu_factory.h"
@@ -110,8 +111,7 @@ Design makeDesign(const SweepOptions& o) {
   Design d;
   d.ces = dvi::ces::isCesScene(o.scene);
   if (!o.list.empty()) {
-    if (!fs::is_regular_file(o.list)) throw InputError("--list " + o.list + ": no such file");
-    d.list_rows = parseList(readText(o.list), o.list);
+    d.list_rows = parseList(dvi::readRegularFile(o.list, "--list " + o.list, dvi::inputLimits().max_json_bytes), o.list);
     for (const auto& kv : d.list_rows[0]) d.keys.push_back(kv.first);
   }
   for (const std::string& g : o.grids) {

@@ -1,6 +1,7 @@
 // CES configuration: strict JSON parsing (see ces_config.h) and the embedded default machine.
 #include "ces/ces_config.h"
 
+#include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/json_check.h"
 
 #include <cmath>
@@ -190,12 +191,15 @@ void applyCesOverride(json& doc, const std::string& assignment) {
                        [](size_t, const std::string&) { return true; });
 }
 
-CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, const std::string& origin) {
+CesConfig parseCesDocument(const json& document, const std::vector<std::string>& overrides, const std::string& origin) {
   Checker c{origin};
-  if (!doc.is_object()) throw InputError(origin + ": expected a JSON object at the top level");
+  if (!document.is_object()) throw InputError(origin + ": expected a JSON object at the top level");
+  checkJsonDepth(document, origin);
+  json doc = document;
   c.object(doc, "(document)", {"$schema", "name", "description", "ces"});
   if (!doc.contains("ces")) throw InputError(origin + ": ces: missing (a CES scene needs the machine under \"ces\")");
   for (const std::string& o : overrides) applyCesOverride(doc, o);
+  if (!overrides.empty()) checkJsonDepth(doc, origin);
   const json& j = c.object(doc["ces"], "ces",
                            {"duration_s", "time_step_s", "seed", "solver", "drum", "electrode", "field", "corona", "brush",
                             "air", "friction", "feed", "collection", "splitters", "output"});
@@ -203,6 +207,7 @@ CesConfig parseCesDocument(json doc, const std::vector<std::string>& overrides, 
   auto has = [](const json& o, const char* k) { return o.contains(k); };
   if (has(j, "duration_s")) cfg.duration = c.range(j["duration_s"], "ces.duration_s", 0, 1e6);
   if (has(j, "time_step_s")) cfg.dt = c.range(j["time_step_s"], "ces.time_step_s", 0, 0.01, true);
+  checkedStepCount(cfg.duration, cfg.dt, origin + ": ces.duration_s");
   if (has(j, "seed")) cfg.seed = uint64_t(c.integer(j["seed"], "ces.seed", 0, int64_t(1) << 53));
   if (has(j, "solver")) {
     const json& s = c.object(j["solver"], "ces.solver", {"type", "iterations", "gyroscopic"});

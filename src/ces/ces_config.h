@@ -151,8 +151,9 @@ bool isCesDocument(const nlohmann::json& doc);
 
 // Parses a whole scene document {"$schema", "name", "description", "ces": {...}} after applying the
 // overrides KEY=VALUE (KEY relative to "ces", e.g. electrode.voltage_kV=-30, or starting with "ces.").
-// `origin` names the file in error messages.
-CesConfig parseCesDocument(nlohmann::json doc, const std::vector<std::string>& overrides, const std::string& origin);
+// `origin` names the file in error messages. The document is checked for its nesting depth before it is copied
+// (copying a document nested 100,000 deep overflows the stack), and its run for a step count within the limit.
+CesConfig parseCesDocument(const nlohmann::json& document, const std::vector<std::string>& overrides, const std::string& origin);
 
 // Applies one override to the document (exposed for the checkpoint, which stores the final document).
 void applyCesOverride(nlohmann::json& doc, const std::string& assignment);

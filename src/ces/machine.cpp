@@ -43,11 +43,21 @@ void get(std::istream& i, T& v) {
   i.read(reinterpret_cast<char*>(&v), sizeof(T));
   if (!i) throw InputError("checkpoint: truncated file");
 }
+// Bytes left in the stream (a checkpoint is read from a file or a string: both can seek).
+inline uint64_t bytesLeft(std::istream& i) {
+  const std::streampos here = i.tellg();
+  if (here < 0) return 0;
+  i.seekg(0, std::ios::end);
+  const std::streampos end = i.tellg();
+  i.seekg(here);
+  return end > here ? uint64_t(end - here) : 0;
+}
 template <class T>
 void getVec(std::istream& i, std::vector<T>& v) {
   uint64_t n = 0;
   get(i, n);
-  if (n > (uint64_t(1) << 34) / sizeof(T)) throw InputError("checkpoint: corrupt array length");
+  // A length beyond what the file holds is refused before anything is allocated for it.
+  if (n > bytesLeft(i) / sizeof(T)) throw InputError("checkpoint: corrupt array length " + std::to_string(n) + " (truncated file)");
   v.resize(size_t(n));
   if (n) i.read(reinterpret_cast<char*>(v.data()), std::streamsize(n * sizeof(T)));
   if (!i) throw InputError("checkpoint: truncated file");
@@ -546,12 +556,41 @@ void CheckpointSystem::saveCore(std::ostream& o) const {
 }
 
 void CheckpointSystem::loadCore(std::istream& i) {
-  get(i, time_);
-  get(i, steps_);
-  getVec(i, prev_keys_);
-  getVec(i, prev_gamma_);
-  getVec(i, rows_);
-  getVec(i, row_lambda_);
+  double time = 0;
+  int64_t steps = 0;
+  std::vector<uint64_t> keys;
+  std::vector<real> gamma, lambda;
+  std::vector<ConstraintRow> rows;
+  get(i, time);
+  get(i, steps);
+  getVec(i, keys);
+  getVec(i, gamma);
+  getVec(i, rows);
+  getVec(i, lambda);
+  // The warm-start cache is looked up by binary search and read 3 impulses a contact; rows name bodies.
+  if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(config().dt)) || steps < 0 || steps > (int64_t(1) << 40))
+    throw InputError("checkpoint: corrupt core clock");
+  if (gamma.size() != 3 * keys.size() || !std::is_sorted(keys.begin(), keys.end()))
+    throw InputError("checkpoint: corrupt warm-start cache");
+  // impulses (N s) of particles and of the drum's drive: 1e6 is far beyond either, and keeps the solve finite
+  for (real g : gamma)
+    if (!(std::fabs(g) <= real(1e6))) throw InputError("checkpoint: corrupt warm-start impulse");
+  if (!lambda.empty() && lambda.size() != rows.size()) throw InputError("checkpoint: corrupt constraint impulses");
+  for (real l : lambda)
+    if (!(std::fabs(l) <= real(1e6))) throw InputError("checkpoint: corrupt constraint impulse");
+  const int32_t n = int32_t(bodies().count());
+  for (const ConstraintRow& r : rows) {
+    bool ok = r.a >= -1 && r.a < n && r.b >= -1 && r.b < n && std::isfinite(r.bias) && !(r.lo > r.hi) && !std::isnan(r.lo) &&
+              !std::isnan(r.hi);
+    for (int k = 0; k < 6; ++k) ok = ok && std::isfinite(r.Ja[k]) && std::isfinite(r.Jb[k]);
+    if (!ok) throw InputError("checkpoint: corrupt constraint row");
+  }
+  time_ = time;
+  steps_ = steps;
+  prev_keys_ = std::move(keys);
+  prev_gamma_ = std::move(gamma);
+  rows_ = std::move(rows);
+  row_lambda_ = std::move(lambda);
 }
 
 void CesMachine::save(std::ostream& o) const {
@@ -593,22 +632,69 @@ void CesMachine::save(std::ostream& o) const {
   if (!o) throw std::runtime_error("checkpoint: write error");
 }
 
+namespace {
+
+// A particle record as the feeder makes it (makeParticleSpec): a diameter 2 x radius and a density mass / volume
+// within the configuration's ranges, and for the shapes the feeder builds from the diameter alone (all but the
+// fragment) the same dimensions, moments and bound; a fragment's hull within its bound and moments that a body
+// of its mass and bound can have. Anything else (a moment of 1e-300 makes the next solve non-finite) is refused.
+bool plausibleSpec(const ParticleSpec& s, const CesConfig& cfg) {
+  constexpr double kPi = 3.14159265358979323846;
+  const double tol = 1e-5;  // rounding of the stored values (real may be float)
+  const double d = 2 * double(s.radius), m = double(s.mass_fg) * kFemtogram;
+  if (!(s.mass_fg > 0 && d >= cfg.diameter_min * (1 - tol) && d <= cfg.diameter_max * (1 + tol))) return false;
+  const MaterialConfig& mat = cfg.materials[size_t(s.material)];
+  const double V = kPi * d * d * d / 6, rho = m / V, slack = kFemtogram / V;  // mass_fg is rounded to 1 fg
+  if (!(rho >= mat.density_min * (1 - tol) - slack && rho <= mat.density_max * (1 + tol) + slack)) return false;
+  auto close = [&](double a, double b) { return std::fabs(a - b) <= tol * std::fmax(std::fabs(a), std::fabs(b)) + 1e-30; };
+  if (s.shape != ParticleShape::Fragment) {
+    SplitMix64 unused{1};
+    const ParticleSpec e = makeParticleSpec(s.material, s.shape, d, rho, unused);
+    return s.hull.empty() && close(s.dims.x, e.dims.x) && close(s.dims.y, e.dims.y) && close(s.dims.z, e.dims.z) &&
+           close(s.inertia.x, e.inertia.x) && close(s.inertia.y, e.inertia.y) && close(s.inertia.z, e.inertia.z) &&
+           close(s.bound, e.bound);
+  }
+  if (s.hull.size() < 4 || s.hull.size() > 64 || !(s.bound >= s.radius * real(1 - tol) && s.bound <= 10 * s.radius)) return false;
+  for (const Vec3& p : s.hull)
+    if (!(isFinite(p) && length(p) <= s.bound * real(1 + tol))) return false;
+  const double I[3] = {s.inertia.x, s.inertia.y, s.inertia.z}, r = double(s.radius), b = double(s.bound);
+  for (int k = 0; k < 3; ++k)  // a moment is at most m b^2; the triangle inequality of principal moments
+    if (!(I[k] >= 0.01 * m * r * r && I[k] <= m * b * b * (1 + tol) && I[(k + 1) % 3] + I[(k + 2) % 3] >= I[k] * (1 - tol)))
+      return false;
+  return true;
+}
+
+}  // namespace
+
+// A checkpoint is input like a scene file: every count is checked against the bytes left before anything is
+// allocated, every index and enum against its range, every number for finiteness and plausibility (a particle of
+// 1e30 m, a moment of inertia of 1e-300, a velocity of 1e300 m/s or a feeder debt of 1e30 kg would make the next
+// step non-finite or allocate without bound), and the whole file must be consumed. Problems are InputErrors
+// "checkpoint: ...".
 void CesMachine::load(std::istream& in) {
   char magic[8];
   in.read(magic, 8);
   if (!in || std::memcmp(magic, kMagic, 8) != 0) throw InputError("checkpoint: not a dvisim CES checkpoint");
   if (int(sys_.bodies().count()) != n_machine_ || !specs_.empty()) throw InputError("checkpoint: the machine is not fresh");
   get(in, steps_);
+  if (steps_ < 0 || steps_ > (int64_t(1) << 40)) throw InputError("checkpoint: corrupt step count " + std::to_string(steps_));
   Feeder::State fs;
   get(in, fs.rng);
   get(in, fs.owed_kg);
   get(in, fs.fed_total_fg);
   getVec(in, fs.fed_fg);
   if (fs.fed_fg.size() != cfg_.materials.size()) throw InputError("checkpoint: the materials differ from the configuration");
+  // The feeder emits while its debt is >= 0 and stops below 0: a saved debt is <= 0 and above minus one particle.
+  // (masses in whole femtograms: 1 kg is 1e18 fg, and the balance adds them up in 64 bits)
+  int64_t fed_sum = 0;
+  for (int64_t f : fs.fed_fg)
+    if (f < 0 || f > int64_t(4e18) || __builtin_add_overflow(fed_sum, f, &fed_sum)) throw InputError("checkpoint: corrupt feeder state");
+  if (!(std::isfinite(fs.owed_kg) && fs.owed_kg <= 0 && fs.owed_kg > -1.0) || fs.fed_total_fg != fed_sum)
+    throw InputError("checkpoint: corrupt feeder state");
   feeder_.setState(fs);
   uint64_t ns = 0;
   get(in, ns);
-  if (ns > (uint64_t(1) << 32)) throw InputError("checkpoint: corrupt particle count");
+  if (ns > bytesLeft(in) / 64) throw InputError("checkpoint: corrupt particle count " + std::to_string(ns));  // >= 64 bytes each
   for (uint64_t k = 0; k < ns; ++k) {
     ParticleSpec s;
     get(in, s.material);
@@ -619,9 +705,16 @@ void CesMachine::load(std::istream& in) {
     get(in, s.inertia);
     get(in, s.radius);
     get(in, s.bound);
+    const std::string what = "checkpoint: particle " + std::to_string(k) + ": ";
     if (s.material < 0 || size_t(s.material) >= cfg_.materials.size() || int(s.shape) < 0 || int(s.shape) >= kParticleShapes)
-      throw InputError("checkpoint: corrupt particle record");
-    addParticle(s, Vec3{0, 0, 0}, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0});
+      throw InputError(what + "corrupt record (material or shape out of range)");
+    if (!plausibleSpec(s, cfg_))
+      throw InputError(what + "corrupt record (its size, mass, shape dimensions or moments are not what the feeder makes)");
+    try {
+      addParticle(s, Vec3{0, 0, 0}, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0});
+    } catch (const InputError& e) {
+      throw InputError(what + e.what());
+    }
   }
   std::vector<uint8_t> status;
   std::vector<int32_t> material;
@@ -636,6 +729,23 @@ void CesMachine::load(std::istream& in) {
   if (status.size() != p_.count() || material.size() != p_.count() || charge.size() != p_.count() ||
       pflags.size() != p_.count())
     throw InputError("checkpoint: body count differs from the particle records");
+  for (size_t i = 0; i < status.size(); ++i) {
+    const bool machine = i < size_t(n_machine_);
+    if (machine ? (status[i] != kStatusMachine || material[i] != p_.material[i])
+                : (status[i] < kStatusInFlight || status[i] > kStatusLost || material[i] != p_.material[i]))
+      throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt status or material");
+    if (!(std::fabs(charge[i]) <= real(1e-6)) || (pflags[i] & ~uint8_t(kFlagPinned)))  // 1e-6 C: 1000x the Pauthenier limit of a 1 mm particle
+      throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt charge or flags");
+  }
+  const int64_t nbodies = int64_t(p_.count());
+  for (const CollectedParticle& c : collected_)
+    if (c.body < n_machine_ || c.body >= nbodies || c.material != p_.material[size_t(c.body)] || int(c.kind) < 0 ||
+        int(c.kind) >= kMaterialKinds || c.mass_fg != p_.mass_fg[size_t(c.body)] || !std::isfinite(c.x) || !std::isfinite(c.z) ||
+        !std::isfinite(c.t))
+      throw InputError("checkpoint: corrupt collected-particle record");
+  for (const RecentSpawn& r : recent_)
+    if (r.body < n_machine_ || r.body >= nbodies || r.step < 0 || r.step > steps_)
+      throw InputError("checkpoint: corrupt recent-spawn record");
   p_.status = status;
   lost_ = int64_t(std::count(status.begin(), status.end(), uint8_t(kStatusLost)));
   p_.material = material;
@@ -653,6 +763,18 @@ void CesMachine::load(std::istream& in) {
   if (pos.size() != b.count() || rot.size() != b.count() || vel.size() != b.count() || omega.size() != b.count() ||
       flags.size() != b.count())
     throw InputError("checkpoint: body arrays have the wrong length");
+  for (size_t i = 0; i < pos.size(); ++i) {
+    const Quat& q = rot[i];
+    const real qn = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+    // within 1 km of the machine (it spans about a metre), a unit rotation, speeds below 1 km/s and 1e6 rad/s; a
+    // machine part keeps its kind (fixed, kinematic or dynamic), a particle is dynamic or frozen (collected or lost)
+    if (!(isFinite(pos[i]) && maxComponent(vabs(pos[i])) <= real(1e3)) || !(std::fabs(qn - 1) < real(1e-3)) ||
+        !(isFinite(vel[i]) && length(vel[i]) <= real(1e3)) || !(isFinite(omega[i]) && length(omega[i]) <= real(1e6)))
+      throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt position, rotation or velocity");
+    const bool machine = i < size_t(n_machine_);
+    if (machine ? flags[i] != b.flags[i] : (flags[i] != 0 && flags[i] != kBodyFixed))
+      throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt body flags");
+  }
   b.pos = pos;
   b.rot = rot;
   b.vel = vel;
@@ -660,8 +782,11 @@ void CesMachine::load(std::istream& in) {
   b.flags = flags;
   uint8_t has_core = 0;
   get(in, has_core);
+  if (has_core > 1) throw InputError("checkpoint: corrupt core marker");
   auto* cs = dynamic_cast<CheckpointSystem*>(&sys_);
   if (has_core && cs) cs->loadCore(in);
+  if (!(has_core && !cs) && in.peek() != std::char_traits<char>::eof())  // a GPU run's file may carry a core it ignores
+    throw InputError("checkpoint: " + std::to_string(bytesLeft(in)) + " bytes of garbage after the end");
   sys_.markHostDirty();
   dev_uploaded_ = 0;  // CesDevice: every particle's state goes up again before the next step
   charges_stale_ = false;

@@ -20,8 +20,35 @@ namespace jsoncheck {
 
 using nlohmann::json;
 
+// The start of a value as JSON text, for messages. Stops after ~48 characters, so its recursion is bounded
+// by that and not by the nesting of the value (json::dump() recurses once per level).
+inline void describeInto(const json& v, std::string& out) {
+  if (out.size() > 48) return;
+  if (v.is_array() || v.is_object()) {
+    out += v.is_array() ? '[' : '{';
+    bool first = true;
+    for (auto it = v.begin(); it != v.end() && out.size() <= 48; ++it) {
+      if (!first) out += ',';
+      first = false;
+      if (v.is_object()) out += json(it.key()).dump(-1, ' ', false, json::error_handler_t::replace) + ":";
+      describeInto(*it, out);
+    }
+    out += v.is_array() ? ']' : '}';
+    return;
+  }
+  if (v.is_string() && v.get_ref<const std::string&>().size() > 64) {
+    // the first 64 bytes, cut back to a UTF-8 character boundary (dump() throws on a broken sequence)
+    const std::string& str = v.get_ref<const std::string&>();
+    size_t n = 64;
+    while (n > 0 && (static_cast<unsigned char>(str[n]) & 0xC0) == 0x80) --n;
+    out += json(str.substr(0, n)).dump(-1, ' ', false, json::error_handler_t::replace);
+    return;
+  }
+  out += v.dump(-1, ' ', false, json::error_handler_t::replace);
+}
 inline std::string describe(const json& v) {
-  std::string s = v.dump();
+  std::string s;
+  describeInto(v, s);
   if (s.size() > 48) s = s.substr(0, 45) + "...";
   return s;
 }
@@ -45,6 +72,13 @@ inline std::string num(double x) {
 // Reports problems as "<origin>: <path>: <what>" (one line, an InputError: exit code 2 in the CLI).
 struct JsonCheck {
   std::string origin;
+  // Where numbers are stored in a narrower type (Bullet's btScalar is a float): the largest magnitude a number
+  // may have and the smallest positive value (the smallest normal float) that positive() and nonNegative()
+  // accept, so that nothing rounds to infinity or zero on the way (a mass of 5e-324 or 1e39 would make a body
+  // static). `stored_as` names the type in the messages.
+  double max_magnitude = std::numeric_limits<double>::max();
+  double min_positive = std::numeric_limits<double>::denorm_min();
+  const char* stored_as = "double";
 
   [[noreturn]] void fail(const std::string& path, const std::string& what) const {
     throw InputError(origin + ": " + (path.empty() ? std::string() : path + ": ") + what);
@@ -70,6 +104,13 @@ struct JsonCheck {
     }
   }
   double number(const json& v, const std::string& path) const {
+    const double x = finiteNumber(v, path);
+    if (std::fabs(x) > max_magnitude)
+      fail(path, "out of range: the magnitude must be <= " + num(max_magnitude) + " (stored as " + stored_as + "), got " + describe(v));
+    return x;
+  }
+  // Any finite number (for values that are not stored as given: a direction is normalised first).
+  double finiteNumber(const json& v, const std::string& path) const {
     if (v.is_string() && (v.get<std::string>() == "nan" || v.get<std::string>() == "NaN"))
       fail(path, "non-finite number " + describe(v));
     if (!v.is_number())
@@ -81,11 +122,14 @@ struct JsonCheck {
   double positive(const json& v, const std::string& path) const {
     const double x = number(v, path);
     if (!(x > 0)) fail(path, "must be > 0, got " + num(x));
+    if (x < min_positive) fail(path, "must be >= " + num(min_positive) + " (stored as " + stored_as + "), got " + describe(v));
     return x;
   }
   double nonNegative(const json& v, const std::string& path) const {
     const double x = number(v, path);
     if (x < 0) fail(path, "must be >= 0, got " + num(x));
+    if (x > 0 && x < min_positive)
+      fail(path, "must be 0 or >= " + num(min_positive) + " (stored as " + stored_as + "), got " + describe(v));
     return x;
   }
   int64_t integer(const json& v, const std::string& path, int64_t lo, int64_t hi) const {
@@ -118,26 +162,40 @@ struct JsonCheck {
     return Vec3{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]"))};
   }
   Vec3 positiveVec3(const json& v, const std::string& path) const {
-    Vec3 x = vec3(v, path);
-    const real c[3] = {x.x, x.y, x.z};
-    for (int i = 0; i < 3; ++i)
-      if (!(c[i] > 0)) fail(path + "[" + std::to_string(i) + "]", "must be > 0, got " + num(c[i]));
-    return x;
+    if (!v.is_array() || v.size() != 3)
+      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    return Vec3{real(positive(v[0], path + "[0]")), real(positive(v[1], path + "[1]")), real(positive(v[2], path + "[2]"))};
+  }
+  // A direction (a plane normal, a rotation axis): 3 finite numbers, not all zero, returned as a unit vector.
+  // Scaled by the largest component before its length is taken, so [1e300, 1e300, 0] (whose length overflows)
+  // and [1e-200, 1e-200, 0] (whose squares underflow) both give their direction instead of a zero vector.
+  Vec3 direction(const json& v, const std::string& path) const {
+    if (!v.is_array() || v.size() != 3)
+      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    double c[3];
+    for (int i = 0; i < 3; ++i) c[i] = finiteNumber(v[size_t(i)], path + "[" + std::to_string(i) + "]");
+    const double m = std::fmax(std::fabs(c[0]), std::fmax(std::fabs(c[1]), std::fabs(c[2])));
+    if (!(m > 0)) fail(path, "has zero length");
+    const double x = c[0] / m, y = c[1] / m, z = c[2] / m, l = std::sqrt(x * x + y * y + z * z);
+    if (!(l > 0) || !std::isfinite(l)) fail(path, "has no finite non-zero length");
+    return Vec3{real(x / l), real(y / l), real(z / l)};
   }
   Quat rotation(const json& v, const std::string& path) const {
     if (v.is_array()) {
       if (v.size() != 4) fail(path, "expected a quaternion [w, x, y, z] or {axis, angle_deg}, got " + describe(v));
-      Quat q{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]")),
-             real(number(v[3], path + "[3]"))};
-      const real n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
-      if (!(n > 0) || !std::isfinite(n)) fail(path, "quaternion has zero length");
-      return normalized(q);
+      double c[4];
+      for (int i = 0; i < 4; ++i) c[i] = finiteNumber(v[size_t(i)], path + "[" + std::to_string(i) + "]");
+      // scaled by the largest component first, as direction() does
+      const double m = std::fmax(std::fmax(std::fabs(c[0]), std::fabs(c[1])), std::fmax(std::fabs(c[2]), std::fabs(c[3])));
+      if (!(m > 0)) fail(path, "quaternion has zero length");
+      for (double& x : c) x /= m;
+      const double n = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3]);
+      return Quat{real(c[0] / n), real(c[1] / n), real(c[2] / n), real(c[3] / n)};
     }
     if (v.is_object()) {
       keys(v, path, {"axis", "angle_deg", "angle"});
       if (!v.contains("axis")) fail(path + ".axis", "missing");
-      const Vec3 axis = vec3(v["axis"], path + ".axis");
-      if (!(length(axis) > 0)) fail(path + ".axis", "has zero length");
+      const Vec3 axis = direction(v["axis"], path + ".axis");
       if (v.contains("angle_deg") == v.contains("angle")) fail(path, "give exactly one of angle_deg, angle (radians)");
       const real angle = v.contains("angle") ? real(number(v["angle"], path + ".angle"))
                                              : real(number(v["angle_deg"], path + ".angle_deg") * M_PI / 180.0);

@@ -3,6 +3,9 @@
 // file, the key path and the value, never a crash inside Bullet.
 #include "chrono_like/io/scene.h"
 
+#include "chrono_like/bullet/bullet_import.h"
+#include "chrono_like/io/bullet_file_check.h"
+#include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/json_check.h"
 
 #include <btBulletDynamicsCommon.h>
@@ -16,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 
@@ -33,6 +37,15 @@ using jsoncheck::describe;
 using jsoncheck::num;
 using jsoncheck::typeName;
 using Check = jsoncheck::JsonCheck;
+
+// Checks for numbers stored as T (a scene's bodies and shapes become Bullet's btScalar, a float in Debian's
+// Bullet; the settings become the engine's real): within T's range, and positive values not below its
+// smallest normal value.
+template <class T>
+Check checkFor(const std::string& origin) {
+  return Check{origin, double(std::numeric_limits<T>::max()), double(std::numeric_limits<T>::min()),
+               sizeof(T) == 4 ? "a 32-bit float" : "a double"};
+}
 
 btVector3 bt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
 btQuaternion bt(Quat q) { return btQuaternion(btScalar(q.x), btScalar(q.y), btScalar(q.z), btScalar(q.w)); }
@@ -109,7 +122,7 @@ Scene::~Scene() = default;
 
 int64_t SceneSettings::stepCount() const {
   if (steps >= 0) return steps;
-  return int64_t(std::llround(double(time) / double(dt)));
+  return checkedStepCount(double(time), double(dt), "settings.time");
 }
 
 SystemConfig systemConfigFromSettings(const SceneSettings& s) {
@@ -143,7 +156,7 @@ SystemConfig systemConfigFromSettings(const SceneSettings& s) {
 }
 
 SceneSettings parseSceneSettings(const json& j, const std::string& origin, const std::string& path) {
-  Check c{origin};
+  const Check c = checkFor<real>(origin);
   SceneSettings s;
   c.object(j, path);
   c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "max_iterations", "tolerance", "storage", "gravity", "friction_combine",
@@ -175,6 +188,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
     s.bullet_length_scale = real(c.nonNegative(j["bullet_length_scale"], at("bullet_length_scale")));
   if (j.contains("bullet_iterations"))
     s.bullet_iterations = int(c.integer(j["bullet_iterations"], at("bullet_iterations"), 1, 1000000));
+  if (s.steps < 0) checkedStepCount(double(s.time), double(s.dt), origin + ": " + at("time"));
   return s;
 }
 
@@ -247,7 +261,9 @@ class Builder {
  public:
   Builder(const Check& c, Scene::Owned& o) : c_(c), o_(o) {}
 
-  BuiltShape shape(const json& j, const std::string& path, bool in_compound = false) {
+  // depth: how many compounds this shape is inside (bounded: compounds recurse here and in scaled()).
+  BuiltShape shape(const json& j, const std::string& path, int depth = 0) {
+    const bool in_compound = depth > 0;
     c_.object(j, path);
     if (!j.contains("type")) c_.fail(path + ".type", "missing shape type");
     const std::string type = c_.oneOf(j["type"], path + ".type",
@@ -350,14 +366,25 @@ class Builder {
     } else if (type == "plane") {
       c_.keys(j, path, {"type", "normal", "offset"});
       if (in_compound) c_.fail(path, "a plane cannot be a compound child");
-      const Vec3 n = c_.vec3(need("normal"), at("normal"));
-      if (!(length(n) > 0)) c_.fail(at("normal"), "has zero length");
-      const double d = j.contains("offset") ? c_.number(j["offset"], at("offset")) : 0.0;
-      b.shape = keep(new btStaticPlaneShape(bt(normalized(n)), btScalar(d / length(n))));
+      // The plane n.x = offset with n as given: offset / |n| along the unit normal.
+      const json& nj = need("normal");
+      const Vec3 u = c_.direction(nj, at("normal"));
+      const double d = j.contains("offset") ? c_.finiteNumber(j["offset"], at("offset")) : 0.0;
+      double nmax = 0;
+      for (const json& x : nj) nmax = std::fmax(nmax, std::fabs(x.get<double>()));
+      double nlen = 0;
+      for (const json& x : nj) nlen += (x.get<double>() / nmax) * (x.get<double>() / nmax);
+      const double dn = d / nmax / std::sqrt(nlen);
+      if (!(std::fabs(dn) <= c_.max_magnitude))
+        c_.fail(at("offset"), "offset / |normal| = " + num(dn) + " is out of range (stored as " + c_.stored_as + ")");
+      b.shape = keep(new btStaticPlaneShape(bt(u), btScalar(dn)));
       b.plane = true;
       b.bound = INFINITY;
     } else {  // compound
       c_.keys(j, path, {"type", "children"});
+      if (depth >= inputLimits().max_compound_depth)
+        c_.fail(path, "compound shapes nested deeper than " + std::to_string(inputLimits().max_compound_depth) +
+                          " levels (the limit)");
       const json& ch = c_.array(need("children"), at("children"));
       if (ch.empty()) c_.fail(at("children"), "a compound needs at least one child");
       std::vector<std::pair<btTransform, btCollisionShape*>> kids;
@@ -366,7 +393,7 @@ class Builder {
         c_.object(ch[i], cp);
         c_.keys(ch[i], cp, {"shape", "position", "rotation"});
         if (!ch[i].contains("shape")) c_.fail(cp + ".shape", "missing");
-        BuiltShape k = shape(ch[i]["shape"], cp + ".shape", true);
+        BuiltShape k = shape(ch[i]["shape"], cp + ".shape", depth + 1);
         const Vec3 pos = ch[i].contains("position") ? c_.vec3(ch[i]["position"], cp + ".position") : Vec3{0, 0, 0};
         const Quat q = ch[i].contains("rotation") ? c_.rotation(ch[i]["rotation"], cp + ".rotation") : Quat{1, 0, 0, 0};
         kids.push_back({btTransform(bt(q), bt(pos)), k.shape});
@@ -399,9 +426,26 @@ class Builder {
   btRigidBody* body(const BodySpec& s, const std::string& path) {
     const bool fixed = s.kinematic || s.mass == 0;
     if (s.shape.plane && !fixed) c_.fail(path + ".mass", "a plane must be static (mass 0), got " + num(s.mass));
+    // What is stored as btScalar must stay finite and, for the mass and the moments of inertia (Bullet keeps
+    // their inverses), positive and above the smallest normal float; else the body silently turns static or
+    // its inverse mass overflows. A mass given in the file was checked where it was read; these are the ones
+    // computed here (density x volume, inertia of the shape, positions of a generator).
+    if (!fixed && !(s.mass >= c_.min_positive && s.mass <= c_.max_magnitude))
+      c_.fail(path + ".mass", "mass " + num(s.mass) + " kg (density x volume) is out of range (stored as " + c_.stored_as + ")");
     const btScalar mass = fixed ? btScalar(0) : btScalar(s.mass);
     btVector3 inertia(0, 0, 0);
-    if (!fixed) s.shape.shape->calculateLocalInertia(mass, inertia);
+    if (!fixed) {
+      s.shape.shape->calculateLocalInertia(mass, inertia);
+      for (int k = 0; k < 3; ++k)
+        if (!(std::isfinite(inertia[k]) && double(inertia[k]) >= c_.min_positive))
+          c_.fail(path, "moment of inertia " + num(double(inertia[k])) + " kg m^2 (mass " + num(s.mass) +
+                            " kg on this shape) is out of range (stored as " + c_.stored_as + ")");
+    }
+    for (const auto& v : {std::make_pair(".position", s.pos), std::make_pair(".velocity", s.vel),
+                          std::make_pair(".angular_velocity", s.omega), std::make_pair(".gravity", s.gravity)})
+      if (!(std::fabs(double(v.second.x)) <= c_.max_magnitude && std::fabs(double(v.second.y)) <= c_.max_magnitude &&
+            std::fabs(double(v.second.z)) <= c_.max_magnitude))
+        c_.fail(path + v.first, "is out of range (stored as " + std::string(c_.stored_as) + ")");
     const btTransform t(bt(s.rot), bt(s.pos));
     auto* ms = new btDefaultMotionState(t);
     o_.motion_states.emplace_back(ms);
@@ -579,11 +623,14 @@ class Builder {
         fx = c_.positive(f[0], at("footprint") + "[0]");
         fz = c_.positive(f[1], at("footprint") + "[1]");
       }
-      nx = std::max<int64_t>(1, int64_t(std::floor(fx / spacing)));
-      nz = std::max<int64_t>(1, int64_t(std::floor(fz / spacing)));
+      // Columns along x and z, at most `count` each (more would stay empty and leave every position as it is),
+      // so that nx * nz <= count^2 cannot wrap (a 4e9 x 4e9 footprint made it 0: a division by zero).
+      nx = int64_t(std::fmax(1.0, std::fmin(std::floor(fx / spacing), double(count))));
+      nz = int64_t(std::fmax(1.0, std::fmin(std::floor(fz / spacing), double(count))));
       ny = (count + nx * nz - 1) / (nx * nz);
     }
     if (count > (int64_t(1) << 26)) c_.fail(path, "too many bodies (" + std::to_string(count) + ")");
+    checkBodyBudget(int64_t(out.size()) + count, c_.origin + ": " + path);
     Rng rng{g.contains("seed") ? uint64_t(c_.integer(g["seed"], at("seed"), 0, int64_t(1) << 53)) : 1u};
     const double friction = g.contains("friction") ? c_.nonNegative(g["friction"], at("friction")) : 0.5;
     const Vec3 vel = g.contains("velocity") ? c_.vec3(g["velocity"], at("velocity")) : Vec3{0, 0, 0};
@@ -627,16 +674,49 @@ class Builder {
   Scene::Owned& o_;
 };
 
-std::string readFile(const std::string& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw InputError(path + ": no such file");
-  if (fs::is_directory(path, ec)) throw InputError(path + ": is a directory, not a scene file");
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  if (f.bad()) throw InputError(path + ": read error");
-  return ss.str();
+// A scene file: a regular file (a FIFO or a device named .json would block the read forever) within the size limit.
+std::string readFile(const std::string& path, uint64_t max_bytes) {
+  return readRegularFile(path, path, max_bytes, ", not a scene file");
+}
+
+// A body as the engine will import it: every number finite, a dynamic body's mass and moments positive, its
+// rotation a rotation, its shapes of finite positive size (what System::addBody needs, checked here so that the
+// message names the body). `where` names it.
+void checkLoadedBody(const btRigidBody& rb, const std::string& where) {
+  auto bad = [&](const std::string& what) { throw InputError(where + ": " + what); };
+  BodyDesc d;
+  try {
+    d = bodyDescFromBullet(rb);
+  } catch (const InputError& e) {
+    bad(e.what());
+  }
+  const btMatrix3x3& r = rb.getCenterOfMassTransform().getBasis();
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const double rij = double(r[0][i]) * r[0][j] + double(r[1][i]) * r[1][j] + double(r[2][i]) * r[2][j];
+      if (!(std::fabs(rij - (i == j ? 1.0 : 0.0)) < 1e-3)) bad("orientation is not a rotation (its matrix is not orthonormal)");
+    }
+  if (!isFinite(d.pos)) bad("non-finite position");
+  if (!isFinite(d.vel) || !isFinite(d.omega)) bad("non-finite velocity");
+  if (!isFinite(d.gravity)) bad("non-finite gravity");
+  if (!(std::isfinite(d.friction) && d.friction >= 0)) bad("friction must be finite and >= 0, got " + num(double(d.friction)));
+  if (d.flags == 0) {
+    if (!(std::isfinite(d.mass) && d.mass > 0)) bad("mass must be finite and > 0, got " + num(double(d.mass)));
+    if (!(isFinite(d.inertia) && minComponent(d.inertia) > 0)) bad("moments of inertia must be finite and > 0");
+  }
+  for (const ShapeDesc& sd : d.shapes) {
+    const Shape& sh = sd.shape;
+    if (!isFinite(sh.dims) || !isFinite(sh.local.p) || !std::isfinite(sh.plane_d) ||
+        !(std::isfinite(sh.local.q.w) && std::isfinite(sh.local.q.x) && std::isfinite(sh.local.q.y) && std::isfinite(sh.local.q.z)))
+      bad(std::string(shapeTypeName(sh.type)) + " shape has a non-finite dimension or pose");
+    if (sh.type == ShapeType::Plane) {
+      if (!(std::fabs(double(length(sh.dims)) - 1) < 1e-6)) bad("plane normal has no finite non-zero length");
+      continue;
+    }
+    if (!(sh.size > 0 && std::isfinite(sh.size))) bad(std::string(shapeTypeName(sh.type)) + " shape has a non-positive size");
+    for (const Vec3& p : sd.hull)
+      if (!isFinite(p)) bad("convex hull has a non-finite point");
+  }
 }
 
 std::string lower(std::string s) {
@@ -647,8 +727,11 @@ std::string lower(std::string s) {
 }  // namespace
 
 Scene Scene::fromJsonText(const std::string& text, const std::string& origin, const std::vector<std::string>& overrides) {
-  Check c{origin};
+  const Check c = checkFor<btScalar>(origin);
   if (text.find_first_not_of(" \t\r\n") == std::string::npos) c.fail("", "file is empty");
+  if (text.size() > inputLimits().max_json_bytes)
+    c.fail("", "the document is " + std::to_string(text.size()) + " bytes, more than the limit of " +
+                   std::to_string(inputLimits().max_json_bytes) + " bytes");
   json doc;
   try {
     doc = json::parse(text);
@@ -659,8 +742,10 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin, co
     if (what.find("overflow") != std::string::npos) what += " (non-finite numbers are not allowed)";
     c.fail("", "malformed JSON: " + what);
   }
+  checkJsonDepth(doc, origin);
   c.object(doc, "(document)");
   for (const std::string& o : overrides) applyOverride(doc, o);
+  if (!overrides.empty()) checkJsonDepth(doc, origin);
   c.keys(doc, "", {"$schema", "name", "description", "settings", "bodies"});
 
   Scene scene;
@@ -673,6 +758,18 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin, co
 
   if (!doc.contains("bodies")) c.fail("bodies", "missing (a scene needs at least one body)");
   const json& bodies = c.array(doc["bodies"], "bodies");
+  // The whole scene's body count before anything is built (the builder validates these values again).
+  int64_t total = 0;
+  for (const json& b : bodies) {
+    const json* g = b.is_object() && b.contains("generator") && b["generator"].is_object() ? &b["generator"] : nullptr;
+    int64_t n = 1;
+    if (g && g->contains("count") && (*g)["count"].is_number_integer()) n = std::max<int64_t>(1, (*g)["count"].get<int64_t>());
+    if (g && g->contains("counts") && (*g)["counts"].is_array() && (*g)["counts"].size() == 3) {
+      for (const json& k : (*g)["counts"]) n *= k.is_number_integer() ? std::clamp<int64_t>(k.get<int64_t>(), 1, 1 << 20) : 1;
+    }
+    total = std::min<int64_t>(total + std::min<int64_t>(n, int64_t(1) << 40), int64_t(1) << 62);  // saturates
+  }
+  checkBodyBudget(total, origin + ": bodies");
   Builder b(c, *scene.owned_);
   for (size_t i = 0; i < bodies.size(); ++i) {
     const std::string path = "bodies[" + std::to_string(i) + "]";
@@ -685,6 +782,8 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin, co
     }
   }
   if (scene.bodies_.empty()) c.fail("bodies", "the scene has no bodies");
+  for (size_t k = 0; k < scene.bodies_.size(); ++k)  // what the checks above derived (inertia, scaled sizes)
+    checkLoadedBody(*scene.bodies_[k], origin + ": body " + std::to_string(k) + " (" + scene.names_[k] + ")");
   return scene;
 }
 
@@ -692,51 +791,6 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin, co
 // .bullet files
 // ---------------------------------------------------------------------------------------------------
 namespace {
-
-// Walks the file's block structure before Bullet's parser sees it (the parser trusts the lengths it
-// reads and crashes on garbage): header "BULLETf"/"BULLETd", pointer size, endianness, 3-digit version,
-// then blocks of (code, length, old pointer, SDNA index, count) + data, one of them the DNA ("DNA1").
-void checkBulletFile(const std::string& buf, const std::string& path) {
-  auto fail = [&](const std::string& what) { throw InputError(path + ": " + what); };
-  if (buf.empty()) fail("file is empty");
-  if (buf.size() < 12 || buf.compare(0, 6, "BULLET") != 0)
-    fail("not a .bullet file (no BULLET header)");
-  if (buf[6] != 'f' && buf[6] != 'd') fail("not a .bullet file (bad precision byte)");
-  if (buf[7] != '-' && buf[7] != '_') fail("not a .bullet file (bad pointer-size byte)");
-  if (buf[8] != 'v' && buf[8] != 'V') fail("not a .bullet file (bad endianness byte)");
-  for (int i = 9; i < 12; ++i)
-    if (!std::isdigit(static_cast<unsigned char>(buf[size_t(i)]))) fail("not a .bullet file (bad version)");
-  const size_t ptr = buf[7] == '-' ? 8 : 4;
-  const bool swap = buf[8] == 'V';
-  const size_t head = 4 + 4 + ptr + 4 + 4;
-  auto read32 = [&](size_t at) {
-    uint32_t v;
-    std::memcpy(&v, buf.data() + at, 4);
-    if (swap) v = (v >> 24) | ((v >> 8) & 0xff00u) | ((v << 8) & 0xff0000u) | (v << 24);
-    return v;
-  };
-  size_t at = 12, blocks = 0, bodies = 0;
-  bool dna = false;
-  while (at < buf.size()) {
-    if (buf.size() - at < head)
-      fail("truncated or corrupt .bullet file (incomplete block header at byte " + std::to_string(at) + ")");
-    const std::string code = buf.substr(at, 4);
-    if (code == "ENDB") break;
-    const int32_t len = int32_t(read32(at + 4));
-    if (len < 0 || size_t(len) > buf.size() - at - head)
-      fail("truncated or corrupt .bullet file (block '" + std::string(code.c_str()) + "' at byte " +
-           std::to_string(at) + " runs past the end of the file)");
-    if (code == "DNA1") {
-      dna = true;
-      if (len < 8 || buf.compare(at + head, 4, "SDNA") != 0) fail("corrupt .bullet file (bad DNA block)");
-    }
-    if (code == "RBDY") ++bodies;
-    at += head + size_t(len);
-    ++blocks;
-  }
-  if (!dna) fail("truncated or corrupt .bullet file (no DNA block)");
-  if (bodies == 0) fail("the .bullet file holds no rigid bodies");
-}
 
 btVector3 vec(const btVector3FloatData& d) {
   btVector3 v;
@@ -775,24 +829,37 @@ void restoreBodyState(btRigidBody* rb, const Data* d, const btVector3& world_gra
 }  // namespace
 
 Scene Scene::fromBulletFile(const std::string& path, const std::vector<std::string>& overrides) {
-  std::string buf = readFile(path);
-  checkBulletFile(buf, path);
+  return fromBulletBuffer(readFile(path, inputLimits().max_binary_bytes), path, overrides);
+}
+
+Scene Scene::fromBulletBuffer(const std::string& bytes, const std::string& origin, const std::vector<std::string>& overrides) {
+  if (bytes.size() > inputLimits().max_binary_bytes)
+    throw InputError(origin + ": is " + std::to_string(bytes.size()) + " bytes, more than the limit of " +
+                     std::to_string(inputLimits().max_binary_bytes) + " bytes");
+  // Only a checked copy reaches Bullet's parser (bullet_file_check.h); the body count is known before it allocates.
+  int64_t n_blocks = 0;
+  std::string checked = bulletfile::sanitizeBulletFile(bytes, origin, inputLimits().max_compound_depth, &n_blocks);
+  checkBodyBudget(n_blocks, origin);
 
   Scene scene;
-  scene.source = path;
+  scene.source = origin;
   scene.format = "bullet";
-  scene.name = fs::path(path).stem().string();
+  scene.name = fs::path(origin).stem().string();
   scene.owned_->importer = std::make_unique<SceneImporter>();
   SceneImporter& imp = *scene.owned_->importer;
 
-  std::vector<char> mem(buf.begin(), buf.end());
-  bParse::btBulletFile file(mem.data(), int(mem.size()));
-  if (!(file.getFlags() & bParse::FD_OK)) throw InputError(path + ": not a readable .bullet file");
-  if (!imp.loadFileFromMemory(&file)) throw InputError(path + ": Bullet's importer could not read the file");
+  // Bullet's DNA scan reads a few bytes past the end it is given: padding, zeroed.
+  const size_t length = checked.size();
+  checked.append(64, '\0');
+  bParse::btBulletFile file(&checked[0], int(length));
+  if (!(file.getFlags() & bParse::FD_OK)) throw InputError(origin + ": not a readable .bullet file");
+  if (!imp.loadFileFromMemory(&file)) throw InputError(origin + ": Bullet's importer could not read the file");
 
+  // The checked copy holds rigid-body structs of the header's precision only.
   const bool dbl = (file.getFlags() & bParse::FD_DOUBLE_PRECISION) != 0;
   for (int i = 0; i < file.m_rigidBodies.size(); ++i) {
-    btRigidBody* rb = btRigidBody::upcast(imp.bodyFor(file.m_rigidBodies[i]));
+    btCollisionObject* made = imp.bodyFor(file.m_rigidBodies[i]);  // null where the importer skipped the body
+    btRigidBody* rb = made ? btRigidBody::upcast(made) : nullptr;
     if (!rb) continue;
     if (dbl)
       restoreBodyState(rb, reinterpret_cast<const btRigidBodyDoubleData*>(file.m_rigidBodies[i]), imp.gravity_);
@@ -800,16 +867,19 @@ Scene Scene::fromBulletFile(const std::string& path, const std::vector<std::stri
       restoreBodyState(rb, reinterpret_cast<const btRigidBodyFloatData*>(file.m_rigidBodies[i]), imp.gravity_);
   }
   const int n = imp.getNumRigidBodies();
-  if (n == 0) throw InputError(path + ": the .bullet file holds no rigid bodies Bullet's importer can read");
+  if (n == 0) throw InputError(origin + ": the .bullet file holds no rigid bodies Bullet's importer can read");
   if (n != file.m_rigidBodies.size())
-    throw InputError(path + ": " + std::to_string(file.m_rigidBodies.size() - n) + " of " +
+    throw InputError(origin + ": " + std::to_string(file.m_rigidBodies.size() - n) + " of " +
                      std::to_string(file.m_rigidBodies.size()) + " rigid bodies have shapes Bullet's importer cannot read");
+  if (!(std::isfinite(imp.gravity_.x()) && std::isfinite(imp.gravity_.y()) && std::isfinite(imp.gravity_.z())))
+    throw InputError(origin + ": the world's gravity is not finite");
   for (int i = 0; i < n; ++i) {
     btRigidBody* rb = btRigidBody::upcast(imp.getRigidBodyByIndex(i));
-    if (!rb) throw InputError(path + ": object " + std::to_string(i) + " is not a rigid body");
-    scene.bodies_.push_back(rb);
+    if (!rb) throw InputError(origin + ": object " + std::to_string(i) + " is not a rigid body");
     const char* nm = imp.getNameForPointer(rb);
     scene.names_.push_back(nm ? nm : "body" + std::to_string(i));
+    checkLoadedBody(*rb, origin + ": rigid body " + std::to_string(i) + " (" + scene.names_.back() + ")");
+    scene.bodies_.push_back(rb);
   }
   scene.settings = SceneSettings{};
   scene.settings.gravity = Vec3{real(imp.gravity_.x()), real(imp.gravity_.y()), real(imp.gravity_.z())};
@@ -833,7 +903,7 @@ Scene Scene::load(const std::string& path, const std::vector<std::string>& overr
     throw InputError(path + ": unknown scene file extension '" + ext + "' (expected .json or .bullet)");
   }
   if (ext == ".bullet") return fromBulletFile(path, overrides);
-  return fromJsonText(readFile(path), path, overrides);
+  return fromJsonText(readFile(path, inputLimits().max_json_bytes), path, overrides);
 }
 
 // ---------------------------------------------------------------------------------------------------

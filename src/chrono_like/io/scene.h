@@ -68,6 +68,9 @@ class Scene {
   static Scene fromJsonText(const std::string& text, const std::string& origin,
                             const std::vector<std::string>& overrides = {});
   static Scene fromBulletFile(const std::string& path, const std::vector<std::string>& overrides = {});
+  // The bytes of a .bullet file (`origin` names it in messages and gives the scene's name).
+  static Scene fromBulletBuffer(const std::string& bytes, const std::string& origin,
+                                const std::vector<std::string>& overrides = {});
 
   // The embedded default scene, as JSON text.
   static const char* defaultSceneJson();

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Bounded fuzzing under CTest (tests/fuzz/CMakeLists.txt, label fuzz; docs/HARDENING.md).
+#   run_fuzz.sh build SRC TREE                  configure and build an instrumented tree (clang, DVISIM_FUZZ:
+#                                                libFuzzer + ASan + UBSan) with only the four fuzz targets
+#   run_fuzz.sh run SRC TREE TARGET SECONDS      fuzz one target for SECONDS, starting from corpus/TARGET and
+#                                                regressions/TARGET (new inputs go to a scratch directory); any
+#                                                finding fails, its reproducer is kept in TREE/fuzz-artifacts/TARGET/
+# Exit 77 (CTest: skipped) where clang++ cannot link a libFuzzer program.
+set -uo pipefail
+mode=$1 src=$2 tree=$3
+cxx=${DVISIM_FUZZ_CXX:-$(command -v clang++ || true)}
+probe=$(mktemp -d)
+trap 'rm -rf "$probe"' EXIT
+echo 'extern "C" int LLVMFuzzerTestOneInput(const unsigned char*, unsigned long) { return 0; }' > "$probe/p.cpp"
+if [ -z "$cxx" ] || ! "$cxx" -fsanitize=fuzzer,address,undefined "$probe/p.cpp" -o "$probe/p" 2>/dev/null; then
+  echo "fuzz: no clang++ with libFuzzer: skipped (Debian packages clang libclang-rt-14-dev libomp-dev)"
+  exit 77
+fi
+targets=(scene_json ces_config bullet_file ces_checkpoint)
+case $mode in
+build)
+  launcher=()
+  command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  cmake -S "$src" -B "$tree" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDVISIM_FUZZ=ON \
+    -DDVISIM_ENABLE_CUDA=OFF -DDVISIM_BUILD_TESTS=OFF -DDVISIM_BUILD_DEMOS=OFF -DDVISIM_BUILD_BENCH=OFF \
+    "${launcher[@]}" > "$probe/configure.log" 2>&1 || { cat "$probe/configure.log"; exit 1; }
+  start=$SECONDS
+  cmake --build "$tree" -j"${DVISIM_FUZZ_JOBS:-2}" --target "${targets[@]/#/fuzz_}" 2>&1 | tail -n 20
+  rc=${PIPESTATUS[0]}
+  echo "fuzz: instrumented tree built in $((SECONDS - start)) s (rc $rc)"
+  exit "$rc"
+  ;;
+run)
+  target=$4 secs=$5
+  bin="$tree/tests/fuzz/fuzz_$target"
+  [ -x "$bin" ] || { echo "fuzz: $bin is missing (did fuzz_build fail?)"; exit 1; }
+  work="$probe/corpus"
+  mkdir -p "$work"
+  cp -r "$src/tests/fuzz/corpus/$target/." "$work/"
+  art="$tree/fuzz-artifacts/$target"
+  mkdir -p "$art"
+  regressions="$src/tests/fuzz/regressions/$target"
+  "$bin" -max_total_time="$secs" -timeout=25 -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$art/" \
+    "$work" "$regressions" > "$probe/fuzz.log" 2>&1
+  rc=$?
+  grep -E "^#[0-9]+ +(DONE|INITED)|stat::|ERROR|FINDING|SUMMARY|Test unit written|^artifact_prefix" "$probe/fuzz.log" | tail -n 30
+  if [ "$rc" -ne 0 ]; then
+    tail -n 60 "$probe/fuzz.log"
+    echo "fuzz: $target: FINDING (exit $rc); reproducer in $art/ - replay it with $bin FILE, fix, then add it to $regressions/"
+    exit 1
+  fi
+  echo "fuzz: $target: ${secs} s, no finding"
+  ;;
+*)
+  echo "usage: run_fuzz.sh build SRC TREE | run SRC TREE TARGET SECONDS"
+  exit 2
+  ;;
+esac
