@@ -72,7 +72,24 @@ class BroadPhaseBins {
            BroadPhaseStats* stats = nullptr);
 
  private:
-  void sortEntriesByBin(uint32_t max_key);
+  // One run's inputs, handed to its passes (broadphase.cpp numbers them 1-8).
+  struct Pass {
+    const Shape* sh;
+    const Aabb* box;
+    const uint8_t* flags;
+    int32_t n;
+    int nthreads;
+  };
+  real classify(const Pass& in);                        // 1: extents and the bin edge
+  void splitBinnedLarge(const Pass& in, real edge);     // 1: binned_ and large_
+  BinGrid makeGrid(const Pass& in, real& edge, Aabb& bounds, BroadPhaseStats& st);  // 2
+  int32_t writeEntries(const Pass& in, const BinGrid& grid, BroadPhaseStats& st);   // 3-5
+  void sortEntriesByBin(uint32_t max_key);              // 4
+  int32_t testBinnedPairs(const Pass& in, int32_t ne, BroadPhaseStats& st);         // 6
+  void pairLargeShapes(const Pass& in);                 // 7
+  void writeOutput(const Pass& in, int32_t nchunks, std::vector<ShapePair>& out_pairs);  // 8
+  void writeLargeBinnedPairs(const Pass& in, int32_t nchunks, ShapePair* out);
+  void mergeLargeLargePairs(ShapePair* out);
 
   BroadPhaseSettings settings_;
   // scratch reused between steps (no allocation in the step loop once warm, except growth)

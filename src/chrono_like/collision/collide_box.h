@@ -68,43 +68,48 @@ DVI_HD int clipPolygon(const Vec3* in, int n, Vec3 pn, real po, Vec3* outp, int 
   return m;
 }
 
-// Box a (half extents a.dims) at wa, box b at wb. Normals from a to b.
-DVI_HD_CALL int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
-                         ContactPoint* out) {
+// Two boxes' axes and half extents, and what the separating-axis test found along the 15 candidate axes.
+struct BoxBoxAxes {
+  Vec3 ax[3], bx[3];  // the axes of box a and box b (world)
+  real ea[3], eb[3];  // their half extents
+  Vec3 t;             // from a's centre to b's
+  real sepA = real(-1e30), sepB = real(-1e30), sepE = real(-1e30);  // largest separation on a's, b's, edge axes
+  int axisA = 0, axisB = 0, edgeI = -1, edgeJ = -1;                 // where (edgeI < 0: no usable edge axis)
+  Vec3 edgeL{0, 0, 0};
+};
+
+// Separation along each candidate axis: |t.L| - (radius of a along L) - (radius of b along L). false as soon as
+// one axis separates the boxes by the envelope or more (no contact).
+DVI_HD bool boxBoxSeparatingAxes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                                 BoxBoxAxes& g) {
   const Mat33 Ra = matFromQuat(wa.q), Rb = matFromQuat(wb.q);
-  Vec3 ax[3] = {column(Ra, 0), column(Ra, 1), column(Ra, 2)};
-  Vec3 bx[3] = {column(Rb, 0), column(Rb, 1), column(Rb, 2)};
-  const real ea[3] = {a.dims.x, a.dims.y, a.dims.z};
-  const real eb[3] = {b.dims.x, b.dims.y, b.dims.z};
-  const Vec3 t = wb.p - wa.p;
+  for (int i = 0; i < 3; ++i) g.ax[i] = column(Ra, i), g.bx[i] = column(Rb, i);
+  g.ea[0] = a.dims.x, g.ea[1] = a.dims.y, g.ea[2] = a.dims.z;
+  g.eb[0] = b.dims.x, g.eb[1] = b.dims.y, g.eb[2] = b.dims.z;
+  const Vec3* ax = g.ax;
+  const Vec3* bx = g.bx;
+  const real* ea = g.ea;
+  const real* eb = g.eb;
+  const Vec3 t = g.t = wb.p - wa.p;
   real absR[3][3];
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) absR[i][j] = std::fabs(dot(ax[i], bx[j])) + real(1e-12);
-
-  // Separation along each candidate axis: |t.L| - (radius of a along L) - (radius of b along L).
-  real sepA = real(-1e30);
-  int axisA = 0;
   for (int i = 0; i < 3; ++i) {
     real s = std::fabs(dot(t, ax[i])) - (ea[i] + eb[0] * absR[i][0] + eb[1] * absR[i][1] + eb[2] * absR[i][2]);
-    if (s >= envelope) return 0;
-    if (s > sepA) {
-      sepA = s;
-      axisA = i;
+    if (s >= envelope) return false;
+    if (s > g.sepA) {
+      g.sepA = s;
+      g.axisA = i;
     }
   }
-  real sepB = real(-1e30);
-  int axisB = 0;
   for (int j = 0; j < 3; ++j) {
     real s = std::fabs(dot(t, bx[j])) - (eb[j] + ea[0] * absR[0][j] + ea[1] * absR[1][j] + ea[2] * absR[2][j]);
-    if (s >= envelope) return 0;
-    if (s > sepB) {
-      sepB = s;
-      axisB = j;
+    if (s >= envelope) return false;
+    if (s > g.sepB) {
+      g.sepB = s;
+      g.axisB = j;
     }
   }
-  real sepE = real(-1e30);
-  int edgeI = -1, edgeJ = -1;
-  Vec3 edgeL{0, 0, 0};
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
       Vec3 L = cross(ax[i], bx[j]);
@@ -114,78 +119,82 @@ DVI_HD_CALL int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, co
       real ra = ea[0] * std::fabs(dot(ax[0], L)) + ea[1] * std::fabs(dot(ax[1], L)) + ea[2] * std::fabs(dot(ax[2], L));
       real rb = eb[0] * std::fabs(dot(bx[0], L)) + eb[1] * std::fabs(dot(bx[1], L)) + eb[2] * std::fabs(dot(bx[2], L));
       real s = std::fabs(dot(t, L)) - ra - rb;
-      if (s >= envelope) return 0;
-      if (s > sepE) {
-        sepE = s;
-        edgeI = i;
-        edgeJ = j;
-        edgeL = L;
+      if (s >= envelope) return false;
+      if (s > g.sepE) {
+        g.sepE = s;
+        g.edgeI = i;
+        g.edgeJ = j;
+        g.edgeL = L;
       }
     }
   }
-  // Prefer face axes (a over b) unless another axis separates clearly more: keeps the manifold's reference
-  // face, and so the feature numbering, stable for resting boxes.
-  // The tolerances are relative to the penetration (and a tiny fraction of the size), so the reported depth
-  // exceeds the minimum over the 15 axes by at most 0.1 %.
-  const real minExt = std::fmin(std::fmin(std::fmin(ea[0], ea[1]), std::fmin(ea[2], eb[0])), std::fmin(eb[1], eb[2]));
-  bool refIsA = !(sepB > sepA + real(1e-3) * std::fabs(sepA) + real(1e-7) * minExt);
-  real sepF = refIsA ? sepA : sepB;
-  bool useEdge = edgeI >= 0 && sepE > sepF + real(1e-3) * std::fabs(sepF) + real(1e-7) * minExt;
+  return true;
+}
 
-  if (!useEdge) {
-    // Reference face on box r, incident face on box i; nr points from r to i.
-    const Vec3* rx = refIsA ? ax : bx;
-    const Vec3* ix = refIsA ? bx : ax;
-    const real* er = refIsA ? ea : eb;
-    const real* ei = refIsA ? eb : ea;
-    const Vec3 cr = refIsA ? wa.p : wb.p;
-    const Vec3 ci = refIsA ? wb.p : wa.p;
-    const int k = refIsA ? axisA : axisB;
-    Vec3 nr = rx[k] * sgn1(dot(ci - cr, rx[k]));
-    Vec3 refc = cr + nr * er[k];
-    // Incident face: the face of box i most anti-parallel to nr.
-    int j = 0;
-    real bestd = -1;
-    for (int q = 0; q < 3; ++q) {
-      real d = std::fabs(dot(ix[q], nr));
-      if (d > bestd) {
-        bestd = d;
-        j = q;
-      }
+// Face contact: the incident face of one box clipped to the reference face of the other (a's face axis when
+// refIsA). Normals from a to b.
+DVI_HD int boxBoxFaceContacts(const BoxBoxAxes& g, const Pose& wa, const Pose& wb, bool refIsA, real envelope,
+                              ContactPoint* out) {
+  // Reference face on box r, incident face on box i; nr points from r to i.
+  const Vec3* rx = refIsA ? g.ax : g.bx;
+  const Vec3* ix = refIsA ? g.bx : g.ax;
+  const real* er = refIsA ? g.ea : g.eb;
+  const real* ei = refIsA ? g.eb : g.ea;
+  const Vec3 cr = refIsA ? wa.p : wb.p;
+  const Vec3 ci = refIsA ? wb.p : wa.p;
+  const int k = refIsA ? g.axisA : g.axisB;
+  Vec3 nr = rx[k] * sgn1(dot(ci - cr, rx[k]));
+  Vec3 refc = cr + nr * er[k];
+  // Incident face: the face of box i most anti-parallel to nr.
+  int j = 0;
+  real bestd = -1;
+  for (int q = 0; q < 3; ++q) {
+    real d = std::fabs(dot(ix[q], nr));
+    if (d > bestd) {
+      bestd = d;
+      j = q;
     }
-    Vec3 fn = ix[j] * (dot(ix[j], nr) > 0 ? real(-1) : real(1));
-    Vec3 fc = ci + fn * ei[j];
-    Vec3 p = ix[(j + 1) % 3] * ei[(j + 1) % 3];
-    Vec3 q = ix[(j + 2) % 3] * ei[(j + 2) % 3];
-    // Each clipping plane adds at most one vertex: the 4-gon becomes at most an 8-gon, so the manifold never
-    // exceeds kMaxContactsPerPair = 8 points and needs no reduction.
-    Vec3 polyA[8], polyB[8];
-    polyA[0] = fc + p + q;
-    polyA[1] = fc - p + q;
-    polyA[2] = fc - p - q;
-    polyA[3] = fc + p - q;
-    int n = 4;
-    const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-    Vec3 u = rx[k1], v = rx[k2];
-    n = clipPolygon(polyA, n, u, dot(u, cr) + er[k1], polyB, 8);
-    n = clipPolygon(polyB, n, -u, -dot(u, cr) + er[k1], polyA, 8);
-    n = clipPolygon(polyA, n, v, dot(v, cr) + er[k2], polyB, 8);
-    n = clipPolygon(polyB, n, -v, -dot(v, cr) + er[k2], polyA, 8);
-    int m = 0;
-    for (int i = 0; i < n; ++i) {
-      real s = dot(polyA[i] - refc, nr);
-      if (s < envelope) {
-        Vec3 onRef = polyA[i] - nr * s;
-        if (refIsA) setContact(out[m], nr, onRef, polyA[i], s, m);
-        else setContact(out[m], -nr, polyA[i], onRef, s, m);
-        ++m;
-      }
-    }
-    if (m > 0 || edgeI < 0) return m;
-    // No face point (a grazing edge configuration): fall back to the edge contact.
   }
-  // Edge-edge: the edge of a along ax[edgeI] and the edge of b along bx[edgeJ] that are extreme along L.
-  Vec3 L = edgeL * sgn1(dot(t, edgeL));
+  Vec3 fn = ix[j] * (dot(ix[j], nr) > 0 ? real(-1) : real(1));
+  Vec3 fc = ci + fn * ei[j];
+  Vec3 p = ix[(j + 1) % 3] * ei[(j + 1) % 3];
+  Vec3 q = ix[(j + 2) % 3] * ei[(j + 2) % 3];
+  // Each clipping plane adds at most one vertex: the 4-gon becomes at most an 8-gon, so the manifold never
+  // exceeds kMaxContactsPerPair = 8 points and needs no reduction.
+  Vec3 polyA[8], polyB[8];
+  polyA[0] = fc + p + q;
+  polyA[1] = fc - p + q;
+  polyA[2] = fc - p - q;
+  polyA[3] = fc + p - q;
+  int n = 4;
+  const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+  Vec3 u = rx[k1], v = rx[k2];
+  n = clipPolygon(polyA, n, u, dot(u, cr) + er[k1], polyB, 8);
+  n = clipPolygon(polyB, n, -u, -dot(u, cr) + er[k1], polyA, 8);
+  n = clipPolygon(polyA, n, v, dot(v, cr) + er[k2], polyB, 8);
+  n = clipPolygon(polyB, n, -v, -dot(v, cr) + er[k2], polyA, 8);
+  int m = 0;
+  for (int i = 0; i < n; ++i) {
+    real s = dot(polyA[i] - refc, nr);
+    if (s < envelope) {
+      Vec3 onRef = polyA[i] - nr * s;
+      if (refIsA) setContact(out[m], nr, onRef, polyA[i], s, m);
+      else setContact(out[m], -nr, polyA[i], onRef, s, m);
+      ++m;
+    }
+  }
+  return m;
+}
+
+// Edge-edge: the edge of a along ax[edgeI] and the edge of b along bx[edgeJ] that are extreme along L.
+DVI_HD int boxBoxEdgeContact(const BoxBoxAxes& g, const Pose& wa, const Pose& wb, real envelope,
+                             ContactPoint* out) {
+  const Vec3* ax = g.ax;
+  const Vec3* bx = g.bx;
+  const real* ea = g.ea;
+  const real* eb = g.eb;
+  const int edgeI = g.edgeI, edgeJ = g.edgeJ;
+  Vec3 L = g.edgeL * sgn1(dot(g.t, g.edgeL));
   Vec3 pA = wa.p, pB = wb.p;
   for (int q = 0; q < 3; ++q) {
     if (q != edgeI) pA += ax[q] * (sgn1(dot(ax[q], L)) * ea[q]);
@@ -201,6 +210,29 @@ DVI_HD_CALL int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, co
   if (!(dist < envelope)) return 0;
   setContact(out[0], L, qa, qb, dist, 0);
   return 1;
+}
+
+// Box a (half extents a.dims) at wa, box b at wb. Normals from a to b.
+DVI_HD_CALL int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
+                         ContactPoint* out) {
+  BoxBoxAxes g;
+  if (!boxBoxSeparatingAxes(a, wa, b, wb, envelope, g)) return 0;
+  // Prefer face axes (a over b) unless another axis separates clearly more: keeps the manifold's reference
+  // face, and so the feature numbering, stable for resting boxes.
+  // The tolerances are relative to the penetration (and a tiny fraction of the size), so the reported depth
+  // exceeds the minimum over the 15 axes by at most 0.1 %.
+  const real* ea = g.ea;
+  const real* eb = g.eb;
+  const real minExt = std::fmin(std::fmin(std::fmin(ea[0], ea[1]), std::fmin(ea[2], eb[0])), std::fmin(eb[1], eb[2]));
+  bool refIsA = !(g.sepB > g.sepA + real(1e-3) * std::fabs(g.sepA) + real(1e-7) * minExt);
+  real sepF = refIsA ? g.sepA : g.sepB;
+  bool useEdge = g.edgeI >= 0 && g.sepE > sepF + real(1e-3) * std::fabs(sepF) + real(1e-7) * minExt;
+  if (!useEdge) {
+    const int m = boxBoxFaceContacts(g, wa, wb, refIsA, envelope, out);
+    if (m > 0 || g.edgeI < 0) return m;
+    // No face point (a grazing edge configuration): fall back to the edge contact.
+  }
+  return boxBoxEdgeContact(g, wa, wb, envelope, out);
 }
 
 }  // namespace np

@@ -30,18 +30,32 @@ class NativeCollision final : public CollisionDetector {
 
   void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, ContactArrays& out,
               CollisionTimes& times) override {
-    const int64_t ns = int64_t(shapes.count());
-    const Shape* sh = shapes.shape.data();
-    const Vec3* hull = shapes.hull_points.data();
-
-    // ComputeAabbs: reads bodies.pos/rot, the free velocities, shapes.shape; writes shapes.sweep, shapes.aabb.
-    double t0 = omp_get_wtime();
-    shapes.aabb.resize(size_t(ns));
-    shapes.sweep.resize(size_t(ns));
-    const real h_sweep = config.speculative ? config.dt : real(0);
     const bool free_given = v_free_ && w_free_;
     const Vec3* vel = free_given ? v_free_ : bodies.vel.data();
     const Vec3* omega = free_given ? w_free_ : bodies.omega.data();
+    double t0 = omp_get_wtime();
+    computeAabbs(bodies, shapes, config, vel, omega);
+    double t1 = omp_get_wtime();
+    broadPhase(bodies, shapes, config, times);
+    double t2 = omp_get_wtime();
+    narrowPhase(bodies, shapes, config, vel, omega, out);
+    double t3 = omp_get_wtime();
+    times.aabbs = t1 - t0;
+    times.broad = t2 - t1;
+    times.narrow = t3 - t2;
+    times.pairs = int64_t(pairs_.size());
+  }
+
+ private:
+  // ComputeAabbs: reads bodies.pos/rot, the free velocities, shapes.shape; writes shapes.sweep, shapes.aabb.
+  static void computeAabbs(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
+                           const Vec3* vel, const Vec3* omega) {
+    const int64_t ns = int64_t(shapes.count());
+    const Shape* sh = shapes.shape.data();
+    const Vec3* hull = shapes.hull_points.data();
+    shapes.aabb.resize(size_t(ns));
+    shapes.sweep.resize(size_t(ns));
+    const real h_sweep = config.speculative ? config.dt : real(0);
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < ns; ++i) {
       const Shape& s = sh[i];
@@ -50,11 +64,15 @@ class NativeCollision final : public CollisionDetector {
       shapes.sweep[i] = sweep;
       shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, config.envelope_rel, sweep));
     }
-    double t1 = omp_get_wtime();
+  }
 
-    // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
-    // fat_flags_ when it builds). Last step's pairs are kept while every box is inside its grown box
-    // (broadphase_kernels.h: pairsStillHold); else a build on the boxes grown by pair_margin x the last edge.
+  // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
+  // fat_flags_ when it builds). Last step's pairs are kept while every box is inside its grown box
+  // (broadphase_kernels.h: pairsStillHold); else a build on the boxes grown by pair_margin x the last edge.
+  void broadPhase(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config,
+                  CollisionTimes& times) {
+    const int64_t ns = int64_t(shapes.count());
+    const Shape* sh = shapes.shape.data();
     const real f = config.pair_margin;
     const uint8_t* flags = bodies.flags.data();
     bool keep = f > real(0) && built_ && int64_t(fat_.size()) == ns;
@@ -80,10 +98,14 @@ class NativeCollision final : public CollisionDetector {
     }
     times.broad_stats = last_stats_;
     times.pairs_reused = keep;
-    double t2 = omp_get_wtime();
+  }
 
-    // NarrowPhase: reads pairs_, poses, velocities, shapes; writes the contact arrays (speculative points of
-    // pairs that do not close within the step left out: narrowphase.h keepSpeculative).
+  // NarrowPhase: reads pairs_, poses, velocities, shapes; writes the contact arrays (speculative points of
+  // pairs that do not close within the step left out: narrowphase.h keepSpeculative).
+  void narrowPhase(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config,
+                   const Vec3* vel, const Vec3* omega, ContactArrays& out) {
+    const Shape* sh = shapes.shape.data();
+    const Vec3* hull = shapes.hull_points.data();
     const int64_t np = int64_t(pairs_.size());
     const int64_t nblocks = (np + kPairsPerBlock - 1) / kPairsPerBlock;
     if (int64_t(blocks_.size()) < nblocks) blocks_.resize(size_t(nblocks));
@@ -107,6 +129,11 @@ class NativeCollision final : public CollisionDetector {
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }
     }
+    writeContacts(sh, nblocks, out);
+  }
+
+  // The blocks' contacts into the contact arrays, in pair order.
+  void writeContacts(const Shape* sh, int64_t nblocks, ContactArrays& out) {
     offsets_.assign(size_t(nblocks) + 1, 0);
     for (int64_t blk = 0; blk < nblocks; ++blk) offsets_[blk + 1] = offsets_[blk] + int64_t(blocks_[blk].size());
     out.resize(size_t(offsets_[nblocks]));
@@ -127,14 +154,8 @@ class NativeCollision final : public CollisionDetector {
         ++k;
       }
     }
-    double t3 = omp_get_wtime();
-    times.aabbs = t1 - t0;
-    times.broad = t2 - t1;
-    times.narrow = t3 - t2;
-    times.pairs = np;
   }
 
- private:
   BroadPhaseBins broad_;
   std::vector<ShapePair> pairs_;
   // pair reuse: the grown boxes and body flags of the last build, its bin edge and statistics

@@ -151,6 +151,77 @@ DVI_HD Vec3 np::supportCoreLocal(const Shape& s, Vec3 d, const Vec3* hull_points
 
 namespace np {
 
+// supportNearLocal of a convex hull (u: the unit direction, tol: the tie tolerance).
+DVI_HD Vec3 hullSupportNear(const Shape& s, Vec3 d, Vec3 u, Vec3 t, real tol, const Vec3* hull_points) {
+  // Nearest point to t of the support face conv(T), T = the points within the tie tolerance of the
+  // maximum, by Frank-Wolfe steps (exact line search) from the nearest point of T: continuous in t and
+  // the pose, and on the face by construction (a convex combination of its points).
+  const Vec3* p = hull_points + s.hull_start;
+  if (s.hull_count <= 0) return Vec3{0, 0, 0};
+  Vec3 sp = supportLocal(s, d, hull_points);
+  const real hmax = dot(sp, u);
+  const real htol = tol * (maxAbs3(sp) + s.size);
+  Vec3 x = sp;
+  real bd = length2(sp - t);
+  for (int i = 0; i < s.hull_count; ++i) {
+    if (dot(p[i], u) < hmax - htol) continue;
+    real dd = length2(p[i] - t);
+    if (dd < bd) {
+      bd = dd;
+      x = p[i];
+    }
+  }
+  for (int it = 0; it < 24; ++it) {
+    Vec3 g = x - t;
+    int sbest = -1;
+    real sv = 0;
+    for (int i = 0; i < s.hull_count; ++i) {
+      if (dot(p[i], u) < hmax - htol) continue;
+      real v = dot(p[i], g);
+      if (sbest < 0 || v < sv) {
+        sv = v;
+        sbest = i;
+      }
+    }
+    if (sbest < 0) break;
+    Vec3 e = p[sbest] - x;
+    real ee = length2(e);
+    real gap = -dot(g, e);
+    if (!(ee > real(0)) || gap <= real(1e-12) * (length2(g) + ee)) break;
+    x += e * clampr(gap / ee, 0, 1);
+  }
+  return x;
+}
+
+// supportNearLocal of a triangle (u: the unit direction, tol: the tie tolerance).
+DVI_HD Vec3 triangleSupportNear(const Shape& s, Vec3 u, Vec3 t, real tol) {
+  const Vec3 p[3] = {Vec3{s.dims.x, 0, s.dims.y}, Vec3{s.dims.z, 0, s.plane_d},
+                     -(Vec3{s.dims.x, 0, s.dims.y} + Vec3{s.dims.z, 0, s.plane_d})};
+  real h[3], hmax = real(-1e30);
+  for (int i = 0; i < 3; ++i) hmax = std::fmax(hmax, h[i] = dot(p[i], u));
+  const real htol = tol * (maxAbs3(p[0]) + maxAbs3(p[1]) + s.size);
+  int on[3], k = 0;
+  for (int i = 0; i < 3; ++i)
+    if (h[i] >= hmax - htol) on[k++] = i;
+  if (k == 1) return p[on[0]];
+  if (k == 2) {
+    Vec3 ab = p[on[1]] - p[on[0]];
+    real l2 = dot(ab, ab);
+    return l2 > real(0) ? p[on[0]] + ab * clampr(dot(t - p[on[0]], ab) / l2, 0, 1) : p[on[0]];
+  }
+  // The whole face: t projected on the plane (y = 0) and clamped into the triangle by edges.
+  Vec3 q{t.x, 0, t.z};
+  for (int i = 0; i < 3; ++i) {
+    Vec3 e = p[(i + 1) % 3] - p[i];
+    Vec3 inward = cross(Vec3{0, 1, 0}, e);
+    if (dot(inward, q - p[i]) < 0) {  // outside this edge: nearest point of the edge
+      real l2 = dot(e, e);
+      q = l2 > real(0) ? p[i] + e * clampr(dot(q - p[i], e) / l2, 0, 1) : p[i];
+    }
+  }
+  return q;
+}
+
 // A support point of the whole shape (sweep radius included) in local direction d, chosen on the support
 // face F(d) (points within the tie tolerance of the maximum) as the point nearest `t`: F(d) is a box face,
 // edge or vertex (clamp the free coordinates), a cylinder cap disc, side line or rim point, a cone base disc,
@@ -200,73 +271,8 @@ DVI_HD_CALL Vec3 supportNearLocal(const Shape& s, Vec3 d, Vec3 t, const Vec3* hu
       }
       return supportLocal(s, d, hull_points);
     }
-    case ShapeType::ConvexHull: {
-      // Nearest point to t of the support face conv(T), T = the points within the tie tolerance of the
-      // maximum, by Frank-Wolfe steps (exact line search) from the nearest point of T: continuous in t and
-      // the pose, and on the face by construction (a convex combination of its points).
-      const Vec3* p = hull_points + s.hull_start;
-      if (s.hull_count <= 0) return Vec3{0, 0, 0};
-      Vec3 sp = supportLocal(s, d, hull_points);
-      const real hmax = dot(sp, u);
-      const real htol = tol * (maxAbs3(sp) + s.size);
-      Vec3 x = sp;
-      real bd = length2(sp - t);
-      for (int i = 0; i < s.hull_count; ++i) {
-        if (dot(p[i], u) < hmax - htol) continue;
-        real dd = length2(p[i] - t);
-        if (dd < bd) {
-          bd = dd;
-          x = p[i];
-        }
-      }
-      for (int it = 0; it < 24; ++it) {
-        Vec3 g = x - t;
-        int sbest = -1;
-        real sv = 0;
-        for (int i = 0; i < s.hull_count; ++i) {
-          if (dot(p[i], u) < hmax - htol) continue;
-          real v = dot(p[i], g);
-          if (sbest < 0 || v < sv) {
-            sv = v;
-            sbest = i;
-          }
-        }
-        if (sbest < 0) break;
-        Vec3 e = p[sbest] - x;
-        real ee = length2(e);
-        real gap = -dot(g, e);
-        if (!(ee > real(0)) || gap <= real(1e-12) * (length2(g) + ee)) break;
-        x += e * clampr(gap / ee, 0, 1);
-      }
-      return x;
-    }
-    case ShapeType::Triangle: {  // the support face: a vertex, an edge or the whole triangle, nearest t
-      const Vec3 p[3] = {Vec3{s.dims.x, 0, s.dims.y}, Vec3{s.dims.z, 0, s.plane_d},
-                         -(Vec3{s.dims.x, 0, s.dims.y} + Vec3{s.dims.z, 0, s.plane_d})};
-      real h[3], hmax = real(-1e30);
-      for (int i = 0; i < 3; ++i) hmax = std::fmax(hmax, h[i] = dot(p[i], u));
-      const real htol = tol * (maxAbs3(p[0]) + maxAbs3(p[1]) + s.size);
-      int on[3], k = 0;
-      for (int i = 0; i < 3; ++i)
-        if (h[i] >= hmax - htol) on[k++] = i;
-      if (k == 1) return p[on[0]];
-      if (k == 2) {
-        Vec3 ab = p[on[1]] - p[on[0]];
-        real l2 = dot(ab, ab);
-        return l2 > real(0) ? p[on[0]] + ab * clampr(dot(t - p[on[0]], ab) / l2, 0, 1) : p[on[0]];
-      }
-      // The whole face: t projected on the plane (y = 0) and clamped into the triangle by edges.
-      Vec3 q{t.x, 0, t.z};
-      for (int i = 0; i < 3; ++i) {
-        Vec3 e = p[(i + 1) % 3] - p[i];
-        Vec3 inward = cross(Vec3{0, 1, 0}, e);
-        if (dot(inward, q - p[i]) < 0) {  // outside this edge: nearest point of the edge
-          real l2 = dot(e, e);
-          q = l2 > real(0) ? p[i] + e * clampr(dot(q - p[i], e) / l2, 0, 1) : p[i];
-        }
-      }
-      return q;
-    }
+    case ShapeType::ConvexHull: return hullSupportNear(s, d, u, t, tol, hull_points);
+    case ShapeType::Triangle: return triangleSupportNear(s, u, t, tol);
     default: return supportLocal(s, d, hull_points);  // sphere, ellipsoid: a single point
   }
 }
