@@ -151,6 +151,9 @@ class BulletCollision final : public CollisionDetector {
   bool needsRebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config) const;
   void rebuild(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config);
   void destroyWorld();
+  void updateAabbs(const BodyArrays& bodies, ShapeArrays& shapes, real rel);
+  void collectManifoldPoints(const BodyArrays& bodies, const ShapeArrays& shapes, real rel);
+  void writeContacts(const ShapeArrays& shapes, ContactArrays& out) const;
   btCollisionShape* makeShape(const Shape& s, const std::vector<Vec3>& hull, real size);
   int32_t shapeOf(int object, int child_index) const {
     const ObjectInfo& o = objects_[size_t(object)];
@@ -387,11 +390,29 @@ void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, cons
                              ContactArrays& out, CollisionTimes& times) {
   const auto t0 = Clock::now();
   if (needsRebuild(bodies, shapes, config)) rebuild(bodies, shapes, config);
-  const size_t ns = shapes.count();
-  const real rel = config.envelope_rel;
+  updateAabbs(bodies, shapes, config.envelope_rel);
+  const auto t1 = Clock::now();
 
-  // Poses and AABBs (ours for shapes.aabb; union of the object's shapes for the dbvt).
-  shapes.aabb.resize(ns);
+  world_->computeOverlappingPairs();
+  const auto t2 = Clock::now();
+
+  btOverlappingPairCache* cache = world_->getPairCache();
+  dispatcher_->dispatchAllCollisionPairs(cache, world_->getDispatchInfo(), dispatcher_.get());
+  collectManifoldPoints(bodies, shapes, config.envelope_rel);
+  writeContacts(shapes, out);
+  const auto t3 = Clock::now();
+
+  times.aabbs = seconds(t0, t1);
+  times.broad = seconds(t1, t2);
+  times.narrow = seconds(t2, t3);
+  times.pairs = cache->getNumOverlappingPairs();
+  times.broad_stats = BroadPhaseStats{};
+  times.broad_stats.pairs = times.pairs;
+}
+
+// Poses and AABBs (ours for shapes.aabb; union of the object's shapes for the dbvt).
+void BulletCollision::updateAabbs(const BodyArrays& bodies, ShapeArrays& shapes, real rel) {
+  shapes.aabb.resize(shapes.count());
   const real big = real(1e30);
   for (size_t oi = 0; oi < objects_.size(); ++oi) {
     const ObjectInfo& o = objects_[oi];
@@ -418,15 +439,10 @@ void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, cons
     }
     broadphase_->setAabbForceUpdate(obj->getBroadphaseHandle(), olo, ohi, dispatcher_.get());
   }
-  const auto t1 = Clock::now();
+}
 
-  world_->computeOverlappingPairs();
-  const auto t2 = Clock::now();
-
-  btOverlappingPairCache* cache = world_->getPairCache();
-  dispatcher_->dispatchAllCollisionPairs(cache, world_->getDispatchInfo(), dispatcher_.get());
-
-  // Manifold points -> our contacts.
+// Manifold points -> raw_ (our shapes, a < b, within the envelope), sorted by (shape pair, manifold, point).
+void BulletCollision::collectManifoldPoints(const BodyArrays& bodies, const ShapeArrays& shapes, real rel) {
   raw_.clear();
   const int nm = dispatcher_->getNumManifolds();
   for (int mi = 0; mi < nm; ++mi) {
@@ -460,7 +476,11 @@ void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, cons
     if (x.manifold != y.manifold) return x.manifold < y.manifold;
     return x.point < y.point;
   });
+}
 
+// raw_ -> the contact arrays; a point's feature is its manifold slot, offset by the manifolds seen before for the
+// same shape pair.
+void BulletCollision::writeContacts(const ShapeArrays& shapes, ContactArrays& out) const {
   out.resize(raw_.size());
   int32_t rank = 0;  // manifolds seen before this one for the same shape pair (normally 0)
   for (size_t i = 0; i < raw_.size(); ++i) {
@@ -481,14 +501,6 @@ void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, cons
     out.dist[i] = r.dist;
     out.key[i] = contactKey(r.sa, r.sb, feature);
   }
-  const auto t3 = Clock::now();
-
-  times.aabbs = seconds(t0, t1);
-  times.broad = seconds(t1, t2);
-  times.narrow = seconds(t2, t3);
-  times.pairs = cache->getNumOverlappingPairs();
-  times.broad_stats = BroadPhaseStats{};
-  times.broad_stats.pairs = times.pairs;
 }
 
 }  // namespace

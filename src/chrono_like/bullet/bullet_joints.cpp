@@ -84,6 +84,117 @@ std::string constraintTypeName(int type) {
   }
 }
 
+namespace {
+
+// The joint specification of each Bullet constraint type (j holds the two bodies already).
+void hingeSpec(btHingeConstraint& h, JointSpec& j) {
+  j.kind = "hinge";
+  j.frame_a = fromBt(h.getAFrame());
+  j.frame_b = fromBt(h.getBFrame());
+  for (auto& a : j.lin) a = JointSpec::Axis::Locked;
+  j.ang = JointSpec::Angular::Hinge;
+  j.hinge_axis = 2;
+  // Bullet's hinge angle is s * theta with s = -referenceSign (referenceSign = -1 with reference frame A).
+  const real s = h.getUseReferenceFrameA() ? real(1) : real(-1);
+  if (h.hasLimit()) {
+    j.hinge_limit = true;
+    const real lo = s * real(h.getLowerLimit()), hi = s * real(h.getUpperLimit());
+    j.hinge_lo = std::min(lo, hi);
+    j.hinge_hi = std::max(lo, hi);
+  }
+  if (h.getEnableAngularMotor()) {
+    j.hinge_motor = true;
+    j.hinge_motor_velocity = s * real(h.getMotorTargetVelocity());
+    j.hinge_motor_max_impulse = real(h.getMaxMotorImpulse());
+  }
+}
+
+void sliderSpec(btSliderConstraint& s, JointSpec& j) {
+  j.kind = "slider";
+  j.frame_a = fromBt(s.getFrameOffsetA());
+  j.frame_b = fromBt(s.getFrameOffsetB());
+  const real lo = s.getLowerLinLimit(), hi = s.getUpperLinLimit();
+  j.lin[0] = lo == hi ? JointSpec::Axis::Locked : (lo > hi ? JointSpec::Axis::Free : JointSpec::Axis::Limited);
+  j.lin_lo[0] = lo;
+  j.lin_hi[0] = hi;
+  j.lin[1] = j.lin[2] = JointSpec::Axis::Locked;
+  const real alo = s.getLowerAngLimit(), ahi = s.getUpperAngLimit();
+  if (alo == ahi && alo == 0) {
+    j.ang = JointSpec::Angular::Locked;
+  } else if (alo > ahi) {
+    j.ang = JointSpec::Angular::Hinge;
+    j.hinge_axis = 0;
+  } else {
+    throw InputError("slider: an angular limit range or a non-zero locked angle is not supported");
+  }
+  if (s.getPoweredAngMotor()) throw InputError("slider: an angular motor is not supported");
+  if (s.getPoweredLinMotor()) {
+    j.lin_motor = true;
+    j.lin_motor_velocity = s.getTargetLinMotorVelocity();
+    j.lin_motor_max_force = s.getMaxLinMotorForce();
+  }
+}
+
+// btGeneric6DofConstraint, and its spring form.
+void dof6Spec(btGeneric6DofConstraint& g, bool spring, JointSpec& j) {
+  j.kind = spring ? "generic 6-DoF spring" : "generic 6-DoF";
+  j.frame_a = fromBt(g.getFrameOffsetA());
+  j.frame_b = fromBt(g.getFrameOffsetB());
+  Dof6 d;
+  btVector3 llo, lhi, alo, ahi;
+  g.getLinearLowerLimit(llo);
+  g.getLinearUpperLimit(lhi);
+  g.getAngularLowerLimit(alo);
+  g.getAngularUpperLimit(ahi);
+  for (int i = 0; i < 3; ++i) {
+    d.lo[i] = llo[i];
+    d.hi[i] = lhi[i];
+    d.lo[3 + i] = alo[i];
+    d.hi[3 + i] = ahi[i];
+    d.motor[i] = g.getTranslationalLimitMotor()->m_enableMotor[i];
+    d.motor[3 + i] = g.getRotationalLimitMotor(i)->m_enableMotor;
+  }
+  if (spring) {
+    auto& sp = static_cast<btGeneric6DofSpringConstraint&>(g);
+    for (int i = 0; i < 6; ++i) {
+      d.spring[i] = sp.isSpringEnabled(i);
+      d.k[i] = sp.getStiffness(i);
+      d.c[i] = 0;  // Bullet's damping here is a motor factor, not a physical coefficient (docs/DROP_IN.md)
+      d.eq[i] = sp.getEquilibriumPoint(i);
+    }
+  }
+  fromDof6(d, j.kind, j);
+}
+
+// btGeneric6DofSpring2Constraint, and btFixedConstraint (one of them with every axis locked).
+void dof6Spring2Spec(btGeneric6DofSpring2Constraint& g, bool fixed, JointSpec& j) {
+  j.kind = fixed ? "fixed" : "generic 6-DoF spring 2";
+  j.frame_a = fromBt(g.getFrameOffsetA());
+  j.frame_b = fromBt(g.getFrameOffsetB());
+  Dof6 d;
+  btTranslationalLimitMotor2* t = g.getTranslationalLimitMotor();
+  for (int i = 0; i < 3; ++i) {
+    btRotationalLimitMotor2* r = g.getRotationalLimitMotor(i);
+    d.lo[i] = t->m_lowerLimit[i];
+    d.hi[i] = t->m_upperLimit[i];
+    d.motor[i] = t->m_enableMotor[i];
+    d.spring[i] = t->m_enableSpring[i];
+    d.k[i] = t->m_springStiffness[i];
+    d.c[i] = t->m_springDamping[i];
+    d.eq[i] = t->m_equilibriumPoint[i];
+    d.lo[3 + i] = r->m_loLimit;
+    d.hi[3 + i] = r->m_hiLimit;
+    d.motor[3 + i] = r->m_enableMotor;
+    d.spring[3 + i] = r->m_enableSpring;
+    d.k[3 + i] = r->m_springStiffness;
+    d.c[3 + i] = r->m_springDamping;
+    d.eq[3 + i] = r->m_equilibriumPoint;
+  }
+  fromDof6(d, j.kind, j);
+}
+
+}  // namespace
+
 JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
   JointSpec j;
   j.a = &c.getRigidBodyA();
@@ -99,117 +210,16 @@ JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
       j.ang = JointSpec::Angular::Free;
       return j;
     }
-    case HINGE_CONSTRAINT_TYPE: {
-      auto& h = static_cast<btHingeConstraint&>(mc);
-      j.kind = "hinge";
-      j.frame_a = fromBt(h.getAFrame());
-      j.frame_b = fromBt(h.getBFrame());
-      for (auto& a : j.lin) a = JointSpec::Axis::Locked;
-      j.ang = JointSpec::Angular::Hinge;
-      j.hinge_axis = 2;
-      // Bullet's hinge angle is s * theta with s = -referenceSign (referenceSign = -1 with reference frame A).
-      const real s = h.getUseReferenceFrameA() ? real(1) : real(-1);
-      if (h.hasLimit()) {
-        j.hinge_limit = true;
-        const real lo = s * real(h.getLowerLimit()), hi = s * real(h.getUpperLimit());
-        j.hinge_lo = std::min(lo, hi);
-        j.hinge_hi = std::max(lo, hi);
-      }
-      if (h.getEnableAngularMotor()) {
-        j.hinge_motor = true;
-        j.hinge_motor_velocity = s * real(h.getMotorTargetVelocity());
-        j.hinge_motor_max_impulse = real(h.getMaxMotorImpulse());
-      }
-      return j;
-    }
-    case SLIDER_CONSTRAINT_TYPE: {
-      auto& s = static_cast<btSliderConstraint&>(mc);
-      j.kind = "slider";
-      j.frame_a = fromBt(s.getFrameOffsetA());
-      j.frame_b = fromBt(s.getFrameOffsetB());
-      const real lo = s.getLowerLinLimit(), hi = s.getUpperLinLimit();
-      j.lin[0] = lo == hi ? JointSpec::Axis::Locked : (lo > hi ? JointSpec::Axis::Free : JointSpec::Axis::Limited);
-      j.lin_lo[0] = lo;
-      j.lin_hi[0] = hi;
-      j.lin[1] = j.lin[2] = JointSpec::Axis::Locked;
-      const real alo = s.getLowerAngLimit(), ahi = s.getUpperAngLimit();
-      if (alo == ahi && alo == 0) {
-        j.ang = JointSpec::Angular::Locked;
-      } else if (alo > ahi) {
-        j.ang = JointSpec::Angular::Hinge;
-        j.hinge_axis = 0;
-      } else {
-        throw InputError("slider: an angular limit range or a non-zero locked angle is not supported");
-      }
-      if (s.getPoweredAngMotor()) throw InputError("slider: an angular motor is not supported");
-      if (s.getPoweredLinMotor()) {
-        j.lin_motor = true;
-        j.lin_motor_velocity = s.getTargetLinMotorVelocity();
-        j.lin_motor_max_force = s.getMaxLinMotorForce();
-      }
-      return j;
-    }
+    case HINGE_CONSTRAINT_TYPE: hingeSpec(static_cast<btHingeConstraint&>(mc), j); return j;
+    case SLIDER_CONSTRAINT_TYPE: sliderSpec(static_cast<btSliderConstraint&>(mc), j); return j;
     case D6_CONSTRAINT_TYPE:
-    case D6_SPRING_CONSTRAINT_TYPE: {
-      auto& g = static_cast<btGeneric6DofConstraint&>(mc);
-      const bool spring = c.getConstraintType() == D6_SPRING_CONSTRAINT_TYPE;
-      j.kind = spring ? "generic 6-DoF spring" : "generic 6-DoF";
-      j.frame_a = fromBt(g.getFrameOffsetA());
-      j.frame_b = fromBt(g.getFrameOffsetB());
-      Dof6 d;
-      btVector3 llo, lhi, alo, ahi;
-      g.getLinearLowerLimit(llo);
-      g.getLinearUpperLimit(lhi);
-      g.getAngularLowerLimit(alo);
-      g.getAngularUpperLimit(ahi);
-      for (int i = 0; i < 3; ++i) {
-        d.lo[i] = llo[i];
-        d.hi[i] = lhi[i];
-        d.lo[3 + i] = alo[i];
-        d.hi[3 + i] = ahi[i];
-        d.motor[i] = g.getTranslationalLimitMotor()->m_enableMotor[i];
-        d.motor[3 + i] = g.getRotationalLimitMotor(i)->m_enableMotor;
-      }
-      if (spring) {
-        auto& sp = static_cast<btGeneric6DofSpringConstraint&>(mc);
-        for (int i = 0; i < 6; ++i) {
-          d.spring[i] = sp.isSpringEnabled(i);
-          d.k[i] = sp.getStiffness(i);
-          d.c[i] = 0;  // Bullet's damping here is a motor factor, not a physical coefficient (docs/DROP_IN.md)
-          d.eq[i] = sp.getEquilibriumPoint(i);
-        }
-      }
-      fromDof6(d, j.kind, j);
+    case D6_SPRING_CONSTRAINT_TYPE:
+      dof6Spec(static_cast<btGeneric6DofConstraint&>(mc), c.getConstraintType() == D6_SPRING_CONSTRAINT_TYPE, j);
       return j;
-    }
     case FIXED_CONSTRAINT_TYPE:
-    case D6_SPRING_2_CONSTRAINT_TYPE: {
-      auto& g = static_cast<btGeneric6DofSpring2Constraint&>(mc);
-      j.kind = c.getConstraintType() == FIXED_CONSTRAINT_TYPE ? "fixed" : "generic 6-DoF spring 2";
-      j.frame_a = fromBt(g.getFrameOffsetA());
-      j.frame_b = fromBt(g.getFrameOffsetB());
-      Dof6 d;
-      btTranslationalLimitMotor2* t = g.getTranslationalLimitMotor();
-      for (int i = 0; i < 3; ++i) {
-        btRotationalLimitMotor2* r = g.getRotationalLimitMotor(i);
-        d.lo[i] = t->m_lowerLimit[i];
-        d.hi[i] = t->m_upperLimit[i];
-        d.motor[i] = t->m_enableMotor[i];
-        d.spring[i] = t->m_enableSpring[i];
-        d.k[i] = t->m_springStiffness[i];
-        d.c[i] = t->m_springDamping[i];
-        d.eq[i] = t->m_equilibriumPoint[i];
-        d.lo[3 + i] = r->m_loLimit;
-        d.hi[3 + i] = r->m_hiLimit;
-        d.motor[3 + i] = r->m_enableMotor;
-        d.spring[3 + i] = r->m_enableSpring;
-        d.k[3 + i] = r->m_springStiffness;
-        d.c[3 + i] = r->m_springDamping;
-        d.eq[3 + i] = r->m_equilibriumPoint;
-      }
-      fromDof6(d, j.kind, j);
+    case D6_SPRING_2_CONSTRAINT_TYPE:
+      dof6Spring2Spec(static_cast<btGeneric6DofSpring2Constraint&>(mc), c.getConstraintType() == FIXED_CONSTRAINT_TYPE, j);
       return j;
-    }
     default:
       throw InputError("unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
                        " (supported: point-to-point, hinge, slider, fixed, generic 6-DoF [spring, spring 2])");

@@ -369,150 +369,231 @@ struct Block {
   uint64_t old;
 };
 
-// The checked copy of `file` (see above). Throws InputError naming `origin` and the problem.
-// `rigid_bodies` receives the number of rigid-body blocks kept.
-inline std::string sanitizeBulletFile(const std::string& file, const std::string& origin, int max_compound_depth,
-                                      int64_t* rigid_bodies = nullptr) {
-  const Fail fail{origin};
-  auto refuse = [&](const std::string& what) { throw InputError(origin + ": " + what); };
-  const char* buf = file.data();
-  const int64_t size = int64_t(file.size());
-  if (size == 0) refuse("file is empty");
-  if (size < 12 || file.compare(0, 6, "BULLET") != 0) refuse("not a .bullet file (no BULLET header)");
-  if (buf[6] != 'f' && buf[6] != 'd') refuse("not a .bullet file (bad precision byte)");
-  if (buf[7] != '-' && buf[7] != '_') refuse("not a .bullet file (bad pointer-size byte)");
-  if (buf[8] != 'v' && buf[8] != 'V') refuse("not a .bullet file (bad endianness byte)");
-  for (int i = 9; i < 12; ++i)
-    if (!std::isdigit(static_cast<unsigned char>(buf[i]))) refuse("not a .bullet file (bad version)");
-  if (buf[7] == '_') refuse("written by a 32-bit program (4-byte pointers): not supported, re-export it from a 64-bit build");
-  if (buf[8] == 'V') refuse("big-endian .bullet file: not supported, re-export it on a little-endian machine");
-  if (std::memcmp(buf + 9, "276", 3) == 0) refuse("Bullet 2.76 file (its broken DNA is not supported)");
-  const bool dbl = buf[6] == 'd';
+// The walk of sanitizeBulletFile: one file's blocks, its DNA, and what has been checked and kept so far.
+class FileChecker {
+ public:
+  static constexpr int64_t kHead = 24;                         // a block header's bytes
+  static constexpr int64_t kMaxExpanded = int64_t(1) << 24;    // primitives the shapes may expand to
 
-  // Blocks up to the DNA, as btBulletFile::parseData walks them.
-  constexpr int64_t kHead = 24;
-  std::vector<Block> blocks;
-  int64_t at = 12, dna_at = -1;
-  while (dna_at < 0) {
-    if (size - at < kHead)
-      refuse("truncated or corrupt .bullet file (incomplete block header at byte " + std::to_string(at) + ")");
-    Block b;
-    b.at = at;
-    b.code = std::string(buf + at, 4);
-    b.len = rd32(buf + at + 4);
-    b.old = rd64(buf + at + 8);
-    b.dna = rd32(buf + at + 16);
-    b.nr = rd32(buf + at + 20);
-    if (b.len < 0 || int64_t(b.len) > size - at - kHead)
-      refuse("truncated or corrupt .bullet file (block '" + code4(buf + at) + "' at byte " + std::to_string(at) +
-             " runs past the end of the file)");
-    if (b.len % 4) fail("block '" + code4(buf + at) + "' at byte " + std::to_string(at) + " has length " + std::to_string(b.len) + ", not a multiple of 4");
-    if (b.code == "SDNA") fail("SDNA block before the DNA block");
-    if (b.code == "DNA1") dna_at = at;
-    else blocks.push_back(b);
-    at += kHead + b.len;
+  FileChecker(const std::string& file, const std::string& origin, int max_compound_depth)
+      : fail(Fail{origin}), origin_(origin), max_depth_(max_compound_depth), buf_(file.data()),
+        size_(int64_t(file.size())) {}
+
+  // The header; returns whether the file is in double precision.
+  bool checkHeader() const {
+    const char* buf = buf_;
+    if (size_ == 0) refuse("file is empty");
+    if (size_ < 12 || std::memcmp(buf, "BULLET", 6) != 0) refuse("not a .bullet file (no BULLET header)");
+    if (buf[6] != 'f' && buf[6] != 'd') refuse("not a .bullet file (bad precision byte)");
+    if (buf[7] != '-' && buf[7] != '_') refuse("not a .bullet file (bad pointer-size byte)");
+    if (buf[8] != 'v' && buf[8] != 'V') refuse("not a .bullet file (bad endianness byte)");
+    for (int i = 9; i < 12; ++i)
+      if (!std::isdigit(static_cast<unsigned char>(buf[i]))) refuse("not a .bullet file (bad version)");
+    if (buf[7] == '_') refuse("written by a 32-bit program (4-byte pointers): not supported, re-export it from a 64-bit build");
+    if (buf[8] == 'V') refuse("big-endian .bullet file: not supported, re-export it on a little-endian machine");
+    if (std::memcmp(buf + 9, "276", 3) == 0) refuse("Bullet 2.76 file (its broken DNA is not supported)");
+    return buf[6] == 'd';
   }
-  const int32_t dna_len = rd32(buf + dna_at + 4);
-  if (dna_len < 8 || std::memcmp(buf + dna_at + kHead, "SDNANAME", 8) != 0) fail("bad DNA block");
-  Dna dna;
-  dna.parse(buf + dna_at + kHead, buf + dna_at + kHead + dna_len, fail, "DNA");
-  const Dna& mem = memoryDna();
 
-  // Blocks by old pointer (Bullet resolves a pointer only to the start of a block).
-  std::unordered_map<uint64_t, size_t> by_old;
-  for (size_t i = 0; i < blocks.size(); ++i) {
-    const Block& b = blocks[i];
-    if (b.old == 0) fail("block '" + code4(buf + b.at) + "' at byte " + std::to_string(b.at) + " has a null address");
-    if (!by_old.emplace(b.old, i).second)
-      fail("two blocks with the address " + std::to_string(b.old) + " (at bytes " + std::to_string(blocks[by_old[b.old]].at) +
-           " and " + std::to_string(b.at) + ")");
-    if (b.dna >= int32_t(dna.structs.size()))
-      fail("block '" + code4(buf + b.at) + "' at byte " + std::to_string(b.at) + " has struct index " + std::to_string(b.dna) + " out of range");
-    if (b.dna >= 0) {
-      if (b.nr < 1) fail("block '" + code4(buf + b.at) + "' at byte " + std::to_string(b.at) + " has " + std::to_string(b.nr) + " elements");
-      if (int64_t(b.nr) * dna.structLen(b.dna) > int64_t(b.len))
-        fail("block '" + code4(buf + b.at) + "' at byte " + std::to_string(b.at) + " is shorter than its " +
-             std::to_string(b.nr) + " " + dna.structName(b.dna) + " elements");
+  // Blocks up to the DNA, as btBulletFile::parseData walks them, and the DNA.
+  void readBlocks() {
+    const char* buf = buf_;
+    int64_t at = 12;
+    while (dna_at_ < 0) {
+      if (size_ - at < kHead)
+        refuse("truncated or corrupt .bullet file (incomplete block header at byte " + std::to_string(at) + ")");
+      Block b;
+      b.at = at;
+      b.code = std::string(buf + at, 4);
+      b.len = rd32(buf + at + 4);
+      b.old = rd64(buf + at + 8);
+      b.dna = rd32(buf + at + 16);
+      b.nr = rd32(buf + at + 20);
+      if (b.len < 0 || int64_t(b.len) > size_ - at - kHead)
+        refuse("truncated or corrupt .bullet file (block '" + code4(buf + at) + "' at byte " + std::to_string(at) +
+               " runs past the end of the file)");
+      if (b.len % 4) fail("block '" + code4(buf + at) + "' at byte " + std::to_string(at) + " has length " + std::to_string(b.len) + ", not a multiple of 4");
+      if (b.code == "SDNA") fail("SDNA block before the DNA block");
+      if (b.code == "DNA1") dna_at_ = at;
+      else blocks_.push_back(b);
+      at += kHead + b.len;
+    }
+    dna_len_ = rd32(buf + dna_at_ + 4);
+    if (dna_len_ < 8 || std::memcmp(buf + dna_at_ + kHead, "SDNANAME", 8) != 0) fail("bad DNA block");
+    dna_.parse(buf + dna_at_ + kHead, buf + dna_at_ + kHead + dna_len_, fail, "DNA");
+    keep_.assign(blocks_.size(), -1);
+    struct_checked_.assign(dna_.structs.size(), 0);
+    on_stack_.assign(blocks_.size(), 0);
+    shape_done_.assign(blocks_.size(), 0);
+    height_.assign(blocks_.size(), 0);
+    expanded_.assign(blocks_.size(), 1);
+  }
+
+  // Blocks by old pointer (Bullet resolves a pointer only to the start of a block), each block's struct index and
+  // element count.
+  void indexBlocks() {
+    for (size_t i = 0; i < blocks_.size(); ++i) {
+      const Block& b = blocks_[i];
+      if (b.old == 0) fail(where(i) + " has a null address");
+      if (!by_old_.emplace(b.old, i).second)
+        fail("two blocks with the address " + std::to_string(b.old) + " (at bytes " + std::to_string(blocks_[by_old_[b.old]].at) +
+             " and " + std::to_string(b.at) + ")");
+      if (b.dna >= int32_t(dna_.structs.size())) fail(where(i) + " has struct index " + std::to_string(b.dna) + " out of range");
+      if (b.dna >= 0) {
+        if (b.nr < 1) fail(where(i) + " has " + std::to_string(b.nr) + " elements");
+        if (int64_t(b.nr) * dna_.structLen(b.dna) > int64_t(b.len))
+          fail(where(i) + " is shorter than its " + std::to_string(b.nr) + " " + dna_.structName(b.dna) + " elements");
+      }
     }
   }
 
+  // The rigid bodies and world records, and everything they reach; returns the number of rigid bodies.
+  int64_t checkBodiesAndWorlds(bool dbl) {
+    const std::string body_struct = dbl ? "btRigidBodyDoubleData" : "btRigidBodyFloatData";
+    const std::string world_struct = dbl ? "btDynamicsWorldDoubleData" : "btDynamicsWorldFloatData";
+    int64_t bodies = 0;
+    int64_t body_shapes = 0;  // shapes the engine's import makes, over all bodies
+    int body_dna = -1;
+    int64_t name_off = 0, shape_off = 0;
+    for (size_t i = 0; i < blocks_.size(); ++i) {
+      const Block& b = blocks_[i];
+      if (b.code == "RBDY") {
+        checkRecord(i, body_struct, dbl, "rigid bodies");
+        mark(i, kBody);
+        checkStruct(i);
+        if (b.dna != body_dna) {  // the two fields' offsets, once per struct (there are many bodies)
+          body_dna = b.dna;
+          name_off = field(i, 0, {"m_collisionObjectData", "*m_name"}, nullptr) - data(i);
+          shape_off = field(i, 0, {"m_collisionObjectData", "*m_collisionShape"}, nullptr) - data(i);
+        }
+        name(i, data(i) + name_off);
+        // (without a shape Bullet's importer would skip the body, with a message on stdout)
+        const uint64_t s = rd64(data(i) + shape_off);
+        const int64_t si = s ? pointee(s) : -1;
+        if (si < 0) fail(where(i) + ": the rigid body has no shape (its shape pointer leads to no block)");
+        shape(size_t(si), 0);
+        body_shapes = std::min(body_shapes + expanded_[size_t(si)], kMaxExpanded + 1);
+        ++bodies;
+      } else if (b.code == "DWLD") {
+        checkRecord(i, world_struct, dbl, "world records");
+        mark(i, kWorld);
+        checkStruct(i);
+      }
+    }
+    if (bodies == 0) refuse("the .bullet file holds no rigid bodies");
+    int64_t converted = 0;  // shapes Bullet's importer makes: every kept shape block, expanded
+    for (size_t i = 0; i < blocks_.size(); ++i)
+      if (keep_[i] == kShape) converted = std::min(converted + expanded_[i], kMaxExpanded + 1);
+    if (converted > kMaxExpanded || body_shapes > kMaxExpanded)
+      throw InputError(origin_ + ": the shapes expand to more than " + std::to_string(kMaxExpanded) +
+                       " primitives (compounds sharing children multiply them; the limit)");
+    return bodies;
+  }
+
+  // The copy: header, the kept blocks in file order, the DNA block; then Bullet's DNA scan must find that DNA.
+  std::string keptCopy() const {
+    std::string out(buf_, 12);
+    out.reserve(size_t(size_));
+    for (size_t i = 0; i < blocks_.size(); ++i)
+      if (keep_[i] >= 0) out.append(buf_ + blocks_[i].at, size_t(kHead + blocks_[i].len));
+    const int64_t dna_data = int64_t(out.size()) + kHead;
+    out.append(buf_ + dna_at_, size_t(kHead + dna_len_));
+    if (bulletDnaScan(out.data(), int64_t(out.size())) != dna_data)
+      fail("Bullet's scan for the DNA would not find the DNA block (the bytes DNA1 or SDNANAME appear in the data)");
+    return out;
+  }
+
+ private:
   // The kept blocks and the role each plays; a block reached in two roles is refused.
   enum Role { kBody, kWorld, kShape, kArray, kName };
-  static const char* const kRoleCode[] = {"RBDY", "DWLD", "SHAP", "ARAY", "ARAY"};
-  std::vector<int> keep(blocks.size(), -1);  // the role of each kept block, -1 for the others
-  auto where = [&](size_t i) { return "block '" + code4(buf + blocks[i].at) + "' at byte " + std::to_string(blocks[i].at); };
-  auto data = [&](size_t i) { return buf + blocks[i].at + kHead; };
-  auto mark = [&](size_t i, Role r) {
-    if (keep[i] >= 0 && keep[i] != r) fail(where(i) + " is used in two roles");
-    if (std::memcmp(blocks[i].code.data(), kRoleCode[r], 4) != 0) fail(where(i) + " should be a '" + kRoleCode[r] + "' block");
-    keep[i] = r;
-  };
+
+  [[noreturn]] void refuse(const std::string& what) const { throw InputError(origin_ + ": " + what); }
+  std::string where(size_t i) const { return "block '" + code4(buf_ + blocks_[i].at) + "' at byte " + std::to_string(blocks_[i].at); }
+  const char* data(size_t i) const { return buf_ + blocks_[i].at + kHead; }
+  int64_t pointee(uint64_t p) const {
+    auto it = by_old_.find(p);
+    return it == by_old_.end() ? -1 : int64_t(it->second);
+  }
+
+  void mark(size_t i, Role r) {
+    static const char* const kRoleCode[] = {"RBDY", "DWLD", "SHAP", "ARAY", "ARAY"};
+    if (keep_[i] >= 0 && keep_[i] != r) fail(where(i) + " is used in two roles");
+    if (std::memcmp(blocks_[i].code.data(), kRoleCode[r], 4) != 0) fail(where(i) + " should be a '" + kRoleCode[r] + "' block");
+    keep_[i] = r;
+  }
+
+  // A rigid-body or world block: one element of the struct of the header's precision.
+  void checkRecord(size_t i, const std::string& expected, bool dbl, const char* what) const {
+    const Block& b = blocks_[i];
+    if (b.dna < 0 || dna_.structName(b.dna) != expected)
+      fail(where(i) + " holds " + (b.dna < 0 ? std::string("no struct") : dna_.structName(b.dna)) + ", but the header says " +
+           (dbl ? "double" : "float") + " precision (" + expected + ")");
+    if (b.nr != 1) fail(where(i) + " holds " + std::to_string(b.nr) + " " + what);
+  }
+
   // A kept struct: one Bullet knows (it converts the block into its own struct of that name, which the importer
   // reads), and where Bullet copies it unconverted instead (equal to its own struct of the same index), that same
   // struct at the same offsets; no pointer-to-pointer members.
-  std::vector<char> struct_checked(dna.structs.size(), 0);
-  auto checkStruct = [&](size_t i) {
-    const int s = blocks[i].dna;
-    if (struct_checked[size_t(s)]) return;
-    struct_checked[size_t(s)] = 1;
-    if (mem.structByName(dna.structName(s)) < 0) fail(where(i) + ": struct " + dna.structName(s) + " is unknown to Bullet");
-    if (copiedUnconverted(dna, mem, s) && (mem.structName(s) != dna.structName(s) || !sameLayout(dna, s, mem, s)))
-      fail(where(i) + ": its struct " + dna.structName(s) + " differs from Bullet's");
+  void checkStruct(size_t i) {
+    const int s = blocks_[i].dna;
+    if (struct_checked_[size_t(s)]) return;
+    struct_checked_[size_t(s)] = 1;
+    if (mem_.structByName(dna_.structName(s)) < 0) fail(where(i) + ": struct " + dna_.structName(s) + " is unknown to Bullet");
+    if (copiedUnconverted(dna_, mem_, s) && (mem_.structName(s) != dna_.structName(s) || !sameLayout(dna_, s, mem_, s)))
+      fail(where(i) + ": its struct " + dna_.structName(s) + " differs from Bullet's");
     std::vector<int> todo{s};
     for (size_t k = 0; k < todo.size() && k < 256; ++k)
-      for (const Dna::Member& m : dna.structs[size_t(todo[k])].members) {
-        if (m.ptrptr) fail(where(i) + ": pointer-to-pointer member " + dna.names[size_t(m.name)] + " in " + dna.structName(s));
-        const int sub = dna.memberStruct(m);
+      for (const Dna::Member& m : dna_.structs[size_t(todo[k])].members) {
+        if (m.ptrptr) fail(where(i) + ": pointer-to-pointer member " + dna_.names[size_t(m.name)] + " in " + dna_.structName(s));
+        const int sub = dna_.memberStruct(m);
         if (sub >= 0) todo.push_back(sub);
       }
-  };
+  }
+
   // A field of block i's element `elem` at the member path (a.b.c), of the given primitive type or a pointer.
-  std::map<std::pair<int, std::string>, int64_t> field_offset;  // (struct, path) -> offset, looked up once
-  auto field = [&](size_t i, int64_t elem, const std::vector<const char*>& path, const char* type) -> const char* {
-    int s = blocks[i].dna;
+  const char* field(size_t i, int64_t elem, const std::vector<const char*>& path, const char* type) {
+    int s = blocks_[i].dna;
     std::string key;
     for (const char* p : path) key += std::string(p) + "/";
     key += type ? type : "*";
-    const auto cached = field_offset.find({s, key});
-    if (cached != field_offset.end()) return data(i) + elem * dna.structLen(s) + cached->second;
+    const auto cached = field_offset_.find({s, key});
+    if (cached != field_offset_.end()) return data(i) + elem * dna_.structLen(s) + cached->second;
     const int s0 = s;
     int64_t off = 0;
     for (size_t k = 0; k < path.size(); ++k) {
-      const Dna::Member* m = dna.member(s, path[k]);
-      if (!m) fail(where(i) + ": " + dna.structName(s) + " has no member " + path[k]);
+      const Dna::Member* m = dna_.member(s, path[k]);
+      if (!m) fail(where(i) + ": " + dna_.structName(s) + " has no member " + path[k]);
       // Bullet converts a block into its own struct of the same name member by member, matching names and, for
       // struct members, type names (else the member stays zero): the value read here must be the one it keeps.
-      const int ms = mem.structByName(dna.structName(s));
-      const Dna::Member* mm = ms >= 0 ? mem.member(ms, path[k]) : nullptr;
-      if (!mm || mm->pointer != m->pointer || (!m->pointer && mem.types[size_t(mm->type)] != dna.types[size_t(m->type)]))
-        fail(where(i) + ": member " + path[k] + " of " + dna.structName(s) + " differs from Bullet's");
+      const int ms = mem_.structByName(dna_.structName(s));
+      const Dna::Member* mm = ms >= 0 ? mem_.member(ms, path[k]) : nullptr;
+      if (!mm || mm->pointer != m->pointer || (!m->pointer && mem_.types[size_t(mm->type)] != dna_.types[size_t(m->type)]))
+        fail(where(i) + ": member " + path[k] + " of " + dna_.structName(s) + " differs from Bullet's");
       off += m->offset;
       if (k + 1 < path.size()) {
-        s = dna.memberStruct(*m);
+        s = dna_.memberStruct(*m);
         if (s < 0) fail(where(i) + ": " + path[k] + " is not a struct");
-      } else if (type ? (m->pointer || dna.types[size_t(m->type)] != type) : !m->pointer) {
-        fail(where(i) + ": member " + path[k] + " of " + dna.structName(s) + " has an unexpected type");
+      } else if (type ? (m->pointer || dna_.types[size_t(m->type)] != type) : !m->pointer) {
+        fail(where(i) + ": member " + path[k] + " of " + dna_.structName(s) + " has an unexpected type");
       }
     }
-    field_offset[{s0, key}] = off;
-    return data(i) + elem * dna.structLen(s0) + off;
-  };
-  auto pointee = [&](uint64_t p) -> int64_t {
-    auto it = by_old.find(p);
-    return it == by_old.end() ? -1 : int64_t(it->second);
-  };
+    field_offset_[{s0, key}] = off;
+    return data(i) + elem * dna_.structLen(s0) + off;
+  }
+
   // A name pointer (char*): null, or a block of raw bytes (no struct) with a NUL inside it.
-  auto name = [&](size_t i, const char* p) {
+  void name(size_t i, const char* p) {
     const uint64_t v = rd64(p);
     if (!v) return;
     const int64_t n = pointee(v);
     if (n < 0) fail(where(i) + ": its name points to no block");
-    if (blocks[size_t(n)].dna >= 0 || !std::memchr(data(size_t(n)), 0, size_t(blocks[size_t(n)].len)))
+    if (blocks_[size_t(n)].dna >= 0 || !std::memchr(data(size_t(n)), 0, size_t(blocks_[size_t(n)].len)))
       fail(where(size_t(n)) + " is not a NUL-terminated name");
     mark(size_t(n), kName);
-  };
+  }
+
   // An array block of at least `count` elements of struct `type`.
-  auto array = [&](size_t i, const char* p, int64_t count, const char* type, bool may_be_null) {
+  void array(size_t i, const char* p, int64_t count, const char* type, bool may_be_null) {
     const uint64_t v = rd64(p);
     if (!v) {
       if (!may_be_null && count > 0) fail(where(i) + ": null pointer to " + std::to_string(count) + " " + type);
@@ -520,12 +601,12 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
     }
     const int64_t n = pointee(v);
     if (n < 0) fail(where(i) + ": pointer to " + type + " points to no block");
-    const Block& b = blocks[size_t(n)];
-    if (b.dna < 0 || dna.structName(b.dna) != type) fail(where(size_t(n)) + " should hold " + type);
+    const Block& b = blocks_[size_t(n)];
+    if (b.dna < 0 || dna_.structName(b.dna) != type) fail(where(size_t(n)) + " should hold " + type);
     if (int64_t(b.nr) < count) fail(where(size_t(n)) + " holds " + std::to_string(b.nr) + " " + type + ", fewer than " + std::to_string(count));
     mark(size_t(n), kArray);
     checkStruct(size_t(n));
-  };
+  }
 
   // Shapes: the importer casts the data by m_shapeType (btWorldImporter::convertCollisionShape).
   struct ShapeKind {
@@ -533,81 +614,64 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
     const char* name;
     const char* data;
   };
-  static const ShapeKind kShapes[] = {{0, "box", "btConvexInternalShapeData"},
-                                      {4, "convex hull", "btConvexHullShapeData"},
-                                      {8, "sphere", "btConvexInternalShapeData"},
-                                      {9, "multi-sphere", "btMultiSphereShapeData"},
-                                      {10, "capsule", "btCapsuleShapeData"},
-                                      {11, "cone", "btConeShapeData"},
-                                      {13, "cylinder", "btCylinderShapeData"},
-                                      {28, "static plane", "btStaticPlaneShapeData"},
-                                      {31, "compound", "btCompoundShapeData"}};
+  static const ShapeKind* shapeKind(int type) {
+    static const ShapeKind kShapes[] = {{0, "box", "btConvexInternalShapeData"},
+                                        {4, "convex hull", "btConvexHullShapeData"},
+                                        {8, "sphere", "btConvexInternalShapeData"},
+                                        {9, "multi-sphere", "btMultiSphereShapeData"},
+                                        {10, "capsule", "btCapsuleShapeData"},
+                                        {11, "cone", "btConeShapeData"},
+                                        {13, "cylinder", "btCylinderShapeData"},
+                                        {28, "static plane", "btStaticPlaneShapeData"},
+                                        {31, "compound", "btCompoundShapeData"}};
+    for (const ShapeKind& k : kShapes)
+      if (k.type == type) return &k;
+    return nullptr;
+  }
+
+  [[noreturn]] void tooDeepError() const {
+    throw InputError(origin_ + ": compound shapes nested deeper than " + std::to_string(max_depth_) + " levels (the limit)");
+  }
+
   // Per shape block: checked yet, on the current path (a cycle), how many compounds deep it nests (itself
   // included) and how many shapes it expands to. A shape checked before is not walked again, but its nesting
   // counts from where it is used; Bullet's importer and ours expand shared children every time they are used,
   // so the expansion (2^24 at most over the file) bounds their work.
-  constexpr int64_t kMaxExpanded = int64_t(1) << 24;
-  std::vector<char> on_stack(blocks.size(), 0), shape_done(blocks.size(), 0);
-  std::vector<int> height(blocks.size(), 0);
-  std::vector<int64_t> expanded(blocks.size(), 1);
-  auto tooDeep = [&](int depth, size_t i) {
-    if (depth + height[i] > max_compound_depth)
-      throw InputError(origin + ": compound shapes nested deeper than " + std::to_string(max_compound_depth) + " levels (the limit)");
-  };
-  std::function<void(size_t, int)> shape = [&](size_t i, int depth) {
-    if (on_stack[i]) fail(where(i) + ": a compound shape contains itself");
-    if (shape_done[i]) return tooDeep(depth, i);
+  void shape(size_t i, int depth) {
+    if (on_stack_[i]) fail(where(i) + ": a compound shape contains itself");
+    if (shape_done_[i]) {
+      if (depth + height_[i] > max_depth_) tooDeepError();
+      return;
+    }
     mark(i, kShape);
-    const Block& b = blocks[i];
-    if (b.dna < 0 || !dna.derivesFrom(b.dna, "btCollisionShapeData")) fail(where(i) + " is not a collision shape");
+    const Block& b = blocks_[i];
+    if (b.dna < 0 || !dna_.derivesFrom(b.dna, "btCollisionShapeData")) fail(where(i) + " is not a collision shape");
     checkStruct(i);
     // m_name and m_shapeType of the btCollisionShapeData at the start of the struct, by the path of first members
     std::vector<const char*> base;
-    for (int st = b.dna; dna.structName(st) != "btCollisionShapeData";) {
-      const Dna::Member& first = dna.structs[size_t(st)].members[0];
-      base.push_back(dna.names[size_t(first.name)].c_str());
-      st = dna.memberStruct(first);
+    for (int st = b.dna; dna_.structName(st) != "btCollisionShapeData";) {
+      const Dna::Member& first = dna_.structs[size_t(st)].members[0];
+      base.push_back(dna_.names[size_t(first.name)].c_str());
+      st = dna_.memberStruct(first);
     }
     std::vector<const char*> name_path = base, type_path = base;
     name_path.push_back("*m_name");
     type_path.push_back("m_shapeType");
     name(i, field(i, 0, name_path, nullptr));
     const int type = rd32(field(i, 0, type_path, "int"));
-    const ShapeKind* kind = nullptr;
-    for (const ShapeKind& k : kShapes)
-      if (k.type == type) kind = &k;
-    if (!kind) throw InputError(origin + ": shape type " + std::to_string(type) + " at byte " + std::to_string(b.at) + " is not supported (dvisim imports box, sphere, capsule, cylinder, cone, convex hull, multi-sphere, compound and static plane shapes)");
-    if (!dna.derivesFrom(b.dna, kind->data) || !mem.derivesFrom(mem.structByName(dna.structName(b.dna)), kind->data))
-      fail(where(i) + ": a " + kind->name + " shape stored as " + dna.structName(b.dna));
+    const ShapeKind* kind = shapeKind(type);
+    if (!kind) throw InputError(origin_ + ": shape type " + std::to_string(type) + " at byte " + std::to_string(b.at) + " is not supported (dvisim imports box, sphere, capsule, cylinder, cone, convex hull, multi-sphere, compound and static plane shapes)");
+    if (!dna_.derivesFrom(b.dna, kind->data) || !mem_.derivesFrom(mem_.structByName(dna_.structName(b.dna)), kind->data))
+      fail(where(i) + ": a " + kind->name + " shape stored as " + dna_.structName(b.dna));
     if (type == 10 || type == 11 || type == 13) {  // the importer makes no shape for another axis
       const int32_t axis = rd32(field(i, 0, {type == 11 ? "m_upIndex" : "m_upAxis"}, "int"));
       if (axis < 0 || axis > 2) fail(where(i) + ": a " + kind->name + " along axis " + std::to_string(axis));
     } else if (type == 31) {
-      if (depth >= max_compound_depth)
-        throw InputError(origin + ": compound shapes nested deeper than " + std::to_string(max_compound_depth) + " levels (the limit)");
-      const int32_t n = rd32(field(i, 0, {"m_numChildShapes"}, "int"));
-      if (n < 0) fail(where(i) + ": a compound of " + std::to_string(n) + " children");
-      const char* p = field(i, 0, {"*m_childShapePtr"}, nullptr);
-      array(i, p, n, "btCompoundShapeChildData", false);
-      height[i] = 1;
-      expanded[i] = 0;
-      if (n > 0) {
-        const size_t c = size_t(pointee(rd64(p)));
-        on_stack[i] = 1;
-        for (int32_t k = 0; k < n; ++k) {
-          const uint64_t child = rd64(field(c, k, {"*m_childShape"}, nullptr));
-          const int64_t ci = child ? pointee(child) : -1;
-          if (ci < 0) fail(where(c) + ": compound child " + std::to_string(k) + " has no shape");
-          shape(size_t(ci), depth + 1);
-          height[i] = std::max(height[i], 1 + height[size_t(ci)]);
-          expanded[i] = std::min(expanded[i] + expanded[size_t(ci)], kMaxExpanded + 1);
-        }
-        on_stack[i] = 0;
-      }
+      compound(i, depth);
     } else if (type == 9) {
       const int32_t n = rd32(field(i, 0, {"m_localPositionArraySize"}, "int"));
       if (n < 1) fail(where(i) + ": a multi-sphere of " + std::to_string(n) + " spheres");
-      expanded[i] = n;
+      expanded_[i] = n;
       array(i, field(i, 0, {"*m_localPositionArrayPtr"}, nullptr), n, "btPositionAndRadius", false);
     } else if (type == 4) {
       const int32_t n = rd32(field(i, 0, {"m_numUnscaledPoints"}, "int"));
@@ -615,65 +679,62 @@ inline std::string sanitizeBulletFile(const std::string& file, const std::string
       array(i, field(i, 0, {"*m_unscaledPointsFloatPtr"}, nullptr), n, "btVector3FloatData", true);
       array(i, field(i, 0, {"*m_unscaledPointsDoublePtr"}, nullptr), n, "btVector3DoubleData", true);
     }
-    shape_done[i] = 1;
-  };
-
-  const std::string body_struct = dbl ? "btRigidBodyDoubleData" : "btRigidBodyFloatData";
-  const std::string world_struct = dbl ? "btDynamicsWorldDoubleData" : "btDynamicsWorldFloatData";
-  size_t bodies = 0;
-  int64_t body_shapes = 0;  // shapes the engine's import makes, over all bodies
-  int body_dna = -1;
-  int64_t name_off = 0, shape_off = 0;
-  for (size_t i = 0; i < blocks.size(); ++i) {
-    const Block& b = blocks[i];
-    if (b.code == "RBDY") {
-      if (b.dna < 0 || dna.structName(b.dna) != body_struct)
-        fail(where(i) + " holds " + (b.dna < 0 ? std::string("no struct") : dna.structName(b.dna)) + ", but the header says " +
-             (dbl ? "double" : "float") + " precision (" + body_struct + ")");
-      if (b.nr != 1) fail(where(i) + " holds " + std::to_string(b.nr) + " rigid bodies");
-      mark(i, kBody);
-      checkStruct(i);
-      if (b.dna != body_dna) {  // the two fields' offsets, once per struct (there are many bodies)
-        body_dna = b.dna;
-        name_off = field(i, 0, {"m_collisionObjectData", "*m_name"}, nullptr) - data(i);
-        shape_off = field(i, 0, {"m_collisionObjectData", "*m_collisionShape"}, nullptr) - data(i);
-      }
-      name(i, data(i) + name_off);
-      // (without a shape Bullet's importer would skip the body, with a message on stdout)
-      const uint64_t s = rd64(data(i) + shape_off);
-      const int64_t si = s ? pointee(s) : -1;
-      if (si < 0) fail(where(i) + ": the rigid body has no shape (its shape pointer leads to no block)");
-      shape(size_t(si), 0);
-      body_shapes = std::min(body_shapes + expanded[size_t(si)], kMaxExpanded + 1);
-      ++bodies;
-    } else if (b.code == "DWLD") {
-      if (b.dna < 0 || dna.structName(b.dna) != world_struct)
-        fail(where(i) + " holds " + (b.dna < 0 ? std::string("no struct") : dna.structName(b.dna)) + ", but the header says " +
-             (dbl ? "double" : "float") + " precision (" + world_struct + ")");
-      if (b.nr != 1) fail(where(i) + " holds " + std::to_string(b.nr) + " world records");
-      mark(i, kWorld);
-      checkStruct(i);
-    }
+    shape_done_[i] = 1;
   }
-  if (bodies == 0) refuse("the .bullet file holds no rigid bodies");
-  int64_t converted = 0;  // shapes Bullet's importer makes: every kept shape block, expanded
-  for (size_t i = 0; i < blocks.size(); ++i)
-    if (keep[i] == kShape) converted = std::min(converted + expanded[i], kMaxExpanded + 1);
-  if (converted > kMaxExpanded || body_shapes > kMaxExpanded)
-    throw InputError(origin + ": the shapes expand to more than " + std::to_string(kMaxExpanded) +
-                     " primitives (compounds sharing children multiply them; the limit)");
-  if (rigid_bodies) *rigid_bodies = int64_t(bodies);
 
-  // The copy: header, the kept blocks in file order, the DNA block; then Bullet's DNA scan must find that DNA.
-  std::string out(buf, 12);
-  out.reserve(size_t(size));
-  for (size_t i = 0; i < blocks.size(); ++i)
-    if (keep[i] >= 0) out.append(buf + blocks[i].at, size_t(kHead + blocks[i].len));
-  const int64_t dna_data = int64_t(out.size()) + kHead;
-  out.append(buf + dna_at, size_t(kHead + dna_len));
-  if (bulletDnaScan(out.data(), int64_t(out.size())) != dna_data)
-    fail("Bullet's scan for the DNA would not find the DNA block (the bytes DNA1 or SDNANAME appear in the data)");
-  return out;
+  // A compound shape block's children, each walked as a shape one level deeper.
+  void compound(size_t i, int depth) {
+    if (depth >= max_depth_) tooDeepError();
+    const int32_t n = rd32(field(i, 0, {"m_numChildShapes"}, "int"));
+    if (n < 0) fail(where(i) + ": a compound of " + std::to_string(n) + " children");
+    const char* p = field(i, 0, {"*m_childShapePtr"}, nullptr);
+    array(i, p, n, "btCompoundShapeChildData", false);
+    height_[i] = 1;
+    expanded_[i] = 0;
+    if (n == 0) return;
+    const size_t c = size_t(pointee(rd64(p)));
+    on_stack_[i] = 1;
+    for (int32_t k = 0; k < n; ++k) {
+      const uint64_t child = rd64(field(c, k, {"*m_childShape"}, nullptr));
+      const int64_t ci = child ? pointee(child) : -1;
+      if (ci < 0) fail(where(c) + ": compound child " + std::to_string(k) + " has no shape");
+      shape(size_t(ci), depth + 1);
+      height_[i] = std::max(height_[i], 1 + height_[size_t(ci)]);
+      expanded_[i] = std::min(expanded_[i] + expanded_[size_t(ci)], kMaxExpanded + 1);
+    }
+    on_stack_[i] = 0;
+  }
+
+  const Fail fail;
+  const std::string origin_;
+  const int max_depth_;
+  const char* const buf_;
+  const int64_t size_;
+  std::vector<Block> blocks_;
+  int64_t dna_at_ = -1;
+  int32_t dna_len_ = 0;
+  Dna dna_;
+  const Dna& mem_ = memoryDna();
+  std::unordered_map<uint64_t, size_t> by_old_;
+  std::vector<int> keep_;  // the role of each kept block, -1 for the others
+  std::vector<char> struct_checked_;
+  std::map<std::pair<int, std::string>, int64_t> field_offset_;  // (struct, path) -> offset, looked up once
+  std::vector<char> on_stack_, shape_done_;
+  std::vector<int> height_;
+  std::vector<int64_t> expanded_;
+};
+
+// The checked copy of `file` (see above). Throws InputError naming `origin` and the problem.
+// `rigid_bodies` receives the number of rigid-body blocks kept.
+inline std::string sanitizeBulletFile(const std::string& file, const std::string& origin, int max_compound_depth,
+                                      int64_t* rigid_bodies = nullptr) {
+  FileChecker check(file, origin, max_compound_depth);
+  const bool dbl = check.checkHeader();
+  check.readBlocks();
+  check.indexBlocks();
+  const int64_t bodies = check.checkBodiesAndWorlds(dbl);
+  if (rigid_bodies) *rigid_bodies = bodies;
+  return check.keptCopy();
 }
 
 }  // namespace bulletfile
