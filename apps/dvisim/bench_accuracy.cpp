@@ -69,10 +69,8 @@ using dvi::Vec3;
 using namespace dvi::benchutil;
 using Clock = std::chrono::steady_clock;
 
-struct AccOptions {
-  std::string out, threads = "0";
+struct AccOptions : BenchBasics {
   std::vector<std::string> scenes, engines;
-  bool quick = false, record = false;
 };
 
 // A scene of the benchmark: its bodies (rebuilt for each run), step, duration and observable.
@@ -569,11 +567,7 @@ int runAccuracy(const AccOptions& o) {
        << (o.quick ? "0.05 s, 0.8 s" : "0.15 s, 1 s") << " of machine time, h0 = 2e-4\n- this run: --scenes " << joined(scene_sel)
        << " --engines " << joined(engine_sel) << (have_gpu ? "" : " (no GPU)") << "\n\n"
        << goal_text << "\nRows: " << base << ".csv (columns in apps/dvisim/bench_accuracy.cpp's header).\n";
-    for (const std::string& d : {results_dir, o.out}) {
-      writeFile(d + "/" + base + ".md", md.str());
-      writeFile(d + "/" + base + ".csv", csvText(rows, ref_obs, ref_scene));
-    }
-    std::printf("recorded: %s/%s.md and .csv\n", results_dir.c_str(), base.c_str());
+    writeBenchRecord({results_dir, o.out}, base, {{"md", md.str()}, {"csv", csvText(rows, ref_obs, ref_scene)}}, writeFile);
   }
   return 0;
 }
@@ -584,10 +578,7 @@ void registerBenchAccuracy(CLI::App& app) {
   auto o = std::make_shared<AccOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time");
-  cmd->add_option("--out", o->out, "Output directory (accuracy.csv, accuracy.png)")->required();
-  cmd->add_flag("--quick", o->quick, "Small scenes and a short sweep (CI smoke test)");
-  cmd->add_flag("--record", o->record, "Also write bench/results/accuracy_<device>_<date>.{md,csv}");
-  cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
+  addBenchBasics(cmd, *o, "accuracy", "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)");
   cmd->add_option("--scenes", o->scenes, "pile,mix,stack,ces,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
   cmd->add_option("--engines", o->engines, "cpu,gpu,bullet (default all; gpu where a device is present)");
   addBenchRunner(cmd, [o] { return runAccuracy(*o); });

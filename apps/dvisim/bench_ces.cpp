@@ -62,10 +62,9 @@ constexpr double kGoalRate = 20000.0;     // particles/s fed
 constexpr double kGoalWall = 300.0;       // s of wall time
 constexpr double kRateTolerance = 0.99;   // measured feed >= 99% of the goal rate (see the header)
 
-struct CesBenchOptions {
-  std::string out, backend = "auto", duration, rate, wall_limit, threads;
+struct CesBenchOptions : BenchBasics {
+  std::string backend = "auto", duration, rate, wall_limit;
   std::vector<std::string> sets;
-  bool quick = false, record = false;
 };
 
 double positive(const std::string& opt, const std::string& v) {
@@ -390,9 +389,7 @@ int runCesBench(const CesBenchOptions& o) {
   std::printf("results: %s/ces_bench.json, %s/ces_bench.md\n", o.out.c_str(), o.out.c_str());
   if (o.record) {
     const std::string base = "ces_" + slug(device) + "_" + stamp;
-    writeFile(results_dir + "/" + base + ".json", j.dump(2) + "\n");
-    writeFile(results_dir + "/" + base + ".md", md.str());
-    std::printf("recorded: %s/%s.md and .json\n", results_dir.c_str(), base.c_str());
+    writeBenchRecord({results_dir}, base, {{"md", md.str()}, {"json", j.dump(2) + "\n"}}, writeFile);
   }
   if (!bal.closes() || !counts_agree) {
     std::fflush(stdout);
@@ -409,16 +406,16 @@ void registerBenchCes(CLI::App& app) {
   auto o = std::make_shared<CesBenchOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "ces", "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)");
-  cmd->add_option("--out", o->out, "Output directory (ces_bench.json, ces_bench.md)")->required();
+  o->threads.clear();  // none given: the machine's own setting
+  addBenchBasics(cmd, *o, "ces", "ces_bench.json, ces_bench.md",
+                 "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close", "md,json",
+                 "OpenMP threads of the CPU backend (0: all)");
   cmd->add_option("--backend", o->backend, "auto|cpu|gpu (default auto; --quick: cpu)");
   cmd->add_option("--duration", o->duration, "Machine time in seconds (default 10; --quick: 0.02)");
   cmd->add_option("--rate", o->rate, "Particles fed per second (default 20000; --quick: 5000)");
   cmd->add_option("--wall-limit", o->wall_limit, "Stop when the wall time exceeds this many seconds (default 300)");
-  cmd->add_option("--threads", o->threads, "OpenMP threads of the CPU backend (0: all)");
   cmd->add_option("--set", o->sets, "Override a machine value, KEY relative to ces (e.g. drum.rpm=60; repeatable)")
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-  cmd->add_flag("--quick", o->quick, "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close");
-  cmd->add_flag("--record", o->record, "Also write bench/results/ces_<device>_<date>.{md,json}");
   addBenchRunner(cmd, [o] { return runCesBench(*o); });
 }

@@ -14,7 +14,9 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cstdio>
 #include <functional>
+#include <string>
 #include <stdexcept>
 #include <utility>
 #include <vector>
@@ -40,4 +42,33 @@ inline int runBenchCommand() {
   for (auto& [cmd, run] : benchRunners())
     if (cmd->parsed()) return run();
   throw std::logic_error("bench: no benchmark subcommand was parsed");
+}
+
+// The options every benchmark takes: --out DIR (required), --quick, --record and --threads N.
+struct BenchBasics {
+  std::string out, threads = "0";
+  bool quick = false, record = false;
+};
+
+// Adds the BenchBasics options of benchmark `name` to cmd: out_files names what --out receives, record_exts the
+// extensions of the record --record writes under bench/results/.
+inline void addBenchBasics(CLI::App* cmd, BenchBasics& o, const std::string& name, const std::string& out_files,
+                           const std::string& quick_help, const std::string& record_exts = "md,csv",
+                           const std::string& threads_help = "OpenMP threads of our CPU backend (0: all)") {
+  cmd->add_option("--out", o.out, "Output directory (" + out_files + ")")->required();
+  cmd->add_flag("--quick", o.quick, quick_help);
+  cmd->add_flag("--record", o.record, "Also write bench/results/" + name + "_<device>_<date>.{" + record_exts + "}");
+  cmd->add_option("--threads", o.threads, threads_help);
+}
+
+// A record of a benchmark run: each (extension, text) of files written as DIR/BASE.EXTENSION into each of dirs,
+// then one line saying where (the first of dirs).
+template <class WriteFile>
+void writeBenchRecord(const std::vector<std::string>& dirs, const std::string& base,
+                      const std::vector<std::pair<std::string, std::string>>& files, WriteFile writeFile) {
+  std::string exts;
+  for (const std::string& d : dirs)
+    for (const auto& [ext, text] : files) writeFile(d + "/" + base + "." + ext, text);
+  for (size_t i = 0; i < files.size(); ++i) exts += (i == 0 ? "." : i + 1 == files.size() ? " and ." : ", .") + files[i].first;
+  std::printf("recorded: %s/%s%s\n", dirs.front().c_str(), base.c_str(), exts.c_str());
 }

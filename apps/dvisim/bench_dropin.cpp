@@ -49,10 +49,9 @@ using dvi::InputError;
 using namespace dvi::benchutil;
 using Clock = std::chrono::steady_clock;
 
-struct DropinOptions {
-  std::string out, steps, threads = "0";
+struct DropinOptions : BenchBasics {
+  std::string steps;
   std::vector<std::string> engines, scenes;
-  bool quick = false, record = false;
 };
 
 // Everything one world owns: Bullet's collision configuration, dispatcher, broad phase and solver, the world
@@ -476,9 +475,7 @@ int runDropin(const DropinOptions& o) {
   if (o.record) {
     const std::string device = have_gpu && std::find(engines.begin(), engines.end(), "gpu") != engines.end() ? gpu_name : cpu_device;
     const std::string base = "dropin_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeFile(results_dir + "/" + base + ".md", text + "\nRows: " + base + ".csv\n");
-    writeFile(results_dir + "/" + base + ".csv", csv.str());
-    std::printf("recorded: %s/%s.md and .csv\n", results_dir.c_str(), base.c_str());
+    writeBenchRecord({results_dir}, base, {{"md", text + "\nRows: " + base + ".csv\n"}, {"csv", csv.str()}}, writeFile);
   }
   return 0;
 }
@@ -489,12 +486,10 @@ void registerBenchDropin(CLI::App& app) {
   auto o = std::make_shared<DropinOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "dropin", "Bullet's benchmark scenes on stock Bullet and on the drop-in world (CPU, GPU), side by side");
-  cmd->add_option("--out", o->out, "Output directory (dropin.csv, dropin.md)")->required();
-  cmd->add_flag("--quick", o->quick, "A quarter of the bodies and few steps (CI smoke test)");
-  cmd->add_flag("--record", o->record, "Also write bench/results/dropin_<device>_<date>.{md,csv}");
+  addBenchBasics(cmd, *o, "dropin", "dropin.csv, dropin.md", "A quarter of the bodies and few steps (CI smoke test)",
+                 "md,csv", "OpenMP threads of our CPU drop-in (0: the default)");
   cmd->add_option("--engines", o->engines, "bullet,cpu,gpu (default all; gpu is skipped without a device)");
   cmd->add_option("--scenes", o->scenes, "boxes,pyramid,ragdolls,hulls,terrain (the default) and boxes100k");
   cmd->add_option("--steps", o->steps, "Timed steps per engine (default 150; --quick 10)");
-  cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU drop-in (0: the default)");
   addBenchRunner(cmd, [o] { return runDropin(*o); });
 }

@@ -33,9 +33,8 @@ using dvi::InputError;
 using namespace dvi::benchutil;
 using Clock = std::chrono::steady_clock;
 
-struct PruneOptions {
-  std::string out, backend = "auto", n, threads = "0";
-  bool quick = false, record = false;
+struct PruneOptions : BenchBasics {
+  std::string backend = "auto", n;
 };
 
 long parseInt(const std::string& s, const char* opt, long lo, long hi) {
@@ -182,9 +181,7 @@ int runPruning(const PruneOptions& o) {
   std::printf("results: %s/pruning.csv, pruning.md\n", o.out.c_str());
   if (o.record) {
     const std::string base = "pruning_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeFile(results_dir + "/" + base + ".md", md_text + "\nRows: " + base + ".csv\n");
-    writeFile(results_dir + "/" + base + ".csv", csv.str());
-    std::printf("recorded: %s/%s.md and .csv\n", results_dir.c_str(), base.c_str());
+    writeBenchRecord({results_dir}, base, {{"md", md_text + "\nRows: " + base + ".csv\n"}, {"csv", csv.str()}}, writeFile);
   }
   return 0;
 }
@@ -195,11 +192,9 @@ void registerBenchPruning(CLI::App& app) {
   auto o = std::make_shared<PruneOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "pruning", "Time saved by leaving out the stages a scene does not need (prune on against off, side by side)");
-  cmd->add_option("--out", o->out, "Output directory (pruning.csv, pruning.md)")->required();
-  cmd->add_flag("--quick", o->quick, "A small pile and few steps (CI smoke test)");
-  cmd->add_flag("--record", o->record, "Also write bench/results/pruning_<device>_<date>.{md,csv}");
+  addBenchBasics(cmd, *o, "pruning", "pruning.csv, pruning.md", "A small pile and few steps (CI smoke test)", "md,csv",
+                 "OpenMP threads of the CPU backend (0: all)");
   cmd->add_option("--backend", o->backend, "cpu, gpu or auto (gpu when a device is present)");
   cmd->add_option("--n", o->n, "Spheres in the pile (default 10000; --quick 400)");
-  cmd->add_option("--threads", o->threads, "OpenMP threads of the CPU backend (0: all)");
   addBenchRunner(cmd, [o] { return runPruning(*o); });
 }

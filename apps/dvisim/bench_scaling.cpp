@@ -80,11 +80,9 @@ using dvi::InputError;
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
-struct ScalingOptions {
-  std::string out;
-  bool record = false, quick = false;
+struct ScalingOptions : BenchBasics {
   std::vector<std::string> sizes, scenes, engines;
-  std::string cpu_max = "100000", threads = "0", budget = "30", results_dir;
+  std::string cpu_max = "100000", budget = "30", results_dir;
   bool gpu_graphs = true;
   long long gpu_persistent_max = -1;  // -1: SystemConfig's default
   bool gpu_register_cache = true;
@@ -810,14 +808,11 @@ void registerBenchScaling(CLI::App& app) {
   auto o = std::make_shared<ScalingOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "scaling", "Pile and multidisperse mix for N = 10k..4M: GPU, CPU backend and Bullet side by side");
-  cmd->add_option("--out", o->out, "Output directory (scaling.csv, scaling.png)")->required();
-  cmd->add_flag("--record", o->record, "Also write bench/results/scaling_<device>_<date>.md and .csv");
-  cmd->add_flag("--quick", o->quick, "Tiny sizes (1k, 4k) and few steps: a smoke test");
+  addBenchBasics(cmd, *o, "scaling", "scaling.csv, scaling.png", "Tiny sizes (1k, 4k) and few steps: a smoke test");
   cmd->add_option("--sizes", o->sizes, "Body counts, e.g. 10k,100k,1M,4M (default; --quick: 1k,4k)");
   cmd->add_option("--scenes", o->scenes, "pile,mix (default both)");
   cmd->add_option("--engines", o->engines, "gpu,cpu,bullet,bullet3_opencl (default all)");
   cmd->add_option("--cpu-max", o->cpu_max, "Largest N for our CPU backend and Bullet (default 100k)");
-  cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
   cmd->add_option("--budget", o->budget, "Seconds of timed steps per configuration at most (default 30)");
   cmd->add_option("--gpu-graphs", o->gpu_graphs,
                   "GPU APGD trials launched one by one: as one CUDA graph each (true, the default) or kernel by "

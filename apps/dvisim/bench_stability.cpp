@@ -50,10 +50,7 @@ using Clock = std::chrono::steady_clock;
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDensity = 2500;
 
-struct StabOptions {
-  std::string out, threads = "0";
-  bool quick = false, record = false;
-};
+struct StabOptions : BenchBasics {};
 
 struct Metrics {
   bool nan = false;
@@ -793,9 +790,7 @@ int runStability(const StabOptions& o) {
   std::printf("results: %s/stability.csv, %s/stability.md (%.1f s)\n", o.out.c_str(), o.out.c_str(), total);
   if (o.record) {
     const std::string base = "stability_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeFile(results_dir + "/" + base + ".md", md.str());
-    writeFile(results_dir + "/" + base + ".csv", csvText(rows));
-    std::printf("recorded: %s/%s.md and .csv\n", results_dir.c_str(), base.c_str());
+    writeBenchRecord({results_dir}, base, {{"md", md.str()}, {"csv", csvText(rows)}}, writeFile);
   }
   return 0;
 }
@@ -806,9 +801,6 @@ void registerBenchStability(CLI::App& app) {
   auto o = std::make_shared<StabOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "stability", "Stiff and extreme cases on our backends and Bullet, each with a criterion and a verdict");
-  cmd->add_option("--out", o->out, "Output directory (stability.csv, stability.md)")->required();
-  cmd->add_flag("--quick", o->quick, "Shorter runs and smaller scenes (CI smoke test)");
-  cmd->add_flag("--record", o->record, "Also write bench/results/stability_<device>_<date>.{md,csv}");
-  cmd->add_option("--threads", o->threads, "OpenMP threads of our CPU backend (0: all)");
+  addBenchBasics(cmd, *o, "stability", "stability.csv, stability.md", "Shorter runs and smaller scenes (CI smoke test)");
   addBenchRunner(cmd, [o] { return runStability(*o); });
 }

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "chrono_like/base/random.h"
 #include "chrono_like/collision/collision.h"
 
 namespace dvi::bench {
@@ -17,18 +18,10 @@ namespace {
 constexpr double kDensity = 2500;  // glass
 constexpr double kPi = 3.14159265358979323846;
 
-// Deterministic uniform numbers in [0, 1) (splitmix64), the same on every platform.
-struct Rng {
-  uint64_t s;
-  explicit Rng(uint64_t seed) : s(seed) {}
-  double next() {
-    uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    z ^= z >> 31;
-    return double(z >> 11) * (1.0 / 9007199254740992.0);
-  }
-  double uniform(double a, double b) { return a + (b - a) * next(); }
+// Deterministic uniform numbers in [0, 1): SplitMix64 (chrono_like/base/random.h), the same on every platform.
+struct Rng : SplitMix64 {
+  explicit Rng(uint64_t seed) { s = seed; }
+  double next() { return uniform(); }
 };
 
 Quat aboutY(double angle) { return Quat{real(std::cos(angle / 2)), 0, real(std::sin(angle / 2)), 0}; }

@@ -13,14 +13,15 @@
 // Masses are whole femtograms (1e-15 kg), so every mass sum of the run (fed, collected, per bin) is an
 // exact integer and the mass balance closes exactly.
 //
-// Random numbers: SplitMix64 (Steele, Lea, Flood, "Fast splittable pseudorandom number generators",
-// OOPSLA 2014), identical on every platform; its state is part of the checkpoint.
+// Random numbers: SplitMix64 (chrono_like/base/random.h), identical on every platform; its state is part of the
+// checkpoint.
 #pragma once
 
 #include <cstdint>
 #include <vector>
 
 #include "ces/ces_config.h"
+#include "chrono_like/base/random.h"
 #include "chrono_like/system.h"
 
 namespace dvi {
@@ -28,17 +29,6 @@ namespace ces {
 
 constexpr double kFemtogram = 1e-15;  // kg, the unit of every particle mass
 
-struct SplitMix64 {
-  uint64_t s = 1;
-  uint64_t next() {
-    uint64_t z = (s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-  }
-  double uniform() { return double(next() >> 11) * (1.0 / 9007199254740992.0); }  // [0, 1)
-  double uniform(double a, double b) { return a + (b - a) * uniform(); }
-};
 
 // One fed particle: enough to rebuild its body (for a checkpoint) and to account for it.
 struct ParticleSpec {

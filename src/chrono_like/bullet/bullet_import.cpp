@@ -119,7 +119,7 @@ void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, st
   }
 }
 
-BodyDesc bodyDescFromBullet(const btRigidBody& body) {
+BodyDesc bodyMotionFromBullet(const btRigidBody& body) {
   BodyDesc d;
   const btTransform& t = body.getCenterOfMassTransform();
   d.pos = fromBt(t.getOrigin());
@@ -127,6 +127,11 @@ BodyDesc bodyDescFromBullet(const btRigidBody& body) {
   d.vel = fromBt(body.getLinearVelocity());
   d.omega = fromBt(body.getAngularVelocity());
   d.friction = real(body.getFriction());
+  return d;
+}
+
+BodyDesc bodyDescFromBullet(const btRigidBody& body) {
+  BodyDesc d = bodyMotionFromBullet(body);
   d.flags = 0;
   if (body.isStaticObject() || body.getInvMass() == 0) {
     d.flags = body.isKinematicObject() ? kBodyKinematic : kBodyFixed;

@@ -46,13 +46,7 @@ BodyDesc describe(const btRigidBody& body) {
   if (kind == 0)
     throw InputError(std::string("a dynamic body cannot use a triangle shape (") + shape->getName() +
                      "); Bullet supports it only on static or kinematic bodies");
-  BodyDesc d;
-  const btTransform& t = body.getCenterOfMassTransform();
-  d.pos = fromBt(t.getOrigin());
-  d.rot = fromBt(t.getRotation());
-  d.vel = fromBt(body.getLinearVelocity());
-  d.omega = fromBt(body.getAngularVelocity());
-  d.friction = real(body.getFriction());
+  BodyDesc d = bodyMotionFromBullet(body);
   d.flags = uint8_t(kind);
   d.mass = 0;
   d.inertia = Vec3{0, 0, 0};

@@ -7,6 +7,7 @@
 #include "chrono_like/io/bullet_file_check.h"
 #include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/json_check.h"
+#include "chrono_like/base/random.h"
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
@@ -50,18 +51,7 @@ Check checkFor(const std::string& origin) {
 btVector3 bt(Vec3 v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
 btQuaternion bt(Quat q) { return btQuaternion(btScalar(q.x), btScalar(q.y), btScalar(q.z), btScalar(q.w)); }
 
-// Deterministic random numbers (SplitMix64), identical on every platform and standard library.
-struct Rng {
-  uint64_t s;
-  uint64_t next() {
-    uint64_t z = (s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-  }
-  double uniform() { return double(next() >> 11) * (1.0 / 9007199254740992.0); }  // [0, 1)
-  double uniform(double a, double b) { return a + (b - a) * uniform(); }
-};
+using Rng = SplitMix64;  // base/random.h
 
 // Uniformly distributed rotation (Shoemake's method).
 Quat randomRotation(Rng& r) {
