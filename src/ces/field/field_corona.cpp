@@ -299,9 +299,88 @@ double d3(double fa, double f0, double fb, double h1, double h2) {
   return (h1 * h1 * fb - h2 * h2 * fa + (h2 * h2 - h1 * h1) * f0) / (h1 * h2 * (h1 + h2));
 }
 
-}  // namespace
+// The steady corona solve of one problem (solveConformalCorona runs its stages in order): the grid, the
+// unknown numbering, the factorised Poisson matrix and the Laplace field, shared by the space-charge
+// iteration and the sampling table. Potentials in the psi convention (see above).
+class ConformalSolver {
+ public:
+  explicit ConformalSolver(const ConformalCoronaProblem& p) : p_(p) {}
+  ConformalCoronaResult run();
 
-ConformalCoronaResult solveConformalCorona(const ConformalCoronaProblem& p) {
+ private:
+  static void validate(const ConformalCoronaProblem& p);
+  void makeGrid();
+  void classifyCells();
+  void assembleAndFactorise();
+  void laplaceField();
+  void laplaceFromModel();
+  void laplaceFromGrid();
+  void iterateSpaceCharge();
+  Currents transport(double injection);
+  double unitSpaceCharge(Eigen::VectorXd& b);
+  void localKaptzov(double rho0Star, std::vector<double>& shapeNew) const;
+  void andersonStep(AndersonMixer& anderson, double rho0Star, const std::vector<double>& shapeNew,
+                    std::vector<double>& xk, std::vector<double>& fk, const std::vector<double>& beta);
+  void reportTransport();
+  void wireFieldSummary();
+  void samplingTable();
+  void tubeTableGradients();
+  void boundaryTableRows();
+  // d f / d(distance from the wire) at the wire, per unit tau (one-sided parabola).
+  double wireNormalDeriv(const std::vector<double>& f, double f0, int i) const {
+    const double f1 = f[g_.idx(i, g_.nt - 1)], f2 = f[g_.idx(i, g_.nt - 2)];
+    return (9 * (f1 - f0) - (f2 - f0)) / (3 * g_.adt);
+  }
+  real& T(int row, int i, int c) { return r_.table[(size_t(row) * g_.ns + i) * 4 + c]; }
+  double val(int i, int j) const { return psiSc_[g_.idx(g_.wrap(i), j)]; }  // tube cells hold 0
+
+  const ConformalCoronaProblem& p_;
+  Grid g_;
+  int n_ = 0;
+  double s_ = 1, absU_ = 0, psiWire_ = 0;
+  ConformalCoronaResult r_;
+  std::vector<double> xs_, ys_, h2_;  // cell centres and the squared scale factor h^2
+  std::vector<int> unk_;              // unknown of each cell, -1 for none
+  int nu_ = 0;
+  // Boundary coefficient of each unknown towards the wire / tube (psi = -|U|), for the Laplace RHS.
+  std::vector<double> bWire_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt_;
+  std::vector<double> psiLap_, gLap_, hWire_;
+  double dirOut_ = 1;  // the wire's outward normal points along dirOut * tau
+  double sumH_ = 0, gLapMean_ = 0;
+  std::vector<double> psiSc_, rhoHat_, inflow_, psiHat_, psi_;
+  double rho0_ = 0;
+  std::vector<int> order_;
+  std::vector<std::pair<double, int>> keyed_;
+  // Injection profile round the wire (arc-length mean 1): adjusted so that the local surface field, not
+  // only its mean, reaches E_on.
+  std::vector<double> shape_;
+};
+
+ConformalCoronaResult ConformalSolver::run() {
+  validate(p_);
+  makeGrid();
+  classifyCells();
+  assembleAndFactorise();
+  laplaceField();
+  r_.phi_sc.assign(n_, 0);
+  r_.rho.assign(n_, 0);
+  r_.wire_field.assign(g_.ns, 0);
+  psiSc_.assign(n_, 0.0);
+  psiHat_.assign(n_, 0.0);
+  psi_.resize(n_);
+  order_.reserve(n_);
+  keyed_.reserve(n_);
+  shape_.assign(g_.ns, 1.0);
+  r_.ionised = gLapMean_ > p_.E_on;
+  if (r_.ionised) iterateSpaceCharge();
+  wireFieldSummary();
+  for (int q = 0; q < n_; ++q) r_.phi_sc[q] = real(-s_ * psiSc_[q]);
+  samplingTable();
+  return std::move(r_);
+}
+
+void ConformalSolver::validate(const ConformalCoronaProblem& p) {
   if (p.n_sigma < 8 || p.n_tau < 4 || p.n_sigma > 4096 || p.n_tau > 4096)
     throw InputError("corona grid: n_sigma must lie in [8, 4096] and n_tau in [4, 4096]");
   if (!finite(p.U) || !(p.wire_radius > 0) || !(p.E_on > 0) || !finite(p.E_on) || !(p.mobility > 0) ||
@@ -310,278 +389,309 @@ ConformalCoronaResult solveConformalCorona(const ConformalCoronaProblem& p) {
   if (!(p.tolerance > 0) || p.max_iterations < 1 || !(p.relaxation > 0 && p.relaxation <= 1))
     throw InputError("corona solver: tolerance must be positive, max_iterations >= 1, relaxation in (0, 1]");
   if (p.tube && !(p.tube_R > 0)) throw InputError("corona solver: the tube radius must be positive");
+}
 
-  Grid g;
-  g.ns = p.n_sigma;
-  g.nt = p.n_tau;
-  g.map = &p.map;
-  g.ds = 2 * kPiD / g.ns;
-  g.dt = (double(p.map.tau_wire) - double(p.map.tau_drum)) / g.nt;
-  g.adt = std::fabs(g.dt);
-  if (!(g.adt > 0)) throw InputError("corona grid: the drum and wire boundaries coincide");
-  g.cs = g.adt / g.ds;
-  g.ctau = g.ds / g.adt;
-  const int n = g.ns * g.nt;
-  const double s = p.U < 0 ? -1.0 : 1.0;
-  const double absU = std::fabs(double(p.U));
-  const double psiWire = -absU;
+void ConformalSolver::makeGrid() {
+  g_.ns = p_.n_sigma;
+  g_.nt = p_.n_tau;
+  g_.map = &p_.map;
+  g_.ds = 2 * kPiD / g_.ns;
+  g_.dt = (double(p_.map.tau_wire) - double(p_.map.tau_drum)) / g_.nt;
+  g_.adt = std::fabs(g_.dt);
+  if (!(g_.adt > 0)) throw InputError("corona grid: the drum and wire boundaries coincide");
+  g_.cs = g_.adt / g_.ds;
+  g_.ctau = g_.ds / g_.adt;
+  n_ = g_.ns * g_.nt;
+  s_ = p_.U < 0 ? -1.0 : 1.0;
+  absU_ = std::fabs(double(p_.U));
+  psiWire_ = -absU_;
+}
 
-  ConformalCoronaResult r;
-  r.kind.assign(n, 0);
-  std::vector<double> xs(n), ys(n), h2(n);
-  for (int j = 0; j < g.nt; ++j)
-    for (int i = 0; i < g.ns; ++i) {
-      const int q = g.idx(i, j);
+// Cell centres, scale factors and kinds: tube (1) inside the tube, far-field sink (2) beyond the frame.
+void ConformalSolver::classifyCells() {
+  r_.kind.assign(n_, 0);
+  xs_.resize(n_);
+  ys_.resize(n_);
+  h2_.resize(n_);
+  for (int j = 0; j < g_.nt; ++j)
+    for (int i = 0; i < g_.ns; ++i) {
+      const int q = g_.idx(i, j);
       real x, y;
-      p.map.toPhysical(real(g.sigma(i)), real(g.tau(j)), x, y);
-      xs[q] = x;
-      ys[q] = y;
-      const double h = p.map.scale(real(g.sigma(i)), real(g.tau(j)));
-      h2[q] = h * h;
-      if (p.tube && std::hypot(x - double(p.tube_cx), y - double(p.tube_cy)) < p.tube_R)
-        r.kind[q] = 1;
-      else if (p.frame_radius > 0 && std::hypot(x - double(p.frame_cx), y - double(p.frame_cy)) > p.frame_radius)
-        r.kind[q] = 2;
+      p_.map.toPhysical(real(g_.sigma(i)), real(g_.tau(j)), x, y);
+      xs_[q] = x;
+      ys_[q] = y;
+      const double h = p_.map.scale(real(g_.sigma(i)), real(g_.tau(j)));
+      h2_[q] = h * h;
+      if (p_.tube && std::hypot(x - double(p_.tube_cx), y - double(p_.tube_cy)) < p_.tube_R)
+        r_.kind[q] = 1;
+      else if (p_.frame_radius > 0 &&
+               std::hypot(x - double(p_.frame_cx), y - double(p_.frame_cy)) > p_.frame_radius)
+        r_.kind[q] = 2;
     }
+}
 
-  // Unknown numbering (tube cells are not unknowns) and the Poisson matrix A = -Laplacian (SPD).
-  std::vector<int> unk(n, -1);
-  int nu = 0;
-  for (int q = 0; q < n; ++q)
-    if (r.kind[q] == 0 || (r.kind[q] == 2 && !p.frame_earthed)) unk[q] = nu++;
-  if (nu == 0) throw InputError("corona grid: the tube covers the whole grid");
+// Unknown numbering (tube cells are not unknowns) and the Poisson matrix A = -Laplacian (SPD).
+void ConformalSolver::assembleAndFactorise() {
+  unk_.assign(n_, -1);
+  nu_ = 0;
+  for (int q = 0; q < n_; ++q)
+    if (r_.kind[q] == 0 || (r_.kind[q] == 2 && !p_.frame_earthed)) unk_[q] = nu_++;
+  if (nu_ == 0) throw InputError("corona grid: the tube covers the whole grid");
   std::vector<Eigen::Triplet<double>> trip;
-  trip.reserve(size_t(nu) * 5);
-  // Boundary coefficient of each unknown towards the wire / tube (psi = -|U|), for the Laplace RHS.
-  std::vector<double> bWire(nu, 0.0);
-  for (int j = 0; j < g.nt; ++j)
-    for (int i = 0; i < g.ns; ++i) {
-      const int q = g.idx(i, j);
-      if (unk[q] < 0) continue;
+  trip.reserve(size_t(nu_) * 5);
+  bWire_.assign(nu_, 0.0);
+  for (int j = 0; j < g_.nt; ++j)
+    for (int i = 0; i < g_.ns; ++i) {
+      const int q = g_.idx(i, j);
+      if (unk_[q] < 0) continue;
       double diag = 0;
       auto link = [&](int nbq, double c) {
         diag += c;
-        if (unk[nbq] >= 0)
-          trip.emplace_back(unk[q], unk[nbq], -c);
-        else if (r.kind[nbq] == 1)
-          bWire[unk[q]] += c;  // tube neighbour (psi = -|U|); an earthed frame cell adds nothing (psi = 0)
+        if (unk_[nbq] >= 0)
+          trip.emplace_back(unk_[q], unk_[nbq], -c);
+        else if (r_.kind[nbq] == 1)
+          bWire_[unk_[q]] += c;  // tube neighbour (psi = -|U|); an earthed frame cell adds nothing (psi = 0)
       };
-      link(g.idx(g.wrap(i - 1), j), g.cs);
-      link(g.idx(g.wrap(i + 1), j), g.cs);
+      link(g_.idx(g_.wrap(i - 1), j), g_.cs);
+      link(g_.idx(g_.wrap(i + 1), j), g_.cs);
       if (j > 0)
-        link(g.idx(i, j - 1), g.ctau);
+        link(g_.idx(i, j - 1), g_.ctau);
       else
-        diag += 2 * g.ctau;  // drum face, psi = 0
-      if (j < g.nt - 1)
-        link(g.idx(i, j + 1), g.ctau);
+        diag += 2 * g_.ctau;  // drum face, psi = 0
+      if (j < g_.nt - 1)
+        link(g_.idx(i, j + 1), g_.ctau);
       else {
-        diag += 2 * g.ctau;  // wire face, psi = -|U|
-        bWire[unk[q]] += 2 * g.ctau;
+        diag += 2 * g_.ctau;  // wire face, psi = -|U|
+        bWire_[unk_[q]] += 2 * g_.ctau;
       }
-      trip.emplace_back(unk[q], unk[q], diag);
+      trip.emplace_back(unk_[q], unk_[q], diag);
     }
-  Eigen::SparseMatrix<double> A(nu, nu);
+  Eigen::SparseMatrix<double> A(nu_, nu_);
   A.setFromTriplets(trip.begin(), trip.end());
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(A);
-  if (ldlt.info() != Eigen::Success) throw InputError("corona solver: the Poisson matrix could not be factorised");
+  ldlt_.compute(A);
+  if (ldlt_.info() != Eigen::Success) throw InputError("corona solver: the Poisson matrix could not be factorised");
+}
 
-  // Laplace potential (psi convention) at the cell centres and the Laplace surface field of the wire.
-  std::vector<double> psiLap(n, psiWire);
-  std::vector<double> gLap(g.ns), hWire(g.ns);
-  for (int i = 0; i < g.ns; ++i) hWire[i] = p.map.scale(real(g.sigma(i)), p.map.tau_wire);
-  const double dirOut = g.dt > 0 ? -1.0 : 1.0;  // the wire's outward normal points along dirOut * tau
-  auto wireNormalDeriv = [&](const std::vector<double>& f, double f0, int i) {
-    // d f / d(distance from the wire) at the wire, per unit tau (one-sided parabola).
-    const double f1 = f[g.idx(i, g.nt - 1)], f2 = f[g.idx(i, g.nt - 2)];
-    return (9 * (f1 - f0) - (f2 - f0)) / (3 * g.adt);
-  };
-  if (p.laplace) {
-    for (int q = 0; q < n; ++q) {
-      if (r.kind[q] == 1) continue;
-      real ph, ex, ey;
-      p.laplace(real(xs[q]), real(ys[q]), ph, ex, ey);
-      psiLap[q] = -s * ph;
-    }
-    for (int i = 0; i < g.ns; ++i) {
-      real x, y, ph, ex, ey, fr, fi;
-      p.map.toPhysical(real(g.sigma(i)), p.map.tau_wire, x, y);
-      p.laplace(x, y, ph, ex, ey);
-      p.map.derivative(real(g.sigma(i)), p.map.tau_wire, fr, fi);
-      // dz/dtau = i f'; the outward normal is dirOut * i f' / |f'|.
-      const double nx = -dirOut * fi / hWire[i], ny = dirOut * fr / hWire[i];
-      gLap[i] = s * (ex * nx + ey * ny);
-    }
-  } else {
-    Eigen::VectorXd b(nu);
-    for (int k = 0; k < nu; ++k) b(k) = bWire[k] * psiWire;
-    const Eigen::VectorXd x = ldlt.solve(b);
-    for (int q = 0; q < n; ++q)
-      psiLap[q] = unk[q] >= 0 ? x(unk[q]) : (r.kind[q] == 1 ? psiWire : 0.0);
-    for (int i = 0; i < g.ns; ++i) gLap[i] = wireNormalDeriv(psiLap, psiWire, i) / hWire[i];
-  }
+// Laplace potential (psi convention) at the cell centres and the Laplace surface field of the wire, from
+// the problem's Laplace model where it has one, else from the grid; its arc-length mean and the onset.
+void ConformalSolver::laplaceField() {
+  psiLap_.assign(n_, psiWire_);
+  gLap_.resize(g_.ns);
+  hWire_.resize(g_.ns);
+  for (int i = 0; i < g_.ns; ++i) hWire_[i] = p_.map.scale(real(g_.sigma(i)), p_.map.tau_wire);
+  dirOut_ = g_.dt > 0 ? -1.0 : 1.0;
+  if (p_.laplace)
+    laplaceFromModel();
+  else
+    laplaceFromGrid();
   double sumH = 0, sumGL = 0;
-  for (int i = 0; i < g.ns; ++i) {
-    sumH += hWire[i];
-    sumGL += gLap[i] * hWire[i];
+  for (int i = 0; i < g_.ns; ++i) {
+    sumH += hWire_[i];
+    sumGL += gLap_[i] * hWire_[i];
   }
-  const double gLapMean = sumGL / sumH;  // arc-length mean = wire charge / (2 pi r eps0)
-  r.laplace_wire_field = real(gLapMean);
-  r.onset_voltage = real(gLapMean > 0 ? double(p.U) * p.E_on / gLapMean : 0.0);
-  r.phi_laplace.assign(n, 0);
-  for (int q = 0; q < n; ++q) r.phi_laplace[q] = real(-s * psiLap[q]);
-  r.phi_sc.assign(n, 0);
-  r.rho.assign(n, 0);
-  r.wire_field.assign(g.ns, 0);
-  std::vector<double> psiSc(n, 0.0), rhoHat, inflow, psiHat(n, 0.0), psi(n);
-  double rho0 = 0;
-  Currents cur;
-  std::vector<int> order;
-  std::vector<std::pair<double, int>> keyed;
-  order.reserve(n);
-  keyed.reserve(n);
-  // Injection profile round the wire (arc-length mean 1): adjusted so that the local surface field, not
-  // only its mean, reaches E_on.
-  std::vector<double> shape(g.ns, 1.0);
+  sumH_ = sumH;
+  gLapMean_ = sumGL / sumH;  // arc-length mean = wire charge / (2 pi r eps0)
+  r_.laplace_wire_field = real(gLapMean_);
+  r_.onset_voltage = real(gLapMean_ > 0 ? double(p_.U) * p_.E_on / gLapMean_ : 0.0);
+  r_.phi_laplace.assign(n_, 0);
+  for (int q = 0; q < n_; ++q) r_.phi_laplace[q] = real(-s_ * psiLap_[q]);
+}
 
-  r.ionised = gLapMean > p.E_on;
-  if (r.ionised) {
-    auto transport = [&](double injection) {
-      for (int q = 0; q < n; ++q) psi[q] = r.kind[q] == 1 ? psiWire : psiLap[q] + psiSc[q];
-      keyed.clear();
-      for (int q = 0; q < n; ++q)
-        if (r.kind[q] != 1) keyed.emplace_back(psi[q], q);
-      std::sort(keyed.begin(), keyed.end());  // contiguous keys: faster than an indirect comparison
-      order.resize(keyed.size());
-      for (size_t k = 0; k < keyed.size(); ++k) order[k] = keyed[k].second;
-      return sweep(g, psi, r.kind, psiWire, injection, shape, order, rhoHat, inflow);
-    };
-    Eigen::VectorXd b(nu);
-    // Anderson acceleration of the fixed-point iteration x <- x + beta f (beta = the relaxation for the
-    // space-charge potential, 1 for the injection profile, whose update carries its own gain).
-    const size_t nx = size_t(n) + g.ns;
-    std::vector<double> xk(nx), fk(nx), beta(nx, 1.0), shapeNew(g.ns);
-    std::fill(beta.begin(), beta.begin() + n, double(p.relaxation));
-    AndersonMixer anderson(nx, kAndersonDepth);
-    for (int it = 1; it <= p.max_iterations; ++it) {
-      transport(1.0);
-      // Space-charge potential of the unit injection: A psi = -|rho| h^2 ds dt / eps0 (zero on conductors).
-      const double cellArea = g.ds * g.adt;
-      for (int q = 0; q < n; ++q)
-        if (unk[q] >= 0) b(unk[q]) = -rhoHat[q] * h2[q] * cellArea / double(kEps0);
-      const Eigen::VectorXd x = ldlt.solve(b);
-      for (int q = 0; q < n; ++q) psiHat[q] = unk[q] >= 0 ? x(unk[q]) : 0.0;
-      double sumG = 0;
-      for (int i = 0; i < g.ns; ++i) sumG += wireNormalDeriv(psiHat, 0.0, i);  // (1/h) * h ds cancels
-      const double gHatMean = sumG / sumH;  // < 0: the ions screen the wire
-      const double rho0Star = gHatMean < 0 ? (double(p.E_on) - gLapMean) / gHatMean : 0.0;
-      // Local Kaptzov: raise the injection where the surface field is above E_on, lower it where below, in
-      // proportion to the excess over the screening the ions provide there, (E - E_on) / (E_Laplace - E_on);
-      // the gain (4) is over-relaxed because the field at one angle feels only part of the charge injected
-      // there (the rest of its screening comes from the ions of the whole wire). Keep the mean at 1.
-      double sw = 0;
-      for (int i = 0; i < g.ns; ++i) {
-        const double gi = gLap[i] + rho0Star * wireNormalDeriv(psiHat, 0.0, i) / hWire[i];
-        const double screen = std::max(gLap[i] - double(p.E_on), 1e-3 * double(p.E_on));
-        shapeNew[i] = std::max(0.0, shape[i] * (1 + kShapeGain * (gi - double(p.E_on)) / screen));
-        sw += shapeNew[i] * hWire[i];
-      }
-      if (sw > 0)
-        for (int i = 0; i < g.ns; ++i) shapeNew[i] *= sumH / sw;
-      double change = 0;
-      for (int q = 0; q < n; ++q) change = std::max(change, std::fabs(rho0Star * psiHat[q] - psiSc[q]));
-      rho0 = rho0Star;
-      r.iterations = it;
-      r.last_change = real(change / absU);
-      if (change / absU < p.tolerance) {
-        for (int q = 0; q < n; ++q) psiSc[q] = rho0Star * psiHat[q];
-        shape = shapeNew;
-        break;
-      }
-      // Fixed-point residual f = g(x) - x of x = (psi_sc / |U|, shape) and the Anderson step.
-      for (int q = 0; q < n; ++q) {
-        xk[q] = psiSc[q] / absU;
-        fk[q] = (rho0Star * psiHat[q] - psiSc[q]) / absU;
-      }
-      for (int i = 0; i < g.ns; ++i) {
-        xk[n + i] = shape[i];
-        fk[n + i] = shapeNew[i] - shape[i];
-      }
-      anderson.step(xk, fk, beta);
-      for (int q = 0; q < n; ++q) psiSc[q] = xk[q] * absU;
-      sw = 0;
-      for (int i = 0; i < g.ns; ++i) {
-        shape[i] = std::max(0.0, xk[n + i]);
-        sw += shape[i] * hWire[i];
-      }
-      if (sw > 0)
-        for (int i = 0; i < g.ns; ++i) shape[i] *= sumH / sw;
-    }
-    // The final transport on the converged potential gives the reported density and currents.
-    cur = transport(rho0);
-    r.injection_density = real(rho0);
-    r.current = real(cur.injected * p.mobility);
-    r.current_drum = real(cur.drum * p.mobility);
-    r.current_far = real(cur.far * p.mobility);
-    r.current_tube = real((cur.tube + cur.trapped) * p.mobility);
-    double q = 0;
-    for (int k = 0; k < n; ++k) {
-      r.rho[k] = real(rhoHat[k]);
-      q += rhoHat[k] * h2[k] * g.ds * g.adt;
-    }
-    r.space_charge = real(q);
+void ConformalSolver::laplaceFromModel() {
+  for (int q = 0; q < n_; ++q) {
+    if (r_.kind[q] == 1) continue;
+    real ph, ex, ey;
+    p_.laplace(real(xs_[q]), real(ys_[q]), ph, ex, ey);
+    psiLap_[q] = -s_ * ph;
   }
+  for (int i = 0; i < g_.ns; ++i) {
+    real x, y, ph, ex, ey, fr, fi;
+    p_.map.toPhysical(real(g_.sigma(i)), p_.map.tau_wire, x, y);
+    p_.laplace(x, y, ph, ex, ey);
+    p_.map.derivative(real(g_.sigma(i)), p_.map.tau_wire, fr, fi);
+    // dz/dtau = i f'; the outward normal is dirOut * i f' / |f'|.
+    const double nx = -dirOut_ * fi / hWire_[i], ny = dirOut_ * fr / hWire_[i];
+    gLap_[i] = s_ * (ex * nx + ey * ny);
+  }
+}
 
-  // Total wire surface field and Kaptzov's error.
+void ConformalSolver::laplaceFromGrid() {
+  Eigen::VectorXd b(nu_);
+  for (int k = 0; k < nu_; ++k) b(k) = bWire_[k] * psiWire_;
+  const Eigen::VectorXd x = ldlt_.solve(b);
+  for (int q = 0; q < n_; ++q)
+    psiLap_[q] = unk_[q] >= 0 ? x(unk_[q]) : (r_.kind[q] == 1 ? psiWire_ : 0.0);
+  for (int i = 0; i < g_.ns; ++i) gLap_[i] = wireNormalDeriv(psiLap_, psiWire_, i) / hWire_[i];
+}
+
+// Ion transport on psi = psi_Laplace + psi_sc for the injection density `injection`: fills rhoHat_.
+Currents ConformalSolver::transport(double injection) {
+  for (int q = 0; q < n_; ++q) psi_[q] = r_.kind[q] == 1 ? psiWire_ : psiLap_[q] + psiSc_[q];
+  keyed_.clear();
+  for (int q = 0; q < n_; ++q)
+    if (r_.kind[q] != 1) keyed_.emplace_back(psi_[q], q);
+  std::sort(keyed_.begin(), keyed_.end());  // contiguous keys: faster than an indirect comparison
+  order_.resize(keyed_.size());
+  for (size_t k = 0; k < keyed_.size(); ++k) order_[k] = keyed_[k].second;
+  return sweep(g_, psi_, r_.kind, psiWire_, injection, shape_, order_, rhoHat_, inflow_);
+}
+
+// Space-charge iteration: transport at unit injection, its potential, Kaptzov's injection density and
+// profile, then the Anderson step, until the space-charge potential stops changing.
+void ConformalSolver::iterateSpaceCharge() {
+  Eigen::VectorXd b(nu_);
+  // Anderson acceleration of the fixed-point iteration x <- x + beta f (beta = the relaxation for the
+  // space-charge potential, 1 for the injection profile, whose update carries its own gain).
+  const size_t nx = size_t(n_) + g_.ns;
+  std::vector<double> xk(nx), fk(nx), beta(nx, 1.0), shapeNew(g_.ns);
+  std::fill(beta.begin(), beta.begin() + n_, double(p_.relaxation));
+  AndersonMixer anderson(nx, kAndersonDepth);
+  for (int it = 1; it <= p_.max_iterations; ++it) {
+    transport(1.0);
+    const double rho0Star = unitSpaceCharge(b);
+    localKaptzov(rho0Star, shapeNew);
+    double change = 0;
+    for (int q = 0; q < n_; ++q) change = std::max(change, std::fabs(rho0Star * psiHat_[q] - psiSc_[q]));
+    rho0_ = rho0Star;
+    r_.iterations = it;
+    r_.last_change = real(change / absU_);
+    if (change / absU_ < p_.tolerance) {
+      for (int q = 0; q < n_; ++q) psiSc_[q] = rho0Star * psiHat_[q];
+      shape_ = shapeNew;
+      break;
+    }
+    andersonStep(anderson, rho0Star, shapeNew, xk, fk, beta);
+  }
+  reportTransport();
+}
+
+// Space-charge potential of the unit injection (psiHat_) and the injection density that brings the mean
+// wire surface field to E_on.
+double ConformalSolver::unitSpaceCharge(Eigen::VectorXd& b) {
+  // A psi = -|rho| h^2 ds dt / eps0 (zero on conductors).
+  const double cellArea = g_.ds * g_.adt;
+  for (int q = 0; q < n_; ++q)
+    if (unk_[q] >= 0) b(unk_[q]) = -rhoHat_[q] * h2_[q] * cellArea / double(kEps0);
+  const Eigen::VectorXd x = ldlt_.solve(b);
+  for (int q = 0; q < n_; ++q) psiHat_[q] = unk_[q] >= 0 ? x(unk_[q]) : 0.0;
+  double sumG = 0;
+  for (int i = 0; i < g_.ns; ++i) sumG += wireNormalDeriv(psiHat_, 0.0, i);  // (1/h) * h ds cancels
+  const double gHatMean = sumG / sumH_;  // < 0: the ions screen the wire
+  return gHatMean < 0 ? (double(p_.E_on) - gLapMean_) / gHatMean : 0.0;
+}
+
+// Local Kaptzov: raise the injection where the surface field is above E_on, lower it where below, in
+// proportion to the excess over the screening the ions provide there, (E - E_on) / (E_Laplace - E_on);
+// the gain (4) is over-relaxed because the field at one angle feels only part of the charge injected
+// there (the rest of its screening comes from the ions of the whole wire). Keep the mean at 1.
+void ConformalSolver::localKaptzov(double rho0Star, std::vector<double>& shapeNew) const {
+  double sw = 0;
+  for (int i = 0; i < g_.ns; ++i) {
+    const double gi = gLap_[i] + rho0Star * wireNormalDeriv(psiHat_, 0.0, i) / hWire_[i];
+    const double screen = std::max(gLap_[i] - double(p_.E_on), 1e-3 * double(p_.E_on));
+    shapeNew[i] = std::max(0.0, shape_[i] * (1 + kShapeGain * (gi - double(p_.E_on)) / screen));
+    sw += shapeNew[i] * hWire_[i];
+  }
+  if (sw > 0)
+    for (int i = 0; i < g_.ns; ++i) shapeNew[i] *= sumH_ / sw;
+}
+
+// Fixed-point residual f = g(x) - x of x = (psi_sc / |U|, shape) and the Anderson step.
+void ConformalSolver::andersonStep(AndersonMixer& anderson, double rho0Star, const std::vector<double>& shapeNew,
+                                   std::vector<double>& xk, std::vector<double>& fk,
+                                   const std::vector<double>& beta) {
+  for (int q = 0; q < n_; ++q) {
+    xk[q] = psiSc_[q] / absU_;
+    fk[q] = (rho0Star * psiHat_[q] - psiSc_[q]) / absU_;
+  }
+  for (int i = 0; i < g_.ns; ++i) {
+    xk[n_ + i] = shape_[i];
+    fk[n_ + i] = shapeNew[i] - shape_[i];
+  }
+  anderson.step(xk, fk, beta);
+  for (int q = 0; q < n_; ++q) psiSc_[q] = xk[q] * absU_;
+  double sw = 0;
+  for (int i = 0; i < g_.ns; ++i) {
+    shape_[i] = std::max(0.0, xk[n_ + i]);
+    sw += shape_[i] * hWire_[i];
+  }
+  if (sw > 0)
+    for (int i = 0; i < g_.ns; ++i) shape_[i] *= sumH_ / sw;
+}
+
+// The final transport on the converged potential gives the reported density and currents.
+void ConformalSolver::reportTransport() {
+  const Currents cur = transport(rho0_);
+  r_.injection_density = real(rho0_);
+  r_.current = real(cur.injected * p_.mobility);
+  r_.current_drum = real(cur.drum * p_.mobility);
+  r_.current_far = real(cur.far * p_.mobility);
+  r_.current_tube = real((cur.tube + cur.trapped) * p_.mobility);
+  double q = 0;
+  for (int k = 0; k < n_; ++k) {
+    r_.rho[k] = real(rhoHat_[k]);
+    q += rhoHat_[k] * h2_[k] * g_.ds * g_.adt;
+  }
+  r_.space_charge = real(q);
+}
+
+// Total wire surface field and Kaptzov's error.
+void ConformalSolver::wireFieldSummary() {
   double wmin = 1e300, wmax = -1e300, wsum = 0;
-  for (int i = 0; i < g.ns; ++i) {
-    const double e = gLap[i] + wireNormalDeriv(psiSc, 0.0, i) / hWire[i];
-    r.wire_field[i] = real(e);
+  for (int i = 0; i < g_.ns; ++i) {
+    const double e = gLap_[i] + wireNormalDeriv(psiSc_, 0.0, i) / hWire_[i];
+    r_.wire_field[i] = real(e);
     wmin = std::min(wmin, e);
     wmax = std::max(wmax, e);
-    wsum += e * hWire[i];
+    wsum += e * hWire_[i];
   }
-  r.wire_field_mean = real(wsum / sumH);
-  r.wire_field_min = real(wmin);
-  r.wire_field_max = real(wmax);
-  r.kaptzov_error = r.ionised ? real(std::max(std::fabs(wmin / p.E_on - 1), std::fabs(wmax / p.E_on - 1))) : 0;
-  for (int q = 0; q < n; ++q) r.phi_sc[q] = real(-s * psiSc[q]);
+  r_.wire_field_mean = real(wsum / sumH_);
+  r_.wire_field_min = real(wmin);
+  r_.wire_field_max = real(wmax);
+  r_.kaptzov_error =
+      r_.ionised ? real(std::max(std::fabs(wmin / p_.E_on - 1), std::fabs(wmax / p_.E_on - 1))) : 0;
+}
 
-  // Sampling table: rows 0 (drum), 1..nt (cells), nt+1 (wire); (psi_sc, dpsi/dsigma, dpsi/dtau, |rho|).
-  const int rows = g.nt + 2;
-  r.table.assign(size_t(rows) * g.ns * 4, 0);
-  auto T = [&](int row, int i, int c) -> real& { return r.table[(size_t(row) * g.ns + i) * 4 + c]; };
-  auto val = [&](int i, int j) { return psiSc[g.idx(g.wrap(i), j)]; };  // tube cells hold 0
-  for (int j = 0; j < g.nt; ++j)
-    for (int i = 0; i < g.ns; ++i) {
-      const int q = g.idx(i, j);
-      if (r.kind[q] == 1) continue;
-      const double f0 = psiSc[q];
-      const double dsg = (val(i + 1, j) - val(i - 1, j)) / (2 * g.ds);
+// Sampling table: rows 0 (drum), 1..nt (cells), nt+1 (wire); (psi_sc, dpsi/dsigma, dpsi/dtau, |rho|).
+void ConformalSolver::samplingTable() {
+  const int rows = g_.nt + 2;
+  r_.table.assign(size_t(rows) * g_.ns * 4, 0);
+  for (int j = 0; j < g_.nt; ++j)
+    for (int i = 0; i < g_.ns; ++i) {
+      const int q = g_.idx(i, j);
+      if (r_.kind[q] == 1) continue;
+      const double f0 = psiSc_[q];
+      const double dsg = (val(i + 1, j) - val(i - 1, j)) / (2 * g_.ds);
       double dtu;
-      if (g.nt == 1)
+      if (g_.nt == 1)
         dtu = 0;
       else if (j == 0)
-        dtu = d3(0.0, f0, val(i, 1), 0.5 * g.dt, g.dt);
-      else if (j == g.nt - 1)
-        dtu = d3(val(i, j - 1), f0, 0.0, g.dt, 0.5 * g.dt);
+        dtu = d3(0.0, f0, val(i, 1), 0.5 * g_.dt, g_.dt);
+      else if (j == g_.nt - 1)
+        dtu = d3(val(i, j - 1), f0, 0.0, g_.dt, 0.5 * g_.dt);
       else
-        dtu = (val(i, j + 1) - val(i, j - 1)) / (2 * g.dt);
+        dtu = (val(i, j + 1) - val(i, j - 1)) / (2 * g_.dt);
       T(j + 1, i, 0) = real(f0);
       T(j + 1, i, 1) = real(dsg);
       T(j + 1, i, 2) = real(dtu);
-      T(j + 1, i, 3) = r.rho[q];
+      T(j + 1, i, 3) = r_.rho[q];
     }
-  // Tube cells: the gradient continued from their gas neighbours (keeps the bilinear sampling of the gas
-  // next to the staircase tube boundary smooth); potential 0 and no ions.
-  for (int j = 0; j < g.nt; ++j)
-    for (int i = 0; i < g.ns; ++i) {
-      if (r.kind[g.idx(i, j)] != 1) continue;
+  tubeTableGradients();
+  boundaryTableRows();
+}
+
+// Tube cells: the gradient continued from their gas neighbours (keeps the bilinear sampling of the gas
+// next to the staircase tube boundary smooth); potential 0 and no ions.
+void ConformalSolver::tubeTableGradients() {
+  for (int j = 0; j < g_.nt; ++j)
+    for (int i = 0; i < g_.ns; ++i) {
+      if (r_.kind[g_.idx(i, j)] != 1) continue;
       double a1 = 0, a2 = 0;
       int cnt = 0;
-      const int nbi[4] = {g.wrap(i - 1), g.wrap(i + 1), i, i};
+      const int nbi[4] = {g_.wrap(i - 1), g_.wrap(i + 1), i, i};
       const int nbj[4] = {j, j, j - 1, j + 1};
       for (int k = 0; k < 4; ++k) {
-        if (nbj[k] < 0 || nbj[k] >= g.nt || r.kind[g.idx(nbi[k], nbj[k])] == 1) continue;
+        if (nbj[k] < 0 || nbj[k] >= g_.nt || r_.kind[g_.idx(nbi[k], nbj[k])] == 1) continue;
         a1 += T(nbj[k] + 1, nbi[k], 1);
         a2 += T(nbj[k] + 1, nbi[k], 2);
         ++cnt;
@@ -591,16 +701,23 @@ ConformalCoronaResult solveConformalCorona(const ConformalCoronaProblem& p) {
         T(j + 1, i, 2) = real(a2 / cnt);
       }
     }
-  for (int i = 0; i < g.ns; ++i) {
-    if (g.nt >= 2) {
-      T(0, i, 2) = real((9 * val(i, 0) - val(i, 1)) / (3 * g.dt));
-      T(g.nt + 1, i, 2) = real(-(9 * val(i, g.nt - 1) - val(i, g.nt - 2)) / (3 * g.dt));
-    }
-    T(0, i, 3) = r.rho[g.idx(i, 0)];
-    T(g.nt + 1, i, 3) = real(rho0);
-  }
-  return r;
 }
+
+// The drum and wire rows: the normal derivative (one-sided parabola) and the ion density.
+void ConformalSolver::boundaryTableRows() {
+  for (int i = 0; i < g_.ns; ++i) {
+    if (g_.nt >= 2) {
+      T(0, i, 2) = real((9 * val(i, 0) - val(i, 1)) / (3 * g_.dt));
+      T(g_.nt + 1, i, 2) = real(-(9 * val(i, g_.nt - 1) - val(i, g_.nt - 2)) / (3 * g_.dt));
+    }
+    T(0, i, 3) = r_.rho[g_.idx(i, 0)];
+    T(g_.nt + 1, i, 3) = real(rho0_);
+  }
+}
+
+}  // namespace
+
+ConformalCoronaResult solveConformalCorona(const ConformalCoronaProblem& p) { return ConformalSolver(p).run(); }
 
 ConformalSample sampleConformal(const ConformalCoronaProblem& p, const ConformalCoronaResult& r, real x, real y) {
   const int ns = p.n_sigma, nt = p.n_tau;
@@ -907,7 +1024,10 @@ real CoronaField::ionDensityFine(Vec3 p) const {
   return sampleConformal(prob_, res_, p.x, p.y).rho_abs / kElementaryCharge;
 }
 
-const CoronaSolution& CoronaField::solve(const CoronaSetup& st) {
+namespace {
+
+// Checks the setup of CoronaField::solve; nxd, nyd: the node counts of the Cartesian grid box.
+void validateSetup(const CoronaSetup& st, double& nxd, double& nyd) {
   auto bad = [](const std::string& m) { throw InputError("corona: " + m); };
   if (!finite(st.U)) bad("U must be finite");
   if (!(st.ion_mobility > 0) || !finite(st.ion_mobility)) bad("ion_mobility must be positive");
@@ -918,52 +1038,177 @@ const CoronaSolution& CoronaField::solve(const CoronaSetup& st) {
       !finite(st.box_y0) || !finite(st.box_y1))
     bad("the grid box must have x1 > x0 and y1 > y0");
   if (!(st.spacing > 0)) bad("the grid spacing must be positive");
-  const double nxd = std::floor((double(st.box_x1) - st.box_x0) / st.spacing + 1e-9) + 1;
-  const double nyd = std::floor((double(st.box_y1) - st.box_y0) / st.spacing + 1e-9) + 1;
+  nxd = std::floor((double(st.box_x1) - st.box_x0) / st.spacing + 1e-9) + 1;
+  nyd = std::floor((double(st.box_y1) - st.box_y0) / st.spacing + 1e-9) + 1;
   if (nxd * nyd > 5e7) bad("the grid box holds more than 5e7 nodes; raise the spacing");
   if (!(st.tolerance > 0)) bad("tolerance must be positive");
+}
 
-  sol_ = CoronaSolution{};
-  const real Eon = peekOnsetField(st.wire.R, st.rel_air_density, st.roughness);
-  sol_.wire_field_on = Eon;
-
-  // CSM Laplace model at a unit voltage of U's sign, scaled by |U| (linear in U).
+// CSM Laplace model at a unit voltage of U's sign (solved in csm), scaled by |U| (linear in U) into
+// charges, conductors and phiInf. Returns the mean surface field of the wire per volt.
+real csmModel(const CoronaSetup& st, CsmField& csm, std::vector<CsmLineCharge>& charges,
+              std::vector<CsmConductor>& conductors, real& phiInf) {
   const real sgn = st.U < 0 ? real(-1) : real(1);
-  CsmField csm;
   csm.addCylinder(st.drum.cx, st.drum.cy, st.drum.R, 0);
   csm.addCylinder(st.wire.cx, st.wire.cy, st.wire.R, sgn);
   if (st.tube.present) csm.addCylinder(st.tube.cx, st.tube.cy, st.tube.R, sgn);
   csm.solve();
   const real absU = std::fabs(st.U);
-  charges_ = csm.charges();
-  for (CsmLineCharge& c : charges_) c.lambda *= absU;
-  conductors_ = csm.conductors();
-  for (CsmConductor& c : conductors_) c.V *= absU;
-  phiInf_ = csm.phiInfinity() * absU;
+  charges = csm.charges();
+  for (CsmLineCharge& c : charges) c.lambda *= absU;
+  conductors = csm.conductors();
+  for (CsmConductor& c : conductors) c.V *= absU;
+  phiInf = csm.phiInfinity() * absU;
   // Mean surface field of the wire per volt = its charge per volt / (2 pi eps0 r) (Gauss).
-  const real ePerVolt = std::fabs(csm.cylinderCharge(1)) / (2 * kPi * kEps0 * st.wire.R);
+  return std::fabs(csm.cylinderCharge(1)) / (2 * kPi * kEps0 * st.wire.R);
+}
+
+// The conformal problem of the setup (without its Laplace model).
+void setConformalProblem(ConformalCoronaProblem& p, const CoronaSetup& st, real Eon) {
+  p = ConformalCoronaProblem{};
+  p.map = ConformalMap::bipolar(st.drum.cx, st.drum.cy, st.drum.R, st.wire.cx, st.wire.cy, st.wire.R);
+  p.n_sigma = st.n_sigma;
+  p.n_tau = st.n_tau;
+  p.U = st.U;
+  p.wire_radius = st.wire.R;
+  p.E_on = Eon;
+  p.mobility = st.ion_mobility;
+  p.tube = st.tube.present;
+  p.tube_cx = st.tube.cx;
+  p.tube_cy = st.tube.cy;
+  p.tube_R = st.tube.R;
+  p.frame_cx = st.drum.cx;
+  p.frame_cy = st.drum.cy;
+  p.frame_radius = st.frame_radius;
+  p.frame_earthed = st.frame_earthed;
+  p.tolerance = st.tolerance;
+  p.relaxation = st.relaxation;
+  p.max_iterations = st.max_iterations;
+}
+
+// Cartesian sampling: CSM Laplace field (exact) + the conformal space-charge correction. Row by row:
+// which nodes need the field and where their space-charge part is sampled, then the CSM part four nodes
+// at a time (groups fixed by the node index: the result does not depend on the thread count), then the
+// space-charge part.
+struct GridSampler {
+  const std::vector<CsmConductor>& conductors;
+  const CsmExpansion& lap;
+  const ConformalCoronaProblem& prob;
+  const ConformalCoronaResult& res;
+  real reach;  // nodes this deep inside a conductor hold the continued field
+
+  // Per-thread scratch of one row (padded to a multiple of 4 nodes).
+  struct Row {
+    explicit Row(int32_t nx4) : xs(nx4), sxs(nx4), sys(nx4), ph(nx4), ex(nx4), ey(nx4), need(new bool[nx4]) {}
+    std::vector<double> xs, sxs, sys, ph, ex, ey;
+    std::unique_ptr<bool[]> need;
+  };
+
+  void run(GridField& G) const {
+#pragma omp parallel
+    {
+      Row w((G.nx + 3) / 4 * 4);
+#pragma omp for schedule(dynamic, 4)
+      for (int32_t j = 0; j < G.ny; ++j) row(G, j, w);
+    }
+  }
+
+  // The conductor the node (x, y) lies in (-1: none), the node's distance d from its centre (0 outside)
+  // and the point (sx, sy) where the node's space-charge part is sampled.
+  int conductorOf(real x, real y, real& sx, real& sy, real& d) const {
+    sx = x;
+    sy = y;
+    d = 0;
+    for (size_t c = 0; c < conductors.size(); ++c) {
+      const CsmConductor& cd = conductors[c];
+      const real d2 = (x - cd.cx) * (x - cd.cx) + (y - cd.cy) * (y - cd.cy);
+      if (d2 < cd.R * cd.R) {
+        d = std::hypot(x - cd.cx, y - cd.cy);
+        if (d > 0) {
+          const real f = (cd.R * (1 + real(1e-9))) / d;
+          sx = cd.cx + (x - cd.cx) * f;
+          sy = cd.cy + (y - cd.cy) * f;
+        }
+        return int(c);
+      }
+    }
+    return -1;
+  }
+
+  void row(GridField& G, int32_t j, Row& w) const {
+    const int32_t nx4 = int32_t(w.xs.size());
+    const real y = G.y0 + j * G.dy;
+    for (int32_t i = 0; i < nx4; ++i) {
+      w.need[i] = false;
+      if (i >= G.nx) continue;
+      const size_t k = size_t(j) * G.nx + i;
+      const real x = G.x0 + i * G.dx;
+      w.xs[i] = x;
+      real sx, sy, d;
+      const int inside = conductorOf(x, y, sx, sy, d);
+      if (inside >= 0 && d < conductors[inside].R - reach && inside != 1) {
+        G.phi[k] = float(conductors[inside].V);
+        continue;
+      }
+      w.need[i] = true;
+      w.sxs[i] = sx;
+      w.sys[i] = sy;
+    }
+    const double yy[4] = {y, y, y, y};
+    for (int32_t i = 0; i < nx4; i += 4)
+      if (w.need[i] || w.need[i + 1] || w.need[i + 2] || w.need[i + 3])
+        lap.eval4(&w.xs[i], yy, &w.need[i], &w.ph[i], &w.ex[i], &w.ey[i]);
+    for (int32_t i = 0; i < G.nx; ++i) {
+      if (!w.need[i]) continue;
+      const size_t k = size_t(j) * G.nx + i;
+      double p = w.ph[i], fx = w.ex[i], fy = w.ey[i];
+      if (res.ionised) {
+        const ConformalSample c = sampleConformal(prob, res, w.sxs[i], w.sys[i]);
+        p += c.phi_sc;
+        fx += c.Ex_sc;
+        fy += c.Ey_sc;
+        G.ion_density[k] = float(c.rho_abs / kElementaryCharge);
+      }
+      G.phi[k] = float(p);
+      G.Ex[k] = float(fx);
+      G.Ey[k] = float(fy);
+    }
+  }
+};
+
+// The Cartesian grid of the setup's box, zero-filled, with the conductors.
+void initGrid(GridField& G, const CoronaSetup& st, double nxd, double nyd, const std::vector<CsmConductor>& cs) {
+  G.x0 = st.box_x0;
+  G.y0 = st.box_y0;
+  G.dx = G.dy = st.spacing;
+  G.nx = int32_t(nxd);
+  G.ny = int32_t(nyd);
+  const size_t nn = size_t(G.nx) * G.ny;
+  G.Ex.assign(nn, 0.f);
+  G.Ey.assign(nn, 0.f);
+  G.phi.assign(nn, 0.f);
+  G.ion_density.assign(nn, 0.f);
+  G.conductors.clear();
+  for (const CsmConductor& c : cs) G.conductors.push_back(GridConductor{c.cx, c.cy, c.R, c.V});
+}
+
+}  // namespace
+
+const CoronaSolution& CoronaField::solve(const CoronaSetup& st) {
+  double nxd, nyd;
+  validateSetup(st, nxd, nyd);
+  sol_ = CoronaSolution{};
+  const real Eon = peekOnsetField(st.wire.R, st.rel_air_density, st.roughness);
+  sol_.wire_field_on = Eon;
+
+  CsmField csm;
+  const real ePerVolt = csmModel(st, csm, charges_, conductors_, phiInf_);
+  const real sgn = st.U < 0 ? real(-1) : real(1);
+  const real absU = std::fabs(st.U);
   sol_.onset_voltage = sgn * Eon / ePerVolt;
   sol_.laplace_wire_field = ePerVolt * absU;
 
-  prob_ = ConformalCoronaProblem{};
-  prob_.map = ConformalMap::bipolar(st.drum.cx, st.drum.cy, st.drum.R, st.wire.cx, st.wire.cy, st.wire.R);
-  prob_.n_sigma = st.n_sigma;
-  prob_.n_tau = st.n_tau;
-  prob_.U = st.U;
-  prob_.wire_radius = st.wire.R;
-  prob_.E_on = Eon;
-  prob_.mobility = st.ion_mobility;
-  prob_.tube = st.tube.present;
-  prob_.tube_cx = st.tube.cx;
-  prob_.tube_cy = st.tube.cy;
-  prob_.tube_R = st.tube.R;
-  prob_.frame_cx = st.drum.cx;
-  prob_.frame_cy = st.drum.cy;
-  prob_.frame_radius = st.frame_radius;
-  prob_.frame_earthed = st.frame_earthed;
-  prob_.tolerance = st.tolerance;
-  prob_.relaxation = st.relaxation;
-  prob_.max_iterations = st.max_iterations;
+  setConformalProblem(prob_, st, Eon);
   std::vector<int> counts;
   for (size_t k = 0; k < conductors_.size(); ++k) counts.push_back(csm.chargeCount(int(k)));
   const auto lap = std::make_shared<const CsmExpansion>(charges_, counts, conductors_, double(phiInf_));
@@ -983,86 +1228,8 @@ const CoronaSolution& CoronaField::solve(const CoronaSetup& st) {
   sol_.current_drum = res_.current_drum;
   sol_.current_far = res_.current_far;
 
-  // Cartesian sampling: CSM Laplace field (exact) + the conformal space-charge correction.
-  GridField& G = sol_.grid;
-  G.x0 = st.box_x0;
-  G.y0 = st.box_y0;
-  G.dx = G.dy = st.spacing;
-  G.nx = int32_t(nxd);
-  G.ny = int32_t(nyd);
-  const size_t nn = size_t(G.nx) * G.ny;
-  G.Ex.assign(nn, 0.f);
-  G.Ey.assign(nn, 0.f);
-  G.phi.assign(nn, 0.f);
-  G.ion_density.assign(nn, 0.f);
-  G.conductors.clear();
-  for (const CsmConductor& c : conductors_) G.conductors.push_back(GridConductor{c.cx, c.cy, c.R, c.V});
-  const real reach = 2 * st.spacing;  // nodes this deep inside a conductor hold the continued field
-  const bool ion = res_.ionised;
-  // Row by row: which nodes need the field and where their space-charge part is sampled, then the CSM
-  // part four nodes at a time (groups fixed by the node index: the result does not depend on the thread
-  // count), then the space-charge part.
-#pragma omp parallel
-  {
-    const int32_t nx4 = (G.nx + 3) / 4 * 4;
-    std::vector<double> xs(nx4), sxs(nx4), sys(nx4), ph(nx4), ex(nx4), ey(nx4);
-    std::unique_ptr<bool[]> need(new bool[nx4]);
-#pragma omp for schedule(dynamic, 4)
-    for (int32_t j = 0; j < G.ny; ++j) {
-      const real y = G.y0 + j * G.dy;
-      for (int32_t i = 0; i < nx4; ++i) {
-        need[i] = false;
-        if (i >= G.nx) continue;
-        const size_t k = size_t(j) * G.nx + i;
-        const real x = G.x0 + i * G.dx;
-        xs[i] = x;
-        // The conductor the node lies in (if any) and the point where the space-charge part is sampled.
-        int inside = -1;
-        real sx = x, sy = y;
-        real d = 0;
-        for (size_t c = 0; c < conductors_.size(); ++c) {
-          const CsmConductor& cd = conductors_[c];
-          const real d2 = (x - cd.cx) * (x - cd.cx) + (y - cd.cy) * (y - cd.cy);
-          if (d2 < cd.R * cd.R) {
-            inside = int(c);
-            d = std::hypot(x - cd.cx, y - cd.cy);
-            if (d > 0) {
-              const real f = (cd.R * (1 + real(1e-9))) / d;
-              sx = cd.cx + (x - cd.cx) * f;
-              sy = cd.cy + (y - cd.cy) * f;
-            }
-            break;
-          }
-        }
-        if (inside >= 0 && d < conductors_[inside].R - reach && inside != 1) {
-          G.phi[k] = float(conductors_[inside].V);
-          continue;
-        }
-        need[i] = true;
-        sxs[i] = sx;
-        sys[i] = sy;
-      }
-      const double yy[4] = {y, y, y, y};
-      for (int32_t i = 0; i < nx4; i += 4)
-        if (need[i] || need[i + 1] || need[i + 2] || need[i + 3])
-          lap->eval4(&xs[i], yy, &need[i], &ph[i], &ex[i], &ey[i]);
-      for (int32_t i = 0; i < G.nx; ++i) {
-        if (!need[i]) continue;
-        const size_t k = size_t(j) * G.nx + i;
-        double p = ph[i], fx = ex[i], fy = ey[i];
-        if (ion) {
-          const ConformalSample c = sampleConformal(prob_, res_, sxs[i], sys[i]);
-          p += c.phi_sc;
-          fx += c.Ex_sc;
-          fy += c.Ey_sc;
-          G.ion_density[k] = float(c.rho_abs / kElementaryCharge);
-        }
-        G.phi[k] = float(p);
-        G.Ex[k] = float(fx);
-        G.Ey[k] = float(fy);
-      }
-    }
-  }
+  initGrid(sol_.grid, st, nxd, nyd, conductors_);
+  GridSampler{conductors_, *lap, prob_, res_, 2 * st.spacing}.run(sol_.grid);
   return sol_;
 }
 

@@ -193,8 +193,10 @@ std::string cesCollectedCsv(const CesMachine& m) {
   return o;
 }
 
-const char* cesPlotScript() {
-  return R"PY(#!/usr/bin/env python3
+namespace {
+// The plot script of cesPlotScript: reads summary.json and the CES CSVs of a results directory and writes
+// distribution.png, splitters.png and grade_recovery.png (matplotlib).
+constexpr const char kCesPlotScript[] = R"PY(#!/usr/bin/env python3
 """dvisim CES plots, written by `dvisim run` next to its results; run again with: python3 plot_ces.py DIR
 
 distribution.png  collected mass per mm along the collection plane for each material kind (the paper's Fig. 5),
@@ -293,7 +295,9 @@ ax.legend(fontsize=8)
 fig.tight_layout()
 fig.savefig(os.path.join(d, "grade_recovery.png"), dpi=120)
 )PY";
-}
+}  // namespace
+
+const char* cesPlotScript() { return kCesPlotScript; }
 
 std::string cesMakePlots(const std::string& dir) {
   // The first python3 on the PATH may be another installation (pyenv, a virtualenv) than the one Debian's
