@@ -91,6 +91,134 @@ __device__ __forceinline__ void phaseStamp(long long* stamps, int trial, int j) 
     stamps[kPhaseStamps * trial + j] = clock64();
 }
 
+// The register-cached form's iterates at the start of a solve: g_k, g_{k-1} and their Schur values of the
+// thread's blocks tid + j * stride (j < K).
+template <int K, class V, class JT, int KC>
+__device__ __forceinline__ void loadCachedIterates(const PersistentApgd<V, JT>& p, const algo::ApgdControl& c,
+                                                   int64_t tid, int64_t stride, real (&cur)[KC][3],
+                                                   real (&old)[KC][3], V (&ncur)[KC][3], V (&nold)[KC][3]) {
+  const real *xc = pickX(p.B, c.cur), *xo = pickX(p.B, c.old);
+  const V *nc = pickNX(p.B, c.ncur), *no = pickNX(p.B, c.nold);
+#pragma unroll
+  for (int j = 0; j < K; ++j) {
+    const int64_t k = tid + j * stride;
+    if (k >= p.n) continue;
+    for (int m = 0; m < 3; ++m) {
+      cur[j][m] = xc[3 * k + m], old[j][m] = xo[3 * k + m];
+      ncur[j][m] = nc[3 * k + m], nold[j][m] = no[3 * k + m];
+    }
+  }
+}
+
+// The register-cached form's g_{k+1} when the last trial's pass (3) wrote it (speculation): the same thread
+// wrote the same blocks.
+template <int K, class V, class JT, int KC>
+__device__ __forceinline__ void loadCachedStep(const PersistentApgd<V, JT>& p, const real* xn, int64_t tid,
+                                               int64_t stride, real (&nxt)[KC][3]) {
+#pragma unroll
+  for (int j = 0; j < K; ++j) {
+    const int64_t k = tid + j * stride;
+    if (k >= p.n) continue;
+    for (int m = 0; m < 3; ++m) nxt[j][m] = xn[3 * k + m];
+  }
+}
+
+// Pass (1): the projected step into xn = X[nw] (K > 0: from the registers, also kept in nxt).
+template <int K, class V, class JT, int KC>
+__device__ __forceinline__ void persistentStep(const PersistentApgd<V, JT>& p, const algo::ApgdControl& c, real* xn,
+                                               int64_t tid, int64_t stride, const real (&cur)[KC][3],
+                                               const real (&old)[KC][3], const V (&ncur)[KC][3],
+                                               const V (&nold)[KC][3], real (&nxt)[KC][3]) {
+  constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
+  if constexpr (K > 0) {
+    const real t = real(1) / c.L;
+#pragma unroll
+    for (int j = 0; j < K; ++j) {
+      const int64_t k = tid + j * stride;
+      if (k >= p.n) continue;
+      kern::apgdStepBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], grad_form ? nullptr : p.B.r + 3 * k,
+                             t * p.B.eta[k], c.beta, nxt[j]);
+      for (int m = 0; m < 3; ++m) xn[3 * k + m] = nxt[j][m];
+    }
+  } else {
+    const kern::ApgdStepT<V> f = apgdStepOf(p.B, c);
+    for (int64_t k = tid; k < p.n; k += stride) f(k);
+  }
+}
+
+// Pass (2): Schur pass (a), the gather of xn, heavy bodies by chunks.
+template <class V, class JT>
+__device__ __forceinline__ void persistentGather(const PersistentApgd<V, JT>& p, real* xn, int64_t tid,
+                                                 int64_t stride) {
+  GatherT<JT> g = p.g;
+  g.x = xn;
+  for (int64_t i = tid; i < p.nbodies; i += stride) g(i);
+  for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
+    heavyGatherChunk(p.heavy, g, xn, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
+}
+
+// Pass (3): Schur pass (b) into NX[nnw] and the test terms, summed into this block's slice partials (K > 0: the
+// thread's blocks from the registers, their N x also kept in nnxt).
+template <int K, class V, class JT, int KC>
+__device__ __forceinline__ void persistentSchurTest(const PersistentApgd<V, JT>& p, const algo::ApgdControl& c,
+                                                    int64_t tid, int64_t stride, const real (&cur)[KC][3],
+                                                    const real (&old)[KC][3], const V (&ncur)[KC][3],
+                                                    const V (&nold)[KC][3], const real (&nxt)[KC][3],
+                                                    V (&nnxt)[KC][3]) {
+  constexpr bool grad_form = !std::is_same_v<V, real>;
+  const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
+  if constexpr (K > 0) {
+    double acc[5] = {0, 0, 0, 0, 0};
+    const kern::ApgdSpeculation sp = apgdSpeculationOf(p.B, c);
+#pragma unroll
+    for (int j = 0; j < K; ++j) {
+      const int64_t k = tid + j * stride;
+      if (k >= p.n) continue;
+      schurBlock(p, k, out, nnxt[j]);
+      kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
+                             p.B.eta[k], c.beta, p.B.a, p.B.inv_a, grad_form, acc, sp);
+    }
+    if (int(blockIdx.x) < p.slices) blockSumFixed<5>(acc, p.partial + int64_t(blockIdx.x) * 5);
+  } else {
+    const SchurTestF<V, JT> f{p, out, apgdTestOf(p.B, c)};
+    for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
+  }
+}
+
+// The last block to finish pass (3) sums the partials in slice order into the control state's sums. (Every block
+// summing them itself contended for the same L2 lines: 9 us a trial at 100,000 contacts on an H100.) last and
+// sums: the kernel's shared flag and sums.
+template <class V, class JT>
+__device__ __forceinline__ void persistentSumPartials(const PersistentApgd<V, JT>& p, bool& last, double* sums) {
+  if (threadIdx.x == 0) {  // thread 0 wrote this block's partials (blockSumFixed)
+    // release: they are visible before the block counts itself; acquire: the last block sees every block's
+    // (its other threads after the barrier below, reading through L2). One acq_rel atomic in place of two
+    // fences.
+    cuda::atomic_ref<unsigned, cuda::thread_scope_device> done(p.st->blocks_done);
+    last = done.fetch_add(1u, cuda::memory_order_acq_rel) == gridDim.x - 1;
+  }
+  __syncthreads();
+  if (last) {
+    reducePartials<5>(p.slices, p.partial, sums);
+    if (threadIdx.x == 0) {
+      for (int m = 0; m < 5; ++m) p.st->sums[m] = sums[m];
+      p.st->blocks_done = 0;
+    }
+  }
+}
+
+// The rotation of afterTest in the registers: g_{k-1} <- g_k <- g_{k+1}, and their Schur values.
+template <int K, int KC, class V>
+__device__ __forceinline__ void rotateCached(real (&cur)[KC][3], real (&old)[KC][3], const real (&nxt)[KC][3],
+                                             V (&ncur)[KC][3], V (&nold)[KC][3], const V (&nnxt)[KC][3]) {
+#pragma unroll
+  for (int j = 0; j < K; ++j)
+    for (int m = 0; m < 3; ++m) {
+      old[j][m] = cur[j][m], cur[j][m] = nxt[j][m];
+      nold[j][m] = ncur[j][m], ncur[j][m] = nnxt[j][m];
+    }
+}
+
 // One kernel for both forms. K = 0: every pass reads its inputs from the buffers. K > 0: thread tid owns the
 // blocks tid + j * stride (j < K) in the step and in the fused pass (3), whose test slice is then the thread's
 // block (the host launches it only when slices == grid, or when every block is in slice blockIdx.x's first
@@ -107,103 +235,30 @@ __global__ void __launch_bounds__(kBlock, persistentBlocksPerSm<K>())
   algo::ApgdControl& c = *reinterpret_cast<algo::ApgdControl*>(c_mem);
   if (threadIdx.x == 0) c = p.st->c;
   __syncthreads();
-  constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
   const int64_t tid = int64_t(blockIdx.x) * kBlock + threadIdx.x, stride = int64_t(gridDim.x) * kBlock;
   constexpr int KC = K > 0 ? K : 1;
   real cur[KC][3], old[KC][3], nxt[KC][3];  // g_k, g_{k-1}, g_{k+1} of the thread's blocks (K > 0)
   V ncur[KC][3], nold[KC][3], nnxt[KC][3];  // their Schur buffers
-  if constexpr (K > 0) {
-    const real *xc = pickX(p.B, c.cur), *xo = pickX(p.B, c.old);
-    const V *nc = pickNX(p.B, c.ncur), *no = pickNX(p.B, c.nold);
-#pragma unroll
-    for (int j = 0; j < K; ++j) {
-      const int64_t k = tid + j * stride;
-      if (k >= p.n) continue;
-      for (int m = 0; m < 3; ++m) {
-        cur[j][m] = xc[3 * k + m], old[j][m] = xo[3 * k + m];
-        ncur[j][m] = nc[3 * k + m], nold[j][m] = no[3 * k + m];
-      }
-    }
-  }
+  if constexpr (K > 0) loadCachedIterates<K>(p, c, tid, stride, cur, old, ncur, nold);
   for (int trial = 0; !c.done; ++trial) {  // c is the same in every block
     real* xn = pickX(p.B, c.nw);
     phaseStamp(p.stamps, trial, 0);
     if (c.ready) {  // the last trial's pass (3) wrote this step, the same thread the same blocks (speculation)
-      if constexpr (K > 0) {
-#pragma unroll
-        for (int j = 0; j < K; ++j) {
-          const int64_t k = tid + j * stride;
-          if (k >= p.n) continue;
-          for (int m = 0; m < 3; ++m) nxt[j][m] = xn[3 * k + m];
-        }
-      }
+      if constexpr (K > 0) loadCachedStep<K>(p, xn, tid, stride, nxt);
       phaseStamp(p.stamps, trial, 1);
       phaseStamp(p.stamps, trial, 2);
     } else {
-      if constexpr (K > 0) {  // (1) the projected step
-        const real t = real(1) / c.L;
-#pragma unroll
-        for (int j = 0; j < K; ++j) {
-          const int64_t k = tid + j * stride;
-          if (k >= p.n) continue;
-          kern::apgdStepBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], grad_form ? nullptr : p.B.r + 3 * k,
-                                 t * p.B.eta[k], c.beta, nxt[j]);
-          for (int m = 0; m < 3; ++m) xn[3 * k + m] = nxt[j][m];
-        }
-      } else {
-        const kern::ApgdStepT<V> f = apgdStepOf(p.B, c);
-        for (int64_t k = tid; k < p.n; k += stride) f(k);
-      }
+      persistentStep<K>(p, c, xn, tid, stride, cur, old, ncur, nold, nxt);  // (1) the projected step
       phaseStamp(p.stamps, trial, 1);
       grid.sync();
       phaseStamp(p.stamps, trial, 2);
     }
-    {  // (2) Schur pass (a): the gather
-      GatherT<JT> g = p.g;
-      g.x = xn;
-      for (int64_t i = tid; i < p.nbodies; i += stride) g(i);
-      for (int32_t w = int32_t(blockIdx.x); w < p.n_heavy * kHeavyChunks; w += int32_t(gridDim.x))
-        heavyGatherChunk(p.heavy, g, xn, p.heavy_partial, p.heavy_ticket, w / kHeavyChunks, w % kHeavyChunks);
-    }
+    persistentGather(p, xn, tid, stride);  // (2) Schur pass (a): the gather
     phaseStamp(p.stamps, trial, 3);
     grid.sync();
     phaseStamp(p.stamps, trial, 4);
-    {  // (3) Schur pass (b) and the test terms
-      const SchurOut<V> out{pickNX(p.B, c.nnw), nullptr, grad_form ? p.B.r : nullptr};
-      if constexpr (K > 0) {
-        double acc[5] = {0, 0, 0, 0, 0};
-        const kern::ApgdSpeculation sp = apgdSpeculationOf(p.B, c);
-#pragma unroll
-        for (int j = 0; j < K; ++j) {
-          const int64_t k = tid + j * stride;
-          if (k >= p.n) continue;
-          schurBlock(p, k, out, nnxt[j]);
-          kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
-                                 p.B.eta[k], c.beta, p.B.a, p.B.inv_a, grad_form, acc, sp);
-        }
-        if (int(blockIdx.x) < p.slices) blockSumFixed<5>(acc, p.partial + int64_t(blockIdx.x) * 5);
-      } else {
-        const SchurTestF<V, JT> f{p, out, apgdTestOf(p.B, c)};
-        for (int s = int(blockIdx.x); s < p.slices; s += int(gridDim.x)) reduceSlice<5>(s, p.slices, p.n, f, p.partial);
-      }
-    }
-    // The last block to finish sums the partials. (Every block summing them itself contended for the same L2
-    // lines: 9 us a trial at 100,000 contacts on an H100.)
-    if (threadIdx.x == 0) {  // thread 0 wrote this block's partials (blockSumFixed)
-      // release: they are visible before the block counts itself; acquire: the last block sees every block's
-      // (its other threads after the barrier below, reading through L2). One acq_rel atomic in place of two
-      // fences.
-      cuda::atomic_ref<unsigned, cuda::thread_scope_device> done(p.st->blocks_done);
-      last = done.fetch_add(1u, cuda::memory_order_acq_rel) == gridDim.x - 1;
-    }
-    __syncthreads();
-    if (last) {
-      reducePartials<5>(p.slices, p.partial, sums);
-      if (threadIdx.x == 0) {
-        for (int m = 0; m < 5; ++m) p.st->sums[m] = sums[m];
-        p.st->blocks_done = 0;
-      }
-    }
+    persistentSchurTest<K>(p, c, tid, stride, cur, old, ncur, nold, nxt, nnxt);  // (3) Schur pass (b), test terms
+    persistentSumPartials(p, last, sums);
     phaseStamp(p.stamps, trial, 5);
     grid.sync();
     if (threadIdx.x == 0) {
@@ -212,14 +267,7 @@ __global__ void __launch_bounds__(kBlock, persistentBlocksPerSm<K>())
     }
     __syncthreads();
     if constexpr (K > 0) {
-      if (c.accepted) {  // the rotation of afterTest: g_{k-1} <- g_k <- g_{k+1}, and their Schur buffers
-#pragma unroll
-        for (int j = 0; j < K; ++j)
-          for (int m = 0; m < 3; ++m) {
-            old[j][m] = cur[j][m], cur[j][m] = nxt[j][m];
-            nold[j][m] = ncur[j][m], ncur[j][m] = nnxt[j][m];
-          }
-      }
+      if (c.accepted) rotateCached<K>(cur, old, nxt, ncur, nold, nnxt);
     }
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) p.st->c = c;
