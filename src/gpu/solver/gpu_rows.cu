@@ -240,24 +240,37 @@ struct JacobiStepF {
   }
 };
 
-}  // namespace
+// The sizes of a step's problem.
+struct RowCounts {
+  int64_t nc = 0;          // contacts
+  int64_t nb = 0;          // bodies
+  int64_t ncb = 0;         // contact blocks (normal-only: three contacts a block)
+  int64_t nbox = 0;        // box entries of the normal blocks, before the rows'
+  int64_t nrb = 0;         // constraint-row blocks
+  int64_t nblk = 0;        // all blocks
+  int64_t nent = 0;        // adjacency entries: 2 per contact, 2 per row
+  bool normal = false;     // normal-only problem
+  bool float_jac = false;  // VectorStorage::Float with APGD: the Jacobians rounded to float, and a float copy
+};
 
-void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows,
-               real* max_penetration) {
-  const int64_t nc = int64_t(d.contacts.count);
-  const int64_t nb = int64_t(d.bodies.count);
+// The bodies' world inverse masses (and their 16-byte isotropic form for the entry gather).
+void inverseMasses(DeviceState& d, const SystemConfig& cfg, int64_t nb) {
   SolverScratch& S = d.solver;
-  S.n_heavy = 0;  // set again once this step's adjacency exists
   DeviceBodies& B = d.bodies;
-  DeviceContacts& C = d.contacts;
   d.entry_gather = cfg.gpu_entry_gather;
   if (d.entry_gather) S.inv_iso.resize(nb);
   launchMap(d, nb,
             BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data(),
                          d.entry_gather ? S.inv_iso.data() : nullptr},
             "launch of BodyInverseF");
-  // Combined friction first: friction rows only where mu > 0 (docs/MODEL.md §6). When no contact of the step has
-  // mu > 0 the CCP has the normal rows only (jacobian.h), as on the CPU (System::buildAndSolve).
+}
+
+// Combined friction, pair size and penetration of every contact; returns the largest mu (1 when every contact's
+// mu is known to be positive, 0 without pruning: only its sign is read).
+real combinedFriction(DeviceState& d, const SystemConfig& cfg, int64_t nc) {
+  SolverScratch& S = d.solver;
+  DeviceBodies& B = d.bodies;
+  DeviceContacts& C = d.contacts;
   C.mu.resize(nc);
   C.size.resize(nc);
   S.v6.resize(nc);  // per-contact penetration
@@ -276,47 +289,47 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
     });
     max_mu = d.readValue(mu_out);
   }
-  d.normal_only = cfg.prune && nc > 0 && !(max_mu > 0);
-  const bool normal = d.normal_only;
-  const int64_t ncb = normal ? (nc + 2) / 3 : nc;
-  d.contact_blocks = ncb;
-  const int64_t nbox = normal ? 3 * ncb : 0;  // box entries of the normal blocks, before the rows'
-  // Constraint rows from the host (RowProvider plug-ins), padded to blocks of three (row_kernels.h).
-  const int64_t nrb = (int64_t(rows.size()) + 2) / 3;
-  const int64_t nblk = ncb + nrb;
-  d.row_count = rows.size();
-  {
-    std::vector<ConstraintRow>& padded = d.host_rows;
-    padded.assign(rows.begin(), rows.end());
-    std::vector<real>& lohi = d.host_lohi;
-    lohi.assign(size_t(6 * nrb), real(0));
-    for (int64_t i = 0; i < 3 * nrb; ++i) {
-      if (i >= int64_t(rows.size())) {
-        ConstraintRow pad;
-        pad.lo = pad.hi = 0;
-        padded.push_back(pad);
-      }
-      lohi[size_t(i)] = padded[size_t(i)].lo;
-      lohi[size_t(3 * nrb + i)] = padded[size_t(i)].hi;
-      for (int32_t c : {padded[size_t(i)].a, padded[size_t(i)].b})
-        if (c < -1 || c >= nb)
-          throw InputError("constraint row " + std::to_string(i) + ": body index " + std::to_string(c) + " out of range");
+  return max_mu;
+}
+
+// Constraint rows from the host (RowProvider plug-ins), padded to blocks of three (row_kernels.h), and their
+// boxes after the normal blocks' (n.nbox).
+void uploadRows(DeviceState& d, const std::vector<ConstraintRow>& rows, const RowCounts& n) {
+  SolverScratch& S = d.solver;
+  const int64_t nrb = n.nrb, nbox = n.nbox;
+  std::vector<ConstraintRow>& padded = d.host_rows;
+  padded.assign(rows.begin(), rows.end());
+  std::vector<real>& lohi = d.host_lohi;
+  lohi.assign(size_t(6 * nrb), real(0));
+  for (int64_t i = 0; i < 3 * nrb; ++i) {
+    if (i >= int64_t(rows.size())) {
+      ConstraintRow pad;
+      pad.lo = pad.hi = 0;
+      padded.push_back(pad);
     }
-    S.rows.upload(padded, d.stream);
-    S.row_lo.resize(size_t(nbox + 3 * nrb));
-    S.row_hi.resize(size_t(nbox + 3 * nrb));
-    if (nrb > 0) {
-      DVI_CUDA(cudaMemcpyAsync(S.row_lo.data() + nbox, lohi.data(), sizeof(real) * size_t(3 * nrb),
-                               cudaMemcpyHostToDevice, d.stream));
-      DVI_CUDA(cudaMemcpyAsync(S.row_hi.data() + nbox, lohi.data() + 3 * nrb, sizeof(real) * size_t(3 * nrb),
-                               cudaMemcpyHostToDevice, d.stream));
-    }
+    lohi[size_t(i)] = padded[size_t(i)].lo;
+    lohi[size_t(3 * nrb + i)] = padded[size_t(i)].hi;
+    for (int32_t c : {padded[size_t(i)].a, padded[size_t(i)].b})
+      if (c < -1 || c >= n.nb)
+        throw InputError("constraint row " + std::to_string(i) + ": body index " + std::to_string(c) + " out of range");
   }
+  S.rows.upload(padded, d.stream);
+  S.row_lo.resize(size_t(nbox + 3 * nrb));
+  S.row_hi.resize(size_t(nbox + 3 * nrb));
+  if (nrb > 0) {
+    DVI_CUDA(cudaMemcpyAsync(S.row_lo.data() + nbox, lohi.data(), sizeof(real) * size_t(3 * nrb),
+                             cudaMemcpyHostToDevice, d.stream));
+    DVI_CUDA(cudaMemcpyAsync(S.row_hi.data() + nbox, lohi.data() + 3 * nrb, sizeof(real) * size_t(3 * nrb),
+                             cudaMemcpyHostToDevice, d.stream));
+  }
+}
+
+// The problem's per-contact, per-block, per-body and per-entry buffers at this step's sizes.
+void resizeProblem(DeviceState& d, const RowCounts& n) {
+  SolverScratch& S = d.solver;
+  const int64_t nc = n.nc, nb = n.nb, nblk = n.nblk, nent = n.nent;
   S.jac.resize(nc);
-  // VectorStorage::Float with APGD: the Jacobians rounded to float, and a float copy for the trials
-  const bool float_jac = cfg.solver == SolverType::APGD && floatStorage(cfg.solver_settings, true) &&
-                         !std::is_same_v<real, float>;
-  if (float_jac) S.jacf.resize(nc);
+  if (n.float_jac) S.jacf.resize(nc);
   S.rhs.resize(3 * nblk);
   S.block_inv.resize(6 * nblk);
   S.block_step.resize(nblk);
@@ -324,7 +337,6 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.colnorm.resize(6 * nblk);
   S.rowsum.resize(3 * nblk);
   S.bodyq.resize(nb);
-  const int64_t nent = 2 * nc + 6 * nrb;  // adjacency entries: 2 per contact, 2 per row
   S.adj_key.resize(nent);
   S.adj_val.resize(nent);
   S.adj_key_sorted.resize(nent);
@@ -332,10 +344,20 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.adj_off.resize(nb + 1);
   S.v5.resize(nblk);  // per-block max diagonal entry
   S.v4.resize(nc);  // key order flags
+}
+
+// Every block's rhs, inverse, steps, column norms, row sums and max diagonal, the Jacobians, the unsorted
+// adjacency entries, and the contact keys' order flags.
+void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const RowCounts& n) {
+  SolverScratch& S = d.solver;
+  DeviceBodies& B = d.bodies;
+  DeviceContacts& C = d.contacts;
+  const int64_t nc = n.nc, nb = n.nb, ncb = n.ncb, nrb = n.nrb;
+  const bool normal = n.normal;
   RowsF f{C.body_a.data(), C.body_b.data(), C.normal.data(), C.pa.data(), C.pb.data(), B.pos.data(),
           B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), cfg.dt, cfg.recovery_rel,
           int32_t(nb), normal, S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.colnorm.data(),
-          S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data(), float_jac ? S.jacf.data() : nullptr};
+          S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data(), n.float_jac ? S.jacf.data() : nullptr};
   launchMap(d, nc, f, "launch of RowsF");
   if (normal)
     launchMap(d, ncb,
@@ -348,14 +370,20 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
                       S.adj_key.data(), S.adj_val.data()},
             "launch of RowBlockF");
   launchMap(d, nc, KeyOrderF{C.key.data(), S.v4.data(), nc}, "launch of KeyOrderF");
-  // body -> contact CSR: a stable radix sort by body keeps each body's entries in increasing k
+}
+
+// The body -> entry CSR (a stable radix sort by body keeps each body's entries in increasing k), the float
+// trials' entry records in that order, and the list of heavy bodies (its count is read back with the maxima).
+void buildAdjacency(DeviceState& d, const RowCounts& n) {
+  SolverScratch& S = d.solver;
+  const int64_t nc = n.nc, nb = n.nb, nent = n.nent;
   const int bits = bitsFor(uint64_t(nb));
   cubRun(d, "cub::DeviceRadixSort::SortPairs (adjacency)", [&](void* t, size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, S.adj_key.data(), S.adj_key_sorted.data(), S.adj_val.data(),
                                            S.adj_val_sorted.data(), int(nent), 0, bits, d.stream);
   });
   launchMap(d, nb + 1, AdjOffsetF{S.adj_key_sorted.data(), nent, S.adj_off.data()}, "launch of AdjOffsetF");
-  if (float_jac && d.entry_gather) {  // the float trials' gather reads each entry's side of the Jacobian in order
+  if (n.float_jac && d.entry_gather) {  // the float trials' gather reads each entry's side of the Jacobian in order
     S.entry_jac.resize(nent);
     launchMap(d, nent, EntryJacobianOrderF{S.adj_val_sorted.data(), S.jacf.data(), 2 * nc, S.entry_jac.data()},
               "launch of EntryJacobianOrderF");
@@ -364,23 +392,35 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.heavy_count.resize(1);
   DVI_CUDA(cudaMemsetAsync(S.heavy_count.data(), 0, sizeof(int32_t), d.stream));
   launchMap(d, nb, HeavyListF{S.adj_off.data(), S.heavy.data(), S.heavy_count.data()}, "launch of HeavyListF");
-  // (the heavy count is read back with the maxima below)
-  // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-block bounds. Only Jacobi
-  // reads them: for the other solvers they are left out (the per-body sum runs in one thread per body, and
-  // the CES drum's 15,000 entries made it 3.6 ms of every step's BuildRows on an H200).
-  if (cfg.solver == SolverType::Jacobi) {
-    launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), layoutOf(d), S.bodyq.data()},
-              "launch of BodyColumnSumF");
-    if (normal)
-      launchMap(d, ncb, NormalJacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc, S.jacobi_step.data()},
-                "launch of NormalJacobiStepF");
-    else
-      launchMap(d, nc, JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
-                "launch of JacobiStepF");
-    launchMap(d, nrb, RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), ncb, S.jacobi_step.data()},
-              "launch of RowJacobiStepF");
-  }
-  // max diag(N), max penetration, key order: three maxima, one read-back
+}
+
+// Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-block bounds.
+void jacobiSteps(DeviceState& d, const RowCounts& n) {
+  SolverScratch& S = d.solver;
+  const int64_t nc = n.nc, nb = n.nb, ncb = n.ncb, nrb = n.nrb;
+  launchMap(d, nb,
+            BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), layoutOf(d), S.bodyq.data()},
+            "launch of BodyColumnSumF");
+  if (n.normal)
+    launchMap(d, ncb,
+              NormalJacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc,
+                                S.jacobi_step.data()},
+              "launch of NormalJacobiStepF");
+  else
+    launchMap(d, nc,
+              JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
+              "launch of JacobiStepF");
+  launchMap(d, nrb,
+            RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), ncb,
+                           S.jacobi_step.data()},
+            "launch of RowJacobiStepF");
+}
+
+// max diag(N), max penetration, key order: three maxima, read back with the heavy bodies' count in one
+// synchronisation; then the heavy gather's scratch for that count.
+void readMaxima(DeviceState& d, const RowCounts& n, real* max_penetration) {
+  SolverScratch& S = d.solver;
+  const int64_t nc = n.nc, nblk = n.nblk;
   d.step_scalars.resize(16);
   real* out = reinterpret_cast<real*>(d.step_scalars.data());
   cubRun(d, "cub::DeviceReduce::Max (diagonal)", [&](void* t, size_t& b) {
@@ -412,6 +452,39 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   d.max_diag = host[0] > real(0) ? host[0] : real(1);
   *max_penetration = std::max(real(0), host[1]);
   d.keys_unsorted = host[2] > real(0);
+}
+
+}  // namespace
+
+void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows,
+               real* max_penetration) {
+  RowCounts n;
+  n.nc = int64_t(d.contacts.count);
+  n.nb = int64_t(d.bodies.count);
+  d.solver.n_heavy = 0;  // set again once this step's adjacency exists
+  inverseMasses(d, cfg, n.nb);
+  // Combined friction first: friction rows only where mu > 0 (docs/MODEL.md §6). When no contact of the step has
+  // mu > 0 the CCP has the normal rows only (jacobian.h), as on the CPU (System::buildAndSolve).
+  const real max_mu = combinedFriction(d, cfg, n.nc);
+  d.normal_only = cfg.prune && n.nc > 0 && !(max_mu > 0);
+  n.normal = d.normal_only;
+  n.ncb = n.normal ? (n.nc + 2) / 3 : n.nc;
+  d.contact_blocks = n.ncb;
+  n.nbox = n.normal ? 3 * n.ncb : 0;
+  n.nrb = (int64_t(rows.size()) + 2) / 3;
+  n.nblk = n.ncb + n.nrb;
+  d.row_count = rows.size();
+  uploadRows(d, rows, n);
+  n.float_jac = cfg.solver == SolverType::APGD && floatStorage(cfg.solver_settings, true) &&
+                !std::is_same_v<real, float>;
+  n.nent = 2 * n.nc + 6 * n.nrb;
+  resizeProblem(d, n);
+  assembleBlocks(d, cfg, n);
+  buildAdjacency(d, n);
+  // Only Jacobi reads the Jacobi steps: for the other solvers they are left out (the per-body sum runs in one
+  // thread per body, and the CES drum's 15,000 entries made it 3.6 ms of every step's BuildRows on an H200).
+  if (cfg.solver == SolverType::Jacobi) jacobiSteps(d, n);
+  readMaxima(d, n, max_penetration);
 }
 
 }  // namespace dvi::gpu
