@@ -336,17 +336,18 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid
   return true;
 }
 
-// The forms the driver launches (gpu_apgd_trials.cu): the Schur buffers of the storage types real and float, each
-// plain and register-cached.
-template int persistentGridMax<real, 0>(DeviceState&);
-template int persistentGridMax<real, kCachedBlocks>(DeviceState&);
-template bool apgdPersistent<real, 0>(DeviceState&, int64_t, const ApgdBuffers<real>&, int, int);
-template bool apgdPersistent<real, kCachedBlocks>(DeviceState&, int64_t, const ApgdBuffers<real>&, int, int);
+// The forms the driver launches (gpu_apgd_trials.cu): the Schur buffers of the storage types float and real, each
+// plain and register-cached. Instantiated in the order the driver asks for them (float storage first), which
+// is the order of the kernels' shared variables in the module, and so their shared-memory offsets.
 #if !defined(DVISIM_SINGLE_PRECISION)
 template int persistentGridMax<float, 0>(DeviceState&);
 template int persistentGridMax<float, kCachedBlocks>(DeviceState&);
-template bool apgdPersistent<float, 0>(DeviceState&, int64_t, const ApgdBuffers<float>&, int, int);
 template bool apgdPersistent<float, kCachedBlocks>(DeviceState&, int64_t, const ApgdBuffers<float>&, int, int);
+template bool apgdPersistent<float, 0>(DeviceState&, int64_t, const ApgdBuffers<float>&, int, int);
 #endif
+template int persistentGridMax<real, 0>(DeviceState&);
+template int persistentGridMax<real, kCachedBlocks>(DeviceState&);
+template bool apgdPersistent<real, kCachedBlocks>(DeviceState&, int64_t, const ApgdBuffers<real>&, int, int);
+template bool apgdPersistent<real, 0>(DeviceState&, int64_t, const ApgdBuffers<real>&, int, int);
 
 }  // namespace dvi::gpu
