@@ -35,6 +35,7 @@ struct ProblemView {
   real max_diag = 1;
 };
 
+// Name of a functor type, for the error message of a failed launch.
 template <class F>
 const char* functorName() {
   return __PRETTY_FUNCTION__;
