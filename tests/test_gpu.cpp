@@ -821,7 +821,7 @@ TEST_CASE("GPU broad phase: pairs and bin edge equal the CPU's with and without 
 
 #endif  // DVISIM_HAVE_CUDA
 
-// A body with 512 or more adjacency entries is gathered by 32 blocks (gpu_solver.cu: HeavyGatherKernel, a ticketed
+// A body with 512 or more adjacency entries is gathered by 32 blocks (gpu/solver/gpu_schur.cu: HeavyGatherKernel, a ticketed
 // fixed-order sum of the blocks' partials) instead of one thread. A free plate under 2,025 spheres has ~2,000
 // contacts: its velocity change in every Schur product comes from that kernel, and must equal the CPU's
 // sequential sum to rounding.

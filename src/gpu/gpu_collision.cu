@@ -689,18 +689,52 @@ static void classifyAndGrid(DeviceState& d, const BroadPhaseSettings& s, int n, 
   DVI_CUDA_LAUNCH("gridKernel");
 }
 
-void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats, const Aabb* boxes) {
-  const int n = int(d.shapes.count);
+// The bin edge from the sorted extents (edgeKernel: median, cut, max_large), into B.params.
+static void edgeFromSortedExtents(DeviceState& d, const BroadPhaseSettings& s, int n) {
   BroadScratch& B = d.broad;
   cudaStream_t st = d.stream;
-  d.pairs = 0;
-  if (n < 2) return;
-  const BroadPhaseSettings s = cfg.broadphase;
-  const Aabb* box = boxes ? boxes : d.shapes.aabb.data();
-  const Shape* shapes = d.shapes.shape.data();
+  B.ext_sorted.resize(n);
+  B.ext_prefix.resize(n);
+  cubRun(d, "cub::DeviceRadixSort::SortKeys (extents)", [&](void* t, size_t& b) {
+    return cub::DeviceRadixSort::SortKeys(t, b, B.ext.data(), B.ext_sorted.data(), n, 0, int(sizeof(real) * 8), st);
+  });
+  toDoubleKernel<<<blocksFor(n), kBlock, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data());
+  DVI_CUDA_LAUNCH("toDoubleKernel");
+  cubRun(d, "cub::DeviceScan::InclusiveSum (extents)", [&](void* t, size_t& b) {
+    return cub::DeviceScan::InclusiveSum(t, b, B.ext_prefix.data(), B.ext_prefix.data(), n, st);
+  });
+  edgeKernel<<<1, 1, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data(), s, B.params.data());
+  DVI_CUDA_LAUNCH("edgeKernel");
+}
 
-  // 1. classification and grid. The bin edge from the extents' statistics where they decide it, else (and
-  // from then on, while the scene needs it) from the sorted extents; a wrong guess costs one more pass.
+// The bin edge from the split of the extents at large_factor x the least (edgeFromSplitKernel), into B.params;
+// needs_sort there when the split cannot decide it.
+static void edgeFromExtentSplit(DeviceState& d, const BroadPhaseSettings& s, int n) {
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
+  B.ext_stats.resize(sizeof(ExtentSplit) + sizeof(real));
+  auto* split = reinterpret_cast<ExtentSplit*>(B.ext_stats.data());
+  real* lo = reinterpret_cast<real*>(B.ext_stats.data() + sizeof(ExtentSplit));
+  const auto mins = thrust::make_transform_iterator(B.ext.data(), ExtentMin{});
+  cubRun(d, "cub::DeviceReduce::Min (extents)", [&](void* t, size_t& b) {
+    return cub::DeviceReduce::Min(t, b, mins, lo, n, st);
+  });
+  const auto parts = thrust::make_transform_iterator(B.ext.data(), ExtentToSplit{lo, s.large_factor});
+  const ExtentSplit none{0, std::numeric_limits<real>::lowest(), std::numeric_limits<real>::max(), 0, 0};
+  cubRun(d, "cub::DeviceReduce::Reduce (extents split)", [&](void* t, size_t& b) {
+    return cub::DeviceReduce::Reduce(t, b, parts, split, n, ExtentSplitMerge{}, none, st);
+  });
+  edgeFromSplitKernel<<<1, 1, 0, st>>>(split, s, B.params.data());
+  DVI_CUDA_LAUNCH("edgeFromSplitKernel");
+}
+
+// Stage 1, classification and grid. The bin edge from the extents' statistics where they decide it, else (and
+// from then on, while the scene needs it) from the sorted extents; a wrong guess costs one more pass. Returns the
+// parameters read back.
+static BroadParams classifyShapes(DeviceState& d, const BroadPhaseSettings& s, int n, const Aabb* box,
+                                  const Shape* shapes) {
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
   B.params.resize(1);
   B.ext.resize(n);
   extentKernel<<<blocksFor(n), kBlock, 0, st>>>(n, shapes, box, B.ext.data());
@@ -708,35 +742,8 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats,
   bool by_sort = B.edge_by_sort;
   BroadParams P{};
   for (;;) {
-    if (by_sort) {
-      B.ext_sorted.resize(n);
-      B.ext_prefix.resize(n);
-      cubRun(d, "cub::DeviceRadixSort::SortKeys (extents)", [&](void* t, size_t& b) {
-        return cub::DeviceRadixSort::SortKeys(t, b, B.ext.data(), B.ext_sorted.data(), n, 0, int(sizeof(real) * 8), st);
-      });
-      toDoubleKernel<<<blocksFor(n), kBlock, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data());
-      DVI_CUDA_LAUNCH("toDoubleKernel");
-      cubRun(d, "cub::DeviceScan::InclusiveSum (extents)", [&](void* t, size_t& b) {
-        return cub::DeviceScan::InclusiveSum(t, b, B.ext_prefix.data(), B.ext_prefix.data(), n, st);
-      });
-      edgeKernel<<<1, 1, 0, st>>>(n, B.ext_sorted.data(), B.ext_prefix.data(), s, B.params.data());
-      DVI_CUDA_LAUNCH("edgeKernel");
-    } else {
-      B.ext_stats.resize(sizeof(ExtentSplit) + sizeof(real));
-      auto* split = reinterpret_cast<ExtentSplit*>(B.ext_stats.data());
-      real* lo = reinterpret_cast<real*>(B.ext_stats.data() + sizeof(ExtentSplit));
-      const auto mins = thrust::make_transform_iterator(B.ext.data(), ExtentMin{});
-      cubRun(d, "cub::DeviceReduce::Min (extents)", [&](void* t, size_t& b) {
-        return cub::DeviceReduce::Min(t, b, mins, lo, n, st);
-      });
-      const auto parts = thrust::make_transform_iterator(B.ext.data(), ExtentToSplit{lo, s.large_factor});
-      const ExtentSplit none{0, std::numeric_limits<real>::lowest(), std::numeric_limits<real>::max(), 0, 0};
-      cubRun(d, "cub::DeviceReduce::Reduce (extents split)", [&](void* t, size_t& b) {
-        return cub::DeviceReduce::Reduce(t, b, parts, split, n, ExtentSplitMerge{}, none, st);
-      });
-      edgeFromSplitKernel<<<1, 1, 0, st>>>(split, s, B.params.data());
-      DVI_CUDA_LAUNCH("edgeFromSplitKernel");
-    }
+    if (by_sort) edgeFromSortedExtents(d, s, n);
+    else edgeFromExtentSplit(d, s, n);
     classifyAndGrid(d, s, n, box);
     P = d.readValue(B.params.data());
     if (by_sort || !P.needs_sort) break;
@@ -744,9 +751,15 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats,
   }
   B.edge_by_sort = P.needs_sort != 0;
   B.last_edge = P.edge;
-  const int nb = P.binned, nl = P.large;
+  return P;
+}
 
-  // 2. count -> scan -> write (bin, shape) entries -> sort by bin -> run-length encode
+// Stage 2: count -> scan -> write (bin, shape) entries -> sort by bin -> run-length encode (the occupied bins,
+// with stats only). Returns the entries' count.
+static int64_t binEntries(DeviceState& d, const BroadParams& P, const Aabb* box, bool stats) {
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
+  const int nb = P.binned;
   int64_t ne = 0;
   B.num_runs.resize(1);
   DVI_CUDA(cudaMemsetAsync(B.num_runs.data(), 0, sizeof(int32_t), st));
@@ -783,8 +796,15 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats,
       });
     }
   }
+  return ne;
+}
 
-  // 3. pairs: emit (into the key buffer's capacity) -> sort by (a, b)
+// Stage 3, pairs: emit (into the key buffer's capacity) -> sort by (a, b). Returns the pairs' count.
+static int64_t emitPairs(DeviceState& d, const BroadParams& P, int n, int64_t ne, const Aabb* box,
+                         const Shape* shapes) {
+  BroadScratch& B = d.broad;
+  cudaStream_t st = d.stream;
+  const int nb = P.binned, nl = P.large;
   const int64_t slots = ne + nb + nl;
   const int sh = bitsFor(uint64_t(n - 1));
   d.pair_shift = sh;
@@ -821,6 +841,21 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats,
       return cub::DeviceRadixSort::SortKeys(t, b, B.pair_key.data(), B.pair_key_sorted.data(), np, 0, 2 * sh, st);
     });
   }
+  return np;
+}
+
+void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats, const Aabb* boxes) {
+  const int n = int(d.shapes.count);
+  BroadScratch& B = d.broad;
+  d.pairs = 0;
+  if (n < 2) return;
+  const BroadPhaseSettings s = cfg.broadphase;
+  const Aabb* box = boxes ? boxes : d.shapes.aabb.data();
+  const Shape* shapes = d.shapes.shape.data();
+  const BroadParams P = classifyShapes(d, s, n, box, shapes);
+  const int nb = P.binned, nl = P.large;
+  const int64_t ne = binEntries(d, P, box, stats != nullptr);
+  const int64_t np = emitPairs(d, P, n, ne, box, shapes);
   d.pairs = np;
   if (stats) {
     *stats = BroadPhaseStats{};

@@ -114,7 +114,7 @@ struct NarrowScratch {
   int count_blocks_per_sm = 0, multi_blocks_per_sm = 0;
 };
 
-// The APGD control of the device loop (gpu_solver.cu: apgdIterateOnDevice), in device memory.
+// The APGD control of the device loop (gpu/solver/gpu_apgd_trials.cu: apgdIterateOnDevice), in device memory.
 struct ApgdDeviceState {
   algo::ApgdControl c;
   const real* schur_x;  // X[c.nw] while running, null when done

@@ -1,6 +1,6 @@
 // The CCP solver algorithms (projected Jacobi, APGD, BB/SPG), written once as templates over an
 // execution backend `Ops`. solver.cpp instantiates them with OpenMP loops over host arrays, and
-// gpu/gpu_solver.cu with CUDA kernels over device arrays: the same passes, the same kern:: functors
+// gpu/solver/gpu_solver.cu (GpuOps) with CUDA kernels over device arrays: the same passes, the same kern:: functors
 // (solver_kernels.h), the same scalar logic on the host. See solver.h for the problem, the residual and
 // the references.
 //
@@ -205,8 +205,9 @@ SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
 //    its buffer (4 iterate buffers rotate), so tracking it copies nothing.
 // The scalar side of APGD after each test reduction: backtracking, momentum, gradient restart, best
 // iterate, buffer rotation and the stop test. Written once, DVI_HD: apgdIterate below calls it on the host
-// after every reduction; the GPU backend calls it in a one-thread kernel on the device (gpu_solver.cu), so
-// the device iterates without reading anything back and takes the very same decisions.
+// after every reduction; the GPU backend calls it on the device after each trial's test
+// (gpu/solver/gpu_apgd_trials.cu, gpu_apgd_persistent.cu), so the device iterates without reading anything
+// back and takes the very same decisions.
 struct ApgdControl {
   // iterate buffers X[0..3] (cur: g_k, old: g_{k-1}, best pinned, nw: the trial g_{k+1}; with speculation
   // X[4], and X[5] when both outcomes are speculated) and N x buffers NX[0..2] (ncur: N g_k, nold: N g_{k-1}, nnw: N of the trial)

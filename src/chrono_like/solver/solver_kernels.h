@@ -1,5 +1,5 @@
 // Per-block operations of the CCP solvers, written once as DVI_HD functors: the OpenMP loops of
-// solver.cpp and the CUDA kernels of gpu/gpu_solver.cu call these very structs through the algorithm
+// solver.cpp and the CUDA kernels of gpu/solver/ call these very structs through the algorithm
 // templates of solver_algorithms.h, so the CPU tests exercise the code the GPU runs.
 //
 // Vectors are laid out in blocks of 3 reals. Blocks [0, nc) are contacts (normal, tangent u, tangent w)
