@@ -8,8 +8,11 @@
 #include <cstring>
 #include <istream>
 #include <ostream>
+#include <sstream>
+#include <unordered_map>
 
 #include "chrono_like/base/errors.h"
+#include "chrono_like/io/checksum.h"
 
 namespace dvi {
 namespace ces {
@@ -543,7 +546,41 @@ MassBalance CesMachine::balance() const {
 // ---------------------------------------------------------------------------------------------------
 
 namespace {
-constexpr char kMagic[8] = {'D', 'V', 'I', 'C', 'E', 'S', '0', '2'};
+
+constexpr size_t kMagicBytes = 8, kHeaderBytes = 16, kTrailerBytes = 8;
+
+// The checked parts of a checkpoint file (machine.h): the metadata and the state bytes.
+struct CheckpointParts {
+  std::string meta, state;
+};
+
+CheckpointParts openCheckpoint(const std::string& f) {
+  if (f.size() < kMagicBytes || std::memcmp(f.data(), "DVICES", 6) != 0) throw InputError("checkpoint: not a dvisim CES checkpoint");
+  if (std::memcmp(f.data(), kCesCheckpointMagic, kMagicBytes) != 0)
+    throw InputError("checkpoint: format " + f.substr(0, kMagicBytes) + " is not the current " + kCesCheckpointMagic +
+                     " (written by another version of dvisim; rerun from the start)");
+  if (f.size() < kHeaderBytes + kTrailerBytes) throw InputError("checkpoint: truncated file (" + std::to_string(f.size()) + " bytes)");
+  uint64_t stored = 0;
+  std::memcpy(&stored, f.data() + f.size() - kTrailerBytes, 8);
+  if (fnv1a64(f.data(), f.size() - kTrailerBytes) != stored)
+    throw InputError("checkpoint: checksum mismatch (the file was edited, truncated or damaged)");
+  uint64_t n = 0;
+  std::memcpy(&n, f.data() + kMagicBytes, 8);
+  if (n > f.size() - kHeaderBytes - kTrailerBytes) throw InputError("checkpoint: corrupt metadata length " + std::to_string(n));
+  CheckpointParts p;
+  p.meta = f.substr(kHeaderBytes, size_t(n));
+  p.state = f.substr(kHeaderBytes + size_t(n), f.size() - kHeaderBytes - kTrailerBytes - size_t(n));
+  return p;
+}
+
+}  // namespace
+
+std::string cesCheckpointMeta(const std::string& bytes) { return openCheckpoint(bytes).meta; }
+
+void resealCesCheckpoint(std::string& f) {
+  if (f.size() < kHeaderBytes + kTrailerBytes) return;
+  const uint64_t h = fnv1a64(f.data(), f.size() - kTrailerBytes);
+  std::memcpy(&f[f.size() - kTrailerBytes], &h, 8);
 }
 
 void CheckpointSystem::saveCore(std::ostream& o) const {
@@ -593,9 +630,12 @@ void CheckpointSystem::loadCore(std::istream& i) {
   row_lambda_ = std::move(lambda);
 }
 
-void CesMachine::save(std::ostream& o) const {
+void CesMachine::save(std::ostream& file, const std::string& meta) const {
   syncCharges();
-  o.write(kMagic, 8);
+  std::ostringstream o(std::ios::binary);
+  o.write(kCesCheckpointMagic, kMagicBytes);
+  put(o, uint64_t(meta.size()));
+  o.write(meta.data(), std::streamsize(meta.size()));
   put(o, steps_);
   const Feeder::State fs = feeder_.state();
   put(o, fs.rng);
@@ -629,7 +669,11 @@ void CesMachine::save(std::ostream& o) const {
   const auto* cs = dynamic_cast<const CheckpointSystem*>(&sys_);
   put(o, uint8_t(cs ? 1 : 0));
   if (cs) cs->saveCore(o);
-  if (!o) throw std::runtime_error("checkpoint: write error");
+  std::string f = o.str();
+  f.append(kTrailerBytes, '\0');
+  resealCesCheckpoint(f);
+  file.write(f.data(), std::streamsize(f.size()));
+  if (!o || !file) throw std::runtime_error("checkpoint: write error");
 }
 
 namespace {
@@ -671,10 +715,17 @@ bool plausibleSpec(const ParticleSpec& s, const CesConfig& cfg) {
 // 1e30 m, a moment of inertia of 1e-300, a velocity of 1e300 m/s or a feeder debt of 1e30 kg would make the next
 // step non-finite or allocate without bound), and the whole file must be consumed. Problems are InputErrors
 // "checkpoint: ...".
-void CesMachine::load(std::istream& in) {
-  char magic[8];
-  in.read(magic, 8);
-  if (!in || std::memcmp(magic, kMagic, 8) != 0) throw InputError("checkpoint: not a dvisim CES checkpoint");
+void CesMachine::load(std::istream& file, std::string* meta) {
+  std::string bytes;
+  {
+    std::ostringstream all(std::ios::binary);
+    all << file.rdbuf();
+    bytes = all.str();
+  }
+  CheckpointParts parts = openCheckpoint(bytes);
+  bytes.clear();
+  bytes.shrink_to_fit();
+  std::istringstream in(std::move(parts.state), std::ios::binary);
   if (int(sys_.bodies().count()) != n_machine_ || !specs_.empty()) throw InputError("checkpoint: the machine is not fresh");
   get(in, steps_);
   if (steps_ < 0 || steps_ > (int64_t(1) << 40)) throw InputError("checkpoint: corrupt step count " + std::to_string(steps_));
@@ -790,6 +841,7 @@ void CesMachine::load(std::istream& in) {
   sys_.markHostDirty();
   dev_uploaded_ = 0;  // CesDevice: every particle's state goes up again before the next step
   charges_stale_ = false;
+  if (meta) *meta = std::move(parts.meta);
 }
 
 }  // namespace ces
