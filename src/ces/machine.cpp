@@ -372,6 +372,46 @@ void CesMachine::emit() {
   const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / cfg_.dt)));
   recent_.erase(std::remove_if(recent_.begin(), recent_.end(), [&](const RecentSpawn& r) { return steps_ - r.step > keep; }),
                 recent_.end());
+  if (due.empty()) return;
+  // The recent spawns in a uniform grid (a hash of cells about a bounding diameter across): each spawn is listed
+  // in every cell its bounding sphere's box touches, and a candidate is tested against the spawns listed in the
+  // cells its own box touches: two spheres that overlap share a point, so they share that point's cell. Linear
+  // in the spawns, where testing every pair was quadratic (a feed of 1e6 g/s spawns ~25,000 particles a
+  // 10 us step). The test itself and the order of the candidates are those of the pairwise loop, so the same
+  // particles land at the same places.
+  double bound_sum = 0;
+  for (const RecentSpawn& r : recent_) bound_sum += double(p_.bound[size_t(r.body)]);
+  for (const ParticleSpec& s : due) bound_sum += double(s.bound);
+  const double cell = std::fmax(2.0 * bound_sum / double(recent_.size() + due.size()), 1e-9);  // the mean diameter
+  constexpr int64_t kSpan = int64_t(1) << 20;  // cell coordinates clamped to +-2^20 (21 bits each in the key)
+  auto coord = [&](double x) {
+    const double c = std::floor(x / cell);
+    return int64_t(c < double(-kSpan) ? double(-kSpan) : c > double(kSpan) ? double(kSpan) : c);
+  };
+  auto key = [](int64_t ix, int64_t iy, int64_t iz) {
+    return uint64_t(ix + kSpan) << 42 | uint64_t(iy + kSpan) << 21 | uint64_t(iz + kSpan);
+  };
+  // The cells of the box of a sphere at q of radius r (widened a little against the rounding of the test).
+  auto cells = [&](const Vec3& q, real r, auto&& visit) {
+    const double w = double(r) * (1 + 1e-6) + 1e-12;
+    const int64_t x0 = coord(double(q.x) - w), x1 = coord(double(q.x) + w), y0 = coord(double(q.y) - w),
+                  y1 = coord(double(q.y) + w), z0 = coord(double(q.z) - w), z1 = coord(double(q.z) + w);
+    for (int64_t ix = x0; ix <= x1; ++ix)
+      for (int64_t iy = y0; iy <= y1; ++iy)
+        for (int64_t iz = z0; iz <= z1; ++iz)
+          if (!visit(key(ix, iy, iz))) return;
+  };
+  std::unordered_map<uint64_t, std::vector<int32_t>> grid;
+  grid.reserve(8 * (recent_.size() + due.size()));
+  auto insert = [&](int32_t body) {
+    const Vec3& q = b.pos[size_t(body)];
+    if (!isFinite(q)) return;  // never within a finite distance of a candidate: the pairwise test was false too
+    cells(q, p_.bound[size_t(body)], [&](uint64_t k) {
+      grid[k].push_back(body);
+      return true;
+    });
+  };
+  for (const RecentSpawn& r : recent_) insert(r.body);
   for (const ParticleSpec& s : due) {
     const Quat rot = feeder_.randomRotation();
     const double z = feeder_.uniform(-cfg_.feed_width / 2, cfg_.feed_width / 2);
@@ -383,15 +423,21 @@ void CesMachine::emit() {
       const real rad = R + real(cfg_.feed_height) + s.bound * real(1 + 2 * attempt);
       pos = Vec3{rad * ux + real(jitter) * tangent.x, rad * uy + real(jitter) * tangent.y, real(z)};
       bool free = true;
-      for (const RecentSpawn& r : recent_)
-        if (length(b.pos[size_t(r.body)] - pos) < p_.bound[size_t(r.body)] + s.bound) {
-          free = false;
-          break;
-        }
+      cells(pos, s.bound, [&](uint64_t k) {
+        const auto it = grid.find(k);
+        if (it != grid.end())
+          for (int32_t body : it->second)
+            if (length(b.pos[size_t(body)] - pos) < p_.bound[size_t(body)] + s.bound) {
+              free = false;
+              break;
+            }
+        return free;
+      });
       if (free || attempt > 50) break;
     }
     const int id = addParticle(s, pos, rot, real(cfg_.feed_speed) * tangent, Vec3{0, 0, 0});
     recent_.push_back(RecentSpawn{id, steps_});
+    insert(id);
   }
 }
 
