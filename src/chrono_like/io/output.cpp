@@ -171,6 +171,12 @@ ResultDir::ResultDir(const std::string& out) {
   fs::path target = fs::absolute(fs::path(out), ec).lexically_normal();
   if (ec || out.empty()) throw InputError("--out '" + out + "': not a usable path");
   if (!target.has_filename()) target = target.parent_path();  // "dir/" -> "dir"
+  if (fs::is_symlink(target, ec)) {
+    // a link to the results directory: the directory it names is replaced, the link stays
+    const fs::path real = fs::canonical(target, ec);
+    if (ec) throw InputError("--out " + out + ": a link to nowhere (" + ec.message() + ")");
+    target = real;
+  }
   if (fs::exists(target, ec) && !fs::is_directory(target, ec))
     throw InputError("--out " + out + ": exists and is not a directory");
   const fs::path parent = target.parent_path();
