@@ -7,6 +7,8 @@
 #include <catch2/catch.hpp>
 
 #include <array>
+#include <chrono>
+#include <map>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -748,5 +750,65 @@ TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's, th
     CHECK(std::abs(b.collected - a.collected) <= std::max<int64_t>(2, a.collected / 20));
     gpu_sys->syncToHost();
     for (const CollectedParticle& c : gpu.collected()) CHECK(gpu_sys->bodies().flags[size_t(c.body)] & kBodyFixed);
+  }
+}
+
+// Pairs of particles whose bounding spheres overlap by more than `slack` of the sum of their bounds (a grid of
+// cells twice the largest bound: linear in the particles).
+int64_t overlappingSpawns(const CesMachine& m, double slack) {
+  const BodyArrays& b = m.system().bodies();
+  const CesParticles& p = m.particles();
+  double cell = 0;
+  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) cell = std::fmax(cell, 2 * double(p.bound[i]));
+  std::map<std::array<int64_t, 3>, std::vector<size_t>> grid;
+  auto at = [&](size_t i) {
+    return std::array<int64_t, 3>{int64_t(std::floor(double(b.pos[i].x) / cell)), int64_t(std::floor(double(b.pos[i].y) / cell)),
+                                  int64_t(std::floor(double(b.pos[i].z) / cell))};
+  };
+  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) grid[at(i)].push_back(i);
+  int64_t n = 0;
+  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) {
+    const auto c = at(i);
+    for (int64_t dx = -1; dx <= 1; ++dx)
+      for (int64_t dy = -1; dy <= 1; ++dy)
+        for (int64_t dz = -1; dz <= 1; ++dz) {
+          const auto it = grid.find({c[0] + dx, c[1] + dy, c[2] + dz});
+          if (it == grid.end()) continue;
+          for (size_t j : it->second)
+            if (j > i && double(length(b.pos[i] - b.pos[j])) < (1 - slack) * double(p.bound[i] + p.bound[j])) ++n;
+        }
+  }
+  return n;
+}
+
+TEST_CASE("CES feeder: a feed of 1e6 g/s spawns without overlaps, in time linear in the spawns", "[ces][ces_machine]") {
+  // (about 2.5 million particles a kilogram: 0.5-1 mm, half of the mass plastic)
+  SECTION("1e6 g/s at a 0.1 us step: ~250 particles a step, none overlapping another") {
+    const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-7", "field.model=\"csm\""});
+    SystemConfig sc;
+    sc.dt = real(cfg.dt);
+    sc.solver_settings.max_iterations = cfg.iterations;
+    CheckpointSystem sys(sc);
+    CesMachine m(cfg, sys);
+    for (int k = 0; k < 20; ++k) m.step();
+    const int64_t spawned = int64_t(m.particles().count()) - m.firstParticleBody();
+    INFO(spawned << " particles");
+    CHECK(spawned > 2000);
+    CHECK(overlappingSpawns(m, 1e-3) == 0);
+  }
+  SECTION("1e6 g/s at a 10 us step: ~25,000 particles a step against up to 75,000 recent ones") {
+    const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-5", "field.model=\"csm\""});
+    SystemConfig sc;
+    sc.dt = real(cfg.dt);
+    sc.solver_settings.max_iterations = cfg.iterations;
+    CheckpointSystem sys(sc);
+    CesMachine m(cfg, sys);
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int k = 0; k < 3; ++k) m.step();
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const int64_t spawned = int64_t(m.particles().count()) - m.firstParticleBody();
+    INFO(spawned << " particles in " << s << " s");
+    CHECK(spawned > 50000);
+    CHECK(s < 60);  // the pairwise test takes minutes here (up to 52 attempts x 75,000 recent spawns a particle)
   }
 }

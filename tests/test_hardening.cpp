@@ -504,7 +504,19 @@ TEST_CASE("Hardening: corrupt CES checkpoints are refused without allocating wha
     rig.machine.step();
   };
   REQUIRE_NOTHROW(load(good));
-  auto refused = [&](const std::string& bytes, const std::string& needle) {
+  // An edited file is refused by its checksum; resealed (the checksum recomputed, as a forger would), every edit
+  // below is still refused, by the field checks.
+  auto refused = [&](const std::string& edited, const std::string& needle, bool checksum_first = true) {
+    std::string bytes = edited;
+    if (checksum_first && bytes.size() == good.size() && bytes != good) {
+      try {
+        load(bytes);
+        FAIL("an edited checkpoint was accepted without its checksum");
+      } catch (const InputError& e) {
+        CHECK(std::string(e.what()).find("checkpoint: checksum mismatch") != std::string::npos);
+      }
+      dvi::ces::resealCesCheckpoint(bytes);
+    }
     try {
       load(bytes);
       FAIL("accepted; expected " << needle);
@@ -513,8 +525,9 @@ TEST_CASE("Hardening: corrupt CES checkpoints are refused without allocating wha
       CHECK(std::string(e.what()).find(needle) != std::string::npos);
     }
   };
-  // layout: magic (8), steps (8), rng (8), owed_kg (8), fed_total_fg (8), fed_fg (8 + 8 per material), particle count (8)
-  const size_t fed_fg = 40, count = fed_fg + 8 + 3 * 8;
+  // layout: magic (8), meta length (8, here 0), steps (8), rng (8), owed_kg (8), fed_total_fg (8),
+  // fed_fg (8 + 8 per material), particle count (8), ..., checksum (8)
+  const size_t fed_fg = 48, count = fed_fg + 8 + 3 * 8;
   std::string f = good;
   const uint64_t huge = uint64_t(1) << 60;
   std::memcpy(&f[fed_fg], &huge, 8);
@@ -524,14 +537,23 @@ TEST_CASE("Hardening: corrupt CES checkpoints are refused without allocating wha
   refused(f, "corrupt particle count");
   f = good;
   const double debt = 1e30;  // the feeder would emit particles until memory runs out
-  std::memcpy(&f[24], &debt, 8);
+  std::memcpy(&f[32], &debt, 8);
   refused(f, "corrupt feeder state");
   f = good;
   const int64_t steps = -5;
-  std::memcpy(&f[8], &steps, 8);
+  std::memcpy(&f[16], &steps, 8);
   refused(f, "corrupt step count");
-  refused(good.substr(0, good.size() / 2), "checkpoint:");
-  refused(good + "garbage", "bytes of garbage after the end");
+  refused(good.substr(0, good.size() / 2), "checkpoint: checksum mismatch");
+  f = good.substr(0, good.size() / 2);
+  f.append(8, '\0');
+  dvi::ces::resealCesCheckpoint(f);
+  refused(f, "checkpoint:");  // truncated state, valid checksum
+  f = good.substr(0, good.size() - 8) + "garbage" + std::string(8, '\0');
+  dvi::ces::resealCesCheckpoint(f);
+  refused(f, "bytes of garbage after the end");
+  f = good;
+  f[7] = '2';  // the format before checksums
+  refused(f, "is not the current DVICES03", false);
   // the first particle's material index (right after the count) out of range
   f = good;
   const int32_t material = 77;

@@ -270,3 +270,33 @@ TEST_CASE("sweep: quick CES sweep, 3 voltages x 3 drum speeds x 2 seeds", "[swee
   }
   fs::remove_all(d);
 }
+
+TEST_CASE("sweep: SIGINT stops the running cases cleanly, writes the tables and exits 4", "[sweep]") {
+  const fs::path d = clitest::tempDir("sweep_int");
+  const fs::path o = d / "o", runs = o / "runs";
+  const std::string so = (d / "stdout").string(), se = (d / "stderr").string();
+  // two long CES runs at once; SIGINT to the sweep once both are stepping
+  const std::string script =
+      quote(DVISIM_CLI_PATH) + " sweep --grid feed.mass_flow_g_s=3,4 --backend cpu --jobs 2 --threads 1 --no-plots "
+      "--set field.model='\"csm\"' --time 30 --out " + quote(o.string()) + " >" + quote(so) + " 2>" + quote(se) +
+      " & p=$!; for i in $(seq 1 600); do [ \"$(cat " + quote(runs.string()) + "/.*.log 2>/dev/null | grep -c 'ces machine:')\" = 2 ] && break; "
+      "sleep 0.1; done; sleep 0.5; kill -INT $p; wait $p";
+  const int status = std::system(("bash -c " + quote(script)).c_str());
+  const int code = WIFEXITED(status) ? WEXITSTATUS(status) : 1000;
+  const std::string err = slurp(se);
+  INFO("stdout: " << slurp(so) << "\nstderr: " << err);
+  CHECK(code == 4);
+  CHECK(err.find("dvisim: sweep interrupted by SIGINT: 2 of 2 runs unfinished") != std::string::npos);
+  const auto rows = readCsv(o / "runs.csv");
+  REQUIRE(rows.size() == 2);
+  for (const auto& row : rows) CHECK(row.at("exit_code") == "4");
+  for (const char* id : {"000-seed1", "001-seed1"}) {
+    INFO(id);
+    REQUIRE(fs::is_regular_file(runs / id / "summary.json"));
+    CHECK(nlohmann::json::parse(slurp(runs / id / "summary.json"))["status"] == "interrupted");
+    CHECK(fs::is_regular_file(runs / id / "checkpoint" / "state.bin"));
+    CHECK(slurp(runs / id / "run.log").find("interrupted by SIGINT") != std::string::npos);
+    CHECK_FALSE(fs::exists(runs / id / "sweep_done.json"));
+  }
+  fs::remove_all(d);
+}

@@ -10,6 +10,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <cstring>
+#include <map>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -22,6 +24,7 @@
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/output.h"
+#include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "gpu/gpu_factory.h"
 
@@ -96,14 +99,68 @@ json cellJson(const SplitterCell& c) {
 // A number, or null when undefined (no particle to average over, no corona model).
 json numberOrNull(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
 
-void writeCheckpoint(const CesMachine& m, const json& doc, const std::string& dir) {
+// The metadata a checkpoint records (CesMachine::save): the document as run and the collision backend, the
+// configuration a resumed run is compared with (checkResumable).
+std::string checkpointMeta(const json& doc, const std::string& collision) {
+  return json{{"document", doc}, {"collision", collision}}.dump();
+}
+
+// checkpoint/state.bin (checksummed, with the configuration inside) and checkpoint/ces_config.json (the same
+// configuration for people to read; a resume refuses it edited).
+void writeCheckpoint(const CesMachine& m, const json& doc, const std::string& collision, const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) throw std::runtime_error("cannot create " + dir + ": " + ec.message());
   std::ostringstream bin(std::ios::binary);
-  m.save(bin);
+  m.save(bin, checkpointMeta(doc, collision));
   writeFileAtomic(dir + "/ces_config.json", doc.dump(2) + "\n");
   writeFileAtomic(dir + "/state.bin", bin.str());
+}
+
+// Leaves of a JSON value by dotted key ("feed.mass_flow_g_s"; array elements by index).
+void flatten(const json& v, const std::string& key, std::map<std::string, json>& out) {
+  if (v.is_object() && !v.empty()) {
+    for (auto it = v.begin(); it != v.end(); ++it) flatten(*it, key.empty() ? it.key() : key + "." + it.key(), out);
+  } else if (v.is_array() && !v.empty()) {
+    for (size_t i = 0; i < v.size(); ++i) flatten(v[i], key + "." + std::to_string(i), out);
+  } else {
+    out[key] = v;
+  }
+}
+
+// Keys of a CES document that a resumed run may change: how long it runs and what it writes. Every other key
+// changes the physics of the steps to come (or of the ones already run), and a resume refuses it by name.
+bool resumeMayChange(const std::string& key) {
+  for (const char* k : {"ces.duration_s", "ces.output", "ces.splitters"}) {
+    const size_t n = std::strlen(k);
+    if (key.compare(0, n, k) == 0 && (key.size() == n || key[n] == '.')) return true;
+  }
+  return key.compare(0, 4, "ces.") != 0;  // outside "ces": the name
+}
+
+// Refuses a resumed configuration that differs from the checkpoint's in a key that changes the physics.
+void checkResumable(const json& before, const json& now, const std::string& collision_before, const std::string& collision) {
+  std::map<std::string, json> a, b;
+  flatten(before, "", a);
+  flatten(now, "", b);
+  std::string diff;
+  int n = 0;
+  auto note = [&](const std::string& key, const std::string& was, const std::string& is) {
+    if (++n <= 4) diff += (diff.empty() ? "" : ", ") + key + " (" + was + " -> " + is + ")";
+  };
+  for (const auto& [k, v] : a) {
+    if (resumeMayChange(k)) continue;
+    const auto it = b.find(k);
+    if (it == b.end()) note(k, v.dump(), "absent");
+    else if (it->second != v) note(k, v.dump(), it->second.dump());
+  }
+  for (const auto& [k, v] : b)
+    if (!resumeMayChange(k) && !a.count(k)) note(k, "absent", v.dump());
+  if (collision != collision_before) note("--collision", collision_before, collision);
+  if (n > 0)
+    throw InputError("--resume: the configuration differs from the checkpoint's in " + std::to_string(n) +
+                     " setting(s) that change the physics: " + diff + (n > 4 ? ", ..." : "") +
+                     " (a resume may change only duration_s, output.* and splitters.*)");
 }
 
 }  // namespace
@@ -310,10 +367,25 @@ int runCesMachine(const CesRunOptions& o) {
   json doc;
   std::string origin;
   const bool resume = !o.resume.empty();
+  std::string state_bytes, collision_before;
   if (resume) {
     if (!o.scene.empty()) throw InputError("--resume " + o.resume + ": give either a scene or --resume, not both");
+    // The configuration comes from state.bin (checksummed); checkpoint/ces_config.json must be its copy.
+    state_bytes = readRegularFile(o.resume + "/checkpoint/state.bin", "--resume " + o.resume + ": checkpoint/state.bin",
+                                  inputLimits().max_binary_bytes);
+    const std::string meta_text = cesCheckpointMeta(state_bytes);
+    json meta;
+    try {
+      meta = json::parse(meta_text);
+      doc = meta.at("document");
+      collision_before = meta.at("collision").get<std::string>();
+    } catch (const json::exception&) {
+      throw InputError("--resume " + o.resume + ": checkpoint/state.bin: corrupt configuration record");
+    }
     origin = o.resume + "/checkpoint/ces_config.json";
-    doc = parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin);
+    if (parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin) != doc)
+      throw InputError("--resume " + o.resume + ": checkpoint/ces_config.json was edited (it differs from the configuration "
+                       "recorded in checkpoint/state.bin; change settings with --set)");
   } else {
     doc = loadCesDocument(o.scene, origin);
   }
@@ -332,7 +404,7 @@ int runCesMachine(const CesRunOptions& o) {
   if (!o.solver.empty()) sets.push_back("solver.type=" + o.solver);
   if (!o.iterations.empty()) sets.push_back("solver.iterations=" + std::to_string(parseInt("--iterations", o.iterations, 1, 1000000)));
   if (!o.frames.empty()) sets.push_back("output.frames=" + std::to_string(parseInt("--frames", o.frames, 0, 1000000)));
-  const double dt_before = resume ? parseCesDocument(doc, {}, origin).dt : 0.0;
+  const json doc_before = doc;
   CesConfig cfg = parseCesDocument(doc, sets, origin);
   if (!o.steps.empty()) {
     const long long n = parseInt("--steps", o.steps, 0, 1LL << 40);
@@ -340,24 +412,20 @@ int runCesMachine(const CesRunOptions& o) {
     sets.push_back("duration_s=" + fmt(cfg.duration));
   }
   for (const std::string& s : sets) applyCesOverride(doc, s);  // the document as run
-  if (resume && cfg.dt != dt_before)
-    throw InputError("--resume: the time step cannot change (checkpoint " + fmt(dt_before) + " s, now " + fmt(cfg.dt) + " s)");
+  const std::string collision = o.collision.empty() ? "native" : o.collision;
+  if (resume) checkResumable(doc_before, doc, collision_before, collision);
   const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
   const int64_t total = checkedStepCount(cfg.duration, cfg.dt, origin + ": ces.duration_s");
 
   const std::string backend = resolveCesBackend(o.backend);
-  std::error_code ec;
-  fs::create_directories(o.out, ec);
-  if (ec || !fs::is_directory(o.out))
-    throw InputError("--out " + o.out + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+  // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
+  ResultDir rd(o.out);
+  const std::string out = rd.path();
 
-  const std::string collision = o.collision.empty() ? "native" : o.collision;
   std::unique_ptr<System> sys = makeCesSystem(cfg, backend, threads, collision);
   CesMachine m(cfg, *sys);
   if (resume) {
-    const std::string path = o.resume + "/checkpoint/state.bin";
-    std::istringstream in(readRegularFile(path, "--resume " + o.resume + ": checkpoint/state.bin", inputLimits().max_binary_bytes),
-                          std::ios::binary);
+    std::istringstream in(std::move(state_bytes), std::ios::binary);
     m.load(in);
     if (m.steps() > total)
       throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) + " s, beyond duration_s = " + fmt(cfg.duration));
@@ -380,162 +448,227 @@ int runCesMachine(const CesRunOptions& o) {
   // Steps between checkpoints; an interval longer than the run is none before the end (and no overflow).
   const double ckpt_steps = cfg.checkpoint_every > 0 ? std::round(cfg.checkpoint_every / cfg.dt) : 0;
   const int64_t ckpt_every = ckpt_steps <= 0 ? 0 : ckpt_steps > double(total) ? total + 1 : std::max<int64_t>(1, int64_t(ckpt_steps));
-  const std::string ckpt_dir = o.out + "/checkpoint";
-  CesFrameWriter frames(o.out);
-  if (cfg.frames > 0) writeFileAtomic(o.out + "/machine.vtp", cesMachineVtp(m));
+  const std::string ckpt_dir = out + "/checkpoint";
+  bool checkpointed = false;
+  CesFrameWriter frames(out);
+  if (cfg.frames > 0) writeFileAtomic(out + "/machine.vtp", cesMachineVtp(m));
   size_t next_frame = 0;
   while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
   const bool tty = ::isatty(2);
+  const bool host_state = m.system().backendName() == "cpu";  // the bodies are checked for divergence every step
   CesRunTotals tot;
   double wall = 0;
   const auto t0 = Clock::now();
   auto last = t0;
-  for (int64_t k = first;; ++k) {
-    while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
-      m.system().syncToHost();
-      frames.write(m.time(), m);
-      ++next_frame;
+  std::exception_ptr failure;
+  bool interrupted = false;
+  installStopHandlers();
+  try {
+    for (int64_t k = first;; ++k) {
+      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+        m.system().syncToHost();
+        frames.write(m.time(), m);
+        ++next_frame;
+      }
+      if (k == total) break;
+      if (stopRequested()) {
+        interrupted = true;
+        break;
+      }
+      const auto s0 = Clock::now();
+      try {
+        m.step();
+      } catch (const SolverError& e) {
+        m.system().syncToHost();
+        throw SimulationDiverged(divergedMessage(k + 1, m.time(), m.system().bodies(), e.what(), cfg.dt));
+      }
+      if (host_state) checkFiniteState(k + 1, m.time(), m.system().bodies());
+      wall += std::chrono::duration<double>(Clock::now() - s0).count();
+      tot.add(m);
+      if (ckpt_every > 0 && m.steps() % ckpt_every == 0 && m.steps() < total) {
+        m.system().syncToHost();
+        writeCheckpoint(m, doc, collision, ckpt_dir);
+        checkpointed = true;
+      }
+      const auto now = Clock::now();
+      if (tty && (now - last > std::chrono::milliseconds(200) || k + 1 == total)) {
+        last = now;
+        const double frac = double(k + 1 - first) / double(std::max<int64_t>(1, total - first));
+        const double el = std::chrono::duration<double>(now - t0).count();
+        const MassBalance b = m.balance();
+        std::fprintf(stderr, "\r[%3d%%] t = %.3f s, %lld fed, %lld collected, %lld in flight, ETA %.0f s  ", int(frac * 100),
+                     m.time(), (long long)b.fed, (long long)b.collected, (long long)b.in_flight, frac > 0 ? el * (1 - frac) / frac : 0.0);
+        std::fflush(stderr);
+      }
     }
-    if (k == total) break;
-    const auto s0 = Clock::now();
-    m.step();
-    wall += std::chrono::duration<double>(Clock::now() - s0).count();
-    tot.add(m);
-    if (ckpt_every > 0 && m.steps() % ckpt_every == 0 && m.steps() < total) {
-      m.system().syncToHost();
-      writeCheckpoint(m, doc, ckpt_dir);
-    }
-    const auto now = Clock::now();
-    if (tty && (now - last > std::chrono::milliseconds(200) || k + 1 == total)) {
-      last = now;
-      const double frac = double(k + 1 - first) / double(std::max<int64_t>(1, total - first));
-      const double el = std::chrono::duration<double>(now - t0).count();
-      const MassBalance b = m.balance();
-      std::fprintf(stderr, "\r[%3d%%] t = %.3f s, %lld fed, %lld collected, %lld in flight, ETA %.0f s  ", int(frac * 100),
-                   m.time(), (long long)b.fed, (long long)b.collected, (long long)b.in_flight, frac > 0 ? el * (1 - frac) / frac : 0.0);
-      std::fflush(stderr);
-    }
+    if (tty) std::fprintf(stderr, "\r\033[K");
+    // The last state (also of an interrupted run): what --resume continues.
+    m.system().syncToHost();
+    if (m.system().backendName() != "cpu") checkFiniteState(m.steps(), m.time(), m.system().bodies());
+    writeCheckpoint(m, doc, collision, ckpt_dir);
+    checkpointed = true;
+  } catch (...) {
+    failure = std::current_exception();
   }
-  if (tty) std::fprintf(stderr, "\r\033[K");
-  m.system().syncToHost();
-  writeCheckpoint(m, doc, ckpt_dir);
-
-  // Results.
-  const MassBalance bal = m.balance();
-  if (!bal.closes()) throw std::logic_error("CES mass balance does not close (internal error)");
-  const SplitterBasis basis = splitterBasis(m);
-  const SplitterTable table =
-      splitterAnalysis(m.collected(), cfg.splitter_lo, cfg.splitter_hi, cfg.splitter_positions, basis);
-  const BinMasses at = binDirect(m.collected(), cfg.s1, cfg.s2);
-  const SplitterCell configured = splitterCell(m.collected(), cfg.s1, cfg.s2, basis);
-  const Distribution dist = massDistribution(m.collected(), cfg.histogram_bin);
-
-  const int64_t steps_run = total - first;
-  json summary;
-  summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
-  summary["scene_name"] = doc.contains("name") && doc["name"].is_string() ? doc["name"].get<std::string>() : "ces";
-  summary["bodies"] = m.system().bodies().count();
-  summary["dt"] = cfg.dt;
-  summary["steps"] = steps_run;
-  summary["threads"] = m.system().effectiveThreads();
-  summary["backend"] = m.system().backendName();
-  summary["device"] = m.system().deviceName();
-  summary["solver"] = cfg.solver;
-  summary["collision"] = collision;
-  summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
-  summary["residual_final"] = m.system().lastStats().relative_residual;  // relative (solver.h)
-  summary["residual_final_abs"] = tot.residual;
-  addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver_settings);
-  summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
-  summary["max_penetration"] = tot.max_penetration;
-  addStageSummary(summary, tot.log);
-  summary["sim_time"] = m.time();
-  summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
-  summary["frames"] = frames.count();
-  json c = massBalanceJson(bal);
-  c["splitters"] = {{"s1_mm", cfg.s1 * 1e3}, {"s2_mm", cfg.s2 * 1e3}};
-  c["bins"] = binsJson(at);
-  c["at_splitters"] = cellJson(configured);
-  c["best"] = cellJson(table.cells[table.best]);
-  c["best"]["targets_met"] = table.targets_met;
-  c["grade_targets"] = {{"conductor", cfg.grade_target_conductor}, {"nonconductor", cfg.grade_target_nonconductor}};
-  c["metrics"] = cesMetrics(m, table, bal);
-  {
-    const CoronaInfo ci = m.coronaInfo();
-    c["corona"] = {{"ionised", ci.ionised},
-                   {"onset_voltage_kV", numberOrNull(ci.onset_voltage * 1e-3)},
-                   {"wire_field_on_kV_cm", numberOrNull(ci.wire_field_on * 1e-5)},
-                   {"current_uA_per_m", numberOrNull(ci.current_per_m * 1e6)}};
-  }
-  c["voltage_kV"] = cfg.voltage * 1e-3;
-  c["splitter_positions"] = cfg.splitter_positions;
-  c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};
-  c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
-  c["field_model"] = cfg.field_model;
-  c["drum_drive"] = m.rheonomicDrive() ? "rheonomic" : "kinematic";
-  if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? tot.drive_torque_sum / double(steps_run) : 0.0;
-  c["forces_on_host"] = m.system().backendName() != "cpu";
-  json mats = json::array();
-  for (size_t k = 0; k < cfg.materials.size(); ++k) {
-    int64_t fed = 0, col = 0;
-    for (size_t i = size_t(m.firstParticleBody()); i < m.particles().count(); ++i) {
-      if (m.particles().material[i] != int32_t(k)) continue;
-      fed += m.particles().mass_fg[i];
-      if (m.particles().status[i] == kStatusCollected) col += m.particles().mass_fg[i];
+  // Diverged or failed after simulating: what there is (a summary with the status and the error, the last
+  // checkpoint; that of the run resumed from when this one wrote none) in place of the previous results, then the
+  // exception again (main() turns it into the exit code).
+  auto writeFailure = [&](std::exception_ptr failure) {
+    if (tty) std::fprintf(stderr, "\r\033[K");
+    const int code = exitCodeFor(failure);
+    try {
+      std::error_code ec;
+      if (!checkpointed && resume) fs::copy(o.resume + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
+      json summary;
+      summary["status"] = runStatusName(code);
+      summary["error"] = exceptionMessage(failure);
+      summary["exit_code"] = code;
+      summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
+      summary["dt"] = cfg.dt;
+      summary["steps"] = m.steps() - first;
+      summary["sim_time"] = m.time();
+      summary["frames"] = frames.count();
+      summary["checkpoint"] = fs::exists(ckpt_dir + "/state.bin") ? json("checkpoint/") : json(nullptr);
+      summary["note"] = "incomplete: the run ended with the error above; checkpoint/ (if any) is the last good state";
+      writeSummary(out + "/summary.json", summary);
+      rd.commit();
+      std::printf("results so far: %s/ (summary.json status \"%s\"%s)\n", rd.out().c_str(), runStatusName(code),
+                  summary["checkpoint"].is_null() ? "" : ", checkpoint/");
+    } catch (...) {
     }
-    mats.push_back({{"name", cfg.materials[k].name}, {"kind", materialKindName(cfg.materials[k].kind)},
-                    {"fed_mass_kg", double(fed) * kFemtogram}, {"collected_mass_kg", double(col) * kFemtogram}});
-  }
-  c["materials"] = mats;
-  std::string plots = "disabled (ces.output.plots = false)";
-  summary["ces"] = c;
+    std::rethrow_exception(failure);
+  };
+  if (failure) writeFailure(failure);
 
-  const std::string out = o.out;
-  std::vector<BodyState> state;
-  const BodyArrays& b = m.system().bodies();
-  for (size_t i = 0; i < b.count(); ++i) state.push_back(BodyState{b.pos[i], b.rot[i], b.vel[i], b.omega[i], b.size[i]});
-  writeBodiesCsv(out + "/bodies.csv", state);
-  writeFileAtomic(out + "/ces_particles.csv", cesParticlesCsv(m));
-  writeFileAtomic(out + "/ces_collected.csv", cesCollectedCsv(m));
-  writeFileAtomic(out + "/ces_distribution.csv", distributionCsv(dist));
-  writeFileAtomic(out + "/ces_splitters.csv", splittersCsv(table));
-  writeFileAtomic(out + "/ces_grade_recovery.csv", gradeRecoveryCsv(gradeRecoveryCurve(table)));
-  writeSummary(out + "/summary.json", summary);
-  if (cfg.plots) {
-    const std::string err = cesMakePlots(out);
-    plots = err.empty() ? "distribution.png, splitters.png" : err;
-    if (!err.empty()) std::fprintf(stderr, "dvisim: warning: %s\n", err.c_str());
-    summary["ces"]["plots"] = plots;
+  try {
+    // Results.
+    const MassBalance bal = m.balance();
+    if (!bal.closes()) throw std::logic_error("CES mass balance does not close (internal error)");
+    const SplitterBasis basis = splitterBasis(m);
+    const SplitterTable table =
+        splitterAnalysis(m.collected(), cfg.splitter_lo, cfg.splitter_hi, cfg.splitter_positions, basis);
+    const BinMasses at = binDirect(m.collected(), cfg.s1, cfg.s2);
+    const SplitterCell configured = splitterCell(m.collected(), cfg.s1, cfg.s2, basis);
+    const Distribution dist = massDistribution(m.collected(), cfg.histogram_bin);
+
+    const int64_t steps_run = m.steps() - first;
+    json summary;
+    summary["status"] = interrupted ? "interrupted" : "done";
+    summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
+    summary["scene_name"] = doc.contains("name") && doc["name"].is_string() ? doc["name"].get<std::string>() : "ces";
+    summary["bodies"] = m.system().bodies().count();
+    summary["dt"] = cfg.dt;
+    summary["steps"] = steps_run;
+    summary["threads"] = m.system().effectiveThreads();
+    summary["backend"] = m.system().backendName();
+    summary["device"] = m.system().deviceName();
+    summary["solver"] = cfg.solver;
+    summary["collision"] = collision;
+    summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
+    summary["residual_final"] = m.system().lastStats().relative_residual;  // relative (solver.h)
+    summary["residual_final_abs"] = tot.residual;
+    addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver_settings);
+    summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
+    summary["max_penetration"] = tot.max_penetration;
+    addStageSummary(summary, tot.log);
+    summary["sim_time"] = m.time();
+    summary["wall_time_s"] = wall;
+    summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
+    summary["frames"] = frames.count();
+    json c = massBalanceJson(bal);
+    c["splitters"] = {{"s1_mm", cfg.s1 * 1e3}, {"s2_mm", cfg.s2 * 1e3}};
+    c["bins"] = binsJson(at);
+    c["at_splitters"] = cellJson(configured);
+    c["best"] = cellJson(table.cells[table.best]);
+    c["best"]["targets_met"] = table.targets_met;
+    c["grade_targets"] = {{"conductor", cfg.grade_target_conductor}, {"nonconductor", cfg.grade_target_nonconductor}};
+    c["metrics"] = cesMetrics(m, table, bal);
+    {
+      const CoronaInfo ci = m.coronaInfo();
+      c["corona"] = {{"ionised", ci.ionised},
+                     {"onset_voltage_kV", numberOrNull(ci.onset_voltage * 1e-3)},
+                     {"wire_field_on_kV_cm", numberOrNull(ci.wire_field_on * 1e-5)},
+                     {"current_uA_per_m", numberOrNull(ci.current_per_m * 1e6)}};
+    }
+    c["voltage_kV"] = cfg.voltage * 1e-3;
+    c["splitter_positions"] = cfg.splitter_positions;
+    c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};
+    c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
+    c["field_model"] = cfg.field_model;
+    c["drum_drive"] = m.rheonomicDrive() ? "rheonomic" : "kinematic";
+    if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? tot.drive_torque_sum / double(steps_run) : 0.0;
+    c["forces_on_host"] = m.system().backendName() != "cpu";
+    json mats = json::array();
+    for (size_t k = 0; k < cfg.materials.size(); ++k) {
+      int64_t fed = 0, col = 0;
+      for (size_t i = size_t(m.firstParticleBody()); i < m.particles().count(); ++i) {
+        if (m.particles().material[i] != int32_t(k)) continue;
+        fed += m.particles().mass_fg[i];
+        if (m.particles().status[i] == kStatusCollected) col += m.particles().mass_fg[i];
+      }
+      mats.push_back({{"name", cfg.materials[k].name}, {"kind", materialKindName(cfg.materials[k].kind)},
+                      {"fed_mass_kg", double(fed) * kFemtogram}, {"collected_mass_kg", double(col) * kFemtogram}});
+    }
+    c["materials"] = mats;
+    std::string plots = "disabled (ces.output.plots = false)";
+    summary["ces"] = c;
+
+    std::vector<BodyState> state;
+    const BodyArrays& b = m.system().bodies();
+    for (size_t i = 0; i < b.count(); ++i) state.push_back(BodyState{b.pos[i], b.rot[i], b.vel[i], b.omega[i], b.size[i]});
+    writeBodiesCsv(out + "/bodies.csv", state);
+    writeFileAtomic(out + "/ces_particles.csv", cesParticlesCsv(m));
+    writeFileAtomic(out + "/ces_collected.csv", cesCollectedCsv(m));
+    writeFileAtomic(out + "/ces_distribution.csv", distributionCsv(dist));
+    writeFileAtomic(out + "/ces_splitters.csv", splittersCsv(table));
+    writeFileAtomic(out + "/ces_grade_recovery.csv", gradeRecoveryCsv(gradeRecoveryCurve(table)));
     writeSummary(out + "/summary.json", summary);
-  }
+    if (cfg.plots) {
+      const std::string err = cesMakePlots(out);
+      plots = err.empty() ? "distribution.png, splitters.png" : err;
+      if (!err.empty()) std::fprintf(stderr, "dvisim: warning: %s\n", err.c_str());
+      summary["ces"]["plots"] = plots;
+      writeSummary(out + "/summary.json", summary);
+    }
 
-  const double g = kFemtogram * 1e3;
-  std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
-  if (bal.lost > 0) std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n", (long long)bal.lost);
-  const SplitterCell& best = table.cells[table.best];
-  {
-    const CoronaInfo ci = m.coronaInfo();
-    if (cfg.field_model == "corona")
-      std::printf("corona: onset %.3g kV, %s, current %.4g uA/m\n", ci.onset_voltage * 1e-3,
-                  ci.ionised ? "ionised" : "below onset (Laplace field, no ions)", ci.current_per_m * 1e6);
+    const double g = kFemtogram * 1e3;
+    std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
+    if (bal.lost > 0) std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n", (long long)bal.lost);
+    const SplitterCell& best = table.cells[table.best];
+    {
+      const CoronaInfo ci = m.coronaInfo();
+      if (cfg.field_model == "corona")
+        std::printf("corona: onset %.3g kV, %s, current %.4g uA/m\n", ci.onset_voltage * 1e-3,
+                    ci.ionised ? "ionised" : "below onset (Laplace field, no ions)", ci.current_per_m * 1e6);
+    }
+    std::printf("bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g (nonconductor/middling/conductor)\n",
+                cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
+                double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
+    std::printf("best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
+                "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
+                best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
+                cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic,
+                best.recovery_plastic, best.middling_fraction);
+    rd.commit();
+    std::printf("results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n", rd.out().c_str(),
+                cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
+                frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
+                wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
+    const std::string remedy = "raise --set solver.iterations (now " + std::to_string(cfg.iterations) + ")";
+    const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver_settings, remedy);
+    if (!unconverged.empty()) std::fprintf(stderr, "%s\n", unconverged.c_str());
+    if (interrupted) {
+      std::fflush(stdout);
+      std::fprintf(stderr, "dvisim: interrupted by %s at t = %g s (step %lld of %lld); the results so far and a checkpoint "
+                   "(--resume %s) are in %s/\n", stopSignalName(), m.time(), (long long)m.steps(), (long long)total,
+                   rd.out().c_str(), rd.out().c_str());
+      return kExitInterrupted;
+    }
+    return 0;
+  } catch (...) {
+    writeFailure(std::current_exception());
   }
-  std::printf("bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g (nonconductor/middling/conductor)\n",
-              cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
-              double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
-  std::printf("best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
-              "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
-              best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
-              cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic,
-              best.recovery_plastic, best.middling_fraction);
-  std::printf("results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n", out.c_str(),
-              cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
-              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
-              wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
-  const std::string remedy = "raise --set solver.iterations (now " + std::to_string(cfg.iterations) + ")";
-  const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver_settings, remedy);
-  if (!unconverged.empty()) std::fprintf(stderr, "%s\n", unconverged.c_str());
-  return 0;
+  return kExitFailed;  // not reached: writeFailure rethrows
 }
 
 }  // namespace ces

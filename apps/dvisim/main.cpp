@@ -13,7 +13,9 @@
 //                                                                           bench_ces.cpp)
 //   dvisim bench pruning --out DIR [--quick] [--record] [--backend B] [--n N] [--threads N]  (bench_pruning.cpp)
 //
-// Exit codes: 0 success; 2 bad input (one line "dvisim: error: ..." on stderr); 1 any other failure.
+// Exit codes (run_control.h; README.md, docs/HARDENING.md): 0 done; 1 any other failure; 2 bad input (one line
+// "dvisim: error: ..." on stderr, nothing run); 3 the simulation diverged; 4 interrupted (SIGINT/SIGTERM);
+// 5 out of memory or a device error.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -40,6 +42,7 @@
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
 #include "chrono_like/io/output.h"
+#include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
@@ -202,10 +205,9 @@ int run(const Options& o) {
   if (backend == "gpu" && !have_gpu)
     throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
 
-  std::error_code ec;
-  std::filesystem::create_directories(o.out, ec);
-  if (ec || !std::filesystem::is_directory(o.out))
-    throw InputError("--out " + o.out + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+  // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
+  dvi::ResultDir rd(o.out);
+  const std::string out = rd.path();
 
   const std::vector<btRigidBody*>& bodies = scene.bodies();
   const std::vector<dvi::real> sizes = bodySizes(bodies);
@@ -230,7 +232,7 @@ int run(const Options& o) {
   summary["frames"] = 0;
 
   std::vector<dvi::BodyState> state(bodies.size());
-  dvi::FrameWriter frames(o.out);
+  dvi::FrameWriter frames(out);
   const std::vector<int64_t> frame_at = frameSteps(st.frames, steps);
   size_t next_frame = 0;
   Progress progress(steps);
@@ -238,19 +240,34 @@ int run(const Options& o) {
 
   // Steps either backend: writes the due frames (through `collect`), times `stepOnce`, then lets
   // `afterStep` gather its statistics. One loop for both, so frames and timing cannot differ.
+  // A step that diverges (SimulationDiverged, SolverError), fails, or SIGINT/SIGTERM ends the loop early: `done`
+  // counts the steps that completed, `failure` holds the exception.
+  int64_t done = 0;
+  bool interrupted = false;
+  std::exception_ptr failure;
+  dvi::installStopHandlers();
   auto runSteps = [&](auto&& collect, auto&& stepOnce, auto&& afterStep) {
-    for (int64_t k = 0;; ++k) {
-      while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
-        collect();
-        frames.write(double(k) * double(st.dt), state);
-        ++next_frame;
+    try {
+      for (int64_t k = 0;; ++k) {
+        while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+          collect();
+          frames.write(double(k) * double(st.dt), state);
+          ++next_frame;
+        }
+        if (k == steps) break;
+        if (dvi::stopRequested()) {
+          interrupted = true;
+          break;
+        }
+        const auto t0 = Clock::now();
+        stepOnce(k);
+        wall += std::chrono::duration<double>(Clock::now() - t0).count();
+        done = k + 1;
+        afterStep();
+        progress.update(k + 1);
       }
-      if (k == steps) break;
-      const auto t0 = Clock::now();
-      stepOnce();
-      wall += std::chrono::duration<double>(Clock::now() - t0).count();
-      afterStep();
-      progress.update(k + 1);
+    } catch (...) {
+      failure = std::current_exception();
     }
     progress.finish();
     collect();
@@ -269,7 +286,16 @@ int run(const Options& o) {
     };
     int64_t contacts = 0;
     dvi::real max_pen = 0;
-    runSteps(collect, [&] { peer.step(); }, [&] {
+    runSteps(collect, [&](int64_t k) {
+      peer.step();
+      for (size_t i = 0; i < bodies.size(); ++i)
+        if (!dvi::isFinite(peer.position(i)) || !dvi::isFinite(peer.velocity(i))) {
+          char msg[200];
+          std::snprintf(msg, sizeof msg, "the simulation diverged in step %lld (t = %.6g s): body %zu has a non-finite "
+                        "position or velocity; try a smaller time step", (long long)(k + 1), double(k + 1) * double(st.dt), i);
+          throw dvi::SimulationDiverged(msg);
+        }
+    }, [&] {
       contacts += peer.lastStats().contacts;
       max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
     });
@@ -302,7 +328,17 @@ int run(const Options& o) {
     int64_t contacts = 0, iterations = 0;
     dvi::real max_pen = 0, residual = 0, relative = 0;
     dvi::StageLog stage_log;
-    runSteps(collect, [&] { sys->step(); }, [&] {
+    const bool host_state = sys->backendName() == "cpu";  // the bodies are checked for divergence every step
+    runSteps(collect, [&](int64_t k) {
+      try {
+        sys->step();
+      } catch (const dvi::SolverError& e) {
+        sys->syncToHost();
+        throw dvi::SimulationDiverged(
+            dvi::divergedMessage(k + 1, double(k + 1) * double(st.dt), sys->bodies(), e.what(), double(st.dt)));
+      }
+      if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * double(st.dt), sys->bodies());
+    }, [&] {
       const dvi::StepStats& s = sys->lastStats();
       contacts += s.contacts;
       iterations += s.iterations;
@@ -325,20 +361,49 @@ int run(const Options& o) {
     not_converged = dvi::convergenceWarning(sys->convergence(), cfg.solver_settings);
     summary["prune"] = cfg.prune;
   }
-  summary["sim_time"] = double(steps) * double(st.dt);
+  // A device backend's state is checked once, at the end (the host copy of every step would cost a transfer).
+  for (size_t i = 0; !failure && !interrupted && i < state.size(); ++i)
+    if (!dvi::isFinite(state[i].pos) || !dvi::isFinite(state[i].vel))
+      failure = std::make_exception_ptr(dvi::SimulationDiverged(
+          "the simulation diverged by step " + std::to_string(done) + ": body " + std::to_string(i) +
+          " has a non-finite position or velocity; try a smaller time step"));
+  const int code = failure ? dvi::exitCodeFor(failure) : interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
+  summary["status"] = dvi::runStatusName(code);
+  if (failure) {
+    summary["error"] = dvi::exceptionMessage(failure);
+    summary["exit_code"] = code;
+  }
+  summary["steps"] = done;
+  summary["steps_planned"] = steps;
+  summary["sim_time"] = double(done) * double(st.dt);
   summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = steps > 0 ? 1000.0 * wall / double(steps) : 0.0;
+  summary["ms_per_step"] = done > 0 ? 1000.0 * wall / double(done) : 0.0;
   summary["frames"] = frames.count();
 
-  const std::string out = o.out;
-  dvi::writeBodiesCsv(out + "/bodies.csv", state);
-  dvi::writeSummary(out + "/summary.json", summary);
-  std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", out.c_str(),
+  try {
+    dvi::writeBodiesCsv(out + "/bodies.csv", state);
+    dvi::writeSummary(out + "/summary.json", summary);
+    rd.commit();
+  } catch (...) {
+    if (!failure) throw;  // the failure of the run is the one to report
+  }
+  if (failure) {
+    std::printf("results so far: %s/ (summary.json status \"%s\", bodies.csv after step %lld)\n", rd.out().c_str(),
+                dvi::runStatusName(code), (long long)done);
+    std::rethrow_exception(failure);
+  }
+  std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", rd.out().c_str(),
               frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "", wall,
-              steps > 0 ? 1000.0 * wall / double(steps) : 0.0);
+              done > 0 ? 1000.0 * wall / double(done) : 0.0);
   if (!not_converged.empty()) {
     std::fflush(stdout);
     std::fprintf(stderr, "%s\n", not_converged.c_str());
+  }
+  if (interrupted) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "dvisim: interrupted by %s after step %lld of %lld; the results so far are in %s/\n",
+                 dvi::stopSignalName(), (long long)done, (long long)steps, rd.out().c_str());
+    return dvi::kExitInterrupted;
   }
   return 0;
 }
@@ -382,6 +447,14 @@ void registerBenchDropin(CLI::App& app);
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
   app.require_subcommand(1);
+  app.footer(
+      "Exit codes:\n"
+      "  0  done\n"
+      "  1  any other failure (an internal error)\n"
+      "  2  bad input: one line \"dvisim: error: ...\" naming the problem; nothing was run or written\n"
+      "  3  the simulation diverged (the message names the step and the body); the results so far are written\n"
+      "  4  interrupted by SIGINT or SIGTERM: the last state is checkpointed, summary.json has status \"interrupted\"\n"
+      "  5  out of memory (std::bad_alloc) or a device (GPU) error");
   Options o;
   CLI::App* run_cmd = app.add_subcommand("run", "Run a scene (.json or .bullet) or a CES machine (.json with \"ces\"; the default CES machine without a scene)");
   run_cmd->add_option("scene", o.scene, "Scene file: .json (scenes/schema/scene.schema.json) or .bullet");
@@ -424,9 +497,9 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("sweep")) return sweep();
     if (app.got_subcommand("bench")) return runBenchCommand();
     return run(o);
-  } catch (const InputError& e) {
-    return fail(2, e.what());
-  } catch (const std::exception& e) {
-    return fail(1, e.what());
+  } catch (...) {
+    // InputError 2, SimulationDiverged/SolverError 3, std::bad_alloc/DeviceError 5, anything else 1 (run_control.h).
+    const std::exception_ptr e = std::current_exception();
+    return fail(dvi::exitCodeFor(e), dvi::exceptionMessage(e));
   }
 }

@@ -40,6 +40,7 @@
 #include "ces/ces_config.h"
 #include "ces_run.h"
 #include "chrono_like/io/input_limits.h"
+#include "chrono_like/io/json_check.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
 #include "gpu/gpu_factory.h"
@@ -153,6 +154,11 @@ void validate(const SweepOptions& o, const Design& d) {
   if (!o.threads.empty()) dvi::parseInt("--threads", o.threads, 0, 4096);
   if (!o.iterations.empty()) dvi::parseInt("--iterations", o.iterations, 0, 1000000);
   if (!o.jobs.empty()) dvi::parseInt("--jobs", o.jobs, 1, 4096);
+  // sweep.json records the arguments as JSON text, which must be UTF-8: checked here, not when it is written.
+  dvi::jsoncheck::requireUtf8(o.scene, "the scene path");
+  dvi::jsoncheck::requireUtf8(o.list, "--list");
+  for (const std::string& g : o.grids) dvi::jsoncheck::requireUtf8(g, "--grid");
+  for (const std::string& v : o.sets) dvi::jsoncheck::requireUtf8(v, "--set");
   for (size_t i = 0; i < d.settings.size(); ++i) {
     const std::vector<std::string> v = overrides(o, d, i, 1);
     try {
@@ -300,14 +306,26 @@ Slots planSlots(const SweepOptions& o) {
 }
 
 // The running children by job slot (0: none), so that a sweep stopped by SIGINT or SIGTERM stops its runs too
-// instead of leaving them to write into DIR after it is gone.
+// instead of leaving them to write into DIR after it is gone. The handler passes the signal on and sets
+// g_stopped; the sweep starts no more runs, waits for the running ones (each checkpoints and writes its results
+// with status "interrupted", exit code 4), writes its tables and exits with code 4.
 volatile sig_atomic_t g_child[4096];
+volatile sig_atomic_t g_stopped = 0;
 
 void stopChildren(int sig) {
+  g_stopped = sig;
   for (volatile sig_atomic_t& pid : g_child)
     if (pid > 0) ::kill(pid_t(pid), sig);
-  std::signal(sig, SIG_DFL);
-  std::raise(sig);
+}
+
+// The log of a running case: beside its directory, which the run replaces as a whole when it ends (ResultDir);
+// moved into it as run.log afterwards.
+fs::path pendingLog(const Case& c) { return c.dir.parent_path() / ("." + c.id + ".log"); }
+
+void keepLog(const Case& c) {
+  std::error_code ec;
+  fs::create_directories(c.dir, ec);
+  fs::rename(pendingLog(c), c.dir / "run.log", ec);
 }
 
 // Runs the unfinished cases, up to s.jobs at a time. Returns the exit code of each case run now (index -> code).
@@ -326,22 +344,25 @@ std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std
   size_t next = 0, done = 0;
   std::signal(SIGINT, stopChildren);
   std::signal(SIGTERM, stopChildren);
-  while (next < todo.size() || !running.empty()) {
-    while (next < todo.size() && !free_slots.empty()) {
+  while ((next < todo.size() && !g_stopped) || !running.empty()) {
+    while (next < todo.size() && !free_slots.empty() && !g_stopped) {
       const Case& c = cases[todo[next]];
-      fs::remove_all(c.dir);
-      fs::create_directories(c.dir);
+      // The run replaces c.dir when it ends (its results, or what it has and the status); a failed start keeps
+      // what was there. Without the marker it is not taken for finished meanwhile.
+      fs::remove(c.dir / kMarker);
+      fs::create_directories(c.dir.parent_path());
       const int slot = free_slots.back();
       free_slots.pop_back();
       slot_of[todo[next]] = slot;
       const std::string gpu = s.gpus.empty() ? "" : s.gpus[size_t(slot) % s.gpus.size()];
-      const pid_t pid = spawnChild(childArgs(o, d, c, s.child_threads), c.dir / "run.log", gpu);
+      const pid_t pid = spawnChild(childArgs(o, d, c, s.child_threads), pendingLog(c), gpu);
       g_child[slot] = pid;
       running[pid] = {todo[next], Clock::now()};
       ++next;
     }
     int status = 0;
     const pid_t pid = ::waitpid(-1, &status, 0);
+    if (pid < 0 && errno == EINTR) continue;
     if (pid < 0) throw std::runtime_error(std::string("waitpid: ") + std::strerror(errno));
     const auto it = running.find(pid);
     if (it == running.end()) continue;
@@ -350,6 +371,7 @@ std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std
     running.erase(it);
     g_child[slot_of[i]] = 0;
     free_slots.push_back(slot_of[i]);
+    keepLog(cases[i]);
     codes[i] = recordExit(cases[i], status, wall);
     std::printf("[%zu/%zu] %s: %s (%.1f s)\n", ++done, todo.size(), cases[i].id.c_str(),
                 codes[i] == 0 ? "ok" : ("FAILED, exit " + std::to_string(codes[i])).c_str(), wall);
@@ -477,6 +499,12 @@ int runSweep(const SweepOptions& o) {
     }
   std::printf("results: %s/ (sweep.json, runs.csv, summary.csv, runs/)\n", o.out.c_str());
   if (!o.no_plots) std::printf("%s\n", plots(o.out, rows).c_str());
+  if (g_stopped) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "dvisim: sweep interrupted by %s: %zu of %zu runs unfinished; rerun the same command to finish them\n",
+                 g_stopped == SIGINT ? "SIGINT" : "SIGTERM", failed, cases.size());
+    return 4;
+  }
   if (failed) std::fprintf(stderr, "dvisim: error: %zu of %zu runs failed\n", failed, cases.size());
   return failed ? 1 : 0;
 }

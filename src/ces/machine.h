@@ -35,6 +35,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "ces/ces_config.h"
@@ -175,8 +176,13 @@ class CesMachine {
   // Checkpoint: the machine state, the feeder, every particle's spec and the body arrays; with a
   // CheckpointSystem also the core's warm-start cache and clock, so that a resumed CPU run ends bitwise
   // where an uninterrupted one does. load() expects a freshly built machine of the same configuration.
-  void save(std::ostream& out) const;
-  void load(std::istream& in);
+  // The file (format DVICES03, kCesCheckpointMagic):
+  //   "DVICES03" | u64 n | n bytes `meta` (the CLI: the configuration the run was made with) | the state |
+  //   u64 FNV-1a 64 (checksum.h) of every byte before it
+  // load() verifies the checksum before it reads a field (any edit is refused), then validates every field as
+  // well; `meta` returns the recorded metadata.
+  void save(std::ostream& out, const std::string& meta = {}) const;
+  void load(std::istream& in, std::string* meta = nullptr);
 
  private:
   friend class CesForceField;
@@ -216,6 +222,15 @@ class CesMachine {
   size_t dev_uploaded_ = 0;         // particles uploaded to dev_
   mutable bool charges_stale_ = false;
 };
+
+constexpr char kCesCheckpointMagic[9] = "DVICES03";
+
+// The metadata a checkpoint file records (CesMachine::save's `meta`), after checking its format and checksum:
+// InputError "checkpoint: ..." when it is not a checkpoint, of an older format, truncated or edited.
+std::string cesCheckpointMeta(const std::string& bytes);
+// Recomputes the trailing checksum of `bytes` in place (tests and the fuzz target: an edited field then reaches
+// the field checks of load() instead of the checksum's refusal). Leaves anything shorter than a header alone.
+void resealCesCheckpoint(std::string& bytes);
 
 // A CPU System whose clock and warm-start cache can be saved and restored (for checkpoints).
 class CheckpointSystem : public System {

@@ -12,11 +12,14 @@
 #include <stdexcept>
 #include <string>
 
+#include "chrono_like/base/errors.h"
+
 namespace dvi::gpu {
 
-struct CudaError : std::runtime_error {
+// A DeviceError (errors.h): the CLI exits with code 5 on it.
+struct CudaError : DeviceError {
   cudaError_t code;
-  CudaError(cudaError_t c, const std::string& what) : std::runtime_error(what), code(c) {}
+  CudaError(cudaError_t c, const std::string& what) : DeviceError(what), code(c) {}
 };
 
 inline void cudaCheck(cudaError_t e, const char* call, const char* file, int line) {

@@ -138,21 +138,6 @@ std::string cesMachineVtp(const CesMachine& m) {
   return o;
 }
 
-void CesFrameWriter::write(double time, const CesMachine& m) {
-  char name[32];
-  std::snprintf(name, sizeof name, "frame_%04d.vtp", int(entries_.size()));
-  writeFileAtomic(dir_ + "/" + name, cesVtpFrame(m));
-  entries_.emplace_back(time, name);
-  std::string pvd = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n";
-  for (const auto& e : entries_) {
-    std::string t;
-    num(t, e.first);
-    pvd += "<DataSet timestep=\"" + t + "\" group=\"\" part=\"0\" file=\"" + e.second + "\"/>\n";
-  }
-  pvd += "</Collection>\n</VTKFile>\n";
-  writeFileAtomic(dir_ + "/frames.pvd", pvd);
-}
-
 std::string cesParticlesCsv(const CesMachine& m) {
   const BodyArrays& b = m.system().bodies();
   const CesParticles& p = m.particles();

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "ces/machine.h"
+#include "chrono_like/io/output.h"
 
 namespace dvi {
 namespace ces {
@@ -19,15 +20,15 @@ std::string cesVtpFrame(const CesMachine& m);
 // The drum, brush and electrodes as closed 48-sided prisms along z, the collection plane as a quad.
 std::string cesMachineVtp(const CesMachine& m);
 
+// frame_NNNN.vtp (cesVtpFrame) + frames.pvd, through the shared PvdSeries (chrono_like/io/output.h).
 class CesFrameWriter {
  public:
-  explicit CesFrameWriter(std::string dir) : dir_(std::move(dir)) {}
-  void write(double time, const CesMachine& m);  // frame_NNNN.vtp + frames.pvd (rewritten)
-  int count() const { return int(entries_.size()); }
+  explicit CesFrameWriter(std::string dir) : series_(std::move(dir)) {}
+  void write(double time, const CesMachine& m) { series_.add(time, cesVtpFrame(m)); }
+  int count() const { return series_.count(); }
 
  private:
-  std::string dir_;
-  std::vector<std::pair<double, std::string>> entries_;
+  PvdSeries series_;
 };
 
 // One row per particle: body, material, kind, shape, mass_kg, radius_m, status, charge_C, x, y, z.

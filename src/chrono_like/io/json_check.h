@@ -8,6 +8,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -232,6 +233,41 @@ struct JsonCheck {
 
 
 // --set KEY=VALUE: VALUE as JSON, or as a string when it does not parse (a bare word: settings.solver=gs).
+// The offset of the first byte of `s` that does not belong to a well-formed UTF-8 sequence (RFC 3629: no overlong
+// forms, no surrogates, nothing above U+10FFFF), or npos when all of it is valid UTF-8.
+inline size_t invalidUtf8At(const std::string& s) {
+  const size_t n = s.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    size_t len = 0;
+    unsigned char lo = 0x80, hi = 0xBF;  // the range of the second byte
+    if (c < 0x80) len = 1;
+    else if (c >= 0xC2 && c <= 0xDF) len = 2;
+    else if (c >= 0xE0 && c <= 0xEF) len = 3, lo = c == 0xE0 ? 0xA0 : 0x80, hi = c == 0xED ? 0x9F : 0xBF;
+    else if (c >= 0xF0 && c <= 0xF4) len = 4, lo = c == 0xF0 ? 0x90 : 0x80, hi = c == 0xF4 ? 0x8F : 0xBF;
+    else return i;
+    if (len > 1) {
+      if (i + len > n) return i;
+      const unsigned char c1 = static_cast<unsigned char>(s[i + 1]);
+      if (c1 < lo || c1 > hi) return i;
+      for (size_t k = 2; k < len; ++k)
+        if ((static_cast<unsigned char>(s[i + k]) & 0xC0) != 0x80) return i;
+    }
+    i += len;
+  }
+  return std::string::npos;
+}
+
+// Refuses a string that is not valid UTF-8 (JSON text must be; a name would otherwise fail only when the results
+// are written): "<what>: not valid UTF-8 (byte 0xNN at offset K)".
+inline void requireUtf8(const std::string& s, const std::string& what) {
+  const size_t at = invalidUtf8At(s);
+  if (at == std::string::npos) return;
+  char b[64];
+  std::snprintf(b, sizeof b, "byte 0x%02x at offset %zu", unsigned(static_cast<unsigned char>(s[at])), at);
+  throw InputError(what + ": not valid UTF-8 (" + b + ")");
+}
+
 inline json parseSetValue(const std::string& text) {
   try {
     return json::parse(text);
@@ -245,6 +281,10 @@ inline json parseSetValue(const std::string& text) {
 // document's parser then rejects unknown keys). Errors name the key as `shown`.
 template <class MayCreate>
 void setByPath(json& root, const std::string& key, const std::string& shown, json value, MayCreate create) {
+  // Names and strings are UTF-8 from the start: checked here, not by the JSON writer at the end of a run.
+  const bool key_ok = invalidUtf8At(key) == std::string::npos;
+  requireUtf8(key, "--set " + (key_ok ? shown : std::string("KEY")) + ": the key");
+  if (value.is_string()) requireUtf8(value.get_ref<const std::string&>(), "--set " + shown + ": the value");
   std::vector<std::string> parts;
   std::stringstream ss(key);
   for (std::string p; std::getline(ss, p, '.');) {

@@ -1,12 +1,17 @@
 #include "chrono_like/io/output.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <stdexcept>
+
+#include "chrono_like/base/errors.h"
 
 namespace dvi {
 
@@ -129,19 +134,98 @@ std::string vtpFrame(const std::vector<BodyState>& bodies) {
   return o;
 }
 
-void FrameWriter::write(double time, const std::vector<BodyState>& bodies) {
+namespace {
+const char kPvdHead[] = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n";
+const char kPvdTail[] = "</Collection>\n</VTKFile>\n";
+}  // namespace
+
+PvdSeries::~PvdSeries() {
+  if (pvd_) std::fclose(pvd_);
+}
+
+void PvdSeries::add(double time, const std::string& vtp) {
   char name[32];
-  std::snprintf(name, sizeof name, "frame_%04d.vtp", int(entries_.size()));
-  writeFileAtomic(dir_ + "/" + name, vtpFrame(bodies));
-  entries_.emplace_back(time, name);
-  std::string pvd = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n";
-  for (const auto& e : entries_) {
-    std::string t;
-    appendNumber(t, e.first);
-    pvd += "<DataSet timestep=\"" + t + "\" group=\"\" part=\"0\" file=\"" + xmlEscape(e.second) + "\"/>\n";
+  std::snprintf(name, sizeof name, "frame_%04d.vtp", count_);
+  writeFileAtomic(dir_ + "/" + name, vtp);
+  const std::string path = dir_ + "/frames.pvd";
+  if (!pvd_) {
+    pvd_ = std::fopen(path.c_str(), "wb");
+    if (!pvd_ || std::fputs(kPvdHead, pvd_) == EOF) throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
+    body_end_ = std::ftell(pvd_);
   }
-  pvd += "</Collection>\n</VTKFile>\n";
-  writeFileAtomic(dir_ + "/frames.pvd", pvd);
+  std::string line = "<DataSet timestep=\"";
+  appendNumber(line, time);
+  line += "\" group=\"\" part=\"0\" file=\"" + xmlEscape(name) + "\"/>\n";
+  // The new entry over the old closing tags, then the closing tags: the file is a complete collection after each frame.
+  if (std::fseek(pvd_, body_end_, SEEK_SET) != 0 || std::fputs(line.c_str(), pvd_) == EOF)
+    throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
+  body_end_ = std::ftell(pvd_);
+  if (std::fputs(kPvdTail, pvd_) == EOF || std::fflush(pvd_) != 0)
+    throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
+  ++count_;
+}
+
+ResultDir::ResultDir(const std::string& out) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::path target = fs::absolute(fs::path(out), ec).lexically_normal();
+  if (ec || out.empty()) throw InputError("--out '" + out + "': not a usable path");
+  if (!target.has_filename()) target = target.parent_path();  // "dir/" -> "dir"
+  if (fs::is_symlink(target, ec)) {
+    // a link to the results directory: the directory it names is replaced, the link stays
+    const fs::path real = fs::canonical(target, ec);
+    if (ec) throw InputError("--out " + out + ": a link to nowhere (" + ec.message() + ")");
+    target = real;
+  }
+  if (fs::exists(target, ec) && !fs::is_directory(target, ec))
+    throw InputError("--out " + out + ": exists and is not a directory");
+  const fs::path parent = target.parent_path();
+  fs::create_directories(parent, ec);
+  if (ec || !fs::is_directory(parent)) {
+    throw InputError("--out " + out + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+  }
+  static int serial = 0;
+  for (int attempt = 0;; ++attempt) {
+    const fs::path tmp = parent / ("." + target.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
+                                   std::to_string(serial++));
+    if (::mkdir(tmp.c_str(), 0777) == 0) {
+      tmp_ = tmp.string();
+      break;
+    }
+    if (errno != EEXIST || attempt > 100)
+      throw InputError("--out " + out + ": cannot create a directory beside it (" + std::strerror(errno) + ")");
+  }
+  out_ = target.string();
+}
+
+ResultDir::~ResultDir() {
+  if (committed_ || tmp_.empty()) return;
+  std::error_code ec;
+  std::filesystem::remove_all(tmp_, ec);
+}
+
+void ResultDir::commit() {
+  namespace fs = std::filesystem;
+  if (committed_) return;
+  std::error_code ec;
+  if (!fs::exists(out_, ec)) {
+    if (std::rename(tmp_.c_str(), out_.c_str()) != 0)
+      throw std::runtime_error("cannot rename " + tmp_ + " to " + out_ + ": " + std::strerror(errno));
+  } else if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, out_.c_str(), RENAME_EXCHANGE) == 0) {
+    fs::remove_all(tmp_, ec);  // the previous results, now under the temporary name
+  } else {
+    // No RENAME_EXCHANGE on this file system: the previous results aside, the new ones in, the previous deleted.
+    const std::string old = tmp_ + ".old";
+    if (std::rename(out_.c_str(), old.c_str()) != 0)
+      throw std::runtime_error("cannot rename " + out_ + " to " + old + ": " + std::strerror(errno));
+    if (std::rename(tmp_.c_str(), out_.c_str()) != 0) {
+      const int e = errno;
+      std::rename(old.c_str(), out_.c_str());
+      throw std::runtime_error("cannot rename " + tmp_ + " to " + out_ + ": " + std::strerror(e));
+    }
+    fs::remove_all(old, ec);
+  }
+  committed_ = true;
 }
 
 }  // namespace dvi

@@ -1,6 +1,7 @@
 // Run outputs: summary.json, bodies.csv, VTK PolyData frames (frame_NNNN.vtp) and their ParaView
 // collection (frames.pvd). Every file is written to a temporary name in the same directory and renamed
-// into place, so a failure never leaves a half-written file nor destroys one written before.
+// into place, so a failure never leaves a half-written file nor destroys one written before; a whole run's
+// directory is replaced the same way (ResultDir).
 #pragma once
 
 #include <cstdio>
@@ -34,17 +35,58 @@ void writeBodiesCsv(const std::string& path, const std::vector<BodyState>& bodie
 // id, size (radius), velocity, angular_velocity, orientation (quaternion w,x,y,z).
 std::string vtpFrame(const std::vector<BodyState>& bodies);
 
-// Writes frames into a directory and keeps frames.pvd (the time series ParaView opens) up to date.
-class FrameWriter {
+// frames.pvd, the time series ParaView opens, kept valid after every frame in linear time: the file stays open, and
+// each frame writes its <DataSet> line over the closing tags and the closing tags after it (one seek and two
+// short writes), instead of rewriting the whole collection (quadratic in the frames). Shared by FrameWriter and
+// the CES frames (ces_output.h).
+class PvdSeries {
  public:
-  explicit FrameWriter(std::string dir) : dir_(std::move(dir)) {}
-  // Writes frame_<index>.vtp (index zero-padded to 4 digits) and rewrites frames.pvd.
-  void write(double time, const std::vector<BodyState>& bodies);
-  int count() const { return int(entries_.size()); }
+  explicit PvdSeries(std::string dir) : dir_(std::move(dir)) {}
+  ~PvdSeries();
+  PvdSeries(const PvdSeries&) = delete;
+  PvdSeries& operator=(const PvdSeries&) = delete;
+  // Writes dir/frame_<index>.vtp (index zero-padded to 4 digits) with `vtp` and adds it to dir/frames.pvd.
+  void add(double time, const std::string& vtp);
+  int count() const { return count_; }
 
  private:
   std::string dir_;
-  std::vector<std::pair<double, std::string>> entries_;
+  std::FILE* pvd_ = nullptr;
+  long body_end_ = 0;  // offset of the closing tags
+  int count_ = 0;
+};
+
+// Writes frames of body states into a directory (frame_NNNN.vtp + frames.pvd, PvdSeries).
+class FrameWriter {
+ public:
+  explicit FrameWriter(std::string dir) : series_(std::move(dir)) {}
+  void write(double time, const std::vector<BodyState>& bodies) { series_.add(time, vtpFrame(bodies)); }
+  int count() const { return series_.count(); }
+
+ private:
+  PvdSeries series_;
+};
+
+// The results directory of a run, replaced atomically: the run writes into a fresh temporary directory beside
+// `out` (path()), and commit() puts it in place of `out` in one rename (renameat2 RENAME_EXCHANGE; where the
+// file system lacks it, two renames) and deletes the previous results. Without commit() (the run failed before
+// it had anything to write) the destructor deletes the temporary directory and `out` stays as it was. So an
+// interrupted or failed run leaves either the previous results untouched or a complete new set, never old files
+// (frames of a longer run) beside new ones. Throws InputError when `out` is not a directory or cannot be made.
+class ResultDir {
+ public:
+  explicit ResultDir(const std::string& out);
+  ~ResultDir();
+  ResultDir(const ResultDir&) = delete;
+  ResultDir& operator=(const ResultDir&) = delete;
+  const std::string& path() const { return tmp_; }  // where the run writes
+  const std::string& out() const { return out_; }
+  void commit();
+  bool committed() const { return committed_; }
+
+ private:
+  std::string out_, tmp_;
+  bool committed_ = false;
 };
 
 // summary.json, pretty-printed. Inline, so that no nlohmann::json crosses the library boundary (its
