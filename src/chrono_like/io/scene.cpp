@@ -253,150 +253,202 @@ class Builder {
 
   // depth: how many compounds this shape is inside (bounded: compounds recurse here and in scaled()).
   BuiltShape shape(const json& j, const std::string& path, int depth = 0) {
-    const bool in_compound = depth > 0;
     c_.object(j, path);
     if (!j.contains("type")) c_.fail(path + ".type", "missing shape type");
     const std::string type = c_.oneOf(j["type"], path + ".type",
         {"sphere", "box", "cylinder", "capsule", "cone", "ellipsoid", "convex_hull", "plane", "compound"});
-    auto need = [&](const char* k) -> const json& {
-      if (!j.contains(k)) c_.fail(path + "." + k, std::string("missing (required for a ") + type + ")");
+    const ShapeJson s{c_, j, path, type};
+    if (type == "sphere") return sphere(s);
+    if (type == "box") return box(s);
+    if (type == "cylinder") return cylinder(s);
+    if (type == "capsule") return capsule(s);
+    if (type == "cone") return cone(s);
+    if (type == "ellipsoid") return ellipsoid(s);
+    if (type == "convex_hull") return convexHull(s);
+    if (type == "plane") return plane(s, depth > 0);
+    return compound(s, depth);
+  }
+
+ private:
+  // A shape object being read: where it is, and the helpers every type uses.
+  struct ShapeJson {
+    const Check& c;
+    const json& j;
+    const std::string& path;
+    const std::string& type;
+    const json& need(const char* k) const {
+      if (!j.contains(k)) c.fail(path + "." + k, std::string("missing (required for a ") + type + ")");
       return j[k];
-    };
-    auto at = [&](const char* k) { return path + "." + k; };
-    auto axisOf = [&]() -> int {
-      if (!j.contains("axis")) return 1;
-      const std::string a = c_.oneOf(j["axis"], at("axis"), {"x", "y", "z"});
-      return a == "x" ? 0 : a == "y" ? 1 : 2;
-    };
-    BuiltShape b;
-    if (type == "sphere") {
-      c_.keys(j, path, {"type", "radius"});
-      const double r = c_.positive(need("radius"), at("radius"));
-      b.shape = keep(new btSphereShape(btScalar(r)));
-      b.volume = 4.0 / 3.0 * M_PI * r * r * r;
-      b.bound = r;
-    } else if (type == "box") {
-      c_.keys(j, path, {"type", "half_extents"});
-      const Vec3 h = c_.positiveVec3(need("half_extents"), at("half_extents"));
-      auto* s = new btBoxShape(bt(h));
-      s->setMargin(marginFor(minComponent(h)));
-      b.shape = keep(s);
-      b.volume = 8.0 * h.x * h.y * h.z;
-      b.bound = length(h);
-    } else if (type == "cylinder") {
-      c_.keys(j, path, {"type", "radius", "half_height", "axis"});
-      const double r = c_.positive(need("radius"), at("radius"));
-      const double hh = c_.positive(need("half_height"), at("half_height"));
-      const int axis = axisOf();
-      btCylinderShape* s = axis == 0   ? new btCylinderShapeX(btVector3(btScalar(hh), btScalar(r), btScalar(r)))
-                           : axis == 1 ? new btCylinderShape(btVector3(btScalar(r), btScalar(hh), btScalar(r)))
-                                       : static_cast<btCylinderShape*>(
-                                             new btCylinderShapeZ(btVector3(btScalar(r), btScalar(r), btScalar(hh))));
-      s->setMargin(marginFor(std::min(r, hh)));
-      b.shape = keep(s);
-      b.volume = M_PI * r * r * 2 * hh;
-      b.bound = std::sqrt(r * r + hh * hh);
-    } else if (type == "capsule") {
-      c_.keys(j, path, {"type", "radius", "half_height", "axis"});
-      const double r = c_.positive(need("radius"), at("radius"));
-      const double hh = c_.nonNegative(need("half_height"), at("half_height"));
-      const int axis = axisOf();
-      const btScalar R = btScalar(r), H = btScalar(2 * hh);
-      btCapsuleShape* s = axis == 0   ? new btCapsuleShapeX(R, H)
-                          : axis == 1 ? new btCapsuleShape(R, H)
-                                      : static_cast<btCapsuleShape*>(new btCapsuleShapeZ(R, H));
-      b.shape = keep(s);
-      b.volume = M_PI * r * r * 2 * hh + 4.0 / 3.0 * M_PI * r * r * r;
-      b.bound = r + hh;
-    } else if (type == "cone") {
-      c_.keys(j, path, {"type", "radius", "height", "axis"});
-      const double r = c_.positive(need("radius"), at("radius"));
-      const double h = c_.positive(need("height"), at("height"));
-      const int axis = axisOf();
-      const btScalar R = btScalar(r), H = btScalar(h);
-      btConeShape* s = axis == 0   ? new btConeShapeX(R, H)
-                       : axis == 1 ? new btConeShape(R, H)
-                                   : static_cast<btConeShape*>(new btConeShapeZ(R, H));
-      s->setMargin(marginFor(std::min(r, 0.5 * h)));
-      b.shape = keep(s);
-      b.volume = M_PI * r * r * h / 3.0;
-      b.bound = std::sqrt(r * r + 0.25 * h * h);
-    } else if (type == "ellipsoid") {
-      c_.keys(j, path, {"type", "semi_axes"});
-      const Vec3 a = c_.positiveVec3(need("semi_axes"), at("semi_axes"));
-      // Bullet has no ellipsoid: a unit multi-sphere scaled per axis, which the importer reads back
-      // as an ellipsoid.
-      const btVector3 center(0, 0, 0);
-      const btScalar one = 1;
-      auto* s = new btMultiSphereShape(&center, &one, 1);
-      s->setMargin(marginFor(minComponent(a)));
-      s->setLocalScaling(bt(a));
-      b.shape = keep(s);
-      b.volume = 4.0 / 3.0 * M_PI * a.x * a.y * a.z;
-      b.bound = maxComponent(a);
-    } else if (type == "convex_hull") {
-      c_.keys(j, path, {"type", "points"});
-      const json& p = c_.array(need("points"), at("points"));
-      if (p.size() < 4) c_.fail(at("points"), "a convex hull needs at least 4 points, got " + std::to_string(p.size()));
-      std::vector<btVector3> pts;
-      Vec3 lo{1e30, 1e30, 1e30}, hi{-1e30, -1e30, -1e30};
-      for (size_t i = 0; i < p.size(); ++i) {
-        const Vec3 v = c_.vec3(p[i], at("points") + "[" + std::to_string(i) + "]");
-        pts.push_back(bt(v));
-        lo = vmin(lo, v);
-        hi = vmax(hi, v);
-        b.bound = std::max(b.bound, double(length(v)));
-      }
-      b.volume = hullVolume(pts);
-      if (!(b.volume > 1e-12 * std::pow(double(maxComponent(hi - lo)), 3)))
-        c_.fail(at("points"), "points are coplanar (the hull has zero volume)");
-      auto* s = new btConvexHullShape(&pts[0].x(), int(pts.size()), int(sizeof(btVector3)));
-      s->setMargin(marginFor(0.5 * minComponent(hi - lo)));
-      b.shape = keep(s);
-    } else if (type == "plane") {
-      c_.keys(j, path, {"type", "normal", "offset"});
-      if (in_compound) c_.fail(path, "a plane cannot be a compound child");
-      // The plane n.x = offset with n as given: offset / |n| along the unit normal.
-      const json& nj = need("normal");
-      const Vec3 u = c_.direction(nj, at("normal"));
-      const double d = j.contains("offset") ? c_.finiteNumber(j["offset"], at("offset")) : 0.0;
-      double nmax = 0;
-      for (const json& x : nj) nmax = std::fmax(nmax, std::fabs(x.get<double>()));
-      double nlen = 0;
-      for (const json& x : nj) nlen += (x.get<double>() / nmax) * (x.get<double>() / nmax);
-      const double dn = d / nmax / std::sqrt(nlen);
-      if (!(std::fabs(dn) <= c_.max_magnitude))
-        c_.fail(at("offset"), "offset / |normal| = " + num(dn) + " is out of range (stored as " + c_.stored_as + ")");
-      b.shape = keep(new btStaticPlaneShape(bt(u), btScalar(dn)));
-      b.plane = true;
-      b.bound = INFINITY;
-    } else {  // compound
-      c_.keys(j, path, {"type", "children"});
-      if (depth >= inputLimits().max_compound_depth)
-        c_.fail(path, "compound shapes nested deeper than " + std::to_string(inputLimits().max_compound_depth) +
-                          " levels (the limit)");
-      const json& ch = c_.array(need("children"), at("children"));
-      if (ch.empty()) c_.fail(at("children"), "a compound needs at least one child");
-      std::vector<std::pair<btTransform, btCollisionShape*>> kids;
-      for (size_t i = 0; i < ch.size(); ++i) {
-        const std::string cp = at("children") + "[" + std::to_string(i) + "]";
-        c_.object(ch[i], cp);
-        c_.keys(ch[i], cp, {"shape", "position", "rotation"});
-        if (!ch[i].contains("shape")) c_.fail(cp + ".shape", "missing");
-        BuiltShape k = shape(ch[i]["shape"], cp + ".shape", depth + 1);
-        const Vec3 pos = ch[i].contains("position") ? c_.vec3(ch[i]["position"], cp + ".position") : Vec3{0, 0, 0};
-        const Quat q = ch[i].contains("rotation") ? c_.rotation(ch[i]["rotation"], cp + ".rotation") : Quat{1, 0, 0, 0};
-        kids.push_back({btTransform(bt(q), bt(pos)), k.shape});
-        b.volume += k.volume;
-        b.bound = std::max(b.bound, double(length(pos)) + k.bound);
-      }
-      auto* s = new btCompoundShape(true, int(kids.size()));
-      for (auto& k : kids) s->addChildShape(k.first, k.second);
-      b.shape = keep(s);
     }
+    std::string at(const char* k) const { return path + "." + k; }
+    int axis() const {
+      if (!j.contains("axis")) return 1;
+      const std::string a = c.oneOf(j["axis"], at("axis"), {"x", "y", "z"});
+      return a == "x" ? 0 : a == "y" ? 1 : 2;
+    }
+  };
+
+  BuiltShape sphere(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "radius"});
+    const double r = c_.positive(sj.need("radius"), sj.at("radius"));
+    b.shape = keep(new btSphereShape(btScalar(r)));
+    b.volume = 4.0 / 3.0 * M_PI * r * r * r;
+    b.bound = r;
     return b;
   }
 
+  BuiltShape box(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "half_extents"});
+    const Vec3 h = c_.positiveVec3(sj.need("half_extents"), sj.at("half_extents"));
+    auto* s = new btBoxShape(bt(h));
+    s->setMargin(marginFor(minComponent(h)));
+    b.shape = keep(s);
+    b.volume = 8.0 * h.x * h.y * h.z;
+    b.bound = length(h);
+    return b;
+  }
+
+  BuiltShape cylinder(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "radius", "half_height", "axis"});
+    const double r = c_.positive(sj.need("radius"), sj.at("radius"));
+    const double hh = c_.positive(sj.need("half_height"), sj.at("half_height"));
+    const int axis = sj.axis();
+    btCylinderShape* s = axis == 0   ? new btCylinderShapeX(btVector3(btScalar(hh), btScalar(r), btScalar(r)))
+                         : axis == 1 ? new btCylinderShape(btVector3(btScalar(r), btScalar(hh), btScalar(r)))
+                                     : static_cast<btCylinderShape*>(
+                                           new btCylinderShapeZ(btVector3(btScalar(r), btScalar(r), btScalar(hh))));
+    s->setMargin(marginFor(std::min(r, hh)));
+    b.shape = keep(s);
+    b.volume = M_PI * r * r * 2 * hh;
+    b.bound = std::sqrt(r * r + hh * hh);
+    return b;
+  }
+
+  BuiltShape capsule(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "radius", "half_height", "axis"});
+    const double r = c_.positive(sj.need("radius"), sj.at("radius"));
+    const double hh = c_.nonNegative(sj.need("half_height"), sj.at("half_height"));
+    const int axis = sj.axis();
+    const btScalar R = btScalar(r), H = btScalar(2 * hh);
+    btCapsuleShape* s = axis == 0   ? new btCapsuleShapeX(R, H)
+                        : axis == 1 ? new btCapsuleShape(R, H)
+                                    : static_cast<btCapsuleShape*>(new btCapsuleShapeZ(R, H));
+    b.shape = keep(s);
+    b.volume = M_PI * r * r * 2 * hh + 4.0 / 3.0 * M_PI * r * r * r;
+    b.bound = r + hh;
+    return b;
+  }
+
+  BuiltShape cone(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "radius", "height", "axis"});
+    const double r = c_.positive(sj.need("radius"), sj.at("radius"));
+    const double h = c_.positive(sj.need("height"), sj.at("height"));
+    const int axis = sj.axis();
+    const btScalar R = btScalar(r), H = btScalar(h);
+    btConeShape* s = axis == 0   ? new btConeShapeX(R, H)
+                     : axis == 1 ? new btConeShape(R, H)
+                                 : static_cast<btConeShape*>(new btConeShapeZ(R, H));
+    s->setMargin(marginFor(std::min(r, 0.5 * h)));
+    b.shape = keep(s);
+    b.volume = M_PI * r * r * h / 3.0;
+    b.bound = std::sqrt(r * r + 0.25 * h * h);
+    return b;
+  }
+
+  BuiltShape ellipsoid(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "semi_axes"});
+    const Vec3 a = c_.positiveVec3(sj.need("semi_axes"), sj.at("semi_axes"));
+    // Bullet has no ellipsoid: a unit multi-sphere scaled per axis, which the importer reads back
+    // as an ellipsoid.
+    const btVector3 center(0, 0, 0);
+    const btScalar one = 1;
+    auto* s = new btMultiSphereShape(&center, &one, 1);
+    s->setMargin(marginFor(minComponent(a)));
+    s->setLocalScaling(bt(a));
+    b.shape = keep(s);
+    b.volume = 4.0 / 3.0 * M_PI * a.x * a.y * a.z;
+    b.bound = maxComponent(a);
+    return b;
+  }
+
+  BuiltShape convexHull(const ShapeJson& sj) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "points"});
+    const json& p = c_.array(sj.need("points"), sj.at("points"));
+    if (p.size() < 4) c_.fail(sj.at("points"), "a convex hull needs at least 4 points, got " + std::to_string(p.size()));
+    std::vector<btVector3> pts;
+    Vec3 lo{1e30, 1e30, 1e30}, hi{-1e30, -1e30, -1e30};
+    for (size_t i = 0; i < p.size(); ++i) {
+      const Vec3 v = c_.vec3(p[i], sj.at("points") + "[" + std::to_string(i) + "]");
+      pts.push_back(bt(v));
+      lo = vmin(lo, v);
+      hi = vmax(hi, v);
+      b.bound = std::max(b.bound, double(length(v)));
+    }
+    b.volume = hullVolume(pts);
+    if (!(b.volume > 1e-12 * std::pow(double(maxComponent(hi - lo)), 3)))
+      c_.fail(sj.at("points"), "points are coplanar (the hull has zero volume)");
+    auto* s = new btConvexHullShape(&pts[0].x(), int(pts.size()), int(sizeof(btVector3)));
+    s->setMargin(marginFor(0.5 * minComponent(hi - lo)));
+    b.shape = keep(s);
+    return b;
+  }
+
+  BuiltShape plane(const ShapeJson& sj, bool in_compound) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "normal", "offset"});
+    if (in_compound) c_.fail(sj.path, "a plane cannot be a compound child");
+    // The plane n.x = offset with n as given: offset / |n| along the unit normal.
+    const json& nj = sj.need("normal");
+    const Vec3 u = c_.direction(nj, sj.at("normal"));
+    const double d = sj.j.contains("offset") ? c_.finiteNumber(sj.j["offset"], sj.at("offset")) : 0.0;
+    double nmax = 0;
+    for (const json& x : nj) nmax = std::fmax(nmax, std::fabs(x.get<double>()));
+    double nlen = 0;
+    for (const json& x : nj) nlen += (x.get<double>() / nmax) * (x.get<double>() / nmax);
+    const double dn = d / nmax / std::sqrt(nlen);
+    if (!(std::fabs(dn) <= c_.max_magnitude))
+      c_.fail(sj.at("offset"), "offset / |normal| = " + num(dn) + " is out of range (stored as " + c_.stored_as + ")");
+    b.shape = keep(new btStaticPlaneShape(bt(u), btScalar(dn)));
+    b.plane = true;
+    b.bound = INFINITY;
+    return b;
+  }
+
+  BuiltShape compound(const ShapeJson& sj, int depth) {
+    BuiltShape b;
+    c_.keys(sj.j, sj.path, {"type", "children"});
+    if (depth >= inputLimits().max_compound_depth)
+      c_.fail(sj.path, "compound shapes nested deeper than " + std::to_string(inputLimits().max_compound_depth) +
+                        " levels (the limit)");
+    const json& ch = c_.array(sj.need("children"), sj.at("children"));
+    if (ch.empty()) c_.fail(sj.at("children"), "a compound needs at least one child");
+    std::vector<std::pair<btTransform, btCollisionShape*>> kids;
+    for (size_t i = 0; i < ch.size(); ++i) {
+      const std::string cp = sj.at("children") + "[" + std::to_string(i) + "]";
+      c_.object(ch[i], cp);
+      c_.keys(ch[i], cp, {"shape", "position", "rotation"});
+      if (!ch[i].contains("shape")) c_.fail(cp + ".shape", "missing");
+      BuiltShape k = shape(ch[i]["shape"], cp + ".shape", depth + 1);
+      const Vec3 pos = ch[i].contains("position") ? c_.vec3(ch[i]["position"], cp + ".position") : Vec3{0, 0, 0};
+      const Quat q = ch[i].contains("rotation") ? c_.rotation(ch[i]["rotation"], cp + ".rotation") : Quat{1, 0, 0, 0};
+      kids.push_back({btTransform(bt(q), bt(pos)), k.shape});
+      b.volume += k.volume;
+      b.bound = std::max(b.bound, double(length(pos)) + k.bound);
+    }
+    auto* s = new btCompoundShape(true, int(kids.size()));
+    for (auto& k : kids) s->addChildShape(k.first, k.second);
+    b.shape = keep(s);
+    return b;
+  }
+
+ public:
   btCollisionShape* keep(btCollisionShape* s) {
     o_.shapes.emplace_back(s);
     return s;
@@ -529,98 +581,18 @@ class Builder {
     const std::string type = c_.oneOf(g["type"], path + ".type", {"grid", "pile"});
     auto at = [&](const char* k) { return path + "." + k; };
     const std::string prefix = g.contains("name") ? c_.string(g["name"], at("name")) : type;
-
-    // Shape mixture: one "shape", or "shapes": [{shape, weight}].
-    struct Entry {
-      json shape;
-      double weight;
-      std::string path;
-    };
-    std::vector<Entry> mix;
-    if (g.contains("shape") == g.contains("shapes")) c_.fail(path, "give exactly one of shape, shapes");
-    if (g.contains("shape")) {
-      mix.push_back({g["shape"], 1.0, at("shape")});
-    } else {
-      const json& arr = c_.array(g["shapes"], at("shapes"));
-      if (arr.empty()) c_.fail(at("shapes"), "needs at least one entry");
-      for (size_t i = 0; i < arr.size(); ++i) {
-        const std::string ep = at("shapes") + "[" + std::to_string(i) + "]";
-        c_.object(arr[i], ep);
-        c_.keys(arr[i], ep, {"shape", "weight"});
-        if (!arr[i].contains("shape")) c_.fail(ep + ".shape", "missing");
-        const double w = arr[i].contains("weight") ? c_.positive(arr[i]["weight"], ep + ".weight") : 1.0;
-        mix.push_back({arr[i]["shape"], w, ep + ".shape"});
-      }
-    }
+    const std::vector<MixEntry> mix = mixture(g, path);
     double smin = 1, smax = 1;
-    if (g.contains("scale")) {
-      if (g["scale"].is_array()) {
-        if (g["scale"].size() != 2) c_.fail(at("scale"), "expected a number or [min, max], got " + describe(g["scale"]));
-        smin = c_.positive(g["scale"][0], at("scale") + "[0]");
-        smax = c_.positive(g["scale"][1], at("scale") + "[1]");
-        if (smax < smin) c_.fail(at("scale"), "max < min");
-      } else {
-        smin = smax = c_.positive(g["scale"], at("scale"));
-      }
-    }
+    scaleRange(g, path, smin, smax);
     const bool random_rot = g.contains("random_rotation") ? c_.boolean(g["random_rotation"], at("random_rotation"))
                                                           : type == "pile";
-    // Validate every entry once and measure the largest extent at the largest scale: the bounding
-    // radius when bodies turn at random, the half extent of the axis-aligned box otherwise.
-    double bound = 0;
-    for (const Entry& e : mix) {
-      BuiltShape b = shape(scaled(e.shape, smax), e.path);
-      if (b.plane) c_.fail(e.path, "a generator cannot make planes");
-      if (random_rot) {
-        bound = std::max(bound, b.bound);
-      } else {
-        btVector3 lo, hi;
-        btTransform id;
-        id.setIdentity();
-        b.shape->getAabb(id, lo, hi);
-        for (int k = 0; k < 3; ++k) bound = std::max({bound, double(-lo[k]), double(hi[k])});
-      }
-    }
+    const double bound = mixtureBound(mix, smax, random_rot);
     const double jitter = g.contains("jitter") ? c_.nonNegative(g["jitter"], at("jitter")) : 0.0;
     if (jitter >= 0.5) c_.fail(at("jitter"), "must be < 0.5 (a fraction of the spacing), got " + num(jitter));
-    const double min_spacing = 2 * bound / (1 - 2 * jitter);
-    double spacing = 1.05 * min_spacing;
-    if (g.contains("spacing")) {
-      spacing = c_.positive(g["spacing"], at("spacing"));
-      if (spacing < min_spacing * (1 - 1e-6))
-        c_.fail(at("spacing"), num(spacing) + " is too small: bodies of bounding radius " + num(bound) +
-                                   " with jitter " + num(jitter) + " need at least " + num(min_spacing));
-    }
+    const double spacing = latticeSpacing(g, path, bound, jitter);
     const Vec3 origin = g.contains("origin") ? c_.vec3(g["origin"], at("origin")) : Vec3{0, 0, 0};
-    int64_t nx = 1, ny = 1, nz = 1, count = 0;
-    if (type == "grid") {
-      if (g.contains("count") || g.contains("footprint")) c_.fail(path, "a grid takes counts [nx, ny, nz], not count/footprint");
-      if (!g.contains("counts")) c_.fail(at("counts"), "missing (required for a grid)");
-      const json& cn = g["counts"];
-      if (!cn.is_array() || cn.size() != 3) c_.fail(at("counts"), "expected [nx, ny, nz], got " + describe(cn));
-      nx = c_.integer(cn[0], at("counts") + "[0]", 1, 1 << 20);
-      ny = c_.integer(cn[1], at("counts") + "[1]", 1, 1 << 20);
-      nz = c_.integer(cn[2], at("counts") + "[2]", 1, 1 << 20);
-      count = nx * ny * nz;
-    } else {
-      if (g.contains("counts")) c_.fail(at("counts"), "a pile takes count and footprint, not counts");
-      if (!g.contains("count")) c_.fail(at("count"), "missing (required for a pile)");
-      count = c_.integer(g["count"], at("count"), 1, int64_t(1) << 26);
-      double fx = spacing * 10, fz = spacing * 10;
-      if (g.contains("footprint")) {
-        const json& f = g["footprint"];
-        if (!f.is_array() || f.size() != 2) c_.fail(at("footprint"), "expected [width_x, width_z], got " + describe(f));
-        fx = c_.positive(f[0], at("footprint") + "[0]");
-        fz = c_.positive(f[1], at("footprint") + "[1]");
-      }
-      // Columns along x and z, at most `count` each (more would stay empty and leave every position as it is),
-      // so that nx * nz <= count^2 cannot wrap (a 4e9 x 4e9 footprint made it 0: a division by zero).
-      nx = int64_t(std::fmax(1.0, std::fmin(std::floor(fx / spacing), double(count))));
-      nz = int64_t(std::fmax(1.0, std::fmin(std::floor(fz / spacing), double(count))));
-      ny = (count + nx * nz - 1) / (nx * nz);
-    }
-    if (count > (int64_t(1) << 26)) c_.fail(path, "too many bodies (" + std::to_string(count) + ")");
-    checkBodyBudget(int64_t(out.size()) + count, c_.origin + ": " + path);
+    const Lattice L = lattice(g, path, type, spacing);
+    checkBodyBudget(int64_t(out.size()) + L.count, c_.origin + ": " + path);
     Rng rng{g.contains("seed") ? uint64_t(c_.integer(g["seed"], at("seed"), 0, int64_t(1) << 53)) : 1u};
     const double friction = g.contains("friction") ? c_.nonNegative(g["friction"], at("friction")) : 0.5;
     const Vec3 vel = g.contains("velocity") ? c_.vec3(g["velocity"], at("velocity")) : Vec3{0, 0, 0};
@@ -630,11 +602,11 @@ class Builder {
     const double mass = g.contains("mass") ? c_.positive(g["mass"], at("mass")) : 1.0;
     const double rho = by_density ? c_.positive(g["density"], at("density")) : 0.0;
     double wsum = 0;
-    for (const Entry& e : mix) wsum += e.weight;
+    for (const MixEntry& e : mix) wsum += e.weight;
 
     std::map<size_t, BuiltShape> shared;  // one Bullet shape per mixture entry when the scale is fixed
-    for (int64_t i = 0; i < count; ++i) {
-      const int64_t ix = i % nx, iz = (i / nx) % nz, iy = i / (nx * nz);
+    for (int64_t i = 0; i < L.count; ++i) {
+      const int64_t ix = i % L.nx, iz = (i / L.nx) % L.nz, iy = i / (L.nx * L.nz);
       double pick = rng.uniform() * wsum;
       size_t e = 0;
       while (e + 1 < mix.size() && pick >= mix[e].weight) pick -= mix[e++].weight;
@@ -657,6 +629,119 @@ class Builder {
       out.push_back(body(s, path));
       names.push_back(prefix + "_" + std::to_string(i));
     }
+  }
+
+ private:
+  // A generator's shape mixture entry: its shape object, weight and key path.
+  struct MixEntry {
+    json shape;
+    double weight;
+    std::string path;
+  };
+  // Where a generator puts its bodies: an nx x ny x nz lattice (a pile fills it layer by layer), count bodies.
+  struct Lattice {
+    int64_t nx = 1, ny = 1, nz = 1, count = 0;
+  };
+
+  // Shape mixture: one "shape", or "shapes": [{shape, weight}].
+  std::vector<MixEntry> mixture(const json& g, const std::string& path) const {
+    auto at = [&](const char* k) { return path + "." + k; };
+    std::vector<MixEntry> mix;
+    if (g.contains("shape") == g.contains("shapes")) c_.fail(path, "give exactly one of shape, shapes");
+    if (g.contains("shape")) {
+      mix.push_back({g["shape"], 1.0, at("shape")});
+      return mix;
+    }
+    const json& arr = c_.array(g["shapes"], at("shapes"));
+    if (arr.empty()) c_.fail(at("shapes"), "needs at least one entry");
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const std::string ep = at("shapes") + "[" + std::to_string(i) + "]";
+      c_.object(arr[i], ep);
+      c_.keys(arr[i], ep, {"shape", "weight"});
+      if (!arr[i].contains("shape")) c_.fail(ep + ".shape", "missing");
+      const double w = arr[i].contains("weight") ? c_.positive(arr[i]["weight"], ep + ".weight") : 1.0;
+      mix.push_back({arr[i]["shape"], w, ep + ".shape"});
+    }
+    return mix;
+  }
+
+  // "scale": a number or [min, max] (default 1).
+  void scaleRange(const json& g, const std::string& path, double& smin, double& smax) const {
+    if (!g.contains("scale")) return;
+    const std::string at = path + ".scale";
+    if (g["scale"].is_array()) {
+      if (g["scale"].size() != 2) c_.fail(at, "expected a number or [min, max], got " + describe(g["scale"]));
+      smin = c_.positive(g["scale"][0], at + "[0]");
+      smax = c_.positive(g["scale"][1], at + "[1]");
+      if (smax < smin) c_.fail(at, "max < min");
+    } else {
+      smin = smax = c_.positive(g["scale"], at);
+    }
+  }
+
+  // Validates every entry once and measures the largest extent at the largest scale: the bounding radius when
+  // bodies turn at random, the half extent of the axis-aligned box otherwise.
+  double mixtureBound(const std::vector<MixEntry>& mix, double smax, bool random_rot) {
+    double bound = 0;
+    for (const MixEntry& e : mix) {
+      BuiltShape b = shape(scaled(e.shape, smax), e.path);
+      if (b.plane) c_.fail(e.path, "a generator cannot make planes");
+      if (random_rot) {
+        bound = std::max(bound, b.bound);
+      } else {
+        btVector3 lo, hi;
+        btTransform id;
+        id.setIdentity();
+        b.shape->getAabb(id, lo, hi);
+        for (int k = 0; k < 3; ++k) bound = std::max({bound, double(-lo[k]), double(hi[k])});
+      }
+    }
+    return bound;
+  }
+
+  // The lattice spacing: "spacing", at least what bodies of that bound with that jitter need (the default 5% more).
+  double latticeSpacing(const json& g, const std::string& path, double bound, double jitter) const {
+    const double min_spacing = 2 * bound / (1 - 2 * jitter);
+    if (!g.contains("spacing")) return 1.05 * min_spacing;
+    const double spacing = c_.positive(g["spacing"], path + ".spacing");
+    if (spacing < min_spacing * (1 - 1e-6))
+      c_.fail(path + ".spacing", num(spacing) + " is too small: bodies of bounding radius " + num(bound) +
+                                     " with jitter " + num(jitter) + " need at least " + num(min_spacing));
+    return spacing;
+  }
+
+  // A grid's "counts" [nx, ny, nz], or a pile's "count" in columns over its "footprint".
+  Lattice lattice(const json& g, const std::string& path, const std::string& type, double spacing) const {
+    auto at = [&](const char* k) { return path + "." + k; };
+    Lattice L;
+    if (type == "grid") {
+      if (g.contains("count") || g.contains("footprint")) c_.fail(path, "a grid takes counts [nx, ny, nz], not count/footprint");
+      if (!g.contains("counts")) c_.fail(at("counts"), "missing (required for a grid)");
+      const json& cn = g["counts"];
+      if (!cn.is_array() || cn.size() != 3) c_.fail(at("counts"), "expected [nx, ny, nz], got " + describe(cn));
+      L.nx = c_.integer(cn[0], at("counts") + "[0]", 1, 1 << 20);
+      L.ny = c_.integer(cn[1], at("counts") + "[1]", 1, 1 << 20);
+      L.nz = c_.integer(cn[2], at("counts") + "[2]", 1, 1 << 20);
+      L.count = L.nx * L.ny * L.nz;
+    } else {
+      if (g.contains("counts")) c_.fail(at("counts"), "a pile takes count and footprint, not counts");
+      if (!g.contains("count")) c_.fail(at("count"), "missing (required for a pile)");
+      L.count = c_.integer(g["count"], at("count"), 1, int64_t(1) << 26);
+      double fx = spacing * 10, fz = spacing * 10;
+      if (g.contains("footprint")) {
+        const json& f = g["footprint"];
+        if (!f.is_array() || f.size() != 2) c_.fail(at("footprint"), "expected [width_x, width_z], got " + describe(f));
+        fx = c_.positive(f[0], at("footprint") + "[0]");
+        fz = c_.positive(f[1], at("footprint") + "[1]");
+      }
+      // Columns along x and z, at most `count` each (more would stay empty and leave every position as it is),
+      // so that nx * nz <= count^2 cannot wrap (a 4e9 x 4e9 footprint made it 0: a division by zero).
+      L.nx = int64_t(std::fmax(1.0, std::fmin(std::floor(fx / spacing), double(L.count))));
+      L.nz = int64_t(std::fmax(1.0, std::fmin(std::floor(fz / spacing), double(L.count))));
+      L.ny = (L.count + L.nx * L.nz - 1) / (L.nx * L.nz);
+    }
+    if (L.count > (int64_t(1) << 26)) c_.fail(path, "too many bodies (" + std::to_string(L.count) + ")");
+    return L;
   }
 
  private:
