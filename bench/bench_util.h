@@ -28,6 +28,7 @@
 #include "chrono_like/base/math.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
+#include "chrono_like/io/output.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
 
@@ -77,11 +78,7 @@ inline std::string shell(const std::string& cmd) {
   return trim(out);
 }
 
-inline std::string shellQuote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
+using dvi::shellQuote;  // chrono_like/io/output.h
 
 inline std::string csvField(std::string s) {
   for (char& c : s)
@@ -189,12 +186,7 @@ inline std::string runPlot(const std::string& script_name, const std::string& di
       break;
     }
   if (script.empty()) return png + " not written: " + script_name + " not found";
-  std::string python;
-  for (const char* p : {"python3", "/usr/bin/python3"})
-    if (std::system((std::string(p) + " -c 'import matplotlib' >/dev/null 2>&1").c_str()) == 0) {
-      python = p;
-      break;
-    }
+  const std::string python = dvi::pythonWithMatplotlib();
   if (python.empty())
     return png + " not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib); the CSV "
                  "is complete, plot later with: python3 " + script + " " + dir;

@@ -540,12 +540,7 @@ std::string makePlot(const std::string& dir) {
   const std::string local = dir + "/plot_scaling.py";
   std::error_code ec;
   if (fs::absolute(script) != fs::absolute(local)) fs::copy_file(script, local, fs::copy_options::overwrite_existing, ec);
-  std::string python;  // the first interpreter with matplotlib (PATH's python3 may be a pyenv one without it)
-  for (const char* p : {"python3", "/usr/bin/python3"})
-    if (std::system((std::string(p) + " -c 'import matplotlib' >/dev/null 2>&1").c_str()) == 0) {
-      python = p;
-      break;
-    }
+  const std::string python = dvi::pythonWithMatplotlib();
   if (python.empty())
     return "scaling.png not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib); "
            "the CSV is complete, plot later with: python3 " + local + " " + dir;

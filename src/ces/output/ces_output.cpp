@@ -19,12 +19,6 @@ void num(std::string& o, double x) {
   o += buf;
 }
 
-std::string shellQuote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
 }  // namespace
 
 std::string cesVtpFrame(const CesMachine& m) {
@@ -285,14 +279,7 @@ fig.savefig(os.path.join(d, "grade_recovery.png"), dpi=120)
 const char* cesPlotScript() { return kCesPlotScript; }
 
 std::string cesMakePlots(const std::string& dir) {
-  // The first python3 on the PATH may be another installation (pyenv, a virtualenv) than the one Debian's
-  // python3-matplotlib belongs to: try it, then /usr/bin/python3.
-  std::string python;
-  for (const char* p : {"python3", "/usr/bin/python3"})
-    if (std::system((std::string(p) + " -c 'import matplotlib' >/dev/null 2>&1").c_str()) == 0) {
-      python = p;
-      break;
-    }
+  const std::string python = pythonWithMatplotlib();
   if (python.empty())
     return "plots not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib)";
   const std::string script = dir + "/plot_ces.py";

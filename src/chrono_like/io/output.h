@@ -27,6 +27,14 @@ struct BodyState {
 // Writes `content` to `path` atomically (temporary file + rename). Throws std::runtime_error on failure.
 void writeFileAtomic(const std::string& path, const std::string& content);
 
+// `s` single-quoted for /bin/sh.
+std::string shellQuote(const std::string& s);
+
+// A python3 that imports matplotlib, for the plot scripts: the first python3 on the PATH (it may be another
+// installation, a virtualenv, than the one Debian's python3-matplotlib belongs to), else /usr/bin/python3;
+// "" when neither has it.
+std::string pythonWithMatplotlib();
+
 // bodies.csv: header id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz, one row per body, full precision (%.17g).
 std::string bodiesCsv(const std::vector<BodyState>& bodies);
 void writeBodiesCsv(const std::string& path, const std::vector<BodyState>& bodies);
