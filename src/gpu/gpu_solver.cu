@@ -135,7 +135,7 @@ struct BodyInverseF {
   const Quat* rot;
   const uint8_t* flags;
   BodyInverseMass* out;
-  BodyInverseIso* iso;  // the gather's 16-byte form (SystemConfig::gpu_entry_gather), else null
+  BodyInverseIso* iso;  // the gather's 16-byte form (GpuTuning::entry_gather), else null
   __device__ void operator()(int64_t i) const {
     const bool fixed = flags[i] & (kBodyFixed | kBodyKinematic);
     const BodyInverseMass B =
@@ -289,7 +289,7 @@ struct GatherT {
   const real* x;
   BodyDelta* delta;
   const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
-  // SystemConfig::gpu_entry_gather: the contact entries' float records in entry order (jac's values; float
+  // GpuTuning::entry_gather: the contact entries' float records in entry order (jac's values; float
   // storage only), and the bodies' 16-byte inverse masses; null: jac and inv
   const EntryJacobianF* ej = nullptr;
   const BodyInverseIso* iso = nullptr;
@@ -503,7 +503,7 @@ EntryLayout layoutOf(const DeviceState& d) {
 }
 
 // The gather over jac (S.jac, or S.jacf for the float APGD trials), with the entry records and isotropic inverse
-// masses where BuildRows wrote them (SystemConfig::gpu_entry_gather; the entry records only with S.jacf, whose
+// masses where BuildRows wrote them (GpuTuning::entry_gather; the entry records only with S.jacf, whose
 // values they copy).
 template <class JT>
 GatherT<JT> gatherOf(DeviceState& d, const JT* jac, const real* x, const real* const* x_slot) {
@@ -563,8 +563,8 @@ void schur(DeviceState& d, const real* x, V* y, const real* const* x_slot = null
 // buffers of the next trial (the Schur passes read them through the slots). Once the control is
 // done every kernel of a trial returns at once, so the host enqueues a whole batch of trials and reads the
 // control back once per batch.
-// How the trials of a solve are launched (SystemConfig::gpu_graphs, gpu_persistent_max_blocks,
-// gpu_apgd_register_cache).
+// How the trials of a solve are launched (GpuTuning::graphs, persistent_max_blocks,
+// apgd_register_cache).
 struct ApgdLaunch {
   bool graphs = true;
   int64_t persistent_max = 0;
@@ -683,7 +683,7 @@ void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDev
 // outcome; when it comes true (ApgdControl::ready) the next trial starts at (2): two barriers a trial.
 // Large problems are bound by their bytes (~650 B per contact a trial); there it saves less, but it was still
 // faster at every size measured (10k to 1M spheres, H100 and H200: docs/GPU_PERFORMANCE.md), so it is the
-// default; SystemConfig::gpu_persistent_max_blocks can send problems above a size trial by trial.
+// default; GpuTuning::persistent_max_blocks can send problems above a size trial by trial.
 // The slices and sums are those of the trial-by-trial launches (reduceSlice, reducePartials), so both paths
 // give bitwise the same iterates ([gpu] test "GPU APGD on the device").
 template <class V, class JT>
@@ -1248,7 +1248,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.n_heavy = 0;  // set again once this step's adjacency exists
   DeviceBodies& B = d.bodies;
   DeviceContacts& C = d.contacts;
-  d.entry_gather = cfg.gpu_entry_gather;
+  d.entry_gather = cfg.gpu.entry_gather;
   if (d.entry_gather) S.inv_iso.resize(nb);
   launchMap(d, nb,
             BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data(),
@@ -1260,7 +1260,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   C.size.resize(nc);
   S.v6.resize(nc);  // per-contact penetration
   launchMap(d, nc, MuF{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.dist.data(),
-                       B.friction.data(), d.shapes.shape.data(), cfg.friction_combine, C.mu.data(), C.size.data(),
+                       B.friction.data(), d.shapes.shape.data(), cfg.collision.friction_combine, C.mu.data(), C.size.data(),
                        S.v6.data()},
             "launch of MuF");
   real max_mu = 0;
@@ -1312,7 +1312,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   }
   S.jac.resize(nc);
   // VectorStorage::Float with APGD: the Jacobians rounded to float, and a float copy for the trials
-  const bool float_jac = cfg.solver == SolverType::APGD && floatStorage(cfg.solver_settings, true) &&
+  const bool float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) &&
                          !std::is_same_v<real, float>;
   if (float_jac) S.jacf.resize(nc);
   S.rhs.resize(3 * nblk);
@@ -1331,7 +1331,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   S.v5.resize(nblk);  // per-block max diagonal entry
   S.v4.resize(nc);  // key order flags
   RowsF f{C.body_a.data(), C.body_b.data(), C.normal.data(), C.pa.data(), C.pb.data(), B.pos.data(),
-          B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), cfg.dt, cfg.recovery_rel,
+          B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), real(cfg.step.dt), cfg.solver.recovery_rel,
           int32_t(nb), normal, S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.colnorm.data(),
           S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data(), float_jac ? S.jacf.data() : nullptr};
   launchMap(d, nc, f, "launch of RowsF");
@@ -1366,7 +1366,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   // Jacobi steps (CcpProblem::jacobiSteps): per-body column sums, then the per-block bounds. Only Jacobi
   // reads them: for the other solvers they are left out (the per-body sum runs in one thread per body, and
   // the CES drum's 15,000 entries made it 3.6 ms of every step's BuildRows on an H200).
-  if (cfg.solver == SolverType::Jacobi) {
+  if (cfg.solver.type == SolverType::Jacobi) {
     launchMap(d, nb, BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), layoutOf(d), S.bodyq.data()},
               "launch of BodyColumnSumF");
     if (normal)
@@ -1433,8 +1433,8 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, ApgdLaunch{cfg.gpu_graphs, cfg.gpu_persistent_max_blocks, cfg.gpu_apgd_register_cache},
-             floatStorage(cfg.solver_settings, true));
+  GpuOps ops(d, pv, ApgdLaunch{cfg.gpu.graphs, cfg.gpu.persistent_max_blocks, cfg.gpu.apgd_register_cache},
+             floatStorage(cfg.solver, true));
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout
@@ -1443,12 +1443,12 @@ SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   }
   real* gamma = solution(d);
   SolverStats st;
-  switch (cfg.solver) {
-    case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver_settings); break;
-    case SolverType::BB: st = algo::bb(ops, gamma, cfg.solver_settings); break;
+  switch (cfg.solver.type) {
+    case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver); break;
+    case SolverType::BB: st = algo::bb(ops, gamma, cfg.solver); break;
     case SolverType::GaussSeidel:  // refused by GpuSystem's constructor
     case SolverType::APGD:
-    default: st = algo::apgd(ops, gamma, cfg.solver_settings); break;
+    default: st = algo::apgd(ops, gamma, cfg.solver); break;
   }
   if (d.normal_only)
     launchMap(d, int64_t(S.gamma.size()), kern::FromNormalLayout{S.x.data(), S.gamma.data(), nc, d.contact_blocks},

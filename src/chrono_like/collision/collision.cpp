@@ -28,8 +28,8 @@ class NativeCollision final : public CollisionDetector {
   explicit NativeCollision(const BroadPhaseSettings& s) : broad_(s) {}
   const char* name() const override { return "native"; }
 
-  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, ContactArrays& out,
-              CollisionTimes& times) override {
+  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, const StepContext& step,
+              ContactArrays& out, CollisionTimes& times) override {
     const int64_t ns = int64_t(shapes.count());
     const Shape* sh = shapes.shape.data();
     const Vec3* hull = shapes.hull_points.data();
@@ -38,7 +38,7 @@ class NativeCollision final : public CollisionDetector {
     double t0 = omp_get_wtime();
     shapes.aabb.resize(size_t(ns));
     shapes.sweep.resize(size_t(ns));
-    const real h_sweep = config.speculative ? config.dt : real(0);
+    const real h_sweep = config.speculative ? step.dt : real(0);
     const bool free_given = v_free_ && w_free_;
     const Vec3* vel = free_given ? v_free_ : bodies.vel.data();
     const Vec3* omega = free_given ? w_free_ : bodies.omega.data();
@@ -55,7 +55,7 @@ class NativeCollision final : public CollisionDetector {
     // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
     // fat_flags_ when it builds). Last step's pairs are kept while every box is inside its grown box
     // (broadphase_kernels.h: pairsStillHold); else a build on the boxes grown by pair_margin x the last edge.
-    const real f = config.pair_margin;
+    const real f = config.broadphase.pair_margin;
     const uint8_t* flags = bodies.flags.data();
     bool keep = f > real(0) && built_ && int64_t(fat_.size()) == ns;
     if (keep) {
@@ -103,7 +103,7 @@ class NativeCollision final : public CollisionDetector {
         int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
         const PairMotion m{bodies.pos[a.body], vel[a.body], omega[a.body],
                            bodies.pos[b.body], vel[b.body], omega[b.body]};
-        n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), config.dt, m);
+        n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), step.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }
     }
