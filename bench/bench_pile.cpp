@@ -120,10 +120,10 @@ int main(int argc, char** argv) {
 
   // Our CPU backend.
   dvi::SystemConfig cfg;
-  cfg.dt = h;
+  cfg.step.dt = h;
   cfg.threads = a.threads;
-  if (!dvi::parseSolver(a.solver, cfg.solver)) { std::fprintf(stderr, "dvisim_bench: error: unknown solver %s\n", a.solver.c_str()); return 2; }
-  cfg.solver_settings.max_iterations = a.iterations;
+  if (!dvi::parseSolver(a.solver, cfg.solver.type)) { std::fprintf(stderr, "dvisim_bench: error: unknown solver %s\n", a.solver.c_str()); return 2; }
+  cfg.solver.max_iterations = a.iterations;
   dvi::System sys(cfg);
   dvi::importBullet(sys, pile.bodies);
   double ours_ms = 0, ours_contacts = 0, ours_pen = 0;

@@ -59,7 +59,7 @@ void broadPhaseOnDevice(const ShapeArrays& shapes, const BodyArrays& bodies, con
     d.bodies.flags.upload(bodies.flags);
     d.bodies.count = bodies.flags.size();
     SystemConfig cfg;
-    cfg.broadphase = settings;
+    cfg.collision.broadphase = settings;
     for (int s = 0; s < steps; ++s) broadPhase(d, cfg, &stats);
     sorted = d.broad.edge_by_sort;
     std::vector<uint64_t> keys;

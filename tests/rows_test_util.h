@@ -27,7 +27,8 @@ struct PinToGround : RowProvider {
   Vec3 p;
   real last[3] = {0, 0, 0};
   PinToGround(int body, Vec3 at) : b(body), p(at) {}
-  void rows(const BodyArrays& bodies, double, real dt, std::vector<ConstraintRow>& out) override {
+  void rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) override {
+    const real dt = step.dt;
     const Vec3 c = bodies.pos[b] - p;
     const real cv[3] = {c.x, c.y, c.z};
     for (int j = 0; j < 3; ++j) {
@@ -50,7 +51,8 @@ struct BallJointToGround : RowProvider {
   int b;
   Vec3 local, p;
   BallJointToGround(int body, Vec3 r_local, Vec3 at) : b(body), local(r_local), p(at) {}
-  void rows(const BodyArrays& bodies, double, real dt, std::vector<ConstraintRow>& out) override {
+  void rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) override {
+    const real dt = step.dt;
     const Vec3 r = rotate(bodies.rot[b], local);
     const Vec3 c = bodies.pos[b] + r - p;
     const real cv[3] = {c.x, c.y, c.z};
@@ -76,7 +78,8 @@ struct SpinDrive : RowProvider {
   int b;
   real target, tau;
   SpinDrive(int body, real w, real torque) : b(body), target(w), tau(torque) {}
-  void rows(const BodyArrays&, double, real dt, std::vector<ConstraintRow>& out) override {
+  void rows(const BodyArrays&, const StepContext& step, std::vector<ConstraintRow>& out) override {
+    const real dt = step.dt;
     ConstraintRow r;
     r.a = -1;
     r.b = b;

@@ -84,7 +84,7 @@ struct Trace {
 
 Trace runDrop(Drop d, real h, real seconds) {
   SystemConfig cfg;
-  cfg.dt = h;
+  cfg.step.dt = h;
   System sys(cfg);
   const Vec3 start{0, kSize + kDrop, 0};
   if (d == Drop::SphereOnPlane) sys.addBody(plane());
@@ -147,11 +147,11 @@ TEST_CASE("a dropped body never rebounds above 1% of its drop height, at every s
 TEST_CASE("penetration is corrected at the bounded recovery speed, and the body lifts by at most v_rec^2/(2g)",
           "[bounce]") {
   SystemConfig cfg;
-  cfg.dt = real(1) / 60;
-  const real v_rec = cfg.recovery_rel * kSize;
+  cfg.step.dt = real(1) / 60;
+  const real v_rec = cfg.solver.recovery_rel * kSize;
   // the bias itself: never asks for more than v_rec, whatever the depth
   for (real depth : {real(0.001), real(0.03), real(0.3), real(3)})
-    CHECK(contactBias(-depth, cfg.dt, cfg.recovery_rel, kSize) >= -v_rec * (1 + 1e-12));
+    CHECK(contactBias(-depth, cfg.step.dt, cfg.solver.recovery_rel, kSize) >= -v_rec * (1 + 1e-12));
   System sys(cfg);
   sys.addBody(plane());
   const real depth = real(0.3) * kSize;

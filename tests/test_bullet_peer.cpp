@@ -209,7 +209,9 @@ struct Arrays {
     bodies.size[size_t(b)] = size;
     return b;
   }
-  void detect() { det->detect(bodies, shapes, collisionSettings(config), contacts, times); }
+  void detect() {
+    det->detect(bodies, shapes, config.collision, makeStepContext(real(config.step.dt)), contacts, times);
+  }
 };
 
 const Quat kId{1, 0, 0, 0};
@@ -439,8 +441,8 @@ TEST_CASE("Bullet collision: compounds map children to shapes, filters as pairAl
 TEST_CASE("Bullet collision backend inside System: resting heights as the native backend", "[bullet]") {
   for (CollisionBackend be : {CollisionBackend::Native, CollisionBackend::Bullet}) {
     SystemConfig c;
-    c.collision = be;
-    c.dt = 1e-3;
+    c.collision.backend = be;
+    c.step.dt = 1e-3;
     c.threads = 1;  // 4 bodies: OpenMP barriers would cost more than the step on a loaded 2-core host
     System s(c, makeBulletCollision);
     BodyDesc g;
@@ -477,9 +479,9 @@ TEST_CASE("Bullet collision backend inside System: resting heights as the native
 
 TEST_CASE("Bullet collision backend: the System builds it only through the factory its caller passes", "[bullet]") {
   SystemConfig c;
-  c.collision = CollisionBackend::Bullet;
+  c.collision.backend = CollisionBackend::Bullet;
   CHECK_THROWS_AS(System{c}, InputError);
   CHECK_NOTHROW(System{c, makeBulletCollision});
-  c.collision = CollisionBackend::Native;
+  c.collision.backend = CollisionBackend::Native;
   CHECK_NOTHROW(System{c});
 }

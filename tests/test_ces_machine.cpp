@@ -210,8 +210,8 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
                               "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=" + drive,
                               "feed.materials=[{\"kind\": \"plastic\", \"mass_fraction\": 1, \"density_kg_m3\": 8000}]"});
   SystemConfig sc;
-  sc.dt = real(cfg.dt);
-  sc.solver_settings.max_iterations = 100;
+  sc.step.dt = real(cfg.step.dt);
+  sc.solver.max_iterations = 100;
   System sys(sc);
   CesMachine m(cfg, sys);
   SplitMix64 rng;
@@ -258,7 +258,7 @@ TEST_CASE("CES machine: rolling resistance holds a sphere on the drum up to the 
                                 "drum.rpm=0", "drum.drive=kinematic", "friction.rolling_drum=" + mu_r,
                                 "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
     SystemConfig sc;
-    sc.dt = real(cfg.dt);
+    sc.step.dt = real(cfg.step.dt);
     System sys(sc);
     CesMachine m(cfg, sys);
     SplitMix64 rng;
@@ -266,7 +266,7 @@ TEST_CASE("CES machine: rolling resistance holds a sphere on the drum up to the 
     const double Rc = cfg.drumRadius() + 0.5e-3, th0 = (90 - theta_deg) * M_PI / 180;
     const int id = m.addParticle(s, Vec3{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0}, Quat{1, 0, 0, 0},
                                  Vec3{0, 0, 0}, Vec3{0, 0, 0});
-    for (int k = 0; k < int(0.3 / cfg.dt); ++k) m.step();
+    for (int k = 0; k < int(0.3 / cfg.step.dt); ++k) m.step();
     return (th0 - angleOf(sys.bodies().pos[size_t(id)])) * Rc;  // arc length rolled down, m
   };
   const double held = roll(4, "0.1"), rolled = roll(8, "0.1"), free_roll = roll(4, "0");
@@ -291,8 +291,8 @@ TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal 
                               "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=kinematic",
                               "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
   SystemConfig sc;
-  sc.dt = real(cfg.dt);
-  sc.solver_settings.max_iterations = 100;
+  sc.step.dt = real(cfg.step.dt);
+  sc.solver.max_iterations = 100;
   System sys(sc);
   CesMachine m(cfg, sys);
   SplitMix64 rng;
@@ -339,7 +339,7 @@ TEST_CASE("CES machine: above corona onset an insulator takes ion charge and is 
     INFO("U = " << U << " kV");
     CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=" + std::to_string(U)});
     SystemConfig sc;
-    sc.dt = real(cfg.dt);
+    sc.step.dt = real(cfg.step.dt);
     System sys(sc);
     CesMachine m(cfg, sys);
     const bool ionised = m.coronaInfo().ionised;
@@ -388,8 +388,8 @@ TEST_CASE("CES machine: above corona onset an insulator takes ion charge and is 
 TEST_CASE("CES machine: the mass balance closes exactly and nothing is lost", "[ces][ces_machine]") {
   CesConfig cfg = configWith({"feed.mass_flow_g_s=1.5", "feed.duration_s=0.1", "collection.y_mm=-170"});
   SystemConfig sc;
-  sc.dt = real(cfg.dt);
-  sc.solver_settings.max_iterations = cfg.iterations;
+  sc.step.dt = real(cfg.step.dt);
+  sc.solver.max_iterations = cfg.solver.max_iterations;
   System sys(sc);
   CesMachine m(cfg, sys);
   const size_t machine_bodies = sys.bodies().count();
@@ -567,8 +567,8 @@ TEST_CASE("CES checkpoint: a resumed run ends bitwise where an uninterrupted one
   const std::vector<std::string> sets{"feed.mass_flow_g_s=3", "feed.duration_s=0.04"};
   const CesConfig cfg = configWith(sets);
   SystemConfig sc;
-  sc.dt = real(cfg.dt);
-  sc.solver_settings.max_iterations = cfg.iterations;
+  sc.step.dt = real(cfg.step.dt);
+  sc.solver.max_iterations = cfg.solver.max_iterations;
   CheckpointSystem whole_sys(sc), first_sys(sc), second_sys(sc);
   CesMachine whole(cfg, whole_sys), first(cfg, first_sys), second(cfg, second_sys);
   for (int k = 0; k < 300; ++k) whole.step();
@@ -643,10 +643,10 @@ TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors
 namespace {
 std::unique_ptr<System> cesSystem(const CesConfig& cfg, bool gpu) {
   SystemConfig sc;
-  sc.dt = real(cfg.dt);
-  sc.solver_settings.max_iterations = cfg.iterations;
-  sc.solver_settings.storage = VectorStorage::Real;  // both backends alike, to rounding
-  sc.broadphase.max_bins = int64_t(1) << 20;
+  sc.step.dt = real(cfg.step.dt);
+  sc.solver.max_iterations = cfg.solver.max_iterations;
+  sc.solver.storage = VectorStorage::Real;  // both backends alike, to rounding
+  sc.collision.broadphase.max_bins = int64_t(1) << 20;
   if (gpu) return makeGpuSystem(sc);
   return std::make_unique<System>(sc);
 }
@@ -786,8 +786,8 @@ TEST_CASE("CES feeder: a feed of 1e6 g/s spawns without overlaps, in time linear
   SECTION("1e6 g/s at a 0.1 us step: ~250 particles a step, none overlapping another") {
     const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-7", "field.model=\"csm\""});
     SystemConfig sc;
-    sc.dt = real(cfg.dt);
-    sc.solver_settings.max_iterations = cfg.iterations;
+    sc.step.dt = real(cfg.step.dt);
+    sc.solver.max_iterations = cfg.solver.max_iterations;
     CheckpointSystem sys(sc);
     CesMachine m(cfg, sys);
     for (int k = 0; k < 20; ++k) m.step();
@@ -799,8 +799,8 @@ TEST_CASE("CES feeder: a feed of 1e6 g/s spawns without overlaps, in time linear
   SECTION("1e6 g/s at a 10 us step: ~25,000 particles a step against up to 75,000 recent ones") {
     const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-5", "field.model=\"csm\""});
     SystemConfig sc;
-    sc.dt = real(cfg.dt);
-    sc.solver_settings.max_iterations = cfg.iterations;
+    sc.step.dt = real(cfg.step.dt);
+    sc.solver.max_iterations = cfg.solver.max_iterations;
     CheckpointSystem sys(sc);
     CesMachine m(cfg, sys);
     const auto t0 = std::chrono::steady_clock::now();

@@ -464,7 +464,7 @@ std::vector<Candidate> candidates() {
 class StudySystem : public System {
  public:
   using System::System;
-  Method method;  // null: the library's solver at config().solver_settings
+  Method method;  // null: the library's solver at config().solver
   Ctx ctx;
   int heavy = -1;
   std::vector<int64_t> capture_at;  // steps whose CCP to keep
@@ -474,11 +474,11 @@ class StudySystem : public System {
 
  protected:
   void buildAndSolve() override {
-    const SolverSettings keep = config_.solver_settings;
-    config_.solver_settings.max_iterations = 0;  // build, warm start, scaled start only
-    config_.solver_settings.tolerance = 0;
+    const SolverSettings keep = config_.solver;
+    config_.solver.max_iterations = 0;  // build, warm start, scaled start only
+    config_.solver.tolerance = 0;
     System::buildAndSolve();
-    config_.solver_settings = keep;
+    config_.solver = keep;
     const int64_t nc = int64_t(contacts_.count());
     if (nc == 0) return;
     if (problem_->normalOnly() || !rows_.empty()) throw std::runtime_error("study: a normal-only problem or rows");
@@ -494,7 +494,7 @@ class StudySystem : public System {
     if (method) {
       R = method(q, gamma_, ctx);
     } else {
-      R = fromStats(solveApgd(*problem_, gamma_.data(), config_.solver_settings), ctx);
+      R = fromStats(solveApgd(*problem_, gamma_.data(), config_.solver), ctx);
     }
     solve_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     iterations += R.iterations;
@@ -527,8 +527,8 @@ class StudySystem : public System {
       b.inv_inertia[i] = b.inv_inertia[i] * m;
     }
     ContactProblemSettings ps;
-    ps.dt = config_.dt;
-    ps.recovery_rel = config_.recovery_rel;
+    ps.dt = real(config_.step.dt);
+    ps.solver = config_.solver;
     ps.threads = 1;
     auto sp = std::make_shared<ContactProblem>();
     sp->build(b, contacts_, v_free_.data(), w_free_.data(), ps);
@@ -543,7 +543,7 @@ class StudySystem : public System {
     q.heavy_blocks = heavyBlocks();
     q.nbodies = int(bodies_.count());
     q.vfree_heavy = v_free_[size_t(heavy)];
-    q.h = config_.dt;
+    q.h = real(config_.step.dt);
     captured.push_back(std::move(q));
   }
 };
@@ -588,8 +588,8 @@ int build(const Scene& sc, StudySystem& s) {
 
 SystemConfig configOf(const Scene& sc) {
   SystemConfig cfg;
-  cfg.dt = real(sc.particles ? 1e-3 : 1e-2);
-  cfg.solver_settings.storage = VectorStorage::Real;
+  cfg.step.dt = real(sc.particles ? 1e-3 : 1e-2);
+  cfg.solver.storage = VectorStorage::Real;
   return cfg;
 }
 

@@ -49,7 +49,7 @@ std::unique_ptr<System> makeSystem(const SystemConfig& cfg, bool gpu) {
 // layout of `dvisim bench stability`'s stacks.
 RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig cfg, bool gpu = false) {
   const real a = real(0.05);
-  cfg.dt = real(dt);
+  cfg.step.dt = real(dt);
   auto sys = makeSystem(cfg, gpu);
   sys->addBody(groundPlane(real(0.7)));
   int top = -1;
@@ -77,7 +77,7 @@ RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig 
 // bench stability's particle case: 2x2 spheres (r 1 cm) in a tight box, a fifth `ratio` times heavier on top.
 RunResult runParticles(double ratio, int steps, SystemConfig cfg, bool gpu = false) {
   const double r = 0.01, w = 4 * r * 1.001, t = 0.01, h = 4 * r;
-  cfg.dt = real(1e-3);
+  cfg.step.dt = real(1e-3);
   auto sys = makeSystem(cfg, gpu);
   sys->addBody(groundPlane(real(0.7)));
   for (int k = 0; k < 4; ++k) {
@@ -130,10 +130,10 @@ void report(const char* what, const RunResult& r) {
 TEST_CASE("relative residual: the zero impulse has residual g h on a resting sphere, relative 1", "[convergence]") {
   for (double h : {1e-3, 1e-2}) {
     SystemConfig cfg;
-    cfg.dt = real(h);
-    cfg.warm_start = false;
-    cfg.solver_settings.max_iterations = 0;
-    cfg.solver_settings.tolerance = 0;
+    cfg.step.dt = real(h);
+    cfg.solver.warm_start = false;
+    cfg.solver.max_iterations = 0;
+    cfg.solver.tolerance = 0;
     System sys(cfg);
     sys.addBody(groundPlane(real(0.5)));
     sys.addBody(ball(real(0.1), real(2), Vec3{0, real(0.1), 0}, real(0.5)));
@@ -152,10 +152,10 @@ TEST_CASE("relative residual: the zero impulse has residual g h on a resting sph
 TEST_CASE("relative residual is scale-free: a box scene in metres and in millimetres", "[convergence]") {
   auto run = [](double sc, int iterations, std::vector<double>& abs_res, std::vector<double>& rel_res) {
     SystemConfig cfg;
-    cfg.dt = real(1e-2);
-    cfg.gravity = Vec3{0, real(-9.81 * sc), 0};
-    cfg.solver_settings.max_iterations = iterations;
-    cfg.solver_settings.tolerance = 0;
+    cfg.step.dt = real(1e-2);
+    cfg.step.gravity = Vec3{0, real(-9.81 * sc), 0};
+    cfg.solver.max_iterations = iterations;
+    cfg.solver.tolerance = 0;
     System sys(cfg);
     sys.addBody(groundPlane(real(0.6)));
     const real a = real(0.05 * sc);
@@ -236,7 +236,7 @@ TEST_CASE("the drop-in world counts the sub-steps that missed the tolerance", "[
     btDbvtBroadphase broadphase;
     btSequentialImpulseConstraintSolver solver;
     DviWorldConfig c;
-    c.system.solver_settings.max_iterations = cap;
+    c.system.solver.max_iterations = cap;
     DviDynamicsWorld world(&dispatcher, &broadphase, &solver, &config, c);
     world.setGravity(btVector3(0, btScalar(-9.81), 0));
     btStaticPlaneShape plane(btVector3(0, 1, 0), 0);
@@ -379,7 +379,7 @@ TEST_CASE("measure: stiff scenes at the default and fixed settings", "[.measure]
   const char* tol_env = std::getenv("DVISIM_TOL");  // another tolerance for the "default" rows
   auto defaults = [&] {
     SystemConfig d;
-    if (tol_env) d.solver_settings.tolerance = real(std::atof(tol_env));
+    if (tol_env) d.solver.tolerance = real(std::atof(tol_env));
     return d;
   };
   for (double ratio : {1.0, 1e3, 1e6}) {
@@ -388,8 +388,8 @@ TEST_CASE("measure: stiff scenes at the default and fixed settings", "[.measure]
     std::snprintf(name, sizeof name, "stack 10 ratio %.0e default", ratio);
     report(name, runStack(10, ratio, 0.01, 3, d));
     SystemConfig f;
-    f.solver_settings.max_iterations = 50;
-    f.solver_settings.tolerance = 0;
+    f.solver.max_iterations = 50;
+    f.solver.tolerance = 0;
     std::snprintf(name, sizeof name, "stack 10 ratio %.0e fixed 50", ratio);
     report(name, runStack(10, ratio, 0.01, 3, f));
   }
@@ -413,8 +413,8 @@ TEST_CASE("measure: sphere pile at the default and fixed settings", "[.pile]") {
   const double tol = std::getenv("DVISIM_PILE_TOL") ? std::atof(std::getenv("DVISIM_PILE_TOL")) : double(kDefaultTolerance);
   for (int mode = std::getenv("DVISIM_PILE_SKIP_FIXED") ? 0 : 1; mode >= 0; --mode) {
     SystemConfig cfg;
-    if (mode == 1) cfg.solver_settings.max_iterations = 50, cfg.solver_settings.tolerance = 0;
-    else cfg.solver_settings.tolerance = real(tol);
+    if (mode == 1) cfg.solver.max_iterations = 50, cfg.solver.tolerance = 0;
+    else cfg.solver.tolerance = real(tol);
     System sys(cfg);
     bench::addToSystem(spec, sys);
     double wall = 0, iters = 0, rel = 0, pen = 0;
@@ -483,8 +483,8 @@ TEST_CASE("GPU defaults: the 10-box 1e3 stack, the 30-box tower and particles 1e
 TEST_CASE("GPU defaults: the tolerance stop takes the CPU's iterations on the stack", "[gpu][convergence]") {
   if (!convergeDevice()) return;
   SystemConfig cfg;
-  cfg.dt = real(0.01);
-  cfg.solver_settings.storage = VectorStorage::Real;
+  cfg.step.dt = real(0.01);
+  cfg.solver.storage = VectorStorage::Real;
   auto cpu = makeSystem(cfg, false);
   auto gpu = makeSystem(cfg, true);
   for (System* sys : {cpu.get(), gpu.get()}) {

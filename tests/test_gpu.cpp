@@ -103,14 +103,14 @@ void buildPile(System& sys, int n, unsigned seed, bool mixed = true, double spac
 
 SystemConfig pileConfig() {
   SystemConfig c;
-  c.dt = real(1e-3);
-  c.solver = SolverType::APGD;
-  c.solver_settings.max_iterations = 50;
-  c.solver_settings.tolerance = 0;  // a fixed count: the backends compared iterate for iterate
+  c.step.dt = real(1e-3);
+  c.solver.type = SolverType::APGD;
+  c.solver.max_iterations = 50;
+  c.solver.tolerance = 0;  // a fixed count: the backends compared iterate for iterate
   // Real storage of APGD's vectors on both backends (the GPU's default is float, VectorStorage): these tests
   // compare the two backends' algorithms to rounding. Float storage has its own test below, and the 1 s
   // statistics test runs each backend's default.
-  c.solver_settings.storage = VectorStorage::Real;
+  c.solver.storage = VectorStorage::Real;
   return c;
 }
 
@@ -393,7 +393,7 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
   if (!haveDevice()) return;
   for (SolverType t : {SolverType::APGD, SolverType::Jacobi, SolverType::BB}) {
     SystemConfig cfg = pileConfig();
-    cfg.solver = t;
+    cfg.solver.type = t;
     System cpu(cfg);
     auto gpu = makeGpuSystem(cfg);
     buildPile(cpu, 10000, 7, false, 1.7);
@@ -442,7 +442,7 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
 TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree within 2%", "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
-  cfg.solver_settings.storage = VectorStorage::Auto;
+  cfg.solver.storage = VectorStorage::Auto;
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);
   const int n = 10000;  // the one-step test's pile; 2,000 bodies (one realisation of a chaotic flow) differed by 2.1%
@@ -452,7 +452,7 @@ TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree 
   // 10-1000x slower (racecheck): the run is cut to 30 steps, which execute every kernel of the step, and the
   // statistics, which need the whole second, are not judged (the sanitizer's report is that run's verdict).
   const bool sanitizer_run = std::getenv("DVISIM_SANITIZER_RUN") != nullptr;
-  const int steps = sanitizer_run ? 30 : int(std::lround(1.0 / double(cfg.dt)));
+  const int steps = sanitizer_run ? 30 : int(std::lround(1.0 / double(cfg.step.dt)));
   // The flow is chaotic (rounding differences grow until single trajectories differ), so the statistics are
   // time averages: kinetic energy over the whole second, mean height over its second half (sampled every 10
   // steps); an instantaneous height of the still-flowing pile differed by 2.1% on an H200.
@@ -496,7 +496,7 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
   if (!haveDevice()) return;
   for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
     SystemConfig cfg = pileConfig();
-    cfg.solver = t;
+    cfg.solver.type = t;
     System cpu(cfg);
     auto gpu = makeGpuSystem(cfg);
     buildPile(cpu, 500, 3, false, 1.8);  // spheres: closed-form narrow phase, so this compares the solvers
@@ -533,8 +533,8 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
 TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, graph and kernel launches agree", "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
-  cfg.solver_settings.max_iterations = 100;
-  cfg.solver_settings.tolerance = 0;
+  cfg.solver.max_iterations = 100;
+  cfg.solver.tolerance = 0;
   real r100 = 0;
   {
     System probe(cfg);
@@ -543,19 +543,19 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, 
     r100 = probe.lastStats().relative_residual;
   }
   REQUIRE(r100 > 0);
-  cfg.solver_settings.tolerance = 3 * r100;  // relative; reached before iteration 100 in the first step
+  cfg.solver.tolerance = 3 * r100;  // relative; reached before iteration 100 in the first step
   SystemConfig persistent_cfg = cfg;
-  persistent_cfg.gpu_persistent_max_blocks = int64_t(1) << 40;
+  persistent_cfg.gpu.persistent_max_blocks = int64_t(1) << 40;
   System cpu(cfg);
   auto persistent = makeGpuSystem(persistent_cfg);
   SystemConfig uncached_cfg = persistent_cfg;
-  uncached_cfg.gpu_apgd_register_cache = false;
+  uncached_cfg.gpu.apgd_register_cache = false;
   auto uncached = makeGpuSystem(uncached_cfg);
   SystemConfig graphs_cfg = cfg;
-  graphs_cfg.gpu_persistent_max_blocks = 0;
+  graphs_cfg.gpu.persistent_max_blocks = 0;
   auto graphs = makeGpuSystem(graphs_cfg);
   SystemConfig plain_cfg = graphs_cfg;
-  plain_cfg.gpu_graphs = false;
+  plain_cfg.gpu.graphs = false;
   auto plain = makeGpuSystem(plain_cfg);
   const std::vector<System*> all{&cpu, persistent.get(), uncached.get(), graphs.get(), plain.get()};
   for (System* sys : all) buildPile(*sys, 2000, 5, false, 1.7);
@@ -563,7 +563,7 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, 
     for (System* sys : all) sys->step();
     INFO("step " << s << ": iterations CPU " << cpu.lastStats().iterations << ", GPU persistent "
                  << persistent->lastStats().iterations << ", GPU graphs " << graphs->lastStats().iterations
-                 << ", GPU kernels " << plain->lastStats().iterations << " (tolerance " << cfg.solver_settings.tolerance
+                 << ", GPU kernels " << plain->lastStats().iterations << " (tolerance " << cfg.solver.tolerance
                  << ")");
     if (s == 0) CHECK(cpu.lastStats().iterations < 100);
     CHECK(persistent->lastStats().iterations == cpu.lastStats().iterations);
@@ -595,16 +595,16 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, 
 TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float storage", "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
-  cfg.solver_settings.storage = VectorStorage::Float;
-  cfg.solver_settings.max_iterations = 200;
+  cfg.solver.storage = VectorStorage::Float;
+  cfg.solver.max_iterations = 200;
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);
   SystemConfig plain_cfg = cfg;  // trial by trial, kernel by kernel (the default here: one persistent kernel)
-  plain_cfg.gpu_graphs = false;
-  plain_cfg.gpu_persistent_max_blocks = 0;
+  plain_cfg.gpu.graphs = false;
+  plain_cfg.gpu.persistent_max_blocks = 0;
   auto plain = makeGpuSystem(plain_cfg);
   SystemConfig contact_gather_cfg = cfg;  // the gather reading each contact's record and full inverse masses
-  contact_gather_cfg.gpu_entry_gather = false;
+  contact_gather_cfg.gpu.entry_gather = false;
   auto contact_gather = makeGpuSystem(contact_gather_cfg);
   for (System* sys : {&cpu, gpu.get(), plain.get(), contact_gather.get()}) buildPile(*sys, 10000, 7, true, 1.7);
   for (int s = 0; s < 3; ++s) {
@@ -654,13 +654,13 @@ TEST_CASE("GPU APGD's speculated steps give bitwise the trajectory without specu
     if (sanitizer_run && storage == VectorStorage::Real) break;
     for (int path = 0; path < 3; ++path) {  // register-cached persistent kernel, plain persistent, trial by trial
       SystemConfig cfg = pileConfig();
-      cfg.solver_settings.storage = storage;
-      cfg.gpu_persistent_max_blocks = path < 2 ? int64_t(1) << 40 : 0;
-      cfg.gpu_apgd_register_cache = path == 0;
+      cfg.solver.storage = storage;
+      cfg.gpu.persistent_max_blocks = path < 2 ? int64_t(1) << 40 : 0;
+      cfg.gpu.apgd_register_cache = path == 0;
       std::vector<std::unique_ptr<System>> sys;
       for (const ApgdSpeculation k : kinds) {
         SystemConfig c = cfg;
-        c.solver_settings.apgd_speculation = k;
+        c.solver.apgd_speculation = k;
         sys.push_back(makeGpuSystem(c));
         buildPile(*sys.back(), 3000, 11, true, 1.7);
       }
@@ -698,7 +698,7 @@ TEST_CASE("constraint rows on the GPU: a pendulum chain on a pile equals the CPU
   if (!haveDevice()) return;
   for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
     SystemConfig cfg = pileConfig();
-    cfg.solver = t;
+    cfg.solver.type = t;
     System cpu(cfg);
     auto gpu = makeGpuSystem(cfg);
     for (System* sys : {&cpu, gpu.get()}) {
@@ -831,7 +831,7 @@ TEST_CASE("a plate under 2,025 spheres: the GPU's heavy-body gather equals the C
   System cpu(cfg);
   auto gpu = makeGpuSystem(cfg);  // the persistent APGD kernel (~4,000 contacts): heavy chunks inside it
   SystemConfig trials_cfg = cfg;  // trial by trial: HeavyGatherKernel
-  trials_cfg.gpu_persistent_max_blocks = 0;
+  trials_cfg.gpu.persistent_max_blocks = 0;
   auto trials = makeGpuSystem(trials_cfg);
   const real r = real(0.01);
   for (System* sys : {&cpu, gpu.get(), trials.get()}) {

@@ -1125,7 +1125,7 @@ TEST_CASE("support ties on flat features are broken deterministically", "[narrow
     // on its apex (pts[0]): one point
     if (k == 0) REQUIRE(m0 >= 4);
     else REQUIRE(m0 == 1);
-    // without the manifold (SystemConfig::mpr_manifold = false) MPR's point alone, the same as the first
+    // without the manifold (CollisionSettings::mpr_manifold = false) MPR's point alone, the same as the first
     ContactPoint c2[kMaxContactsPerPair];
     REQUIRE(collideShapes(slab, pose(Vec3{0, 0, 0}), S, pc0, pts.data(), 0.02, c2, nullptr, false) == 1);
     CHECK(length(c2[0].pa - c0[0].pa) == 0);

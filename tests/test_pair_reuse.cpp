@@ -27,9 +27,9 @@ struct RunLog {
 
 RunLog runScene(const std::string& scene, long n, int steps, real pair_margin, bool gpu) {
   SystemConfig cfg;
-  cfg.dt = real(1e-3);
-  cfg.solver_settings.max_iterations = 30;
-  cfg.broadphase.pair_margin = pair_margin;
+  cfg.step.dt = real(1e-3);
+  cfg.solver.max_iterations = 30;
+  cfg.collision.broadphase.pair_margin = pair_margin;
   std::unique_ptr<System> sys = gpu ? makeGpuSystem(cfg) : std::make_unique<System>(cfg);
   bench::addToSystem(bench::makeSceneSpec(scene, n), *sys);
   RunLog log;
@@ -66,7 +66,7 @@ void checkSameTrajectory(bool gpu) {
 // must find their contact although no box moved.
 void checkFlagsChange(bool gpu) {
   SystemConfig cfg;
-  cfg.broadphase.pair_margin = real(0.025);
+  cfg.collision.broadphase.pair_margin = real(0.025);
   std::unique_ptr<System> sys = gpu ? makeGpuSystem(cfg) : std::make_unique<System>(cfg);
   BodyDesc base;
   base.flags = kBodyFixed;

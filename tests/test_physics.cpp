@@ -61,14 +61,14 @@ Vec3 forceBetween(const System& sys, int from, int on) {
 
 TEST_CASE("free fall follows the semi-implicit Euler solution of y'' = -g", "[physics]") {
   SystemConfig cfg;
-  cfg.dt = real(1e-3);
+  cfg.step.dt = real(1e-3);
   System sys(cfg);
   int b = sys.addBody(sphere(real(0.1), 1, Vec3{0, 10, 0}, real(0.5)));
   const int n = 500;
   sys.advance(n);
   // Semi-implicit Euler: v_k = -g h k, y_n = y0 - g h^2 n(n+1)/2 (exact for the discrete scheme),
   // within g h t / 2 of the continuous y0 - g t^2 / 2.
-  const real h = cfg.dt, t = n * h;
+  const real h = cfg.step.dt, t = n * h;
   CHECK(sys.bodies().pos[b].y == Approx(10 - g * h * h * n * (n + 1) / 2).epsilon(1e-12));
   CHECK(sys.bodies().pos[b].y == Approx(10 - g * t * t / 2).margin(g * h * t));
   CHECK(sys.bodies().vel[b].y == Approx(-g * t).epsilon(1e-12));
@@ -77,9 +77,9 @@ TEST_CASE("free fall follows the semi-implicit Euler solution of y'' = -g", "[ph
 
 TEST_CASE("a box resting on a plane carries m g", "[physics]") {
   SystemConfig cfg;
-  cfg.dt = real(1e-3);
-  cfg.solver = SolverType::APGD;
-  cfg.solver_settings.max_iterations = 100;
+  cfg.step.dt = real(1e-3);
+  cfg.solver.type = SolverType::APGD;
+  cfg.solver.max_iterations = 100;
   System sys(cfg);
   int gr = sys.addBody(ground());
   const real m = 2;
@@ -98,10 +98,10 @@ TEST_CASE("a box on a 30 degree incline slides with g(sin - mu cos) and sticks a
   const real theta = real(M_PI / 6);
   for (real mu : {real(0.5), real(0.7)}) {
     SystemConfig cfg;
-    cfg.dt = real(1e-3);
-    cfg.gravity = Vec3{g * std::sin(theta), -g * std::cos(theta), 0};
-    cfg.solver = SolverType::APGD;
-    cfg.solver_settings.max_iterations = 100;
+    cfg.step.dt = real(1e-3);
+    cfg.step.gravity = Vec3{g * std::sin(theta), -g * std::cos(theta), 0};
+    cfg.solver.type = SolverType::APGD;
+    cfg.solver.max_iterations = 100;
     System sys(cfg);
     sys.addBody(ground());  // friction 1: the product rule gives the box's mu
     int b = sys.addBody(box(Vec3{real(0.1), real(0.05), real(0.1)}, 1, Vec3{0, real(0.05), 0}, mu));
@@ -124,8 +124,8 @@ TEST_CASE("a sphere launched sliding ends rolling at 5/7 of its speed", "[physic
   // Sliding friction decelerates v and spins up w until v = w r; with I = 2/5 m r^2 that happens at
   // v = 5/7 v0 (momentum about the contact point is conserved). Rolling friction is absent.
   SystemConfig cfg;
-  cfg.dt = real(1e-3);
-  cfg.solver_settings.max_iterations = 100;
+  cfg.step.dt = real(1e-3);
+  cfg.solver.max_iterations = 100;
   System sys(cfg);
   sys.addBody(ground());
   const real r = real(0.05), v0 = 2;
@@ -140,9 +140,9 @@ TEST_CASE("a sphere launched sliding ends rolling at 5/7 of its speed", "[physic
 
 TEST_CASE("the bottom contact of a 10-box stack carries the whole weight", "[physics]") {
   SystemConfig cfg;
-  cfg.dt = real(1e-3);
-  cfg.solver = SolverType::APGD;
-  cfg.solver_settings.max_iterations = 200;
+  cfg.step.dt = real(1e-3);
+  cfg.solver.type = SolverType::APGD;
+  cfg.solver.max_iterations = 200;
   System sys(cfg);
   int gr = sys.addBody(ground());
   const real m = 1, hh = real(0.05);
@@ -162,11 +162,11 @@ TEST_CASE("the bottom contact of a 10-box stack carries the whole weight", "[phy
 TEST_CASE("the final state hashes the same with 1 and 2 OpenMP threads", "[physics][determinism]") {
   auto run = [](int threads) {
     SystemConfig cfg;
-    cfg.dt = real(1e-3);
+    cfg.step.dt = real(1e-3);
     cfg.threads = threads;
     cfg.min_bodies_per_thread = 1;  // force the threads on this small scene
-    cfg.solver = SolverType::APGD;
-    cfg.solver_settings.max_iterations = 30;
+    cfg.solver.type = SolverType::APGD;
+    cfg.solver.max_iterations = 30;
     System sys(cfg);
     sys.addBody(ground());
     int i = 0;
@@ -198,8 +198,8 @@ TEST_CASE("a torque-free tumbling body: energy never grows, principal spins are 
   // only dissipate (Catto, GDC 2015), while the explicit term gains energy at every step.
   auto run = [](Vec3 w0, int steps, real h, real& e0, real& e1, Vec3& w_end) {
     SystemConfig cfg;
-    cfg.dt = h;
-    cfg.gravity = Vec3{0, 0, 0};
+    cfg.step.dt = h;
+    cfg.step.gravity = Vec3{0, 0, 0};
     System sys(cfg);
     BodyDesc d;
     d.mass = 1;
@@ -242,8 +242,8 @@ TEST_CASE("speculative contacts: fast spheres do not tunnel through a thin wall"
   for (real speed : {real(10), real(30), real(100)}) {
     for (bool speculative : {false, true}) {
       SystemConfig cfg;
-      cfg.gravity = Vec3{0, 0, 0};
-      cfg.speculative = speculative;
+      cfg.step.gravity = Vec3{0, 0, 0};
+      cfg.collision.speculative = speculative;
       System sys(cfg);
       BodyDesc wall = box(Vec3{t, real(0.05), real(0.05)}, 0, Vec3{0, 0, 0}, real(0.5));
       wall.flags = kBodyFixed;
@@ -276,7 +276,7 @@ TEST_CASE("speculative contacts: fast spheres do not tunnel through a thin wall"
 TEST_CASE("stacks of cylinders and hexagonal prisms standing on their flat faces hold", "[physics][manifold]") {
   for (int kind = 0; kind < 2; ++kind) {
     SystemConfig cfg;
-    cfg.dt = real(1e-3);
+    cfg.step.dt = real(1e-3);
     System sys(cfg);
     sys.addBody(ground());
     const real r = real(0.01), h = real(0.005);  // radius 1 cm, half height 0.5 cm

@@ -73,9 +73,9 @@ TEST_CASE("frictionless pile: the normal-only CCP gives the three-row problem's 
   for (SolverType t : {SolverType::Jacobi, SolverType::GaussSeidel, SolverType::APGD, SolverType::BB}) {
     SECTION(solverName(t)) {
       SystemConfig cfg;
-      cfg.solver = t;
-      cfg.solver_settings.max_iterations = t == SolverType::Jacobi ? 20000 : 4000;
-      cfg.solver_settings.tolerance = real(dbl ? 1e-11 : 1e-5);
+      cfg.solver.type = t;
+      cfg.solver.max_iterations = t == SolverType::Jacobi ? 20000 : 4000;
+      cfg.solver.tolerance = real(dbl ? 1e-11 : 1e-5);
       cfg.threads = 1;
       SystemConfig full = cfg;
       full.prune = false;

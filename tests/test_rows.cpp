@@ -14,10 +14,10 @@ using namespace rowstest;
 TEST_CASE("a body held by three bilateral rows carries its weight: impulse m g h, no motion", "[rows]") {
   for (SolverType t : {SolverType::APGD, SolverType::Jacobi, SolverType::BB, SolverType::GaussSeidel}) {
     SystemConfig cfg;
-    cfg.dt = real(0.01);
-    cfg.solver = t;
-    cfg.solver_settings.max_iterations = 200;
-    cfg.solver_settings.tolerance = 0;  // a fixed count: the answer to 1e-6
+    cfg.step.dt = real(0.01);
+    cfg.solver.type = t;
+    cfg.solver.max_iterations = 200;
+    cfg.solver.tolerance = 0;  // a fixed count: the answer to 1e-6
     System sys(cfg);
     const real m = 2;
     const int b = sys.addBody(freeBox(Vec3{0, 1, 0}, m));
@@ -25,7 +25,7 @@ TEST_CASE("a body held by three bilateral rows carries its weight: impulse m g h
     sys.addRowProvider(pin);
     sys.step();
     // Gravity pulls -y: the y row pushes +y with m g h (Ja = +e_y on the body, as "b" side).
-    CHECK(pin->last[1] == Approx(m * 9.81 * cfg.dt).epsilon(1e-6));
+    CHECK(pin->last[1] == Approx(m * 9.81 * cfg.step.dt).epsilon(1e-6));
     CHECK(std::fabs(pin->last[0]) < 1e-9);
     CHECK(std::fabs(pin->last[2]) < 1e-9);
     CHECK(length(sys.bodies().vel[b]) < 1e-9);
@@ -39,9 +39,9 @@ TEST_CASE("a velocity drive with a torque limit: exact target when reachable, li
   const real I = real(0.5), h = real(0.01);
   for (real tau : {real(1000), real(10)}) {
     SystemConfig cfg;
-    cfg.dt = h;
-    cfg.gravity = Vec3{0, 0, 0};
-    cfg.solver_settings.tolerance = real(1e-10);  // the answer to 1e-6 (relative residual)
+    cfg.step.dt = h;
+    cfg.step.gravity = Vec3{0, 0, 0};
+    cfg.solver.tolerance = real(1e-10);  // the answer to 1e-6 (relative residual)
     System sys(cfg);
     BodyDesc d = freeBox(Vec3{0, 0, 0}, 1);
     d.inertia = Vec3{I, I, I};

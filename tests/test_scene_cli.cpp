@@ -500,7 +500,7 @@ TEST_CASE("Bullet files: every supported shape survives Bullet's serializer and 
 
   Scene scene = Scene::load((d / "all_shapes.bullet").string());
   REQUIRE(scene.bodyCount() == w.ptrs.size());
-  CHECK(scene.settings.gravity.y == Approx(-9.81));
+  CHECK(scene.settings.system.step.gravity.y == Approx(-9.81));
   for (size_t i = 0; i < w.ptrs.size(); ++i) {
     INFO("body " << i << " " << w.ptrs[i]->getCollisionShape()->getName());
     const BodyDesc a = bodyDescFromBullet(*w.ptrs[i]);

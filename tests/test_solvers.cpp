@@ -92,13 +92,13 @@ Scene randomScene(uint64_t seed, int nb, int nc, bool local_pairs = false) {
     addContact(s, a, b, n, pa, pb, real(U(rng) < 0.15 ? 0.0 : 0.8 * U(rng)));
   }
   s.ps.dt = 1e-2;
-  s.ps.recovery_rel = 1;
+  s.ps.solver.recovery_rel = 1;
   s.ps.threads = 1;
   return s;
 }
 
 refsolver::DenseCcp dense(const Scene& s) {
-  return refsolver::denseFromScene(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps.dt, s.ps.recovery_rel);
+  return refsolver::denseFromScene(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps.dt, s.ps.solver.recovery_rel);
 }
 
 double maxAbsDiff(const real* a, const real* b, size_t n) {
@@ -721,7 +721,7 @@ TEST_CASE("disparate scales: no solver ends worse than its warm start or zero, r
     warm.insert(warm.end(), {gn, real(0.5 * gn * (U(rng) - 0.5)), real(0.5 * gn * (U(rng) - 0.5))});
   }
   s.ps.dt = 1e-3;
-  s.ps.recovery_rel = 10;
+  s.ps.solver.recovery_rel = 10;
   s.ps.threads = 2;
   ContactProblem cp;
   cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);

@@ -164,14 +164,14 @@ std::vector<AccScene> makeScenes(bool quick) {
 double complementarityGap(const dvi::System& sys) {
   const dvi::ContactArrays& c = sys.contacts();
   const dvi::BodyArrays& b = sys.bodies();
-  const real dt = sys.config().dt;
+  const real dt = real(sys.config().step.dt);
   auto x_pre = [&](size_t i) { return b.pos[i] - b.vel[i] * dt; };
   double gap = 0, mag = 0;
   for (size_t k = 0; k < c.dist.size(); ++k) {
     const size_t A = size_t(c.body_a[k]), B = size_t(c.body_b[k]);
     const Vec3 rA = c.pa[k] - x_pre(A), rB = c.pb[k] - x_pre(B);
     const Vec3 vrel = (b.vel[B] + dvi::cross(b.omega[B], rB)) - (b.vel[A] + dvi::cross(b.omega[A], rA));
-    const real bn = dvi::contactBias(c.dist[k], dt, sys.config().recovery_rel, c.size[k]);
+    const real bn = dvi::contactBias(c.dist[k], dt, sys.config().solver.recovery_rel, c.size[k]);
     const Vec3 G = sys.contactForce(k) * dt;
     gap += std::fabs(double(dvi::dot(G, vrel + bn * c.normal[k])));
     mag += double(dvi::length(G));
@@ -196,10 +196,10 @@ Row runCesOne(const AccScene& sc, const std::string& engine, const std::string& 
   nlohmann::json doc = dvi::ces::loadCesDocument("", origin);
   const dvi::ces::CesConfig cfg = dvi::ces::parseCesDocument(doc, sets, origin);
   std::unique_ptr<dvi::System> sys = dvi::ces::makeCesSystem(cfg, engine, threads, "native");
-  sys->mutableConfig().solver_settings.tolerance = real(tol);
+  sys->mutableConfig().solver.tolerance = real(tol);
   dvi::ces::CesMachine m(cfg, *sys);
   row.device = sys->deviceName();
-  row.steps = int(std::llround(cfg.duration / cfg.dt));
+  row.steps = int(std::llround(cfg.duration / cfg.step.dt));
   double res_sum = 0, res_abs_sum = 0, compl_sum = 0;
   int compl_n = 0;
   for (int k = 0; k < row.steps; ++k) {
@@ -275,10 +275,10 @@ Row runOne(const AccScene& sc, const std::string& engine, const std::string& sol
     run = std::make_unique<BulletRunner>(bodies, bs);
   } else {
     dvi::SystemConfig cfg;
-    cfg.dt = real(dt);
-    dvi::parseSolver(solver, cfg.solver);
-    cfg.solver_settings.max_iterations = iterations;
-    cfg.solver_settings.tolerance = real(tol);  // relative (0: the fixed count of the sweep)
+    cfg.step.dt = real(dt);
+    dvi::parseSolver(solver, cfg.solver.type);
+    cfg.solver.max_iterations = iterations;
+    cfg.solver.tolerance = real(tol);  // relative (0: the fixed count of the sweep)
     cfg.threads = threads;
     auto o = std::make_unique<OursRunner>(bodies, cfg, engine == "gpu");
     ours = o.get();
@@ -338,18 +338,18 @@ GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, in
   try {
     dvi::bench::BulletScene scene = dvi::bench::makeBulletScene(dvi::bench::makePileSpec(n));
     dvi::SystemConfig cfg;
-    cfg.dt = real(1e-3);
-    cfg.solver = dvi::SolverType::APGD;
-    cfg.solver_settings.max_iterations = 50;
+    cfg.step.dt = real(1e-3);
+    cfg.solver.type = dvi::SolverType::APGD;
+    cfg.solver.max_iterations = 50;
     cfg.threads = threads;
     OursRunner run(scene.bodies, cfg, gpu);
     for (int i = 0; i < presteps; ++i) run.step();
     dvi::SystemConfig& c = run.sys->mutableConfig();
-    c.solver = solver;
-    c.solver_settings.max_iterations = cap;
-    c.solver_settings.tolerance = real(tol);  // relative residual (solver.h)
-    c.solver_settings.record_history = true;
-    c.warm_start = warm;
+    c.solver.type = solver;
+    c.solver.max_iterations = cap;
+    c.solver.tolerance = real(tol);  // relative residual (solver.h)
+    c.solver.record_history = true;
+    c.solver.warm_start = warm;
     run.step();
     const dvi::StepStats& st = run.sys->lastStats();
     g.seconds = st.stage_seconds[size_t(dvi::StageType::Solve)];

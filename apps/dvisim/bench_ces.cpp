@@ -138,7 +138,7 @@ int runCesBench(const CesBenchOptions& o) {
   const std::string results_dir = o.record ? resultsDir() : std::string();
 
   // ---- run ----
-  const int64_t total = std::max<int64_t>(1, int64_t(std::llround(cfg.duration / cfg.dt)));
+  const int64_t total = std::max<int64_t>(1, int64_t(std::llround(cfg.duration / cfg.step.dt)));
   const auto t_start = Clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
   std::unique_ptr<dvi::System> sys = dvi::ces::makeCesSystem(cfg, backend, threads, "native");
@@ -146,8 +146,8 @@ int runCesBench(const CesBenchOptions& o) {
   const double setup_s = elapsed();
   std::printf("bench ces%s: %s backend, %g s of machine time (%lld steps of %g s, %s %d it) at %s particles/s "
               "(mean particle %.4g mg -> %.4g g/s), wall limit %g s\n",
-              o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.dt, cfg.solver.c_str(),
-              cfg.iterations, grouped(rate).c_str(), mean_mass * 1e6, mass_flow * 1e3, wall_limit);
+              o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.step.dt, dvi::solverName(cfg.solver.type),
+              cfg.solver.max_iterations, grouped(rate).c_str(), mean_mass * 1e6, mass_flow * 1e3, wall_limit);
   const std::string where = m.deviceParticles()
                                 ? "CES field, charges and classification on the device (CesDevice)"
                                 : "CES forces applied on the host";
@@ -182,7 +182,7 @@ int runCesBench(const CesBenchOptions& o) {
     const int64_t in_flight = m.particlesInFlight();
     max_in_flight = std::max(max_in_flight, in_flight);
     const double w = elapsed();
-    if (wall_at_goal < 0 && m.time() + 0.5 * cfg.dt >= kGoalDuration) wall_at_goal = w;
+    if (wall_at_goal < 0 && m.time() + 0.5 * cfg.step.dt >= kGoalDuration) wall_at_goal = w;
     const bool t_mark = (k + 1) * 10 >= int64_t(next_t) * total, w_mark = w >= 0.1 * next_w * wall_limit;
     if (t_mark || w_mark) {
       while ((k + 1) * 10 >= int64_t(next_t) * total) ++next_t;
@@ -233,7 +233,7 @@ int runCesBench(const CesBenchOptions& o) {
     const double t_goal = kGoalDuration;
     const bool reached_goal = wall_at_goal >= 0;
     // The wall time of the goal's 10 s: measured, or (cut at the wall limit) extrapolated at the last 10%'s pace.
-    const double wall_needed = reached_goal ? wall_at_goal : wall + (t_goal - reached) / cfg.dt * ms_last * 1e-3;
+    const double wall_needed = reached_goal ? wall_at_goal : wall + (t_goal - reached) / cfg.step.dt * ms_last * 1e-3;
     const bool fed_ok = fed_rate >= kRateTolerance * kGoalRate;
     const bool met = fed_ok && reached_goal && wall_needed <= kGoalWall;
     goal["met"] = met;
@@ -279,9 +279,9 @@ int runCesBench(const CesBenchOptions& o) {
   j["date"] = date;
   j["machine"] = {{"origin", origin},
                   {"sets", o.sets},
-                  {"dt", cfg.dt},
-                  {"solver", cfg.solver},
-                  {"iterations", cfg.iterations},
+                  {"dt", cfg.step.dt},
+                  {"solver", dvi::solverName(cfg.solver.type)},
+                  {"iterations", cfg.solver.max_iterations},
                   {"drum_drive", m.rheonomicDrive() ? "rheonomic" : "kinematic"},
                   {"field_model", cfg.field_model},
                   {"diameter_mm", {cfg.diameter_min * 1e3, cfg.diameter_max * 1e3}},
@@ -326,7 +326,7 @@ int runCesBench(const CesBenchOptions& o) {
      << "- command: `" << command << "`\n- device: " << device << "\n- backend: " << j["backend"].get<std::string>()
      << " (" << where << ")\n- commit: " << commit
      << "\n- date: " << date << "\n- machine: " << origin << (o.sets.empty() ? "" : " with --set") << "; dt "
-     << fmt(cfg.dt, "%g") << " s, " << cfg.solver << " " << cfg.iterations << " iterations, drum "
+     << fmt(cfg.step.dt, "%g") << " s, " << dvi::solverName(cfg.solver.type) << " " << cfg.solver.max_iterations << " iterations, drum "
      << j["machine"]["drum_drive"].get<std::string>() << ", particles " << fmt(cfg.diameter_min * 1e3, "%g") << "-"
      << fmt(cfg.diameter_max * 1e3, "%g") << " mm\n"
      << "- target: " << fmt(duration, "%g") << " s of machine time at " << grouped(rate)
@@ -377,7 +377,7 @@ int runCesBench(const CesBenchOptions& o) {
               grouped(double(max_in_flight)).c_str(), grouped(double(bal.in_flight)).c_str());
   std::printf("contacts per step: %s mean, %s max; solver %s, %.3g iterations per step\n",
               grouped(j["contacts_per_step_mean"].get<double>()).c_str(), grouped(double(tot.max_contacts)).c_str(),
-              cfg.solver.c_str(), j["iterations_mean"].get<double>());
+              dvi::solverName(cfg.solver.type), j["iterations_mean"].get<double>());
   std::printf("stages (s):");
   for (const auto& [name, sec] : stages) std::printf(" %s %.3g", name.c_str(), sec);
   std::printf("; machine outside the stages %.3g\n", step_wall - stage_total);

@@ -87,21 +87,21 @@ struct ScalingOptions : BenchBasics {
   long long gpu_persistent_max = -1;  // -1: SystemConfig's default
   bool gpu_register_cache = true;
   double pair_margin = dvi::BroadPhaseSettings{}.pair_margin;
-  bool mpr_manifold = dvi::SystemConfig{}.mpr_manifold;
-  bool gpu_entry_gather = dvi::SystemConfig{}.gpu_entry_gather;
+  bool mpr_manifold = dvi::SystemConfig{}.collision.mpr_manifold;
+  bool gpu_entry_gather = dvi::SystemConfig{}.gpu.entry_gather;
   std::string storage = "auto";
   std::string speculation = "auto";
   std::string stop_compare = "on";  // run ours again at the solver's default stop (ratio to the fixed 50)
   std::string bullet3_device = "gpu";
 };
 
-// How the GPU launches APGD's trials under cfg (SystemConfig::gpu_persistent_max_blocks, gpu_graphs).
+// How the GPU launches APGD's trials under cfg (GpuTuning::persistent_max_blocks, graphs).
 std::string gpuTrialsLabel(const dvi::SystemConfig& cfg) {
-  const std::string single = cfg.gpu_graphs ? "one CUDA graph each" : "kernel by kernel";
-  const int64_t m = cfg.gpu_persistent_max_blocks;
+  const std::string single = cfg.gpu.graphs ? "one CUDA graph each" : "kernel by kernel";
+  const int64_t m = cfg.gpu.persistent_max_blocks;
   if (m <= 0) return single;
   const std::string persistent = "all in one cooperative kernel per solve";
-  const std::string cache = cfg.gpu_apgd_register_cache
+  const std::string cache = cfg.gpu.apgd_register_cache
                                 ? ", each thread's blocks kept in registers between trials where they fit 2 a thread"
                                 : "";
   if (m == std::numeric_limits<int64_t>::max())
@@ -592,21 +592,21 @@ int runScaling(const ScalingOptions& o) {
   }
 
   dvi::SystemConfig cfg;
-  cfg.dt = dvi::real(1e-3);
-  cfg.solver = dvi::SolverType::APGD;
-  cfg.solver_settings.max_iterations = 50;
-  cfg.solver_settings.tolerance = 0;  // all 50 iterations
+  cfg.step.dt = dvi::real(1e-3);
+  cfg.solver.type = dvi::SolverType::APGD;
+  cfg.solver.max_iterations = 50;
+  cfg.solver.tolerance = 0;  // all 50 iterations
   cfg.threads = int(threads);
-  cfg.gpu_graphs = o.gpu_graphs;
-  if (o.gpu_persistent_max >= 0) cfg.gpu_persistent_max_blocks = o.gpu_persistent_max;
-  cfg.gpu_apgd_register_cache = o.gpu_register_cache;
-  cfg.broadphase.pair_margin = dvi::real(o.pair_margin);
-  cfg.mpr_manifold = o.mpr_manifold;
-  cfg.gpu_entry_gather = o.gpu_entry_gather;
-  cfg.solver_settings.storage = o.storage == "real"    ? dvi::VectorStorage::Real
+  cfg.gpu.graphs = o.gpu_graphs;
+  if (o.gpu_persistent_max >= 0) cfg.gpu.persistent_max_blocks = o.gpu_persistent_max;
+  cfg.gpu.apgd_register_cache = o.gpu_register_cache;
+  cfg.collision.broadphase.pair_margin = dvi::real(o.pair_margin);
+  cfg.collision.mpr_manifold = o.mpr_manifold;
+  cfg.gpu.entry_gather = o.gpu_entry_gather;
+  cfg.solver.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                                 : o.storage == "float" ? dvi::VectorStorage::Float
                                                        : dvi::VectorStorage::Auto;
-  cfg.solver_settings.apgd_speculation = o.speculation == "none"       ? dvi::ApgdSpeculation::None
+  cfg.solver.apgd_speculation = o.speculation == "none"       ? dvi::ApgdSpeculation::None
                                          : o.speculation == "accepted" ? dvi::ApgdSpeculation::Accepted
                                          : o.speculation == "both"     ? dvi::ApgdSpeculation::Both
                                                                        : dvi::ApgdSpeculation::Auto;
@@ -674,8 +674,8 @@ int runScaling(const ScalingOptions& o) {
   // of the rows: each of our rows is run again at the defaults and the ratio printed side by side (one line per row,
   // repeated after the table). The CSV keeps the fixed-50 rows.
   dvi::SystemConfig cfg_default = cfg;
-  cfg_default.solver_settings.max_iterations = dvi::SolverSettings{}.max_iterations;
-  cfg_default.solver_settings.tolerance = dvi::SolverSettings{}.tolerance;
+  cfg_default.solver.max_iterations = dvi::SolverSettings{}.max_iterations;
+  cfg_default.solver.tolerance = dvi::SolverSettings{}.tolerance;
   std::string stop_lines;
   auto compareStop = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, double copy) {
     const Row& fixed = rows.back();
@@ -687,7 +687,7 @@ int runScaling(const ScalingOptions& o) {
       std::snprintf(buf, sizeof buf, "  stop   %-4s %-4s %6s: default stop (tolerance %g, cap %d) %.2f ms/step, %.1f iterations; fixed 50 "
                      "%.2f ms/step; ratio %.3f",
                      engine.c_str(), spec.name.c_str(), countLabel(fixed.n).c_str(),
-                     double(cfg_default.solver_settings.tolerance), cfg_default.solver_settings.max_iterations, d.ms,
+                     double(cfg_default.solver.tolerance), cfg_default.solver.max_iterations, d.ms,
                      d.iterations, fixed.ms, d.ms / fixed.ms);
       line = buf;
     } catch (const std::exception& e) {
@@ -770,13 +770,13 @@ int runScaling(const ScalingOptions& o) {
        << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
        << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg)
-       << "; APGD storage: " << storageLabel(cfg.solver_settings, true) << " on the GPU, "
-       << (cfg.gpu_entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and isotropic inverse masses as 16 B (gpu_entry_gather), "
+       << "; APGD storage: " << storageLabel(cfg.solver, true) << " on the GPU, "
+       << (cfg.gpu.entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and isotropic inverse masses as 16 B (gpu_entry_gather), "
                                 : "the gather reading each contact's Jacobian (--gpu-entry-gather false), ")
-       << storageLabel(cfg.solver_settings, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
-       << "; next step speculated by the test pass: " << speculationLabel(cfg.solver_settings.apgd_speculation)
-       << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.broadphase.pair_margin)
-       << "\n- NarrowPhase (ours): " << (cfg.mpr_manifold ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)" : "MPR's one point per pair (--mpr-manifold false)")
+       << storageLabel(cfg.solver, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
+       << "; next step speculated by the test pass: " << speculationLabel(cfg.solver.apgd_speculation)
+       << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.collision.broadphase.pair_margin)
+       << "\n- NarrowPhase (ours): " << (cfg.collision.mpr_manifold ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)" : "MPR's one point per pair (--mpr-manifold false)")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
@@ -824,11 +824,11 @@ void registerBenchScaling(CLI::App& app) {
                   "(BroadPhaseSettings::pair_margin; 0: a build every step; default 0.025)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--mpr-manifold", o->mpr_manifold,
-                  "MPR pairs of two flat features get up to 4 more points of their overlap (SystemConfig::mpr_manifold; "
+                  "MPR pairs of two flat features get up to 4 more points of their overlap (CollisionSettings::mpr_manifold; "
                   "true, the default, or false: MPR's one point)");
   cmd->add_option("--gpu-entry-gather", o->gpu_entry_gather,
                   "GPU float storage: the Schur product's gather reads each adjacency entry's side of the Jacobian in "
-                  "entry order and isotropic inverse masses as 16 bytes (SystemConfig::gpu_entry_gather; true, the "
+                  "entry order and isotropic inverse masses as 16 bytes (GpuTuning::entry_gather; true, the "
                   "default, or false: each contact's Jacobian and the full inverse mass)");
   cmd->add_option("--storage", o->storage,
                   "APGD vector storage: auto (float on the GPU, real on the CPU; the default), real or float")

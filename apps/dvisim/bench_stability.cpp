@@ -103,11 +103,11 @@ struct Probe {
   std::vector<bool> moving;
   explicit Probe(const std::vector<btRigidBody*>& bodies, int threads) {
     dvi::SystemConfig c;
-    c.dt = real(1e-9);
-    c.gravity = Vec3{0, 0, 0};
-    c.solver = dvi::SolverType::Jacobi;
-    c.solver_settings.max_iterations = 1;
-    c.warm_start = false;
+    c.step.dt = real(1e-9);
+    c.step.gravity = Vec3{0, 0, 0};
+    c.solver.type = dvi::SolverType::Jacobi;
+    c.solver.max_iterations = 1;
+    c.solver.warm_start = false;
     c.threads = threads;
     sys = std::make_unique<dvi::System>(c);
     ids = dvi::importBullet(*sys, bodies);
@@ -582,9 +582,9 @@ Metrics runHugePile(const Case& c, int threads) {
                                          real((in / side + 0.5) * pitch)}, real(0.7));
   }
   dvi::SystemConfig cfg;
-  cfg.dt = real(c.dt);
-  cfg.solver = dvi::SolverType::APGD;
-  applySolver(c, cfg.solver_settings);
+  cfg.step.dt = real(c.dt);
+  cfg.solver.type = dvi::SolverType::APGD;
+  applySolver(c, cfg.solver);
   OursRunner run(s.bodies, cfg, true);
   for (int k = 1; k <= c.steps; ++k) {
     try {
@@ -729,13 +729,13 @@ int runStability(const StabOptions& o) {
         std::unique_ptr<Runner> run;
         if (e.bullet_iters == 0) {
           dvi::SystemConfig cfg;
-          cfg.dt = real(c.dt);
-          cfg.gravity = c.gravity;
-          cfg.solver = dvi::SolverType::APGD;
-          applySolver(c, cfg.solver_settings);
+          cfg.step.dt = real(c.dt);
+          cfg.step.gravity = c.gravity;
+          cfg.solver.type = dvi::SolverType::APGD;
+          applySolver(c, cfg.solver);
           cfg.threads = int(threads);
           run = std::make_unique<OursRunner>(s.bodies, cfg, e.name == "gpu");
-          const dvi::SolverSettings& ss = cfg.solver_settings;
+          const dvi::SolverSettings& ss = cfg.solver;
           r.note = ss.tolerance > 0 ? "APGD to relative residual " + fmt("%.0e", double(ss.tolerance)) + ", at most " +
                                           std::to_string(ss.max_iterations) + " iterations"
                                     : "APGD " + std::to_string(ss.max_iterations) + " iterations";

@@ -191,17 +191,15 @@ std::string resolveCesBackend(const std::string& requested) {
 
 std::unique_ptr<System> makeCesSystem(const CesConfig& cfg, const std::string& backend, int threads,
                                       const std::string& collision) {
-  SceneSettings st;
-  st.dt = real(cfg.dt);
-  st.solver = cfg.solver;
-  st.iterations = cfg.iterations;
-  st.threads = threads;
-  st.collision = collision.empty() ? "native" : collision;
-  st.friction_combine = "product";  // the pair coefficients of ces.friction are converted for this rule
-  SystemConfig sc = systemConfigFromSettings(st);
+  SystemConfig sc;
+  sc.step = cfg.step;
+  sc.solver = cfg.solver;
+  sc.threads = threads;
+  sc.collision.backend = collision == "bullet" ? CollisionBackend::Bullet : CollisionBackend::Native;
+  sc.collision.friction_combine = FrictionCombine::Product;  // the pair coefficients of ces.friction are for this rule
   // The particle cloud spans the machine (0.8 x 0.6 x 0.3 m) sparsely: a grid of 2^24 bins of 2 mm costs
   // more to scan than the pairs it finds (measured 7.5 ms/step); 2^20 bins of ~5 mm keep every bin sparse.
-  sc.broadphase.max_bins = int64_t(1) << 20;
+  sc.collision.broadphase.max_bins = int64_t(1) << 20;
   if (backend == "gpu") return makeGpuSystem(sc, makeBulletCollision);
   return std::make_unique<CheckpointSystem>(sc, makeBulletCollision);
 }
@@ -408,14 +406,14 @@ int runCesMachine(const CesRunOptions& o) {
   CesConfig cfg = parseCesDocument(doc, sets, origin);
   if (!o.steps.empty()) {
     const long long n = parseInt("--steps", o.steps, 0, 1LL << 40);
-    cfg.duration = double(n) * cfg.dt;
+    cfg.duration = double(n) * cfg.step.dt;
     sets.push_back("duration_s=" + fmt(cfg.duration));
   }
   for (const std::string& s : sets) applyCesOverride(doc, s);  // the document as run
   const std::string collision = o.collision.empty() ? "native" : o.collision;
   if (resume) checkResumable(doc_before, doc, collision_before, collision);
   const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
-  const int64_t total = checkedStepCount(cfg.duration, cfg.dt, origin + ": ces.duration_s");
+  const int64_t total = checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
 
   const std::string backend = resolveCesBackend(o.backend);
   // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
@@ -433,7 +431,7 @@ int runCesMachine(const CesRunOptions& o) {
   const int64_t first = m.steps();
   std::printf("ces machine: %s, %s field, drum %s at %g rpm, U = %g kV, feed %g g/s for %g s; %lld steps of %g s%s\n",
               origin.c_str(), cfg.field_model.c_str(), m.rheonomicDrive() ? "rheonomic" : "kinematic", cfg.drum_rpm,
-              cfg.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.dt,
+              cfg.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.step.dt,
               resume ? (" (resumed at t = " + fmt(m.time()) + " s)").c_str() : "");
   if (m.system().backendName() != "cpu" && !m.deviceParticles())
     std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
@@ -446,7 +444,7 @@ int runCesMachine(const CesRunOptions& o) {
   for (int k = 0; cfg.frames > 1 && k < cfg.frames; ++k)
     frame_at.push_back(int64_t(std::llround(double(k) * double(total) / double(cfg.frames - 1))));
   // Steps between checkpoints; an interval longer than the run is none before the end (and no overflow).
-  const double ckpt_steps = cfg.checkpoint_every > 0 ? std::round(cfg.checkpoint_every / cfg.dt) : 0;
+  const double ckpt_steps = cfg.checkpoint_every > 0 ? std::round(cfg.checkpoint_every / cfg.step.dt) : 0;
   const int64_t ckpt_every = ckpt_steps <= 0 ? 0 : ckpt_steps > double(total) ? total + 1 : std::max<int64_t>(1, int64_t(ckpt_steps));
   const std::string ckpt_dir = out + "/checkpoint";
   bool checkpointed = false;
@@ -480,7 +478,7 @@ int runCesMachine(const CesRunOptions& o) {
         m.step();
       } catch (const SolverError& e) {
         m.system().syncToHost();
-        throw SimulationDiverged(divergedMessage(k + 1, m.time(), m.system().bodies(), e.what(), cfg.dt));
+        throw SimulationDiverged(divergedMessage(k + 1, m.time(), m.system().bodies(), e.what(), cfg.step.dt));
       }
       if (host_state) checkFiniteState(k + 1, m.time(), m.system().bodies());
       wall += std::chrono::duration<double>(Clock::now() - s0).count();
@@ -524,7 +522,7 @@ int runCesMachine(const CesRunOptions& o) {
       summary["error"] = exceptionMessage(failure);
       summary["exit_code"] = code;
       summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
-      summary["dt"] = cfg.dt;
+      summary["dt"] = cfg.step.dt;
       summary["steps"] = m.steps() - first;
       summary["sim_time"] = m.time();
       summary["frames"] = frames.count();
@@ -557,17 +555,17 @@ int runCesMachine(const CesRunOptions& o) {
     summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
     summary["scene_name"] = doc.contains("name") && doc["name"].is_string() ? doc["name"].get<std::string>() : "ces";
     summary["bodies"] = m.system().bodies().count();
-    summary["dt"] = cfg.dt;
+    summary["dt"] = cfg.step.dt;
     summary["steps"] = steps_run;
     summary["threads"] = m.system().effectiveThreads();
     summary["backend"] = m.system().backendName();
     summary["device"] = m.system().deviceName();
-    summary["solver"] = cfg.solver;
+    summary["solver"] = solverName(cfg.solver.type);
     summary["collision"] = collision;
     summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
     summary["residual_final"] = m.system().lastStats().relative_residual;  // relative (solver.h)
     summary["residual_final_abs"] = tot.residual;
-    addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver_settings);
+    addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver);
     summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
     summary["max_penetration"] = tot.max_penetration;
     addStageSummary(summary, tot.log);
@@ -654,8 +652,8 @@ int runCesMachine(const CesRunOptions& o) {
                 cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
                 frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
                 wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
-    const std::string remedy = "raise --set solver.iterations (now " + std::to_string(cfg.iterations) + ")";
-    const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver_settings, remedy);
+    const std::string remedy = "raise --set solver.iterations (now " + std::to_string(cfg.solver.max_iterations) + ")";
+    const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver, remedy);
     if (!unconverged.empty()) std::fprintf(stderr, "%s\n", unconverged.c_str());
     if (interrupted) {
       std::fflush(stdout);

@@ -103,8 +103,8 @@ void loadsWithoutCrashing(const std::string& path) {
 bool endsWith(const std::string& s, const std::string& e) { return s.size() >= e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0; }
 
 void loadInto(EngineWorld& e, const CompareOptions& o, const dvi::Scene& settings_scene) {
-  e.world->setGravity(btVector3(btScalar(settings_scene.settings.gravity.x), btScalar(settings_scene.settings.gravity.y),
-                                btScalar(settings_scene.settings.gravity.z)));
+  e.world->setGravity(btVector3(btScalar(settings_scene.settings.system.step.gravity.x), btScalar(settings_scene.settings.system.step.gravity.y),
+                                btScalar(settings_scene.settings.system.step.gravity.z)));
   if (endsWith(o.scene, ".bullet")) {
     e.importer = std::make_unique<btBulletWorldImporter>(e.world.get());
     if (!e.importer->loadFile(o.scene.c_str())) throw InputError(o.scene + ": Bullet's importer could not read the file");
@@ -154,7 +154,7 @@ EngineResult runEngine(const std::string& name, const CompareOptions& o, const d
     dvi::DviWorldConfig c;
     c.backend = name == "gpu" ? dvi::WorldBackend::Gpu : dvi::WorldBackend::Cpu;
     c.make_gpu_system = dvi::makeGpuSystem;
-    c.system = dvi::systemConfigFromSettings(s.settings);
+    c.system = s.settings.system;
     auto w = std::make_unique<dvi::DviDynamicsWorld>(&e.dispatcher, &e.broadphase, &e.solver, &e.config, c);
     r.device = w->system().deviceName();
     e.world = std::move(w);
@@ -179,21 +179,21 @@ int runCompare(const CompareOptions& o) {
   if (!std::filesystem::exists(o.scene)) throw InputError(o.scene + ": no such file");
   dvi::Scene s = dvi::Scene::load(o.scene, o.sets);  // validates the file and gives the settings
   if (endsWith(o.scene, ".bullet")) loadsWithoutCrashing(o.scene);
-  if (!o.dt.empty()) s.settings.dt = dvi::real(dvi::parseReal("--dt", o.dt));
+  if (!o.dt.empty()) s.settings.system.step.dt = dvi::real(dvi::parseReal("--dt", o.dt));
   if (!o.time.empty()) s.settings.time = dvi::real(dvi::parseReal("--time", o.time)), s.settings.steps = -1;
   if (!o.steps.empty()) s.settings.steps = dvi::parseInt("--steps", o.steps, 0, int64_t(1) << 40);
   if (!o.solver.empty()) s.applySettingOverride("settings.solver=" + o.solver);
   if (!o.iterations.empty()) s.applySettingOverride("settings.iterations=" + o.iterations);
-  if (!(s.settings.dt > 0)) throw InputError("--dt: must be positive");
+  if (!(s.settings.system.step.dt > 0)) throw InputError("--dt: must be positive");
   const int64_t steps = s.settings.stepCount();
   if (steps < 0) throw InputError("--steps: must be >= 0");
 
   std::vector<EngineResult> results;
-  results.push_back(runEngine("bullet", o, s, double(s.settings.dt), steps));
-  results.push_back(runEngine("cpu", o, s, double(s.settings.dt), steps));
+  results.push_back(runEngine("bullet", o, s, s.settings.system.step.dt, steps));
+  results.push_back(runEngine("cpu", o, s, s.settings.system.step.dt, steps));
   std::string why;
   if (dvi::gpuAvailable(&why)) {
-    results.push_back(runEngine("gpu", o, s, double(s.settings.dt), steps));
+    results.push_back(runEngine("gpu", o, s, s.settings.system.step.dt, steps));
   } else {
     EngineResult g;
     g.name = "gpu";
@@ -208,7 +208,7 @@ int runCompare(const CompareOptions& o) {
   if (!csv) throw InputError(csv_path + ": cannot write");
   csv << "engine,body,x,y,z,vx,vy,vz,pos_diff,vel_diff,energy,max_penetration,wall_s\n";
   std::printf("compare %s: %zu bodies, %lld steps of %g s\n", o.scene.c_str(), ref.bodies.size(), (long long)steps,
-              double(s.settings.dt));
+              s.settings.system.step.dt);
   std::printf("%-7s %12s %12s %12s %12s %14s %12s %10s  %s\n", "engine", "max |dx|", "mean |dx|", "max |dv|", "mean |dv|",
               "energy (J)", "max pen", "wall (s)", "device");
   for (const EngineResult& r : results) {

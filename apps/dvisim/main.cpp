@@ -178,21 +178,24 @@ int run(const Options& o) {
   }
 
   dvi::Scene scene = dvi::Scene::load(o.scene, o.sets);
+  // The command line writes into the scene's settings (SceneSettings, its SystemConfig) after the scene file.
   dvi::SceneSettings& st = scene.settings;
-  if (dt) st.dt = dvi::real(*dt);
+  dvi::SystemConfig& cfg = st.system;
+  if (dt) cfg.step.dt = dvi::real(*dt);  // in the engine's precision, as a scene's settings.dt
   if (time) st.time = dvi::real(*time), st.steps = -1;
   if (!o.steps.empty()) st.steps = parseInt("--steps", o.steps, 0, 1LL << 40);
-  if (!o.iterations.empty()) st.iterations = int(parseInt("--iterations", o.iterations, 0, 1000000));
-  if (!o.max_iterations.empty()) st.max_iterations = int(parseInt("--max-iterations", o.max_iterations, 1, 1000000));
+  if (!o.iterations.empty()) st.setIterations(int(parseInt("--iterations", o.iterations, 0, 1000000)));
+  if (!o.max_iterations.empty()) st.setMaxIterations(int(parseInt("--max-iterations", o.max_iterations, 1, 1000000)));
   if (!o.tolerance.empty()) {
     const double tol = parseReal("--tolerance", o.tolerance);
     if (!(tol >= 0) || !std::isfinite(tol)) throw InputError("--tolerance: must be a finite number >= 0, got " + o.tolerance);
-    st.tolerance = dvi::real(tol);
+    st.setTolerance(dvi::real(tol));
   }
-  if (!o.threads.empty()) st.threads = int(parseInt("--threads", o.threads, 0, 4096));
+  if (!o.threads.empty()) cfg.threads = int(parseInt("--threads", o.threads, 0, 4096));
   if (!o.frames.empty()) st.frames = int(parseInt("--frames", o.frames, 0, 1000000));
-  if (!o.solver.empty()) st.solver = o.solver;
-  if (!o.collision.empty()) st.collision = o.collision;
+  if (!o.solver.empty()) dvi::parseSolver(o.solver, cfg.solver.type);  // validated above
+  if (!o.collision.empty())
+    cfg.collision.backend = o.collision == "bullet" ? dvi::CollisionBackend::Bullet : dvi::CollisionBackend::Native;
   const int64_t steps = st.stepCount();
 
   // Backend.
@@ -212,11 +215,11 @@ int run(const Options& o) {
   const std::vector<btRigidBody*>& bodies = scene.bodies();
   const std::vector<dvi::real> sizes = bodySizes(bodies);
   std::printf("scene: %s (%zu bodies), %lld steps of %g s\n", scene.name.c_str(), bodies.size(), (long long)steps,
-              double(st.dt));
+              cfg.step.dt);
   std::fflush(stdout);
 
 #ifdef _OPENMP
-  const int threads = st.threads > 0 ? st.threads : omp_get_max_threads();
+  const int threads = cfg.threads > 0 ? cfg.threads : omp_get_max_threads();
 #else
   const int threads = 1;
 #endif
@@ -226,7 +229,7 @@ int run(const Options& o) {
   summary["scene"] = scene.source;
   summary["scene_name"] = scene.name;
   summary["bodies"] = bodies.size();
-  summary["dt"] = st.dt;
+  summary["dt"] = cfg.step.dt;
   summary["steps"] = steps;
   summary["threads"] = threads;
   summary["frames"] = 0;
@@ -251,7 +254,7 @@ int run(const Options& o) {
       for (int64_t k = 0;; ++k) {
         while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
           collect();
-          frames.write(double(k) * double(st.dt), state);
+          frames.write(double(k) * cfg.step.dt, state);
           ++next_frame;
         }
         if (k == steps) break;
@@ -275,9 +278,9 @@ int run(const Options& o) {
 
   if (backend == "bullet") {
     dvi::BulletPeerSettings ps;
-    ps.dt = st.dt;
-    ps.gravity = st.gravity;
-    ps.solver_iterations = o.iterations.empty() ? st.bullet_iterations : std::max(1, st.iterations);
+    ps.dt = dvi::real(cfg.step.dt);
+    ps.gravity = cfg.step.gravity;
+    ps.solver_iterations = o.iterations.empty() ? st.bullet_iterations : std::max(1, st.iterations());
     ps.length_scale = st.bullet_length_scale > 0 ? st.bullet_length_scale : autoLengthScale(bodies, sizes);
     dvi::BulletPeer peer(bodies, ps);
     auto collect = [&] {
@@ -292,7 +295,7 @@ int run(const Options& o) {
         if (!dvi::isFinite(peer.position(i)) || !dvi::isFinite(peer.velocity(i))) {
           char msg[200];
           std::snprintf(msg, sizeof msg, "the simulation diverged in step %lld (t = %.6g s): body %zu has a non-finite "
-                        "position or velocity; try a smaller time step", (long long)(k + 1), double(k + 1) * double(st.dt), i);
+                        "position or velocity; try a smaller time step", (long long)(k + 1), double(k + 1) * cfg.step.dt, i);
           throw dvi::SimulationDiverged(msg);
         }
     }, [&] {
@@ -312,7 +315,6 @@ int run(const Options& o) {
     summary["stage_seconds"] = {{"bullet", wall}};
     summary["threads"] = 1;
   } else {
-    const dvi::SystemConfig cfg = dvi::systemConfigFromSettings(st);
     std::unique_ptr<dvi::System> sys =
         backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
                          : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
@@ -335,9 +337,9 @@ int run(const Options& o) {
       } catch (const dvi::SolverError& e) {
         sys->syncToHost();
         throw dvi::SimulationDiverged(
-            dvi::divergedMessage(k + 1, double(k + 1) * double(st.dt), sys->bodies(), e.what(), double(st.dt)));
+            dvi::divergedMessage(k + 1, double(k + 1) * cfg.step.dt, sys->bodies(), e.what(), cfg.step.dt));
       }
-      if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * double(st.dt), sys->bodies());
+      if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * cfg.step.dt, sys->bodies());
     }, [&] {
       const dvi::StepStats& s = sys->lastStats();
       contacts += s.contacts;
@@ -349,16 +351,16 @@ int run(const Options& o) {
     });
     summary["backend"] = sys->backendName();
     summary["device"] = sys->deviceName();
-    summary["solver"] = st.solver;
-    summary["collision"] = st.collision;
+    summary["solver"] = dvi::solverName(cfg.solver.type);
+    summary["collision"] = dvi::collisionBackendName(cfg.collision.backend);
     summary["iterations_mean"] = steps > 0 ? double(iterations) / double(steps) : 0.0;
     summary["residual_final"] = relative;  // relative residual (solver.h)
     summary["residual_final_abs"] = residual;
     summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
     summary["max_penetration"] = max_pen;
-    dvi::addConvergenceSummary(summary, sys->convergence(), cfg.solver_settings);
+    dvi::addConvergenceSummary(summary, sys->convergence(), cfg.solver);
     dvi::addStageSummary(summary, stage_log);
-    not_converged = dvi::convergenceWarning(sys->convergence(), cfg.solver_settings);
+    not_converged = dvi::convergenceWarning(sys->convergence(), cfg.solver);
     summary["prune"] = cfg.prune;
   }
   // A device backend's state is checked once, at the end (the host copy of every step would cost a transfer).
@@ -375,7 +377,7 @@ int run(const Options& o) {
   }
   summary["steps"] = done;
   summary["steps_planned"] = steps;
-  summary["sim_time"] = double(done) * double(st.dt);
+  summary["sim_time"] = double(done) * cfg.step.dt;
   summary["wall_time_s"] = wall;
   summary["ms_per_step"] = done > 0 ? 1000.0 * wall / double(done) : 0.0;
   summary["frames"] = frames.count();

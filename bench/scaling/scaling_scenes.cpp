@@ -276,7 +276,7 @@ real deepestPenetration(const SceneSpec& spec, const std::vector<Vec3>& pos, con
     throw InputError("deepestPenetration: " + std::to_string(pos.size()) + " positions and " +
                      std::to_string(rot.size()) + " rotations for " + std::to_string(spec.bodies.size()) + " bodies");
   SystemConfig cfg;
-  cfg.speculative = false;  // poses only: no sweep, the envelope alone decides which pairs are tested
+  cfg.collision.speculative = false;  // poses only: no sweep, the envelope alone decides which pairs are tested
   System sys(cfg);
   addToSystem(spec, sys);
   BodyArrays bodies = sys.bodies();
@@ -294,7 +294,8 @@ real deepestPenetration(const SceneSpec& spec, const std::vector<Vec3>& pos, con
   ShapeArrays shapes = sys.shapes();
   ContactArrays contacts;
   CollisionTimes times;
-  makeNativeCollision(cfg.broadphase)->detect(bodies, shapes, collisionSettings(cfg), contacts, times);
+  makeNativeCollision(cfg.collision.broadphase)
+      ->detect(bodies, shapes, cfg.collision, makeStepContext(real(cfg.step.dt)), contacts, times);
   real deepest = 0;
   for (size_t k = 0; k < contacts.count(); ++k) deepest = std::max(deepest, -contacts.dist[k]);
   return deepest;

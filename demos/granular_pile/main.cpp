@@ -46,9 +46,9 @@ int main(int argc, char** argv) {
 
   // 2. The one change: a DVI system steps them instead of btDiscreteDynamicsWorld.
   dvi::SystemConfig config;
-  config.dt = 1e-3;                      // 1 ms: large for a penalty DEM, fine for DVI
-  config.solver = dvi::SolverType::APGD;
-  config.solver_settings.max_iterations = 50;
+  config.step.dt = 1e-3;                 // 1 ms: large for a penalty DEM, fine for DVI
+  config.solver.type = dvi::SolverType::APGD;
+  config.solver.max_iterations = 50;
   dvi::System system(config);
   std::vector<int> ids = dvi::importBullet(system, bodies);
 

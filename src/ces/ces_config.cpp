@@ -206,14 +206,18 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   CesConfig cfg;
   auto has = [](const json& o, const char* k) { return o.contains(k); };
   if (has(j, "duration_s")) cfg.duration = c.range(j["duration_s"], "ces.duration_s", 0, 1e6);
-  if (has(j, "time_step_s")) cfg.dt = c.range(j["time_step_s"], "ces.time_step_s", 0, 0.01, true);
-  checkedStepCount(cfg.duration, cfg.dt, origin + ": ces.duration_s");
+  if (has(j, "time_step_s")) cfg.step.dt = c.range(j["time_step_s"], "ces.time_step_s", 0, 0.01, true);
+  checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
   if (has(j, "seed")) cfg.seed = uint64_t(c.integer(j["seed"], "ces.seed", 0, int64_t(1) << 53));
   if (has(j, "solver")) {
     const json& s = c.object(j["solver"], "ces.solver", {"type", "iterations", "gyroscopic"});
-    if (has(s, "gyroscopic")) cfg.gyroscopic = c.boolean(s["gyroscopic"], "ces.solver.gyroscopic");
-    if (has(s, "type")) cfg.solver = c.oneOf(s["type"], "ces.solver.type", {"jacobi", "gs", "apgd", "bb"});
-    if (has(s, "iterations")) cfg.iterations = int(c.integer(s["iterations"], "ces.solver.iterations", 1, 100000));
+    if (has(s, "gyroscopic")) cfg.step.gyroscopic = c.boolean(s["gyroscopic"], "ces.solver.gyroscopic");
+    if (has(s, "type"))
+      cfg.solver.type = c.named<SolverType>(s["type"], "ces.solver.type",
+                                            {{"jacobi", SolverType::Jacobi}, {"gs", SolverType::GaussSeidel},
+                                             {"apgd", SolverType::APGD}, {"bb", SolverType::BB}});
+    if (has(s, "iterations"))  // a fixed count (the tolerance stays 0)
+      cfg.solver.max_iterations = int(c.integer(s["iterations"], "ces.solver.iterations", 1, 100000));
   }
   if (has(j, "drum")) {
     const json& s = c.object(j["drum"], "ces.drum", {"diameter_mm", "width_mm", "rpm", "drive", "mass_kg"});

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "chrono_like/base/math.h"
+#include "chrono_like/system.h"
 
 namespace dvi {
 namespace ces {
@@ -56,17 +57,32 @@ struct ElectrodeConfig {
   double voltage = -35000;   // V (extra electrodes only; the wire and tube take the supply's)
 };
 
+// The machine's step: ces.time_step_s (dt, 2e-4 s) and ces.solver.gyroscopic (the gyroscopic term w x I w, on:
+// the explicit form once spun a tumbling 1 mm wire from 1e3 to 1e11 rad/s in 0.1 s at h = 2e-4 s). Gravity is the
+// System's default.
+inline StepSettings cesDefaultStep() {
+  StepSettings s;
+  s.dt = 2e-4;
+  return s;
+}
+// The machine's solver: ces.solver.type (APGD) and ces.solver.iterations, a fixed count (max_iterations 30,
+// tolerance 0).
+inline SolverSettings cesDefaultSolver() {
+  SolverSettings s;
+  s.type = SolverType::APGD;
+  s.max_iterations = 30;
+  s.tolerance = 0;
+  return s;
+}
+
 struct CesConfig {
   // Run.
   double duration = 2.0;      // s of machine time
-  double dt = 2e-4;           // s
   uint64_t seed = 1;
-  std::string solver = "apgd";
-  int iterations = 30;
-  // The gyroscopic term w x I w (implicit in the core since da7294a; the explicit form spun a tumbling
-  // 1 mm wire from 1e3 to 1e11 rad/s in 0.1 s at h = 2e-4 s).
-  bool gyroscopic = true;
-  int threads = 0;            // 0: OpenMP default
+  // The System's step and solver parts (system.h), parsed straight into them; the rest of the System's
+  // configuration is makeCesSystem's (apps/dvisim/ces_run.h).
+  StepSettings step = cesDefaultStep();
+  SolverSettings solver = cesDefaultSolver();
 
   // Drum (grounded). drive: "auto" (rheonomic constraint when the core solves constraint rows, else
   // kinematic), "kinematic" or "rheonomic".

@@ -69,7 +69,7 @@ void getVec(std::istream& i, std::vector<T>& v) {
 // A provider with one row: body 0's x velocity = 1.
 class ProbeRow : public RowProvider {
  public:
-  void rows(const BodyArrays&, double, real, std::vector<ConstraintRow>& out) override {
+  void rows(const BodyArrays&, const StepContext&, std::vector<ConstraintRow>& out) override {
     ConstraintRow r;
     r.a = 0;
     r.Ja[0] = 1;
@@ -82,8 +82,8 @@ class ProbeRow : public RowProvider {
 
 bool coreSolvesConstraintRows() {
   SystemConfig c;
-  c.dt = real(1e-3);
-  c.gravity = Vec3{0, 0, 0};
+  c.step.dt = real(1e-3);
+  c.step.gravity = Vec3{0, 0, 0};
   System s(c);
   BodyDesc d;
   d.shapes.push_back(makeSphere(real(0.1)));
@@ -97,7 +97,8 @@ bool coreSolvesConstraintRows() {
 // Plug-ins
 // ---------------------------------------------------------------------------------------------------
 
-void CesForceField::apply(const BodyArrays& b, double, real dt, Vec3* force, Vec3* torque) {
+void CesForceField::apply(const BodyArrays& b, const StepContext& step, Vec3* force, Vec3* torque) {
+  const real dt = step.dt;
   const CesParticles& p = m_.p_;
   const CesModel& model = m_.model_;
   const int64_t n = int64_t(std::min(p.count(), b.count()));
@@ -114,13 +115,14 @@ void CesForceField::apply(const BodyArrays& b, double, real dt, Vec3* force, Vec
   }
 }
 
-bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, double, real dt, Vec3* force, Vec3* torque) {
+bool CesForceField::applyOnDevice(const DeviceBodyRefs& b, const StepContext& step, Vec3* force, Vec3* torque) {
   if (!m_.dev_) return false;
-  m_.dev_->forces(b, dt, force, torque);
+  m_.dev_->forces(b, step.dt, force, torque);
   return true;
 }
 
-void DrumDrive::rows(const BodyArrays& b, double t, real dt, std::vector<ConstraintRow>& out) {
+void DrumDrive::rows(const BodyArrays& b, const StepContext& step, std::vector<ConstraintRow>& out) {
+  const real dt = step.dt;
   dt_ = dt;
   const Vec3 p = b.pos[size_t(body_)];
   const Vec3 err = p - centre_;
@@ -146,7 +148,7 @@ void DrumDrive::rows(const BodyArrays& b, double t, real dt, std::vector<Constra
   ConstraintRow drive;  // rheonomic: omega_z = omega(t)
   drive.a = body_;
   drive.Ja[5] = 1;
-  drive.bias = -real(omega(t));
+  drive.bias = -real(omega(step.end()));
   out.push_back(drive);
 }
 
@@ -162,7 +164,7 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   if (sys_.bodies().count() != 0) throw InputError("CES machine: the system must be empty");
   if (cfg_.materials.size() > size_t(kMaxMaterials)) throw InputError("CES machine: at most 64 materials");
   if (cfg_.extra_electrodes.size() + 2 > size_t(kMaxElectrodes)) throw InputError("CES machine: at most 6 extra electrodes");
-  sys_.mutableConfig().gyroscopic = cfg_.gyroscopic;  // see CesConfig::gyroscopic
+  sys_.mutableConfig().step.gyroscopic = cfg_.step.gyroscopic;  // see cesDefaultStep
   const real R = real(cfg_.drumRadius()), W = real(cfg_.drum_width);
   // Pair coefficients under the product rule (Bullet's, the core's default): f_particle^2 = mu_pp and
   // f_particle f_part = mu_(particle, part).
@@ -244,7 +246,7 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   model_.air_viscosity = real(cfg_.air_viscosity);
   model_.contact_tol = real(1.1);
   model_.rolling_drum = real(cfg_.mu_rolling_drum);
-  model_.gravity = sys_.config().gravity;
+  model_.gravity = sys_.config().step.gravity;
   model_.collect_y = real(cfg_.collection_y);
   model_.domain_x_lo = real(-1);
   model_.domain_x_hi = real(1);
@@ -361,7 +363,7 @@ int CesMachine::addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 v
 
 void CesMachine::emit() {
   std::vector<ParticleSpec> due;
-  const double t = time(), h = cfg_.dt;
+  const double t = time(), h = cfg_.step.dt;
   feeder_.emit(t, h, due);
   // Forget spawns older than 50 ms: they have left the outlet.
   const BodyArrays& b = sys_.bodies();
@@ -369,7 +371,7 @@ void CesMachine::emit() {
   const real ux = real(std::cos(cfg_.feed_angle)), uy = real(std::sin(cfg_.feed_angle));
   const real dir = cfg_.drum_rpm >= 0 ? real(1) : real(-1);
   const Vec3 tangent{dir * uy, -dir * ux, 0};  // the drum surface's direction of motion at the outlet
-  const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / cfg_.dt)));
+  const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / cfg_.step.dt)));
   recent_.erase(std::remove_if(recent_.begin(), recent_.end(), [&](const RecentSpawn& r) { return steps_ - r.step > keep; }),
                 recent_.end());
   if (due.empty()) return;
@@ -445,7 +447,7 @@ void CesMachine::applyForcesOnHost() {
   BodyArrays& b = sys_.mutableBodies();
   std::fill(b.force.begin(), b.force.end(), Vec3{0, 0, 0});
   std::fill(b.torque.begin(), b.torque.end(), Vec3{0, 0, 0});
-  field_->apply(b, sys_.time(), real(cfg_.dt), b.force.data(), b.torque.data());
+  field_->apply(b, makeStepContext(real(cfg_.step.dt), sys_.time(), sys_.stepCount()), b.force.data(), b.torque.data());
 }
 
 void CesMachine::setCharge(int body, real q) {
@@ -487,7 +489,7 @@ void CesMachine::postStepDevice() {
   DeviceBodyRefs refs;
   sys_.deviceBodies(refs);
   std::vector<std::pair<int32_t, uint8_t>> changed;
-  dev_->postStep(refs, real(cfg_.dt), changed);
+  dev_->postStep(refs, real(cfg_.step.dt), changed);
   if (changed.empty()) return;
   std::vector<int32_t> ids;
   ids.reserve(changed.size());
@@ -520,7 +522,7 @@ void CesMachine::step() {
 void CesMachine::postStep() {
   BodyArrays& b = sys_.mutableBodies();
   const int64_t n = int64_t(p_.count());
-  const real h = real(cfg_.dt);
+  const real h = real(cfg_.step.dt);
   const CesModel& m = model_;
   std::vector<uint8_t> next(size_t(n), kStatusMachine);
   const int threads = sys_.effectiveThreads();
@@ -542,7 +544,7 @@ void CesMachine::settle(size_t k, uint8_t next) {
   if (next == kStatusLost) ++lost_;
   if (next == kStatusCollected) {
     // Crossing point of the collection plane on the step's straight path x - h v .. x.
-    const real h = real(cfg_.dt);
+    const real h = real(cfg_.step.dt);
     const Vec3 x1 = b.pos[k], x0 = x1 - h * b.vel[k];
     const double f = x0.y > x1.y ? double((x0.y - model_.collect_y) / (x0.y - x1.y)) : 1.0;
     const double fc = std::min(1.0, std::max(0.0, f));
@@ -553,7 +555,7 @@ void CesMachine::settle(size_t k, uint8_t next) {
     c.mass_fg = p_.mass_fg[k];
     c.x = double(x0.x) + fc * double(x1.x - x0.x) - cfg_.collection_x0;
     c.z = double(x0.z) + fc * double(x1.z - x0.z);
-    c.t = time() - cfg_.dt + fc * cfg_.dt;
+    c.t = time() - cfg_.step.dt + fc * cfg_.step.dt;
     collected_.push_back(c);
     b.pos[k].y = model_.collect_y - kBinDrop;  // into the bin, out of everyone's way
   }
@@ -651,7 +653,7 @@ void CheckpointSystem::loadCore(std::istream& i) {
   getVec(i, rows);
   getVec(i, lambda);
   // The warm-start cache is looked up by binary search and read 3 impulses a contact; rows name bodies.
-  if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(config().dt)) || steps < 0 || steps > (int64_t(1) << 40))
+  if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(real(config().step.dt))) || steps < 0 || steps > (int64_t(1) << 40))
     throw InputError("checkpoint: corrupt core clock");
   if (gamma.size() != 3 * keys.size() || !std::is_sorted(keys.begin(), keys.end()))
     throw InputError("checkpoint: corrupt warm-start cache");

@@ -97,9 +97,9 @@ struct CoronaInfo {
 class CesForceField : public ForceField {
  public:
   explicit CesForceField(const CesMachine& m) : m_(m) {}
-  void apply(const BodyArrays& bodies, double t, real dt, Vec3* force, Vec3* torque) override;
+  void apply(const BodyArrays& bodies, const StepContext& step, Vec3* force, Vec3* torque) override;
   // On a device backend with the CES kernels (CesDevice): the same forces, computed there.
-  bool applyOnDevice(const DeviceBodyRefs& bodies, double t, real dt, Vec3* force, Vec3* torque) override;
+  bool applyOnDevice(const DeviceBodyRefs& bodies, const StepContext& step, Vec3* force, Vec3* torque) override;
 
  private:
   const CesMachine& m_;
@@ -110,7 +110,7 @@ class CesForceField : public ForceField {
 class DrumDrive : public RowProvider {
  public:
   DrumDrive(int body, Vec3 centre, double omega) : body_(body), centre_(centre), omega_(omega) {}
-  void rows(const BodyArrays& bodies, double t, real dt, std::vector<ConstraintRow>& out) override;
+  void rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) override;
   void impulses(const real* lambda, size_t count) override;
   bool bodiesRead(std::vector<int32_t>& ids) const override {  // the drum alone
     ids.push_back(body_);
@@ -123,7 +123,7 @@ class DrumDrive : public RowProvider {
   int body_;
   Vec3 centre_;
   double omega_;
-  real dt_ = 0;
+  real dt_ = 0;  // the step of the last rows() (StepContext::dt), for impulses(): torque = impulse / h
   double torque_ = 0;
 };
 
@@ -136,7 +136,7 @@ class CesMachine {
   CesMachine(const CesConfig& cfg, System& sys);
 
   void step();
-  double time() const { return double(steps_) * cfg_.dt; }
+  double time() const { return double(steps_) * cfg_.step.dt; }
   int64_t steps() const { return steps_; }
   const CesConfig& config() const { return cfg_; }
   System& system() { return sys_; }

@@ -7,6 +7,7 @@
 
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/math.h"
+#include "chrono_like/base/step_context.h"
 
 namespace dvi {
 
@@ -24,16 +25,16 @@ struct DeviceBodyRefs {
 };
 
 // Adds forces and torques (world frame, N and N m, acting at the centre of mass) to every body it
-// models. Called once per step in IntegrateForces, before the velocities are updated. t is the time
-// at the start of the step.
+// models. Called once per step in IntegrateForces, before the velocities are updated, with the step's context
+// (step.t: the time at the start of the step; step.dt: h).
 class ForceField {
  public:
   virtual ~ForceField() = default;
-  virtual void apply(const BodyArrays& bodies, double t, real dt, Vec3* force, Vec3* torque) = 0;
+  virtual void apply(const BodyArrays& bodies, const StepContext& step, Vec3* force, Vec3* torque) = 0;
   // A device backend first offers the field its device arrays (force, torque: device pointers, one per body,
   // to add to). true: applied there, no host round trip; false (the default): the backend copies the bodies
   // to the host and calls apply().
-  virtual bool applyOnDevice(const DeviceBodyRefs& /*bodies*/, double /*t*/, real /*dt*/, Vec3* /*force*/,
+  virtual bool applyOnDevice(const DeviceBodyRefs& /*bodies*/, const StepContext& /*step*/, Vec3* /*force*/,
                              Vec3* /*torque*/) {
     return false;
   }

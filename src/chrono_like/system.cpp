@@ -117,10 +117,11 @@ void validateShape(const ShapeDesc& d, int body_index) {
 
 System::System(SystemConfig config, CollisionFactory bullet_collision)
     : config_(config), problem_(std::make_unique<ContactProblem>()) {
-  if (!(config_.dt > 0) || !std::isfinite(config_.dt)) throw InputError("time step dt must be positive, got " + std::to_string(config_.dt));
-  if (config_.solver_settings.max_iterations < 0) throw InputError("solver iterations must be >= 0");
-  if (config_.collision == CollisionBackend::Native)
-    collision_ = makeNativeCollision(config_.broadphase);
+  if (!(real(config_.step.dt) > 0) || !std::isfinite(real(config_.step.dt)))
+    throw InputError("time step dt must be positive, got " + std::to_string(real(config_.step.dt)));
+  if (config_.solver.max_iterations < 0) throw InputError("solver iterations must be >= 0");
+  if (config_.collision.backend == CollisionBackend::Native)
+    collision_ = makeNativeCollision(config_.collision.broadphase);
   else if (bullet_collision)
     collision_ = bullet_collision();
   else
@@ -173,7 +174,7 @@ int System::addBody(const BodyDesc& d) {
   bodies_.inv_mass[n] = immovable ? 0 : 1 / d.mass;
   bodies_.inv_inertia[n] = immovable ? Vec3{0, 0, 0} : Vec3{1 / d.inertia.x, 1 / d.inertia.y, 1 / d.inertia.z};
   bodies_.force[n] = bodies_.torque[n] = Vec3{0, 0, 0};
-  bodies_.gravity[n] = d.has_gravity ? d.gravity : config_.gravity;
+  bodies_.gravity[n] = d.has_gravity ? d.gravity : config_.step.gravity;
   bodies_.friction[n] = d.friction;
   bodies_.flags[n] = d.flags;
   bodies_.shape_start[n] = int32_t(shapes_.count());
@@ -215,9 +216,9 @@ bool System::planParts() {
   part(StagePart::ConstraintRows, !row_providers_.empty() || !prune, "no joint or row provider in the scene");
   // Gyroscopic term: only dynamic bodies with non-spherical inertia need it.
   const size_t nb = bodies_.count();
-  const bool gyro = config_.gyroscopic && nb > 0 && (!prune || hasGyroscopicBodies());
+  const bool gyro = config_.step.gyroscopic && nb > 0 && (!prune || hasGyroscopicBodies());
   part(StagePart::Gyroscopic, gyro,
-       !config_.gyroscopic ? "switched off (SystemConfig::gyroscopic)" : "every dynamic body has spherical inertia");
+       !config_.step.gyroscopic ? "switched off (SystemConfig::step.gyroscopic)" : "every dynamic body has spherical inertia");
   // MPR: the shape types present decide whether any pair can need it (pairUsesMpr). It is a per-pair choice of
   // the narrow phase, not a switch: prune = false does not force it on pairs with a closed form.
   for (; typed_shapes_ < shapes_.count(); ++typed_shapes_) shape_types_ |= 1u << unsigned(shapes_.shape[typed_shapes_].type);
@@ -225,9 +226,9 @@ bool System::planParts() {
   for (int a = 0; a < int(ShapeType::Count); ++a)
     for (int b = a; b < int(ShapeType::Count); ++b)
       if ((shape_types_ >> a & 1u) && (shape_types_ >> b & 1u) && pairUsesMpr(ShapeType(a), ShapeType(b))) mpr = true;
-  if (config_.collision == CollisionBackend::Bullet) mpr = false;
+  if (config_.collision.backend == CollisionBackend::Bullet) mpr = false;
   part(StagePart::Mpr, mpr,
-       config_.collision == CollisionBackend::Bullet ? "Bullet's collision backend (GJK/EPA)"
+       config_.collision.backend == CollisionBackend::Bullet ? "Bullet's collision backend (GJK/EPA)"
                                                      : "every pair of shape types in the scene has a closed form");
   part(StagePart::RollingSpinningRows, false, "not in the engine: no rolling or spinning friction (Bullet's is not imported)");
   return gyro;
@@ -235,6 +236,7 @@ bool System::planParts() {
 
 void System::step() {
   stats_ = StepStats{};
+  beginStep();
   // The stages read omp_get_max_threads(); the caller's setting is restored after the step.
   const int caller_threads = omp_get_max_threads();
   omp_set_num_threads(effectiveThreads());
@@ -245,18 +247,17 @@ void System::step() {
   buildAndSolve();
   integrate();
   omp_set_num_threads(caller_threads);
-  time_ += config_.dt;
-  ++steps_;
+  endStep();
 }
 
 void System::integrateForces() {
   const int64_t n = int64_t(bodies_.count());
   v_free_.resize(size_t(n));
   w_free_.resize(size_t(n));
-  const real h = config_.dt;
+  const real h = ctx_.dt;
   const bool gyro = stats_.part_ran[int(StagePart::Gyroscopic)];
   const bool skip_spherical = config_.prune;
-  for (const auto& f : fields_) f->apply(bodies_, time_, h, bodies_.force.data(), bodies_.torque.data());
+  for (const auto& f : fields_) f->apply(bodies_, ctx_, bodies_.force.data(), bodies_.torque.data());
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i)
     integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i],
@@ -267,7 +268,7 @@ void System::integrateForces() {
 void System::detectCollisions() {
   CollisionTimes t;
   collision_->setFreeVelocities(v_free_.data(), w_free_.data());
-  collision_->detect(bodies_, shapes_, collisionSettings(config_), contacts_, t);
+  collision_->detect(bodies_, shapes_, config_.collision, ctx_, contacts_, t);
   stats_.stage_seconds[int(StageType::ComputeAabbs)] = t.aabbs;
   stats_.stage_seconds[int(StageType::BroadPhase)] = t.broad;
   stats_.stage_seconds[int(StageType::NarrowPhase)] = t.narrow;
@@ -284,7 +285,7 @@ void System::collectRows() {
   provider_rows_.clear();
   for (const auto& p : row_providers_) {  // each provider appends its rows; remember how many
     const size_t n0 = rows_.size();
-    p->rows(bodies_, time_ + config_.dt, config_.dt, rows_);
+    p->rows(bodies_, ctx_, rows_);
     provider_rows_.push_back(rows_.size() - n0);
   }
   if (rows_.size() != before) row_lambda_.clear();  // the rows changed: no warm start for them
@@ -311,7 +312,7 @@ void System::buildAndSolve() {
   }
   timed(stats_, StageType::BuildRows, [&] {
     real max_pen = 0, max_mu = 0;
-    const FrictionCombine rule = config_.friction_combine;
+    const FrictionCombine rule = config_.collision.friction_combine;
 #pragma omp parallel for schedule(static) reduction(max : max_pen, max_mu)
     for (int64_t k = 0; k < nc; ++k) {
       real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
@@ -331,19 +332,19 @@ void System::buildAndSolve() {
     stats_.part_reason[int(StagePart::FrictionRows)] =
         nc == 0 ? "no contacts" : normal_only ? "no contact with mu > 0 this step" : nullptr;
     ContactProblemSettings ps;
-    ps.dt = config_.dt;
-    ps.recovery_rel = config_.recovery_rel;
+    ps.dt = ctx_.dt;
+    ps.solver = config_.solver;
     ps.threads = omp_get_max_threads();
     ps.normal_only = normal_only;
-    ps.float_jacobians = config_.solver == SolverType::APGD && floatStorage(config_.solver_settings, false) &&
+    ps.float_jacobians = config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) &&
                          !std::is_same_v<real, float>;
     problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_);
   });
-  if (config_.warm_start && int64_t(row_lambda_.size()) == nrows)
+  if (config_.solver.warm_start && int64_t(row_lambda_.size()) == nrows)
     for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(3 * nc + i)] = row_lambda_[size_t(i)];
-  if (!config_.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::warm_start)");
+  if (!config_.solver.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
   else if (prev_keys_.empty()) leaveOut(StageType::WarmStart, "no contacts in the previous step");
-  if (config_.warm_start && !prev_keys_.empty()) {
+  if (config_.solver.warm_start && !prev_keys_.empty()) {
     timed(stats_, StageType::WarmStart, [&] {
 #pragma omp parallel for schedule(static)
       for (int64_t k = 0; k < nc; ++k) {
@@ -364,11 +365,11 @@ void System::buildAndSolve() {
       x = x_.data();
     }
     SolverStats s;
-    switch (config_.solver) {
-      case SolverType::Jacobi: s = solveJacobi(*problem_, x, config_.solver_settings); break;
-      case SolverType::GaussSeidel: s = problem_->solveGaussSeidel(x, config_.solver_settings); break;
-      case SolverType::APGD: s = solveApgd(*problem_, x, config_.solver_settings); break;
-      case SolverType::BB: s = solveBB(*problem_, x, config_.solver_settings); break;
+    switch (config_.solver.type) {
+      case SolverType::Jacobi: s = solveJacobi(*problem_, x, config_.solver); break;
+      case SolverType::GaussSeidel: s = problem_->solveGaussSeidel(x, config_.solver); break;
+      case SolverType::APGD: s = solveApgd(*problem_, x, config_.solver); break;
+      case SolverType::BB: s = solveBB(*problem_, x, config_.solver); break;
     }
     if (problem_->normalOnly()) problem_->fromSolverLayout(x, gamma_.data());
     solution_ = x;
@@ -402,7 +403,7 @@ void System::integrate() {
     problem_->applyImpulses(solution_, bodies_.vel.data(), bodies_.omega.data());
   });
   timed(stats_, StageType::IntegratePositions, [&] {
-    const real h = config_.dt;
+    const real h = ctx_.dt;
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < n; ++i) {
       integrateBodyPosition(bodies_.pos[i], bodies_.rot[i], bodies_.vel[i], bodies_.omega[i], bodies_.flags[i], h);
@@ -415,7 +416,7 @@ Vec3 System::contactForce(size_t k) const {
   Vec3 u, w;
   tangentBasis(contacts_.normal[k], u, w);
   const real* g = &gamma_[3 * k];
-  return (contacts_.normal[k] * g[0] + u * g[1] + w * g[2]) / config_.dt;
+  return (contacts_.normal[k] * g[0] + u * g[1] + w * g[2]) / real(config_.step.dt);
 }
 
 uint64_t System::stateHash() const {

@@ -19,6 +19,7 @@
 
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/errors.h"
+#include "chrono_like/base/step_context.h"
 #include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/collision.h"
 #include "chrono_like/force_field.h"
@@ -58,53 +59,62 @@ constexpr int kStagePartCount = int(StagePart::Count);
 const char* stagePartName(StagePart p);  // e.g. "BuildRows.FrictionRows"
 StageType stageOfPart(StagePart p);
 
-enum class CollisionBackend { Native, Bullet };
-enum class FrictionCombine { Product, Min, Average };  // Product is Bullet's rule
+// The System's configuration, in parts (in the manner of Jolt's PhysicsSettings): the step, the collision
+// pipeline (collision/collision.h: CollisionSettings), the solver (solver/solver.h: SolverSettings), the GPU
+// backend's tuning, and how the CPU stages run. Each setting is declared once, here or in those headers; scene
+// files (io/scene.h: SceneSettings holds a SystemConfig), CES machines (ces/ces_config.h: CesConfig holds the step
+// and solver parts) and the command line write into these fields. docs/ARCHITECTURE.md ("Configuration") lists
+// who reads what.
+
+// The time step and the forces every body feels.
+struct StepSettings {
+  // [s] the step h; must be > 0 and finite. Default 1e-3. Held in double so that a machine's clock counts in the
+  // step as given (ces/machine.h); the engine steps with real(dt) (StepContext::dt).
+  double dt = 1e-3;
+  // [m/s^2] gravity of every body added without its own (BodyDesc::has_gravity). Default (0, -9.81, 0).
+  Vec3 gravity{0, real(-9.81), 0};
+  // The implicit gyroscopic term omega x I omega for bodies with non-spherical inertia. Default true.
+  bool gyroscopic = true;
+};
+
+// The GPU backend's tuning (gpu/gpu_system.h). None of them changes a result: each pair of choices gives bitwise
+// the same iterates.
+struct GpuTuning {
+  // Run each APGD trial (step, Schur product, test, control) as one captured CUDA graph, launched once per trial;
+  // false launches the kernels one by one (more launch latency). Default true.
+  bool graphs = true;
+  // [blocks] an APGD problem of at most this many blocks (contacts, or row blocks) runs all its trials in one
+  // cooperative kernel (grid-wide barriers between the step, the gather and the fused Schur/test pass; the
+  // control updated in every block), larger ones trial by trial (graphs). 0: never. The default is every size:
+  // on an H100 the persistent kernel was faster from 10k to 1M spheres (docs/GPU_PERFORMANCE.md). Jacobi and BB
+  // always launch kernel by kernel, and so does a device without cooperative launch.
+  int64_t persistent_max_blocks = std::numeric_limits<int64_t>::max();
+  // In the persistent APGD kernel, a problem of at most 2 blocks per thread of its grid (2 blocks of 256 per SM:
+  // ~135,000 blocks on an H100) keeps each thread's iterates and Schur values in registers from trial to trial
+  // instead of reading them again. false: every trial reads its buffers. Default true.
+  bool apgd_register_cache = true;
+  // Float storage (VectorStorage::Float): the Schur product's gather reads each adjacency entry's normal and
+  // lever arm from a 24-byte float record kept in entry order (written once a step by BuildRows), and each body's
+  // inverse mass from a 16-byte record where its world inverse inertia is a multiple of the identity, instead of
+  // each contact's 44-byte Jacobian at random and the 56-byte inverse mass. false: the contact records (for
+  // measuring the difference). Default true.
+  bool entry_gather = true;
+};
 
 struct SystemConfig {
-  real dt = real(1e-3);
-  Vec3 gravity{0, real(-9.81), 0};
-  SolverType solver = SolverType::APGD;
-  SolverSettings solver_settings;
-  int threads = 0;                  // OpenMP threads; 0 = OpenMP's default
-  int min_bodies_per_thread = 256;  // fewer bodies than this per thread: use fewer threads (a small scene
+  StepSettings step;            // dt, gravity, gyroscopic term
+  CollisionSettings collision;  // backend, envelope, speculative contacts, MPR manifold, friction rule, broad phase
+  SolverSettings solver;        // algorithm, stop, warm start, penetration recovery
+  GpuTuning gpu;                // the GPU backend's launch choices
+  int threads = 0;                  // [threads] OpenMP threads of the CPU stages; 0 = OpenMP's default
+  int min_bodies_per_thread = 256;  // [bodies] fewer bodies than this per thread: use fewer threads (a small scene
                                     // costs more in OpenMP barriers than it gains; 1 forces all threads)
-  real envelope_rel = real(0.05);   // collision envelope as a fraction of the smaller shape's size
-  real recovery_rel = real(10);     // largest penetration-recovery speed: recovery_rel x size per second
-  FrictionCombine friction_combine = FrictionCombine::Product;
-  CollisionBackend collision = CollisionBackend::Native;
-  BroadPhaseSettings broadphase;
-  bool warm_start = true;
-  bool gyroscopic = true;           // omega x I omega for bodies with non-spherical inertia
-  bool speculative = true;          // speculative contacts: envelopes grow to the step's sweep (narrowphase.h)
-  // MPR pairs of two flat features (cylinder caps, hull faces, a box face on a cap) get up to 4 more points of
-  // their overlap (mpr.h: mprManifold): without them such stacks tip about MPR's one point and sink.
-  bool mpr_manifold = true;
   // Leave out the stages and rows the scene does not need (docs/MODEL.md §6): the normal row only when no contact
   // of the step has mu > 0, no gyroscopic term for spherical inertia, no row or field round trips without
   // row providers or fields. false runs every one of them (3 rows per contact even for mu = 0, the
   // gyroscopic Newton step for every body, the row and field stages when empty): for benchmarks and tests.
+  // Default true.
   bool prune = true;
-  // GPU backend: run each APGD trial (step, Schur product, test, control) as one captured CUDA graph,
-  // launched once per trial; false launches the kernels one by one (same results, more launch latency).
-  bool gpu_graphs = true;
-  // GPU backend: an APGD problem of at most this many blocks (contacts, or row blocks) runs all its trials in one
-  // cooperative kernel (grid-wide barriers between the step, the gather and the fused Schur/test pass; the
-  // control updated in every block), larger ones trial by trial (gpu_graphs). Both give bitwise the same iterates.
-  // 0: never. The default is every size: on an H100 the persistent kernel was faster from 10k to 1M spheres
-  // (docs/GPU_PERFORMANCE.md). Jacobi and BB always launch kernel by kernel, and so does a device without cooperative
-  // launch.
-  int64_t gpu_persistent_max_blocks = std::numeric_limits<int64_t>::max();
-  // GPU backend: in the persistent APGD kernel, a problem of at most 2 blocks per thread of its grid (2 blocks of
-  // 256 per SM: ~135,000 blocks on an H100) keeps each thread's iterates and Schur values in registers from trial
-  // to trial instead of reading them again (bitwise the same iterates). false: every trial reads its buffers.
-  bool gpu_apgd_register_cache = true;
-  // GPU backend, float storage (VectorStorage::Float): the Schur product's gather reads each adjacency entry's
-  // normal and lever arm from a 24-byte float record kept in entry order (written once a step by BuildRows), and
-  // each body's inverse mass from a 16-byte record where its world inverse inertia is a multiple of the identity,
-  // instead of each contact's 44-byte Jacobian at random and the 56-byte inverse mass (bitwise the same sums).
-  // false: the contact records (for measuring the difference).
-  bool gpu_entry_gather = true;
 };
 
 // A shape as given to addBody: the record (body index ignored) and, for a convex hull, its points.
@@ -202,17 +212,6 @@ struct ConvergenceLog {
   }
 };
 
-// The part of the configuration the collision backends read (collision.h).
-inline CollisionSettings collisionSettings(const SystemConfig& c) {
-  CollisionSettings s;
-  s.dt = c.dt;
-  s.envelope_rel = c.envelope_rel;
-  s.speculative = c.speculative;
-  s.mpr_manifold = c.mpr_manifold;
-  s.pair_margin = c.broadphase.pair_margin;
-  return s;
-}
-
 class ContactProblem;
 
 class System {
@@ -229,7 +228,7 @@ class System {
   // InputError naming the problem. Returns the body index.
   int addBody(const BodyDesc& desc);
 
-  virtual void step();                 // one step of config().dt
+  virtual void step();                 // one step of config().step.dt
   void advance(int steps) { for (int i = 0; i < steps; ++i) step(); }
 
   const SystemConfig& config() const { return config_; }
@@ -244,6 +243,8 @@ class System {
   // Every step's solve since construction: how many missed the tolerance, the worst relative residual.
   const ConvergenceLog& convergence() const { return convergence_; }
   double time() const { return time_; }
+  // The context of the step running now, or of the last one between steps (StepContext).
+  const StepContext& stepContext() const { return ctx_; }
   int64_t stepCount() const { return steps_; }
   virtual std::string backendName() const { return "cpu"; }
   virtual std::string deviceName() const;
@@ -274,6 +275,13 @@ class System {
   uint64_t stateHash() const;
 
  protected:
+  // The step's context from the configuration and the clock (every backend's step() starts with it), and the
+  // clock advanced by it (every step() ends with it).
+  void beginStep() { ctx_ = makeStepContext(real(config_.step.dt), time_, steps_); }
+  void endStep() {
+    time_ += double(ctx_.dt);
+    ++steps_;
+  }
   // The stages; a GPU subclass overrides them with device versions.
   virtual void integrateForces();
   virtual void detectCollisions();  // ComputeAabbs + BroadPhase + NarrowPhase
@@ -323,6 +331,7 @@ class System {
   uint32_t shape_types_ = 0;                // bit t: the scene has a shape of type t
   StepStats stats_;
   ConvergenceLog convergence_;
+  StepContext ctx_;                         // of this step (beginStep)
   double time_ = 0;
   int64_t steps_ = 0;
 };

@@ -369,7 +369,7 @@ struct NarrowArgs {
   real envelope_rel;
   real h;
   int shift;      // of the pair keys (packPair)
-  bool manifold;  // SystemConfig::mpr_manifold
+  bool manifold;  // CollisionSettings::mpr_manifold
 };
 
 struct PairPoses {
@@ -658,7 +658,7 @@ void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
   if (n == 0) return;
   aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(
       n, d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(), d.bodies.v_free.data(),
-      d.bodies.w_free.data(), d.shapes.hull.data(), cfg.envelope_rel, cfg.speculative ? cfg.dt : real(0), d.shapes.sweep.data(),
+      d.bodies.w_free.data(), d.shapes.hull.data(), cfg.collision.envelope_rel, cfg.collision.speculative ? real(cfg.step.dt) : real(0), d.shapes.sweep.data(),
       d.shapes.aabb.data());
   DVI_CUDA_LAUNCH("aabbKernel");
 }
@@ -849,7 +849,7 @@ void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats,
   BroadScratch& B = d.broad;
   d.pairs = 0;
   if (n < 2) return;
-  const BroadPhaseSettings s = cfg.broadphase;
+  const BroadPhaseSettings s = cfg.collision.broadphase;
   const Aabb* box = boxes ? boxes : d.shapes.aabb.data();
   const Shape* shapes = d.shapes.shape.data();
   const BroadParams P = classifyShapes(d, s, n, box, shapes);
@@ -873,7 +873,7 @@ bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg) {
   const int n = int(d.shapes.count);
   BroadScratch& B = d.broad;
   cudaStream_t st = d.stream;
-  const real f = cfg.broadphase.pair_margin;
+  const real f = cfg.collision.broadphase.pair_margin;
   if (f > real(0) && B.built && int64_t(B.fat.size()) == n && n >= 2) {
     B.moved.resize(1);
     DVI_CUDA(cudaMemsetAsync(B.moved.data(), 0, sizeof(int32_t), st));
@@ -919,10 +919,10 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
                d.bodies.w_free.data(),
                d.shapes.hull.data(),
                d.shapes.sweep.data(),
-               cfg.envelope_rel,
-               cfg.dt,
+               cfg.collision.envelope_rel,
+               real(cfg.step.dt),
                d.pair_shift,
-               cfg.mpr_manifold};
+               cfg.collision.mpr_manifold};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));

@@ -139,7 +139,7 @@ struct SolverScratch {
   DeviceBuffer<uint32_t> adj_key{"adjacency keys"}, adj_key_sorted{"adjacency sorted keys"};
   DeviceBuffer<int32_t> adj_val{"adjacency values"}, adj_val_sorted{"adjacency sorted values"};
   DeviceBuffer<int32_t> adj_off{"adjacency offsets"};
-  // SystemConfig::gpu_entry_gather: each sorted entry's side of the float Jacobian, and the bodies' isotropic
+  // GpuTuning::entry_gather: each sorted entry's side of the float Jacobian, and the bodies' isotropic
   // inverse masses (jacobian.h: EntryJacobianF, BodyInverseIso)
   DeviceBuffer<EntryJacobianF> entry_jac{"adjacency entry jacobians (float)"};
   DeviceBuffer<BodyInverseIso> inv_iso{"body inverse masses (isotropic form)"};
@@ -188,7 +188,7 @@ struct DeviceState {
   bool keys_unsorted = false;
   size_t row_count = 0;                  // constraint rows this step (before padding)
   bool normal_only = false;              // this step's CCP has the contacts' normal rows only (jacobian.h)
-  bool entry_gather = false;             // SystemConfig::gpu_entry_gather of this step's BuildRows
+  bool entry_gather = false;             // GpuTuning::entry_gather of this step's BuildRows
   bool all_frictional = false;           // every uploaded body has friction > 0 (GpuSystem::uploadIfNeeded)
   int64_t contact_blocks = 0;            // contact blocks: contacts, or ceil(contacts / 3) when normal_only
   std::vector<ConstraintRow> host_rows;  // host staging of the padded rows

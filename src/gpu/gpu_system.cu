@@ -119,7 +119,7 @@ GpuSystem::GpuSystem(SystemConfig config, CollisionFactory bullet_collision)
     : System(config, bullet_collision), d_(std::make_unique<DeviceState>()) {
   std::string why;
   if (!queryDevice(&why)) throw InputError("GPU backend: " + why);
-  if (config_.solver == SolverType::GaussSeidel)
+  if (config_.solver.type == SolverType::GaussSeidel)
     throw InputError("GPU backend: Gauss-Seidel is sequential; use jacobi, apgd or bb on the GPU");
   DVI_CUDA(cudaStreamCreateWithFlags(&d_->stream, cudaStreamNonBlocking));
   {
@@ -212,6 +212,7 @@ void GpuSystem::uploadIfNeeded() {
 
 void GpuSystem::step() {
   stats_ = StepStats{};
+  beginStep();
   uploadIfNeeded();
   planParts();
   cudaEvent_t* ev = d_->ev;
@@ -227,8 +228,7 @@ void GpuSystem::step() {
     DVI_CUDA(cudaEventElapsedTime(&ms, ev[s], ev[s + 1]));
     stats_.stage_seconds[s] = double(ms) * 1e-3;
   }
-  time_ += config_.dt;
-  ++steps_;
+  endStep();
 }
 
 void GpuSystem::integrateForces() {
@@ -249,7 +249,7 @@ void GpuSystem::integrateForces() {
     deviceBodies(refs);
     std::vector<ForceField*> host_fields;
     for (const auto& f : fields_)
-      if (!f->applyOnDevice(refs, time_, config_.dt, b.field_force.data(), b.field_torque.data()))
+      if (!f->applyOnDevice(refs, ctx_, b.field_force.data(), b.field_torque.data()))
         host_fields.push_back(f.get());
     if (!host_fields.empty()) {
       b.pos.download(bodies_.pos, b.count, s);
@@ -258,7 +258,7 @@ void GpuSystem::integrateForces() {
       b.omega.download(bodies_.omega, b.count, s);
       b.field_force.download(field_force_, size_t(n), s);  // the device fields' sums, synchronous
       b.field_torque.download(field_torque_, size_t(n), s);
-      for (ForceField* f : host_fields) f->apply(bodies_, time_, config_.dt, field_force_.data(), field_torque_.data());
+      for (ForceField* f : host_fields) f->apply(bodies_, ctx_, field_force_.data(), field_torque_.data());
       b.field_force.upload(field_force_, s);
       b.field_torque.upload(field_torque_, s);
     }
@@ -270,7 +270,7 @@ void GpuSystem::integrateForces() {
   integrateForcesKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(
       n, b.vel.data(), b.omega.data(), b.rot.data(), b.inv_mass.data(), b.inv_inertia.data(), b.force.data(),
       b.torque.data(), b.gravity.data(), b.flags.data(), stats_.part_ran[int(StagePart::Gyroscopic)], config_.prune,
-      config_.dt, b.v_free.data(), b.w_free.data());
+      ctx_.dt, b.v_free.data(), b.w_free.data());
   DVI_CUDA_LAUNCH("integrateForcesKernel");
 }
 
@@ -335,10 +335,10 @@ void GpuSystem::buildAndSolve() {
   stats_.part_reason[int(StagePart::FrictionRows)] =
       nc == 0 ? "no contacts" : d_->normal_only ? "no contact with mu > 0 this step" : nullptr;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
-  const bool warm = config_.warm_start && d_->prev_count > 0;
-  warmStart(*d_, config_.warm_start, config_.warm_start ? row_lambda_ : std::vector<real>{});
+  const bool warm = config_.solver.warm_start && d_->prev_count > 0;
+  warmStart(*d_, config_.solver.warm_start, config_.solver.warm_start ? row_lambda_ : std::vector<real>{});
   stats_.stage_ran[int(StageType::WarmStart)] = warm;
-  if (!config_.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::warm_start)");
+  if (!config_.solver.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
   else if (!warm) leaveOut(StageType::WarmStart, "no contacts in the previous step");
   DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
   recordSolve(solveCcp(*d_, config_));
@@ -365,7 +365,7 @@ void GpuSystem::integrate() {
   DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegrateVelocities) + 1], d_->stream));
   if (n > 0) {
     integratePositionsKernel<<<blocksFor(n), kBlock, 0, d_->stream>>>(n, b.pos.data(), b.rot.data(), b.vel.data(),
-                                                                      b.omega.data(), b.flags.data(), config_.dt,
+                                                                      b.omega.data(), b.flags.data(), ctx_.dt,
                                                                       b.force.data(), b.torque.data());
     DVI_CUDA_LAUNCH("integratePositionsKernel");
   }

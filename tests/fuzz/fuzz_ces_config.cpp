@@ -31,8 +31,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   return fuzz::run("fuzz_ces_config", [&] {
     const dvi::ces::CesConfig cfg = dvi::ces::parseCesDocument(doc, sets, "fuzz.json");
     // what the machine relies on
-    if (!(cfg.dt > 0 && std::isfinite(cfg.duration) && cfg.duration >= 0 && !cfg.materials.empty()))
+    if (!(cfg.step.dt > 0 && std::isfinite(cfg.duration) && cfg.duration >= 0 && !cfg.materials.empty()))
       fuzz::finding("fuzz_ces_config", "an accepted configuration without a positive time step or a material");
-    (void)dvi::checkedStepCount(cfg.duration, cfg.dt, "fuzz");
+    (void)dvi::checkedStepCount(cfg.duration, cfg.step.dt, "fuzz");
   });
 }

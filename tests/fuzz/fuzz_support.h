@@ -58,7 +58,7 @@ int run(const char* target, F&& f) {
 // The oracle for a loaded scene: a step count, and every body imports into a System.
 inline void checkScene(const char* target, const dvi::Scene& scene) {
   (void)scene.settings.stepCount();  // may refuse (InputError), must not overflow
-  dvi::SystemConfig cfg = dvi::systemConfigFromSettings(scene.settings);
+  dvi::SystemConfig cfg = scene.settings.system;
   cfg.threads = 1;
   dvi::System system(cfg);
   try {

@@ -128,8 +128,8 @@ class BulletCollision final : public CollisionDetector {
   ~BulletCollision() override { destroyWorld(); }
   const char* name() const override { return "bullet"; }
 
-  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, ContactArrays& out,
-              CollisionTimes& times) override;
+  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, const StepContext& step,
+              ContactArrays& out, CollisionTimes& times) override;
 
   // Distance up to which points of objects i and j are generated and kept in their manifold.
   btScalar pairThreshold(int i, int j) const {
@@ -387,7 +387,7 @@ void BulletCollision::rebuild(const BodyArrays& bodies, const ShapeArrays& shape
 }
 
 void BulletCollision::detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
-                             ContactArrays& out, CollisionTimes& times) {
+                             const StepContext& /*step*/, ContactArrays& out, CollisionTimes& times) {
   const auto t0 = Clock::now();
   if (needsRebuild(bodies, shapes, config)) rebuild(bodies, shapes, config);
   updateAabbs(bodies, shapes, config.envelope_rel);

@@ -172,7 +172,7 @@ BodyDesc bodyDescFromBullet(const btRigidBody& body) {
 std::vector<int> importBullet(System& system, const std::vector<btRigidBody*>& bodies) {
   std::vector<int> ids;
   ids.reserve(bodies.size());
-  const Vec3 g = system.config().gravity;
+  const Vec3 g = system.config().step.gravity;
   for (size_t i = 0; i < bodies.size(); ++i) {
     if (!bodies[i]) throw InputError("rigid body " + std::to_string(i) + " is null");
     BodyDesc d;

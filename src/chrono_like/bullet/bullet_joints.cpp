@@ -254,14 +254,14 @@ JointBody BulletJoints::side(const BodyArrays& bodies, const btRigidBody* body) 
   return s;
 }
 
-void BulletJoints::rows(const BodyArrays& bodies, double /*t*/, real dt, std::vector<ConstraintRow>& out) {
+void BulletJoints::rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) {
   row_joint_.clear();
   for (size_t k = 0; k < joints_.size(); ++k) {
     btTypedConstraint* c = joints_[k];
     if (!c->isEnabled()) continue;
     const JointSpec j = jointSpecFromBullet(*c);
     const size_t before = out.size();
-    jointRows(j, side(bodies, j.a), side(bodies, j.b), dt, settings_, out);
+    jointRows(j, side(bodies, j.a), side(bodies, j.b), step.dt, settings_, out);
     row_joint_.resize(out.size(), int(k));
     (void)before;
   }

@@ -40,7 +40,7 @@ class BulletJoints final : public RowProvider {
   size_t size() const { return joints_.size(); }
   const std::vector<btTypedConstraint*>& constraints() const { return joints_; }
 
-  void rows(const BodyArrays& bodies, double t, real dt, std::vector<ConstraintRow>& out) override;
+  void rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) override;
   void impulses(const real* lambda, size_t count) override;
 
   // Spring forces of the 6-DoF springs, added to force/torque (system body indices).

@@ -109,8 +109,8 @@ DviDynamicsWorld::~DviDynamicsWorld() { releaseManifolds(); }
 
 std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
   SystemConfig c = config_.system;
-  c.gravity = fromBt(m_gravity);
-  if (!(c.dt > 0)) c.dt = real(1) / 60;
+  c.step.gravity = fromBt(m_gravity);
+  if (!(real(c.step.dt) > 0)) c.step.dt = real(1) / 60;
   std::unique_ptr<System> s;
   const bool gpu = config_.backend == WorldBackend::Gpu ||
                    (config_.backend == WorldBackend::Auto && config_.gpu_available && config_.gpu_available(nullptr));
@@ -220,7 +220,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   for (btRigidBody* b : pending_) addToSystem(b);
   pending_.clear();
 
-  system_->mutableConfig().dt = real(h);
+  system_->mutableConfig().step.dt = real(h);
   BodyArrays& B = system_->mutableBodies();
   for (size_t i = 0; i < tracked_.size(); ++i) {
     Tracked& t = tracked_[i];

@@ -44,7 +44,7 @@ enum class WorldBackend { Cpu, Gpu, Auto };
 
 struct DviWorldConfig {
   WorldBackend backend = WorldBackend::Cpu;
-  SystemConfig system;       // solver, iterations, threads, envelope...; dt and gravity come from Bullet
+  SystemConfig system;       // solver, threads, collision...; step.dt and step.gravity come from Bullet
   JointSettings joints;
   bool fill_manifolds = true;  // mirror the contacts into Bullet's persistent manifolds (dispatcher)
   // The GPU backend for WorldBackend::Gpu and Auto, given by the app (gpu/gpu_factory.h: dvi::makeGpuSystem and

@@ -28,17 +28,17 @@ class NativeCollision final : public CollisionDetector {
   explicit NativeCollision(const BroadPhaseSettings& s) : broad_(s) {}
   const char* name() const override { return "native"; }
 
-  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, ContactArrays& out,
-              CollisionTimes& times) override {
+  void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config, const StepContext& step,
+              ContactArrays& out, CollisionTimes& times) override {
     const bool free_given = v_free_ && w_free_;
     const Vec3* vel = free_given ? v_free_ : bodies.vel.data();
     const Vec3* omega = free_given ? w_free_ : bodies.omega.data();
     double t0 = omp_get_wtime();
-    computeAabbs(bodies, shapes, config, vel, omega);
+    computeAabbs(bodies, shapes, config, step, vel, omega);
     double t1 = omp_get_wtime();
     broadPhase(bodies, shapes, config, times);
     double t2 = omp_get_wtime();
-    narrowPhase(bodies, shapes, config, vel, omega, out);
+    narrowPhase(bodies, shapes, config, step, vel, omega, out);
     double t3 = omp_get_wtime();
     times.aabbs = t1 - t0;
     times.broad = t2 - t1;
@@ -49,13 +49,13 @@ class NativeCollision final : public CollisionDetector {
  private:
   // ComputeAabbs: reads bodies.pos/rot, the free velocities, shapes.shape; writes shapes.sweep, shapes.aabb.
   static void computeAabbs(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
-                           const Vec3* vel, const Vec3* omega) {
+                           const StepContext& step, const Vec3* vel, const Vec3* omega) {
     const int64_t ns = int64_t(shapes.count());
     const Shape* sh = shapes.shape.data();
     const Vec3* hull = shapes.hull_points.data();
     shapes.aabb.resize(size_t(ns));
     shapes.sweep.resize(size_t(ns));
-    const real h_sweep = config.speculative ? config.dt : real(0);
+    const real h_sweep = config.speculative ? step.dt : real(0);
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < ns; ++i) {
       const Shape& s = sh[i];
@@ -73,7 +73,7 @@ class NativeCollision final : public CollisionDetector {
                   CollisionTimes& times) {
     const int64_t ns = int64_t(shapes.count());
     const Shape* sh = shapes.shape.data();
-    const real f = config.pair_margin;
+    const real f = config.broadphase.pair_margin;
     const uint8_t* flags = bodies.flags.data();
     bool keep = f > real(0) && built_ && int64_t(fat_.size()) == ns;
     if (keep) {
@@ -103,7 +103,7 @@ class NativeCollision final : public CollisionDetector {
   // NarrowPhase: reads pairs_, poses, velocities, shapes; writes the contact arrays (speculative points of
   // pairs that do not close within the step left out: narrowphase.h keepSpeculative).
   void narrowPhase(const BodyArrays& bodies, const ShapeArrays& shapes, const CollisionSettings& config,
-                   const Vec3* vel, const Vec3* omega, ContactArrays& out) {
+                   const StepContext& step, const Vec3* vel, const Vec3* omega, ContactArrays& out) {
     const Shape* sh = shapes.shape.data();
     const Vec3* hull = shapes.hull_points.data();
     const int64_t np = int64_t(pairs_.size());
@@ -125,7 +125,7 @@ class NativeCollision final : public CollisionDetector {
         int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
         const PairMotion m{bodies.pos[a.body], vel[a.body], omega[a.body],
                            bodies.pos[b.body], vel[b.body], omega[b.body]};
-        n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), config.dt, m);
+        n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), step.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }
     }

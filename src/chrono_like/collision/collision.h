@@ -7,18 +7,31 @@
 #include <memory>
 
 #include "chrono_like/base/data.h"
+#include "chrono_like/base/step_context.h"
 #include "chrono_like/collision/broadphase.h"
 
 namespace dvi {
 
-// What a collision backend reads of the System's configuration (system.h: collisionSettings(SystemConfig)), so
-// that the backends do not depend on the System.
+// Which pipeline finds the contacts: the native one (broad phase broadphase.h, narrow phase narrowphase.h) or
+// Bullet's (bullet/bullet_collision_backend.h: GJK/EPA, made by a factory the caller hands to the System).
+enum class CollisionBackend { Native, Bullet };
+// How the friction coefficients of two bodies combine into a contact's mu. Product is Bullet's rule.
+enum class FrictionCombine { Product, Min, Average };
+
+// The collision part of the System's configuration (system.h: SystemConfig::collision), read by the collision
+// backends and by the System where it fills each contact's mu. The step itself comes with the StepContext.
 struct CollisionSettings {
-  real dt = 0;                // the step (the sweep of speculative contacts and their rule)
-  real envelope_rel = 0;      // SystemConfig::envelope_rel
-  bool speculative = false;   // SystemConfig::speculative
-  bool mpr_manifold = false;  // SystemConfig::mpr_manifold
-  real pair_margin = 0;       // BroadPhaseSettings::pair_margin
+  CollisionBackend backend = CollisionBackend::Native;  // default: native
+  // [1, relative] collision envelope as a fraction of the smaller shape's size: contacts are made up to this
+  // separation. Default 0.05.
+  real envelope_rel = real(0.05);
+  // Speculative contacts: the envelopes grow to the step's sweep of each body (narrowphase.h). Default true.
+  bool speculative = true;
+  // MPR pairs of two flat features (cylinder caps, hull faces, a box face on a cap) get up to 4 more points of
+  // their overlap (mpr.h: mprManifold): without them such stacks tip about MPR's one point and sink. Default true.
+  bool mpr_manifold = true;
+  FrictionCombine friction_combine = FrictionCombine::Product;  // default: Product (Bullet's rule)
+  BroadPhaseSettings broadphase;  // the native broad phase's grid and its pair reuse (broadphase.h)
 };
 
 struct CollisionTimes {
@@ -35,8 +48,9 @@ class CollisionDetector {
   // Reads bodies.{pos, rot, flags}, shapes.shape, shapes.hull_points; writes shapes.aabb and the
   // geometric fields of `out` (shape_a/b, body_a/b, normal, pa, pb, dist, key). The system fills mu and
   // size afterwards. Contacts are ordered by (shape_a, shape_b, feature) whatever the thread count.
+  // step.dt is the sweep of the speculative contacts and their rule.
   virtual void detect(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
-                      ContactArrays& out, CollisionTimes& times) = 0;
+                      const StepContext& step, ContactArrays& out, CollisionTimes& times) = 0;
   // The velocities after this step's forces (the System's v_free, w_free; one per body, valid during the next
   // detect): the native backend's sweeps and speculative-contact rule read them (narrowphase.h). Unset (null):
   // bodies.vel and bodies.omega.

@@ -101,7 +101,7 @@ struct MprDeferred;
 // deep MPR pair is left unfinished: its state goes to *defer, the answer is np::kMprDeferred (-1), and
 // finishDeferredMpr completes it (the GPU narrow phase runs those apart, a lane per restart: mpr.h).
 // `manifold`: MPR pairs of two flat features get up to 4 more points (mpr.h: mprManifold;
-// SystemConfig::mpr_manifold).
+// CollisionSettings::mpr_manifold).
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
                          const Vec3* hull_points, real envelope, ContactPoint* out,
                          np::MprDeferred* defer = nullptr, bool manifold = true);

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "chrono_like/base/errors.h"
@@ -154,6 +155,17 @@ struct JsonCheck {
     for (const char* c : choices) {
       if (s == c) return s;
       list += std::string(list.empty() ? "" : "|") + c;
+    }
+    fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
+  }
+  // A string naming one of `choices` (name, value): its value; else the same message as oneOf.
+  template <class E>
+  E named(const json& v, const std::string& path, std::initializer_list<std::pair<const char*, E>> choices) const {
+    const std::string s = string(v, path);
+    std::string list;
+    for (const auto& c : choices) {
+      if (s == c.first) return c.second;
+      list += std::string(list.empty() ? "" : "|") + c.first;
     }
     fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
   }

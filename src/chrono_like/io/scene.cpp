@@ -112,73 +112,75 @@ Scene::~Scene() = default;
 
 int64_t SceneSettings::stepCount() const {
   if (steps >= 0) return steps;
-  return checkedStepCount(double(time), double(dt), "settings.time");
+  return checkedStepCount(double(time), system.step.dt, "settings.time");
 }
 
-SystemConfig systemConfigFromSettings(const SceneSettings& s) {
-  SystemConfig c;
-  c.dt = s.dt;
-  c.gravity = s.gravity;
-  if (s.solver == "jacobi") c.solver = SolverType::Jacobi;
-  else if (s.solver == "gs") c.solver = SolverType::GaussSeidel;
-  else if (s.solver == "bb") c.solver = SolverType::BB;
-  else c.solver = SolverType::APGD;
-  c.solver_settings.max_iterations = s.max_iterations >= 0 ? s.max_iterations
-                                     : s.iterations >= 0   ? s.iterations
-                                                           : kDefaultMaxIterations;
-  c.solver_settings.tolerance = s.tolerance >= 0                                ? s.tolerance
-                                : (s.iterations >= 0 && s.max_iterations < 0) ? real(0)  // a fixed count
-                                                                                : kDefaultTolerance;
-  c.solver_settings.storage = s.storage == "real"    ? VectorStorage::Real
-                              : s.storage == "float" ? VectorStorage::Float
-                                                     : VectorStorage::Auto;
-  c.threads = s.threads;
-  c.envelope_rel = s.envelope_rel;
-  c.recovery_rel = s.recovery_rel;
-  c.friction_combine = s.friction_combine == "min"       ? FrictionCombine::Min
-                       : s.friction_combine == "average" ? FrictionCombine::Average
-                                                         : FrictionCombine::Product;
-  c.collision = s.collision == "bullet" ? CollisionBackend::Bullet : CollisionBackend::Native;
-  c.warm_start = s.warm_start;
-  c.speculative = s.speculative;
-  c.mpr_manifold = s.mpr_manifold;
-  return c;
+void SceneSettings::setIterations(int n) {
+  iterations_ = n;
+  if (!max_iterations_given_) system.solver.max_iterations = n;
+  if (!tolerance_given_) system.solver.tolerance = max_iterations_given_ ? kDefaultTolerance : real(0);  // a fixed count
 }
+
+void SceneSettings::setMaxIterations(int n) {
+  system.solver.max_iterations = n;
+  max_iterations_given_ = true;
+  if (!tolerance_given_) system.solver.tolerance = kDefaultTolerance;
+}
+
+void SceneSettings::setTolerance(real tol) {
+  system.solver.tolerance = tol;
+  tolerance_given_ = true;
+}
+
+const char* collisionBackendName(CollisionBackend b) { return b == CollisionBackend::Bullet ? "bullet" : "native"; }
 
 SceneSettings parseSceneSettings(const json& j, const std::string& origin, const std::string& path) {
   const Check c = checkFor<real>(origin);
   SceneSettings s;
+  StepSettings& step = s.system.step;
+  CollisionSettings& col = s.system.collision;
+  SolverSettings& sol = s.system.solver;
   c.object(j, path);
   c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "max_iterations", "tolerance", "storage", "gravity", "friction_combine",
                    "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
                    "speculative", "mpr_manifold", "bullet_length_scale", "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
-  if (j.contains("dt")) s.dt = real(c.positive(j["dt"], at("dt")));
+  if (j.contains("dt")) step.dt = real(c.positive(j["dt"], at("dt")));  // in the engine's precision
   if (j.contains("steps") && j.contains("time")) c.fail(path, "give either steps or time, not both");
   if (j.contains("steps")) s.steps = c.integer(j["steps"], at("steps"), 0, int64_t(1) << 40);
   if (j.contains("time")) s.time = real(c.nonNegative(j["time"], at("time")));
-  if (j.contains("solver")) s.solver = c.oneOf(j["solver"], at("solver"), {"jacobi", "gs", "apgd", "bb"});
-  if (j.contains("iterations")) s.iterations = int(c.integer(j["iterations"], at("iterations"), 0, 1000000));
+  if (j.contains("solver"))
+    sol.type = c.named<SolverType>(j["solver"], at("solver"),
+                                   {{"jacobi", SolverType::Jacobi}, {"gs", SolverType::GaussSeidel},
+                                    {"apgd", SolverType::APGD}, {"bb", SolverType::BB}});
+  if (j.contains("iterations")) s.setIterations(int(c.integer(j["iterations"], at("iterations"), 0, 1000000)));
   if (j.contains("max_iterations"))
-    s.max_iterations = int(c.integer(j["max_iterations"], at("max_iterations"), 1, 1000000));
-  if (j.contains("tolerance")) s.tolerance = real(c.nonNegative(j["tolerance"], at("tolerance")));
-  if (j.contains("storage")) s.storage = c.oneOf(j["storage"], at("storage"), {"auto", "real", "float"});
-  if (j.contains("gravity")) s.gravity = c.vec3(j["gravity"], at("gravity"));
+    s.setMaxIterations(int(c.integer(j["max_iterations"], at("max_iterations"), 1, 1000000)));
+  if (j.contains("tolerance")) s.setTolerance(real(c.nonNegative(j["tolerance"], at("tolerance"))));
+  if (j.contains("storage"))
+    sol.storage = c.named<VectorStorage>(
+        j["storage"], at("storage"),
+        {{"auto", VectorStorage::Auto}, {"real", VectorStorage::Real}, {"float", VectorStorage::Float}});
+  if (j.contains("gravity")) step.gravity = c.vec3(j["gravity"], at("gravity"));
   if (j.contains("friction_combine"))
-    s.friction_combine = c.oneOf(j["friction_combine"], at("friction_combine"), {"product", "min", "average"});
-  if (j.contains("envelope_rel")) s.envelope_rel = real(c.nonNegative(j["envelope_rel"], at("envelope_rel")));
-  if (j.contains("recovery_rel")) s.recovery_rel = real(c.positive(j["recovery_rel"], at("recovery_rel")));
-  if (j.contains("collision")) s.collision = c.oneOf(j["collision"], at("collision"), {"native", "bullet"});
-  if (j.contains("threads")) s.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
+    col.friction_combine = c.named<FrictionCombine>(
+        j["friction_combine"], at("friction_combine"),
+        {{"product", FrictionCombine::Product}, {"min", FrictionCombine::Min}, {"average", FrictionCombine::Average}});
+  if (j.contains("envelope_rel")) col.envelope_rel = real(c.nonNegative(j["envelope_rel"], at("envelope_rel")));
+  if (j.contains("recovery_rel")) sol.recovery_rel = real(c.positive(j["recovery_rel"], at("recovery_rel")));
+  if (j.contains("collision"))
+    col.backend = c.named<CollisionBackend>(j["collision"], at("collision"),
+                                            {{"native", CollisionBackend::Native}, {"bullet", CollisionBackend::Bullet}});
+  if (j.contains("threads")) s.system.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
   if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
-  if (j.contains("warm_start")) s.warm_start = c.boolean(j["warm_start"], at("warm_start"));
-  if (j.contains("speculative")) s.speculative = c.boolean(j["speculative"], at("speculative"));
-  if (j.contains("mpr_manifold")) s.mpr_manifold = c.boolean(j["mpr_manifold"], at("mpr_manifold"));
+  if (j.contains("warm_start")) sol.warm_start = c.boolean(j["warm_start"], at("warm_start"));
+  if (j.contains("speculative")) col.speculative = c.boolean(j["speculative"], at("speculative"));
+  if (j.contains("mpr_manifold")) col.mpr_manifold = c.boolean(j["mpr_manifold"], at("mpr_manifold"));
   if (j.contains("bullet_length_scale"))
     s.bullet_length_scale = real(c.nonNegative(j["bullet_length_scale"], at("bullet_length_scale")));
   if (j.contains("bullet_iterations"))
     s.bullet_iterations = int(c.integer(j["bullet_iterations"], at("bullet_iterations"), 1, 1000000));
-  if (s.steps < 0) checkedStepCount(double(s.time), double(s.dt), origin + ": " + at("time"));
+  if (s.steps < 0) checkedStepCount(double(s.time), step.dt, origin + ": " + at("time"));
   return s;
 }
 
@@ -957,9 +959,10 @@ Scene Scene::fromBulletBuffer(const std::string& bytes, const std::string& origi
     scene.bodies_.push_back(rb);
   }
   scene.settings = SceneSettings{};
-  scene.settings.gravity = Vec3{real(imp.gravity_.x()), real(imp.gravity_.y()), real(imp.gravity_.z())};
+  Vec3& g = scene.settings.system.step.gravity;
+  g = Vec3{real(imp.gravity_.x()), real(imp.gravity_.y()), real(imp.gravity_.z())};
   scene.settings_json_ = json::object();
-  scene.settings_json_["gravity"] = {scene.settings.gravity.x, scene.settings.gravity.y, scene.settings.gravity.z};
+  scene.settings_json_["gravity"] = {g.x, g.y, g.z};
   for (const std::string& o : overrides) scene.applySettingOverride(o);
   return scene;
 }

@@ -27,37 +27,37 @@ class btBulletWorldImporter;
 
 namespace dvi {
 
-// Run settings of a scene (JSON "settings"). Command-line options override them.
+// Run settings of a scene (JSON "settings"). The engine's settings are parsed straight into `system` (the
+// keys dt, gravity, solver, max_iterations, tolerance, storage, warm_start, recovery_rel, friction_combine,
+// envelope_rel, collision, speculative, mpr_manifold, threads; docs/ARCHITECTURE.md, "Configuration", lists the
+// field of each); the run's own (how long, frames, the Bullet peer's) are declared here. Command-line options write into
+// the same fields.
 struct SceneSettings {
-  real dt = real(1e-3);
-  int64_t steps = -1;        // number of steps; -1: from `time`
-  real time = real(1);       // simulated time when steps < 0
-  std::string solver = "apgd";  // jacobi | gs | apgd | bb
-  // Solver stop (SolverSettings): -1 = not given. `iterations` alone is a fixed count (no tolerance);
-  // otherwise the solve stops at `tolerance` (relative residual; default kDefaultTolerance) or after
-  // `max_iterations` (default: `iterations` when given, else kDefaultMaxIterations).
-  int iterations = -1;
-  int max_iterations = -1;
-  real tolerance = -1;
-  std::string storage = "auto";  // auto | real | float (APGD's vectors, VectorStorage)
-  Vec3 gravity{0, real(-9.81), 0};
-  std::string friction_combine = "product";  // product (Bullet's rule) | min | average
-  real envelope_rel = real(0.05);
-  real recovery_rel = real(10);
-  std::string collision = "native";  // native | bullet
-  int threads = 0;                   // 0: OpenMP's default
-  int frames = 0;                    // VTK frames to write
-  bool warm_start = true;
-  bool speculative = true;
-  bool mpr_manifold = true;
-  real bullet_length_scale = 0;      // Bullet peer unit scale; 0: automatic from the body sizes
-  int bullet_iterations = 10;        // Bullet peer sequential-impulse iterations
+  SystemConfig system;       // the System the scene runs on
+  int64_t steps = -1;        // [steps] number of steps; -1: from `time`
+  real time = real(1);       // [s] simulated time when steps < 0
+  int frames = 0;            // VTK frames to write
+  real bullet_length_scale = 0;  // [m per Bullet unit] Bullet peer unit scale; 0: automatic from the body sizes
+  int bullet_iterations = 10;    // Bullet peer sequential-impulse iterations
 
-  int64_t stepCount() const;  // steps, or round(time / dt)
+  int64_t stepCount() const;  // steps, or round(time / system.step.dt)
+
+  // The solver's stop (system.solver.max_iterations and tolerance) from the keys iterations, max_iterations and
+  // tolerance, in any order: `iterations` alone is a fixed count (tolerance 0); otherwise the solve stops at
+  // `tolerance` (default kDefaultTolerance) or after `max_iterations` (default: `iterations` when given, else
+  // kDefaultMaxIterations). The scene parser and the command line both set them through these.
+  void setIterations(int n);
+  void setMaxIterations(int n);
+  void setTolerance(real tol);
+  int iterations() const { return iterations_; }  // `iterations` as given; -1: not given (the Bullet peer's count)
+
+ private:
+  int iterations_ = -1;
+  bool max_iterations_given_ = false, tolerance_given_ = false;
 };
 
-// Fills a SystemConfig from the settings (solver and friction rule names already validated).
-SystemConfig systemConfigFromSettings(const SceneSettings& s);
+// The names the scene files and the command line use for the enumerated settings (the inverses of the parser's).
+const char* collisionBackendName(CollisionBackend b);  // "native" | "bullet"
 
 class Scene {
  public:

@@ -20,6 +20,7 @@
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/hd.h"
 #include "chrono_like/base/math.h"
+#include "chrono_like/base/step_context.h"
 
 namespace dvi {
 
@@ -33,11 +34,12 @@ struct ConstraintRow {
 };
 
 // Produces the rows of this step from the current state (positions, velocities at the start of the
-// step). Called once per step, in BuildRows, before the solve. t is the time at the end of the step.
+// step). Called once per step, in BuildRows, before the solve, with the step's context: step.dt is h (the
+// position-error feedback C / h), step.end() the time at the end of the step (a rheonomic drive's s(t)).
 class RowProvider {
  public:
   virtual ~RowProvider() = default;
-  virtual void rows(const BodyArrays& bodies, double t, real dt, std::vector<ConstraintRow>& out) = 0;
+  virtual void rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) = 0;
   // Called after the solve with the impulses of the rows this provider produced (in order), e.g. to
   // report joint reaction forces or a drive torque. Default: ignore.
   virtual void impulses(const real* /*lambda*/, size_t /*count*/) {}

@@ -71,12 +71,12 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     mu_[k] = contacts.mu[k];
     if (normal_only_) {  // block data per block of three contacts, below
       rhs_[k] = contactNormalVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b]) +
-                contactBias(contacts.dist[k], h, settings.recovery_rel, contacts.size[k]);
+                contactBias(contacts.dist[k], h, settings.solver.recovery_rel, contacts.size[k]);
       continue;
     }
     real* rk = rhs_.data() + 3 * k;
     contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
-    rk[0] += contactBias(contacts.dist[k], h, settings.recovery_rel, contacts.size[k]);
+    rk[0] += contactBias(contacts.dist[k], h, settings.solver.recovery_rel, contacts.size[k]);
     real N[6];
     contactDiagonalBlock(J, inv_[a], inv_[b], N);
     invertSymmetric3(N, binv_.data() + 6 * k);

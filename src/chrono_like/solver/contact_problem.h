@@ -30,11 +30,13 @@
 
 namespace dvi {
 
+// What one build of the problem reads: the step, the solver settings (recovery_rel) and how the System runs
+// this step.
 struct ContactProblemSettings {
-  real dt = real(1e-3);
-  real recovery_rel = real(10);  // largest separating speed asked for a penetration: recovery_rel x size per s
-  int threads = 0;               // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
-                                 // under kSerialContacts contacts solve serially (threads() == 1).
+  real dt = real(1e-3);   // [s] the step h (StepContext::dt)
+  SolverSettings solver;  // the System's (SystemConfig::solver): recovery_rel
+  int threads = 0;        // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
+                          // under kSerialContacts contacts solve serially (threads() == 1).
   // Every contact is frictionless (mu = 0): assemble the normal rows only, packed three per block
   // (jacobian.h); the solution vector is then in the normal layout (toSolverLayout / fromSolverLayout).
   bool normal_only = false;

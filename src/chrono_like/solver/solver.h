@@ -91,13 +91,22 @@ constexpr int kDefaultMaxIterations = 1000;
 // joints and cylinder stacks before 50 iterations with deeper penetrations than the fixed 50 gave (tests).
 constexpr int kDefaultMinIterations = 50;
 
+// The solver part of the System's configuration (system.h: SystemConfig::solver), and what every solver
+// algorithm reads. ContactProblem reads recovery_rel (contact_problem.h).
 struct SolverSettings {
+  SolverType type = SolverType::APGD;  // the algorithm; default APGD
+  // Start each contact's impulse from the last step's impulse of the contact with the same persistent key (and
+  // the constraint rows' from theirs). Default true.
+  bool warm_start = true;
+  // [1/s] largest speed at which a penetration is pushed out: recovery_rel x the contact's size per second (the
+  // right-hand side's max(dist/h, -v_rec), contact_problem.h). Default 10.
+  real recovery_rel = real(10);
   // A solve stops at the first iterate whose relative residual (above) is <= tolerance, or after
   // max_iterations. tolerance 0 runs all max_iterations (the fixed count of `--iterations N`); the result is
   // still judged against kDefaultTolerance (SolverStats::converged).
-  int max_iterations = kDefaultMaxIterations;
-  real tolerance = kDefaultTolerance;
-  int min_iterations = kDefaultMinIterations;  // the tolerance stops no sooner (unless the residual is 0)
+  int max_iterations = kDefaultMaxIterations;  // [iterations] default kDefaultMaxIterations (1000)
+  real tolerance = kDefaultTolerance;          // [1, relative residual] default kDefaultTolerance (0.15)
+  int min_iterations = kDefaultMinIterations;  // the tolerance stops no sooner (unless the residual is 0); 50
   // Jacobi relaxation. With Scalar scaling the step is omega / (Gershgorin row bound of the whole N), so
   // any omega in (0, 1] decreases the objective at every iteration (omega < 2 converges); with Inverse3x3
   // Chrono's 0.3 is the usual choice.

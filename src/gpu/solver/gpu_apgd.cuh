@@ -24,8 +24,8 @@ namespace dvi::gpu {
 // buffers of the next trial (the Schur passes read them through the slots). Once the control is
 // done every kernel of a trial returns at once, so the host enqueues a whole batch of trials and reads the
 // control back once per batch.
-// How the trials of a solve are launched (SystemConfig::gpu_graphs, gpu_persistent_max_blocks,
-// gpu_apgd_register_cache).
+// How the trials of a solve are launched (GpuTuning::graphs, persistent_max_blocks,
+// apgd_register_cache).
 struct ApgdLaunch {
   bool graphs = true;
   int64_t persistent_max = 0;

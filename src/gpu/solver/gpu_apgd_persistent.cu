@@ -33,7 +33,7 @@ namespace {
 // outcome; when it comes true (ApgdControl::ready) the next trial starts at (2): two barriers a trial.
 // Large problems are bound by their bytes (~650 B per contact a trial); there it saves less, but it was still
 // faster at every size measured (10k to 1M spheres, H100 and H200: docs/GPU_PERFORMANCE.md), so it is the
-// default; SystemConfig::gpu_persistent_max_blocks can send problems above a size trial by trial.
+// default; GpuTuning::persistent_max_blocks can send problems above a size trial by trial.
 // The slices and sums are those of the trial-by-trial launches (reduceSlice, reducePartials), so both paths
 // give bitwise the same iterates ([gpu] test "GPU APGD on the device").
 template <class V, class JT>

@@ -35,7 +35,7 @@ struct BodyInverseF {
   const Quat* rot;
   const uint8_t* flags;
   BodyInverseMass* out;
-  BodyInverseIso* iso;  // the gather's 16-byte form (SystemConfig::gpu_entry_gather), else null
+  BodyInverseIso* iso;  // the gather's 16-byte form (GpuTuning::entry_gather), else null
   __device__ void operator()(int64_t i) const {
     const bool fixed = flags[i] & (kBodyFixed | kBodyKinematic);
     const BodyInverseMass B =
@@ -257,7 +257,7 @@ struct RowCounts {
 void inverseMasses(DeviceState& d, const SystemConfig& cfg, int64_t nb) {
   SolverScratch& S = d.solver;
   DeviceBodies& B = d.bodies;
-  d.entry_gather = cfg.gpu_entry_gather;
+  d.entry_gather = cfg.gpu.entry_gather;
   if (d.entry_gather) S.inv_iso.resize(nb);
   launchMap(d, nb,
             BodyInverseF{B.inv_mass.data(), B.inv_inertia.data(), B.rot.data(), B.flags.data(), B.inv.data(),
@@ -275,7 +275,7 @@ real combinedFriction(DeviceState& d, const SystemConfig& cfg, int64_t nc) {
   C.size.resize(nc);
   S.v6.resize(nc);  // per-contact penetration
   launchMap(d, nc, MuF{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.dist.data(),
-                       B.friction.data(), d.shapes.shape.data(), cfg.friction_combine, C.mu.data(), C.size.data(),
+                       B.friction.data(), d.shapes.shape.data(), cfg.collision.friction_combine, C.mu.data(), C.size.data(),
                        S.v6.data()},
             "launch of MuF");
   real max_mu = 0;
@@ -355,7 +355,7 @@ void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const RowCounts& n)
   const int64_t nc = n.nc, nb = n.nb, ncb = n.ncb, nrb = n.nrb;
   const bool normal = n.normal;
   RowsF f{C.body_a.data(), C.body_b.data(), C.normal.data(), C.pa.data(), C.pb.data(), B.pos.data(),
-          B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), cfg.dt, cfg.recovery_rel,
+          B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), real(cfg.step.dt), cfg.solver.recovery_rel,
           int32_t(nb), normal, S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.colnorm.data(),
           S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data(), n.float_jac ? S.jacf.data() : nullptr};
   launchMap(d, nc, f, "launch of RowsF");
@@ -475,7 +475,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   n.nblk = n.ncb + n.nrb;
   d.row_count = rows.size();
   uploadRows(d, rows, n);
-  n.float_jac = cfg.solver == SolverType::APGD && floatStorage(cfg.solver_settings, true) &&
+  n.float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) &&
                 !std::is_same_v<real, float>;
   n.nent = 2 * n.nc + 6 * n.nrb;
   resizeProblem(d, n);
@@ -483,7 +483,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   buildAdjacency(d, n);
   // Only Jacobi reads the Jacobi steps: for the other solvers they are left out (the per-body sum runs in one
   // thread per body, and the CES drum's 15,000 entries made it 3.6 ms of every step's BuildRows on an H200).
-  if (cfg.solver == SolverType::Jacobi) jacobiSteps(d, n);
+  if (cfg.solver.type == SolverType::Jacobi) jacobiSteps(d, n);
   readMaxima(d, n, max_penetration);
 }
 

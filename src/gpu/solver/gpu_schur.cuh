@@ -31,7 +31,7 @@ struct GatherT {
   const real* x;
   BodyDelta* delta;
   const real* const* x_slot = nullptr;  // set: x is *x_slot, read on the device (null there: nothing to do)
-  // SystemConfig::gpu_entry_gather: the contact entries' float records in entry order (jac's values; float
+  // GpuTuning::entry_gather: the contact entries' float records in entry order (jac's values; float
   // storage only), and the bodies' 16-byte inverse masses; null: jac and inv
   const EntryJacobianF* ej = nullptr;
   const BodyInverseIso* iso = nullptr;
@@ -175,7 +175,7 @@ inline EntryLayout layoutOf(const DeviceState& d) {
 }
 
 // The gather over jac (S.jac, or S.jacf for the float APGD trials), with the entry records and isotropic inverse
-// masses where BuildRows wrote them (SystemConfig::gpu_entry_gather; the entry records only with S.jacf, whose
+// masses where BuildRows wrote them (GpuTuning::entry_gather; the entry records only with S.jacf, whose
 // values they copy).
 template <class JT>
 GatherT<JT> gatherOf(DeviceState& d, const JT* jac, const real* x, const real* const* x_slot) {

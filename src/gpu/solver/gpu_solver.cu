@@ -203,8 +203,8 @@ real* solution(DeviceState& d) { return d.normal_only ? d.solver.x.data() : d.so
 
 SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const ProblemView pv = view(d, d.max_diag);
-  GpuOps ops(d, pv, ApgdLaunch{cfg.gpu_graphs, cfg.gpu_persistent_max_blocks, cfg.gpu_apgd_register_cache},
-             floatStorage(cfg.solver_settings, true));
+  GpuOps ops(d, pv, ApgdLaunch{cfg.gpu.graphs, cfg.gpu.persistent_max_blocks, cfg.gpu.apgd_register_cache},
+             floatStorage(cfg.solver, true));
   SolverScratch& S = d.solver;
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout
@@ -213,12 +213,12 @@ SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   }
   real* gamma = solution(d);
   SolverStats st;
-  switch (cfg.solver) {
-    case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver_settings); break;
-    case SolverType::BB: st = algo::bb(ops, gamma, cfg.solver_settings); break;
+  switch (cfg.solver.type) {
+    case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver); break;
+    case SolverType::BB: st = algo::bb(ops, gamma, cfg.solver); break;
     case SolverType::GaussSeidel:  // refused by GpuSystem's constructor
     case SolverType::APGD:
-    default: st = algo::apgd(ops, gamma, cfg.solver_settings); break;
+    default: st = algo::apgd(ops, gamma, cfg.solver); break;
   }
   if (d.normal_only)
     launchMap(d, int64_t(S.gamma.size()), kern::FromNormalLayout{S.x.data(), S.gamma.data(), nc, d.contact_blocks},
