@@ -40,7 +40,6 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   ncb_ = normal_only_ ? (nc + 2) / 3 : nc;
   const int64_t ncb = ncb_;
   const int64_t nblk = ncb + nrb_;
-  const int64_t nbox = normal_only_ ? 3 * ncb : 0;  // box entries of the contacts' normal blocks
   jac_.resize(size_t(nc));
   rhs_.resize(size_t(3 * nblk));
   mu_.resize(size_t(nc));
@@ -59,6 +58,22 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     inv_[i] = fixed ? kNoBody : makeBodyInverseMass(bodies.inv_mass[i], bodies.inv_inertia[i], bodies.rot[i]);
   }
 
+  real max_diag = assembleContacts(bodies, contacts, v_free, w_free, settings);
+  max_diag = assembleBoxesAndRows(rows, nb, v_free, w_free, max_diag);
+  max_diag_ = max_diag > 0 ? max_diag : real(1);
+  buildAdjacency(nb);
+  computeJacobiSteps(nb);
+  // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
+  if (nblk < kSerialContacts) threads_ = 1;
+}
+
+// Each contact's Jacobian, right-hand side (relative free velocity + bias), diagonal block, its inverse, block step,
+// column norms and row sums (the normal-only blocks are assembled in assembleBoxesAndRows). Returns the largest
+// diagonal entry.
+real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
+                                      const Vec3* w_free, const ContactProblemSettings& settings) {
+  const int T = threads_;
+  const int64_t nc = nc_;
   const real h = settings.dt;
   real max_diag = 0;
 #pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
@@ -86,6 +101,17 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
 
+  return max_diag;
+}
+
+// The box bounds of the normal-only contact blocks (then assembled three contacts a block) and of the constraint
+// rows, three per block after the contacts. Returns max_diag raised to the blocks' largest diagonal entry.
+real ContactProblem::assembleBoxesAndRows(const std::vector<ConstraintRow>* rows, int64_t nb, const Vec3* v_free,
+                                          const Vec3* w_free, real max_diag) {
+  const int T = threads_;
+  const int64_t nc = nc_, ncb = ncb_;
+  const int64_t nrows = rows ? int64_t(rows->size()) : 0;
+  const int64_t nbox = normal_only_ ? 3 * ncb : 0;  // box entries of the contacts' normal blocks
   lo_.assign(size_t(nbox + 3 * nrb_), real(0));
   hi_.assign(size_t(nbox + 3 * nrb_), real(0));
   if (normal_only_) {  // blocks of three normal rows, each in [0, inf); padding rows in [0, 0]
@@ -127,8 +153,12 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
                                     rowsum_.data() + 3 * k);
     max_diag = std::max(max_diag, d);
   }
-  max_diag_ = max_diag > 0 ? max_diag : real(1);
 
+  return max_diag;
+}
+
+void ContactProblem::buildAdjacency(int64_t nb) {
+  const int64_t nc = nc_;
   // Body -> entry adjacency (CSR over the bodies that can move and touch a contact or row); entries
   // 2 k + side for contacts and 2 nc + 2 i + side for rows, listed in increasing order, so the gather in
   // schur() sums in a fixed order.
@@ -166,6 +196,11 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     if (R.b >= 0 && movable(inv_[R.b])) adj_[fill[R.b]++] = int32_t(2 * nc + 2 * i + 1);
   }
 
+}
+
+void ContactProblem::computeJacobiSteps(int64_t nb) {
+  const int T = threads_;
+  const int64_t nc = nc_, ncb = ncb_;
   // Jacobi steps (solver.h: jacobiSteps): row (k, i) of N has absolute sum <= |row i of N_kk| + sum over
   // the two bodies c of contact k of |D_kic|_{M^-1} (Q_c - q_kc), Q_c = sum over the contacts l of c and
   // j of |D_ljc|_{M^-1}, q_kc contact k's own share (Cauchy-Schwarz in the M_c^-1 inner product for the
@@ -195,8 +230,6 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   for (int64_t q = 0; q < nrb_; ++q)
     jeta_[ncb + q] = rowBlockJacobiStep(rows_.data() + 3 * q, colnorm_.data() + 6 * (ncb + q),
                                         rowsum_.data() + 3 * (ncb + q), bodyq_.data());
-  // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
-  if (nblk < kSerialContacts) threads_ = 1;
 }
 
 int ContactProblem::size() const { return int(3 * (ncb_ + nrb_)); }
@@ -270,6 +303,72 @@ void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const 
   }
 }
 
+// Gauss-Seidel's block gradient y = (N gamma + r)_k from the maintained body velocity changes delta_.
+void ContactProblem::gsBlockGradient(int64_t k, real* y) const {
+  const BodyDelta* dl = delta_.data();
+  const int64_t nc = nc_, ncb = ncb_;
+  if (k < ncb && !normal_only_) {
+    const ContactJacobian& J = jac_[k];
+    contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+  } else if (k < ncb) {  // three normal rows (padding rows: 0)
+    for (int j = 0; j < 3; ++j) {
+      const int64_t c = 3 * k + j;
+      y[j] = c < nc ? contactNormalVelocity(jac_[c], dl[jac_[c].a].v, dl[jac_[c].a].w, dl[jac_[c].b].v, dl[jac_[c].b].w)
+                    : real(0);
+    }
+  } else {
+    for (int j = 0; j < 3; ++j) y[j] = rowFromDeltas(rows_[size_t(3 * (k - ncb) + j)], dl);
+  }
+  for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
+}
+
+// Gauss-Seidel: block k's impulses changed by dg; delta_ += M^-1 D_k dg on its bodies.
+void ContactProblem::gsApplyBlockChange(int64_t k, const real* dg) const {
+  BodyDelta* dl = delta_.data();
+  const int64_t nc = nc_, ncb = ncb_;
+  if (k < ncb && normal_only_) {
+    for (int j = 0; j < 3; ++j) {
+      const int64_t c = 3 * k + j;
+      if (dg[j] == 0 || c >= nc) continue;
+      for (int side = 0; side < 2; ++side) {
+        const int32_t i = side ? jac_[c].b : jac_[c].a;
+        if (!movable(inv_[i])) continue;
+        Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+        accumulateContactNormalImpulse(jac_[c], side, dg[j], F, Tq);
+        const BodyDelta d = bodyDeltaFromImpulse(inv_[i], F, Tq);
+        dl[i].v += d.v;
+        dl[i].w += d.w;
+      }
+    }
+  } else if (k < ncb) {
+    const ContactJacobian& J = jac_[k];
+    for (int side = 0; side < 2; ++side) {
+      const int32_t i = side ? J.b : J.a;
+      const BodyInverseMass& M = inv_[i];
+      if (!movable(M)) continue;
+      Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+      accumulateContactImpulse(J, side, dg, F, Tq);
+      const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
+      dl[i].v += d.v;
+      dl[i].w += d.w;
+    }
+  } else {
+    for (int j = 0; j < 3; ++j) {
+      if (dg[j] == 0) continue;
+      const ConstraintRow& R = rows_[size_t(3 * (k - ncb) + j)];
+      for (int side = 0; side < 2; ++side) {
+        const int32_t i = side ? R.b : R.a;
+        if (i < 0 || !movable(inv_[i])) continue;
+        Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+        accumulateRowImpulse(side ? R.Jb : R.Ja, dg[j], F, Tq);
+        const BodyDelta d = bodyDeltaFromImpulse(inv_[i], F, Tq);
+        dl[i].v += d.v;
+        dl[i].w += d.w;
+      }
+    }
+  }
+}
+
 // Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
 // CMAME 200 (2011)): sweep the contacts in order; for contact k
 //   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
@@ -278,8 +377,7 @@ void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const 
 // final residual a fresh Schur product.
 SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
   SolverStats st;
-  const int64_t nc = nc_, ncb = ncb_, nblk = ncb_ + nrb_;
-  const bool normal = normal_only_;
+  const int64_t nblk = ncb_ + nrb_;
   if (nblk == 0) return st;
   const real a = residualAlpha(*this, s), inv_a = real(1) / a;
   const real w = s.gs_omega;
@@ -288,23 +386,7 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   std::vector<double> part;
   project(gamma);
   gatherBodyDeltas(gamma);  // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
-  BodyDelta* dl = delta_.data();
-  // y = (N gamma + r)_k from the maintained body velocity changes
-  auto blockGradient = [&](int64_t k, real* y) {
-    if (k < ncb && !normal) {
-      const ContactJacobian& J = jac_[k];
-      contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
-    } else if (k < ncb) {  // three normal rows (padding rows: 0)
-      for (int j = 0; j < 3; ++j) {
-        const int64_t c = 3 * k + j;
-        y[j] = c < nc ? contactNormalVelocity(jac_[c], dl[jac_[c].a].v, dl[jac_[c].a].w, dl[jac_[c].b].v, dl[jac_[c].b].w)
-                      : real(0);
-      }
-    } else {
-      for (int j = 0; j < 3; ++j) y[j] = rowFromDeltas(rows_[size_t(3 * (k - ncb) + j)], dl);
-    }
-    for (int j = 0; j < 3; ++j) y[j] += rhs_[3 * k + j];
-  };
+  auto blockGradient = [&](int64_t k, real* y) { gsBlockGradient(k, y); };
   auto residualFromDeltas = [&]() {
     double sum;
     detail::blockReduce<1>(nblk, threads_, part, &sum, [&](int64_t k, double* acc) {
@@ -340,47 +422,7 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
         g[1] = gn[1];
         g[2] = gn[2];
         if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-        if (k < ncb && normal) {
-          for (int j = 0; j < 3; ++j) {
-            const int64_t c = 3 * k + j;
-            if (dg[j] == 0 || c >= nc) continue;
-            for (int side = 0; side < 2; ++side) {
-              const int32_t i = side ? jac_[c].b : jac_[c].a;
-              if (!movable(inv_[i])) continue;
-              Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-              accumulateContactNormalImpulse(jac_[c], side, dg[j], F, Tq);
-              const BodyDelta d = bodyDeltaFromImpulse(inv_[i], F, Tq);
-              dl[i].v += d.v;
-              dl[i].w += d.w;
-            }
-          }
-        } else if (k < ncb) {
-          const ContactJacobian& J = jac_[k];
-          for (int side = 0; side < 2; ++side) {
-            const int32_t i = side ? J.b : J.a;
-            const BodyInverseMass& M = inv_[i];
-            if (!movable(M)) continue;
-            Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-            accumulateContactImpulse(J, side, dg, F, Tq);
-            const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
-            dl[i].v += d.v;
-            dl[i].w += d.w;
-          }
-        } else {
-          for (int j = 0; j < 3; ++j) {
-            if (dg[j] == 0) continue;
-            const ConstraintRow& R = rows_[size_t(3 * (k - ncb) + j)];
-            for (int side = 0; side < 2; ++side) {
-              const int32_t i = side ? R.b : R.a;
-              if (i < 0 || !movable(inv_[i])) continue;
-              Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-              accumulateRowImpulse(side ? R.Jb : R.Ja, dg[j], F, Tq);
-              const BodyDelta d = bodyDeltaFromImpulse(inv_[i], F, Tq);
-              dl[i].v += d.v;
-              dl[i].w += d.w;
-            }
-          }
-        }
+        gsApplyBlockChange(k, dg);
       }
       ++st.iterations;
       const bool need = s.record_history || s.tolerance > 0;

@@ -86,6 +86,16 @@ class ContactProblem final : public CcpProblem {
  private:
   // Pass (a): delta_[i] = M_i^-1 sum over the contacts of body i of D_ki x_k, for the active bodies.
   void gatherBodyDeltas(const real* x) const;
+  // The passes of build(): contact blocks, box bounds and row blocks, body -> entry adjacency, Jacobi steps.
+  real assembleContacts(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,
+                        const ContactProblemSettings& settings);
+  real assembleBoxesAndRows(const std::vector<ConstraintRow>* rows, int64_t nb, const Vec3* v_free, const Vec3* w_free,
+                            real max_diag);
+  void buildAdjacency(int64_t nb);
+  void computeJacobiSteps(int64_t nb);
+  // Gauss-Seidel's block k: its gradient from delta_, and delta_ updated by a change dg of its impulses.
+  void gsBlockGradient(int64_t k, real* y) const;
+  void gsApplyBlockChange(int64_t k, const real* dg) const;
 
   int threads_ = 1;
   int64_t nc_ = 0;                       // contacts
