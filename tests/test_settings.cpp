@@ -7,6 +7,9 @@
 #include "ces/ces_config.h"
 #include "chrono_like/base/step_context.h"
 #include "chrono_like/io/scene.h"
+#include "chrono_like/system.h"
+
+#include <omp.h>
 
 using namespace dvi;
 using nlohmann::json;
@@ -88,4 +91,32 @@ TEST_CASE("Settings: the step context", "[settings]") {
   CHECK(c.inv_dt == real(1) / real(0.01));
   CHECK(c.step == 7);
   CHECK(c.end() == 2.0 + double(real(0.01)));
+}
+
+TEST_CASE("Settings: threads = 0 takes OpenMP's default team size (OMP_NUM_THREADS), not the core count", "[settings]") {
+  // omp_set_num_threads sets the same value OMP_NUM_THREADS sets at start-up (the nthreads ICV).
+  const int before = omp_get_max_threads();
+  dvi::SystemConfig cfg;
+  cfg.threads = 0;
+  cfg.min_bodies_per_thread = 1;
+  dvi::System sys(cfg);
+  for (int i = 0; i < 64; ++i) {
+    dvi::BodyDesc d;
+    d.pos = dvi::Vec3{dvi::real(i), 0, 0};
+    d.shapes.push_back(dvi::makeSphere(dvi::real(0.1)));
+    sys.addBody(d);
+  }
+  omp_set_num_threads(1);
+  CHECK(sys.effectiveThreads() == 1);
+  omp_set_num_threads(3);
+  CHECK(sys.effectiveThreads() == 3);
+  cfg.threads = 2;
+  dvi::System two(cfg);
+  for (int i = 0; i < 64; ++i) {
+    dvi::BodyDesc d;
+    d.shapes.push_back(dvi::makeSphere(dvi::real(0.1)));
+    two.addBody(d);
+  }
+  CHECK(two.effectiveThreads() == 2);  // an explicit count stands whatever the default is
+  omp_set_num_threads(before);
 }

@@ -142,7 +142,8 @@ std::string System::deviceName() const {
 }
 
 int System::effectiveThreads() const {
-  const int requested = config_.threads > 0 ? config_.threads : omp_get_num_procs();
+  // 0: OpenMP's default team size (OMP_NUM_THREADS, else the cores), as read outside any parallel region.
+  const int requested = config_.threads > 0 ? config_.threads : omp_get_max_threads();
   const int64_t per = std::max(1, config_.min_bodies_per_thread);
   const int64_t useful = std::max<int64_t>(1, int64_t(bodies_.count()) / per);
   return int(std::min<int64_t>(requested, useful));
