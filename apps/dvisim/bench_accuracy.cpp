@@ -574,12 +574,12 @@ int runAccuracy(const AccOptions& o) {
 
 }  // namespace
 
-void registerBenchAccuracy(CLI::App& app) {
+void registerBenchAccuracy(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<AccOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time");
   addBenchBasics(cmd, *o, "accuracy", "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)");
   cmd->add_option("--scenes", o->scenes, "pile,mix,stack,ces,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
   cmd->add_option("--engines", o->engines, "cpu,gpu,bullet (default all; gpu where a device is present)");
-  addBenchRunner(cmd, [o] { return runAccuracy(*o); });
+  addBenchRunner(reg, cmd, [o] { return runAccuracy(*o); });
 }

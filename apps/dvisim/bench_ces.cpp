@@ -402,7 +402,7 @@ int runCesBench(const CesBenchOptions& o) {
 
 }  // namespace
 
-void registerBenchCes(CLI::App& app) {
+void registerBenchCes(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<CesBenchOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "ces", "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)");
@@ -417,5 +417,5 @@ void registerBenchCes(CLI::App& app) {
   cmd->add_option("--set", o->sets, "Override a machine value, KEY relative to ces (e.g. drum.rpm=60; repeatable)")
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-  addBenchRunner(cmd, [o] { return runCesBench(*o); });
+  addBenchRunner(reg, cmd, [o] { return runCesBench(*o); });
 }

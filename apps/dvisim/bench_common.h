@@ -1,13 +1,13 @@
 // `dvisim bench ...`: the group of benchmark subcommands. Each benchmark lives in its own file
 // (bench_scaling.cpp: `bench scaling`; `bench accuracy`, `bench stability` can join the same way):
 //
-//   void registerBenchFoo(CLI::App& app) {
+//   void registerBenchFoo(CLI::App& app, BenchRegistry& reg) {
 //     CLI::App* cmd = benchCommand(app)->add_subcommand("foo", "...");
 //     auto opts = std::make_shared<FooOptions>();   // options bound to cmd
-//     addBenchRunner(cmd, [opts] { return runFoo(*opts); });
+//     addBenchRunner(reg, cmd, [opts] { return runFoo(*opts); });
 //   }
 //
-// main.cpp calls each register function once, then, when `bench` was given, runBenchCommand() runs the
+// main.cpp calls each register function once, then, when `bench` was given, runBenchCommand(reg) runs the
 // one subcommand that was parsed. Runners return the exit code and throw dvi::InputError on bad input
 // (main maps it to exit code 2).
 #pragma once
@@ -29,17 +29,19 @@ inline CLI::App* benchCommand(CLI::App& app) {
   return bench;
 }
 
-inline std::vector<std::pair<CLI::App*, std::function<int()>>>& benchRunners() {
-  static std::vector<std::pair<CLI::App*, std::function<int()>>> runners;
-  return runners;
-}
+// The benchmark subcommands and the function that runs each; main() owns one and hands it to the register functions.
+struct BenchRegistry {
+  std::vector<std::pair<CLI::App*, std::function<int()>>> runners;
+};
 
 // Registers the function that runs benchmark subcommand `cmd` (a subcommand of benchCommand(app)).
-inline void addBenchRunner(CLI::App* cmd, std::function<int()> run) { benchRunners().emplace_back(cmd, std::move(run)); }
+inline void addBenchRunner(BenchRegistry& reg, CLI::App* cmd, std::function<int()> run) {
+  reg.runners.emplace_back(cmd, std::move(run));
+}
 
 // Runs the benchmark subcommand that was parsed; call when app.got_subcommand("bench").
-inline int runBenchCommand() {
-  for (auto& [cmd, run] : benchRunners())
+inline int runBenchCommand(const BenchRegistry& reg) {
+  for (const auto& [cmd, run] : reg.runners)
     if (cmd->parsed()) return run();
   throw std::logic_error("bench: no benchmark subcommand was parsed");
 }

@@ -482,7 +482,7 @@ int runDropin(const DropinOptions& o) {
 
 }  // namespace
 
-void registerBenchDropin(CLI::App& app) {
+void registerBenchDropin(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<DropinOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "dropin", "Bullet's benchmark scenes on stock Bullet and on the drop-in world (CPU, GPU), side by side");
@@ -491,5 +491,5 @@ void registerBenchDropin(CLI::App& app) {
   cmd->add_option("--engines", o->engines, "bullet,cpu,gpu (default all; gpu is skipped without a device)");
   cmd->add_option("--scenes", o->scenes, "boxes,pyramid,ragdolls,hulls,terrain (the default) and boxes100k");
   cmd->add_option("--steps", o->steps, "Timed steps per engine (default 150; --quick 10)");
-  addBenchRunner(cmd, [o] { return runDropin(*o); });
+  addBenchRunner(reg, cmd, [o] { return runDropin(*o); });
 }

@@ -188,7 +188,7 @@ int runPruning(const PruneOptions& o) {
 
 }  // namespace
 
-void registerBenchPruning(CLI::App& app) {
+void registerBenchPruning(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<PruneOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "pruning", "Time saved by leaving out the stages a scene does not need (prune on against off, side by side)");
@@ -196,5 +196,5 @@ void registerBenchPruning(CLI::App& app) {
                  "OpenMP threads of the CPU backend (0: all)");
   cmd->add_option("--backend", o->backend, "cpu, gpu or auto (gpu when a device is present)");
   cmd->add_option("--n", o->n, "Spheres in the pile (default 10000; --quick 400)");
-  addBenchRunner(cmd, [o] { return runPruning(*o); });
+  addBenchRunner(reg, cmd, [o] { return runPruning(*o); });
 }

@@ -799,7 +799,7 @@ int runScaling(const ScalingOptions& o) {
 
 }  // namespace
 
-void registerBenchScaling(CLI::App& app) {
+void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<ScalingOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "scaling", "Pile and multidisperse mix for N = 10k..4M: GPU, CPU backend and Bullet side by side");
@@ -845,6 +845,6 @@ void registerBenchScaling(CLI::App& app) {
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
       ->check(CLI::IsMember({"gpu", "cpu", "any"}));
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
-  addBenchRunner(cmd, [o] { return runScaling(*o); });
-  registerBenchBullet3Worker(app);
+  addBenchRunner(reg, cmd, [o] { return runScaling(*o); });
+  registerBenchBullet3Worker(app, reg);
 }

@@ -226,7 +226,7 @@ Bullet3Outcome runBullet3Isolated(const Bullet3Job& job, const std::string& log_
   return r;
 }
 
-void registerBenchBullet3Worker(CLI::App& app) {
+void registerBenchBullet3Worker(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<WorkerOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "bullet3-worker", "One Bullet 3 OpenCL configuration of bench scaling (run by it in a child process)");
@@ -239,5 +239,5 @@ void registerBenchBullet3Worker(CLI::App& app) {
   cmd->add_option("--device", o->device, "OpenCL device type: gpu, cpu or any")->check(CLI::IsMember({"gpu", "cpu", "any"}));
   cmd->add_option("--cache-dir", o->cache_dir, "Bullet 3's kernel cache (default: under the temp directory)");
   cmd->add_option("--result", o->result, "Write the outcome (key=value lines) to this file too");
-  addBenchRunner(cmd, [o] { return runWorker(*o); });
+  addBenchRunner(reg, cmd, [o] { return runWorker(*o); });
 }

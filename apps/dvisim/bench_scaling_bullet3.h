@@ -13,6 +13,7 @@
 
 #include <string>
 
+#include "bench_common.h"
 #include "scaling/bullet3_peer.h"
 
 struct Bullet3Job {
@@ -43,4 +44,4 @@ Bullet3Outcome runBullet3(const Bullet3Job& job);
 Bullet3Outcome runBullet3Isolated(const Bullet3Job& job, const std::string& log_path, double timeout_s);
 
 // Registers the hidden `dvisim bench bullet3-worker` subcommand.
-void registerBenchBullet3Worker(CLI::App& app);
+void registerBenchBullet3Worker(CLI::App& app, BenchRegistry& reg);

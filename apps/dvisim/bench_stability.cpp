@@ -797,10 +797,10 @@ int runStability(const StabOptions& o) {
 
 }  // namespace
 
-void registerBenchStability(CLI::App& app) {
+void registerBenchStability(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<StabOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "stability", "Stiff and extreme cases on our backends and Bullet, each with a criterion and a verdict");
   addBenchBasics(cmd, *o, "stability", "stability.csv, stability.md", "Shorter runs and smaller scenes (CI smoke test)");
-  addBenchRunner(cmd, [o] { return runStability(*o); });
+  addBenchRunner(reg, cmd, [o] { return runStability(*o); });
 }

@@ -434,17 +434,17 @@ int fail(int code, const std::string& msg) {
 std::function<int()> addCompareCommand(CLI::App& app);
 // `dvisim sweep` (sweep.cpp): design of experiments over a scene with replicate seeds, the same way.
 std::function<int()> addSweepCommand(CLI::App& app);
-// `dvisim bench scaling` (bench_scaling.cpp); runs through runBenchCommand() (bench_common.h).
-void registerBenchScaling(CLI::App& app);
+// `dvisim bench scaling` (bench_scaling.cpp); runs through runBenchCommand (bench_common.h).
+void registerBenchScaling(CLI::App& app, BenchRegistry& reg);
 // `dvisim bench accuracy` (bench_accuracy.cpp) and `dvisim bench stability` (bench_stability.cpp), the same way.
-void registerBenchAccuracy(CLI::App& app);
-void registerBenchStability(CLI::App& app);
+void registerBenchAccuracy(CLI::App& app, BenchRegistry& reg);
+void registerBenchStability(CLI::App& app, BenchRegistry& reg);
 // `dvisim bench ces` (bench_ces.cpp): the CES machine at an industrial feed against wall time.
-void registerBenchCes(CLI::App& app);
+void registerBenchCes(CLI::App& app, BenchRegistry& reg);
 // `dvisim bench pruning` (bench_pruning.cpp): prune on against off, side by side.
-void registerBenchPruning(CLI::App& app);
+void registerBenchPruning(CLI::App& app, BenchRegistry& reg);
 // `dvisim bench dropin` (bench_dropin.cpp): Bullet's benchmark scenes on stock Bullet and on the drop-in world.
-void registerBenchDropin(CLI::App& app);
+void registerBenchDropin(CLI::App& app, BenchRegistry& reg);
 
 int main(int argc, char** argv) {
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
@@ -480,12 +480,13 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--resume", o.resume, "CES machine: continue the run checkpointed in DIR (DIR/checkpoint/)");
   const std::function<int()> compare = addCompareCommand(app);
   const std::function<int()> sweep = addSweepCommand(app);
-  registerBenchScaling(app);
-  registerBenchAccuracy(app);
-  registerBenchStability(app);
-  registerBenchCes(app);
-  registerBenchPruning(app);
-  registerBenchDropin(app);
+  BenchRegistry bench;  // the `bench` subcommands
+  registerBenchScaling(app, bench);
+  registerBenchAccuracy(app, bench);
+  registerBenchStability(app, bench);
+  registerBenchCes(app, bench);
+  registerBenchPruning(app, bench);
+  registerBenchDropin(app, bench);
 
   try {
     app.parse(argc, argv);
@@ -497,7 +498,7 @@ int main(int argc, char** argv) {
     refuseEmptyValues(app);
     if (app.got_subcommand("compare")) return compare();
     if (app.got_subcommand("sweep")) return sweep();
-    if (app.got_subcommand("bench")) return runBenchCommand();
+    if (app.got_subcommand("bench")) return runBenchCommand(bench);
     return run(o);
   } catch (...) {
     // InputError 2, SimulationDiverged/SolverError 3, std::bad_alloc/DeviceError 5, anything else 1 (run_control.h).
