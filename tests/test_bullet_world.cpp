@@ -715,3 +715,19 @@ TEST_CASE("drop-in world: the GPU backend comes from the app, Gpu without it is 
   DviDynamicsWorld world(&dispatcher, &broadphase, &solver, &config, c);
   CHECK(world.backendName() == "cpu");
 }
+
+TEST_CASE("Drop-in: a refused GPU backend names the API, not a command-line flag", "[bullet]") {
+  if (dvi::gpuAvailable()) {
+    WARN("skipped: a GPU is available, so makeGpuSystem does not refuse");
+    return;
+  }
+  try {
+    (void)dvi::makeGpuSystem(dvi::SystemConfig{});
+    FAIL("makeGpuSystem without a GPU did not throw");
+  } catch (const dvi::InputError& e) {
+    const std::string m = e.what();
+    INFO(m);
+    CHECK(m.rfind("GPU backend: ", 0) == 0);
+    CHECK(m.find("--backend") == std::string::npos);
+  }
+}

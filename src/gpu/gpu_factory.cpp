@@ -19,12 +19,12 @@ bool gpuAvailable(std::string* name) {
 std::unique_ptr<System> makeGpuSystem(const SystemConfig& config, CollisionFactory bullet_collision) {
 #if defined(DVISIM_HAVE_CUDA)
   std::string why;
-  if (!gpu::queryDevice(&why)) throw InputError("--backend gpu: " + why);
+  if (!gpu::queryDevice(&why)) throw InputError("GPU backend: " + why);
   return std::make_unique<GpuSystem>(config, bullet_collision);
 #else
   (void)config;
   (void)bullet_collision;
-  throw InputError("--backend gpu: this build has no CUDA backend");
+  throw InputError("GPU backend: this build has no CUDA backend");
 #endif
 }
 
