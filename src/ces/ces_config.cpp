@@ -191,42 +191,42 @@ void applyCesOverride(json& doc, const std::string& assignment) {
                        [](size_t, const std::string&) { return true; });
 }
 
-CesConfig parseCesDocument(const json& document, const std::vector<std::string>& overrides, const std::string& origin) {
-  Checker c{origin};
-  if (!document.is_object()) throw InputError(origin + ": expected a JSON object at the top level");
-  checkJsonDepth(document, origin);
-  json doc = document;
-  c.object(doc, "(document)", {"$schema", "name", "description", "ces"});
-  if (!doc.contains("ces")) throw InputError(origin + ": ces: missing (a CES scene needs the machine under \"ces\")");
-  for (const std::string& o : overrides) applyCesOverride(doc, o);
-  if (!overrides.empty()) checkJsonDepth(doc, origin);
-  const json& j = c.object(doc["ces"], "ces",
-                           {"duration_s", "time_step_s", "seed", "solver", "drum", "electrode", "field", "corona", "brush",
-                            "air", "friction", "feed", "collection", "splitters", "output"});
-  CesConfig cfg;
-  auto has = [](const json& o, const char* k) { return o.contains(k); };
+namespace {
+
+bool has(const json& o, const char* k) { return o.contains(k); }
+
+// The run itself: duration, time step (their step count checked) and seed.
+void parseCesRun(const Checker& c, const json& j, CesConfig& cfg, const std::string& origin) {
   if (has(j, "duration_s")) cfg.duration = c.range(j["duration_s"], "ces.duration_s", 0, 1e6);
   if (has(j, "time_step_s")) cfg.step.dt = c.range(j["time_step_s"], "ces.time_step_s", 0, 0.01, true);
   checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
   if (has(j, "seed")) cfg.seed = uint64_t(c.integer(j["seed"], "ces.seed", 0, int64_t(1) << 53));
-  if (has(j, "solver")) {
-    const json& s = c.object(j["solver"], "ces.solver", {"type", "iterations", "gyroscopic"});
-    if (has(s, "gyroscopic")) cfg.step.gyroscopic = c.boolean(s["gyroscopic"], "ces.solver.gyroscopic");
-    if (has(s, "type"))
-      cfg.solver.type = c.named<SolverType>(s["type"], "ces.solver.type",
-                                            {{"jacobi", SolverType::Jacobi}, {"gs", SolverType::GaussSeidel},
-                                             {"apgd", SolverType::APGD}, {"bb", SolverType::BB}});
-    if (has(s, "iterations"))  // a fixed count (the tolerance stays 0)
-      cfg.solver.max_iterations = int(c.integer(s["iterations"], "ces.solver.iterations", 1, 100000));
-  }
-  if (has(j, "drum")) {
-    const json& s = c.object(j["drum"], "ces.drum", {"diameter_mm", "width_mm", "rpm", "drive", "mass_kg"});
-    if (has(s, "diameter_mm")) cfg.drum_diameter = c.positive(s["diameter_mm"], "ces.drum.diameter_mm") * kMm;
-    if (has(s, "width_mm")) cfg.drum_width = c.positive(s["width_mm"], "ces.drum.width_mm") * kMm;
-    if (has(s, "rpm")) cfg.drum_rpm = c.range(s["rpm"], "ces.drum.rpm", -1000, 1000);
-    if (has(s, "drive")) cfg.drum_drive = c.oneOf(s["drive"], "ces.drum.drive", {"auto", "kinematic", "rheonomic"});
-    if (has(s, "mass_kg")) cfg.drum_mass = c.positive(s["mass_kg"], "ces.drum.mass_kg");
-  }
+}
+
+void parseCesSolver(const Checker& c, const json& j, CesConfig& cfg) {
+  if (!has(j, "solver")) return;
+  const json& s = c.object(j["solver"], "ces.solver", {"type", "iterations", "gyroscopic"});
+  if (has(s, "gyroscopic")) cfg.step.gyroscopic = c.boolean(s["gyroscopic"], "ces.solver.gyroscopic");
+  if (has(s, "type"))
+    cfg.solver.type = c.named<SolverType>(s["type"], "ces.solver.type",
+                                          {{"jacobi", SolverType::Jacobi}, {"gs", SolverType::GaussSeidel},
+                                           {"apgd", SolverType::APGD}, {"bb", SolverType::BB}});
+  if (has(s, "iterations"))  // a fixed count (the tolerance stays 0)
+    cfg.solver.max_iterations = int(c.integer(s["iterations"], "ces.solver.iterations", 1, 100000));
+}
+
+void parseCesDrum(const Checker& c, const json& j, CesConfig& cfg) {
+  if (!has(j, "drum")) return;
+  const json& s = c.object(j["drum"], "ces.drum", {"diameter_mm", "width_mm", "rpm", "drive", "mass_kg"});
+  if (has(s, "diameter_mm")) cfg.drum_diameter = c.positive(s["diameter_mm"], "ces.drum.diameter_mm") * kMm;
+  if (has(s, "width_mm")) cfg.drum_width = c.positive(s["width_mm"], "ces.drum.width_mm") * kMm;
+  if (has(s, "rpm")) cfg.drum_rpm = c.range(s["rpm"], "ces.drum.rpm", -1000, 1000);
+  if (has(s, "drive")) cfg.drum_drive = c.oneOf(s["drive"], "ces.drum.drive", {"auto", "kinematic", "rheonomic"});
+  if (has(s, "mass_kg")) cfg.drum_mass = c.positive(s["mass_kg"], "ces.drum.mass_kg");
+}
+
+// The supply and its two electrodes; both electrodes take the supply's voltage.
+void parseCesElectrode(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "electrode")) {
     const json& s = c.object(j["electrode"], "ces.electrode", {"voltage_kV", "wire", "tube"});
     // 0 is the supply off; the sign is the corona's polarity (negative corona is usual).
@@ -235,6 +235,10 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
     if (has(s, "tube")) cfg.tube = parseSupplied(c, s["tube"], "ces.electrode.tube", cfg.tube);
   }
   cfg.wire.voltage = cfg.tube.voltage = cfg.voltage;
+}
+
+// The field model, its extra electrodes, and whether the model fits the electrodes given.
+void parseCesField(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "field")) {
     const json& s = c.object(j["field"], "ces.field", {"model", "extra_electrodes"});
     if (has(s, "model")) cfg.field_model = c.oneOf(s["model"], "ces.field.model", {"corona", "csm", "two_cylinder"});
@@ -254,34 +258,43 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
     c.fail("ces.field.model", "the corona model needs the corona wire (electrode.wire.enabled); use csm or two_cylinder without it");
   if (cfg.field_model == "csm" && !cfg.wire.enabled && !cfg.tube.enabled && cfg.extra_electrodes.empty())
     c.fail("ces.electrode", "no electrode: enable the wire or the tube");
-  if (has(j, "corona")) {
-    const json& s = c.object(j["corona"], "ces.corona", {"ion_mobility_m2_Vs", "rel_air_density", "roughness", "grid_mm", "image_cutoff_mm"});
-    if (has(s, "ion_mobility_m2_Vs")) cfg.ion_mobility = c.range(s["ion_mobility_m2_Vs"], "ces.corona.ion_mobility_m2_Vs", 0, 1, true);
-    if (has(s, "rel_air_density")) cfg.rel_air_density = c.range(s["rel_air_density"], "ces.corona.rel_air_density", 0, 10, true);
-    if (has(s, "roughness")) cfg.roughness = c.range(s["roughness"], "ces.corona.roughness", 0, 1, true);
-    if (has(s, "grid_mm")) cfg.corona_grid = c.range(s["grid_mm"], "ces.corona.grid_mm", 0.05, 20) * kMm;
-    if (has(s, "image_cutoff_mm")) cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
-  }
-  if (has(j, "brush")) {
-    const json& s = c.object(j["brush"], "ces.brush",
-                             {"diameter_mm", "core_diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s", "sweep_time_s"});
-    if (has(s, "diameter_mm")) cfg.brush_diameter = c.positive(s["diameter_mm"], "ces.brush.diameter_mm") * kMm;
-    cfg.brush_core_diameter = has(s, "core_diameter_mm")
-                                  ? c.positive(s["core_diameter_mm"], "ces.brush.core_diameter_mm") * kMm
-                                  : cfg.brush_diameter;  // no bristles named: a smooth cylinder
-    if (cfg.brush_core_diameter > cfg.brush_diameter)
-      c.fail("ces.brush.core_diameter_mm", "larger than diameter_mm (the diameter over the bristle tips)");
-    if (has(s, "angle_deg")) cfg.brush_angle = c.range(s["angle_deg"], "ces.brush.angle_deg", -360, 360) * kDeg;
-    if (has(s, "rpm")) cfg.brush_rpm = c.range(s["rpm"], "ces.brush.rpm", -10000, 10000);
-    if (has(s, "gap_mm")) cfg.brush_gap = c.nonNegative(s["gap_mm"], "ces.brush.gap_mm") * kMm;
-    if (has(s, "discharge_time_s")) cfg.brush_discharge_time = c.nonNegative(s["discharge_time_s"], "ces.brush.discharge_time_s");
-    if (has(s, "sweep_time_s")) cfg.brush_sweep_time = c.nonNegative(s["sweep_time_s"], "ces.brush.sweep_time_s");
-  }
-  if (has(j, "air")) {
-    const json& s = c.object(j["air"], "ces.air", {"viscosity_Pa_s", "density_kg_m3"});
-    if (has(s, "viscosity_Pa_s")) cfg.air_viscosity = c.positive(s["viscosity_Pa_s"], "ces.air.viscosity_Pa_s");
-    if (has(s, "density_kg_m3")) cfg.air_density = c.nonNegative(s["density_kg_m3"], "ces.air.density_kg_m3");
-  }
+}
+
+void parseCesCorona(const Checker& c, const json& j, CesConfig& cfg) {
+  if (!has(j, "corona")) return;
+  const json& s = c.object(j["corona"], "ces.corona", {"ion_mobility_m2_Vs", "rel_air_density", "roughness", "grid_mm", "image_cutoff_mm"});
+  if (has(s, "ion_mobility_m2_Vs")) cfg.ion_mobility = c.range(s["ion_mobility_m2_Vs"], "ces.corona.ion_mobility_m2_Vs", 0, 1, true);
+  if (has(s, "rel_air_density")) cfg.rel_air_density = c.range(s["rel_air_density"], "ces.corona.rel_air_density", 0, 10, true);
+  if (has(s, "roughness")) cfg.roughness = c.range(s["roughness"], "ces.corona.roughness", 0, 1, true);
+  if (has(s, "grid_mm")) cfg.corona_grid = c.range(s["grid_mm"], "ces.corona.grid_mm", 0.05, 20) * kMm;
+  if (has(s, "image_cutoff_mm")) cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
+}
+
+void parseCesBrush(const Checker& c, const json& j, CesConfig& cfg) {
+  if (!has(j, "brush")) return;
+  const json& s = c.object(j["brush"], "ces.brush",
+                           {"diameter_mm", "core_diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s", "sweep_time_s"});
+  if (has(s, "diameter_mm")) cfg.brush_diameter = c.positive(s["diameter_mm"], "ces.brush.diameter_mm") * kMm;
+  cfg.brush_core_diameter = has(s, "core_diameter_mm")
+                                ? c.positive(s["core_diameter_mm"], "ces.brush.core_diameter_mm") * kMm
+                                : cfg.brush_diameter;  // no bristles named: a smooth cylinder
+  if (cfg.brush_core_diameter > cfg.brush_diameter)
+    c.fail("ces.brush.core_diameter_mm", "larger than diameter_mm (the diameter over the bristle tips)");
+  if (has(s, "angle_deg")) cfg.brush_angle = c.range(s["angle_deg"], "ces.brush.angle_deg", -360, 360) * kDeg;
+  if (has(s, "rpm")) cfg.brush_rpm = c.range(s["rpm"], "ces.brush.rpm", -10000, 10000);
+  if (has(s, "gap_mm")) cfg.brush_gap = c.nonNegative(s["gap_mm"], "ces.brush.gap_mm") * kMm;
+  if (has(s, "discharge_time_s")) cfg.brush_discharge_time = c.nonNegative(s["discharge_time_s"], "ces.brush.discharge_time_s");
+  if (has(s, "sweep_time_s")) cfg.brush_sweep_time = c.nonNegative(s["sweep_time_s"], "ces.brush.sweep_time_s");
+}
+
+void parseCesAir(const Checker& c, const json& j, CesConfig& cfg) {
+  if (!has(j, "air")) return;
+  const json& s = c.object(j["air"], "ces.air", {"viscosity_Pa_s", "density_kg_m3"});
+  if (has(s, "viscosity_Pa_s")) cfg.air_viscosity = c.positive(s["viscosity_Pa_s"], "ces.air.viscosity_Pa_s");
+  if (has(s, "density_kg_m3")) cfg.air_density = c.nonNegative(s["density_kg_m3"], "ces.air.density_kg_m3");
+}
+
+void parseCesFriction(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "friction")) {
     const json& s = c.object(j["friction"], "ces.friction", {"particle_particle", "particle_drum", "particle_brush", "particle_wall",
                                                           "rolling_drum"});
@@ -293,6 +306,10 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   }
   if (!(cfg.mu_particle_particle > 0))
     c.fail("ces.friction.particle_particle", "must be > 0 (the other pairs are expressed through it under the product rule)");
+}
+
+// The feed and its materials; at least one material, and a feed no wider than the drum.
+void parseCesFeed(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "feed")) {
     const json& s = c.object(j["feed"], "ces.feed",
                              {"mass_flow_g_s", "start_s", "duration_s", "angle_deg", "height_mm", "speed_m_s", "width_mm",
@@ -323,6 +340,9 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   }
   if (cfg.materials.empty()) c.fail("ces.feed.materials", "missing (at least one material)");
   if (cfg.feed_width > cfg.drum_width) c.fail("ces.feed.width_mm", "wider than the drum (" + num(cfg.drum_width / kMm) + " mm)");
+}
+
+void parseCesCollection(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "collection")) {
     const json& s = c.object(j["collection"], "ces.collection", {"y_mm", "x0_mm"});
     if (has(s, "y_mm")) cfg.collection_y = c.range(s["y_mm"], "ces.collection.y_mm", -1e5, 1e5) * kMm;
@@ -330,6 +350,9 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   }
   if (!(cfg.collection_y < -cfg.drumRadius()))
     c.fail("ces.collection.y_mm", "the collection plane must lie below the drum (y < " + num(-cfg.drumRadius() / kMm) + " mm)");
+}
+
+void parseCesSplitters(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "splitters")) {
     const json& s = c.object(j["splitters"], "ces.splitters", {"s1_mm", "s2_mm", "range_mm", "positions", "grade_targets"});
     if (has(s, "grade_targets")) {
@@ -350,14 +373,19 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
     if (has(s, "positions")) cfg.splitter_positions = int(c.integer(s["positions"], "ces.splitters.positions", 2, 10000));
   }
   if (cfg.s2 < cfg.s1) c.fail("ces.splitters.s2_mm", "must be >= s1_mm (" + num(cfg.s1 / kMm) + ")");
-  if (has(j, "output")) {
-    const json& s = c.object(j["output"], "ces.output", {"frames", "histogram_bin_mm", "plots", "checkpoint_every_s"});
-    if (has(s, "frames")) cfg.frames = int(c.integer(s["frames"], "ces.output.frames", 0, 1000000));
-    if (has(s, "histogram_bin_mm")) cfg.histogram_bin = c.positive(s["histogram_bin_mm"], "ces.output.histogram_bin_mm") * kMm;
-    if (has(s, "plots")) cfg.plots = c.boolean(s["plots"], "ces.output.plots");
-    if (has(s, "checkpoint_every_s")) cfg.checkpoint_every = c.nonNegative(s["checkpoint_every_s"], "ces.output.checkpoint_every_s");
-  }
-  // Geometry: the electrodes outside the drum and apart from each other.
+}
+
+void parseCesOutput(const Checker& c, const json& j, CesConfig& cfg) {
+  if (!has(j, "output")) return;
+  const json& s = c.object(j["output"], "ces.output", {"frames", "histogram_bin_mm", "plots", "checkpoint_every_s"});
+  if (has(s, "frames")) cfg.frames = int(c.integer(s["frames"], "ces.output.frames", 0, 1000000));
+  if (has(s, "histogram_bin_mm")) cfg.histogram_bin = c.positive(s["histogram_bin_mm"], "ces.output.histogram_bin_mm") * kMm;
+  if (has(s, "plots")) cfg.plots = c.boolean(s["plots"], "ces.output.plots");
+  if (has(s, "checkpoint_every_s")) cfg.checkpoint_every = c.nonNegative(s["checkpoint_every_s"], "ces.output.checkpoint_every_s");
+}
+
+// Geometry: the electrodes outside the drum and apart from each other.
+void checkCesElectrodeGeometry(const Checker& c, const CesConfig& cfg) {
   auto electrodeOk = [&](const ElectrodeConfig& e, const std::string& p) {
     if (!(e.distance > cfg.drumRadius() + e.diameter / 2))
       c.fail(p + ".distance_mm", "the electrode must lie outside the drum (distance > drum radius + electrode radius)");
@@ -372,6 +400,38 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
     if (!(std::hypot(dx, dy) > (cfg.wire.diameter + cfg.tube.diameter) / 2))
       c.fail("ces.electrode.wire", "the wire and the tube overlap");
   }
+}
+
+}  // namespace
+
+CesConfig parseCesDocument(const json& document, const std::vector<std::string>& overrides, const std::string& origin) {
+  Checker c{origin};
+  if (!document.is_object()) throw InputError(origin + ": expected a JSON object at the top level");
+  checkJsonDepth(document, origin);
+  json doc = document;
+  c.object(doc, "(document)", {"$schema", "name", "description", "ces"});
+  if (!doc.contains("ces")) throw InputError(origin + ": ces: missing (a CES scene needs the machine under \"ces\")");
+  for (const std::string& o : overrides) applyCesOverride(doc, o);
+  if (!overrides.empty()) checkJsonDepth(doc, origin);
+  const json& j = c.object(doc["ces"], "ces",
+                           {"duration_s", "time_step_s", "seed", "solver", "drum", "electrode", "field", "corona", "brush",
+                            "air", "friction", "feed", "collection", "splitters", "output"});
+  CesConfig cfg;
+  // One section at a time, in this order: a section's checks may read the sections before it.
+  parseCesRun(c, j, cfg, origin);
+  parseCesSolver(c, j, cfg);
+  parseCesDrum(c, j, cfg);
+  parseCesElectrode(c, j, cfg);
+  parseCesField(c, j, cfg);
+  parseCesCorona(c, j, cfg);
+  parseCesBrush(c, j, cfg);
+  parseCesAir(c, j, cfg);
+  parseCesFriction(c, j, cfg);
+  parseCesFeed(c, j, cfg);
+  parseCesCollection(c, j, cfg);
+  parseCesSplitters(c, j, cfg);
+  parseCesOutput(c, j, cfg);
+  checkCesElectrodeGeometry(c, cfg);
   return cfg;
 }
 

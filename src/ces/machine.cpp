@@ -165,16 +165,36 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   if (cfg_.materials.size() > size_t(kMaxMaterials)) throw InputError("CES machine: at most 64 materials");
   if (cfg_.extra_electrodes.size() + 2 > size_t(kMaxElectrodes)) throw InputError("CES machine: at most 6 extra electrodes");
   sys_.mutableConfig().step.gyroscopic = cfg_.step.gyroscopic;  // see cesDefaultStep
-  const real R = real(cfg_.drumRadius()), W = real(cfg_.drum_width);
   // Pair coefficients under the product rule (Bullet's, the core's default): f_particle^2 = mu_pp and
   // f_particle f_part = mu_(particle, part).
   particle_friction_ = real(std::sqrt(cfg_.mu_particle_particle));
-  const real fp = particle_friction_;
 
-  // Field.
   std::vector<ElectrodeConfig> supplied;  // the enabled wire and tube (both at the supply's voltage)
   if (cfg_.wire.enabled) supplied.push_back(cfg_.wire);
   if (cfg_.tube.enabled) supplied.push_back(cfg_.tube);
+  setupField(supplied);
+  setupModel(supplied);
+
+  // The machine's bodies, in this order (body indices, and so the trajectories, depend on it): drum, brush,
+  // electrodes, end walls.
+  addDrumBody();
+  addBrushBody();
+  addElectrodeBodies();
+  addEndWalls();
+  n_machine_ = int(sys_.bodies().count());
+
+  field_ = std::make_shared<CesForceField>(*this);
+#ifdef DVISIM_HAVE_CUDA
+  DeviceBodyRefs refs;
+  if (sys_.deviceBodies(refs)) dev_ = makeCesDevice(model_);
+#endif
+  host_forces_ = sys_.backendName() != "cpu" && !dev_;
+  if (!host_forces_) sys_.addForceField(field_);
+}
+
+// Field: the model's solution (two-cylinder, charge simulation or corona) behind model_.field.
+void CesMachine::setupField(const std::vector<ElectrodeConfig>& supplied) {
+  const real R = real(cfg_.drumRadius());
   if (cfg_.field_model == "two_cylinder") {
     const ElectrodeConfig& e = cfg_.tube;
     model_.field.model = 0;
@@ -191,46 +211,58 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
     csm_.solve();
     model_.field.csm = csm_.view();
   } else {  // corona: wire + optional tube on the supply
-    model_.field.model = 2;
-    CoronaSetup st;
-    auto cyl = [](const ElectrodeConfig& e) {
-      return CoronaCylinder{real(e.distance * std::cos(e.angle)), real(e.distance * std::sin(e.angle)), real(e.diameter / 2),
-                            e.enabled};
-    };
-    st.drum = CoronaCylinder{0, 0, R, true};
-    st.wire = cyl(cfg_.wire);
-    st.tube = cyl(cfg_.tube);
-    st.U = real(cfg_.voltage);
-    st.ion_mobility = real(cfg_.ion_mobility);
-    st.rel_air_density = real(cfg_.rel_air_density);
-    st.roughness = real(cfg_.roughness);
-    // The box covers every place a particle reaches before it is collected or lost: the drum, the
-    // electrodes, the trajectories down to below the collection plane (outside it the box's edge value is
-    // used; the field there is a small fraction of the drum's).
-    const real h = real(cfg_.corona_grid);
-    st.box_x0 = -R - real(0.10);
-    st.box_x1 = real(0.45);
-    st.box_y0 = std::min(real(cfg_.collection_y) - real(0.02), -R - real(0.02));
-    st.box_y1 = R + real(0.10);
-    for (const ElectrodeConfig* e : {&cfg_.wire, &cfg_.tube})
-      if (e->enabled) {
-        st.box_x1 = std::max(st.box_x1, real(e->distance * std::cos(e->angle) + e->diameter / 2) + real(0.02));
-        st.box_y1 = std::max(st.box_y1, real(e->distance * std::sin(e->angle) + e->diameter / 2) + real(0.02));
-      }
-    st.spacing = h;
-    const CoronaSolution& sol = corona_field_.solve(st);
-    model_.field.grid = corona_field_.view();
-    corona_.ionised = sol.ionised;
-    corona_.onset_voltage = double(sol.onset_voltage);
-    corona_.wire_field_on = double(sol.wire_field_on);
-    corona_.current_per_m = double(sol.current_per_m);
+    setupCoronaField();
   }
+}
+
+// The corona model: the wire and the optional tube on the supply, solved on a grid.
+void CesMachine::setupCoronaField() {
+  const real R = real(cfg_.drumRadius());
+  model_.field.model = 2;
+  CoronaSetup st;
+  auto cyl = [](const ElectrodeConfig& e) {
+    return CoronaCylinder{real(e.distance * std::cos(e.angle)), real(e.distance * std::sin(e.angle)), real(e.diameter / 2),
+                          e.enabled};
+  };
+  st.drum = CoronaCylinder{0, 0, R, true};
+  st.wire = cyl(cfg_.wire);
+  st.tube = cyl(cfg_.tube);
+  st.U = real(cfg_.voltage);
+  st.ion_mobility = real(cfg_.ion_mobility);
+  st.rel_air_density = real(cfg_.rel_air_density);
+  st.roughness = real(cfg_.roughness);
+  // The box covers every place a particle reaches before it is collected or lost: the drum, the
+  // electrodes, the trajectories down to below the collection plane (outside it the box's edge value is
+  // used; the field there is a small fraction of the drum's).
+  const real h = real(cfg_.corona_grid);
+  st.box_x0 = -R - real(0.10);
+  st.box_x1 = real(0.45);
+  st.box_y0 = std::min(real(cfg_.collection_y) - real(0.02), -R - real(0.02));
+  st.box_y1 = R + real(0.10);
+  for (const ElectrodeConfig* e : {&cfg_.wire, &cfg_.tube})
+    if (e->enabled) {
+      st.box_x1 = std::max(st.box_x1, real(e->distance * std::cos(e->angle) + e->diameter / 2) + real(0.02));
+      st.box_y1 = std::max(st.box_y1, real(e->distance * std::sin(e->angle) + e->diameter / 2) + real(0.02));
+    }
+  st.spacing = h;
+  const CoronaSolution& sol = corona_field_.solve(st);
+  model_.field.grid = corona_field_.view();
+  corona_.ionised = sol.ionised;
+  corona_.onset_voltage = double(sol.onset_voltage);
+  corona_.wire_field_on = double(sol.wire_field_on);
+  corona_.current_per_m = double(sol.current_per_m);
+}
+
+// The rest of the model the force field and the classification read: drum, brush, electrodes, air, domain,
+// materials.
+void CesMachine::setupModel(const std::vector<ElectrodeConfig>& supplied) {
+  const real R = real(cfg_.drumRadius()), W = real(cfg_.drum_width);
   model_.drum = DrumGeometry{0, 0, R, 0, W / 2, real(cfg_.image_cutoff)};
   model_.polarity = cfg_.voltage < 0 ? real(-1) : cfg_.voltage > 0 ? real(1) : real(0);
   model_.ion_mobility = real(cfg_.ion_mobility);
   model_.pin_dy = -R * real(std::cos(20.0 * 3.14159265358979323846 / 180.0));  // within 20 deg of the lowest point
-  // The brush's axis: its bristle tips (radius rb) brush_gap from the drum; its rigid core (radius rc) is the body.
-  const real rb = real(cfg_.brush_diameter / 2), rc = real(cfg_.brush_core_diameter / 2), db = R + rb + real(cfg_.brush_gap);
+  // The brush's axis: its bristle tips (radius rb) brush_gap from the drum (its rigid core is the body, addBrushBody).
+  const real rb = real(cfg_.brush_diameter / 2), db = R + rb + real(cfg_.brush_gap);
   model_.brush = CylinderXY{db * real(std::cos(cfg_.brush_angle)), db * real(std::sin(cfg_.brush_angle)), rb};
   model_.brush_omega = real(cfg_.omegaBrush());
   model_.brush_tau = real(cfg_.brush_discharge_time);
@@ -258,73 +290,78 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
     model_.eps_r[k] = real(cfg_.materials[k].eps_r);
     model_.tau[k] = real(cfg_.materials[k].relaxation_time);
   }
+}
 
-  // Drum.
+// Drum: kinematic, or (rheonomic) a dynamic body driven at its speed by a constraint row (DrumDrive).
+void CesMachine::addDrumBody() {
+  const real R = real(cfg_.drumRadius()), W = real(cfg_.drum_width);
   std::string drive = cfg_.drum_drive;
   if (drive == "auto") drive = coreSolvesConstraintRows() ? "rheonomic" : "kinematic";
   if (drive == "rheonomic" && !coreSolvesConstraintRows())
     throw InputError("ces.drum.drive: rheonomic needs a core that solves constraint rows (this build does not); use kinematic");
-  {
-    BodyDesc d;
-    d.rot = axisZ();
-    d.omega = Vec3{0, 0, real(cfg_.omegaDrum())};
-    d.friction = real(cfg_.mu_particle_drum) / fp;
-    d.shapes.push_back(machineShape(makeCylinder(R, W / 2)));
-    if (drive == "rheonomic") {
-      const real M = real(cfg_.drum_mass);
-      d.mass = M;
-      d.inertia = Vec3{M * (6 * R * R + W * W) / 12, M * R * R, M * (6 * R * R + W * W) / 12};  // thin shell, axis local y
-      d.has_gravity = true;  // the truss carries its weight: no gravity on the drum
-      d.gravity = Vec3{0, 0, 0};
-    } else {
-      d.mass = 0;
-      d.flags = kBodyKinematic;
-    }
-    drum_ = addBody(d, -1, nullptr, 0);
-    model_.drum_body = drum_;
-    if (drive == "rheonomic") {
-      drive_ = std::make_shared<DrumDrive>(drum_, Vec3{0, 0, 0}, cfg_.omegaDrum());
-      sys_.addRowProvider(drive_);
-    }
-  }
-  {  // Brush.
-    BodyDesc d;
-    d.pos = Vec3{model_.brush.cx, model_.brush.cy, 0};
-    d.rot = axisZ();
-    d.omega = Vec3{0, 0, real(cfg_.omegaBrush())};
+  BodyDesc d;
+  d.rot = axisZ();
+  d.omega = Vec3{0, 0, real(cfg_.omegaDrum())};
+  d.friction = real(cfg_.mu_particle_drum) / particle_friction_;
+  d.shapes.push_back(machineShape(makeCylinder(R, W / 2)));
+  if (drive == "rheonomic") {
+    const real M = real(cfg_.drum_mass);
+    d.mass = M;
+    d.inertia = Vec3{M * (6 * R * R + W * W) / 12, M * R * R, M * (6 * R * R + W * W) / 12};  // thin shell, axis local y
+    d.has_gravity = true;  // the truss carries its weight: no gravity on the drum
+    d.gravity = Vec3{0, 0, 0};
+  } else {
     d.mass = 0;
     d.flags = kBodyKinematic;
-    d.friction = real(cfg_.mu_particle_brush) / fp;
-    d.shapes.push_back(machineShape(makeCylinder(rc, W / 2)));
-    brush_ = addBody(d, -1, nullptr, 0);
   }
-  for (int k = 0; k < model_.n_electrodes; ++k) {  // electrodes
+  drum_ = addBody(d, -1, nullptr, 0);
+  model_.drum_body = drum_;
+  if (drive == "rheonomic") {
+    drive_ = std::make_shared<DrumDrive>(drum_, Vec3{0, 0, 0}, cfg_.omegaDrum());
+    sys_.addRowProvider(drive_);
+  }
+}
+
+// Brush: a kinematic cylinder of its rigid core's radius (rc) on the axis setupModel placed.
+void CesMachine::addBrushBody() {
+  const real rc = real(cfg_.brush_core_diameter / 2), W = real(cfg_.drum_width);
+  BodyDesc d;
+  d.pos = Vec3{model_.brush.cx, model_.brush.cy, 0};
+  d.rot = axisZ();
+  d.omega = Vec3{0, 0, real(cfg_.omegaBrush())};
+  d.mass = 0;
+  d.flags = kBodyKinematic;
+  d.friction = real(cfg_.mu_particle_brush) / particle_friction_;
+  d.shapes.push_back(machineShape(makeCylinder(rc, W / 2)));
+  brush_ = addBody(d, -1, nullptr, 0);
+}
+
+// Electrodes: fixed cylinders, in model_.electrodes' order.
+void CesMachine::addElectrodeBodies() {
+  const real W = real(cfg_.drum_width);
+  for (int k = 0; k < model_.n_electrodes; ++k) {
     BodyDesc d;
     d.pos = Vec3{model_.electrodes[k].cx, model_.electrodes[k].cy, 0};
     d.rot = axisZ();
     d.mass = 0;
     d.flags = kBodyFixed;
-    d.friction = real(cfg_.mu_particle_wall) / fp;
+    d.friction = real(cfg_.mu_particle_wall) / particle_friction_;
     d.shapes.push_back(machineShape(makeCylinder(model_.electrodes[k].R, W / 2)));
     addBody(d, -1, nullptr, 0);
   }
-  for (int side = -1; side <= 1; side += 2) {  // end walls: solid beyond z = +-W/2
+}
+
+// End walls: solid beyond z = +-W/2.
+void CesMachine::addEndWalls() {
+  const real W = real(cfg_.drum_width);
+  for (int side = -1; side <= 1; side += 2) {
     BodyDesc d;
     d.mass = 0;
     d.flags = kBodyFixed;
-    d.friction = real(cfg_.mu_particle_wall) / fp;
+    d.friction = real(cfg_.mu_particle_wall) / particle_friction_;
     d.shapes.push_back(machineShape(makePlane(Vec3{0, 0, real(-side)}, -W / 2)));
     addBody(d, -1, nullptr, 0);
   }
-  n_machine_ = int(sys_.bodies().count());
-
-  field_ = std::make_shared<CesForceField>(*this);
-#ifdef DVISIM_HAVE_CUDA
-  DeviceBodyRefs refs;
-  if (sys_.deviceBodies(refs)) dev_ = makeCesDevice(model_);
-#endif
-  host_forces_ = sys_.backendName() != "cpu" && !dev_;
-  if (!host_forces_) sys_.addForceField(field_);
 }
 
 int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spec, real charge) {
@@ -775,6 +812,20 @@ void CesMachine::load(std::istream& file, std::string* meta) {
   bytes.shrink_to_fit();
   std::istringstream in(std::move(parts.state), std::ios::binary);
   if (int(sys_.bodies().count()) != n_machine_ || !specs_.empty()) throw InputError("checkpoint: the machine is not fresh");
+  // The sections in the order save() writes them.
+  loadClockAndFeeder(in);
+  loadParticleRecords(in);
+  loadParticleState(in);
+  loadBodyArrays(in);
+  loadCoreAndEnd(in);
+  sys_.markHostDirty();
+  dev_uploaded_ = 0;  // CesDevice: every particle's state goes up again before the next step
+  charges_stale_ = false;
+  if (meta) *meta = std::move(parts.meta);
+}
+
+// The step count and the feeder's state.
+void CesMachine::loadClockAndFeeder(std::istream& in) {
   get(in, steps_);
   if (steps_ < 0 || steps_ > (int64_t(1) << 40)) throw InputError("checkpoint: corrupt step count " + std::to_string(steps_));
   Feeder::State fs;
@@ -791,6 +842,10 @@ void CesMachine::load(std::istream& file, std::string* meta) {
   if (!(std::isfinite(fs.owed_kg) && fs.owed_kg <= 0 && fs.owed_kg > -1.0) || fs.fed_total_fg != fed_sum)
     throw InputError("checkpoint: corrupt feeder state");
   feeder_.setState(fs);
+}
+
+// Every particle's spec, each checked and its body added (at rest; loadBodyArrays sets its state).
+void CesMachine::loadParticleRecords(std::istream& in) {
   uint64_t ns = 0;
   get(in, ns);
   if (ns > bytesLeft(in) / 64) throw InputError("checkpoint: corrupt particle count " + std::to_string(ns));  // >= 64 bytes each
@@ -815,6 +870,10 @@ void CesMachine::load(std::istream& file, std::string* meta) {
       throw InputError(what + e.what());
     }
   }
+}
+
+// The per-body particle arrays (status, material, charge, flags) and the collected and recent-spawn records.
+void CesMachine::loadParticleState(std::istream& in) {
   std::vector<uint8_t> status;
   std::vector<int32_t> material;
   std::vector<real> charge;
@@ -850,6 +909,10 @@ void CesMachine::load(std::istream& file, std::string* meta) {
   p_.material = material;
   p_.charge = charge;
   p_.flags = pflags;
+}
+
+// The body arrays (positions, rotations, velocities, flags) of every body, machine parts included.
+void CesMachine::loadBodyArrays(std::istream& in) {
   BodyArrays& b = sys_.mutableBodies();
   std::vector<Vec3> pos, vel, omega;
   std::vector<Quat> rot;
@@ -879,6 +942,10 @@ void CesMachine::load(std::istream& file, std::string* meta) {
   b.vel = vel;
   b.omega = omega;
   b.flags = flags;
+}
+
+// The core's warm start (with a CheckpointSystem), then nothing may follow.
+void CesMachine::loadCoreAndEnd(std::istream& in) {
   uint8_t has_core = 0;
   get(in, has_core);
   if (has_core > 1) throw InputError("checkpoint: corrupt core marker");
@@ -886,10 +953,6 @@ void CesMachine::load(std::istream& file, std::string* meta) {
   if (has_core && cs) cs->loadCore(in);
   if (!(has_core && !cs) && in.peek() != std::char_traits<char>::eof())  // a GPU run's file may carry a core it ignores
     throw InputError("checkpoint: " + std::to_string(bytesLeft(in)) + " bytes of garbage after the end");
-  sys_.markHostDirty();
-  dev_uploaded_ = 0;  // CesDevice: every particle's state goes up again before the next step
-  charges_stale_ = false;
-  if (meta) *meta = std::move(parts.meta);
 }
 
 }  // namespace ces

@@ -186,6 +186,20 @@ class CesMachine {
 
  private:
   friend class CesForceField;
+  // Construction, in the constructor's order (the bodies' order fixes their indices).
+  void setupField(const std::vector<ElectrodeConfig>& supplied);
+  void setupCoronaField();
+  void setupModel(const std::vector<ElectrodeConfig>& supplied);
+  void addDrumBody();
+  void addBrushBody();
+  void addElectrodeBodies();
+  void addEndWalls();
+  // load(): the checkpoint's sections, each read and validated in the order save() writes them.
+  void loadClockAndFeeder(std::istream& in);
+  void loadParticleRecords(std::istream& in);
+  void loadParticleState(std::istream& in);
+  void loadBodyArrays(std::istream& in);
+  void loadCoreAndEnd(std::istream& in);
   int addBody(const BodyDesc& d, int material, const ParticleSpec* spec, real charge);
   void emit();
   void postStep();
