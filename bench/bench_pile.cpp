@@ -50,8 +50,8 @@ struct Pile {
 Pile makePile(long n, double r, double mu) {
   Pile p;
   const int side = int(std::ceil(std::cbrt(double(n) / 2.0)));  // footprint side; height ~ 2 x side
-  const double pitch = 2.0 * r * 1.05;    // across (x, z)
-  const double vpitch = 2.0 * r * 1.001;  // along a column (y)
+  const double pitch = 2.0 * r * 1.05;                          // across (x, z)
+  const double vpitch = 2.0 * r * 1.001;                        // along a column (y)
   const double width = side * pitch;
   auto add = [&](btCollisionShape* s, double mass, btVector3 pos) {
     btVector3 inertia(0, 0, 0);
@@ -92,26 +92,42 @@ double now() { return std::chrono::duration<double>(std::chrono::steady_clock::n
 int main(int argc, char** argv) {
   Args a;
   if (argc < 2 || std::strcmp(argv[1], "pile") != 0) {
-    std::fprintf(stderr, "usage: dvisim_bench pile [--n N] [--steps S] [--warmup W] [--iterations I] [--solver S] "
-                         "[--threads T] [--bullet-iterations I] [--no-bullet] [--csv FILE]\n");
+    std::fprintf(stderr,
+                 "usage: dvisim_bench pile [--n N] [--steps S] [--warmup W] [--iterations I] [--solver S] "
+                 "[--threads T] [--bullet-iterations I] [--no-bullet] [--csv FILE]\n");
     return 2;
   }
   for (int i = 2; i < argc; ++i) {
     std::string k = argv[i];
     auto next = [&]() -> std::string {
-      if (i + 1 >= argc) { std::fprintf(stderr, "dvisim_bench: error: %s needs a value\n", k.c_str()); std::exit(2); }
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "dvisim_bench: error: %s needs a value\n", k.c_str());
+        std::exit(2);
+      }
       return argv[++i];
     };
-    if (k == "--n") a.n = std::atol(next().c_str());
-    else if (k == "--steps") a.steps = std::atoi(next().c_str());
-    else if (k == "--warmup") a.warmup = std::atoi(next().c_str());
-    else if (k == "--iterations") a.iterations = std::atoi(next().c_str());
-    else if (k == "--solver") a.solver = next();
-    else if (k == "--threads") a.threads = std::atoi(next().c_str());
-    else if (k == "--bullet-iterations") a.bullet_iterations = std::atoi(next().c_str());
-    else if (k == "--no-bullet") a.bullet = false;
-    else if (k == "--csv") a.csv = next();
-    else { std::fprintf(stderr, "dvisim_bench: error: unknown option %s\n", k.c_str()); return 2; }
+    if (k == "--n")
+      a.n = std::atol(next().c_str());
+    else if (k == "--steps")
+      a.steps = std::atoi(next().c_str());
+    else if (k == "--warmup")
+      a.warmup = std::atoi(next().c_str());
+    else if (k == "--iterations")
+      a.iterations = std::atoi(next().c_str());
+    else if (k == "--solver")
+      a.solver = next();
+    else if (k == "--threads")
+      a.threads = std::atoi(next().c_str());
+    else if (k == "--bullet-iterations")
+      a.bullet_iterations = std::atoi(next().c_str());
+    else if (k == "--no-bullet")
+      a.bullet = false;
+    else if (k == "--csv")
+      a.csv = next();
+    else {
+      std::fprintf(stderr, "dvisim_bench: error: unknown option %s\n", k.c_str());
+      return 2;
+    }
   }
   const double r = 0.01, mu = 0.5, h = 1e-3;
   Pile pile = makePile(a.n, r, mu);
@@ -122,7 +138,10 @@ int main(int argc, char** argv) {
   dvi::SystemConfig cfg;
   cfg.step.dt = h;
   cfg.threads = a.threads;
-  if (!dvi::parseSolver(a.solver, cfg.solver.type)) { std::fprintf(stderr, "dvisim_bench: error: unknown solver %s\n", a.solver.c_str()); return 2; }
+  if (!dvi::parseSolver(a.solver, cfg.solver.type)) {
+    std::fprintf(stderr, "dvisim_bench: error: unknown solver %s\n", a.solver.c_str());
+    return 2;
+  }
   cfg.solver.max_iterations = a.iterations;
   dvi::System sys(cfg);
   dvi::importBullet(sys, pile.bodies);
@@ -139,12 +158,13 @@ int main(int argc, char** argv) {
     for (int k = 0; k < dvi::kStageCount; ++k) stage_ms[k] += 1e3 * sys.lastStats().stage_seconds[k] / a.steps;
   }
   std::printf("\n%-34s %12s %12s %16s\n", "engine", "ms/step", "contacts", "max pen / r");
-  std::printf("%-34s %12.1f %12.0f %16.4f\n", ("dvisim cpu " + a.solver + " " + std::to_string(a.iterations) + " it, " +
-                                                std::to_string(cfg.threads > 0 ? cfg.threads : omp_get_max_threads()) + " thr").c_str(),
+  std::printf("%-34s %12.1f %12.0f %16.4f\n",
+              ("dvisim cpu " + a.solver + " " + std::to_string(a.iterations) + " it, " +
+               std::to_string(cfg.threads > 0 ? cfg.threads : omp_get_max_threads()) + " thr")
+                  .c_str(),
               ours_ms, ours_contacts, ours_pen / r);
   std::printf("  stages (ms/step):");
-  for (int k = 0; k < dvi::kStageCount; ++k)
-    std::printf(" %s %.1f", dvi::stageName(dvi::StageType(k)), stage_ms[k]);
+  for (int k = 0; k < dvi::kStageCount; ++k) std::printf(" %s %.1f", dvi::stageName(dvi::StageType(k)), stage_ms[k]);
   std::printf("\n");
 
   double bullet_ms = 0, bullet_contacts = 0, bullet_pen = 0;
@@ -166,15 +186,20 @@ int main(int argc, char** argv) {
     std::printf("%-34s %12.1f %12.0f %16.4f\n",
                 ("bullet 2 SI " + std::to_string(a.bullet_iterations) + " it, 1 thr, cm units").c_str(), bullet_ms,
                 bullet_contacts, bullet_pen / r);
-    std::printf("\nratio bullet/dvisim: time %.2fx faster, relative penetration %.2f (dvisim / bullet; <= 1 is better)\n",
-                bullet_ms / ours_ms, bullet_pen > 0 ? ours_pen / bullet_pen : 0.0);
-    std::printf("note: Bullet ran the same pile in centimetres (length_scale 100); its numbers are converted to metres.\n");
+    std::printf(
+        "\nratio bullet/dvisim: time %.2fx faster, relative penetration %.2f (dvisim / bullet; <= 1 is better)\n",
+        bullet_ms / ours_ms, bullet_pen > 0 ? ours_pen / bullet_pen : 0.0);
+    std::printf(
+        "note: Bullet ran the same pile in centimetres (length_scale 100); its numbers are converted to metres.\n");
   }
   if (!a.csv.empty()) {
     std::ofstream f(a.csv);
     f << "engine,n,steps,ms_per_step,contacts,max_penetration_rel\n";
-    f << "dvisim_cpu," << a.n << "," << a.steps << "," << ours_ms << "," << ours_contacts << "," << ours_pen / r << "\n";
-    if (a.bullet) f << "bullet," << a.n << "," << a.steps << "," << bullet_ms << "," << bullet_contacts << "," << bullet_pen / r << "\n";
+    f << "dvisim_cpu," << a.n << "," << a.steps << "," << ours_ms << "," << ours_contacts << "," << ours_pen / r
+      << "\n";
+    if (a.bullet)
+      f << "bullet," << a.n << "," << a.steps << "," << bullet_ms << "," << bullet_contacts << "," << bullet_pen / r
+        << "\n";
   }
   return 0;
 }

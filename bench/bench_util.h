@@ -97,8 +97,10 @@ inline std::string num(double v, const char* fmt = "%.6g") {
 inline std::string slug(const std::string& s) {
   std::string o;
   for (char c : s) {
-    if (std::isalnum((unsigned char)c)) o += char(std::tolower((unsigned char)c));
-    else if (!o.empty() && o.back() != '-') o += '-';
+    if (std::isalnum((unsigned char)c))
+      o += char(std::tolower((unsigned char)c));
+    else if (!o.empty() && o.back() != '-')
+      o += '-';
   }
   while (!o.empty() && o.back() == '-') o.pop_back();
   if (o.size() > 48) o.resize(48);
@@ -188,8 +190,10 @@ inline std::string runPlot(const std::string& script_name, const std::string& di
   if (script.empty()) return png + " not written: " + script_name + " not found";
   const std::string python = dvi::pythonWithMatplotlib();
   if (python.empty())
-    return png + " not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib); the CSV "
-                 "is complete, plot later with: python3 " + script + " " + dir;
+    return png +
+           " not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib); the CSV "
+           "is complete, plot later with: python3 " +
+           script + " " + dir;
   const std::string log = dir + "/" + script_name + ".log";
   const std::string cmd = python + " " + shellQuote(script) + " " + shellQuote(dir) + " >" + shellQuote(log) + " 2>&1";
   if (std::system(cmd.c_str()) != 0) return png + " not written: " + script_name + " failed (see " + log + ")";
@@ -219,7 +223,8 @@ struct BtBodies {
     if (mass > 0) shape->calculateLocalInertia(btScalar(mass), inertia);
     btRigidBody::btRigidBodyConstructionInfo info(btScalar(mass), nullptr, shape, inertia);
     info.m_startWorldTransform.setOrigin(bt(pos));
-    info.m_startWorldTransform.setRotation(btQuaternion(btScalar(rot.x), btScalar(rot.y), btScalar(rot.z), btScalar(rot.w)));
+    info.m_startWorldTransform.setRotation(
+        btQuaternion(btScalar(rot.x), btScalar(rot.y), btScalar(rot.z), btScalar(rot.w)));
     info.m_friction = btScalar(friction);
     owned.emplace_back(new btRigidBody(info));
     btRigidBody* b = owned.back().get();
@@ -282,11 +287,14 @@ struct BulletRunner : Runner {
   std::string device() const override {
     char b[160];
     std::snprintf(b, sizeof b, "Bullet %d.%02d btDiscreteDynamicsWorld, sequential impulse %d it, 1 thread, length x%g",
-                  btGetVersion() / 100, btGetVersion() % 100, settings.solver_iterations, double(settings.length_scale));
+                  btGetVersion() / 100, btGetVersion() % 100, settings.solver_iterations,
+                  double(settings.length_scale));
     return b;
   }
 };
 
-inline bool finite3(Vec3 v) { return std::isfinite(double(v.x)) && std::isfinite(double(v.y)) && std::isfinite(double(v.z)); }
+inline bool finite3(Vec3 v) {
+  return std::isfinite(double(v.x)) && std::isfinite(double(v.y)) && std::isfinite(double(v.z));
+}
 
 }  // namespace dvi::benchutil

@@ -19,9 +19,8 @@ __global__ void collidePairsKernel(int n, const Shape* a, const Pose* wa, const 
 }  // namespace
 
 void collidePairsOnDevice(const std::vector<Shape>& a, const std::vector<Pose>& wa, const std::vector<Shape>& b,
-                          const std::vector<Pose>& wb, const std::vector<Vec3>& hull,
-                          const std::vector<real>& envelope, std::vector<int>& counts,
-                          std::vector<ContactPoint>& out) {
+                          const std::vector<Pose>& wb, const std::vector<Vec3>& hull, const std::vector<real>& envelope,
+                          std::vector<int>& counts, std::vector<ContactPoint>& out) {
   const int n = int(a.size());
   DeviceBuffer<Shape> da("test shapes a"), db("test shapes b");
   DeviceBuffer<Pose> dwa("test poses a"), dwb("test poses b");

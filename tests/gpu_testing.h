@@ -14,9 +14,8 @@ namespace dvi::gpu {
 // For each i: collideShapes(a[i], wa[i], b[i], wb[i], hull, envelope[i]) on the device. out gets
 // kMaxContactsPerPair points per pair, counts the number of valid points of each.
 void collidePairsOnDevice(const std::vector<Shape>& a, const std::vector<Pose>& wa, const std::vector<Shape>& b,
-                          const std::vector<Pose>& wb, const std::vector<Vec3>& hull,
-                          const std::vector<real>& envelope, std::vector<int>& counts,
-                          std::vector<ContactPoint>& out);
+                          const std::vector<Pose>& wb, const std::vector<Vec3>& hull, const std::vector<real>& envelope,
+                          std::vector<int>& counts, std::vector<ContactPoint>& out);
 
 // The GPU broad phase (gpu_collision.cu: broadPhase) over shapes.shape, shapes.aabb and bodies.flags, run
 // `steps` times on the same device state (the later runs start from the bin-edge path the earlier chose). pairs

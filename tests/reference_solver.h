@@ -135,7 +135,8 @@ inline std::vector<double> solve(const DenseCcp& P, double tol = 1e-13, int max_
     for (int k = 0; k < nc; ++k) {
       double fro = 0;
       for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) fro += P.N[size_t(3 * k + i) * n + 3 * k + j] * P.N[size_t(3 * k + i) * n + 3 * k + j];
+        for (int j = 0; j < 3; ++j)
+          fro += P.N[size_t(3 * k + i) * n + 3 * k + j] * P.N[size_t(3 * k + i) * n + 3 * k + j];
       fro = std::sqrt(fro);
       if (fro <= 0) continue;
       const double t = 1.0 / fro;  // Frobenius norm >= lambda_max
@@ -184,9 +185,11 @@ inline double kktViolation(const DenseCcp& P, const std::vector<double>& g) {
     const double* x = &g[3 * k];
     const double u[3] = {Ng[3 * k] + P.r[3 * k], Ng[3 * k + 1] + P.r[3 * k + 1], Ng[3 * k + 2] + P.r[3 * k + 2]};
     const double mu = P.mu[k];
-    v = std::max(v, (std::hypot(x[1], x[2]) - mu * x[0]) / gs);               // primal cone
-    if (mu > 0) v = std::max(v, (mu * std::hypot(u[1], u[2]) - u[0]) / us);  // dual cone
-    else v = std::max(v, -u[0] / us);
+    v = std::max(v, (std::hypot(x[1], x[2]) - mu * x[0]) / gs);  // primal cone
+    if (mu > 0)
+      v = std::max(v, (mu * std::hypot(u[1], u[2]) - u[0]) / us);  // dual cone
+    else
+      v = std::max(v, -u[0] / us);
     v = std::max(v, std::fabs(x[0] * u[0] + x[1] * u[1] + x[2] * u[2]) / (gs * us));
   }
   return v;

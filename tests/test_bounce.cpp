@@ -87,9 +87,12 @@ Trace runDrop(Drop d, real h, real seconds) {
   cfg.step.dt = h;
   System sys(cfg);
   const Vec3 start{0, kSize + kDrop, 0};
-  if (d == Drop::SphereOnPlane) sys.addBody(plane());
-  else if (d == Drop::BoxOnBox) sys.addBody(fixedBox(Vec3{real(0.5), real(0.1), real(0.5)}, Vec3{0, real(-0.1), 0}));
-  else sys.addBody(fixedBox(Vec3{real(0.5), real(0.005), real(0.5)}, Vec3{0, real(-0.005), 0}));
+  if (d == Drop::SphereOnPlane)
+    sys.addBody(plane());
+  else if (d == Drop::BoxOnBox)
+    sys.addBody(fixedBox(Vec3{real(0.5), real(0.1), real(0.5)}, Vec3{0, real(-0.1), 0}));
+  else
+    sys.addBody(fixedBox(Vec3{real(0.5), real(0.005), real(0.5)}, Vec3{0, real(-0.005), 0}));
   const int b = sys.addBody(d == Drop::BoxOnBox ? box(kSize, start) : sphere(kSize, start));
   Trace t;
   const int n = int(std::lround(seconds / h));
@@ -114,7 +117,8 @@ Landing landing(const std::vector<real>& y, real rest) {
   if (i == y.size()) return L;
   L.landed = true;
   for (size_t j = i; j < y.size(); ++j) L.rebound = std::max(L.rebound, y[j] - rest);
-  for (size_t j = i; j < std::min(y.size(), i + 2); ++j) L.first_impact_depth = std::max(L.first_impact_depth, rest - y[j]);
+  for (size_t j = i; j < std::min(y.size(), i + 2); ++j)
+    L.first_impact_depth = std::max(L.first_impact_depth, rest - y[j]);
   L.final_offset = y.back() - rest;
   return L;
 }
@@ -182,8 +186,7 @@ std::vector<double> frameHeights(const fs::path& file) {
   std::ifstream f(file);
   std::string line;
   std::vector<double> y;
-  while (std::getline(f, line) && line.find("Name=\"position\"") == std::string::npos) {
-  }
+  while (std::getline(f, line) && line.find("Name=\"position\"") == std::string::npos) {}
   while (std::getline(f, line) && line.find("</DataArray>") == std::string::npos) {
     std::istringstream s(line);
     double px = 0, py = 0, pz = 0;
@@ -196,7 +199,8 @@ std::vector<double> frameHeights(const fs::path& file) {
 
 // The same three drops as a .json scene run by the dvisim binary, side by side (x = 0, 2, 4; supports' tops at
 // y = 1), one run per step size (--dt), a frame every step; heights read back from the frames.
-TEST_CASE("dvisim run: a dropped body never rebounds above 1% of its drop height, at every step size", "[bounce][cli]") {
+TEST_CASE("dvisim run: a dropped body never rebounds above 1% of its drop height, at every step size",
+          "[bounce][cli]") {
   const fs::path dir = fs::temp_directory_path() / ("dvisim_bounce_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
@@ -269,17 +273,19 @@ TEST_CASE("Bullet's HelloWorld scene rests through the drop-in world as it does 
     btSequentialImpulseConstraintSolver solver;
     std::unique_ptr<btDiscreteDynamicsWorld> dynamicsWorld;
     if (dvi)
-      dynamicsWorld = std::make_unique<DviDynamicsWorld>(&dispatcher, &overlappingPairCache, &solver, &collisionConfiguration);
-    else
       dynamicsWorld =
-          std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &overlappingPairCache, &solver, &collisionConfiguration);
+          std::make_unique<DviDynamicsWorld>(&dispatcher, &overlappingPairCache, &solver, &collisionConfiguration);
+    else
+      dynamicsWorld = std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &overlappingPairCache, &solver,
+                                                                &collisionConfiguration);
     dynamicsWorld->setGravity(btVector3(0, -10, 0));
     btBoxShape groundShape(btVector3(btScalar(50.), btScalar(50.), btScalar(50.)));
     btTransform groundTransform;
     groundTransform.setIdentity();
     groundTransform.setOrigin(btVector3(0, -56, 0));
     btDefaultMotionState groundMotion(groundTransform);
-    btRigidBody ground(btRigidBody::btRigidBodyConstructionInfo(btScalar(0.), &groundMotion, &groundShape, btVector3(0, 0, 0)));
+    btRigidBody ground(
+        btRigidBody::btRigidBodyConstructionInfo(btScalar(0.), &groundMotion, &groundShape, btVector3(0, 0, 0)));
     dynamicsWorld->addRigidBody(&ground);
     btSphereShape colShape(btScalar(1.));
     btScalar mass(1.f);
@@ -306,7 +312,8 @@ TEST_CASE("Bullet's HelloWorld scene rests through the drop-in world as it does 
     return r;
   };
   const Run bullet = run(false), ours = run(true);
-  INFO("stock Bullet: rebound " << bullet.rebound << " m, deepest " << bullet.deepest << " m, final y " << bullet.final_y);
+  INFO("stock Bullet: rebound " << bullet.rebound << " m, deepest " << bullet.deepest << " m, final y "
+                                << bullet.final_y);
   INFO("drop-in world: rebound " << ours.rebound << " m, deepest " << ours.deepest << " m, final y " << ours.final_y);
   // both rest: no rebound above 1% of the 15 m drop, at rest on the box at the end
   CHECK(bullet.rebound <= 0.15);

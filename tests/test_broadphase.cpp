@@ -109,8 +109,8 @@ void checkAgainstOracle(const Scene& sc, BroadPhaseSettings set = {}, BroadPhase
     std::vector<ShapePair> got;
     BroadPhaseStats st;
     bp.run(sc.shapes, sc.bodies, got, &st);
-    INFO("threads " << threads << ", shapes " << sc.shapes.count() << ", pairs " << got.size() << " vs "
-                    << ref.size() << ", bins " << st.bins << ", large " << st.large_shapes);
+    INFO("threads " << threads << ", shapes " << sc.shapes.count() << ", pairs " << got.size() << " vs " << ref.size()
+                    << ", bins " << st.bins << ", large " << st.large_shapes);
     CHECK(strictlySortedUnique(got));
     CHECK(samePairs(got, ref));
     CHECK(st.pairs == int64_t(got.size()));
@@ -293,7 +293,8 @@ TEST_CASE("broad phase timing: 100k spheres of radius 1 cm in a dense pile", "[b
   for (int k = 0; k < side; ++k)
     for (int j = 0; j < side; ++j)
       for (int i = 0; i < side; ++i) {
-        const Vec3 c{pitch * real(i) + real(J(rng)), pitch * real(j) + real(J(rng)), r + pitch * real(k) + real(J(rng))};
+        const Vec3 c{pitch * real(i) + real(J(rng)), pitch * real(j) + real(J(rng)),
+                     r + pitch * real(k) + real(J(rng))};
         sc.addShape(sc.addBody(0), ShapeType::Sphere, cube(c, r + env));
       }
   BroadPhaseBins bp;
@@ -304,11 +305,12 @@ TEST_CASE("broad phase timing: 100k spheres of radius 1 cm in a dense pile", "[b
   const auto t0 = std::chrono::steady_clock::now();
   for (int i = 0; i < reps; ++i) bp.run(sc.shapes, sc.bodies, pairs, &st);
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / reps;
-  std::printf("[broadphase] %zu shapes, %d threads: %.2f ms per call; %lld pairs, %lld bins (%d x %d x %d, edge %.4g), "
-              "%lld occupied, %lld entries, %lld in-bin tests, %d large\n",
-              sc.shapes.count(), omp_get_max_threads(), ms, (long long)st.pairs, (long long)st.bins, st.grid[0],
-              st.grid[1], st.grid[2], double(st.bin_edge), (long long)st.occupied_bins, (long long)st.bin_entries,
-              (long long)st.bin_pair_tests, st.large_shapes);
+  std::printf(
+      "[broadphase] %zu shapes, %d threads: %.2f ms per call; %lld pairs, %lld bins (%d x %d x %d, edge %.4g), "
+      "%lld occupied, %lld entries, %lld in-bin tests, %d large\n",
+      sc.shapes.count(), omp_get_max_threads(), ms, (long long)st.pairs, (long long)st.bins, st.grid[0], st.grid[1],
+      st.grid[2], double(st.bin_edge), (long long)st.occupied_bins, (long long)st.bin_entries,
+      (long long)st.bin_pair_tests, st.large_shapes);
   CHECK(strictlySortedUnique(pairs));
   CHECK(st.large_shapes == 2);
   // independent count: every sphere touches the ground box (bottom layer: overlap; others: the plane

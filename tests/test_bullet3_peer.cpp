@@ -51,7 +51,7 @@ TEST_CASE("Bullet 3 peer: the bodies read back before a step are the scene's", "
     worst = std::max(worst, double(length(pos[i] - spec.bodies[i].pos)));
     REQUIRE(length(vel[i]) == 0);
   }
-  CHECK(worst < 1e-6);  // float storage in centimetres: ~1e-7 m at these heights
+  CHECK(worst < 1e-6);                                     // float storage in centimetres: ~1e-7 m at these heights
   CHECK(deepestPenetration(spec, pos, rot) < real(1e-6));  // the scene starts without overlaps
 }
 
@@ -101,9 +101,7 @@ TEST_CASE("Bullet 3 peer: running out of broad-phase pairs is an error, not a tr
   try {
     for (int k = 0; k < 100; ++k) peer.step();
     FAIL("100 steps with a pair capacity of one per body did not fail");
-  } catch (const Bullet3Error& e) {
-    CHECK(std::string(e.what()).find("ran out of") != std::string::npos);
-  }
+  } catch (const Bullet3Error& e) { CHECK(std::string(e.what()).find("ran out of") != std::string::npos); }
 }
 
 TEST_CASE("Bullet 3 peer: bad settings are input errors", "[bullet3]") {

@@ -60,8 +60,8 @@ TEST_CASE("BulletPeer: free fall follows Bullet's semi-implicit Euler", "[bullet
   const double g = 9.81, dt = 0.01, t = n * dt;
   const double y_discrete = 10 - 0.5 * g * dt * dt * n * (n + 1);
   const double y_continuous = 10 - 0.5 * g * t * t;
-  CHECK(std::abs(peer.position(0).y - y_discrete) < 1e-3);        // float round-off over 100 steps
-  CHECK(std::abs(peer.position(0).y - y_continuous) > 0.04);       // the formula is really the discrete one
+  CHECK(std::abs(peer.position(0).y - y_discrete) < 1e-3);    // float round-off over 100 steps
+  CHECK(std::abs(peer.position(0).y - y_continuous) > 0.04);  // the formula is really the discrete one
   CHECK(std::abs(peer.velocity(0).y - (-g * t)) < 1e-3);
   CHECK(std::abs(peer.position(0).x) < 1e-6);
   CHECK(peer.lastStats().contacts == 0);
@@ -169,9 +169,7 @@ TEST_CASE("BulletPeer: every supported shape clones, unsupported ones are refuse
   CHECK_THROWS_AS(BulletPeer(bad.list(), st), InputError);
   try {
     BulletPeer p(bad.list(), st);
-  } catch (const InputError& e) {
-    CHECK(std::string(e.what()).find("Empty") != std::string::npos);
-  }
+  } catch (const InputError& e) { CHECK(std::string(e.what()).find("Empty") != std::string::npos); }
 }
 
 // ---------------------------------------------------------------------------------------------------

@@ -151,7 +151,8 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
   auto* hinge = new btHingeConstraint(*a, *b, frame(btVector3(0.5, 0, 0), tilt), frame(btVector3(-0.5, 0, 0.1)));
   hinge->setLimit(-1, 1);
   cs.emplace_back(hinge);
-  auto* slider = new btSliderConstraint(*a, *b, frame(btVector3(0.3, 0.1, 0), tilt), frame(btVector3(-0.2, 0, 0)), true);
+  auto* slider =
+      new btSliderConstraint(*a, *b, frame(btVector3(0.3, 0.1, 0), tilt), frame(btVector3(-0.2, 0, 0)), true);
   slider->setLowerLinLimit(-0.5);
   slider->setUpperLinLimit(0.5);
   cs.emplace_back(slider);
@@ -162,7 +163,8 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
   d6->setAngularLowerLimit(btVector3(0, 0, 1));  // z free: a hinge about frame A's z
   d6->setAngularUpperLimit(btVector3(0, 0, -1));
   cs.emplace_back(d6);
-  auto* d62 = new btGeneric6DofSpring2Constraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0), tilt));
+  auto* d62 =
+      new btGeneric6DofSpring2Constraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0), tilt));
   d62->setLinearLowerLimit(btVector3(0, 0, 0));
   d62->setLinearUpperLimit(btVector3(0, 0, 0));
   d62->setAngularLowerLimit(btVector3(0, 0, 0));
@@ -197,7 +199,8 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
         if (std::isfinite(r0[k].hi)) continue;  // a motor row (bias = -target), not a position row
         const real fd = (r1[k].bias - r0[k].bias) * dt / d;
         real jv = 0;
-        const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z}, vb[6] = {B.v.x, B.v.y, B.v.z, B.w.x, B.w.y, B.w.z};
+        const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z},
+                   vb[6] = {B.v.x, B.v.y, B.v.z, B.w.x, B.w.y, B.w.z};
         for (int i = 0; i < 6; ++i) jv += r0[k].Ja[i] * va[i] + r0[k].Jb[i] * vb[i];
         INFO("row " << k << " J v = " << jv << ", finite difference " << fd);
         // First order in the joint error (0.05): the rows are exact at C = 0 and accurate to O(C) near it.
@@ -212,11 +215,12 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
       jointRows(j, A, B0, dt, settings, r0);
       jointRows(j, advanced(A, d), advanced(B0, d), dt, settings, r1);
       for (size_t k = 0; k < r0.size(); ++k) {
-        if (std::isfinite(r0[k].hi)) continue;  // motor rows
+        if (std::isfinite(r0[k].hi)) continue;                           // motor rows
         if (r0[k].lo == 0 && std::fabs(r0[k].bias) > real(1)) continue;  // an inactive limit far away
         const real fd = (r1[k].bias - r0[k].bias) * dt / d;
         real jv = 0;
-        const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z}, vb[6] = {B0.v.x, B0.v.y, B0.v.z, B0.w.x, B0.w.y, B0.w.z};
+        const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z},
+                   vb[6] = {B0.v.x, B0.v.y, B0.v.z, B0.w.x, B0.w.y, B0.w.z};
         for (int i = 0; i < 6; ++i) jv += r0[k].Ja[i] * va[i] + r0[k].Jb[i] * vb[i];
         INFO("exact pose, row " << k << " J v = " << jv << ", finite difference " << fd);
         CHECK(std::fabs(fd - jv) < 1e-4 * (1 + std::fabs(jv)));
@@ -240,12 +244,13 @@ TEST_CASE("joint rows: the hinge angle follows Bullet's getHingeAngle", "[world]
     for (double angle : {-2.5, -1.0, -0.2, 0.3, 1.2, 2.9}) {
       btTransform tb(btQuaternion(btVector3(0, 0, 1), btScalar(angle)), btVector3(1, 0, 0));
       JointBody A, B;
-      B.q = Quat{real(tb.getRotation().w()), real(tb.getRotation().x()), real(tb.getRotation().y()), real(tb.getRotation().z())};
+      B.q = Quat{real(tb.getRotation().w()), real(tb.getRotation().x()), real(tb.getRotation().y()),
+                 real(tb.getRotation().z())};
       B.x = Vec3{1, 0, 0};
       const real theta = jointHingeAngle(j, A, B);
       const btScalar bullet = h.getHingeAngle(a->getCenterOfMassTransform(), tb);
       INFO("reference frame A " << refA << ", angle " << angle);
-      CHECK(theta == Approx(angle).margin(1e-5));                      // theta: B relative to A, right-handed
+      CHECK(theta == Approx(angle).margin(1e-5));                             // theta: B relative to A, right-handed
       CHECK(double(bullet) == Approx((refA ? 1 : -1) * angle).margin(1e-5));  // Bullet's sign rule in joints.cpp
     }
   }
@@ -297,10 +302,10 @@ TEST_CASE("drop-in world: free flight, forces, impulses, damping, per-body gravi
   auto run = [](bool dvi) {
     TestWorld w(dvi);
     btCollisionShape* s = w.own(new btSphereShape(btScalar(0.1)));
-    btRigidBody* f = w.make(s, 2, btVector3(0, 10, 0));   // central force each frame
-    btRigidBody* g = w.make(s, 1, btVector3(2, 10, 0));   // own gravity
-    btRigidBody* d = w.make(s, 1, btVector3(4, 10, 0));   // damping
-    btRigidBody* k = w.make(s, 1, btVector3(6, 10, 0));   // impulse then torque
+    btRigidBody* f = w.make(s, 2, btVector3(0, 10, 0));  // central force each frame
+    btRigidBody* g = w.make(s, 1, btVector3(2, 10, 0));  // own gravity
+    btRigidBody* d = w.make(s, 1, btVector3(4, 10, 0));  // damping
+    btRigidBody* k = w.make(s, 1, btVector3(6, 10, 0));  // impulse then torque
     g->setGravity(btVector3(0, -2, 0));
     d->setDamping(btScalar(0.3), btScalar(0.5));
     d->setLinearVelocity(btVector3(1, 0, 0));
@@ -372,8 +377,8 @@ TEST_CASE("drop-in world: static triangle mesh is environment geometry", "[world
   btTriangleMesh mesh;
   for (int i = -2; i < 2; ++i)
     for (int k = -2; k < 2; ++k) {
-      btVector3 a(btScalar(i), 0, btScalar(k)), b(btScalar(i + 1), 0, btScalar(k)), c(btScalar(i + 1), 0, btScalar(k + 1)),
-          d(btScalar(i), 0, btScalar(k + 1));
+      btVector3 a(btScalar(i), 0, btScalar(k)), b(btScalar(i + 1), 0, btScalar(k)),
+          c(btScalar(i + 1), 0, btScalar(k + 1)), d(btScalar(i), 0, btScalar(k + 1));
       mesh.addTriangle(a, c, b);
       mesh.addTriangle(a, d, c);
     }
@@ -433,7 +438,8 @@ TEST_CASE("drop-in world: joint violations stay below 1e-4 of the body size over
   btRigidBody* h = w.make(box, 1, btVector3(3, 2, 0));
   w.joint(new btHingeConstraint(*h, btVector3(-0.6, 0, 0), btVector3(0, 0, 1)));
   btRigidBody* s = w.make(box, 1, btVector3(6, 2, 0));
-  auto* sl = w.joint(new btSliderConstraint(*s, frame(btVector3(0, 0, 0), btQuaternion(btVector3(0, 0, 1), 0.5)), true));
+  auto* sl =
+      w.joint(new btSliderConstraint(*s, frame(btVector3(0, 0, 0), btQuaternion(btVector3(0, 0, 1), 0.5)), true));
   sl->setLowerLinLimit(-1);
   sl->setUpperLinLimit(1);
   btRigidBody* f1 = w.make(box, 1, btVector3(9, 2, 0));
@@ -441,7 +447,8 @@ TEST_CASE("drop-in world: joint violations stay below 1e-4 of the body size over
   w.joint(new btHingeConstraint(*f1, btVector3(0, 0.3, 0), btVector3(0, 0, 1)));
   w.joint(new btFixedConstraint(*f1, *f2, frame(btVector3(0.25, 0, 0)), frame(btVector3(-0.25, 0, 0))), true);
   btRigidBody* d = w.make(box, 1, btVector3(12, 2, 0));
-  auto* d6 = w.joint(new btGeneric6DofConstraint(fixed, *d, frame(btVector3(12.5, 2.3, 0)), frame(btVector3(0.5, 0.3, 0)), true));
+  auto* d6 = w.joint(
+      new btGeneric6DofConstraint(fixed, *d, frame(btVector3(12.5, 2.3, 0)), frame(btVector3(0.5, 0.3, 0)), true));
   d6->setAngularLowerLimit(btVector3(0, 0, 1));
   d6->setAngularUpperLimit(btVector3(0, 0, -1));
   h->setAngularVelocity(btVector3(0, 0, 2));
@@ -596,7 +603,8 @@ TEST_CASE("drop-in world: contacts readable through our list and Bullet's manifo
   CHECK(n == 4);
   CHECK(sum == Approx(2 * 9.81 / 240).epsilon(1e-2));
   int points = 0;
-  for (int i = 0; i < w.dispatcher.getNumManifolds(); ++i) points += w.dispatcher.getManifoldByIndexInternal(i)->getNumContacts();
+  for (int i = 0; i < w.dispatcher.getNumManifolds(); ++i)
+    points += w.dispatcher.getManifoldByIndexInternal(i)->getNumContacts();
   CHECK(points == 4);
 }
 
@@ -623,18 +631,22 @@ TEST_CASE("a .bullet scene with each shape and joint type round-trips through th
   compound->addChildShape(frame(btVector3(-0.2, 0, 0)), src.own(new btSphereShape(0.1)));
   dyn.push_back(src.make(src.own(compound), 1, btVector3(7, 1, 0)));
   src.joint(new btPoint2PointConstraint(*dyn[0], *dyn[1], btVector3(0.5, 0, 0), btVector3(-0.5, 0, 0)));
-  auto* hinge = src.joint(new btHingeConstraint(*dyn[1], *dyn[2], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
+  auto* hinge =
+      src.joint(new btHingeConstraint(*dyn[1], *dyn[2], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
   hinge->enableAngularMotor(true, 2, 5);
   hinge->setLimit(-1, 1);
   src.joint(new btSliderConstraint(*dyn[2], *dyn[3], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true));
   src.joint(new btFixedConstraint(*dyn[3], *dyn[4], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
-  src.joint(new btGeneric6DofConstraint(*dyn[4], *dyn[5], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true));
-  auto* spring = src.joint(new btGeneric6DofSpringConstraint(*dyn[5], *dyn[6], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true));
+  src.joint(
+      new btGeneric6DofConstraint(*dyn[4], *dyn[5], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true));
+  auto* spring = src.joint(new btGeneric6DofSpringConstraint(*dyn[5], *dyn[6], frame(btVector3(0.5, 0, 0)),
+                                                             frame(btVector3(-0.5, 0, 0)), true));
   spring->setLinearLowerLimit(btVector3(1, 0, 0));
   spring->setLinearUpperLimit(btVector3(-1, 0, 0));
   spring->enableSpring(0, true);
   spring->setStiffness(0, 20);
-  auto* spring2 = src.joint(new btGeneric6DofSpring2Constraint(*dyn[6], *dyn[7], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
+  auto* spring2 = src.joint(
+      new btGeneric6DofSpring2Constraint(*dyn[6], *dyn[7], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
   spring2->setLinearLowerLimit(btVector3(-0.2, 0, 0));
   spring2->setLinearUpperLimit(btVector3(0.2, 0, 0));
   btDefaultSerializer ser;
@@ -702,8 +714,9 @@ TEST_CASE("drop-in world on the GPU backend: the demo's stack rests as on Bullet
   scene.destroy(*w.world);
 }
 
-TEST_CASE("drop-in world: the GPU backend comes from the app, Gpu without it is refused, Auto without it runs on the CPU",
-          "[world]") {
+TEST_CASE(
+    "drop-in world: the GPU backend comes from the app, Gpu without it is refused, Auto without it runs on the CPU",
+    "[world]") {
   btDefaultCollisionConfiguration config;
   btCollisionDispatcher dispatcher(&config);
   btDbvtBroadphase broadphase;

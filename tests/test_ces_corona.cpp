@@ -150,8 +150,8 @@ TEST_CASE("CES corona: onset voltage, coaxial (Peek's V_on = E_on r ln(R/r)) and
   const int M = 2000;
   for (int k = 0; k < M; ++k) {
     const double t = kTwoPiD * (k + 0.5) / M;
-    const FieldSample f = csm.eval(Vec3{s.wire.cx + s.wire.R * (1 + 1e-12) * std::cos(t),
-                                        s.wire.cy + s.wire.R * (1 + 1e-12) * std::sin(t), 0});
+    const FieldSample f = csm.eval(
+        Vec3{s.wire.cx + s.wire.R * (1 + 1e-12) * std::cos(t), s.wire.cy + s.wire.R * (1 + 1e-12) * std::sin(t), 0});
     sum += std::hypot(f.E.x, f.E.y);
   }
   CHECK(sum / M == Approx(peekOnsetField(s.wire.R)).epsilon(1e-6));
@@ -253,7 +253,7 @@ TEST_CASE("CES corona: machine above onset: current rises with |U|, Kaptzov, cha
     const double qWire = sgn * double(kEps0) * kTwoPiD * rw * r.wire_field_mean;
     const double expected = qWire + sgn * qIons;
     INFO("U " << U << " flux*eps0 " << kEps0 * flux << " wire " << qWire << " ions " << sgn * qIons);
-    CHECK(std::fabs(qIons) > 0.05 * std::fabs(qWire));  // the ions matter at this radius
+    CHECK(std::fabs(qIons) > 0.05 * std::fabs(qWire));      // the ions matter at this radius
     CHECK(kEps0 * flux == Approx(expected).epsilon(1e-3));  // measured 4e-5 .. 1.3e-4
   }
 }
@@ -324,7 +324,8 @@ TEST_CASE("CES corona: evalGrid reproduces a linear field exactly and the fine f
       const FieldSample fine = cf.evalFine(p);
       const FieldSample gr = evalGrid(gv, p);
       REQUIRE(gr.region == 0);
-      worstSurf = std::max(worstSurf, std::hypot(gr.E.x - fine.E.x, gr.E.y - fine.E.y) / std::hypot(fine.E.x, fine.E.y));
+      worstSurf =
+          std::max(worstSurf, std::hypot(gr.E.x - fine.E.x, gr.E.y - fine.E.y) / std::hypot(fine.E.x, fine.E.y));
     }
   }
   INFO("worst relative |E| error: away from the wire " << worstFar << ", at the drum and tube " << worstSurf);
@@ -349,7 +350,8 @@ TEST_CASE("CES corona: Cartesian nodes hold the direct CSM sum plus the conforma
   double worstE = 0, worstPhi = 0, worstN = 0;
   int outside = 0, inside = 0;
   for (int k = 0; k < 20000; ++k) {
-    const int i = int(std::fmod(0.6180339887 * (k + 1), 1.0) * g.nx), j = int(std::fmod(0.7548776662 * (k + 1), 1.0) * g.ny);
+    const int i = int(std::fmod(0.6180339887 * (k + 1), 1.0) * g.nx),
+              j = int(std::fmod(0.7548776662 * (k + 1), 1.0) * g.ny);
     const double x = g.x0 + i * g.dx, y = g.y0 + j * g.dy;
     const size_t n = size_t(j) * g.nx + i;
     double sx = x, sy = y;

@@ -52,13 +52,15 @@ double contactImpulse(const System& s, int a, int b) {
   const ContactArrays& c = s.contacts();
   double g = 0;
   for (size_t k = 0; k < c.count(); ++k)
-    if ((c.body_a[k] == a && c.body_b[k] == b) || (c.body_a[k] == b && c.body_b[k] == a)) g += double(s.impulses()[3 * k]);
+    if ((c.body_a[k] == a && c.body_b[k] == b) || (c.body_a[k] == b && c.body_b[k] == a))
+      g += double(s.impulses()[3 * k]);
   return g;
 }
 
 }  // namespace
 
-TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and keeps to the schema", "[ces][ces_machine]") {
+TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and keeps to the schema",
+          "[ces][ces_machine]") {
   const json embedded = json::parse(defaultCesJson());
   const json file = json::parse(slurp(std::string(DVISIM_SOURCE_DIR) + "/scenes/ces_default.json"));
   CHECK(embedded == file);
@@ -112,8 +114,8 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
   CHECK(s.voltage == Approx(-30000));
   CHECK(s.wire.voltage == Approx(-30000));
   CHECK(configWith({"electrode.voltage_kV=0"}).voltage == 0);  // the supply off is a valid machine
-  const CesConfig t = configWith({"electrode.wire.enabled=false", "field.model=two_cylinder", "electrode.tube.angle_deg=40",
-                                  "splitters.grade_targets.conductor=0.9"});
+  const CesConfig t = configWith({"electrode.wire.enabled=false", "field.model=two_cylinder",
+                                  "electrode.tube.angle_deg=40", "splitters.grade_targets.conductor=0.9"});
   CHECK_FALSE(t.wire.enabled);
   CHECK(t.tube.angle == Approx(40 * M_PI / 180));
   CHECK(t.grade_target_conductor == 0.9);
@@ -204,45 +206,46 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
   std::vector<std::string> drives{"kinematic"};
   if (coreSolvesConstraintRows()) drives.push_back("rheonomic");
   for (const std::string& drive : drives) {
-  INFO("drum drive " << drive);
-  CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false",
-                              "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
-                              "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=" + drive,
-                              "feed.materials=[{\"kind\": \"plastic\", \"mass_fraction\": 1, \"density_kg_m3\": 8000}]"});
-  SystemConfig sc;
-  sc.step.dt = real(cfg.step.dt);
-  sc.solver.max_iterations = 100;
-  System sys(sc);
-  CesMachine m(cfg, sys);
-  SplitMix64 rng;
-  ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8000, rng);
-  s.inertia = s.inertia * real(1e6);
-  const double R = cfg.drumRadius(), r = 0.5e-3, w = -cfg.omegaDrum(), Rc = R + r, g = 9.81;
-  const double th0 = 80 * M_PI / 180;
-  const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
-  const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
-  const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
-  const double th_star = std::asin(w * w * Rc / g);  // 21.1 degrees
-  // Leaving: the first step at which the gap to the drum opens beyond 1e-7 m (0.02 % of r; resting, the
-  // gap is ~2e-8 m). Contact impulses are no criterion here: the convex (Anitescu-Tasora) relaxation of
-  // friction keeps a tiny impulse at mu = 200 while the gap opens.
-  double th_leave = -1;
-  Vec3 v_leave{};
-  for (int k = 0; k < 6000 && th_leave < 0; ++k) {
-    m.step();
-    const Vec3 p = sys.bodies().pos[size_t(id)];
-    if (std::hypot(double(p.x), double(p.y)) - Rc > 1e-7) {
-      th_leave = angleOf(p);
-      v_leave = sys.bodies().vel[size_t(id)];
+    INFO("drum drive " << drive);
+    CesConfig cfg =
+        configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false",
+                    "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
+                    "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=" + drive,
+                    "feed.materials=[{\"kind\": \"plastic\", \"mass_fraction\": 1, \"density_kg_m3\": 8000}]"});
+    SystemConfig sc;
+    sc.step.dt = real(cfg.step.dt);
+    sc.solver.max_iterations = 100;
+    System sys(sc);
+    CesMachine m(cfg, sys);
+    SplitMix64 rng;
+    ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8000, rng);
+    s.inertia = s.inertia * real(1e6);
+    const double R = cfg.drumRadius(), r = 0.5e-3, w = -cfg.omegaDrum(), Rc = R + r, g = 9.81;
+    const double th0 = 80 * M_PI / 180;
+    const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
+    const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
+    const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
+    const double th_star = std::asin(w * w * Rc / g);  // 21.1 degrees
+    // Leaving: the first step at which the gap to the drum opens beyond 1e-7 m (0.02 % of r; resting, the
+    // gap is ~2e-8 m). Contact impulses are no criterion here: the convex (Anitescu-Tasora) relaxation of
+    // friction keeps a tiny impulse at mu = 200 while the gap opens.
+    double th_leave = -1;
+    Vec3 v_leave{};
+    for (int k = 0; k < 6000 && th_leave < 0; ++k) {
+      m.step();
+      const Vec3 p = sys.bodies().pos[size_t(id)];
+      if (std::hypot(double(p.x), double(p.y)) - Rc > 1e-7) {
+        th_leave = angleOf(p);
+        v_leave = sys.bodies().vel[size_t(id)];
+      }
     }
-  }
-  INFO("leaving angle " << th_leave * 180 / M_PI << " deg, analytic " << th_star * 180 / M_PI << " deg");
-  CHECK(std::fabs(th_leave - th_star) < 0.5 * M_PI / 180);
-  // The state there: the drum's surface velocity, tangent to the drum.
-  const Vec3 vs{real(w * Rc * std::sin(th_star)), real(-w * Rc * std::cos(th_star)), 0};
-  CHECK(double(length(v_leave)) == Approx(w * Rc).epsilon(0.005));
-  CHECK(double(length(v_leave - vs)) < 0.01 * w * Rc);
-  CHECK(m.rheonomicDrive() == (drive == "rheonomic"));
+    INFO("leaving angle " << th_leave * 180 / M_PI << " deg, analytic " << th_star * 180 / M_PI << " deg");
+    CHECK(std::fabs(th_leave - th_star) < 0.5 * M_PI / 180);
+    // The state there: the drum's surface velocity, tangent to the drum.
+    const Vec3 vs{real(w * Rc * std::sin(th_star)), real(-w * Rc * std::cos(th_star)), 0};
+    CHECK(double(length(v_leave)) == Approx(w * Rc).epsilon(0.005));
+    CHECK(double(length(v_leave - vs)) < 0.01 * w * Rc);
+    CHECK(m.rheonomicDrive() == (drive == "rheonomic"));
   }
 }
 
@@ -253,10 +256,11 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
 TEST_CASE("CES machine: rolling resistance holds a sphere on the drum up to the slope tan(theta) = mu_r",
           "[ces][ces_machine]") {
   auto roll = [](double theta_deg, const std::string& mu_r) {
-    CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false",
-                                "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
-                                "drum.rpm=0", "drum.drive=kinematic", "friction.rolling_drum=" + mu_r,
-                                "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
+    CesConfig cfg =
+        configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false",
+                    "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0", "drum.rpm=0",
+                    "drum.drive=kinematic", "friction.rolling_drum=" + mu_r,
+                    "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
     SystemConfig sc;
     sc.step.dt = real(cfg.step.dt);
     System sys(sc);
@@ -270,8 +274,8 @@ TEST_CASE("CES machine: rolling resistance holds a sphere on the drum up to the 
     return (th0 - angleOf(sys.bodies().pos[size_t(id)])) * Rc;  // arc length rolled down, m
   };
   const double held = roll(4, "0.1"), rolled = roll(8, "0.1"), free_roll = roll(4, "0");
-  INFO("arc rolled in 0.3 s: 4 deg mu_r 0.1: " << held << " m; 8 deg mu_r 0.1: " << rolled << " m; 4 deg mu_r 0: "
-                                               << free_roll << " m");
+  INFO("arc rolled in 0.3 s: 4 deg mu_r 0.1: " << held << " m; 8 deg mu_r 0.1: " << rolled
+                                               << " m; 4 deg mu_r 0: " << free_roll << " m");
   // Rolling freely down a slope of 4 degrees: s = (5/7) g sin(theta) t^2 / 2 = 22 mm in 0.3 s (more as the slope
   // steepens). Held: a creep of at most ~g h per step.
   CHECK(free_roll > 0.015);
@@ -311,7 +315,8 @@ TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal 
       break;
     }
   }
-  INFO("analytic leaving angle " << th_star * 180 / M_PI << " deg (bare drum: " << std::asin(w * w * Rc / g) * 180 / M_PI << ")");
+  INFO("analytic leaving angle " << th_star * 180 / M_PI
+                                 << " deg (bare drum: " << std::asin(w * w * Rc / g) * 180 / M_PI << ")");
   REQUIRE(th_star > 35 * M_PI / 180);  // well above the bare drum's 21 deg: the lift matters
   const double th0 = 80 * M_PI / 180;
   const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
@@ -331,8 +336,9 @@ TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal 
   CHECK(q_leave > 0);  // induced: opposite to the negative electrode
 }
 
-TEST_CASE("CES machine: above corona onset an insulator takes ion charge and is pinned until the brush, below it is not",
-          "[ces][ces_machine]") {
+TEST_CASE(
+    "CES machine: above corona onset an insulator takes ion charge and is pinned until the brush, below it is not",
+    "[ces][ces_machine]") {
   // A plastic sphere (d = 0.75 mm, rotation locked: shredded plastic does not roll) placed on the drum at
   // 80 deg, before the corona wire (60 deg), on the default composite machine.
   for (const double U : {-35.0, -8.0}) {
@@ -474,9 +480,12 @@ TEST_CASE("CES feeder: the expected particle mass matches a large sample drawn b
 
 TEST_CASE("CES splitters: direct binning and cumulative sums agree, grade and recovery by hand", "[ces][ces_machine]") {
   // By hand: metal 3 ug at 150 mm, 1 ug at 50 mm; plastic 2 ug at 20 mm, 1 ug at 120 mm; middling 5 ug at 100 mm.
-  auto P = [](MaterialKind k, double x_mm, int64_t ug) { return CollectedParticle{0, 0, k, ug * 1000000000, x_mm * 1e-3, 0, 0}; };
-  std::vector<CollectedParticle> c{P(MaterialKind::Metal, 150, 3), P(MaterialKind::Metal, 50, 1), P(MaterialKind::Plastic, 20, 2),
-                                   P(MaterialKind::Plastic, 120, 1), P(MaterialKind::Middling, 100, 5)};
+  auto P = [](MaterialKind k, double x_mm, int64_t ug) {
+    return CollectedParticle{0, 0, k, ug * 1000000000, x_mm * 1e-3, 0, 0};
+  };
+  std::vector<CollectedParticle> c{P(MaterialKind::Metal, 150, 3), P(MaterialKind::Metal, 50, 1),
+                                   P(MaterialKind::Plastic, 20, 2), P(MaterialKind::Plastic, 120, 1),
+                                   P(MaterialKind::Middling, 100, 5)};
   const SplitterCell s = splitterCell(c, 0.080, 0.140);
   CHECK(s.mass.fg[kBinConductor][0] == 3000000000);
   CHECK(s.mass.fg[kBinMiddling][1] == 1000000000);
@@ -515,8 +524,8 @@ TEST_CASE("CES splitters: direct binning and cumulative sums agree, grade and re
   CHECK(ob.recovery_metal + ob.recovery_plastic == Approx(best));
   CHECK(best == Approx(3.0 / 8.0 + 2.0 / 6.0));  // metal at 150 mm alone, plastic at 20 mm alone
   CHECK(ob.s1 > 0.020);
-  CHECK(ob.s1 <= 0.050);   // the metal at 50 mm must not join the nonconductor product
-  CHECK(ob.s2 > 0.120);    // the plastic at 120 mm is left in the middlings
+  CHECK(ob.s1 <= 0.050);  // the metal at 50 mm must not join the nonconductor product
+  CHECK(ob.s2 > 0.120);   // the plastic at 120 mm is left in the middlings
   CHECK(ob.s2 <= 0.150);
   CHECK(ob.middling_fraction > 0);
   // Unreachable targets (a plastic particle where the best metal lands): the closest setting, flagged.
@@ -526,12 +535,13 @@ TEST_CASE("CES splitters: direct binning and cumulative sums agree, grade and re
   fed.target_nonconductor = 1.0;
   CHECK_FALSE(splitterAnalysis(mixed, 0, 0.2, 41, fed).targets_met);
   // The grade-recovery curve: the conductor product x' >= s, the nonconductor product x' < s, by hand at s = 0.1.
-  const std::vector<GradeRecoveryPoint> gr = gradeRecoveryCurve(splitterAnalysis(c, 0, 0.2, 41, SplitterBasis{fed.fed_fg}));
+  const std::vector<GradeRecoveryPoint> gr =
+      gradeRecoveryCurve(splitterAnalysis(c, 0, 0.2, 41, SplitterBasis{fed.fed_fg}));
   REQUIRE(gr.size() == 41);
   CHECK(gr[20].s == Approx(0.1));
-  CHECK(gr[20].grade_metal == Approx(3.0 / 9.0));     // x' >= 0.1: metal 3, plastic 1, middling 5 (on the splitter)
+  CHECK(gr[20].grade_metal == Approx(3.0 / 9.0));  // x' >= 0.1: metal 3, plastic 1, middling 5 (on the splitter)
   CHECK(gr[20].recovery_metal == Approx(3.0 / 8.0));
-  CHECK(gr[20].grade_plastic == Approx(2.0 / 3.0));   // x' < 0.1: plastic 2, metal 1
+  CHECK(gr[20].grade_plastic == Approx(2.0 / 3.0));  // x' < 0.1: plastic 2, metal 1
   CHECK(gr[20].recovery_plastic == Approx(2.0 / 6.0));
   // A particle exactly on a splitter goes to the bin above it.
   CHECK(splitterCell(c, 0.050, 0.150).mass.fg[kBinConductor][0] == 3000000000);
@@ -587,7 +597,8 @@ TEST_CASE("CES checkpoint: a resumed run ends bitwise where an uninterrupted one
 
 TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors", "[ces][ces_machine][cli]") {
   const fs::path d = tempDir("cli");
-  const std::string common = " --backend cpu --set output.plots=false --set feed.mass_flow_g_s=3 --set feed.duration_s=0.03";
+  const std::string common =
+      " --backend cpu --set output.plots=false --set feed.mass_flow_g_s=3 --set feed.duration_s=0.03";
   CliResult a = runCli("run --time 0.06" + common + " --out " + quote((d / "a").string()));
   INFO(a.out << a.err);
   REQUIRE(a.code == 0);
@@ -606,10 +617,10 @@ TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors
     CHECK(s["ces"].contains(k));
   // The flat metrics object the sweep reads: every name present; the fractions of the feed add up to 1.
   const json& mt = s["ces"]["metrics"];
-  for (const char* k : {"copper.mean_landing_mm", "copper.mean_charge_C", "copper.recovery", "conductor.grade",
-                        "conductor.recovery", "nonconductor.grade", "nonconductor.recovery", "middling.mass_fraction",
-                        "holdup.mass_fraction", "pinned.plastic", "pinned.copper", "onset_voltage_kV",
-                        "corona_current_uA_per_m"})
+  for (const char* k :
+       {"copper.mean_landing_mm", "copper.mean_charge_C", "copper.recovery", "conductor.grade", "conductor.recovery",
+        "nonconductor.grade", "nonconductor.recovery", "middling.mass_fraction", "holdup.mass_fraction",
+        "pinned.plastic", "pinned.copper", "onset_voltage_kV", "corona_current_uA_per_m"})
     CHECK(mt.contains(k));
   const double fed = s["ces"]["fed_mass_kg"];
   CHECK(double(mt["holdup.mass_fraction"]) * fed == Approx(double(s["ces"]["held_up_mass_kg"])).epsilon(1e-9));
@@ -762,7 +773,8 @@ int64_t overlappingSpawns(const CesMachine& m, double slack) {
   for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) cell = std::fmax(cell, 2 * double(p.bound[i]));
   std::map<std::array<int64_t, 3>, std::vector<size_t>> grid;
   auto at = [&](size_t i) {
-    return std::array<int64_t, 3>{int64_t(std::floor(double(b.pos[i].x) / cell)), int64_t(std::floor(double(b.pos[i].y) / cell)),
+    return std::array<int64_t, 3>{int64_t(std::floor(double(b.pos[i].x) / cell)),
+                                  int64_t(std::floor(double(b.pos[i].y) / cell)),
                                   int64_t(std::floor(double(b.pos[i].z) / cell))};
   };
   for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) grid[at(i)].push_back(i);

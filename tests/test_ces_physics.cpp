@@ -90,9 +90,7 @@ TEST_CASE("CES two-cylinder field: phi constant on both surfaces to 1e-9 relativ
   for (const Geometry& g : kGeometries) {
     const TwoCylinderField f = make(g);
     const double ox = g.cx + g.L * f.ex, oy = g.cy + g.L * f.ey;
-    const struct {
-      double x, y, R, V;
-    } surfaces[2] = {{g.cx, g.cy, g.R1, 0.0}, {ox, oy, g.R2, g.U}};
+    const struct { double x, y, R, V; } surfaces[2] = {{g.cx, g.cy, g.R1, 0.0}, {ox, oy, g.R2, g.U}};
     double worstPhi = 0, worstTangential = 0;
     for (const auto& s : surfaces)
       for (int i = 0; i < 360; ++i) {
@@ -120,8 +118,10 @@ TEST_CASE("CES two-cylinder field: E = -grad phi by central differences", "[ces]
     for (const Vec3& p : pts) {
       const FieldSample s = evalTwoCylinder(f, p);
       if (s.region != 0) FAIL("grid point inside a conductor");
-      const double dphidx = (evalTwoCylinder(f, p + Vec3{h, 0, 0}).phi - evalTwoCylinder(f, p - Vec3{h, 0, 0}).phi) / (2 * h);
-      const double dphidy = (evalTwoCylinder(f, p + Vec3{0, h, 0}).phi - evalTwoCylinder(f, p - Vec3{0, h, 0}).phi) / (2 * h);
+      const double dphidx =
+          (evalTwoCylinder(f, p + Vec3{h, 0, 0}).phi - evalTwoCylinder(f, p - Vec3{h, 0, 0}).phi) / (2 * h);
+      const double dphidy =
+          (evalTwoCylinder(f, p + Vec3{0, h, 0}).phi - evalTwoCylinder(f, p - Vec3{0, h, 0}).phi) / (2 * h);
       const Vec3 fd{-dphidx, -dphidy, 0};
       worst = std::max(worst, double(length(fd - s.E) / length(s.E)));
     }
@@ -192,8 +192,8 @@ TEST_CASE("CES charge-simulation model matches the exact two-cylinder field", "[
       worstPhi = std::max(worstPhi, std::fabs(a.phi - b.phi) / std::fabs(g.U));
     }
     CHECK(outside == int(pts.size()));
-    INFO("L = " << g.L << ", M = " << csm.chargeCount(0) << "/" << csm.chargeCount(1) << ", worst E error "
-                << worstE << ", worst phi error " << worstPhi);
+    INFO("L = " << g.L << ", M = " << csm.chargeCount(0) << "/" << csm.chargeCount(1) << ", worst E error " << worstE
+                << ", worst phi error " << worstPhi);
     // The requirement is 1e-3 on E. Measured: ~2e-12 (default machine), ~2e-4 on E and 3e-5 on phi for the
     // 1 mm gap (gap/R2 = 0.05: the images crowd the gap, the automatic placement saturates at M = 400; a
     // nearly touching pair needs charges graded toward the gap, which this model does not do).
@@ -212,7 +212,8 @@ TEST_CASE("CES charge-simulation model matches the exact two-cylinder field", "[
   csm.solve();
   double worstE = 0;
   for (const Vec3& p : gapPoints(f, 1e-3, 5e-3, 0.367))
-    worstE = std::max(worstE, double(length(evalTwoCylinder(f, p).E - csm.eval(p).E) / length(evalTwoCylinder(f, p).E)));
+    worstE =
+        std::max(worstE, double(length(evalTwoCylinder(f, p).E - csm.eval(p).E) / length(evalTwoCylinder(f, p).E)));
   CHECK(worstE < 1e-3);
 }
 
@@ -232,8 +233,8 @@ TEST_CASE("CES charge-simulation model: drum + corona wire + static tube, consta
     for (int i = 0; i < 360; ++i) {
       const double t = kTwoPiD * (i + 0.37) / 360, nx = std::cos(t), ny = std::sin(t);
       real phi, Ex, Ey;
-      csmRaw(csm.charges().data(), int(csm.charges().size()), csm.phiInfinity(), c.cx + c.R * nx, c.cy + c.R * ny,
-             phi, Ex, Ey);
+      csmRaw(csm.charges().data(), int(csm.charges().size()), csm.phiInfinity(), c.cx + c.R * nx, c.cy + c.R * ny, phi,
+             Ex, Ey);
       worst = std::max(worst, std::fabs(phi - c.V) / 35000.0);
       worstTangential = std::max(worstTangential, std::fabs(-Ex * ny + Ey * nx) / std::hypot(Ex, Ey));
     }
@@ -436,10 +437,12 @@ TEST_CASE("CES lift of a conductor on the drum: Lebedev-Skal'skaya 0.832 q E, im
   CHECK(F.x == 0);
   // In flight (2 mm off the drum): q E, no image.
   const Vec3 up{0, real(0.16 + 2e-3), 0};
-  CHECK(cesParticleForce(m, 0, up, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4)).y == Approx(qF * En).epsilon(1e-12));
+  CHECK(cesParticleForce(m, 0, up, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4)).y ==
+        Approx(qF * En).epsilon(1e-12));
   // An insulator with the same charge on the drum: q E minus the image attraction q^2/(16 pi eps0 r^2).
   const double img = qF * qF / (16 * M_PI * 8.8541878128e-12 * r * r);
-  CHECK(cesParticleForce(m, 1, top, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4)).y == Approx(qF * En - img).epsilon(1e-9));
+  CHECK(cesParticleForce(m, 1, top, Vec3{0, 0, 0}, real(qF), real(r), real(r), real(1e-6), real(2e-4)).y ==
+        Approx(qF * En - img).epsilon(1e-9));
   // The charge update: a metal touching the drum takes the Félici charge at once, with the sign of E.n
   // (positive here, under a field that points away from the drum: the electrode is negative).
   uint8_t flags = 0;
@@ -460,7 +463,8 @@ TEST_CASE("CES charging: Pauthenier with the local field and ion density, relaxa
   const Vec3 free{0.1, 0.3, 0};               // in the gas, away from the drum
   uint8_t flags = 0;
   // From 0, one step: q = -q_s h/(h + tau_c) (negative corona); ten steps of h = one of 10 h.
-  CHECK(cesChargeUpdate(m, 1, free, 0, real(r), real(r), real(h), flags) == Approx(-qs_plastic * h / (h + tc)).epsilon(1e-6));
+  CHECK(cesChargeUpdate(m, 1, free, 0, real(r), real(r), real(h), flags) ==
+        Approx(-qs_plastic * h / (h + tc)).epsilon(1e-6));
   real q = 0;
   for (int k = 0; k < 10; ++k) q = cesChargeUpdate(m, 1, free, q, real(r), real(r), real(h), flags);
   CHECK(double(q) == Approx(-qs_plastic * 10 * h / (10 * h + tc)).epsilon(1e-6));
@@ -473,7 +477,8 @@ TEST_CASE("CES charging: Pauthenier with the local field and ion density, relaxa
     const double k1 = rhs(x), k2 = rhs(x + dt / 2 * k1), k3 = rhs(x + dt / 2 * k2), k4 = rhs(x + dt * k3);
     x += dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4);
   }
-  CHECK(double(cesChargeUpdate(m, 0, free, real(qs_metal), real(r), real(r), real(h), flags)) == Approx(-x).epsilon(1e-9));
+  CHECK(double(cesChargeUpdate(m, 0, free, real(qs_metal), real(r), real(r), real(h), flags)) ==
+        Approx(-x).epsilon(1e-9));
   // No ions, no charging: the same place with N = 0 (below onset) leaves the charge alone.
   UniformGrid g0(E, 0);
   m.field.grid = g0.view;
@@ -522,10 +527,10 @@ TEST_CASE("CES brush: the bristles' sweep relaxes the velocity exactly over a st
   CHECK(double(Fb.y) == Approx(mass * f / h * (4 * M_PI * 0.03 + 1)).epsilon(1e-6));
   // Touching the tips from outside (centre 1.05 bounding radii beyond them): among the bristles; 1.2 radii
   // beyond: not (the contact tolerance is 1.1 radii), only the (negligible) drag.
-  CHECK(length(cesParticleForce(md, 1, Vec3{real(0.35 + 1.05 * r), 0, 0}, vp, 0, real(r), real(r), real(mass), real(h))) >
-        0.01 * mass / h);  // the sweep: mass (1 - e^(-0.1))/h x 0.372 m/s
-  CHECK(length(cesParticleForce(md, 1, Vec3{real(0.35 + 1.2 * r), 0, 0}, vp, 0, real(r), real(r), real(mass), real(h))) <
-        1e-9 * mass / h);
+  CHECK(length(cesParticleForce(md, 1, Vec3{real(0.35 + 1.05 * r), 0, 0}, vp, 0, real(r), real(r), real(mass),
+                                real(h))) > 0.01 * mass / h);  // the sweep: mass (1 - e^(-0.1))/h x 0.372 m/s
+  CHECK(length(cesParticleForce(md, 1, Vec3{real(0.35 + 1.2 * r), 0, 0}, vp, 0, real(r), real(r), real(mass),
+                                real(h))) < 1e-9 * mass / h);
   // Among the bristles the charge decays with the brush's time constant (1 ms here); outside it is kept.
   uint8_t flags = 0;
   CHECK(double(cesChargeUpdate(md, 1, p, real(-4e-12), real(r), real(r), real(h), flags)) ==
@@ -555,7 +560,8 @@ TEST_CASE("CES rolling resistance: mu_r r F_n against the relative rolling, limi
   // At rest on a still drum, rolling backwards at 50 rad/s about z: F_n = m g sin(theta) (the normal component of
   // gravity), the moment mu_r r F_n about +z (against w = -50 z).
   {
-    const Vec3 M = drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I), real(mu_r), real(h));
+    const Vec3 M = drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I),
+                                     real(mu_r), real(h));
     const double Fn = m * 9.81 * std::sin(th);
     CHECK(double(M.z) == Approx(mu_r * r * Fn).epsilon(1e-5));
     CHECK(std::fabs(double(M.x)) + std::fabs(double(M.y)) < 1e-20);
@@ -575,12 +581,14 @@ TEST_CASE("CES rolling resistance: mu_r r F_n against the relative rolling, limi
   // Other forces pressing in add to F_n; fast enough about the axis (v_phi^2 / rho > the inward push) it leaves: 0.
   {
     const Vec3 F = real(-2 * m * 9.81) * n;  // 2 m g toward the axis (an image force, say)
-    const Vec3 M = drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, F, grav, real(m), real(r), real(I), real(mu_r), real(h));
+    const Vec3 M =
+        drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, F, grav, real(m), real(r), real(I), real(mu_r), real(h));
     CHECK(double(M.z) == Approx(mu_r * r * m * 9.81 * (std::sin(th) + 2)).epsilon(1e-5));
     const double v_leave = std::sqrt(9.81 * std::sin(th) * rho) * 1.01;
     const Vec3 e_phi{-n.y, n.x, 0};
     CHECK(length(drumRollingTorque(g, p, real(v_leave) * e_phi, Vec3{0, 0, -50}, none, none, grav, real(m), real(r),
                                    real(I), real(mu_r), real(h))) == 0);
   }
-  CHECK(length(drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I), 0, real(h))) == 0);
+  CHECK(length(drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I), 0,
+                                 real(h))) == 0);
 }

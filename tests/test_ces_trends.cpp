@@ -47,10 +47,11 @@ double num(const json& m, const char* key) {
 TEST_CASE("CES trends of the default machine: landing, induced sign, onset, pinning, balance", "[ces][ces_trends]") {
   const fs::path dir = fs::temp_directory_path() / ("dvisim_ces_trends_" + std::to_string(getpid()));
   fs::remove_all(dir);
-  const std::string cmd = std::string("\"") + DVISIM_CLI_PATH +
-                          "\" sweep --grid electrode.voltage_kV=-8,-20,-45 --seeds 1 --jobs 2 --threads 1 --backend cpu --no-plots"
-                          " --set feed.duration_s=0.2 --time 1.3 --out \"" +
-                          dir.string() + "\" > \"" + dir.string() + ".log\" 2>&1";
+  const std::string cmd =
+      std::string("\"") + DVISIM_CLI_PATH +
+      "\" sweep --grid electrode.voltage_kV=-8,-20,-45 --seeds 1 --jobs 2 --threads 1 --backend cpu --no-plots"
+      " --set feed.duration_s=0.2 --time 1.3 --out \"" +
+      dir.string() + "\" > \"" + dir.string() + ".log\" 2>&1";
   const int rc = std::system(cmd.c_str());
   INFO("sweep log: " << dir.string() << ".log");
   REQUIRE(rc == 0);

@@ -79,7 +79,7 @@ Vec3 heavyVelocity(const Problem& q, const std::vector<real>& g) {
 struct Result {
   int iterations = 0;  // accepted iterations (or sweeps); polish sweeps counted separately
   int sweeps = 0;
-  real rel = 0;        // relative residual reached
+  real rel = 0;  // relative residual reached
   bool converged = false;
 };
 
@@ -113,10 +113,13 @@ void startOf(const CcpProblem& p, std::vector<real>& g, std::vector<real>& Ng) {
   p.project(g.data());
   p.schur(g.data(), Ng.data());
   double gNg = 0, rg = 0;
-  for (int i = 0; i < p.size(); ++i) gNg += double(g[size_t(i)]) * Ng[size_t(i)], rg += double(p.rhs()[i]) * g[size_t(i)];
+  for (int i = 0; i < p.size(); ++i)
+    gNg += double(g[size_t(i)]) * Ng[size_t(i)], rg += double(p.rhs()[i]) * g[size_t(i)];
   double sc = 1;
-  if (gNg > 0) sc = std::max(0.0, -rg / gNg);
-  else if (rg > 0 || gNg < 0) sc = 0;
+  if (gNg > 0)
+    sc = std::max(0.0, -rg / gNg);
+  else if (rg > 0 || gNg < 0)
+    sc = 0;
   for (int i = 0; i < p.size(); ++i) g[size_t(i)] = real(sc * g[size_t(i)]), Ng[size_t(i)] = real(sc * Ng[size_t(i)]);
 }
 
@@ -156,15 +159,15 @@ struct SubsetGs {
 enum class Restart { Gradient, Function };
 struct ApgdOptions {
   Restart restart = Restart::Gradient;
-  const real* eta = nullptr;        // metric (block steps); null: p.blockSteps()
-  int polish_every = 0;             // APGD iterations between Gauss-Seidel polishes (0: none)
+  const real* eta = nullptr;  // metric (block steps); null: p.blockSteps()
+  int polish_every = 0;       // APGD iterations between Gauss-Seidel polishes (0: none)
   int polish_sweeps = 5;
   const std::vector<int>* polish_blocks = nullptr;  // null: all blocks
-  int sub_every = 0;                // two-group subspace step every sub_every iterations (0: none)
+  int sub_every = 0;                                // two-group subspace step every sub_every iterations (0: none)
   const std::vector<int>* group = nullptr;          // group H of the subspace step
- bool sub_cold_only = false;      // the periodic subspace step only where group H starts from zero impulses
-  bool sub_start = false;          // the two-group subspace step once, on the start
-  bool jump_restart = true;         // restart the momentum after a polish or subspace step
+  bool sub_cold_only = false;  // the periodic subspace step only where group H starts from zero impulses
+  bool sub_start = false;      // the two-group subspace step once, on the start
+  bool jump_restart = true;    // restart the momentum after a polish or subspace step
 };
 
 // APGD as solver_algorithms.h's (Mazhar et al. 2015 with the scalar block metric, backtracking, L *= 0.9, best
@@ -176,8 +179,9 @@ Result apgdLocal(const CcpProblem& p, std::vector<real>& gamma, const Ctx& cx, c
   const BlockSet bs = p.blockSet();
   SolverSettings ss;
   const real a = residualAlpha(p, ss);
-  std::vector<real> t, g = gamma, Ng(static_cast<size_t>(n)), go(static_cast<size_t>(n)), Ngo(static_cast<size_t>(n)), y(static_cast<size_t>(n)), Ny(static_cast<size_t>(n)),
-                       gn(static_cast<size_t>(n)), Ngn(static_cast<size_t>(n)), best, grad;
+  std::vector<real> t, g = gamma, Ng(static_cast<size_t>(n)), go(static_cast<size_t>(n)), Ngo(static_cast<size_t>(n)),
+                       y(static_cast<size_t>(n)), Ny(static_cast<size_t>(n)), gn(static_cast<size_t>(n)),
+                       Ngn(static_cast<size_t>(n)), best, grad;
   startOf(p, g, Ng);
   go = g, Ngo = Ng;
   std::vector<real> zero(static_cast<size_t>(n), real(0));
@@ -208,38 +212,38 @@ Result apgdLocal(const CcpProblem& p, std::vector<real>& gamma, const Ctx& cx, c
     for (int k : *o.group) inH[size_t(k)] = 1;
   // the two-group subspace step on g (one Schur product)
   auto subspace = [&] {
-        // v1 = g on group H, v2 = g elsewhere; N v2 = N g - N v1: one Schur product.
-        std::vector<real> v1(static_cast<size_t>(n), real(0)), Nv1(static_cast<size_t>(n));
-        for (int k = 0; k < nb; ++k)
-          if (inH[size_t(k)])
-            for (int j = 0; j < 3; ++j) v1[size_t(3 * k + j)] = g[size_t(3 * k + j)];
-        p.schur(v1.data(), Nv1.data());
-        double A11 = 0, A12 = 0, A22 = 0, b1 = 0, b2 = 0;
-        for (int i = 0; i < n; ++i) {
-          const double v1i = v1[size_t(i)], v2i = double(g[size_t(i)]) - v1i;
-          const double Nv1i = Nv1[size_t(i)], Nv2i = double(Ng[size_t(i)]) - Nv1i;
-          A11 += v1i * Nv1i, A12 += v1i * Nv2i, A22 += v2i * Nv2i;
-          const double gr = double(Ng[size_t(i)]) + r[i];
-          b1 += v1i * gr, b2 += v2i * gr;
-        }
-        // minimise f(g + c1 v1 + c2 v2): A c = -b; keep 1 + c >= 0 (a non-negative scaling stays in the cones)
-        const double det = A11 * A22 - A12 * A12;
-        double c1 = 0, c2 = 0;
-        if (det > 1e-300 * (A11 * A22) && det > 0) {
-          c1 = (-b1 * A22 + b2 * A12) / det;
-          c2 = (-b2 * A11 + b1 * A12) / det;
-        } else if (A11 > 0) {
-          c1 = -b1 / A11;
-        }
-        c1 = std::max(c1, -1.0), c2 = std::max(c2, -1.0);
-        for (int i = 0; i < n; ++i) {
-          const double v1i = v1[size_t(i)], v2i = double(g[size_t(i)]) - v1i;
-          const double Nv1i = Nv1[size_t(i)], Nv2i = double(Ng[size_t(i)]) - Nv1i;
-          g[size_t(i)] = real(double(g[size_t(i)]) + c1 * v1i + c2 * v2i);
-          Ng[size_t(i)] = real(double(Ng[size_t(i)]) + c1 * Nv1i + c2 * Nv2i);
-        }
-        fcur = objective(p, g.data(), Ng.data());
-        };
+    // v1 = g on group H, v2 = g elsewhere; N v2 = N g - N v1: one Schur product.
+    std::vector<real> v1(static_cast<size_t>(n), real(0)), Nv1(static_cast<size_t>(n));
+    for (int k = 0; k < nb; ++k)
+      if (inH[size_t(k)])
+        for (int j = 0; j < 3; ++j) v1[size_t(3 * k + j)] = g[size_t(3 * k + j)];
+    p.schur(v1.data(), Nv1.data());
+    double A11 = 0, A12 = 0, A22 = 0, b1 = 0, b2 = 0;
+    for (int i = 0; i < n; ++i) {
+      const double v1i = v1[size_t(i)], v2i = double(g[size_t(i)]) - v1i;
+      const double Nv1i = Nv1[size_t(i)], Nv2i = double(Ng[size_t(i)]) - Nv1i;
+      A11 += v1i * Nv1i, A12 += v1i * Nv2i, A22 += v2i * Nv2i;
+      const double gr = double(Ng[size_t(i)]) + r[i];
+      b1 += v1i * gr, b2 += v2i * gr;
+    }
+    // minimise f(g + c1 v1 + c2 v2): A c = -b; keep 1 + c >= 0 (a non-negative scaling stays in the cones)
+    const double det = A11 * A22 - A12 * A12;
+    double c1 = 0, c2 = 0;
+    if (det > 1e-300 * (A11 * A22) && det > 0) {
+      c1 = (-b1 * A22 + b2 * A12) / det;
+      c2 = (-b2 * A11 + b1 * A12) / det;
+    } else if (A11 > 0) {
+      c1 = -b1 / A11;
+    }
+    c1 = std::max(c1, -1.0), c2 = std::max(c2, -1.0);
+    for (int i = 0; i < n; ++i) {
+      const double v1i = v1[size_t(i)], v2i = double(g[size_t(i)]) - v1i;
+      const double Nv1i = Nv1[size_t(i)], Nv2i = double(Ng[size_t(i)]) - Nv1i;
+      g[size_t(i)] = real(double(g[size_t(i)]) + c1 * v1i + c2 * v2i);
+      Ng[size_t(i)] = real(double(Ng[size_t(i)]) + c1 * Nv1i + c2 * Nv2i);
+    }
+    fcur = objective(p, g.data(), Ng.data());
+  };
   if (o.sub_start && o.group) {  // at the start only: the warm start's ray scaling per group
     subspace();
     go = g, Ngo = Ng;
@@ -264,7 +268,8 @@ Result apgdLocal(const CcpProblem& p, std::vector<real>& gamma, const Ctx& cx, c
         Ny[size_t(i)] = Ng[size_t(i)] + beta * (Ng[size_t(i)] - Ngo[size_t(i)]);
       }
       for (int k = 0; k < nb; ++k) {
-        for (int j = 0; j < 3; ++j) gn[size_t(3 * k + j)] = y[size_t(3 * k + j)] - eta[k] / L * (Ny[size_t(3 * k + j)] + r[3 * k + j]);
+        for (int j = 0; j < 3; ++j)
+          gn[size_t(3 * k + j)] = y[size_t(3 * k + j)] - eta[k] / L * (Ny[size_t(3 * k + j)] + r[3 * k + j]);
         projectBlock(bs, k, &gn[size_t(3 * k)]);
       }
       p.schur(gn.data(), Ngn.data());
@@ -408,7 +413,8 @@ std::vector<Candidate> candidates() {
   c.push_back({"gs", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
                  return fromStats(q.p->solveGaussSeidel(g.data(), settingsOf(cx)), cx);
                }});
-  c.push_back({"msplit", [](const Problem& q, std::vector<real>& g, const Ctx& cx) { return massSplitJacobi(q, g, cx); }});
+  c.push_back(
+      {"msplit", [](const Problem& q, std::vector<real>& g, const Ctx& cx) { return massSplitJacobi(q, g, cx); }});
   c.push_back({"apgd-ms", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
                  ApgdOptions o;
                  o.eta = q.split->blockSteps();
@@ -520,7 +526,8 @@ class StudySystem : public System {
   std::shared_ptr<ContactProblem> splitProblem() const {
     BodyArrays b = bodies_;
     std::vector<int> count(b.count(), 0);
-    for (size_t k = 0; k < contacts_.count(); ++k) ++count[size_t(contacts_.body_a[k])], ++count[size_t(contacts_.body_b[k])];
+    for (size_t k = 0; k < contacts_.count(); ++k)
+      ++count[size_t(contacts_.body_a[k])], ++count[size_t(contacts_.body_b[k])];
     for (size_t i = 0; i < b.count(); ++i) {
       const real m = real(std::max(1, count[i]));
       b.inv_mass[i] *= m;
@@ -563,7 +570,8 @@ int build(const Scene& sc, StudySystem& s) {
     const real a = real(0.05);
     int top = -1;
     for (int i = 0; i < 10; ++i)
-      top = s.addBody(cube(a, i == 9 ? real(sc.ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
+      top =
+          s.addBody(cube(a, i == 9 ? real(sc.ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
     return top;
   }
   const double r = 0.01, w = 4 * r * 1.001, t = 0.01, h = 4 * r;
@@ -580,10 +588,11 @@ int build(const Scene& sc, StudySystem& s) {
   }
   const double m = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r;
   for (int i = 0; i < 4; ++i)
-    s.addBody(ball(real(r), real(m), Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
+    s.addBody(ball(real(r), real(m),
+                   Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
                    real(0.7)));
-  return s.addBody(ball(real(r), real(m * sc.ratio), Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)},
-                        real(0.7)));
+  return s.addBody(ball(real(r), real(m * sc.ratio),
+                        Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)}, real(0.7)));
 }
 
 SystemConfig configOf(const Scene& sc) {
@@ -594,8 +603,10 @@ SystemConfig configOf(const Scene& sc) {
 }
 
 std::vector<Scene> scenes() {
-  return {{"particles 1e2", true, 1e2, 0.01, "r"},  {"particles 1e4", true, 1e4, 0.01, "r"},
-          {"particles 1e6", true, 1e6, 0.01, "r"},  {"stack 1e3", false, 1e3, 1e-3, "mm"},
+  return {{"particles 1e2", true, 1e2, 0.01, "r"},
+          {"particles 1e4", true, 1e4, 0.01, "r"},
+          {"particles 1e6", true, 1e6, 0.01, "r"},
+          {"stack 1e3", false, 1e3, 1e-3, "mm"},
           {"stack 1e6", false, 1e6, 1e-3, "mm"}};
 }
 
@@ -627,10 +638,11 @@ TEST_CASE("study: mass-ratio CCP snapshots, iterations and time to 1e-1, 1e-2, 1
       rc.cap = 400000;
       const Result rr = fromStats(solveApgd(*q.p, ref.data(), settingsOf(rc)), rc);
       const Vec3 vref = heavyVelocity(q, ref);
-      std::printf("\n%s, step %lld: %d contacts (%zu on the heavy body), reference relative residual %.2e after %d "
-                  "iterations, heavy body v_ref.y %.3e m/s\n",
-                  sc.name.c_str(), (long long)step, q.p->size() / 3, q.heavy_blocks.size(), double(rr.rel), rr.iterations,
-                  double(vref.y));
+      std::printf(
+          "\n%s, step %lld: %d contacts (%zu on the heavy body), reference relative residual %.2e after %d "
+          "iterations, heavy body v_ref.y %.3e m/s\n",
+          sc.name.c_str(), (long long)step, q.p->size() / 3, q.heavy_blocks.size(), double(rr.rel), rr.iterations,
+          double(vref.y));
       std::printf("  %-10s | %-34s | %-34s | %-34s\n", "method", "1e-1: it, ms, rel, err", "1e-2: it, ms, rel, err",
                   "1e-3: it, ms, rel, err");
       for (const Candidate& c : cands) {
@@ -647,15 +659,16 @@ TEST_CASE("study: mass-ratio CCP snapshots, iterations and time to 1e-1, 1e-2, 1
             g = q.warm;
             const auto t0 = std::chrono::steady_clock::now();
             R = c.run(q, g, cx);
-            best_ms = std::min(best_ms, 1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+            best_ms =
+                std::min(best_ms, 1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
             if (best_ms > 200) break;
           }
           const Vec3 v = heavyVelocity(q, g);
           const double err = double(q.h) * double(length(v - vref)) / sc.unit;
           char cell[64];
           if (R.sweeps)
-            std::snprintf(cell, sizeof cell, "%d+%ds %.2f %.1e %.1e%s", R.iterations, R.sweeps, best_ms, double(R.rel), err,
-                          R.converged ? "" : "!");
+            std::snprintf(cell, sizeof cell, "%d+%ds %.2f %.1e %.1e%s", R.iterations, R.sweeps, best_ms, double(R.rel),
+                          err, R.converged ? "" : "!");
           else
             std::snprintf(cell, sizeof cell, "%d %.2f %.1e %.1e%s", R.iterations, best_ms, double(R.rel), err,
                           R.converged ? "" : "!");

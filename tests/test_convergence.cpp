@@ -54,7 +54,8 @@ RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig 
   sys->addBody(groundPlane(real(0.7)));
   int top = -1;
   for (int i = 0; i < n; ++i)
-    top = sys->addBody(cube(a, i == n - 1 ? real(ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
+    top = sys->addBody(
+        cube(a, i == n - 1 ? real(ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
   RunResult r;
   r.top_y0 = double(sys->bodies().pos[size_t(top)].y);
   const int steps = int(std::lround(seconds / dt));
@@ -93,10 +94,11 @@ RunResult runParticles(double ratio, int steps, SystemConfig cfg, bool gpu = fal
   }
   const double m = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r;
   for (int i = 0; i < 4; ++i)
-    sys->addBody(ball(real(r), real(m), Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
-                      real(0.7)));
-  const int top = sys->addBody(ball(real(r), real(m * ratio), Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)},
-                                    real(0.7)));
+    sys->addBody(ball(
+        real(r), real(m),
+        Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))}, real(0.7)));
+  const int top = sys->addBody(ball(
+      real(r), real(m * ratio), Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)}, real(0.7)));
   RunResult res;
   res.top_y0 = double(sys->bodies().pos[size_t(top)].y);
   int64_t iters = 0;
@@ -116,10 +118,10 @@ RunResult runParticles(double ratio, int steps, SystemConfig cfg, bool gpu = fal
 }
 
 void report(const char* what, const RunResult& r) {
-  std::printf("%-40s top %+.4e m, pen %.3e m, iters mean %.1f max %d, not converged %lld/%lld, worst %.3g, solve %.3f s\n",
-              what, r.top_y - r.top_y0, r.max_pen, r.mean_iterations, r.max_iterations,
-              (long long)r.log.steps_not_converged, (long long)r.log.steps, double(r.log.worst_relative_residual),
-              r.seconds);
+  std::printf(
+      "%-40s top %+.4e m, pen %.3e m, iters mean %.1f max %d, not converged %lld/%lld, worst %.3g, solve %.3f s\n",
+      what, r.top_y - r.top_y0, r.max_pen, r.mean_iterations, r.max_iterations, (long long)r.log.steps_not_converged,
+      (long long)r.log.steps, double(r.log.worst_relative_residual), r.seconds);
 }
 
 }  // namespace
@@ -252,13 +254,15 @@ TEST_CASE("the drop-in world counts the sub-steps that missed the tolerance", "[
       t.setIdentity();
       t.setOrigin(btVector3(0, i == 0 ? 0 : btScalar(0.05 * (1.0002 + 2.0002 * (i - 1))), 0));
       states.emplace_back(new btDefaultMotionState(t));
-      bodies.emplace_back(new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, states.back().get(), s, inertia)));
+      bodies.emplace_back(
+          new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, states.back().get(), s, inertia)));
       bodies.back()->setActivationState(DISABLE_DEACTIVATION);
       world.addRigidBody(bodies.back().get());
     }
     for (int k = 0; k < 30; ++k) world.stepSimulation(btScalar(0.01), 0, btScalar(0.01));
     const ConvergenceLog& log = world.convergence();
-    INFO("cap " << cap << ": " << log.steps_not_converged << " of " << log.steps << ", worst " << log.worst_relative_residual);
+    INFO("cap " << cap << ": " << log.steps_not_converged << " of " << log.steps << ", worst "
+                << log.worst_relative_residual);
     CHECK(log.steps == world.subSteps());
     if (cap == 2) {
       CHECK(log.steps_not_converged > 0);
@@ -316,7 +320,8 @@ Cli runCli(const std::string& dir, const std::string& args) {
 }
 }  // namespace
 
-TEST_CASE("CLI: a run whose steps miss the tolerance warns once and counts them in summary.json", "[convergence][cli]") {
+TEST_CASE("CLI: a run whose steps miss the tolerance warns once and counts them in summary.json",
+          "[convergence][cli]") {
   char tmpl[] = "/tmp/dvisim_converge_XXXXXX";
   REQUIRE(mkdtemp(tmpl) != nullptr);
   const std::string dir = tmpl;
@@ -410,11 +415,14 @@ TEST_CASE("measure: sphere pile at the default and fixed settings", "[.pile]") {
   const long n = std::getenv("DVISIM_PILE_N") ? std::atol(std::getenv("DVISIM_PILE_N")) : 10000;
   const int steps = std::getenv("DVISIM_PILE_STEPS") ? std::atoi(std::getenv("DVISIM_PILE_STEPS")) : 300;
   const bench::SceneSpec spec = bench::makePileSpec(n);
-  const double tol = std::getenv("DVISIM_PILE_TOL") ? std::atof(std::getenv("DVISIM_PILE_TOL")) : double(kDefaultTolerance);
+  const double tol =
+      std::getenv("DVISIM_PILE_TOL") ? std::atof(std::getenv("DVISIM_PILE_TOL")) : double(kDefaultTolerance);
   for (int mode = std::getenv("DVISIM_PILE_SKIP_FIXED") ? 0 : 1; mode >= 0; --mode) {
     SystemConfig cfg;
-    if (mode == 1) cfg.solver.max_iterations = 50, cfg.solver.tolerance = 0;
-    else cfg.solver.tolerance = real(tol);
+    if (mode == 1)
+      cfg.solver.max_iterations = 50, cfg.solver.tolerance = 0;
+    else
+      cfg.solver.tolerance = real(tol);
     System sys(cfg);
     bench::addToSystem(spec, sys);
     double wall = 0, iters = 0, rel = 0, pen = 0;
@@ -490,15 +498,16 @@ TEST_CASE("GPU defaults: the tolerance stop takes the CPU's iterations on the st
   for (System* sys : {cpu.get(), gpu.get()}) {
     sys->addBody(groundPlane(real(0.7)));
     for (int i = 0; i < 10; ++i)
-      sys->addBody(cube(real(0.05), i == 9 ? real(1000) : real(1), Vec3{0, real(0.05 * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
+      sys->addBody(
+          cube(real(0.05), i == 9 ? real(1000) : real(1), Vec3{0, real(0.05 * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
   }
   int differing = 0;
   for (int k = 0; k < 20; ++k) {
     cpu->step();
     gpu->step();
     const StepStats &a = cpu->lastStats(), &b = gpu->lastStats();
-    INFO("step " << k << ": iterations " << a.iterations << " / " << b.iterations << ", relative " << a.relative_residual
-                 << " / " << b.relative_residual);
+    INFO("step " << k << ": iterations " << a.iterations << " / " << b.iterations << ", relative "
+                 << a.relative_residual << " / " << b.relative_residual);
     // Once the stack rests, the relative residual is round-off (below 1e-6: differences of nearly equal
     // velocities, reduced in another order on each backend), and an exact zero on one backend ends its solve
     // early (reachedStop). Iteration counts are compared only while the residual is above round-off.

@@ -82,8 +82,8 @@ void buildPile(System& sys, int n, unsigned seed, bool mixed = true, double spac
   const real r = real(0.01);
   const int side = std::max(1, int(std::cbrt(double(n) / 4)));  // a column about 4x as tall as it is wide
   const real d = real(spacing) * r;
-  const ShapeType types[7] = {ShapeType::Sphere, ShapeType::Ellipsoid, ShapeType::Box, ShapeType::Cylinder,
-                              ShapeType::Capsule, ShapeType::Cone, ShapeType::ConvexHull};
+  const ShapeType types[7] = {ShapeType::Sphere,  ShapeType::Ellipsoid, ShapeType::Box,       ShapeType::Cylinder,
+                              ShapeType::Capsule, ShapeType::Cone,      ShapeType::ConvexHull};
   for (int i = 0; i < n; ++i) {
     const int ix = i % side, iz = (i / side) % side, iy = i / (side * side);
     BodyDesc b;
@@ -277,7 +277,8 @@ TEST_CASE("GPU narrow phase equals the CPU's on random pairs of every shape comb
         const double dl = std::fabs(double(g.dist - cpu[k].dist)) / size;
         const double dp = std::fmax(double(length(g.pa - cpu[k].pa)), double(length(g.pb - cpu[k].pb))) / size;
         const double dn = std::fmax(std::fabs(double(dot(g.pa - cpu[k].pa, cpu[k].normal))),
-                                    std::fabs(double(dot(g.pb - cpu[k].pb, cpu[k].normal)))) / size;
+                                    std::fabs(double(dot(g.pb - cpu[k].pb, cpu[k].normal)))) /
+                          size;
         if (closed) {
           worst_closed = std::fmax(worst_closed, std::fmax(ang, std::fmax(dl, dp)));
           bad = ang > (kDouble ? 1e-9 : 1e-2) || dl > (kDouble ? 1e-9 : 1e-2) || dp > (kDouble ? 1e-9 : 1e-2);
@@ -302,11 +303,11 @@ TEST_CASE("GPU narrow phase equals the CPU's on random pairs of every shape comb
       detail << "\n  " << name << ": " << c[0] << " pairs, " << c[1] << " count / " << c[2]
              << " point mismatches, largest tangential slide " << c[3] << " x size";
   WARN("narrow phase GPU vs CPU: " << A.size() << " pairs, " << with_contacts << " touching, " << compared
-                                   << " points compared; count mismatches " << count_mismatch
-                                   << ", point mismatches " << point_mismatch << "; closed form worst error "
-                                   << worst_closed << "; MPR worst normal angle " << worst_mpr_angle
-                                   << " rad, depth " << worst_mpr_depth << " x size, " << slid
-                                   << " points slid (largest " << worst_slide << " x size)" << detail.str());
+                                   << " points compared; count mismatches " << count_mismatch << ", point mismatches "
+                                   << point_mismatch << "; closed form worst error " << worst_closed
+                                   << "; MPR worst normal angle " << worst_mpr_angle << " rad, depth "
+                                   << worst_mpr_depth << " x size, " << slid << " points slid (largest " << worst_slide
+                                   << " x size)" << detail.str());
   CHECK(with_contacts > int(A.size()) / 4);
   // a pair whose distance sits on the envelope boundary may flip by rounding
   CHECK(count_mismatch <= int(A.size()) / 500);
@@ -342,10 +343,11 @@ void compareOneStep(bool mixed) {
       }
       if (wd > 0) {
         const ShapeArrays& sh = cpu.shapes();
-        WARN((mixed ? "mixed" : "spheres") << " step " << s << ": largest normal difference " << wd << " at contact "
-                     << worst << " (" << shapeTypeName(sh.shape[size_t(cc.shape_a[worst])].type) << "-"
-                     << shapeTypeName(sh.shape[size_t(cc.shape_b[worst])].type) << ", feature "
-                     << (cc.key[worst] & 0xFF) << ", dist CPU " << cc.dist[worst] << " GPU " << gc.dist[worst] << ")");
+        WARN((mixed ? "mixed" : "spheres")
+             << " step " << s << ": largest normal difference " << wd << " at contact " << worst << " ("
+             << shapeTypeName(sh.shape[size_t(cc.shape_a[worst])].type) << "-"
+             << shapeTypeName(sh.shape[size_t(cc.shape_b[worst])].type) << ", feature " << (cc.key[worst] & 0xFF)
+             << ", dist CPU " << cc.dist[worst] << " GPU " << gc.dist[worst] << ")");
       }
     }
     const double ed = relDiff(gc.dist, cc.dist);
@@ -354,10 +356,10 @@ void compareOneStep(bool mixed) {
     const double ew = relDiff(flatten(gpu->bodies().omega), flatten(cpu.bodies().omega));
     const double ep = relDiff(flatten(gpu->bodies().pos), flatten(cpu.bodies().pos));
     WARN((mixed ? "mixed" : "spheres") << " step " << s << " (" << cc.count() << " contacts, iterations CPU "
-                 << cpu.lastStats().iterations << " GPU " << gpu->lastStats().iterations
-                 << "): relative differences normals " << en << ", dist " << ed << ", impulses " << eg << ", v "
-                 << ev << ", omega " << ew << ", pos " << ep << "; residual CPU " << cpu.lastStats().residual
-                 << " GPU " << gpu->lastStats().residual);
+                                       << cpu.lastStats().iterations << " GPU " << gpu->lastStats().iterations
+                                       << "): relative differences normals " << en << ", dist " << ed << ", impulses "
+                                       << eg << ", v " << ev << ", omega " << ew << ", pos " << ep << "; residual CPU "
+                                       << cpu.lastStats().residual << " GPU " << gpu->lastStats().residual);
     // Step 0 to rounding. Step 1 starts from states 5e-19 apart, and an MPR pair resting along a line (a capsule's
     // side on a cylinder's cap, kept parallel by the flat-feature manifold, mpr.h) has an ill-conditioned normal:
     // the depth does not change as it turns about the line, and the two builds' roundings put it 1.1e-4 rad
@@ -428,7 +430,8 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
                            << gpu->lastStats().iterations);
       double tang = 0;
       for (size_t k = 0; k < gpu->contacts().count(); ++k)
-        tang = std::max({tang, std::fabs(double(gpu->impulses()[3 * k + 1])), std::fabs(double(gpu->impulses()[3 * k + 2]))});
+        tang = std::max(
+            {tang, std::fabs(double(gpu->impulses()[3 * k + 1])), std::fabs(double(gpu->impulses()[3 * k + 2]))});
       CHECK(tang == 0);
       const double tol = kDouble ? 1e-9 : 2e-3;
       CHECK(eg < tol);
@@ -479,9 +482,8 @@ TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree 
   const PileStats a = pileStats(cpu), b = pileStats(*gpu);
   WARN("1 s of " << n << " bodies: mean height over the last 0.5 s CPU " << h_cpu / nh << " GPU " << h_gpu / nh
                  << "; mean kinetic energy CPU " << ke_cpu * 10 / steps << " GPU " << ke_gpu * 10 / steps
-                 << "; final height CPU " << a.mean_height << " GPU " << b.mean_height << ", final KE CPU "
-                 << a.kinetic << " GPU " << b.kinetic << "; contacts per body CPU " << z_cpu / nh << " GPU "
-                 << z_gpu / nh);
+                 << "; final height CPU " << a.mean_height << " GPU " << b.mean_height << ", final KE CPU " << a.kinetic
+                 << " GPU " << b.kinetic << "; contacts per body CPU " << z_cpu / nh << " GPU " << z_gpu / nh);
   if (sanitizer_run) {
     WARN("DVISIM_SANITIZER_RUN: 30 steps under the sanitizer, statistics not judged");
     return;
@@ -530,7 +532,8 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
 // trials must give bitwise the same state: all trials in one cooperative kernel with each thread's blocks kept in
 // registers (the default at this size), the same kernel reading them from memory every trial, each trial as one
 // CUDA graph, and each trial's kernels one by one.
-TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, graph and kernel launches agree", "[gpu]") {
+TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, graph and kernel launches agree",
+          "[gpu]") {
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
   cfg.solver.max_iterations = 100;
@@ -563,8 +566,7 @@ TEST_CASE("GPU APGD on the device: tolerance stops equal the CPU's, persistent, 
     for (System* sys : all) sys->step();
     INFO("step " << s << ": iterations CPU " << cpu.lastStats().iterations << ", GPU persistent "
                  << persistent->lastStats().iterations << ", GPU graphs " << graphs->lastStats().iterations
-                 << ", GPU kernels " << plain->lastStats().iterations << " (tolerance " << cfg.solver.tolerance
-                 << ")");
+                 << ", GPU kernels " << plain->lastStats().iterations << " (tolerance " << cfg.solver.tolerance << ")");
     if (s == 0) CHECK(cpu.lastStats().iterations < 100);
     CHECK(persistent->lastStats().iterations == cpu.lastStats().iterations);
     CHECK(uncached->lastStats().iterations == cpu.lastStats().iterations);
@@ -619,9 +621,9 @@ TEST_CASE("GPU float storage: the 10,000-body mixed pile follows the CPU's float
     WARN("float storage, step " << s << " (" << cpu.contacts().count() << " contacts, iterations CPU "
                                 << cpu.lastStats().iterations << " GPU " << gpu->lastStats().iterations
                                 << "): relative differences v " << ev << ", omega " << ew << ", impulses " << eg
-                                << "; residual CPU " << cpu.lastStats().residual << " GPU "
-                                << gpu->lastStats().residual << "; deepest penetration CPU "
-                                << cpu.lastStats().max_penetration << " GPU " << gpu->lastStats().max_penetration);
+                                << "; residual CPU " << cpu.lastStats().residual << " GPU " << gpu->lastStats().residual
+                                << "; deepest penetration CPU " << cpu.lastStats().max_penetration << " GPU "
+                                << gpu->lastStats().max_penetration);
     if (s == 0) {
       CHECK(ev < 1e-6);
       CHECK(ew < 1e-5);
@@ -670,8 +672,8 @@ TEST_CASE("GPU APGD's speculated steps give bitwise the trajectory without specu
         const StepStats& none = sys[0]->lastStats();
         const int rej = none.trials - none.iterations;
         rejected += rej;
-        INFO("storage " << (storage == VectorStorage::Real ? "real" : "float") << ", path " << path << ", step "
-                        << step << ": trials " << none.trials << ", iterations " << none.iterations
+        INFO("storage " << (storage == VectorStorage::Real ? "real" : "float") << ", path " << path << ", step " << step
+                        << ": trials " << none.trials << ", iterations " << none.iterations
                         << ", speculated (accepted, both, auto) " << sys[1]->lastStats().speculated << ", "
                         << sys[2]->lastStats().speculated << ", " << sys[3]->lastStats().speculated);
         CHECK(none.speculated == 0);
@@ -883,7 +885,8 @@ TEST_CASE("a plate under 2,025 spheres: the GPU's heavy-body gather equals the C
     const Vec3 dvp = gpu->bodies().vel[1] - cpu.bodies().vel[1];
     WARN("plate step " << s << ": " << on_plate << " contacts on the plate; relative differences impulses " << eg
                        << ", v " << ev << ", omega " << ew << "; plate velocity CPU (" << cpu.bodies().vel[1].x << ", "
-                       << cpu.bodies().vel[1].y << ", " << cpu.bodies().vel[1].z << "), GPU differs by " << length(dvp));
+                       << cpu.bodies().vel[1].y << ", " << cpu.bodies().vel[1].z << "), GPU differs by "
+                       << length(dvp));
     const double tol = kDouble ? 1e-9 : 2e-3;
     CHECK(eg < tol);
     CHECK(ev < tol);

@@ -30,7 +30,8 @@ TEST_CASE("GPU scaling benchmark: dvisim bench scaling --record", "[.][gpu_bench
   }
   const char* out = std::getenv("DVISIM_BENCH_OUT");
   std::string cmd = quote(cli) + " bench scaling --record --out " +
-                    quote(out && *out ? std::string(out) : (std::filesystem::temp_directory_path() / "dvisim_bench_scaling").string());
+                    quote(out && *out ? std::string(out)
+                                      : (std::filesystem::temp_directory_path() / "dvisim_bench_scaling").string());
   if (const char* sizes = std::getenv("DVISIM_BENCH_SIZES")) cmd += " --sizes " + quote(sizes);
   const int status = std::system(cmd.c_str());
   REQUIRE(WIFEXITED(status));

@@ -49,8 +49,9 @@ struct Bounded {
 // `dvisim ARGS` under `timeout -s KILL`, with an optional shell prefix (e.g. "ulimit -v 4000000;").
 Bounded runBounded(const std::string& args, const std::string& prefix = "") {
   const fs::path d = tempDir("hard");
-  const std::string cmd = prefix + " exec timeout -s KILL " + std::to_string(kLimitSeconds) + " " + quote(DVISIM_CLI_PATH) +
-                          " " + args + " >" + quote((d / "out").string()) + " 2>" + quote((d / "err").string());
+  const std::string cmd = prefix + " exec timeout -s KILL " + std::to_string(kLimitSeconds) + " " +
+                          quote(DVISIM_CLI_PATH) + " " + args + " >" + quote((d / "out").string()) + " 2>" +
+                          quote((d / "err").string());
   const auto t0 = std::chrono::steady_clock::now();
   const int status = std::system(("bash -c " + quote(cmd)).c_str());
   Bounded r;
@@ -67,7 +68,8 @@ Bounded runBounded(const std::string& args, const std::string& prefix = "") {
 void expectRefused(const std::string& args, const std::vector<std::string>& needles, const std::string& prefix = "") {
   INFO("dvisim " << args.substr(0, 300));
   const Bounded r = runBounded(args, prefix);
-  INFO("exit " << r.code << " after " << r.seconds << " s\nstdout: " << r.out.substr(0, 2000) << "\nstderr: " << r.err.substr(0, 2000));
+  INFO("exit " << r.code << " after " << r.seconds << " s\nstdout: " << r.out.substr(0, 2000)
+               << "\nstderr: " << r.err.substr(0, 2000));
   CHECK(r.code == 2);
   CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
   CHECK(r.err.rfind("dvisim: error: ", 0) == 0);
@@ -156,7 +158,8 @@ TEST_CASE("Hardening: a pile whose footprint columns nx*nz wrap to 0 runs (was S
   // 2^32 x 2^32 columns of spacing 1: nx * nz was 2^64 = 0 in 64 bits, a division by zero
   spit(d / "fpe.json", sceneWith(std::string(kPlane) + R"(, { "generator": { "type": "pile", "count": 10, "spacing": 1,
       "footprint": [4294967296, 4294967296], "shape": { "type": "sphere", "radius": 0.1 } } })"));
-  const Bounded r = runBounded("run " + quote((d / "fpe.json").string()) + " --backend cpu --out " + quote((d / "o").string()));
+  const Bounded r =
+      runBounded("run " + quote((d / "fpe.json").string()) + " --backend cpu --out " + quote((d / "o").string()));
   INFO(r.out << r.err);
   CHECK(r.code == 0);
   CHECK(r.out.find("(11 bodies)") != std::string::npos);
@@ -171,24 +174,31 @@ TEST_CASE("Hardening: a pile whose footprint columns nx*nz wrap to 0 runs (was S
   fs::remove_all(d);
 }
 
-TEST_CASE("Hardening: deeply nested JSON is refused with the key path and the limit (was a stack overflow)", "[hardening][cli]") {
+TEST_CASE("Hardening: deeply nested JSON is refused with the key path and the limit (was a stack overflow)",
+          "[hardening][cli]") {
   const fs::path d = tempDir("deep");
   const std::string dir = d.string(), out = " --out " + quote(dir + "/o");
   // arrays 100,000 deep in a body's position (JsonCheck::describe printed the whole value)
-  spit(d / "array.json", sceneWith(R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": )" + nested("[", "]", 100000) + " }"));
-  expectRefused("run " + quote(dir + "/array.json") + out, {"array.json: bodies[0].position[0][0]", "nested deeper than 64 levels"});
+  spit(d / "array.json",
+       sceneWith(R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": )" + nested("[", "]", 100000) + " }"));
+  expectRefused("run " + quote(dir + "/array.json") + out,
+                {"array.json: bodies[0].position[0][0]", "nested deeper than 64 levels"});
   // objects 100,000 deep
-  spit(d / "object.json", sceneWith(R"({ "shape": { "type": "sphere", "radius": 0.1 }, "x": )" + nested(R"({"a":)", "}", 100000, "1") + " }"));
+  spit(d / "object.json", sceneWith(R"({ "shape": { "type": "sphere", "radius": 0.1 }, "x": )" +
+                                    nested(R"({"a":)", "}", 100000, "1") + " }"));
   expectRefused("run " + quote(dir + "/object.json") + out, {"bodies[0].x.a.a", "nested deeper than 64 levels"});
   // compounds 2,000 deep (Builder::shape recursed once per level)
-  spit(d / "compound.json",
-       sceneWith(R"({ "mass": 1, "shape": )" +
-                 nested(R"({ "type": "compound", "children": [ { "shape": )", "} ] }", 2000, R"({ "type": "sphere", "radius": 0.1 })") + " }"));
-  expectRefused("run " + quote(dir + "/compound.json") + out, {"bodies[0].shape.children[0].shape", "nested deeper than 64 levels"});
+  spit(d / "compound.json", sceneWith(R"({ "mass": 1, "shape": )" +
+                                      nested(R"({ "type": "compound", "children": [ { "shape": )", "} ] }", 2000,
+                                             R"({ "type": "sphere", "radius": 0.1 })") +
+                                      " }"));
+  expectRefused("run " + quote(dir + "/compound.json") + out,
+                {"bodies[0].shape.children[0].shape", "nested deeper than 64 levels"});
   // within the nesting limit, compounds nested 9 deep pass the JSON check and meet the compound limit
-  spit(d / "compound9.json",
-       sceneWith(R"({ "mass": 1, "shape": )" +
-                 nested(R"({ "type": "compound", "children": [ { "shape": )", "} ] }", 9, R"({ "type": "sphere", "radius": 0.1 })") + " }"));
+  spit(d / "compound9.json", sceneWith(R"({ "mass": 1, "shape": )" +
+                                       nested(R"({ "type": "compound", "children": [ { "shape": )", "} ] }", 9,
+                                              R"({ "type": "sphere", "radius": 0.1 })") +
+                                       " }"));
   expectRefused("run " + quote(dir + "/compound9.json") + out, {"compound shapes nested deeper than 8 levels"});
   // a CES document (parseCesDocument copied the document before looking at it)
   spit(d / "ces.json", R"({ "ces": { "drum": )" + nested("[", "]", 100000) + " } }");
@@ -196,8 +206,9 @@ TEST_CASE("Hardening: deeply nested JSON is refused with the key path and the li
   // a --set value
   spit(d / "tiny.json", sceneWith(std::string(kPlane)));
   // (30,000 deep: one command-line argument holds at most 128 KiB)
-  expectRefused("run " + quote(dir + "/tiny.json") + " --set " + quote("settings.gravity=" + nested("[", "]", 30000)) + out,
-                {"nested deeper than 64 levels"});
+  expectRefused(
+      "run " + quote(dir + "/tiny.json") + " --set " + quote("settings.gravity=" + nested("[", "]", 30000)) + out,
+      {"nested deeper than 64 levels"});
   fs::remove_all(d);
 }
 
@@ -205,28 +216,33 @@ TEST_CASE("Hardening: the largest scenes are refused before allocating (was a se
           "[hardening][cli]") {
   const fs::path d = tempDir("big");
   const std::string dir = d.string(), out = " --out " + quote(dir + "/o");
-  const std::string pile = R"({ "generator": { "type": "pile", "count": 67108864, "shape": { "type": "sphere", "radius": 0.01 } } })";
+  const std::string pile =
+      R"({ "generator": { "type": "pile", "count": 67108864, "shape": { "type": "sphere", "radius": 0.01 } } })";
   // the schema's largest pile alone: within the body limit, refused for its memory (here 4 GB of address space)
   spit(d / "largest.json", sceneWith(pile));
-  expectRefused("run " + quote(dir + "/largest.json") + out, {"largest.json: bodies: 67108864 bodies need about", "GB of memory"},
-                "ulimit -v 4000000;");
+  expectRefused("run " + quote(dir + "/largest.json") + out,
+                {"largest.json: bodies: 67108864 bodies need about", "GB of memory"}, "ulimit -v 4000000;");
   // two of them: beyond the body limit wherever it runs
   spit(d / "two.json", sceneWith(pile + ", " + pile));
-  expectRefused("run " + quote(dir + "/two.json") + out, {"two.json: bodies: 134217728 bodies, more than the limit of 67108864"});
+  expectRefused("run " + quote(dir + "/two.json") + out,
+                {"two.json: bodies: 134217728 bodies, more than the limit of 67108864"});
   fs::remove_all(d);
 }
 
-TEST_CASE("Hardening: step counts that overflow are refused with the number (was a run that never ended)", "[hardening][cli]") {
+TEST_CASE("Hardening: step counts that overflow are refused with the number (was a run that never ended)",
+          "[hardening][cli]") {
   const fs::path d = tempDir("steps");
   const std::string dir = d.string(), out = " --out " + quote(dir + "/o");
   const std::string sphere = std::string(kPlane) + R"(, { "shape": { "type": "sphere", "radius": 0.1 } })";
   spit(d / "time.json", sceneWith(sphere, R"({ "time": 1e30 })"));
-  expectRefused("run " + quote(dir + "/time.json") + out, {"settings.time: 1e+30 s at a time step of 0.001 s is 1e+33 steps, more than the limit"});
+  expectRefused("run " + quote(dir + "/time.json") + out,
+                {"settings.time: 1e+30 s at a time step of 0.001 s is 1e+33 steps, more than the limit"});
   spit(d / "dt.json", sceneWith(sphere, R"({ "dt": 1e-300, "time": 1 })"));
   expectRefused("run " + quote(dir + "/dt.json") + out, {"1e+300 steps"});
   spit(d / "ok.json", sceneWith(sphere));
   expectRefused("run " + quote(dir + "/ok.json") + " --time 1e30" + out, {"1e+33 steps"});
-  expectRefused("run " + quote(dir + "/ok.json") + " --dt 1e-300 --time 1" + out, {"settings.time", "1e+300 steps, more than the limit"});
+  expectRefused("run " + quote(dir + "/ok.json") + " --dt 1e-300 --time 1" + out,
+                {"settings.time", "1e+300 steps, more than the limit"});
   expectRefused("run " + quote(dir + "/ok.json") + " --set settings.time=1e30" + out, {"1e+33 steps"});
   // the CES machine: duration / time step
   expectRefused("run --dt 1e-300" + out, {"ces.duration_s: 2 s at a time step of 1e-300 s is 2e+300 steps"});
@@ -236,7 +252,8 @@ TEST_CASE("Hardening: step counts that overflow are refused with the number (was
   fs::remove_all(d);
 }
 
-TEST_CASE("Hardening: FIFOs and devices named like scenes are refused by name (was a read that never ended)", "[hardening][cli]") {
+TEST_CASE("Hardening: FIFOs and devices named like scenes are refused by name (was a read that never ended)",
+          "[hardening][cli]") {
   const fs::path d = tempDir("fifo");
   const std::string dir = d.string(), out = " --out " + quote(dir + "/o");
   REQUIRE(::mkfifo((d / "fifo.json").c_str(), 0600) == 0);
@@ -274,8 +291,9 @@ TEST_CASE("Hardening: numbers outside the float range are refused, not turned in
                 {"bodies[1].mass: mass", "(density x volume) is out of range"});
   expectRefused("run " + body("inertia.json", R"({ "shape": { "type": "sphere", "radius": 1e-20 }, "mass": 1 })"),
                 {"bodies[1]: moment of inertia", "is out of range"});
-  expectRefused("run " + body("pos.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": [0, 1e39, 0] })"),
-                {"bodies[1].position[1]: out of range"});
+  expectRefused(
+      "run " + body("pos.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": [0, 1e39, 0] })"),
+      {"bodies[1].position[1]: out of range"});
   expectRefused("run " + body("radius.json", R"({ "shape": { "type": "sphere", "radius": 1e-40 } })"),
                 {"bodies[1].shape.radius: must be >= 1.175494351e-38"});
   expectRefused("run " + body("grid.json", R"({ "generator": { "type": "grid", "counts": [2, 1, 1], "spacing": 3e38,
@@ -286,9 +304,10 @@ TEST_CASE("Hardening: numbers outside the float range are refused, not turned in
 
 TEST_CASE("Hardening: huge and tiny plane normals and rotation axes keep their direction", "[hardening]") {
   auto planeNormal = [](const std::string& normal, const std::string& offset) {
-    const Scene s = Scene::fromJsonText(sceneWith(R"({ "shape": { "type": "plane", "normal": )" + normal + R"(, "offset": )" + offset +
-                                                  R"( }, "mass": 0 }, { "shape": { "type": "sphere", "radius": 0.1 } })"),
-                                        "plane.json");
+    const Scene s =
+        Scene::fromJsonText(sceneWith(R"({ "shape": { "type": "plane", "normal": )" + normal + R"(, "offset": )" +
+                                      offset + R"( }, "mass": 0 }, { "shape": { "type": "sphere", "radius": 0.1 } })"),
+                            "plane.json");
     const BodyDesc d = bodyDescFromBullet(*s.bodies()[0]);
     REQUIRE(d.shapes.size() == 1);
     return std::make_pair(d.shapes[0].shape.dims, d.shapes[0].shape.plane_d);
@@ -308,14 +327,16 @@ TEST_CASE("Hardening: huge and tiny plane normals and rotation axes keep their d
   CHECK_THROWS_WITH(planeNormal("[0, 0, 0]", "0"), Catch::Contains("bodies[0].shape.normal: has zero length"));
   // a rotation axis the same way: 90 degrees about [0, 1e300, 0] is 90 degrees about y
   const Scene s = Scene::fromJsonText(
-      sceneWith(R"({ "shape": { "type": "box", "half_extents": [1, 1, 1] }, "rotation": { "axis": [0, 1e300, 0], "angle_deg": 90 } })"),
+      sceneWith(
+          R"({ "shape": { "type": "box", "half_extents": [1, 1, 1] }, "rotation": { "axis": [0, 1e300, 0], "angle_deg": 90 } })"),
       "rot.json");
   const btQuaternion q = s.bodies()[0]->getOrientation();
   CHECK(std::fabs(double(q.y())) == Approx(h));
   CHECK(std::fabs(double(q.w())) == Approx(h));
 }
 
-TEST_CASE("Hardening: CLI numbers are plain decimals and an empty value is an error, not a missing option", "[hardening][cli]") {
+TEST_CASE("Hardening: CLI numbers are plain decimals and an empty value is an error, not a missing option",
+          "[hardening][cli]") {
   const fs::path d = tempDir("num");
   const std::string dir = d.string();
   spit(d / "tiny.json", sceneWith(std::string(kPlane) + R"(, { "shape": { "type": "sphere", "radius": 0.1 } })"));
@@ -345,7 +366,8 @@ TEST_CASE("Hardening: CLI numbers are plain decimals and an empty value is an er
 // .bullet files
 // ---------------------------------------------------------------------------------------------------
 
-TEST_CASE("Hardening: .bullet files with a corrupt structure are refused before Bullet's parser sees them", "[hardening]") {
+TEST_CASE("Hardening: .bullet files with a corrupt structure are refused before Bullet's parser sees them",
+          "[hardening]") {
   const std::string good = bulletBytes();
   REQUIRE_NOTHROW(Scene::fromBulletBuffer(good, "good.bullet"));
   const std::vector<BlockAt> blocks = blocksOf(good);
@@ -436,7 +458,8 @@ TEST_CASE("Hardening: compounds that share children are refused when they expand
   CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 10);
 }
 
-TEST_CASE("Hardening: every single-bit flip of a .bullet file is refused or loads, none crashes or hangs", "[hardening]") {
+TEST_CASE("Hardening: every single-bit flip of a .bullet file is refused or loads, none crashes or hangs",
+          "[hardening]") {
   // Bullet's own loader crashed or hung on 5.6% of the flips of this kind of file's blocks and on 15.6% of those of
   // its DNA (docs/HARDENING.md). Every bit of the blocks, every 11th bit of the DNA, in this process: a crash fails
   // the test by ending it, a flip that loads must import into a System.
@@ -453,9 +476,7 @@ TEST_CASE("Hardening: every single-bit flip of a .bullet file is refused or load
       System system(cfg);
       importBullet(system, s.bodies());
       ++accepted;
-    } catch (const InputError&) {
-      ++refused;
-    }
+    } catch (const InputError&) { ++refused; }
   };
   const auto t0 = std::chrono::steady_clock::now();
   for (size_t bit = 0; bit < dna * 8; ++bit) flip(bit);
@@ -473,7 +494,8 @@ TEST_CASE("Hardening: corrupt .bullet files through the CLI exit with code 2", "
   std::string f = good;
   f[6] = 'd';
   spit(d / "double.bullet", f);
-  expectRefused("run " + quote(dir + "/double.bullet") + out, {"double.bullet: corrupt .bullet file", "double precision"});
+  expectRefused("run " + quote(dir + "/double.bullet") + out,
+                {"double.bullet: corrupt .bullet file", "double precision"});
   expectRefused("compare " + quote(dir + "/double.bullet") + out, {"double.bullet: corrupt .bullet file"});
   f = good;
   const size_t strc = f.find("STRC");
@@ -564,7 +586,9 @@ TEST_CASE("Hardening: corrupt CES checkpoints are refused without allocating wha
 TEST_CASE("Hardening: a corrupt checkpoint through the CLI exits with code 2", "[hardening][cli]") {
   const fs::path d = tempDir("resume");
   const std::string dir = d.string();
-  const Bounded r = runBounded("run --backend cpu --set field.model=\\\"csm\\\" --set output.plots=false --time 0.002 --out " + quote(dir + "/a"));
+  const Bounded r =
+      runBounded("run --backend cpu --set field.model=\\\"csm\\\" --set output.plots=false --time 0.002 --out " +
+                 quote(dir + "/a"));
   INFO(r.out << r.err);
   REQUIRE(r.code == 0);
   const fs::path state = d / "a" / "checkpoint" / "state.bin";
@@ -573,6 +597,7 @@ TEST_CASE("Hardening: a corrupt checkpoint through the CLI exits with code 2", "
   spit(state, good.substr(0, good.size() - 7));
   expectRefused("run --backend cpu --resume " + quote(dir + "/a") + " --out " + quote(dir + "/b"), {"checkpoint: "});
   spit(state, std::string(good.size(), '\xff'));
-  expectRefused("run --backend cpu --resume " + quote(dir + "/a") + " --out " + quote(dir + "/b"), {"checkpoint: not a dvisim CES checkpoint"});
+  expectRefused("run --backend cpu --resume " + quote(dir + "/a") + " --out " + quote(dir + "/b"),
+                {"checkpoint: not a dvisim CES checkpoint"});
   fs::remove_all(d);
 }

@@ -90,8 +90,10 @@ double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
   double lo = 0, hi = 1;
   for (int i = 0; i < 100; ++i) {
     double m1 = lo + (hi - lo) * 0.381966, m2 = hi - (hi - lo) * 0.381966;
-    if (f(m1) < f(m2)) hi = m2;
-    else lo = m1;
+    if (f(m1) < f(m2))
+      hi = m2;
+    else
+      lo = m1;
   }
   double s = 0.5 * (lo + hi);
   if (f(0) < f(s)) s = 0;
@@ -104,8 +106,10 @@ double segmentSegmentDistance(Vec3 a0, Vec3 a1, Vec3 b0, Vec3 b1) {
   double lo = 0, hi = 1;
   for (int i = 0; i < 100; ++i) {
     double m1 = lo + (hi - lo) * 0.381966, m2 = hi - (hi - lo) * 0.381966;
-    if (f(m1) < f(m2)) hi = m2;
-    else lo = m1;
+    if (f(m1) < f(m2))
+      hi = m2;
+    else
+      lo = m1;
   }
   return std::min({f(0.5 * (lo + hi)), f(0), f(1)});
 }
@@ -426,8 +430,8 @@ TEST_CASE("capsule-, cylinder-, cone- and box-plane manifolds", "[narrowphase]")
   // Standing cylinder: 4 bottom rim points, features 0..3, the same for a tiny tilt.
   for (int k = 0; k < 2; ++k) {
     Quat q = quatFromAxisAngle(Vec3{1, 0, 0.5}, k * 1e-5);
-    int m = collideShapes(cylinder(0.3, 0.5), pose(Vec3{0, 0.5 - 0.002, 0}, q), P, pose(Vec3{0, 0, 0}), nullptr,
-                          0.01, c);
+    int m =
+        collideShapes(cylinder(0.3, 0.5), pose(Vec3{0, 0.5 - 0.002, 0}, q), P, pose(Vec3{0, 0, 0}), nullptr, 0.01, c);
     REQUIRE(m == 4);
     for (int i = 0; i < m; ++i) {
       CHECK(c[i].feature == i);
@@ -516,7 +520,8 @@ TEST_CASE("small shapes on the side of a large cylinder: a point per vertex, exa
     CHECK(double(c[deepest(c, m)].dist) == Approx(-pen).margin(1e-12));
     // Fragment (convex hull) with a flat bottom of 6 points 0.2 mm below its origin.
     std::vector<Vec3> pts;
-    for (int i = 0; i < 6; ++i) pts.push_back(Vec3{real(0.3e-3 * std::cos(i * kPi / 3)), real(-0.2e-3), real(0.3e-3 * std::sin(i * kPi / 3))});
+    for (int i = 0; i < 6; ++i)
+      pts.push_back(Vec3{real(0.3e-3 * std::cos(i * kPi / 3)), real(-0.2e-3), real(0.3e-3 * std::sin(i * kPi / 3))});
     pts.push_back(Vec3{0, real(0.3e-3), 0});
     Shape frag = hull(0, int(pts.size()));
     const Pose wh = pose(radial * real(R + 0.2e-3 - pen), qr);
@@ -693,7 +698,8 @@ Pair randomShape(ShapeType t, Rng& rng, std::vector<Vec3>& pts) {
     }
     default: {  // convex hull: points around a random ellipsoid, offset from the origin
       int n = 12 + int(rng.uni(0, 12));
-      Vec3 a{rng.uni(0.3, 1), rng.uni(0.3, 1), rng.uni(0.3, 1)}, o{rng.uni(-0.1, 0.1), rng.uni(-0.1, 0.1), rng.uni(-0.1, 0.1)};
+      Vec3 a{rng.uni(0.3, 1), rng.uni(0.3, 1), rng.uni(0.3, 1)},
+          o{rng.uni(-0.1, 0.1), rng.uni(-0.1, 0.1), rng.uni(-0.1, 0.1)};
       p.s = hull(int(pts.size()), n);
       auto* b = new btConvexHullShape();
       for (int i = 0; i < n; ++i) {
@@ -859,8 +865,10 @@ TEST_CASE("every convex pair agrees with Bullet's GJK/EPA and a brute-force orac
         double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
         for (int k = 0; k < 30; ++k) {
           double mid = 0.5 * (lo + hi);
-          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0) lo = mid;
-          else hi = mid;
+          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0)
+            lo = mid;
+          else
+            hi = mid;
         }
         double size = std::min(A.s.size, B.s.size);
         double t = 0.5 * (lo + hi) + rng.uni(-0.08, 0.08) * size;
@@ -909,8 +917,9 @@ TEST_CASE("every convex pair agrees with Bullet's GJK/EPA and a brute-force orac
       worstOr = std::max(worstOr, pOr), worstBt = std::max(worstBt, pBt), worstAng = std::max(worstAng, pAng);
       worstBtOr = std::max(worstBtOr, pBtOr);
     }
-  std::printf("  all pairs, %d samples: |ours-oracle| %.1e  |ours-bullet| %.1e  normal %.2f deg  |bullet-oracle| %.1e\n",
-              compared, worstOr, worstBt, worstAng, worstBtOr);
+  std::printf(
+      "  all pairs, %d samples: |ours-oracle| %.1e  |ours-bullet| %.1e  normal %.2f deg  |bullet-oracle| %.1e\n",
+      compared, worstOr, worstBt, worstAng, worstBtOr);
   CHECK(compared > 28 * kSamples / 2);
 }
 
@@ -1041,8 +1050,10 @@ TEST_CASE("MPR pairs: contact points lie on both surfaces (deep penetrations inc
         double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
         for (int k = 0; k < 30; ++k) {
           double mid = 0.5 * (lo + hi);
-          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0) lo = mid;
-          else hi = mid;
+          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0)
+            lo = mid;
+          else
+            hi = mid;
         }
         double size = std::min(A.s.size, B.s.size);
         Pose pb = at(0.5 * (lo + hi) - rng.uni(0.0, 0.5) * size);
@@ -1123,8 +1134,10 @@ TEST_CASE("support ties on flat features are broken deterministically", "[narrow
     int m1 = collideShapes(slab, pose(Vec3{0, 0, 0}), S, pc1, pts.data(), 0.02, c1);
     // the cylinder's cap on the slab: MPR's point and the face overlap's extremes (mprManifold); the hull rests
     // on its apex (pts[0]): one point
-    if (k == 0) REQUIRE(m0 >= 4);
-    else REQUIRE(m0 == 1);
+    if (k == 0)
+      REQUIRE(m0 >= 4);
+    else
+      REQUIRE(m0 == 1);
     // without the manifold (CollisionSettings::mpr_manifold = false) MPR's point alone, the same as the first
     ContactPoint c2[kMaxContactsPerPair];
     REQUIRE(collideShapes(slab, pose(Vec3{0, 0, 0}), S, pc0, pts.data(), 0.02, c2, nullptr, false) == 1);
@@ -1137,7 +1150,7 @@ TEST_CASE("support ties on flat features are broken deterministically", "[narrow
       CHECK(angleDeg(c0[i].normal, Vec3{0, 1, 0}) < 1e-6);
       CHECK(length(c0[i].pa - c1[i].pa) < 1e-12);
       CHECK(length(c0[i].pb - c1[i].pb) < 1e-12);
-      CHECK(c0[i].pa.y == Approx(0.1).margin(1e-12));  // on the slab's top face
+      CHECK(c0[i].pa.y == Approx(0.1).margin(1e-12));                                         // on the slab's top face
       if (k == 0) CHECK(length(Vec3{c0[i].pa.x - 0.2, 0, c0[i].pa.z + 0.1}) <= 0.3 + 1e-12);  // under the cylinder
     }
   }

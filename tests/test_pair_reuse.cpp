@@ -20,7 +20,7 @@ using namespace dvi;
 namespace {
 
 struct RunLog {
-  std::vector<uint64_t> hash;    // stateHash after each step
+  std::vector<uint64_t> hash;     // stateHash after each step
   std::vector<int64_t> contacts;  // contacts of each step
   int reused = 0;                 // steps that kept the last step's pairs
 };

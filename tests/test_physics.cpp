@@ -292,7 +292,8 @@ TEST_CASE("stacks of cylinders and hexagonal prisms standing on their flat faces
       } else {
         std::vector<Vec3> pts;
         for (int k = 0; k < 6; ++k)
-          for (real y : {-h, h}) pts.push_back(Vec3{r * real(std::cos(k * kPi / 3)), y, r * real(std::sin(k * kPi / 3))});
+          for (real y : {-h, h})
+            pts.push_back(Vec3{r * real(std::cos(k * kPi / 3)), y, r * real(std::sin(k * kPi / 3))});
         b.shapes.push_back(makeConvexHull(pts));
       }
       ids.push_back(sys.addBody(b));
@@ -302,8 +303,8 @@ TEST_CASE("stacks of cylinders and hexagonal prisms standing on their flat faces
       sys.step();
       deepest = std::max(deepest, sys.lastStats().max_penetration);
     }
-    INFO((kind == 0 ? "cylinders" : "hexagonal prisms") << ": deepest penetration " << deepest << " m, top at "
-                                                         << sys.bodies().pos[size_t(ids.back())].y);
+    INFO((kind == 0 ? "cylinders" : "hexagonal prisms")
+         << ": deepest penetration " << deepest << " m, top at " << sys.bodies().pos[size_t(ids.back())].y);
     CHECK(deepest < real(1e-4));  // 1% of a body's height (10 mm without the manifold)
     CHECK(std::fabs(double(sys.bodies().pos[size_t(ids.back())].y) - 9 * double(h)) < 3e-4);
     for (int id : ids) {

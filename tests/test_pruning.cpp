@@ -187,7 +187,8 @@ TEST_CASE("the stage list reflects the scene", "[pruning]") {
     System s(cfg);
     buildPile(s, 16, 0, 0);
     s.step();
-    for (StagePart p : {StagePart::ForceFields, StagePart::Gyroscopic, StagePart::ConstraintRows, StagePart::FrictionRows})
+    for (StagePart p :
+         {StagePart::ForceFields, StagePart::Gyroscopic, StagePart::ConstraintRows, StagePart::FrictionRows})
       CHECK(ran(s, p));
     CHECK_FALSE(ran(s, StagePart::RollingSpinningRows));  // not in the engine
     CHECK_FALSE(ran(s, StagePart::Mpr));                  // a per-pair choice: spheres have a closed form

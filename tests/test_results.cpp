@@ -48,7 +48,8 @@ int tempLeftovers(const fs::path& dir) {
 }
 
 // A short CES run on the CPU (the charge-simulation field: no corona grid to solve first).
-const std::string kCes = " --backend cpu --set field.model=\\\"csm\\\" --set output.plots=false --set feed.mass_flow_g_s=3";
+const std::string kCes =
+    " --backend cpu --set field.model=\\\"csm\\\" --set output.plots=false --set feed.mass_flow_g_s=3";
 
 }  // namespace
 
@@ -76,8 +77,8 @@ TEST_CASE("Exit codes: each exception maps to its code and status", "[results]")
 TEST_CASE("Exit codes: dvisim --help lists them", "[results][cli]") {
   const CliResult r = runCli("--help");
   CHECK(r.code == 0);
-  for (const char* line : {"Exit codes:", "0  done", "2  bad input", "3  the simulation diverged", "4  interrupted",
-                           "5  out of memory"})
+  for (const char* line :
+       {"Exit codes:", "0  done", "2  bad input", "3  the simulation diverged", "4  interrupted", "5  out of memory"})
     CHECK(r.out.find(line) != std::string::npos);
 }
 
@@ -86,8 +87,8 @@ TEST_CASE("Exit code 3: a diverging scene names the step and the body and keeps 
   spit(d / "ball.json", kBall);
   const fs::path out = d / "o";
   // a time step of 1e154 s: the first step's displacement is ~1e308 m, the next overflows
-  const CliResult r = runCli("run " + quote((d / "ball.json").string()) + " --backend cpu --dt 1e154 --steps 20 --out " +
-                             quote(out.string()));
+  const CliResult r = runCli("run " + quote((d / "ball.json").string()) +
+                             " --backend cpu --dt 1e154 --steps 20 --out " + quote(out.string()));
   INFO(r.out << r.err);
   CHECK(r.code == 3);
   CHECK(r.errLines() == 1);
@@ -133,8 +134,9 @@ TEST_CASE("Exit code 4: SIGTERM and SIGINT checkpoint the last state, write stat
     const std::string so = (d / "stdout").string(), se = (d / "stderr").string();
     // a long run; the signal once it has started stepping
     const std::string cmd = quote(DVISIM_CLI_PATH) + " run" + kCes + " --time 30 --out " + quote(out.string()) + " >" +
-                            quote(so) + " 2>" + quote(se) + " & p=$!; for i in $(seq 1 600); do grep -q 'ces machine:' " +
-                            quote(so) + " && break; sleep 0.1; done; sleep 0.5; kill -" + sig + " $p; wait $p";
+                            quote(so) + " 2>" + quote(se) +
+                            " & p=$!; for i in $(seq 1 600); do grep -q 'ces machine:' " + quote(so) +
+                            " && break; sleep 0.1; done; sleep 0.5; kill -" + sig + " $p; wait $p";
     const int code = bash(cmd);
     const std::string err = slurp(se);
     INFO(slurp(so) << err);
@@ -151,8 +153,8 @@ TEST_CASE("Exit code 4: SIGTERM and SIGINT checkpoint the last state, write stat
       // resumed in its own directory for two more milliseconds
       char dur[64];
       std::snprintf(dur, sizeof dur, "%.9g", t + 0.002);
-      const CliResult r = runCli("run --backend cpu --resume " + quote(out.string()) + " --set duration_s=" + dur + " --out " +
-                                 quote(out.string()));
+      const CliResult r = runCli("run --backend cpu --resume " + quote(out.string()) + " --set duration_s=" + dur +
+                                 " --out " + quote(out.string()));
       INFO(r.out << r.err);
       CHECK(r.code == 0);
       const json s2 = json::parse(slurp(out / "summary.json"));
@@ -247,13 +249,15 @@ TEST_CASE("Checkpoints: an old-format file is refused by name", "[results]") {
 TEST_CASE("UTF-8: a name that is not UTF-8 is refused up front", "[results][cli]") {
   const fs::path d = tempDir("utf8");
   const std::string so = (d / "stdout").string(), se = (d / "stderr").string();
-  const int code = bash(quote(DVISIM_CLI_PATH) + " run --backend cpu --set $'feed.materials.0.name=cu\\xff' --time 0.001 --out " +
-                        quote((d / "o").string()) + " >" + quote(so) + " 2>" + quote(se));
+  const int code =
+      bash(quote(DVISIM_CLI_PATH) + " run --backend cpu --set $'feed.materials.0.name=cu\\xff' --time 0.001 --out " +
+           quote((d / "o").string()) + " >" + quote(so) + " 2>" + quote(se));
   const std::string err = slurp(se);
   INFO(err);
   CHECK(code == 2);
   CHECK(std::count(err.begin(), err.end(), '\n') == 1);
-  CHECK(err.find("--set feed.materials.0.name: the value: not valid UTF-8 (byte 0xff at offset 2)") != std::string::npos);
+  CHECK(err.find("--set feed.materials.0.name: the value: not valid UTF-8 (byte 0xff at offset 2)") !=
+        std::string::npos);
   CHECK_FALSE(fs::exists(d / "o"));
   // in a scene file: the JSON parser refuses it
   spit(d / "bad.json", std::string(kBall).replace(std::string(kBall).find("\"ball\""), 6, "\"b\xc3\x28\""));
@@ -284,7 +288,8 @@ TEST_CASE("frames.pvd: a valid collection after every frame, entries appended in
   const std::string pvd = slurp(d / "frames.pvd");
   CHECK(pvd.find("<DataSet timestep=\"0\" group=\"\" part=\"0\" file=\"frame_0000.vtp\"/>\n"
                  "<DataSet timestep=\"0.5\" group=\"\" part=\"0\" file=\"frame_0001.vtp\"/>\n"
-                 "<DataSet timestep=\"1\" group=\"\" part=\"0\" file=\"frame_0002.vtp\"/>\n</Collection>") != std::string::npos);
+                 "<DataSet timestep=\"1\" group=\"\" part=\"0\" file=\"frame_0002.vtp\"/>\n</Collection>") !=
+        std::string::npos);
   CHECK(slurp(d / "frame_0002.vtp") == "<VTKFile/>\n");
   fs::remove_all(d);
 }

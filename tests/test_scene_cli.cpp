@@ -98,7 +98,8 @@ struct BulletWorldFixture {
     }
     {
       auto* comp = new btCompoundShape();
-      comp->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0.2f, 0, 0)), keep(new btSphereShape(0.1f)));
+      comp->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0.2f, 0, 0)),
+                          keep(new btSphereShape(0.1f)));
       comp->addChildShape(btTransform(btQuaternion(btVector3(0, 1, 0), 0.5f), btVector3(-0.2f, 0, 0)),
                           keep(new btBoxShape(btVector3(0.1f, 0.05f, 0.1f))));
       comp->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0, 0.2f, 0)),
@@ -216,34 +217,43 @@ TEST_CASE("CLI: bad values in a JSON scene name the key path", "[cli]") {
   const fs::path d = tempDir("values");
   const std::string dir = d.string();
   auto scene = [&](const std::string& name, const std::string& body) {
-    spit(d / name, R"({ "settings": { "steps": 2 }, "bodies": [ { "shape": { "type": "plane", "normal": [0, 1, 0] }, "mass": 0 }, )" +
-                       body + " ] }");
+    spit(
+        d / name,
+        R"({ "settings": { "steps": 2 }, "bodies": [ { "shape": { "type": "plane", "normal": [0, 1, 0] }, "mass": 0 }, )" +
+            body + " ] }");
     return quote(dir + "/" + name) + " --out " + quote(dir + "/o");
   };
-  expectInputError("run " + scene("nan_string.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": [0, "nan", 0] })"),
+  expectInputError("run " + scene("nan_string.json",
+                                  R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": [0, "nan", 0] })"),
                    "bodies[1].position[1]");
-  expectInputError("run " + scene("nan_huge.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": [0, 1e999, 0] })"),
-                   "1e999");
+  expectInputError(
+      "run " + scene("nan_huge.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "position": [0, 1e999, 0] })"),
+      "1e999");
   expectInputError("run " + scene("neg_mass.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "mass": -1 })"),
                    "bodies[1].mass");
   expectInputError("run " + scene("zero_radius.json", R"({ "shape": { "type": "sphere", "radius": 0 } })"),
                    "bodies[1].shape.radius");
-  expectInputError("run " + scene("neg_box.json", R"({ "shape": { "type": "box", "half_extents": [0.1, -0.1, 0.1] } })"),
-                   "half_extents[1]");
-  expectInputError("run " + scene("unknown_key.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "colour": "red" })"),
-                   "bodies[1].colour");
-  expectInputError("run " + scene("unknown_shape_key.json", R"({ "shape": { "type": "sphere", "radius": 0.1, "height": 2 } })"),
-                   "bodies[1].shape.height");
-  expectInputError("run " + scene("unknown_type.json", R"({ "shape": { "type": "torus", "radius": 0.1 } })"),
-                   "torus");
+  expectInputError(
+      "run " + scene("neg_box.json", R"({ "shape": { "type": "box", "half_extents": [0.1, -0.1, 0.1] } })"),
+      "half_extents[1]");
+  expectInputError(
+      "run " + scene("unknown_key.json", R"({ "shape": { "type": "sphere", "radius": 0.1 }, "colour": "red" })"),
+      "bodies[1].colour");
+  expectInputError(
+      "run " + scene("unknown_shape_key.json", R"({ "shape": { "type": "sphere", "radius": 0.1, "height": 2 } })"),
+      "bodies[1].shape.height");
+  expectInputError("run " + scene("unknown_type.json", R"({ "shape": { "type": "torus", "radius": 0.1 } })"), "torus");
   expectInputError("run " + scene("wrong_type.json", R"({ "shape": { "type": "sphere", "radius": "big" } })"),
                    "bodies[1].shape.radius");
-  expectInputError("run " + scene("dyn_plane.json", R"({ "shape": { "type": "plane", "normal": [0, 1, 0] }, "mass": 1 })"),
-                   "plane");
-  expectInputError("run " + scene("flat_hull.json",
-                                  R"({ "shape": { "type": "convex_hull", "points": [[0,0,0],[1,0,0],[0,1,0],[1,1,0]] } })"),
-                   "coplanar");
-  spit(d / "bad_setting.json", R"({ "settings": { "dt": 0.001, "stepz": 3 }, "bodies": [ { "shape": { "type": "sphere", "radius": 0.1 } } ] })");
+  expectInputError(
+      "run " + scene("dyn_plane.json", R"({ "shape": { "type": "plane", "normal": [0, 1, 0] }, "mass": 1 })"), "plane");
+  expectInputError(
+      "run " + scene("flat_hull.json",
+                     R"({ "shape": { "type": "convex_hull", "points": [[0,0,0],[1,0,0],[0,1,0],[1,1,0]] } })"),
+      "coplanar");
+  spit(
+      d / "bad_setting.json",
+      R"({ "settings": { "dt": 0.001, "stepz": 3 }, "bodies": [ { "shape": { "type": "sphere", "radius": 0.1 } } ] })");
   expectInputError("run " + quote(dir + "/bad_setting.json") + " --out " + quote(dir + "/o"), "settings.stepz");
   fs::remove_all(d);
 }
@@ -282,8 +292,8 @@ TEST_CASE("CLI: a JSON scene round trip writes summary.json, bodies.csv and fram
   const fs::path d = tempDir("roundtrip");
   spit(d / "tiny.json", kTinyScene);
   const fs::path out = d / "out";
-  const CliResult r = runCli("run " + quote((d / "tiny.json").string()) + " --backend cpu --frames 3 --set settings.dt=0.002 --out " +
-                             quote(out.string()));
+  const CliResult r = runCli("run " + quote((d / "tiny.json").string()) +
+                             " --backend cpu --frames 3 --set settings.dt=0.002 --out " + quote(out.string()));
   INFO(r.out << r.err);
   REQUIRE(r.code == 0);
   CHECK(r.err.empty());
@@ -305,9 +315,9 @@ TEST_CASE("CLI: a JSON scene round trip writes summary.json, bodies.csv and fram
   CHECK(rows == 3);
 
   const auto j = nlohmann::json::parse(slurp(out / "summary.json"));
-  for (const char* k : {"backend", "device", "solver", "dt", "steps", "sim_time", "wall_time_s", "bodies", "contacts_mean",
-                        "max_penetration", "iterations_mean", "residual_final", "stages", "stage_seconds", "threads",
-                        "collision", "scene"})
+  for (const char* k : {"backend", "device", "solver", "dt", "steps", "sim_time", "wall_time_s", "bodies",
+                        "contacts_mean", "max_penetration", "iterations_mean", "residual_final", "stages",
+                        "stage_seconds", "threads", "collision", "scene"})
     CHECK(j.contains(k));
   CHECK(j["backend"] == "cpu");
   CHECK(j["bodies"] == 3);
@@ -427,12 +437,14 @@ TEST_CASE("Bullet import: X/Y/Z variants are rotated onto Bullet's axes (support
     btConvexShape* s;
     bool margin;
   };
-  for (Case c : {Case{&ky, false}, Case{&kx, false}, Case{&kz, false}, Case{&py, true}, Case{&px, true}, Case{&pz, true}}) {
+  for (Case c :
+       {Case{&ky, false}, Case{&kx, false}, Case{&kz, false}, Case{&py, true}, Case{&px, true}, Case{&pz, true}}) {
     std::vector<ShapeDesc> out;
     appendShapesFromBullet(*c.s, id, out);
     REQUIRE(out.size() == 1);
     INFO(c.s->getName());
-    for (Vec3 d : probeDirections()) CHECK(supportValue(out[0], d) == Approx(bulletSupport(*c.s, d, c.margin)).margin(1e-5));
+    for (Vec3 d : probeDirections())
+      CHECK(supportValue(out[0], d) == Approx(bulletSupport(*c.s, d, c.margin)).margin(1e-5));
   }
   // A convex hull with local scaling.
   const btScalar pts[] = {0.1f, 0.1f, 0.1f, -0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, -0.3f};
@@ -511,7 +523,8 @@ TEST_CASE("Bullet files: every supported shape survives Bullet's serializer and 
     CHECK(length(a.pos - b.pos) < 1e-6);
     CHECK(length(a.vel - b.vel) < 1e-6);
     CHECK(length(a.omega - b.omega) < 1e-6);
-    CHECK(std::fabs(a.rot.w * b.rot.w + a.rot.x * b.rot.x + a.rot.y * b.rot.y + a.rot.z * b.rot.z) == Approx(1).margin(1e-6));
+    CHECK(std::fabs(a.rot.w * b.rot.w + a.rot.x * b.rot.x + a.rot.y * b.rot.y + a.rot.z * b.rot.z) ==
+          Approx(1).margin(1e-6));
     REQUIRE(a.shapes.size() == b.shapes.size());
     for (size_t k = 0; k < a.shapes.size(); ++k) {
       const Shape& sa = a.shapes[k].shape;

@@ -50,7 +50,9 @@ TEST_CASE("Settings: an empty settings object gives SystemConfig's defaults", "[
 }
 
 TEST_CASE("Settings: iterations, max_iterations and tolerance combine into the stop in any order", "[settings]") {
-  auto stop = [](const SceneSettings& s) { return std::make_pair(s.system.solver.max_iterations, s.system.solver.tolerance); };
+  auto stop = [](const SceneSettings& s) {
+    return std::make_pair(s.system.solver.max_iterations, s.system.solver.tolerance);
+  };
   CHECK(stop(parse(R"({"iterations": 20})")) == std::make_pair(20, real(0)));  // a fixed count
   CHECK(stop(parse(R"({"iterations": 20, "tolerance": 0.01})")) == std::make_pair(20, real(0.01)));
   CHECK(stop(parse(R"({"iterations": 20, "max_iterations": 40})")) == std::make_pair(40, kDefaultTolerance));
@@ -93,7 +95,8 @@ TEST_CASE("Settings: the step context", "[settings]") {
   CHECK(c.end() == 2.0 + double(real(0.01)));
 }
 
-TEST_CASE("Settings: threads = 0 takes OpenMP's default team size (OMP_NUM_THREADS), not the core count", "[settings]") {
+TEST_CASE("Settings: threads = 0 takes OpenMP's default team size (OMP_NUM_THREADS), not the core count",
+          "[settings]") {
   // omp_set_num_threads sets the same value OMP_NUM_THREADS sets at start-up (the nthreads ICV).
   const int before = omp_get_max_threads();
   dvi::SystemConfig cfg;

@@ -152,8 +152,10 @@ TEST_CASE("cone projection: Moreau decomposition, idempotence, special cases", "
     REQUIRE(p[0] >= 0);
     // q = x - p is in the polar cone {mu |q_t| <= -q_n} (for mu = 0: q_t free, q_n <= 0) and orthogonal to p
     const real q[3] = {x[0] - p[0], x[1] - p[1], x[2] - p[2]};
-    if (mu > 0) REQUIRE(mu * std::hypot(q[1], q[2]) <= -q[0] + 1e-14 * sc);
-    else REQUIRE(q[0] <= 1e-15 * sc);
+    if (mu > 0)
+      REQUIRE(mu * std::hypot(q[1], q[2]) <= -q[0] + 1e-14 * sc);
+    else
+      REQUIRE(q[0] <= 1e-15 * sc);
     REQUIRE(std::fabs(p[0] * q[0] + p[1] * q[1] + p[2] * q[2]) <= 1e-14 * sc * sc);
     // idempotent
     real pp[3] = {p[0], p[1], p[2]};
@@ -265,8 +267,8 @@ TEST_CASE("float Jacobians and the gather's compact records keep the contact row
     const ContactJacobian R = roundJacobian(J);
     // the frame: unit, orthogonal, near the real one
     const Vec3 w = cross(R.n, R.u);
-    worst_frame = std::max({worst_frame, std::fabs(length(R.n) - 1), std::fabs(length(R.u) - 1), std::fabs(length(w) - 1),
-                            std::fabs(dot(R.n, R.u))});
+    worst_frame = std::max({worst_frame, std::fabs(length(R.n) - 1), std::fabs(length(R.u) - 1),
+                            std::fabs(length(w) - 1), std::fabs(dot(R.n, R.u))});
     worst_angle = std::max(worst_angle, length(cross(R.n, J.n)));
     CHECK(length(R.rA - J.rA) <= 1e-7 * length(J.rA));
     CHECK(length(R.rB - J.rB) <= 1e-7 * length(J.rB));
@@ -425,8 +427,8 @@ TEST_CASE("APGD with float storage reaches the dense reference to float precisio
       const SolverStats st = solveApgd(cp, g.data(), s);
       double err = 0;
       for (int i = 0; i < P.n; ++i) err = std::max(err, std::fabs(double(g[size_t(i)]) - ref[size_t(i)]) / gs);
-      INFO((rounded ? "float" : "real") << " storage, " << it << " iterations: max |g - g_ref| / (1 + |g_ref|) "
-                                        << err << ", residual " << st.residual);
+      INFO((rounded ? "float" : "real") << " storage, " << it << " iterations: max |g - g_ref| / (1 + |g_ref|) " << err
+                                        << ", residual " << st.residual);
       // measured: real 2.7e-4, 1.8e-6, 3.8e-10; float 2.7e-4, 1.9e-6, 2.3e-8
       CHECK(err < (it == 50 ? 5e-4 : it == 100 ? 4e-6 : rounded ? 1e-7 : 1e-9));
       if (it == 400) result[m] = g;
@@ -741,7 +743,7 @@ TEST_CASE("disparate scales: no solver ends worse than its warm start or zero, r
     const real res = ccpResidual(cp, g.data(), alpha, scratch);
     INFO("f warm " << fw << " f out " << f << " res warm " << rw << " res out " << res);
     CHECK(f <= fw);
-    CHECK(f <= 0);  // no worse than the zero impulse: the solver injects no energy (before the fix: > 0)
+    CHECK(f <= 0);                 // no worse than the zero impulse: the solver injects no energy (before the fix: > 0)
     CHECK(res < real(1e-3) * rw);  // before the fix: 2e-3 .. 7e-3 (step set by the stiffest contact)
     CHECK(r.residual == Approx(res).epsilon(1e-9));
   }

@@ -100,7 +100,7 @@ TEST_CASE("sweep: full-factorial expansion, list rows and linspace levels", "[sw
 TEST_CASE("sweep: Student-t 95% interval against tabulated quantiles and hand-computed intervals", "[sweep]") {
   // t_{0.975,nu}, Montgomery & Runger, Applied Statistics and Probability for Engineers, 6th ed., Appendix A,
   // percentage points of the t distribution.
-  const std::map<int, double> table = {{1, 12.706}, {2, 4.303}, {3, 3.182}, {4, 2.776}, {9, 2.262},
+  const std::map<int, double> table = {{1, 12.706}, {2, 4.303},  {3, 3.182},  {4, 2.776},  {9, 2.262},
                                        {10, 2.228}, {20, 2.086}, {29, 2.045}, {40, 2.021}, {120, 1.980}};
   for (const auto& [nu, t] : table) {
     INFO("nu = " << nu);
@@ -166,7 +166,8 @@ TEST_CASE("sweep: resume reruns only the runs without a done marker, other argum
   spit(d / "scene.json", kPileScene);
   const std::string args = "sweep " + quote((d / "scene.json").string()) +
                            " --grid settings.dt=0.001,0.002 --seeds 2 --seed-key bodies.1.generator.seed --backend cpu "
-                           "--jobs 2 --no-plots --out " + quote((d / "o").string());
+                           "--jobs 2 --no-plots --out " +
+                           quote((d / "o").string());
   clitest::CliResult r = runCli(args);
   INFO("stdout: " << r.out << "\nstderr: " << r.err);
   REQUIRE(r.code == 0);
@@ -207,8 +208,9 @@ TEST_CASE("sweep: a failed run is reported and the sweep exits non-zero after wr
   }
   const fs::path d = clitest::tempDir("sweep_fail");
   spit(d / "scene.json", kPileScene);
-  const clitest::CliResult r = runCli("sweep " + quote((d / "scene.json").string()) +
-                                      " --grid settings.dt=0.001,0.002 --backend gpu --no-plots --out " + quote((d / "o").string()));
+  const clitest::CliResult r =
+      runCli("sweep " + quote((d / "scene.json").string()) +
+             " --grid settings.dt=0.001,0.002 --backend gpu --no-plots --out " + quote((d / "o").string()));
   INFO("stdout: " << r.out << "\nstderr: " << r.err);
   CHECK(r.code == 1);
   CHECK(r.err.find("run 000-seed1 failed (exit 2), log: ") != std::string::npos);
@@ -223,9 +225,10 @@ TEST_CASE("sweep: a failed run is reported and the sweep exits non-zero after wr
 
 TEST_CASE("sweep: quick CES sweep, 3 voltages x 3 drum speeds x 2 seeds", "[sweep]") {
   const fs::path d = clitest::tempDir("sweep_ces");
-  const clitest::CliResult r =
-      runCli("sweep --grid electrode.voltage_kV=-20,-30,-40 --grid drum.rpm=30,44.8,60 --seeds 2 --time 0.02 --backend cpu "
-             "--out " + quote(d.string()));
+  const clitest::CliResult r = runCli(
+      "sweep --grid electrode.voltage_kV=-20,-30,-40 --grid drum.rpm=30,44.8,60 --seeds 2 --time 0.02 --backend cpu "
+      "--out " +
+      quote(d.string()));
   INFO("stdout: " << r.out << "\nstderr: " << r.err);
   REQUIRE(r.code == 0);
   const auto runs = readCsv(d / "runs.csv");
@@ -254,7 +257,8 @@ TEST_CASE("sweep: quick CES sweep, 3 voltages x 3 drum speeds x 2 seeds", "[swee
       CHECK(row->at("electrode.voltage_kV") == s.at("electrode.voltage_kV"));
       // The setting reached the run: its own summary.json reports the electrode voltage.
       const nlohmann::json js = nlohmann::json::parse(slurp(d / "runs" / row->at("case") / "summary.json"));
-      if (js["ces"].contains("voltage_kV")) CHECK(js["ces"]["voltage_kV"].get<double>() == Approx(std::stod(row->at("electrode.voltage_kV"))));
+      if (js["ces"].contains("voltage_kV"))
+        CHECK(js["ces"]["voltage_kV"].get<double>() == Approx(std::stod(row->at("electrode.voltage_kV"))));
     }
     settings.insert({s.at("electrode.voltage_kV"), s.at("drum.rpm")});
     CHECK(s.at("n") == "2");
@@ -276,11 +280,13 @@ TEST_CASE("sweep: SIGINT stops the running cases cleanly, writes the tables and 
   const fs::path o = d / "o", runs = o / "runs";
   const std::string so = (d / "stdout").string(), se = (d / "stderr").string();
   // two long CES runs at once; SIGINT to the sweep once both are stepping
-  const std::string script =
-      quote(DVISIM_CLI_PATH) + " sweep --grid feed.mass_flow_g_s=3,4 --backend cpu --jobs 2 --threads 1 --no-plots "
-      "--set field.model='\"csm\"' --time 30 --out " + quote(o.string()) + " >" + quote(so) + " 2>" + quote(se) +
-      " & p=$!; for i in $(seq 1 600); do [ \"$(cat " + quote(runs.string()) + "/.*.log 2>/dev/null | grep -c 'ces machine:')\" = 2 ] && break; "
-      "sleep 0.1; done; sleep 0.5; kill -INT $p; wait $p";
+  const std::string script = quote(DVISIM_CLI_PATH) +
+                             " sweep --grid feed.mass_flow_g_s=3,4 --backend cpu --jobs 2 --threads 1 --no-plots "
+                             "--set field.model='\"csm\"' --time 30 --out " +
+                             quote(o.string()) + " >" + quote(so) + " 2>" + quote(se) +
+                             " & p=$!; for i in $(seq 1 600); do [ \"$(cat " + quote(runs.string()) +
+                             "/.*.log 2>/dev/null | grep -c 'ces machine:')\" = 2 ] && break; "
+                             "sleep 0.1; done; sleep 0.5; kill -INT $p; wait $p";
   const int status = std::system(("bash -c " + quote(script)).c_str());
   const int code = WIFEXITED(status) ? WEXITSTATUS(status) : 1000;
   const std::string err = slurp(se);

@@ -90,7 +90,8 @@ struct AccScene {
 struct Row {
   std::string scene, engine, solver, sweep, status = "ok", device;
   int iterations = 0, steps = 0;
-  double dt = 0, wall_s = 0, run_s = 0, res_mean = NAN, res_last = NAN, res_abs_mean = NAN, res_abs_last = NAN, pen_rel = 0, compl_mean = NAN, obs = NAN, obs_err = NAN;
+  double dt = 0, wall_s = 0, run_s = 0, res_mean = NAN, res_last = NAN, res_abs_mean = NAN, res_abs_last = NAN,
+         pen_rel = 0, compl_mean = NAN, obs = NAN, obs_err = NAN;
 };
 
 Vec3 meanHeight(const Runner& r, const std::vector<btRigidBody*>& b) {
@@ -135,8 +136,12 @@ std::vector<AccScene> makeScenes(bool quick) {
     AccScene s;
     s.name = "ces";
     s.h0 = 2e-4, s.T = quick ? 0.8 : 1.0, s.ref_length = 0.25e-3;  // the smallest particle radius
-    s.ces_sets = {"duration_s=" + num(s.T, "%.17g"), "feed.start_s=0", "feed.duration_s=" + std::string(quick ? "0.05" : "0.15"),
-                  "output.frames=0", "output.plots=false", "output.checkpoint_every_s=0"};
+    s.ces_sets = {"duration_s=" + num(s.T, "%.17g"),
+                  "feed.start_s=0",
+                  "feed.duration_s=" + std::string(quick ? "0.05" : "0.15"),
+                  "output.frames=0",
+                  "output.plots=false",
+                  "output.checkpoint_every_s=0"};
     if (quick) s.ces_sets.push_back("collection.y_mm=-200");
     s.obs_scale = 1, s.obs_name = "metal recovery in the conductor bin";
     v.push_back(s);
@@ -149,7 +154,8 @@ std::vector<AccScene> makeScenes(bool quick) {
     s.build = [](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>&) {
       b.add(new btStaticPlaneShape(btVector3(0, 1, 0), 0), 0, Vec3{0, 0, 0}, real(1.0));
       btCollisionShape* box = b.own(new btBoxShape(btVector3(0.1f, 0.1f, 0.1f)));
-      for (int i = 0; i < 10; ++i) b.addShared(box, i == 9 ? 1000.0 : 1.0, Vec3{0, real(0.1 * 1.0002 + 0.2002 * i), 0}, real(0.5));
+      for (int i = 0; i < 10; ++i)
+        b.addShared(box, i == 9 ? 1000.0 : 1.0, Vec3{0, real(0.1 * 1.0002 + 0.2002 * i), 0}, real(0.5));
     };
     s.observe = [](const Runner& r, const std::vector<btRigidBody*>& b) { return r.pos(b.size() - 1); };
     s.obs_scale = 0.1, s.obs_name = "position of the top box";
@@ -316,7 +322,8 @@ Row runOne(const AccScene& sc, const std::string& engine, const std::string& sol
   if (obs_out) *obs_out = o;
   row.obs = double(o.y);  // the height (pile, mix) or the top box's y (stack)
   for (size_t i = 0; i < bodies.size(); ++i)
-    if (bodies[i]->getInvMass() > 0 && (!finite3(run->pos(i)) || !finite3(run->vel(i)))) row.status = "non-finite state";
+    if (bodies[i]->getInvMass() > 0 && (!finite3(run->pos(i)) || !finite3(run->vel(i))))
+      row.status = "non-finite state";
   run.reset();
   keep.reset();
   row.run_s = std::chrono::duration<double>(Clock::now() - t_run).count();  // setup, steps, measurements, teardown
@@ -356,9 +363,7 @@ GoalResult timeToResidual(long n, dvi::SolverType solver, bool warm, int cap, in
     g.iterations = st.iterations;
     g.residual = double(st.relative_residual);
     g.reached = st.relative_residual <= real(tol);
-  } catch (const std::exception& e) {
-    g.error = e.what();
-  }
+  } catch (const std::exception& e) { g.error = e.what(); }
   return g;
 }
 
@@ -369,18 +374,19 @@ const char* kCsvHeader =
     "max_penetration_rel,compl_violation_mps,observable,observable_ref,observable_err_rel,device,status,run_s,"
     "residual_abs_mean_mps,residual_abs_last_mps";
 
-std::string csvText(const std::vector<Row>& rows, const std::vector<double>& refs_obs, const std::vector<std::string>& ref_scene) {
+std::string csvText(const std::vector<Row>& rows, const std::vector<double>& refs_obs,
+                    const std::vector<std::string>& ref_scene) {
   std::ostringstream o;
   o << kCsvHeader << "\n";
   for (const Row& r : rows) {
     double ref = NAN;
     for (size_t i = 0; i < ref_scene.size(); ++i)
       if (ref_scene[i] == r.scene) ref = refs_obs[i];
-    o << r.scene << "," << r.engine << "," << r.solver << "," << r.sweep << "," << r.iterations << "," << num(r.dt) << ","
-      << r.steps << "," << num(r.wall_s) << "," << num(1e3 * r.wall_s / std::max(1, r.steps)) << "," << num(r.res_mean)
-      << "," << num(r.res_last) << "," << num(r.pen_rel) << "," << num(r.compl_mean) << "," << num(r.obs) << ","
-      << num(ref) << "," << num(r.obs_err) << "," << csvField(r.device) << "," << csvField(r.status) << "," << num(r.run_s) << ","
-      << num(r.res_abs_mean) << "," << num(r.res_abs_last) << "\n";
+    o << r.scene << "," << r.engine << "," << r.solver << "," << r.sweep << "," << r.iterations << "," << num(r.dt)
+      << "," << r.steps << "," << num(r.wall_s) << "," << num(1e3 * r.wall_s / std::max(1, r.steps)) << ","
+      << num(r.res_mean) << "," << num(r.res_last) << "," << num(r.pen_rel) << "," << num(r.compl_mean) << ","
+      << num(r.obs) << "," << num(ref) << "," << num(r.obs_err) << "," << csvField(r.device) << ","
+      << csvField(r.status) << "," << num(r.run_s) << "," << num(r.res_abs_mean) << "," << num(r.res_abs_last) << "\n";
   }
   return o.str();
 }
@@ -415,7 +421,8 @@ int runAccuracy(const AccOptions& o) {
   if (have_gpu && selected(engine_sel, "gpu")) engines.push_back("gpu");
   const bool run_bullet = selected(engine_sel, "bullet");
   std::printf("bench accuracy%s: solvers jacobi, gs (CPU), apgd, bb on %s; Bullet's sequential impulse; iterations",
-              o.quick ? " --quick" : "", have_gpu ? ("cpu and gpu (" + gpu_name + ")").c_str() : "cpu (no GPU in this run)");
+              o.quick ? " --quick" : "",
+              have_gpu ? ("cpu and gpu (" + gpu_name + ")").c_str() : "cpu (no GPU in this run)");
   for (int i : iters) std::printf(" %d", i);
   std::printf("; steps 2 h0 .. h0/4 at %d iterations\n", dt_iters);
 
@@ -440,9 +447,7 @@ int runAccuracy(const AccOptions& o) {
       } else {
         rr = runOne(sc, have_gpu ? "gpu" : "cpu", "apgd", o.quick ? 300 : 500, sc.h0 / 4, 1e-7, int(threads), &ref);
       }
-    } catch (const std::exception& e) {
-      rr.scene = sc.name, rr.status = std::string("error: ") + e.what();
-    }
+    } catch (const std::exception& e) { rr.scene = sc.name, rr.status = std::string("error: ") + e.what(); }
     rr.sweep = "reference";
     rr.obs_err = 0;
     rows.push_back(rr);
@@ -451,7 +456,8 @@ int runAccuracy(const AccOptions& o) {
     std::printf("%s: reference (APGD %d it, tol 1e-7, h = %g): %s = %.6g, %.2f s\n", sc.name.c_str(), rr.iterations,
                 rr.dt, sc.obs_name.c_str(), double(ref.y), rr.wall_s);
     std::fflush(stdout);
-    auto attempt = [&](const std::string& engine, const std::string& solver, int it, double dt, const std::string& sweep) {
+    auto attempt = [&](const std::string& engine, const std::string& solver, int it, double dt,
+                       const std::string& sweep) {
       if (isatty(fileno(stdout))) {  // a progress line on a terminal, overwritten by the row's line
         std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g ...\r", sc.name.c_str(), engine.c_str(),
                     solver.empty() ? "bullet-si" : solver.c_str(), sweep.c_str(), it, dt);
@@ -473,23 +479,29 @@ int runAccuracy(const AccOptions& o) {
         r.scene = sc.name, r.engine = engine, r.solver = solver, r.iterations = it, r.dt = dt;
         r.status = std::string("SolverError: ") + e.what();
       } catch (const std::exception& e) {
-        r.scene = sc.name, r.engine = engine, r.solver = solver.empty() ? "bullet-si" : solver, r.iterations = it, r.dt = dt;
+        r.scene = sc.name, r.engine = engine, r.solver = solver.empty() ? "bullet-si" : solver, r.iterations = it,
+        r.dt = dt;
         r.status = std::string("error: ") + e.what();
       }
       r.sweep = sweep;
       rows.push_back(r);
-      std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s (run %.1f s)  res %-10s pen %-10s compl %-10s obs err %s%s\n",
-                  sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s, r.run_s,
-                  num(r.res_mean, "%.3g").c_str(), num(r.pen_rel, "%.3g").c_str(), num(r.compl_mean, "%.3g").c_str(),
-                  num(r.obs_err, "%.3g").c_str(), r.status == "ok" ? "" : ("  [" + r.status + "]").c_str());
+      std::printf(
+          "  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s (run %.1f s)  res %-10s pen %-10s compl %-10s obs err %s%s\n",
+          sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s, r.run_s,
+          num(r.res_mean, "%.3g").c_str(), num(r.pen_rel, "%.3g").c_str(), num(r.compl_mean, "%.3g").c_str(),
+          num(r.obs_err, "%.3g").c_str(), r.status == "ok" ? "" : ("  [" + r.status + "]").c_str());
       std::fflush(stdout);
       flush();
     };
     for (const std::string& engine : engines)
       for (const char* solver : {"jacobi", "gs", "apgd", "bb"}) {
         if (engine == "gpu" && std::string(solver) == "gs") continue;  // Gauss-Seidel is CPU only
-        const std::vector<int> it_sweep = !ces ? iters : o.quick ? std::vector<int>{10, 40} : std::vector<int>{10, 30, 100};
-        const std::vector<double> dt_sweep = !ces ? dt_factors : o.quick ? std::vector<double>{} : std::vector<double>{2.0, 0.5};
+        const std::vector<int> it_sweep = !ces      ? iters
+                                          : o.quick ? std::vector<int>{10, 40}
+                                                    : std::vector<int>{10, 30, 100};
+        const std::vector<double> dt_sweep = !ces      ? dt_factors
+                                             : o.quick ? std::vector<double>{}
+                                                       : std::vector<double>{2.0, 0.5};
         for (int it : it_sweep) attempt(engine, solver, it, sc.h0, "iterations");
         for (double f : dt_sweep) attempt(engine, solver, ces ? 30 : dt_iters, sc.h0 * f, "dt");
       }
@@ -520,11 +532,14 @@ int runAccuracy(const AccOptions& o) {
         continue;
       }
       const double ratio = a.seconds > 0 ? j.seconds / a.seconds : NAN;
-      std::snprintf(b, sizeof b,
-                    "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
-                    label.c_str(), a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached", j.iterations,
-                    j.seconds, j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
-                    !a.reached ? "APGD did not reach 1e-4" : ratio >= 10 ? "met" : (j.reached ? "missed" : "met (lower bound)"));
+      std::snprintf(
+          b, sizeof b,
+          "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
+          label.c_str(), a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached", j.iterations, j.seconds,
+          j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
+          !a.reached    ? "APGD did not reach 1e-4"
+          : ratio >= 10 ? "met"
+                        : (j.reached ? "missed" : "met (lower bound)"));
       goal << b;
     }
   // Time to the default tolerance (SolverSettings: relative residual, iteration cap) per solver, the same CCP.
@@ -535,10 +550,11 @@ int runAccuracy(const AccOptions& o) {
          << "-sphere pile's CCP after 5 settling steps, warm start, Solve-stage time:\n";
     for (const std::string& engine : engines) {
       const bool gpu = engine == "gpu";
-      for (dvi::SolverType t : {dvi::SolverType::APGD, dvi::SolverType::BB, dvi::SolverType::Jacobi, dvi::SolverType::GaussSeidel}) {
+      for (dvi::SolverType t :
+           {dvi::SolverType::APGD, dvi::SolverType::BB, dvi::SolverType::Jacobi, dvi::SolverType::GaussSeidel}) {
         if (gpu && t == dvi::SolverType::GaussSeidel) continue;  // CPU only
-        const GoalResult a = timeToResidual(goal_n, t, true, defaults.max_iterations, int(threads), 5, gpu,
-                                            double(defaults.tolerance));
+        const GoalResult a =
+            timeToResidual(goal_n, t, true, defaults.max_iterations, int(threads), 5, gpu, double(defaults.tolerance));
         char b[256];
         if (!a.error.empty())
           std::snprintf(b, sizeof b, "  %s %s: error: %s\n", engine.c_str(), dvi::solverName(t), a.error.c_str());
@@ -564,10 +580,11 @@ int runAccuracy(const AccOptions& o) {
        << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scenes: pile "
        << (o.quick ? "400" : "100k") << " spheres r 1 cm; mix " << (o.quick ? "250" : "20k")
        << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2; the default CES machine fed for "
-       << (o.quick ? "0.05 s, 0.8 s" : "0.15 s, 1 s") << " of machine time, h0 = 2e-4\n- this run: --scenes " << joined(scene_sel)
-       << " --engines " << joined(engine_sel) << (have_gpu ? "" : " (no GPU)") << "\n\n"
+       << (o.quick ? "0.05 s, 0.8 s" : "0.15 s, 1 s") << " of machine time, h0 = 2e-4\n- this run: --scenes "
+       << joined(scene_sel) << " --engines " << joined(engine_sel) << (have_gpu ? "" : " (no GPU)") << "\n\n"
        << goal_text << "\nRows: " << base << ".csv (columns in apps/dvisim/bench_accuracy.cpp's header).\n";
-    writeBenchRecord({results_dir, o.out}, base, {{"md", md.str()}, {"csv", csvText(rows, ref_obs, ref_scene)}}, writeFile);
+    writeBenchRecord({results_dir, o.out}, base, {{"md", md.str()}, {"csv", csvText(rows, ref_obs, ref_scene)}},
+                     writeFile);
   }
   return 0;
 }
@@ -579,7 +596,8 @@ void registerBenchAccuracy(CLI::App& app, BenchRegistry& reg) {
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time");
   addBenchBasics(cmd, *o, "accuracy", "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)");
-  cmd->add_option("--scenes", o->scenes, "pile,mix,stack,ces,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
+  cmd->add_option("--scenes", o->scenes,
+                  "pile,mix,stack,ces,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
   cmd->add_option("--engines", o->engines, "cpu,gpu,bullet (default all; gpu where a device is present)");
   addBenchRunner(reg, cmd, [o] { return runAccuracy(*o); });
 }

@@ -57,10 +57,10 @@ using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
 // The goal of the issue.
-constexpr double kGoalDuration = 10.0;    // s of machine time
-constexpr double kGoalRate = 20000.0;     // particles/s fed
-constexpr double kGoalWall = 300.0;       // s of wall time
-constexpr double kRateTolerance = 0.99;   // measured feed >= 99% of the goal rate (see the header)
+constexpr double kGoalDuration = 10.0;   // s of machine time
+constexpr double kGoalRate = 20000.0;    // particles/s fed
+constexpr double kGoalWall = 300.0;      // s of wall time
+constexpr double kRateTolerance = 0.99;  // measured feed >= 99% of the goal rate (see the header)
 
 struct CesBenchOptions : BenchBasics {
   std::string backend = "auto", duration, rate, wall_limit;
@@ -126,9 +126,12 @@ int runCesBench(const CesBenchOptions& o) {
   const double mean_mass = dvi::ces::expectedParticleMass(base);
   const double mass_flow = rate * mean_mass;  // kg/s
   std::vector<std::string> sets = o.sets;
-  const std::vector<std::string> bench_sets{"duration_s=" + fmt(duration),          "feed.start_s=0",
-                                            "feed.duration_s=" + fmt(duration),     "feed.mass_flow_g_s=" + fmt(mass_flow * 1e3),
-                                            "output.frames=0",                      "output.plots=false",
+  const std::vector<std::string> bench_sets{"duration_s=" + fmt(duration),
+                                            "feed.start_s=0",
+                                            "feed.duration_s=" + fmt(duration),
+                                            "feed.mass_flow_g_s=" + fmt(mass_flow * 1e3),
+                                            "output.frames=0",
+                                            "output.plots=false",
                                             "output.checkpoint_every_s=0"};
   sets.insert(sets.end(), bench_sets.begin(), bench_sets.end());
   const dvi::ces::CesConfig cfg = dvi::ces::parseCesDocument(doc, sets, origin);
@@ -144,13 +147,14 @@ int runCesBench(const CesBenchOptions& o) {
   std::unique_ptr<dvi::System> sys = dvi::ces::makeCesSystem(cfg, backend, threads, "native");
   dvi::ces::CesMachine m(cfg, *sys);
   const double setup_s = elapsed();
-  std::printf("bench ces%s: %s backend, %g s of machine time (%lld steps of %g s, %s %d it) at %s particles/s "
-              "(mean particle %.4g mg -> %.4g g/s), wall limit %g s\n",
-              o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.step.dt, dvi::solverName(cfg.solver.type),
-              cfg.solver.max_iterations, grouped(rate).c_str(), mean_mass * 1e6, mass_flow * 1e3, wall_limit);
-  const std::string where = m.deviceParticles()
-                                ? "CES field, charges and classification on the device (CesDevice)"
-                                : "CES forces applied on the host";
+  std::printf(
+      "bench ces%s: %s backend, %g s of machine time (%lld steps of %g s, %s %d it) at %s particles/s "
+      "(mean particle %.4g mg -> %.4g g/s), wall limit %g s\n",
+      o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.step.dt,
+      dvi::solverName(cfg.solver.type), cfg.solver.max_iterations, grouped(rate).c_str(), mean_mass * 1e6,
+      mass_flow * 1e3, wall_limit);
+  const std::string where = m.deviceParticles() ? "CES field, charges and classification on the device (CesDevice)"
+                                                : "CES forces applied on the host";
   std::printf("note: %s (docs/CES.md)\n", where.c_str());
   std::fflush(stdout);
 
@@ -190,8 +194,8 @@ int runCesBench(const CesBenchOptions& o) {
       const Progress p{m.time(), w, in_flight, k + 1, mark_ms / double(mark_steps)};
       progress.push_back(p);
       std::printf("[%3d%%] t = %.4g s of %g, wall %.4g s, %s bodies in flight, %.3g ms/step\n",
-                  int(100.0 * double(k + 1) / double(total)), p.t, duration, p.wall, grouped(double(p.in_flight)).c_str(),
-                  p.ms_per_step);
+                  int(100.0 * double(k + 1) / double(total)), p.t, duration, p.wall,
+                  grouped(double(p.in_flight)).c_str(), p.ms_per_step);
       std::fflush(stdout);
       mark_ms = 0, mark_steps = 0;
     }
@@ -286,12 +290,9 @@ int runCesBench(const CesBenchOptions& o) {
                   {"field_model", cfg.field_model},
                   {"diameter_mm", {cfg.diameter_min * 1e3, cfg.diameter_max * 1e3}},
                   {"forces_on_host", m.system().backendName() != "cpu"}};
-  j["target"] = {{"duration_s", duration},
-                 {"rate_particles_per_s", rate},
-                 {"mean_particle_mass_kg", mean_mass},
-                 {"mass_flow_g_s", mass_flow * 1e3},
-                 {"wall_limit_s", wall_limit},
-                 {"steps", total}};
+  j["target"] = {
+      {"duration_s", duration},           {"rate_particles_per_s", rate}, {"mean_particle_mass_kg", mean_mass},
+      {"mass_flow_g_s", mass_flow * 1e3}, {"wall_limit_s", wall_limit},   {"steps", total}};
   j["reached"] = {{"sim_time_s", reached}, {"steps", steps_run}, {"stopped_by", stopped_by}};
   j["wall_s"] = wall;
   j["wall_at_10s_s"] = wall_at_goal >= 0 ? json(wall_at_goal) : json(nullptr);
@@ -316,7 +317,10 @@ int runCesBench(const CesBenchOptions& o) {
   j["goal"] = goal;
   j["progress"] = json::array();
   for (const Progress& p : progress)
-    j["progress"].push_back({{"sim_time_s", p.t}, {"wall_s", p.wall}, {"in_flight", p.in_flight}, {"steps", p.steps},
+    j["progress"].push_back({{"sim_time_s", p.t},
+                             {"wall_s", p.wall},
+                             {"in_flight", p.in_flight},
+                             {"steps", p.steps},
                              {"ms_per_step", p.ms_per_step}});
 
   std::ostringstream md;
@@ -324,9 +328,9 @@ int runCesBench(const CesBenchOptions& o) {
      << "Written by `dvisim bench ces" << (o.record ? " --record" : "")
      << "` (apps/dvisim/bench_ces.cpp); do not edit by hand.\n\n"
      << "- command: `" << command << "`\n- device: " << device << "\n- backend: " << j["backend"].get<std::string>()
-     << " (" << where << ")\n- commit: " << commit
-     << "\n- date: " << date << "\n- machine: " << origin << (o.sets.empty() ? "" : " with --set") << "; dt "
-     << fmt(cfg.step.dt, "%g") << " s, " << dvi::solverName(cfg.solver.type) << " " << cfg.solver.max_iterations << " iterations, drum "
+     << " (" << where << ")\n- commit: " << commit << "\n- date: " << date << "\n- machine: " << origin
+     << (o.sets.empty() ? "" : " with --set") << "; dt " << fmt(cfg.step.dt, "%g") << " s, "
+     << dvi::solverName(cfg.solver.type) << " " << cfg.solver.max_iterations << " iterations, drum "
      << j["machine"]["drum_drive"].get<std::string>() << ", particles " << fmt(cfg.diameter_min * 1e3, "%g") << "-"
      << fmt(cfg.diameter_max * 1e3, "%g") << " mm\n"
      << "- target: " << fmt(duration, "%g") << " s of machine time at " << grouped(rate)
@@ -357,8 +361,8 @@ int runCesBench(const CesBenchOptions& o) {
       stage_total += tot.log.seconds[size_t(i)];
     }
   for (const auto& [name, sec] : stages)
-    md << "| " << name << " | " << fmt(sec, "%.3g") << " | " << fmt(stage_total > 0 ? 100 * sec / stage_total : 0.0, "%.1f")
-       << "% |\n";
+    md << "| " << name << " | " << fmt(sec, "%.3g") << " | "
+       << fmt(stage_total > 0 ? 100 * sec / stage_total : 0.0, "%.1f") << "% |\n";
   md << "| machine (feed, forces, charges; outside the core's stages) | " << fmt(step_wall - stage_total, "%.3g")
      << " | |\n\nProgress:\n\n| machine time s | wall s | bodies in flight | ms/step |\n| --- | --- | --- | --- |\n";
   for (const Progress& p : progress)
@@ -369,8 +373,8 @@ int runCesBench(const CesBenchOptions& o) {
   writeFile(o.out + "/ces_bench.md", md.str());
 
   std::printf("device: %s; commit %s; %s\n", device.c_str(), commit.c_str(), date.c_str());
-  std::printf("reached %.4g s of %g s machine time in %.4g s wall (setup %.3g s), stopped by %s\n", reached, duration, wall,
-              setup_s, stopped_by.c_str());
+  std::printf("reached %.4g s of %g s machine time in %.4g s wall (setup %.3g s), stopped by %s\n", reached, duration,
+              wall, setup_s, stopped_by.c_str());
   std::printf("ms/step: %.3g mean, %.3g over the last 10%%\n", ms_mean, ms_last);
   std::printf("fed %s particles: %s particles/s, %.4g g/s; bodies in flight %s max, %s at the end\n",
               grouped(double(bal.fed)).c_str(), grouped(fed_rate).c_str(), fed_flow_g_s,
@@ -405,7 +409,8 @@ int runCesBench(const CesBenchOptions& o) {
 void registerBenchCes(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<CesBenchOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "ces", "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)");
+      "ces",
+      "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)");
   o->threads.clear();  // none given: the machine's own setting
   addBenchBasics(cmd, *o, "ces", "ces_bench.json, ces_bench.md",
                  "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close", "md,json",

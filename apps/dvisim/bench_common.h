@@ -71,6 +71,7 @@ void writeBenchRecord(const std::vector<std::string>& dirs, const std::string& b
   std::string exts;
   for (const std::string& d : dirs)
     for (const auto& [ext, text] : files) writeFile(d + "/" + base + "." + ext, text);
-  for (size_t i = 0; i < files.size(); ++i) exts += (i == 0 ? "." : i + 1 == files.size() ? " and ." : ", .") + files[i].first;
+  for (size_t i = 0; i < files.size(); ++i)
+    exts += (i == 0 ? "." : i + 1 == files.size() ? " and ." : ", .") + files[i].first;
   std::printf("recorded: %s/%s%s\n", dirs.front().c_str(), base.c_str(), exts.c_str());
 }

@@ -118,7 +118,8 @@ std::unique_ptr<World> makeWorld(const std::string& engine, int threads) {
     c.make_gpu_system = dvi::makeGpuSystem;
     c.gpu_available = dvi::gpuAvailable;
     c.system.threads = threads;
-    auto* ours = new dvi::DviDynamicsWorld(w->dispatcher.get(), w->broadphase.get(), w->solver.get(), w->config.get(), c);
+    auto* ours =
+        new dvi::DviDynamicsWorld(w->dispatcher.get(), w->broadphase.get(), w->solver.get(), w->config.get(), c);
     w->ours = ours;
     w->world.reset(ours);
   }
@@ -150,18 +151,23 @@ void scenePyramid(World& w, int scale) {
     const int n = base - layer;
     for (int i = 0; i < n; ++i)
       for (int k = 0; k < n; ++k)
-        w.reference = w.add(box, 1, btVector3(btScalar(2.0 * i - (n - 1)), btScalar(1 + 2.0 * layer), btScalar(2.0 * k - (n - 1))));
+        w.reference = w.add(
+            box, 1, btVector3(btScalar(2.0 * i - (n - 1)), btScalar(1 + 2.0 * layer), btScalar(2.0 * k - (n - 1))));
   }
 }
 
 // A ragdoll (Bullet's ragdoll proportions: pelvis, spine, head, upper/lower arms and legs as capsules, in metres)
 // at `at`: point-to-point joints at the hips, shoulders and neck, hinges at the knees, elbows and spine.
 void ragdoll(World& w, const btVector3& at) {
-  struct Part { btScalar r, h; btVector3 p; };
-  const Part parts[11] = {{0.15f, 0.20f, {0, 1.0f, 0}},        {0.15f, 0.28f, {0, 1.2f, 0}},       {0.10f, 0.05f, {0, 1.6f, 0}},
-                          {0.07f, 0.45f, {-0.18f, 0.65f, 0}},  {0.05f, 0.37f, {-0.18f, 0.2f, 0}},  {0.07f, 0.45f, {0.18f, 0.65f, 0}},
-                          {0.05f, 0.37f, {0.18f, 0.2f, 0}},    {0.05f, 0.33f, {-0.35f, 1.45f, 0}}, {0.04f, 0.25f, {-0.7f, 1.45f, 0}},
-                          {0.05f, 0.33f, {0.35f, 1.45f, 0}},   {0.04f, 0.25f, {0.7f, 1.45f, 0}}};
+  struct Part {
+    btScalar r, h;
+    btVector3 p;
+  };
+  const Part parts[11] = {
+      {0.15f, 0.20f, {0, 1.0f, 0}},       {0.15f, 0.28f, {0, 1.2f, 0}},       {0.10f, 0.05f, {0, 1.6f, 0}},
+      {0.07f, 0.45f, {-0.18f, 0.65f, 0}}, {0.05f, 0.37f, {-0.18f, 0.2f, 0}},  {0.07f, 0.45f, {0.18f, 0.65f, 0}},
+      {0.05f, 0.37f, {0.18f, 0.2f, 0}},   {0.05f, 0.33f, {-0.35f, 1.45f, 0}}, {0.04f, 0.25f, {-0.7f, 1.45f, 0}},
+      {0.05f, 0.33f, {0.35f, 1.45f, 0}},  {0.04f, 0.25f, {0.7f, 1.45f, 0}}};
   btRigidBody* b[11];
   for (int i = 0; i < 11; ++i) {
     btCollisionShape* s = w.keep(new btCapsuleShape(parts[i].r, parts[i].h));
@@ -188,13 +194,13 @@ void ragdoll(World& w, const btVector3& at) {
     h->setLimit(lo, hi);
     w.join(h);
   };
-  hinge(0, 1, at + btVector3(0, 1.1f, 0), -0.8f, 0.8f);        // spine
-  p2p(1, 2, at + btVector3(0, 1.5f, 0));                        // neck
-  p2p(0, 3, at + btVector3(-0.18f, 0.9f, 0));                   // hips
+  hinge(0, 1, at + btVector3(0, 1.1f, 0), -0.8f, 0.8f);  // spine
+  p2p(1, 2, at + btVector3(0, 1.5f, 0));                 // neck
+  p2p(0, 3, at + btVector3(-0.18f, 0.9f, 0));            // hips
   p2p(0, 5, at + btVector3(0.18f, 0.9f, 0));
-  hinge(3, 4, at + btVector3(-0.18f, 0.42f, 0), 0.0f, 2.5f);   // knees
+  hinge(3, 4, at + btVector3(-0.18f, 0.42f, 0), 0.0f, 2.5f);  // knees
   hinge(5, 6, at + btVector3(0.18f, 0.42f, 0), 0.0f, 2.5f);
-  p2p(1, 7, at + btVector3(-0.18f, 1.45f, 0));                  // shoulders
+  p2p(1, 7, at + btVector3(-0.18f, 1.45f, 0));  // shoulders
   p2p(1, 9, at + btVector3(0.18f, 1.45f, 0));
   hinge(7, 8, at + btVector3(-0.55f, 1.45f, 0), -2.5f, 0.0f);  // elbows
   hinge(9, 10, at + btVector3(0.55f, 1.45f, 0), -2.5f, 0.0f);
@@ -212,10 +218,10 @@ void sceneRagdolls(World& w, int scale) {
 // A convex hull of 14 vertices (a flattened, irregular rock of ~1 m).
 btCollisionShape* rockHull() {
   auto* h = new btConvexHullShape();
-  const btScalar v[14][3] = {{0.5f, 0, 0},     {-0.5f, 0.05f, 0}, {0, 0.35f, 0},     {0, -0.3f, 0.1f},  {0, 0, 0.45f},
-                             {0.1f, 0, -0.5f},  {0.35f, 0.25f, 0.2f}, {-0.3f, 0.2f, -0.25f}, {0.3f, -0.2f, -0.3f},
-                             {-0.35f, -0.2f, 0.3f}, {0.2f, 0.3f, -0.3f}, {-0.2f, 0.3f, 0.3f}, {0.4f, -0.1f, 0.3f},
-                             {-0.4f, -0.15f, -0.2f}};
+  const btScalar v[14][3] = {{0.5f, 0, 0},         {-0.5f, 0.05f, 0},     {0, 0.35f, 0},        {0, -0.3f, 0.1f},
+                             {0, 0, 0.45f},        {0.1f, 0, -0.5f},      {0.35f, 0.25f, 0.2f}, {-0.3f, 0.2f, -0.25f},
+                             {0.3f, -0.2f, -0.3f}, {-0.35f, -0.2f, 0.3f}, {0.2f, 0.3f, -0.3f},  {-0.2f, 0.3f, 0.3f},
+                             {0.4f, -0.1f, 0.3f},  {-0.4f, -0.15f, -0.2f}};
   for (const auto& p : v) h->addPoint(btVector3(p[0], p[1], p[2]), false);
   h->recalcLocalAabb();
   return h;
@@ -246,8 +252,9 @@ void sceneTerrain(World& w, int scale) {
       const int a = i * (cells + 1) + k, b = a + 1, c = a + cells + 1, d = c + 1;
       w.mesh_indices.insert(w.mesh_indices.end(), {a, b, d, a, d, c});
     }
-  auto* mesh = new btTriangleIndexVertexArray(int(w.mesh_indices.size() / 3), w.mesh_indices.data(), 3 * sizeof(int),
-                                              int(w.mesh_vertices.size() / 3), w.mesh_vertices.data(), 3 * sizeof(btScalar));
+  auto* mesh =
+      new btTriangleIndexVertexArray(int(w.mesh_indices.size() / 3), w.mesh_indices.data(), 3 * sizeof(int),
+                                     int(w.mesh_vertices.size() / 3), w.mesh_vertices.data(), 3 * sizeof(btScalar));
   w.meshes.emplace_back(mesh);
   w.add(w.keep(new btBvhTriangleMeshShape(mesh, true)), 0, btVector3(0, 0, 0));
   btCollisionShape* box = w.keep(new btBoxShape(btVector3(0.5f, 0.5f, 0.5f)));
@@ -274,9 +281,9 @@ void sceneBoxes100k(World& w, int scale) {
 
 using SceneBuilder = std::function<void(World&, int)>;
 const std::map<std::string, SceneBuilder>& sceneBuilders() {
-  static const std::map<std::string, SceneBuilder> m{{"boxes", sceneBoxes},   {"pyramid", scenePyramid},
+  static const std::map<std::string, SceneBuilder> m{{"boxes", sceneBoxes},       {"pyramid", scenePyramid},
                                                      {"ragdolls", sceneRagdolls}, {"hulls", sceneHulls},
-                                                     {"terrain", sceneTerrain}, {"boxes100k", sceneBoxes100k}};
+                                                     {"terrain", sceneTerrain},   {"boxes100k", sceneBoxes100k}};
   return m;
 }
 
@@ -284,10 +291,10 @@ struct Result {
   std::string scene, engine, status = "ok";
   size_t bodies = 0, constraints = 0;
   long steps = 0;
-  double wall = 0;              // s over the timed steps
-  double contacts = 0;          // manifold points at distance < 0, mean over the timed steps
-  double max_pen = 0;           // deepest manifold point over the timed steps, m
-  double drift = 0;             // see the header
+  double wall = 0;      // s over the timed steps
+  double contacts = 0;  // manifold points at distance < 0, mean over the timed steps
+  double max_pen = 0;   // deepest manifold point over the timed steps, m
+  double drift = 0;     // see the header
   double msPerStep() const { return steps > 0 ? 1e3 * wall / double(steps) : 0; }
 };
 
@@ -320,11 +327,13 @@ double meanHeight(const World& w) {
 int runDropin(const DropinOptions& o) {
   const std::vector<std::string> engines = selectNames("--engines", o.engines, {"bullet", "cpu", "gpu"});
   const std::vector<std::string> scenes =
-      o.scenes.empty() ? std::vector<std::string>{"boxes", "pyramid", "ragdolls", "hulls", "terrain"}
-                       : selectNames("--scenes", o.scenes, {"boxes", "pyramid", "ragdolls", "hulls", "terrain", "boxes100k"});
+      o.scenes.empty()
+          ? std::vector<std::string>{"boxes", "pyramid", "ragdolls", "hulls", "terrain"}
+          : selectNames("--scenes", o.scenes, {"boxes", "pyramid", "ragdolls", "hulls", "terrain", "boxes100k"});
   char* end = nullptr;
   const long threads = std::strtol(o.threads.c_str(), &end, 10);
-  if (o.threads.empty() || *end || threads < 0 || threads > 4096) throw InputError("--threads: expected an integer >= 0");
+  if (o.threads.empty() || *end || threads < 0 || threads > 4096)
+    throw InputError("--threads: expected an integer >= 0");
   long steps = o.quick ? 10 : 150;
   if (!o.steps.empty()) {
     steps = std::strtol(o.steps.c_str(), &end, 10);
@@ -373,8 +382,9 @@ int runDropin(const DropinOptions& o) {
     }
     std::vector<double> h0(worlds.size(), 0);
     for (size_t i = 0; i < worlds.size(); ++i)
-      if (worlds[i]) h0[i] = scene == "pyramid" && worlds[i]->reference ? worlds[i]->reference->getCenterOfMassPosition().y()
-                                                                         : meanHeight(*worlds[i]);
+      if (worlds[i])
+        h0[i] = scene == "pyramid" && worlds[i]->reference ? worlds[i]->reference->getCenterOfMassPosition().y()
+                                                           : meanHeight(*worlds[i]);
     const long per_round = (scene_steps + rounds - 1) / rounds;
     for (int round = 0; round < rounds; ++round)
       for (size_t j = 0; j < worlds.size(); ++j) {
@@ -424,7 +434,8 @@ int runDropin(const DropinOptions& o) {
     return 0.0;
   };
   std::ostringstream csv, md;
-  csv << "scene,engine,bodies,constraints,steps,ms_per_step,ratio_to_bullet,contact_points,max_penetration_m,drift,status\n";
+  csv << "scene,engine,bodies,constraints,steps,ms_per_step,ratio_to_bullet,contact_points,max_penetration_m,drift,"
+         "status\n";
   md << "| scene | engine | bodies | joints | ms/step | ours / Bullet | contact points | deepest (m) | drift |\n"
      << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
   int cpu_met = 0, cpu_rows = 0;
@@ -434,7 +445,8 @@ int runDropin(const DropinOptions& o) {
     if (r.engine == "cpu" && ratio > 0) ++cpu_rows, cpu_met += ratio <= 1.0;
     csv << r.scene << "," << r.engine << "," << r.bodies << "," << r.constraints << "," << r.steps << ","
         << num(r.msPerStep(), "%.4f") << "," << (ratio > 0 ? num(ratio, "%.3f") : "") << "," << num(r.contacts, "%.1f")
-        << "," << num(r.max_pen, "%.5f") << "," << (std::isnan(r.drift) ? std::string() : num(r.drift, "%.5f")) << "," << csvField(r.status) << "\n";
+        << "," << num(r.max_pen, "%.5f") << "," << (std::isnan(r.drift) ? std::string() : num(r.drift, "%.5f")) << ","
+        << csvField(r.status) << "\n";
     char line[512];
     if (r.status == "ok")
       std::snprintf(line, sizeof line, "| %s | %s | %zu | %zu | %.2f | %s | %.0f | %.4f | %s |\n", r.scene.c_str(),
@@ -442,11 +454,13 @@ int runDropin(const DropinOptions& o) {
                     ratio > 0 ? num(ratio, "%.2fx").c_str() : "-", r.contacts, r.max_pen,
                     std::isnan(r.drift) ? "-" : num(r.drift, "%+.4f").c_str());
     else
-      std::snprintf(line, sizeof line, "| %s | %s | | | %s | | | | |\n", r.scene.c_str(), r.engine.c_str(), r.status.c_str());
+      std::snprintf(line, sizeof line, "| %s | %s | | | %s | | | | |\n", r.scene.c_str(), r.engine.c_str(),
+                    r.status.c_str());
     md << line;
   }
   char goal[256];
-  std::snprintf(goal, sizeof goal, "\nGoal: our CPU drop-in at <= 1.0x Bullet's time on every scene: %s (%d of %d scenes)\n",
+  std::snprintf(goal, sizeof goal,
+                "\nGoal: our CPU drop-in at <= 1.0x Bullet's time on every scene: %s (%d of %d scenes)\n",
                 cpu_rows > 0 && cpu_met == cpu_rows ? "MET" : "NOT MET", cpu_met, cpu_rows);
   md << goal;
   for (const Result& r : results)
@@ -459,7 +473,8 @@ int runDropin(const DropinOptions& o) {
   std::printf("%s%s", md.str().c_str(), "");
 
   std::ostringstream head;
-  head << "# Drop-in: Bullet's benchmark scenes on stock Bullet and on the drop-in world" << (o.quick ? " (--quick)" : "")
+  head << "# Drop-in: Bullet's benchmark scenes on stock Bullet and on the drop-in world"
+       << (o.quick ? " (--quick)" : "")
        << "\n\nWritten by the benchmark (`dvisim bench dropin`, apps/dvisim/bench_dropin.cpp); do not edit by hand.\n\n"
        << "- CPU: " << (cpu_device.empty() ? "-" : cpu_device) << "\n- GPU: " << (have_gpu ? gpu_name : "none")
        << "\n- Bullet: " << btGetVersion() << ", btDiscreteDynamicsWorld, sequential impulses (10 iterations), 1 thread"
@@ -473,7 +488,8 @@ int runDropin(const DropinOptions& o) {
   writeFile(o.out + "/dropin.md", text);
   std::printf("results: %s/dropin.csv, dropin.md\n", o.out.c_str());
   if (o.record) {
-    const std::string device = have_gpu && std::find(engines.begin(), engines.end(), "gpu") != engines.end() ? gpu_name : cpu_device;
+    const std::string device =
+        have_gpu && std::find(engines.begin(), engines.end(), "gpu") != engines.end() ? gpu_name : cpu_device;
     const std::string base = "dropin_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
     writeBenchRecord({results_dir}, base, {{"md", text + "\nRows: " + base + ".csv\n"}, {"csv", csv.str()}}, writeFile);
   }

@@ -124,7 +124,8 @@ int runPruning(const PruneOptions& o) {
       r[p].contacts /= double(std::max(1L, r[p].steps));
       r[p].normal_only_steps = long(log[p].normal_only_steps);
       for (int k = 0; k < dvi::kStagePartCount; ++k)
-        if (log[p].part_ran[size_t(k)]) r[p].parts += std::string(r[p].parts.empty() ? "" : " ") + dvi::stagePartName(dvi::StagePart(k));
+        if (log[p].part_ran[size_t(k)])
+          r[p].parts += std::string(r[p].parts.empty() ? "" : " ") + dvi::stagePartName(dvi::StagePart(k));
       results.push_back(r[p]);
     }
   }
@@ -139,7 +140,8 @@ int runPruning(const PruneOptions& o) {
     const Result& r = results[i];
     csv << r.scene << "," << num(r.mu) << "," << (r.prune ? "true" : "false") << "," << bodies << "," << r.steps << ","
         << num(r.msPerStep(), "%.4f");
-    for (int k = 0; k < dvi::kStageCount; ++k) csv << "," << num(1e3 * r.stage[size_t(k)] / double(std::max(1L, r.steps)), "%.4f");
+    for (int k = 0; k < dvi::kStageCount; ++k)
+      csv << "," << num(1e3 * r.stage[size_t(k)] / double(std::max(1L, r.steps)), "%.4f");
     csv << "," << num(r.contacts, "%.1f") << "," << r.normal_only_steps << ","
         << (r.prune ? num(saving(i), "%.2f") : std::string()) << "," << (gpu ? "gpu" : "cpu") << "," << used_threads
         << "," << csvField(device) << "," << csvField(r.parts) << "\n";
@@ -148,14 +150,15 @@ int runPruning(const PruneOptions& o) {
   const bool pass = s0 >= 30.0;
   std::ostringstream md;
   char line[512];
-  md << "| scene | prune | ms/step | BuildRows | WarmStart | Solve | IntegrateVelocities | contacts | normal-only steps |\n"
+  md << "| scene | prune | ms/step | BuildRows | WarmStart | Solve | IntegrateVelocities | contacts | normal-only "
+        "steps |\n"
      << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
   for (const Result& r : results) {
     auto ms = [&](dvi::StageType s) { return 1e3 * r.stage[size_t(s)] / double(std::max(1L, r.steps)); };
-    std::snprintf(line, sizeof line, "| %s | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %ld/%ld |\n", r.scene.c_str(),
-                  r.prune ? "true" : "false", r.msPerStep(), ms(dvi::StageType::BuildRows), ms(dvi::StageType::WarmStart),
-                  ms(dvi::StageType::Solve), ms(dvi::StageType::IntegrateVelocities), r.contacts, r.normal_only_steps,
-                  r.steps);
+    std::snprintf(line, sizeof line, "| %s | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %ld/%ld |\n",
+                  r.scene.c_str(), r.prune ? "true" : "false", r.msPerStep(), ms(dvi::StageType::BuildRows),
+                  ms(dvi::StageType::WarmStart), ms(dvi::StageType::Solve), ms(dvi::StageType::IntegrateVelocities),
+                  r.contacts, r.normal_only_steps, r.steps);
     md << line;
   }
   std::snprintf(line, sizeof line,
@@ -165,14 +168,15 @@ int runPruning(const PruneOptions& o) {
                 s0, pass ? "MET" : "NOT MET", s1);
   md << line;
   std::printf("%s", md.str().c_str());
-  std::printf("Goal: pruning saves >= 30%% on a frictionless all-sphere scene: %s (%.1f%%)\n",
-              pass ? "MET" : "NOT MET", s0);
+  std::printf("Goal: pruning saves >= 30%% on a frictionless all-sphere scene: %s (%.1f%%)\n", pass ? "MET" : "NOT MET",
+              s0);
 
   std::ostringstream head;
   head << "# Pruning: the stages a scene does not need" << (o.quick ? " (--quick)" : "") << "\n\n"
        << "Written by the benchmark (`dvisim bench pruning`, apps/dvisim/bench_pruning.cpp); do not edit by hand.\n\n"
-       << "- device: " << device << "\n- backend: " << (gpu ? "gpu" : "cpu") << (gpu ? "" : ", threads " + std::to_string(used_threads))
-       << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scene: pile of " << n
+       << "- device: " << device << "\n- backend: " << (gpu ? "gpu" : "cpu")
+       << (gpu ? "" : ", threads " + std::to_string(used_threads)) << "\n- commit: " << commitId()
+       << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scene: pile of " << n
        << " spheres r 1 cm (bench/scaling/scaling_scenes.h), APGD 50 iterations, h = 1 ms; " << warmup
        << " warm-up steps, then " << rounds << " alternating rounds of " << per_round << " steps per system\n\n";
   const std::string md_text = head.str() + md.str();
@@ -181,7 +185,8 @@ int runPruning(const PruneOptions& o) {
   std::printf("results: %s/pruning.csv, pruning.md\n", o.out.c_str());
   if (o.record) {
     const std::string base = "pruning_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeBenchRecord({results_dir}, base, {{"md", md_text + "\nRows: " + base + ".csv\n"}, {"csv", csv.str()}}, writeFile);
+    writeBenchRecord({results_dir}, base, {{"md", md_text + "\nRows: " + base + ".csv\n"}, {"csv", csv.str()}},
+                     writeFile);
   }
   return 0;
 }

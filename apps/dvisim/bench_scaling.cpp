@@ -70,8 +70,8 @@ using dvi::benchutil::fitSteps;
 using dvi::benchutil::shell;
 using dvi::benchutil::shellQuote;
 using dvi::benchutil::slug;
-using dvi::benchutil::splitList;
 using dvi::benchutil::sourceDir;
+using dvi::benchutil::splitList;
 using dvi::benchutil::trim;
 using dvi::benchutil::utcNow;
 using dvi::benchutil::writeFile;
@@ -149,16 +149,20 @@ struct Row {
 
 long parseCount(const std::string& opt, const std::string& tok_in) {
   const std::string tok = trim(tok_in);
-  const std::string err = opt + ": expected sizes like 10k,100k,1M (integers >= 1, suffix k or M), got '" + tok_in + "'";
+  const std::string err =
+      opt + ": expected sizes like 10k,100k,1M (integers >= 1, suffix k or M), got '" + tok_in + "'";
   if (tok.empty()) throw InputError(err);
   size_t digits = 0;
   while (digits < tok.size() && std::isdigit((unsigned char)tok[digits])) ++digits;
   if (digits == 0 || digits > 9) throw InputError(err);
   double mult = 1;
   const std::string suffix = tok.substr(digits);
-  if (suffix == "k" || suffix == "K") mult = 1e3;
-  else if (suffix == "M" || suffix == "m") mult = 1e6;
-  else if (!suffix.empty()) throw InputError(err);
+  if (suffix == "k" || suffix == "K")
+    mult = 1e3;
+  else if (suffix == "M" || suffix == "m")
+    mult = 1e6;
+  else if (!suffix.empty())
+    throw InputError(err);
   const double v = std::stod(tok.substr(0, digits)) * mult;
   if (v < 1 || v > 1e8) throw InputError(opt + ": " + tok + " is out of range [1, 100M]");
   return long(v);
@@ -267,13 +271,14 @@ Row runOurs(const std::string& engine, const dvi::bench::SceneSpec& spec, const 
     std::string line = "  stages " + engine + " " + spec.name + " " + std::to_string(r.n) + " (pairs kept " +
                        std::to_string(kept) + "/" + std::to_string(p.steps) + "; ms/step):";
     for (int k = 0; k < dvi::kStageCount; ++k)
-      if (stage_ms[size_t(k)] > 0) line += " " + std::string(dvi::stageName(dvi::StageType(k))) + " " + num(stage_ms[size_t(k)], "%.3f");
+      if (stage_ms[size_t(k)] > 0)
+        line += " " + std::string(dvi::stageName(dvi::StageType(k))) + " " + num(stage_ms[size_t(k)], "%.3f");
     std::printf("%s\n", line.c_str());
   }
   r.max_pen_rel = pen / r.ref_length;
   if (r.solve_only_ms > 0 && r.iterations > 0) {
-    r.solve_gbps = dvi::bench::solverIterationBytes(r.contacts, double(r.bodies)) * r.iterations /
-                   (r.solve_only_ms * 1e-3) * 1e-9;
+    r.solve_gbps =
+        dvi::bench::solverIterationBytes(r.contacts, double(r.bodies)) * r.iterations / (r.solve_only_ms * 1e-3) * 1e-9;
     if (copy_gbps > 0) {
       r.copy_gbps = copy_gbps;
       r.pct_copy = 100.0 * r.solve_gbps / copy_gbps;
@@ -345,7 +350,8 @@ Row runBullet3Row(const dvi::bench::SceneSpec& spec, bool quick, double budget, 
   // check (seconds at 4M); a hung device is stopped after this, 420 s with the default budget: less than the 10
   // minutes a device-machine command may take, so a hang costs a row there too, not the run's output.
   const double timeout_s = 300 + 4 * budget;
-  const Bullet3Outcome b = runBullet3Isolated(job, work_dir + "/" + spec.name + "_" + countLabel(job.n) + ".log", timeout_s);
+  const Bullet3Outcome b =
+      runBullet3Isolated(job, work_dir + "/" + spec.name + "_" + countLabel(job.n) + ".log", timeout_s);
   Row r;
   r.engine = "bullet3_opencl";
   r.scene = spec.name;
@@ -382,11 +388,10 @@ std::string csvText(const std::vector<Row>& rows) {
     o << r.engine << "," << r.scene << "," << r.n << "," << (ok ? std::to_string(r.bodies) : "") << ","
       << (ok ? std::to_string(r.threads) : "") << "," << (ok ? std::to_string(r.warmup) : "") << ","
       << (ok ? std::to_string(r.steps) : "") << "," << (ok && r.pairs_kept >= 0 ? std::to_string(r.pairs_kept) : "")
-      << "," << v(r.setup_s) << "," << v(r.ms) << "," << v(r.broad) << ","
-      << v(r.narrow) << "," << v(r.solve) << "," << v(r.integrate) << "," << v(r.other) << "," << v(r.contacts) << ","
-      << v(r.iterations) << "," << v(r.max_pen_rel) << "," << num(r.ref_length) << "," << v(r.device_mib) << ","
-      << v(r.solve_gbps) << "," << v(r.copy_gbps) << "," << v(r.pct_copy) << "," << csvField(r.device) << ","
-      << csvField(r.status) << "\n";
+      << "," << v(r.setup_s) << "," << v(r.ms) << "," << v(r.broad) << "," << v(r.narrow) << "," << v(r.solve) << ","
+      << v(r.integrate) << "," << v(r.other) << "," << v(r.contacts) << "," << v(r.iterations) << ","
+      << v(r.max_pen_rel) << "," << num(r.ref_length) << "," << v(r.device_mib) << "," << v(r.solve_gbps) << ","
+      << v(r.copy_gbps) << "," << v(r.pct_copy) << "," << csvField(r.device) << "," << csvField(r.status) << "\n";
   }
   return o.str();
 }
@@ -397,14 +402,15 @@ std::string tableText(const std::vector<Row>& rows, const std::string& common_st
   std::ostringstream o;
   char line[512];
   std::snprintf(line, sizeof line, "%-14s %-5s %6s %10s %8s %8s %8s %8s %10s %8s %8s %9s %7s\n", "engine", "scene", "N",
-                "ms/step", "broad", "narrow", "solve", "integr", "contacts", "pen/ref", "dev MiB", "solv GB/s", "%copy");
+                "ms/step", "broad", "narrow", "solve", "integr", "contacts", "pen/ref", "dev MiB", "solv GB/s",
+                "%copy");
   o << line;
   auto f = [](double x, const char* fmt) { return x < 0 ? std::string("-") : num(x, fmt); };
   for (const Row& r : rows) {
     if (!r.ok()) {
       if (!common_status.empty() && r.status == common_status) continue;
-      std::snprintf(line, sizeof line, "%-14s %-5s %6s  %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(),
-                    r.status.c_str());
+      std::snprintf(line, sizeof line, "%-14s %-5s %6s  %s\n", r.engine.c_str(), r.scene.c_str(),
+                    countLabel(r.n).c_str(), r.status.c_str());
       o << line;
       continue;
     }
@@ -430,7 +436,8 @@ std::optional<long> commonN(const std::vector<Row>& rows, const std::string& a, 
   if (findRow(rows, a, scene, want) && findRow(rows, b, scene, want)) return want;
   std::optional<long> best;
   for (const Row& r : rows)
-    if (r.ok() && r.engine == a && r.scene == scene && findRow(rows, b, scene, r.n) && (!best || r.n > *best)) best = r.n;
+    if (r.ok() && r.engine == a && r.scene == scene && findRow(rows, b, scene, r.n) && (!best || r.n > *best))
+      best = r.n;
   return best;
 }
 
@@ -440,8 +447,10 @@ std::string verdict(double value, double goal, bool at_most) {
   if (met) return "met";
   const double f = at_most ? value / goal : goal / value;
   // A near miss as a percentage ("missed by 1.0x" said nothing of 296.5x against 300x).
-  if (f < 1.1) std::snprintf(b, sizeof b, "missed by %.1f%%", 100 * (f - 1));
-  else std::snprintf(b, sizeof b, "missed by %.1fx", f);
+  if (f < 1.1)
+    std::snprintf(b, sizeof b, "missed by %.1f%%", 100 * (f - 1));
+  else
+    std::snprintf(b, sizeof b, "missed by %.1fx", f);
   return b;
 }
 
@@ -469,10 +478,11 @@ std::string goalsText(const std::vector<Row>& rows, const std::string& gpu_statu
         for (const Row& r : rows)
           if (r.ok() && r.engine == "gpu" && r.scene == scene && (!bw || r.n > bw->n)) bw = &r;
       if (bw && bw->pct_copy >= 0) {
-        std::snprintf(b, sizeof b,
-                      "  solver bandwidth at %s: %.0f GB/s = %.1f%% of the measured copy %.0f GB/s (goal >= 60%%): %s%s\n",
-                      countLabel(bw->n).c_str(), bw->solve_gbps, bw->pct_copy, bw->copy_gbps,
-                      verdict(bw->pct_copy, 60, false).c_str(), tag.c_str());
+        std::snprintf(
+            b, sizeof b,
+            "  solver bandwidth at %s: %.0f GB/s = %.1f%% of the measured copy %.0f GB/s (goal >= 60%%): %s%s\n",
+            countLabel(bw->n).c_str(), bw->solve_gbps, bw->pct_copy, bw->copy_gbps,
+            verdict(bw->pct_copy, 60, false).c_str(), tag.c_str());
         o << b;
       }
     }
@@ -488,9 +498,11 @@ std::string goalsText(const std::vector<Row>& rows, const std::string& gpu_statu
       const std::optional<long> n = commonN(rows, q.a, q.b, scene, 100000);
       if (!n) continue;
       const double ratio = findRow(rows, q.b, scene, *n)->ms / findRow(rows, q.a, scene, *n)->ms;
-      std::string goal = q.goal > 0 ? " (goal >= " + num(q.goal, "%.0f") + "x at 100k): " + verdict(ratio, q.goal, false) : "";
+      std::string goal =
+          q.goal > 0 ? " (goal >= " + num(q.goal, "%.0f") + "x at 100k): " + verdict(ratio, q.goal, false) : "";
       if (q.goal > 0 && *n != 100000) goal += " -- at " + countLabel(*n) + ", 100k not run";
-      std::snprintf(b, sizeof b, "  %s at %s: %.1fx%s%s\n", q.what, countLabel(*n).c_str(), ratio, goal.c_str(), tag.c_str());
+      std::snprintf(b, sizeof b, "  %s at %s: %.1fx%s%s\n", q.what, countLabel(*n).c_str(), ratio, goal.c_str(),
+                    tag.c_str());
       o << b;
     }
   }
@@ -503,8 +515,10 @@ std::string notesText(double dev_copy, double host_copy, const std::string& bull
     << "- Stages (ms/step): broad = ComputeAabbs + BroadPhase; narrow = NarrowPhase; solve = BuildRows + WarmStart + "
        "Solve; integrate = IntegrateForces + IntegrateVelocities + IntegratePositions; ms/step is the wall time of "
        "step().\n"
-    << "- Solver bandwidth is a model: (contacts x 200 B + bodies x 50 B) per iteration x iterations / Solve-stage time "
-       "(docs/MODEL.md §8, docs/GPU_PERFORMANCE.md). It is compared with the copy bandwidth measured in this run (read + "
+    << "- Solver bandwidth is a model: (contacts x 200 B + bodies x 50 B) per iteration x iterations / Solve-stage "
+       "time "
+       "(docs/MODEL.md §8, docs/GPU_PERFORMANCE.md). It is compared with the copy bandwidth measured in this run (read "
+       "+ "
        "write): device "
     << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("not measured (no GPU)")) << ", host "
     << num(host_copy, "%.0f") << " GB/s (parallel memcpy over the CPU backend's threads).\n"
@@ -539,14 +553,17 @@ std::string makePlot(const std::string& dir) {
   if (script.empty()) return "scaling.png not written: plot_scaling.py not found (set DVISIM_PLOT_SCALING)";
   const std::string local = dir + "/plot_scaling.py";
   std::error_code ec;
-  if (fs::absolute(script) != fs::absolute(local)) fs::copy_file(script, local, fs::copy_options::overwrite_existing, ec);
+  if (fs::absolute(script) != fs::absolute(local))
+    fs::copy_file(script, local, fs::copy_options::overwrite_existing, ec);
   const std::string python = dvi::pythonWithMatplotlib();
   if (python.empty())
     return "scaling.png not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib); "
-           "the CSV is complete, plot later with: python3 " + local + " " + dir;
+           "the CSV is complete, plot later with: python3 " +
+           local + " " + dir;
   const std::string cmd = python + " " + shellQuote(ec ? script : local) + " " + shellQuote(dir) + " >" +
                           shellQuote(dir + "/plot_scaling.log") + " 2>&1";
-  if (std::system(cmd.c_str()) != 0) return "scaling.png not written: plot_scaling.py failed (see " + dir + "/plot_scaling.log)";
+  if (std::system(cmd.c_str()) != 0)
+    return "scaling.png not written: plot_scaling.py failed (see " + dir + "/plot_scaling.log)";
   return "plot: " + dir + "/scaling.png";
 }
 
@@ -556,7 +573,8 @@ int runScaling(const ScalingOptions& o) {
   // Validate everything before any work.
   std::vector<long> sizes;
   for (const std::string& t : splitList(o.sizes)) sizes.push_back(parseCount("--sizes", t));
-  if (sizes.empty()) sizes = o.quick ? std::vector<long>{1000, 4000} : std::vector<long>{10000, 100000, 1000000, 4000000};
+  if (sizes.empty())
+    sizes = o.quick ? std::vector<long>{1000, 4000} : std::vector<long>{10000, 100000, 1000000, 4000000};
   std::sort(sizes.begin(), sizes.end());
   sizes.erase(std::unique(sizes.begin(), sizes.end()), sizes.end());
   std::vector<std::string> scenes = splitList(o.scenes), engines = splitList(o.engines);
@@ -572,20 +590,24 @@ int runScaling(const ScalingOptions& o) {
   const long cpu_max = parseCount("--cpu-max", o.cpu_max);
   char* end = nullptr;
   const long threads = std::strtol(o.threads.c_str(), &end, 10);
-  if (o.threads.empty() || *end || threads < 0 || threads > 4096) throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
+  if (o.threads.empty() || *end || threads < 0 || threads > 4096)
+    throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
   const double budget = std::strtod(o.budget.c_str(), &end);
-  if (o.budget.empty() || *end || !(budget > 0) || !std::isfinite(budget)) throw InputError("--budget: expected seconds > 0, got '" + o.budget + "'");
+  if (o.budget.empty() || *end || !(budget > 0) || !std::isfinite(budget))
+    throw InputError("--budget: expected seconds > 0, got '" + o.budget + "'");
 
   const std::string dir = o.out;
   std::error_code ec;
   fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir)) throw InputError("--out " + dir + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
+  if (ec || !fs::is_directory(dir))
+    throw InputError("--out " + dir + ": cannot create the output directory" + (ec ? " (" + ec.message() + ")" : ""));
   if (::access(dir.c_str(), W_OK) != 0 || !std::ofstream(dir + "/scaling.csv"))
     throw InputError("--out " + dir + ": the directory is not writable");
   std::string results_dir;
   if (o.record) {
     results_dir = !o.results_dir.empty() ? o.results_dir
-                  : !sourceDir().empty() ? sourceDir() + "/bench/results" : std::string("bench/results");
+                  : !sourceDir().empty() ? sourceDir() + "/bench/results"
+                                         : std::string("bench/results");
     fs::create_directories(results_dir, ec);
     if (ec || !fs::is_directory(results_dir) || ::access(results_dir.c_str(), W_OK) != 0)
       throw InputError("--results-dir " + results_dir + ": cannot create or write the directory");
@@ -604,17 +626,19 @@ int runScaling(const ScalingOptions& o) {
   cfg.collision.mpr_manifold = o.mpr_manifold;
   cfg.gpu.entry_gather = o.gpu_entry_gather;
   cfg.solver.storage = o.storage == "real"    ? dvi::VectorStorage::Real
-                                : o.storage == "float" ? dvi::VectorStorage::Float
-                                                       : dvi::VectorStorage::Auto;
+                       : o.storage == "float" ? dvi::VectorStorage::Float
+                                              : dvi::VectorStorage::Auto;
   cfg.solver.apgd_speculation = o.speculation == "none"       ? dvi::ApgdSpeculation::None
-                                         : o.speculation == "accepted" ? dvi::ApgdSpeculation::Accepted
-                                         : o.speculation == "both"     ? dvi::ApgdSpeculation::Both
-                                                                       : dvi::ApgdSpeculation::Auto;
+                                : o.speculation == "accepted" ? dvi::ApgdSpeculation::Accepted
+                                : o.speculation == "both"     ? dvi::ApgdSpeculation::Both
+                                                              : dvi::ApgdSpeculation::Auto;
 
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
-  const std::string gpu_status = has("gpu") ? (have_gpu ? "" : "skipped: no GPU (" + (gpu_name.empty() ? std::string("no CUDA device") : gpu_name) + ")")
-                                            : "skipped: not in --engines";
+  const std::string gpu_status =
+      has("gpu")
+          ? (have_gpu ? "" : "skipped: no GPU (" + (gpu_name.empty() ? std::string("no CUDA device") : gpu_name) + ")")
+          : "skipped: not in --engines";
 #ifdef _OPENMP
   const int host_threads = threads > 0 ? int(threads) : omp_get_num_procs();
 #else
@@ -623,7 +647,13 @@ int runScaling(const ScalingOptions& o) {
   std::string cpu_model = dvi::System(cfg).deviceName();  // "model (k threads)" for an empty scene
   cpu_model = cpu_model.substr(0, cpu_model.rfind(" ("));
   const std::string cpu_name = cpu_model + " (" + std::to_string(host_threads) + " threads)";
-  std::printf("bench scaling: scenes %s; sizes", [&] { std::string s; for (auto& x : scenes) s += (s.empty() ? "" : ",") + x; return s; }().c_str());
+  std::printf("bench scaling: scenes %s; sizes",
+              [&] {
+                std::string s;
+                for (auto& x : scenes) s += (s.empty() ? "" : ",") + x;
+                return s;
+              }()
+                  .c_str());
   for (long n : sizes) std::printf(" %s", countLabel(n).c_str());
   std::printf("; h = 1e-3 s, APGD 50 iterations, %s precision\n", sizeof(dvi::real) == 8 ? "double" : "float");
   std::printf("GPU: %s\nCPU: %s\n", have_gpu ? gpu_name.c_str() : gpu_status.c_str(), cpu_name.c_str());
@@ -656,11 +686,13 @@ int runScaling(const ScalingOptions& o) {
   auto flush = [&] { writeFile(dir + "/scaling.csv", csvText(rows)); };
   auto report = [&](const Row& r) {
     if (r.ok())
-      std::printf("  %-6s %-4s %6s: %10.2f ms/step (%d timed after %d warm-up), %.0f contacts, pen/ref %.4f, setup %.1f s\n",
-                  r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.ms, r.steps, r.warmup, r.contacts,
-                  r.max_pen_rel, r.setup_s);
+      std::printf(
+          "  %-6s %-4s %6s: %10.2f ms/step (%d timed after %d warm-up), %.0f contacts, pen/ref %.4f, setup %.1f s\n",
+          r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.ms, r.steps, r.warmup, r.contacts,
+          r.max_pen_rel, r.setup_s);
     else if (b3_status.empty() || r.status != b3_status)
-      std::printf("  %-6s %-4s %6s: %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.status.c_str());
+      std::printf("  %-6s %-4s %6s: %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(),
+                  r.status.c_str());
     std::fflush(stdout);
   };
   auto failed = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, const std::string& status) {
@@ -684,11 +716,12 @@ int runScaling(const ScalingOptions& o) {
     try {
       const Row d = runOurs(engine, spec, cfg_default, o.quick, budget, copy);
       char buf[400];
-      std::snprintf(buf, sizeof buf, "  stop   %-4s %-4s %6s: default stop (tolerance %g, cap %d) %.2f ms/step, %.1f iterations; fixed 50 "
-                     "%.2f ms/step; ratio %.3f",
-                     engine.c_str(), spec.name.c_str(), countLabel(fixed.n).c_str(),
-                     double(cfg_default.solver.tolerance), cfg_default.solver.max_iterations, d.ms,
-                     d.iterations, fixed.ms, d.ms / fixed.ms);
+      std::snprintf(
+          buf, sizeof buf,
+          "  stop   %-4s %-4s %6s: default stop (tolerance %g, cap %d) %.2f ms/step, %.1f iterations; fixed 50 "
+          "%.2f ms/step; ratio %.3f",
+          engine.c_str(), spec.name.c_str(), countLabel(fixed.n).c_str(), double(cfg_default.solver.tolerance),
+          cfg_default.solver.max_iterations, d.ms, d.iterations, fixed.ms, d.ms / fixed.ms);
       line = buf;
     } catch (const std::exception& e) {
       line = "  stop   " + engine + " " + spec.name + " " + countLabel(fixed.n) + ": default stop failed: " + e.what();
@@ -703,9 +736,7 @@ int runScaling(const ScalingOptions& o) {
       auto attempt = [&](const std::string& engine, auto&& fn) {
         try {
           rows.push_back(fn());
-        } catch (const std::exception& e) {
-          rows.push_back(failed(engine, spec, std::string("error: ") + e.what()));
-        }
+        } catch (const std::exception& e) { rows.push_back(failed(engine, spec, std::string("error: ") + e.what())); }
         report(rows.back());
         flush();
       };
@@ -720,7 +751,8 @@ int runScaling(const ScalingOptions& o) {
         if (!b3_status.empty()) {
           rows.push_back(failed("bullet3_opencl", spec, b3_status)), report(rows.back());
         } else if (b3_failed_at.count(scene)) {
-          rows.push_back(failed("bullet3_opencl", spec, "not run: failed at smaller N (" + countLabel(b3_failed_at[scene]) + ")"));
+          rows.push_back(
+              failed("bullet3_opencl", spec, "not run: failed at smaller N (" + countLabel(b3_failed_at[scene]) + ")"));
           report(rows.back());
         } else {
           attempt("bullet3_opencl", [&] { return runBullet3Row(spec, o.quick, budget, b3_device, b3_dir); });
@@ -739,15 +771,18 @@ int runScaling(const ScalingOptions& o) {
 
   std::string b3_note = b3_status;
   if (b3_status.empty() && has("bullet3_opencl"))
-    b3_note = "b3GpuRigidBodyPipeline on " + b3_what + " (--bullet3-device " + o.bullet3_device +
-              "), the same bodies in centimetres, each configuration in a child process (logs in " + b3_dir +
-              "). Bullet 3 fixes mu = 0.7 in its kernels (the scene's 0.5 cannot be set), solves contacts with 4 PGS "
-              "iterations and a 1/60 s solver step, damps angular velocity by 0.99 per step; the peer gives it the scenes' "
-              "masses and inertias, and the mix's cylinders and ellipsoids as convex hulls (scaling_scenes.h "
-              "withConvexHulls). ms/step ends each step with clFinish; setup includes compiling Bullet 3's kernels in the "
-              "first configuration (the later ones load them from " + b3_dir + "/kernel_cache). Its penetration is "
-              "measured once, after the timed steps, by our narrow phase on the poses read back and the shapes Bullet 3 "
-              "had; after a failure at one N the larger N of that scene are not run.";
+    b3_note =
+        "b3GpuRigidBodyPipeline on " + b3_what + " (--bullet3-device " + o.bullet3_device +
+        "), the same bodies in centimetres, each configuration in a child process (logs in " + b3_dir +
+        "). Bullet 3 fixes mu = 0.7 in its kernels (the scene's 0.5 cannot be set), solves contacts with 4 PGS "
+        "iterations and a 1/60 s solver step, damps angular velocity by 0.99 per step; the peer gives it the scenes' "
+        "masses and inertias, and the mix's cylinders and ellipsoids as convex hulls (scaling_scenes.h "
+        "withConvexHulls). ms/step ends each step with clFinish; setup includes compiling Bullet 3's kernels in the "
+        "first configuration (the later ones load them from " +
+        b3_dir +
+        "/kernel_cache). Its penetration is "
+        "measured once, after the timed steps, by our narrow phase on the poses read back and the shapes Bullet 3 "
+        "had; after a failure at one N the larger N of that scene are not run.";
   else if (!has("bullet3_opencl"))
     b3_note = "not in --engines.";
   const std::string table = tableText(rows, b3_status), goals = goalsText(rows, gpu_status),
@@ -761,31 +796,44 @@ int runScaling(const ScalingOptions& o) {
 
   if (o.record) {
     const std::string device = have_gpu ? gpu_name : cpu_name;
-    const std::string base = "scaling_" + slug(have_gpu ? gpu_name : "cpu-" + cpu_model) + "_" + utcNow("%Y%m%d-%H%M%S");
+    const std::string base =
+        "scaling_" + slug(have_gpu ? gpu_name : "cpu-" + cpu_model) + "_" + utcNow("%Y%m%d-%H%M%S");
     std::ostringstream md;
     md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
        << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
-       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name
-       << "\n- Bullet 3 OpenCL: " << (!has("bullet3_opencl") ? std::string("not in --engines") : b3_status.empty() ? b3_what : b3_status)
-       << "\n- commit: " << commitId()
-       << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
-       << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg)
-       << "; APGD storage: " << storageLabel(cfg.solver, true) << " on the GPU, "
-       << (cfg.gpu.entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and isotropic inverse masses as 16 B (gpu_entry_gather), "
+       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- Bullet 3 OpenCL: "
+       << (!has("bullet3_opencl") ? std::string("not in --engines")
+           : b3_status.empty()    ? b3_what
+                                  : b3_status)
+       << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ")
+       << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
+       << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg) << "; APGD storage: " << storageLabel(cfg.solver, true)
+       << " on the GPU, "
+       << (cfg.gpu.entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and "
+                                  "isotropic inverse masses as 16 B (gpu_entry_gather), "
                                 : "the gather reading each contact's Jacobian (--gpu-entry-gather false), ")
-       << storageLabel(cfg.solver, false) << " on the CPU (arithmetic in " << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
+       << storageLabel(cfg.solver, false) << " on the CPU (arithmetic in "
+       << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
        << "; next step speculated by the test pass: " << speculationLabel(cfg.solver.apgd_speculation)
        << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.collision.broadphase.pair_margin)
-       << "\n- NarrowPhase (ours): " << (cfg.collision.mpr_manifold ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)" : "MPR's one point per pair (--mpr-manifold false)")
+       << "\n- NarrowPhase (ours): "
+       << (cfg.collision.mpr_manifold
+               ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)"
+               : "MPR's one point per pair (--mpr-manifold false)")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
-       << "- copy bandwidth (read + write): device " << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-"))
-       << ", host " << num(host_copy, "%.0f") << " GB/s\n\n"
-       << "```\n" << table << "```\n\n" << goals << "\n" << notes
-       << (stop_lines.empty() ? std::string()
-                              : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
-                                "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
-                                    stop_lines + "```\n")
+       << "- copy bandwidth (read + write): device "
+       << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-")) << ", host " << num(host_copy, "%.0f")
+       << " GB/s\n\n"
+       << "```\n"
+       << table << "```\n\n"
+       << goals << "\n"
+       << notes
+       << (stop_lines.empty()
+               ? std::string()
+               : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
+                 "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
+                     stop_lines + "```\n")
        << "\nThe rows: " << base << ".csv\n";
     for (const std::string& d : {results_dir, dir}) {
       writeFile(d + "/" + base + ".md", md.str());
@@ -823,9 +871,10 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
                   "BroadPhase keeps its pairs between steps within boxes grown by this fraction of the bin edge "
                   "(BroadPhaseSettings::pair_margin; 0: a build every step; default 0.025)")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--mpr-manifold", o->mpr_manifold,
-                  "MPR pairs of two flat features get up to 4 more points of their overlap (CollisionSettings::mpr_manifold; "
-                  "true, the default, or false: MPR's one point)");
+  cmd->add_option(
+      "--mpr-manifold", o->mpr_manifold,
+      "MPR pairs of two flat features get up to 4 more points of their overlap (CollisionSettings::mpr_manifold; "
+      "true, the default, or false: MPR's one point)");
   cmd->add_option("--gpu-entry-gather", o->gpu_entry_gather,
                   "GPU float storage: the Schur product's gather reads each adjacency entry's side of the Jacobian in "
                   "entry order and isotropic inverse masses as 16 bytes (GpuTuning::entry_gather; true, the "
@@ -837,9 +886,10 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
                   "APGD's test pass computes the next trial's step ahead (SolverSettings::apgd_speculation; the same "
                   "iterates): auto (the default), none, accepted or both")
       ->check(CLI::IsMember({"auto", "none", "accepted", "both"}));
-  cmd->add_option("--stop-compare", o->stop_compare,
-                  "on (the default): each of our rows (fixed 50 APGD iterations) runs again at the solver's default stop "
-                  "(relative tolerance, iteration cap) and the ms/step ratio is printed; off: not")
+  cmd->add_option(
+         "--stop-compare", o->stop_compare,
+         "on (the default): each of our rows (fixed 50 APGD iterations) runs again at the solver's default stop "
+         "(relative tolerance, iteration cap) and the ms/step ratio is printed; off: not")
       ->check(CLI::IsMember({"on", "off"}));
   cmd->add_option("--bullet3-device", o->bullet3_device,
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")

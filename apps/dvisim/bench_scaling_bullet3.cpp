@@ -53,7 +53,8 @@ bool parseOutcome(const std::string& path, Bullet3Outcome& r) {
     const size_t eq = line.find('=');
     if (eq != std::string::npos) kv[line.substr(0, eq)] = line.substr(eq + 1);
   }
-  for (const char* k : {"status", "device", "bodies", "warmup", "steps", "setup_s", "ms", "contacts", "max_penetration"})
+  for (const char* k :
+       {"status", "device", "bodies", "warmup", "steps", "setup_s", "ms", "contacts", "max_penetration"})
     if (!kv.count(k)) return false;
   try {
     r.status = kv["status"];
@@ -65,9 +66,7 @@ bool parseOutcome(const std::string& path, Bullet3Outcome& r) {
     r.ms = std::stod(kv["ms"]);
     r.contacts = std::stod(kv["contacts"]);
     r.max_penetration = std::stod(kv["max_penetration"]);
-  } catch (const std::exception&) {
-    return false;
-  }
+  } catch (const std::exception&) { return false; }
   return !r.status.empty();
 }
 
@@ -148,11 +147,10 @@ Bullet3Outcome runBullet3(const Bullet3Job& job) {
     peer.readBodies(pos, rot, vel);
     for (size_t i = 0; i < pos.size(); ++i)
       if (!dvi::benchutil::finite3(pos[i]) || !dvi::benchutil::finite3(vel[i]))
-        throw Bullet3Error("body " + std::to_string(i) + " has a non-finite position or velocity after the timed steps");
+        throw Bullet3Error("body " + std::to_string(i) +
+                           " has a non-finite position or velocity after the timed steps");
     r.max_penetration = double(deepestPenetration(withConvexHulls(spec), pos, rot));  // the shapes Bullet 3 had
-  } catch (const std::exception& e) {
-    r.status = std::string("error: ") + e.what();
-  }
+  } catch (const std::exception& e) { r.status = std::string("error: ") + e.what(); }
   return r;
 }
 
@@ -166,11 +164,25 @@ Bullet3Outcome runBullet3Isolated(const Bullet3Job& job, const std::string& log_
   }
   const std::string result = log_path + ".result";
   fs::remove(result, ec);
-  const std::vector<std::string> args = {exe.string(), "bench", "bullet3-worker", "--scene", job.scene,
-                                         "--n", std::to_string(job.n), "--warmup", std::to_string(job.warmup),
-                                         "--steps", std::to_string(job.steps), "--budget", dvi::benchutil::num(job.budget, "%.17g"),
-                                         "--device", dvi::bench::openClDeviceTypeName(job.device),
-                                         "--cache-dir", job.cache_dir, "--result", result};
+  const std::vector<std::string> args = {exe.string(),
+                                         "bench",
+                                         "bullet3-worker",
+                                         "--scene",
+                                         job.scene,
+                                         "--n",
+                                         std::to_string(job.n),
+                                         "--warmup",
+                                         std::to_string(job.warmup),
+                                         "--steps",
+                                         std::to_string(job.steps),
+                                         "--budget",
+                                         dvi::benchutil::num(job.budget, "%.17g"),
+                                         "--device",
+                                         dvi::bench::openClDeviceTypeName(job.device),
+                                         "--cache-dir",
+                                         job.cache_dir,
+                                         "--result",
+                                         result};
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
@@ -203,8 +215,8 @@ Bullet3Outcome runBullet3Isolated(const Bullet3Job& job, const std::string& log_
     if (secondsSince(t0) > timeout_s) {
       kill(pid, SIGKILL);
       waitpid(pid, &wstatus, 0);
-      r.status = "error: the Bullet 3 worker ran past " + dvi::benchutil::num(timeout_s, "%.0f") + " s and was stopped (" +
-                 lastLogLine(log_path) + ", " + log_path + ")";
+      r.status = "error: the Bullet 3 worker ran past " + dvi::benchutil::num(timeout_s, "%.0f") +
+                 " s and was stopped (" + lastLogLine(log_path) + ", " + log_path + ")";
       return r;
     }
     usleep(20000);
@@ -236,7 +248,8 @@ void registerBenchBullet3Worker(CLI::App& app, BenchRegistry& reg) {
   cmd->add_option("--warmup", o->warmup, "Warm-up steps")->check(CLI::Range(0, 1000000));
   cmd->add_option("--steps", o->steps, "Timed steps at most")->check(CLI::Range(1, 1000000));
   cmd->add_option("--budget", o->budget, "Seconds of timed steps at most")->check(CLI::PositiveNumber);
-  cmd->add_option("--device", o->device, "OpenCL device type: gpu, cpu or any")->check(CLI::IsMember({"gpu", "cpu", "any"}));
+  cmd->add_option("--device", o->device, "OpenCL device type: gpu, cpu or any")
+      ->check(CLI::IsMember({"gpu", "cpu", "any"}));
   cmd->add_option("--cache-dir", o->cache_dir, "Bullet 3's kernel cache (default: under the temp directory)");
   cmd->add_option("--result", o->result, "Write the outcome (key=value lines) to this file too");
   addBenchRunner(reg, cmd, [o] { return runWorker(*o); });

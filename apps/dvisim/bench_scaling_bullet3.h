@@ -22,7 +22,7 @@ struct Bullet3Job {
   int warmup = 0, steps = 0;  // steps: at most; fewer when the last warm-up step says they would pass `budget`
   double budget = 30;         // seconds of timed steps
   dvi::bench::OpenClDeviceType device = dvi::bench::OpenClDeviceType::Gpu;
-  std::string cache_dir;      // Bullet 3's compiled kernels (Bullet3PeerSettings::kernel_cache_dir)
+  std::string cache_dir;  // Bullet 3's compiled kernels (Bullet3PeerSettings::kernel_cache_dir)
 };
 
 struct Bullet3Outcome {
@@ -30,10 +30,10 @@ struct Bullet3Outcome {
   std::string device;         // Bullet3Peer::description()
   long bodies = 0;            // all bodies, the ground and the walls included
   int warmup = 0, steps = 0;
-  double setup_s = 0;         // device, context, kernels (compiled or from the cache), scene upload
-  double ms = 0;              // per timed step, each step ended by clFinish
-  double contacts = 0;        // contact manifolds per timed step
-  double max_penetration = 0; // metres, after the timed steps, on withConvexHulls(scene) (scaling_scenes.h)
+  double setup_s = 0;          // device, context, kernels (compiled or from the cache), scene upload
+  double ms = 0;               // per timed step, each step ended by clFinish
+  double contacts = 0;         // contact manifolds per timed step
+  double max_penetration = 0;  // metres, after the timed steps, on withConvexHulls(scene) (scaling_scenes.h)
   bool ok() const { return status == "ok"; }
 };
 

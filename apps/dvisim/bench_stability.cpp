@@ -75,15 +75,15 @@ struct Case {
   int steps = 100;
   // Ours runs every case at the solver's default stop (relative tolerance and iteration cap, SolverSettings).
   // A case may hand-set them only with the reason in `why` (the row's note shows it).
-  int iterations = 0;    // > 0: the iteration cap (a fixed count when tolerance is 0 too)
-  double tolerance = -1; // >= 0: a hand-set relative tolerance
+  int iterations = 0;     // > 0: the iteration cap (a fixed count when tolerance is 0 too)
+  double tolerance = -1;  // >= 0: a hand-set relative tolerance
   std::string why;
   Vec3 gravity{0, real(-9.81), 0};
   double bullet_scale = 1;
   double settle_t = 0;   // late_pen_rel from this time on
   double length = 0.01;  // L of the energy scale
   std::function<Verdict(const Metrics&)> judge;
-  std::string skip;  // non-empty: not run, the reason
+  std::string skip;   // non-empty: not run, the reason
   bool huge = false;  // the 1e6 pile: GPU only, penetration from the engine's own statistics
 };
 
@@ -142,8 +142,8 @@ double energyOf(const Runner& r, const std::vector<btRigidBody*>& bodies, Vec3 g
     const Vec3 v = r.vel(i), wb = dvi::rotateInv(r.rot(i), r.omega(i));
     const double iw[3] = {inv_i.x() > 0 ? 1.0 / inv_i.x() : 0, inv_i.y() > 0 ? 1.0 / inv_i.y() : 0,
                           inv_i.z() > 0 ? 1.0 / inv_i.z() : 0};
-    const double k = 0.5 * m * double(dvi::dot(v, v)) +
-                     0.5 * (iw[0] * wb.x * wb.x + iw[1] * wb.y * wb.y + iw[2] * wb.z * wb.z);
+    const double k =
+        0.5 * m * double(dvi::dot(v, v)) + 0.5 * (iw[0] * wb.x * wb.x + iw[1] * wb.y * wb.y + iw[2] * wb.z * wb.z);
     ke += k;
     e += k - m * double(dvi::dot(g, r.pos(i)));
   }
@@ -243,8 +243,10 @@ void buildStack(BtBodies& s, int n, double a, double ratio, double mu) {
 // The solver settings of ours for a case: the defaults unless the case hand-sets them (Case::why).
 void applySolver(const Case& c, dvi::SolverSettings& s) {
   if (c.iterations > 0) s.max_iterations = c.iterations;
-  if (c.tolerance >= 0) s.tolerance = real(c.tolerance);
-  else if (c.iterations > 0) s.tolerance = 0;  // a fixed count
+  if (c.tolerance >= 0)
+    s.tolerance = real(c.tolerance);
+  else if (c.iterations > 0)
+    s.tolerance = 0;  // a fixed count
 }
 
 std::vector<Case> makeCases(bool quick, bool have_gpu) {
@@ -287,9 +289,11 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
       btCollisionShape* sph = s.own(new btSphereShape(btScalar(r)));
       const double m = sphereMass(r);
       for (int i = 0; i < 4; ++i)
-        s.addShared(sph, m, Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
+        s.addShared(sph, m,
+                    Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
                     real(0.7));
-      s.addShared(sph, m * ratio, Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)}, real(0.7));
+      s.addShared(sph, m * ratio, Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)},
+                  real(0.7));
     };
     c.dt = 1e-3, c.steps = quick ? 300 : 1000, c.length = r, c.bullet_scale = 100, c.bullet_units = "cm";
     c.criterion = "2x2 spheres (r 1 cm) in a box, one " + fmt("%.0e", ratio) +
@@ -347,14 +351,22 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     // Each cube starts 0.1% of its size above the one below, so the stack first closes its gaps (0.11 mm in
     // all, 2.2 sizes of the 0.1 mm cube): bodies are judged against their analytic rest positions (cube i at
     // y = 2 sum_{j<i} a_j + a_i, spheres at y = r), not against where they started.
-    c.criterion = "cubes and spheres of 0.1 mm..10 cm, h = 1e-3 s: every body ends within 10% of its size of its "
-                  "analytic rest position, penetration < 5% of the pair's size";
+    c.criterion =
+        "cubes and spheres of 0.1 mm..10 cm, h = 1e-3 s: every body ends within 10% of its size of its "
+        "analytic rest position, penetration < 5% of the pair's size";
     c.judge = [](const Metrics& m) {
       Verdict v;
       if (broken(m, v)) return v;
       const double sizes[] = {0, 0.05, 0.005, 0.0005, 0.00005, 0.05, 0.005, 0.0005, 0.00005};
-      const char* names[] = {"", "10 cm cube", "1 cm cube", "1 mm cube", "0.1 mm cube", "10 cm sphere", "1 cm sphere",
-                             "1 mm sphere", "0.1 mm sphere"};
+      const char* names[] = {"",
+                             "10 cm cube",
+                             "1 cm cube",
+                             "1 mm cube",
+                             "0.1 mm cube",
+                             "10 cm sphere",
+                             "1 cm sphere",
+                             "1 mm sphere",
+                             "0.1 mm sphere"};
       double worst = 0;
       size_t wi = 1;
       double below = 0;  // height of the cubes below cube i
@@ -412,7 +424,8 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     c.judge = [](const Metrics& m) {
       Verdict v;
       if (broken(m, v)) return v;
-      v.measured = fmt("pen %.3g, energy growth %.3g", m.pen_rel, m.energy_growth) + fmt(", vmax %.3g m/s", m.max_speed);
+      v.measured =
+          fmt("pen %.3g, energy growth %.3g", m.pen_rel, m.energy_growth) + fmt(", vmax %.3g m/s", m.max_speed);
       v.pass = m.pen_rel < 0.05 && m.energy_growth < 0.1 && m.max_speed < 0.5;
       return v;
     };
@@ -438,7 +451,8 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
       if (broken(m, v)) return v;
       const double x = double(m.final_pos.back().x);
       const bool tunnel = x > 0;
-      v.measured = std::string(tunnel ? "TUNNELLED" : "bounced/stopped") + fmt(", final x %.3g m, vmax %.3g m/s", x, m.max_speed);
+      v.measured = std::string(tunnel ? "TUNNELLED" : "bounced/stopped") +
+                   fmt(", final x %.3g m, vmax %.3g m/s", x, m.max_speed);
       v.pass = !tunnel && m.max_speed <= 1.05 * speed;
       return v;
     };
@@ -497,8 +511,9 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     c.dt = 1e-3, c.steps = quick ? 500 : 1000, c.length = r, c.settle_t = 0.4;
     c.bullet_scale = 100, c.bullet_units = "cm";
-    c.criterion = "27 spheres overlapping by 25% of their diameter and 2 boxes by 25%: penetration < 5% of size "
-                  "from t = 0.4 s on, max speed < 1 m/s (no explosion)";
+    c.criterion =
+        "27 spheres overlapping by 25% of their diameter and 2 boxes by 25%: penetration < 5% of size "
+        "from t = 0.4 s on, max speed < 1 m/s (no explosion)";
     c.judge = [](const Metrics& m) {
       Verdict v;
       if (broken(m, v)) return v;
@@ -524,8 +539,9 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
             real(0.7), Vec3{0, 0, 0}, aboutZ(kPi / 2));
     };
     c.dt = 1e-3, c.steps = quick ? 500 : 1000, c.length = t, c.settle_t = 0.4;
-    c.criterion = "plates 2 mm thick and a 2 mm needle dropped onto the ground and onto each other: nothing passes "
-                  "through (order kept, above ground), penetration < 5% of the thin half size from t = 0.4 s on";
+    c.criterion =
+        "plates 2 mm thick and a 2 mm needle dropped onto the ground and onto each other: nothing passes "
+        "through (order kept, above ground), penetration < 5% of the thin half size from t = 0.4 s on";
     c.judge = [t](const Metrics& m) {
       Verdict v;
       if (broken(m, v)) return v;
@@ -543,9 +559,12 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     c.name = "pile_1e6";
     c.huge = true;
     c.dt = 1e-3, c.steps = 100, c.length = 0.01;
-    c.criterion = "1e6 spheres (r 1 cm) in a box, h = 1e-3 s, 100 steps: no NaN, penetration < 5% of r, max speed < 1 m/s";
-    if (quick) c.skip = "skipped: --quick (full mode only)";
-    else if (!have_gpu) c.skip = "skipped: needs the GPU backend (no GPU in this run)";
+    c.criterion =
+        "1e6 spheres (r 1 cm) in a box, h = 1e-3 s, 100 steps: no NaN, penetration < 5% of r, max speed < 1 m/s";
+    if (quick)
+      c.skip = "skipped: --quick (full mode only)";
+    else if (!have_gpu)
+      c.skip = "skipped: needs the GPU backend (no GPU in this run)";
     c.judge = [](const Metrics& m) {
       Verdict v;
       if (broken(m, v)) return v;
@@ -572,14 +591,17 @@ Metrics runHugePile(const Case& c, int threads) {
   for (int k = 0; k < 4; ++k) {
     const bool xw = k < 2;
     const double c0 = (k % 2 == 0) ? -0.05 : w + 0.05;
-    btCollisionShape* wall = new btBoxShape(xw ? btVector3(0.05f, btScalar(h), btScalar(w)) : btVector3(btScalar(w), btScalar(h), 0.05f));
+    btCollisionShape* wall =
+        new btBoxShape(xw ? btVector3(0.05f, btScalar(h), btScalar(w)) : btVector3(btScalar(w), btScalar(h), 0.05f));
     s.add(wall, 0, xw ? Vec3{real(c0), real(h), real(w / 2)} : Vec3{real(w / 2), real(h), real(c0)}, real(0.7));
   }
   btCollisionShape* sph = s.own(new btSphereShape(btScalar(r)));
   for (long i = 0; i < n; ++i) {
     const long l = i / (side * side), in = i % (side * side);
-    s.addShared(sph, sphereMass(r), Vec3{real((in % side + 0.5) * pitch + 0.0004 * ((i * 7) % 5 - 2)), real(r * (1.001 + 2.002 * l)),
-                                         real((in / side + 0.5) * pitch)}, real(0.7));
+    s.addShared(sph, sphereMass(r),
+                Vec3{real((in % side + 0.5) * pitch + 0.0004 * ((i * 7) % 5 - 2)), real(r * (1.001 + 2.002 * l)),
+                     real((in / side + 0.5) * pitch)},
+                real(0.7));
   }
   dvi::SystemConfig cfg;
   cfg.step.dt = real(c.dt);
@@ -627,10 +649,11 @@ std::string csvText(const std::vector<Row>& rows) {
   for (const Row& r : rows) {
     const bool ran = r.verdict != "SKIP";
     auto v = [&](double x) { return ran ? num(x) : std::string(); };
-    o << r.name << "," << r.engine << "," << csvField(r.criterion) << "," << csvField(r.measured) << "," << r.verdict << ","
-      << v(r.m.pen_rel) << "," << v(r.m.late_pen_rel) << "," << v(r.m.energy_growth) << "," << v(r.m.max_speed) << ","
-      << (ran ? (r.m.nan ? "1" : "0") : "") << "," << num(r.dt) << "," << r.steps << "," << (ran ? std::to_string(r.m.steps_done) : "")
-      << "," << r.bodies << "," << v(r.m.wall_s) << "," << csvField(r.device) << "," << csvField(r.note) << "\n";
+    o << r.name << "," << r.engine << "," << csvField(r.criterion) << "," << csvField(r.measured) << "," << r.verdict
+      << "," << v(r.m.pen_rel) << "," << v(r.m.late_pen_rel) << "," << v(r.m.energy_growth) << "," << v(r.m.max_speed)
+      << "," << (ran ? (r.m.nan ? "1" : "0") : "") << "," << num(r.dt) << "," << r.steps << ","
+      << (ran ? std::to_string(r.m.steps_done) : "") << "," << r.bodies << "," << v(r.m.wall_s) << ","
+      << csvField(r.device) << "," << csvField(r.note) << "\n";
   }
   return o.str();
 }
@@ -658,12 +681,15 @@ std::string summaryText(const std::vector<Row>& rows) {
     if (r.verdict == "SKIP") continue;
     const bool is_ours = r.engine == "cpu" || r.engine == "gpu";
     (is_ours ? ours : bl)++;
-    if (r.verdict == "PASS") (is_ours ? ours_pass : bl_pass)++;
-    else (is_ours ? fails : bullet_fails).push_back(&r);
+    if (r.verdict == "PASS")
+      (is_ours ? ours_pass : bl_pass)++;
+    else
+      (is_ours ? fails : bullet_fails).push_back(&r);
   }
-  o << "Summary: our engine passes " << ours_pass << " of " << ours << " runs; Bullet passes " << bl_pass << " of " << bl
-    << ".\n";
-  if (fails.empty()) o << "Our engine: no failures.\n";
+  o << "Summary: our engine passes " << ours_pass << " of " << ours << " runs; Bullet passes " << bl_pass << " of "
+    << bl << ".\n";
+  if (fails.empty())
+    o << "Our engine: no failures.\n";
   else {
     o << "FAILURES of our engine (" << fails.size() << "):\n";
     for (const Row* r : fails) o << "  - " << r->name << " [" << r->engine << "]: " << r->measured << "\n";
@@ -755,7 +781,8 @@ int runStability(const StabOptions& o) {
         if (const auto* ours = dynamic_cast<const OursRunner*>(run.get())) {
           const dvi::ConvergenceLog& cl = ours->sys->convergence();
           r.note += "; " + std::to_string(cl.steps_not_converged) + "/" + std::to_string(cl.steps) +
-                    " steps missed the tolerance, worst relative residual " + fmt("%.2g", double(cl.worst_relative_residual));
+                    " steps missed the tolerance, worst relative residual " +
+                    fmt("%.2g", double(cl.worst_relative_residual));
         }
         const Verdict v = c.judge(r.m);
         r.measured = v.measured, r.verdict = v.pass ? "PASS" : "FAIL";
@@ -783,7 +810,8 @@ int runStability(const StabOptions& o) {
      << "- penetration is measured for every engine by our collision detection on the engine's poses, relative to the "
         "pair's size (the smaller smallest half dimension); energy growth is relative to max(initial kinetic energy, "
         "sum m g L).\n\n"
-     << mdTable(rows) << "\n" << summary << "\nTotal run time " << num(total, "%.1f") << " s.\n";
+     << mdTable(rows) << "\n"
+     << summary << "\nTotal run time " << num(total, "%.1f") << " s.\n";
   writeFile(o.out + "/stability.csv", csvText(rows));
   writeFile(o.out + "/stability.md", md.str());
   std::printf("\n%s", summary.c_str());
@@ -801,6 +829,7 @@ void registerBenchStability(CLI::App& app, BenchRegistry& reg) {
   auto o = std::make_shared<StabOptions>();
   CLI::App* cmd = benchCommand(app)->add_subcommand(
       "stability", "Stiff and extreme cases on our backends and Bullet, each with a criterion and a verdict");
-  addBenchBasics(cmd, *o, "stability", "stability.csv, stability.md", "Shorter runs and smaller scenes (CI smoke test)");
+  addBenchBasics(cmd, *o, "stability", "stability.csv, stability.md",
+                 "Shorter runs and smaller scenes (CI smoke test)");
   addBenchRunner(reg, cmd, [o] { return runStability(*o); });
 }

@@ -55,7 +55,6 @@ json parseJson(const std::string& text, const std::string& origin) {
   }
 }
 
-
 void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
   std::string list;
   for (const char* c : choices) {
@@ -139,7 +138,8 @@ bool resumeMayChange(const std::string& key) {
 }
 
 // Refuses a resumed configuration that differs from the checkpoint's in a key that changes the physics.
-void checkResumable(const json& before, const json& now, const std::string& collision_before, const std::string& collision) {
+void checkResumable(const json& before, const json& now, const std::string& collision_before,
+                    const std::string& collision) {
   std::map<std::string, json> a, b;
   flatten(before, "", a);
   flatten(now, "", b);
@@ -151,8 +151,10 @@ void checkResumable(const json& before, const json& now, const std::string& coll
   for (const auto& [k, v] : a) {
     if (resumeMayChange(k)) continue;
     const auto it = b.find(k);
-    if (it == b.end()) note(k, v.dump(), "absent");
-    else if (it->second != v) note(k, v.dump(), it->second.dump());
+    if (it == b.end())
+      note(k, v.dump(), "absent");
+    else if (it->second != v)
+      note(k, v.dump(), it->second.dump());
   }
   for (const auto& [k, v] : b)
     if (!resumeMayChange(k) && !a.count(k)) note(k, "absent", v.dump());
@@ -185,7 +187,8 @@ std::string resolveCesBackend(const std::string& requested) {
     std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
   }
   if (backend == "gpu" && !have_gpu)
-    throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
+    throw InputError("--backend gpu: no usable GPU device" +
+                     (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
   return backend;
 }
 
@@ -284,7 +287,9 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
   }
   // The bin each kind belongs in: metal -> conductor, plastic -> nonconductor, middling -> middling.
   auto ownBin = [](MaterialKind kind) {
-    return kind == MaterialKind::Metal ? kBinConductor : kind == MaterialKind::Plastic ? kBinNonconductor : kBinMiddling;
+    return kind == MaterialKind::Metal     ? kBinConductor
+           : kind == MaterialKind::Plastic ? kBinNonconductor
+                                           : kBinMiddling;
   };
   for (const CollectedParticle& c : m.collected()) {
     const size_t k = size_t(c.material);
@@ -348,9 +353,7 @@ bool isCesScene(const std::string& path) {
   ss << f.rdbuf();
   try {
     return isCesDocument(json::parse(ss.str()));
-  } catch (const json::exception&) {
-    return false;
-  }
+  } catch (const json::exception&) { return false; }
 }
 
 int runCesMachine(const CesRunOptions& o) {
@@ -382,7 +385,8 @@ int runCesMachine(const CesRunOptions& o) {
     }
     origin = o.resume + "/checkpoint/ces_config.json";
     if (parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin) != doc)
-      throw InputError("--resume " + o.resume + ": checkpoint/ces_config.json was edited (it differs from the configuration "
+      throw InputError("--resume " + o.resume +
+                       ": checkpoint/ces_config.json was edited (it differs from the configuration "
                        "recorded in checkpoint/state.bin; change settings with --set)");
   } else {
     doc = loadCesDocument(o.scene, origin);
@@ -400,7 +404,8 @@ int runCesMachine(const CesRunOptions& o) {
     sets.push_back("duration_s=" + fmt(t));
   }
   if (!o.solver.empty()) sets.push_back("solver.type=" + o.solver);
-  if (!o.iterations.empty()) sets.push_back("solver.iterations=" + std::to_string(parseInt("--iterations", o.iterations, 1, 1000000)));
+  if (!o.iterations.empty())
+    sets.push_back("solver.iterations=" + std::to_string(parseInt("--iterations", o.iterations, 1, 1000000)));
   if (!o.frames.empty()) sets.push_back("output.frames=" + std::to_string(parseInt("--frames", o.frames, 0, 1000000)));
   const json doc_before = doc;
   CesConfig cfg = parseCesDocument(doc, sets, origin);
@@ -426,7 +431,8 @@ int runCesMachine(const CesRunOptions& o) {
     std::istringstream in(std::move(state_bytes), std::ios::binary);
     m.load(in);
     if (m.steps() > total)
-      throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) + " s, beyond duration_s = " + fmt(cfg.duration));
+      throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) +
+                       " s, beyond duration_s = " + fmt(cfg.duration));
   }
   const int64_t first = m.steps();
   std::printf("ces machine: %s, %s field, drum %s at %g rpm, U = %g kV, feed %g g/s for %g s; %lld steps of %g s%s\n",
@@ -445,7 +451,9 @@ int runCesMachine(const CesRunOptions& o) {
     frame_at.push_back(int64_t(std::llround(double(k) * double(total) / double(cfg.frames - 1))));
   // Steps between checkpoints; an interval longer than the run is none before the end (and no overflow).
   const double ckpt_steps = cfg.checkpoint_every > 0 ? std::round(cfg.checkpoint_every / cfg.step.dt) : 0;
-  const int64_t ckpt_every = ckpt_steps <= 0 ? 0 : ckpt_steps > double(total) ? total + 1 : std::max<int64_t>(1, int64_t(ckpt_steps));
+  const int64_t ckpt_every = ckpt_steps <= 0              ? 0
+                             : ckpt_steps > double(total) ? total + 1
+                                                          : std::max<int64_t>(1, int64_t(ckpt_steps));
   const std::string ckpt_dir = out + "/checkpoint";
   bool checkpointed = false;
   CesFrameWriter frames(out);
@@ -494,8 +502,9 @@ int runCesMachine(const CesRunOptions& o) {
         const double frac = double(k + 1 - first) / double(std::max<int64_t>(1, total - first));
         const double el = std::chrono::duration<double>(now - t0).count();
         const MassBalance b = m.balance();
-        std::fprintf(stderr, "\r[%3d%%] t = %.3f s, %lld fed, %lld collected, %lld in flight, ETA %.0f s  ", int(frac * 100),
-                     m.time(), (long long)b.fed, (long long)b.collected, (long long)b.in_flight, frac > 0 ? el * (1 - frac) / frac : 0.0);
+        std::fprintf(stderr, "\r[%3d%%] t = %.3f s, %lld fed, %lld collected, %lld in flight, ETA %.0f s  ",
+                     int(frac * 100), m.time(), (long long)b.fed, (long long)b.collected, (long long)b.in_flight,
+                     frac > 0 ? el * (1 - frac) / frac : 0.0);
         std::fflush(stderr);
       }
     }
@@ -505,9 +514,7 @@ int runCesMachine(const CesRunOptions& o) {
     if (m.system().backendName() != "cpu") checkFiniteState(m.steps(), m.time(), m.system().bodies());
     writeCheckpoint(m, doc, collision, ckpt_dir);
     checkpointed = true;
-  } catch (...) {
-    failure = std::current_exception();
-  }
+  } catch (...) { failure = std::current_exception(); }
   // Diverged or failed after simulating: what there is (a summary with the status and the error, the last
   // checkpoint; that of the run resumed from when this one wrote none) in place of the previous results, then the
   // exception again (main() turns it into the exit code).
@@ -532,8 +539,7 @@ int runCesMachine(const CesRunOptions& o) {
       rd.commit();
       std::printf("results so far: %s/ (summary.json status \"%s\"%s)\n", rd.out().c_str(), runStatusName(code),
                   summary["checkpoint"].is_null() ? "" : ", checkpoint/");
-    } catch (...) {
-    }
+    } catch (...) {}
     std::rethrow_exception(failure);
   };
   if (failure) writeFailure(failure);
@@ -604,8 +610,10 @@ int runCesMachine(const CesRunOptions& o) {
         fed += m.particles().mass_fg[i];
         if (m.particles().status[i] == kStatusCollected) col += m.particles().mass_fg[i];
       }
-      mats.push_back({{"name", cfg.materials[k].name}, {"kind", materialKindName(cfg.materials[k].kind)},
-                      {"fed_mass_kg", double(fed) * kFemtogram}, {"collected_mass_kg", double(col) * kFemtogram}});
+      mats.push_back({{"name", cfg.materials[k].name},
+                      {"kind", materialKindName(cfg.materials[k].kind)},
+                      {"fed_mass_kg", double(fed) * kFemtogram},
+                      {"collected_mass_kg", double(col) * kFemtogram}});
     }
     c["materials"] = mats;
     std::string plots = "disabled (ces.output.plots = false)";
@@ -613,7 +621,8 @@ int runCesMachine(const CesRunOptions& o) {
 
     std::vector<BodyState> state;
     const BodyArrays& b = m.system().bodies();
-    for (size_t i = 0; i < b.count(); ++i) state.push_back(BodyState{b.pos[i], b.rot[i], b.vel[i], b.omega[i], b.size[i]});
+    for (size_t i = 0; i < b.count(); ++i)
+      state.push_back(BodyState{b.pos[i], b.rot[i], b.vel[i], b.omega[i], b.size[i]});
     writeBodiesCsv(out + "/bodies.csv", state);
     writeFileAtomic(out + "/ces_particles.csv", cesParticlesCsv(m));
     writeFileAtomic(out + "/ces_collected.csv", cesCollectedCsv(m));
@@ -631,7 +640,9 @@ int runCesMachine(const CesRunOptions& o) {
 
     const double g = kFemtogram * 1e3;
     std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
-    if (bal.lost > 0) std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n", (long long)bal.lost);
+    if (bal.lost > 0)
+      std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n",
+                   (long long)bal.lost);
     const SplitterCell& best = table.cells[table.best];
     {
       const CoronaInfo ci = m.coronaInfo();
@@ -639,33 +650,38 @@ int runCesMachine(const CesRunOptions& o) {
         std::printf("corona: onset %.3g kV, %s, current %.4g uA/m\n", ci.onset_voltage * 1e-3,
                     ci.ionised ? "ionised" : "below onset (Laplace field, no ions)", ci.current_per_m * 1e6);
     }
-    std::printf("bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g (nonconductor/middling/conductor)\n",
-                cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
-                double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
-    std::printf("best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
-                "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
-                best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
-                cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic,
-                best.recovery_plastic, best.middling_fraction);
+    std::printf(
+        "bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g "
+        "(nonconductor/middling/conductor)\n",
+        cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
+        double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
+    std::printf(
+        "best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
+        "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
+        best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
+        cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic, best.recovery_plastic,
+        best.middling_fraction);
     rd.commit();
-    std::printf("results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n", rd.out().c_str(),
-                cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
-                frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
-                wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
+    std::printf(
+        "results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n",
+        rd.out().c_str(),
+        cfg.plots && plots.find("png") != std::string::npos ? ", distribution.png, splitters.png" : "",
+        frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd + machine.vtp").c_str() : "",
+        wall, steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0);
     const std::string remedy = "raise --set solver.iterations (now " + std::to_string(cfg.solver.max_iterations) + ")";
     const std::string unconverged = convergenceWarning(m.system().convergence(), m.system().config().solver, remedy);
     if (!unconverged.empty()) std::fprintf(stderr, "%s\n", unconverged.c_str());
     if (interrupted) {
       std::fflush(stdout);
-      std::fprintf(stderr, "dvisim: interrupted by %s at t = %g s (step %lld of %lld); the results so far and a checkpoint "
-                   "(--resume %s) are in %s/\n", stopSignalName(), m.time(), (long long)m.steps(), (long long)total,
-                   rd.out().c_str(), rd.out().c_str());
+      std::fprintf(stderr,
+                   "dvisim: interrupted by %s at t = %g s (step %lld of %lld); the results so far and a checkpoint "
+                   "(--resume %s) are in %s/\n",
+                   stopSignalName(), m.time(), (long long)m.steps(), (long long)total, rd.out().c_str(),
+                   rd.out().c_str());
       return kExitInterrupted;
     }
     return 0;
-  } catch (...) {
-    writeFailure(std::current_exception());
-  }
+  } catch (...) { writeFailure(std::current_exception()); }
   return kExitFailed;  // not reached: writeFailure rethrows
 }
 

@@ -21,12 +21,12 @@ namespace ces {
 
 // The run options as typed (validated here). Empty strings: not given.
 struct CesRunOptions {
-  std::string scene;                 // .json with a top-level "ces"; empty: the embedded default machine
-  std::vector<std::string> sets;     // KEY=VALUE, KEY relative to "ces" (or starting with "ces.")
-  std::string backend = "auto";      // auto | cpu | gpu
+  std::string scene;              // .json with a top-level "ces"; empty: the embedded default machine
+  std::vector<std::string> sets;  // KEY=VALUE, KEY relative to "ces" (or starting with "ces.")
+  std::string backend = "auto";   // auto | cpu | gpu
   std::string collision, solver, iterations, dt, time, steps, threads, frames;
   std::string out = "dvisim-out";
-  std::string resume;                // directory of an earlier run (its checkpoint/)
+  std::string resume;  // directory of an earlier run (its checkpoint/)
 };
 
 // True for an empty path (the default is the CES machine) and for a readable .json whose top level is
@@ -56,9 +56,9 @@ struct CesRunTotals {
   int64_t steps = 0, contacts = 0, max_contacts = 0, iterations = 0;
   real max_penetration = 0, residual = 0;
   double drive_torque_sum = 0;
-  StageLog log;                       // seconds per stage, stages and parts that ran, what was left out
-  void add(const CesMachine& m);      // after each CesMachine::step()
-  nlohmann::json stageNames() const;  // the stages that ran (stageName), in stage order
+  StageLog log;                         // seconds per stage, stages and parts that ran, what was left out
+  void add(const CesMachine& m);        // after each CesMachine::step()
+  nlohmann::json stageNames() const;    // the stages that ran (stageName), in stage order
   nlohmann::json stageSeconds() const;  // {name: seconds summed over the run}
 };
 

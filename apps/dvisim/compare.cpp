@@ -92,22 +92,28 @@ void loadsWithoutCrashing(const std::string& path) {
     ::_exit(ok ? 0 : 3);
   }
   int status = 0;
-  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
   if (WIFSIGNALED(status))
     throw InputError(path + ": corrupt .bullet file (Bullet's importer " +
-                     (WTERMSIG(status) == SIGALRM ? std::string("did not finish in 60 s") : "crashed on it: " + std::string(strsignal(WTERMSIG(status)))) + ")");
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) throw InputError(path + ": Bullet's importer could not read the file");
+                     (WTERMSIG(status) == SIGALRM ? std::string("did not finish in 60 s")
+                                                  : "crashed on it: " + std::string(strsignal(WTERMSIG(status)))) +
+                     ")");
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    throw InputError(path + ": Bullet's importer could not read the file");
 }
 
-bool endsWith(const std::string& s, const std::string& e) { return s.size() >= e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0; }
+bool endsWith(const std::string& s, const std::string& e) {
+  return s.size() >= e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0;
+}
 
 void loadInto(EngineWorld& e, const CompareOptions& o, const dvi::Scene& settings_scene) {
-  e.world->setGravity(btVector3(btScalar(settings_scene.settings.system.step.gravity.x), btScalar(settings_scene.settings.system.step.gravity.y),
+  e.world->setGravity(btVector3(btScalar(settings_scene.settings.system.step.gravity.x),
+                                btScalar(settings_scene.settings.system.step.gravity.y),
                                 btScalar(settings_scene.settings.system.step.gravity.z)));
   if (endsWith(o.scene, ".bullet")) {
     e.importer = std::make_unique<btBulletWorldImporter>(e.world.get());
-    if (!e.importer->loadFile(o.scene.c_str())) throw InputError(o.scene + ": Bullet's importer could not read the file");
+    if (!e.importer->loadFile(o.scene.c_str()))
+      throw InputError(o.scene + ": Bullet's importer could not read the file");
     return;
   }
   e.scene = dvi::Scene::load(o.scene, o.sets);
@@ -125,7 +131,8 @@ double deepestPenetration(btDispatcher& d) {
   double deepest = 0;
   for (int i = 0; i < d.getNumManifolds(); ++i) {
     const btPersistentManifold* m = d.getManifoldByIndexInternal(i);
-    for (int k = 0; k < m->getNumContacts(); ++k) deepest = std::fmax(deepest, -double(m->getContactPoint(k).getDistance()));
+    for (int k = 0; k < m->getNumContacts(); ++k)
+      deepest = std::fmax(deepest, -double(m->getContactPoint(k).getDistance()));
   }
   return deepest;
 }
@@ -143,7 +150,8 @@ double energy(const std::vector<btRigidBody*>& bodies) {
   return e;
 }
 
-EngineResult runEngine(const std::string& name, const CompareOptions& o, const dvi::Scene& s, double dt, int64_t steps) {
+EngineResult runEngine(const std::string& name, const CompareOptions& o, const dvi::Scene& s, double dt,
+                       int64_t steps) {
   EngineResult r;
   r.name = name;
   EngineWorld e;
@@ -168,7 +176,8 @@ EngineResult runEngine(const std::string& name, const CompareOptions& o, const d
   }
   r.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.steps = steps;
-  for (const btRigidBody* b : bodies) r.bodies.push_back(BodyState{b->getCenterOfMassPosition(), b->getLinearVelocity()});
+  for (const btRigidBody* b : bodies)
+    r.bodies.push_back(BodyState{b->getCenterOfMassPosition(), b->getLinearVelocity()});
   r.energy = energy(bodies);
   r.ran = true;
   return r;
@@ -209,8 +218,8 @@ int runCompare(const CompareOptions& o) {
   csv << "engine,body,x,y,z,vx,vy,vz,pos_diff,vel_diff,energy,max_penetration,wall_s\n";
   std::printf("compare %s: %zu bodies, %lld steps of %g s\n", o.scene.c_str(), ref.bodies.size(), (long long)steps,
               s.settings.system.step.dt);
-  std::printf("%-7s %12s %12s %12s %12s %14s %12s %10s  %s\n", "engine", "max |dx|", "mean |dx|", "max |dv|", "mean |dv|",
-              "energy (J)", "max pen", "wall (s)", "device");
+  std::printf("%-7s %12s %12s %12s %12s %14s %12s %10s  %s\n", "engine", "max |dx|", "mean |dx|", "max |dv|",
+              "mean |dv|", "energy (J)", "max pen", "wall (s)", "device");
   for (const EngineResult& r : results) {
     if (!r.ran) {
       std::printf("%-7s skipped: %s\n", r.name.c_str(), r.skipped.c_str());
@@ -227,16 +236,17 @@ int runCompare(const CompareOptions& o) {
       const BodyState& b = r.bodies[i];
       char line[512];
       std::snprintf(line, sizeof line, "%s,%zu,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,,,\n", r.name.c_str(), i,
-                    double(b.x.x()), double(b.x.y()), double(b.x.z()), double(b.v.x()), double(b.v.y()), double(b.v.z()), dx, dv);
+                    double(b.x.x()), double(b.x.y()), double(b.x.z()), double(b.v.x()), double(b.v.y()),
+                    double(b.v.z()), dx, dv);
       csv << line;
     }
     const double n = std::max<double>(1, double(r.bodies.size()));
     char line[512];
-    std::snprintf(line, sizeof line, "%s,all,,,,,,,%.9g,%.9g,%.9g,%.9g,%.6g\n", r.name.c_str(), max_dx, max_dv, r.energy,
-                  r.penetration, r.wall);
+    std::snprintf(line, sizeof line, "%s,all,,,,,,,%.9g,%.9g,%.9g,%.9g,%.6g\n", r.name.c_str(), max_dx, max_dv,
+                  r.energy, r.penetration, r.wall);
     csv << line;
-    std::printf("%-7s %12.3e %12.3e %12.3e %12.3e %14.6g %12.3e %10.3f  %s\n", r.name.c_str(), max_dx, sum_dx / n, max_dv,
-                sum_dv / n, r.energy, r.penetration, r.wall, r.device.c_str());
+    std::printf("%-7s %12.3e %12.3e %12.3e %12.3e %14.6g %12.3e %10.3f  %s\n", r.name.c_str(), max_dx, sum_dx / n,
+                max_dv, sum_dv / n, r.energy, r.penetration, r.wall, r.device.c_str());
   }
   std::printf("differences are against bullet; per-body values in %s\n", csv_path.c_str());
   return 0;

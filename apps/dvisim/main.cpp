@@ -73,7 +73,6 @@ std::string oneLine(std::string s) {
   return s;
 }
 
-
 void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
   std::string list;
   for (const char* c : choices) {
@@ -154,7 +153,8 @@ int runCes(const Options& o) {
   dvi::ces::CesRunOptions c;
   c.scene = o.scene, c.sets = o.sets, c.backend = o.backend, c.collision = o.collision, c.solver = o.solver;
   if (!o.tolerance.empty() || !o.max_iterations.empty())
-    throw InputError("--tolerance and --max-iterations: not available for a CES machine (it runs ces.solver.iterations)");
+    throw InputError(
+        "--tolerance and --max-iterations: not available for a CES machine (it runs ces.solver.iterations)");
   c.iterations = o.iterations, c.dt = o.dt, c.time = o.time, c.steps = o.steps, c.threads = o.threads;
   c.frames = o.frames, c.out = o.out, c.resume = o.resume;
   return dvi::ces::runCesMachine(c);
@@ -188,7 +188,8 @@ int run(const Options& o) {
   if (!o.max_iterations.empty()) st.setMaxIterations(int(parseInt("--max-iterations", o.max_iterations, 1, 1000000)));
   if (!o.tolerance.empty()) {
     const double tol = parseReal("--tolerance", o.tolerance);
-    if (!(tol >= 0) || !std::isfinite(tol)) throw InputError("--tolerance: must be a finite number >= 0, got " + o.tolerance);
+    if (!(tol >= 0) || !std::isfinite(tol))
+      throw InputError("--tolerance: must be a finite number >= 0, got " + o.tolerance);
     st.setTolerance(dvi::real(tol));
   }
   if (!o.threads.empty()) cfg.threads = int(parseInt("--threads", o.threads, 0, 4096));
@@ -206,7 +207,8 @@ int run(const Options& o) {
     std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
   }
   if (backend == "gpu" && !have_gpu)
-    throw InputError("--backend gpu: no usable GPU device" + (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
+    throw InputError("--backend gpu: no usable GPU device" +
+                     (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
 
   // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
   dvi::ResultDir rd(o.out);
@@ -269,9 +271,7 @@ int run(const Options& o) {
         afterStep();
         progress.update(k + 1);
       }
-    } catch (...) {
-      failure = std::current_exception();
-    }
+    } catch (...) { failure = std::current_exception(); }
     progress.finish();
     collect();
   };
@@ -285,23 +285,29 @@ int run(const Options& o) {
     dvi::BulletPeer peer(bodies, ps);
     auto collect = [&] {
       for (size_t i = 0; i < bodies.size(); ++i)
-        state[i] = dvi::BodyState{peer.position(i), peer.rotation(i), peer.velocity(i), peer.angularVelocity(i), sizes[i]};
+        state[i] =
+            dvi::BodyState{peer.position(i), peer.rotation(i), peer.velocity(i), peer.angularVelocity(i), sizes[i]};
     };
     int64_t contacts = 0;
     dvi::real max_pen = 0;
-    runSteps(collect, [&](int64_t k) {
-      peer.step();
-      for (size_t i = 0; i < bodies.size(); ++i)
-        if (!dvi::isFinite(peer.position(i)) || !dvi::isFinite(peer.velocity(i))) {
-          char msg[200];
-          std::snprintf(msg, sizeof msg, "the simulation diverged in step %lld (t = %.6g s): body %zu has a non-finite "
-                        "position or velocity; try a smaller time step", (long long)(k + 1), double(k + 1) * cfg.step.dt, i);
-          throw dvi::SimulationDiverged(msg);
-        }
-    }, [&] {
-      contacts += peer.lastStats().contacts;
-      max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
-    });
+    runSteps(
+        collect,
+        [&](int64_t k) {
+          peer.step();
+          for (size_t i = 0; i < bodies.size(); ++i)
+            if (!dvi::isFinite(peer.position(i)) || !dvi::isFinite(peer.velocity(i))) {
+              char msg[200];
+              std::snprintf(msg, sizeof msg,
+                            "the simulation diverged in step %lld (t = %.6g s): body %zu has a non-finite "
+                            "position or velocity; try a smaller time step",
+                            (long long)(k + 1), double(k + 1) * cfg.step.dt, i);
+              throw dvi::SimulationDiverged(msg);
+            }
+        },
+        [&] {
+          contacts += peer.lastStats().contacts;
+          max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
+        });
     summary["backend"] = "bullet";
     summary["device"] = "Bullet " + std::to_string(btGetVersion()) + " btDiscreteDynamicsWorld (CPU, 1 thread)";
     summary["solver"] = "bullet-si";
@@ -315,9 +321,8 @@ int run(const Options& o) {
     summary["stage_seconds"] = {{"bullet", wall}};
     summary["threads"] = 1;
   } else {
-    std::unique_ptr<dvi::System> sys =
-        backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
-                         : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
+    std::unique_ptr<dvi::System> sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
+                                                        : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
     const std::vector<int> ids = dvi::importBullet(*sys, bodies);
     auto collect = [&] {
       sys->syncToHost();  // a device backend copies its state into the host arrays
@@ -331,24 +336,27 @@ int run(const Options& o) {
     dvi::real max_pen = 0, residual = 0, relative = 0;
     dvi::StageLog stage_log;
     const bool host_state = sys->backendName() == "cpu";  // the bodies are checked for divergence every step
-    runSteps(collect, [&](int64_t k) {
-      try {
-        sys->step();
-      } catch (const dvi::SolverError& e) {
-        sys->syncToHost();
-        throw dvi::SimulationDiverged(
-            dvi::divergedMessage(k + 1, double(k + 1) * cfg.step.dt, sys->bodies(), e.what(), cfg.step.dt));
-      }
-      if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * cfg.step.dt, sys->bodies());
-    }, [&] {
-      const dvi::StepStats& s = sys->lastStats();
-      contacts += s.contacts;
-      iterations += s.iterations;
-      max_pen = std::fmax(max_pen, s.max_penetration);
-      residual = s.residual;
-      relative = s.relative_residual;
-      stage_log.add(s);
-    });
+    runSteps(
+        collect,
+        [&](int64_t k) {
+          try {
+            sys->step();
+          } catch (const dvi::SolverError& e) {
+            sys->syncToHost();
+            throw dvi::SimulationDiverged(
+                dvi::divergedMessage(k + 1, double(k + 1) * cfg.step.dt, sys->bodies(), e.what(), cfg.step.dt));
+          }
+          if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * cfg.step.dt, sys->bodies());
+        },
+        [&] {
+          const dvi::StepStats& s = sys->lastStats();
+          contacts += s.contacts;
+          iterations += s.iterations;
+          max_pen = std::fmax(max_pen, s.max_penetration);
+          residual = s.residual;
+          relative = s.relative_residual;
+          stage_log.add(s);
+        });
     summary["backend"] = sys->backendName();
     summary["device"] = sys->deviceName();
     summary["solver"] = dvi::solverName(cfg.solver.type);
@@ -458,15 +466,19 @@ int main(int argc, char** argv) {
       "  4  interrupted by SIGINT or SIGTERM: the last state is checkpointed, summary.json has status \"interrupted\"\n"
       "  5  out of memory (std::bad_alloc) or a device (GPU) error");
   Options o;
-  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene (.json or .bullet) or a CES machine (.json with \"ces\"; the default CES machine without a scene)");
+  CLI::App* run_cmd = app.add_subcommand(
+      "run",
+      "Run a scene (.json or .bullet) or a CES machine (.json with \"ces\"; the default CES machine without a scene)");
   run_cmd->add_option("scene", o.scene, "Scene file: .json (scenes/schema/scene.schema.json) or .bullet");
   run_cmd->add_option("--backend", o.backend, "auto|cpu|gpu|bullet (default auto)");
   run_cmd->add_option("--collision", o.collision, "native|bullet");
   run_cmd->add_option("--solver", o.solver, "jacobi|gs|apgd|bb");
-  run_cmd->add_option("--iterations", o.iterations,
-                      "A fixed number of solver iterations per step (alone: no tolerance stop; with --tolerance: the cap)");
-  run_cmd->add_option("--tolerance", o.tolerance,
-                      "Solver stop: relative residual, residual / residual of the zero impulse (default 0.15; 0: none)");
+  run_cmd->add_option(
+      "--iterations", o.iterations,
+      "A fixed number of solver iterations per step (alone: no tolerance stop; with --tolerance: the cap)");
+  run_cmd->add_option(
+      "--tolerance", o.tolerance,
+      "Solver stop: relative residual, residual / residual of the zero impulse (default 0.15; 0: none)");
   run_cmd->add_option("--max-iterations", o.max_iterations, "Iteration cap of the tolerance stop (default 1000)");
   run_cmd->add_option("--dt", o.dt, "Time step in seconds");
   run_cmd->add_option("--time", o.time, "Simulated time in seconds");

@@ -112,7 +112,8 @@ Design makeDesign(const SweepOptions& o) {
   Design d;
   d.ces = dvi::ces::isCesScene(o.scene);
   if (!o.list.empty()) {
-    d.list_rows = parseList(dvi::readRegularFile(o.list, "--list " + o.list, dvi::inputLimits().max_json_bytes), o.list);
+    d.list_rows =
+        parseList(dvi::readRegularFile(o.list, "--list " + o.list, dvi::inputLimits().max_json_bytes), o.list);
     for (const auto& kv : d.list_rows[0]) d.keys.push_back(kv.first);
   }
   for (const std::string& g : o.grids) {
@@ -124,7 +125,8 @@ Design makeDesign(const SweepOptions& o) {
   d.seeds = dvi::parseInt("--seeds", o.seeds, 1, 1000000);
   d.seed_key = !o.seed_key.empty() ? o.seed_key : d.ces ? "seed" : "";
   if (d.seed_key.empty() && d.seeds > 1)
-    throw InputError("--seeds " + o.seeds + ": this scene has no default seed key; name the value to vary with --seed-key "
+    throw InputError("--seeds " + o.seeds +
+                     ": this scene has no default seed key; name the value to vary with --seed-key "
                      "(e.g. bodies.1.seed for a generator's seed)");
   checkKeys(o, d);
   return d;
@@ -148,8 +150,10 @@ void validate(const SweepOptions& o, const Design& d) {
   if (o.backend != "auto" && o.backend != "cpu" && o.backend != "gpu" && o.backend != "bullet")
     throw InputError("unknown backend '" + o.backend + "' (expected auto|cpu|gpu|bullet)");
   if (!o.time.empty() && !o.steps.empty()) throw InputError("--time and --steps are mutually exclusive");
-  if (!o.time.empty() && !(dvi::parseReal("--time", o.time) >= 0)) throw InputError("--time: must be >= 0, got " + o.time);
-  if (!o.dt.empty() && !(dvi::parseReal("--dt", o.dt) > 0)) throw InputError("--dt: the time step must be > 0, got " + o.dt);
+  if (!o.time.empty() && !(dvi::parseReal("--time", o.time) >= 0))
+    throw InputError("--time: must be >= 0, got " + o.time);
+  if (!o.dt.empty() && !(dvi::parseReal("--dt", o.dt) > 0))
+    throw InputError("--dt: the time step must be > 0, got " + o.dt);
   if (!o.steps.empty()) dvi::parseInt("--steps", o.steps, 0, 1LL << 40);
   if (!o.threads.empty()) dvi::parseInt("--threads", o.threads, 0, 4096);
   if (!o.iterations.empty()) dvi::parseInt("--iterations", o.iterations, 0, 1000000);
@@ -186,9 +190,13 @@ json settingJson(const Setting& s) {
 json argumentsJson(const SweepOptions& o, const Design& d) {
   json rows = json::array();
   for (const Setting& s : d.list_rows) rows.push_back(settingJson(s));
-  return {{"scene", o.scene}, {"grid", o.grids}, {"list", o.list}, {"list_settings", rows}, {"seeds", d.seeds},
-          {"seed_key", d.seed_key}, {"set", o.sets}, {"time", o.time}, {"steps", o.steps}, {"dt", o.dt},
-          {"backend", o.backend}, {"threads", o.threads}, {"solver", o.solver}, {"iterations", o.iterations}};
+  return {{"scene", o.scene},     {"grid", o.grids},
+          {"list", o.list},       {"list_settings", rows},
+          {"seeds", d.seeds},     {"seed_key", d.seed_key},
+          {"set", o.sets},        {"time", o.time},
+          {"steps", o.steps},     {"dt", o.dt},
+          {"backend", o.backend}, {"threads", o.threads},
+          {"solver", o.solver},   {"iterations", o.iterations}};
 }
 
 // Writes DIR/sweep.json, or, when one is there, refuses arguments that differ from the ones it holds.
@@ -230,7 +238,8 @@ std::vector<std::string> gpuDevices(const std::string& backend) {
   } else {
     std::error_code ec;
     size_t n = 0;
-    for (auto it = fs::directory_iterator("/proc/driver/nvidia/gpus", ec); !ec && it != fs::directory_iterator(); ++it) ++n;
+    for (auto it = fs::directory_iterator("/proc/driver/nvidia/gpus", ec); !ec && it != fs::directory_iterator(); ++it)
+      ++n;
     for (size_t i = 0; i < n; ++i) ids.push_back(std::to_string(i));
   }
   if (ids.empty()) ids.push_back("0");
@@ -242,8 +251,12 @@ std::vector<std::string> childArgs(const SweepOptions& o, const Design& d, const
   if (!o.scene.empty()) a.push_back(o.scene);
   a.insert(a.end(), {"--out", c.dir.string()});
   for (const std::string& s : overrides(o, d, c.setting, c.seed)) a.insert(a.end(), {"--set", s});
-  const std::pair<const char*, std::string> pass[] = {{"--time", o.time},       {"--steps", o.steps},   {"--dt", o.dt},
-                                                      {"--backend", o.backend}, {"--threads", threads}, {"--solver", o.solver},
+  const std::pair<const char*, std::string> pass[] = {{"--time", o.time},
+                                                      {"--steps", o.steps},
+                                                      {"--dt", o.dt},
+                                                      {"--backend", o.backend},
+                                                      {"--threads", threads},
+                                                      {"--solver", o.solver},
                                                       {"--iterations", o.iterations}};
   for (const auto& p : pass)
     if (!p.second.empty()) a.insert(a.end(), {p.first, p.second});
@@ -274,7 +287,9 @@ pid_t spawnChild(const std::vector<std::string>& args, const fs::path& log, cons
   return pid;
 }
 
-bool finished(const Case& c) { return fs::is_regular_file(c.dir / kMarker) && fs::is_regular_file(c.dir / "summary.json"); }
+bool finished(const Case& c) {
+  return fs::is_regular_file(c.dir / kMarker) && fs::is_regular_file(c.dir / "summary.json");
+}
 
 // After a child exits: the marker when it exited 0 with a readable summary.json. Returns the exit code (1 for a
 // child that exited 0 without a readable summary).
@@ -299,7 +314,9 @@ Slots planSlots(const SweepOptions& o) {
   Slots s;
   s.gpus = gpuDevices(o.backend);
   const int cores = std::max(1, int(std::thread::hardware_concurrency()));
-  s.jobs = !o.jobs.empty() ? int(dvi::parseInt("--jobs", o.jobs, 1, 4096)) : s.gpus.empty() ? cores : int(s.gpus.size());
+  s.jobs = !o.jobs.empty()  ? int(dvi::parseInt("--jobs", o.jobs, 1, 4096))
+           : s.gpus.empty() ? cores
+                            : int(s.gpus.size());
   // The runs together use the cores once (a GPU run's host side too): cores / jobs threads each unless --threads.
   s.child_threads = !o.threads.empty() ? o.threads : std::to_string(std::max(1, cores / s.jobs));
   return s;
@@ -399,9 +416,7 @@ std::vector<Row> collectRows(const std::vector<Case>& cases, const std::map<size
       r.wall = json::parse(readText(cases[i].dir / kMarker)).at("wall_s").get<double>();
       r.metrics = runMetrics(json::parse(readText(cases[i].dir / "summary.json")));
       r.ok = true, r.exit_code = 0;
-    } catch (const std::exception&) {
-      r.ok = false;
-    }
+    } catch (const std::exception&) { r.ok = false; }
   }
   return rows;
 }
@@ -415,7 +430,8 @@ std::vector<std::string> metricNames(const std::vector<Row>& rows) {
 
 std::string num(double v) { return dvi::benchutil::num(v, "%.10g"); }
 
-void writeRunsCsv(const SweepOptions& o, const Design& d, const std::vector<Case>& cases, const std::vector<Row>& rows) {
+void writeRunsCsv(const SweepOptions& o, const Design& d, const std::vector<Case>& cases,
+                  const std::vector<Row>& rows) {
   const std::vector<std::string> names = metricNames(rows);
   std::ostringstream s;
   s << "case,setting";
@@ -427,8 +443,8 @@ void writeRunsCsv(const SweepOptions& o, const Design& d, const std::vector<Case
     const Row& r = rows[i];
     s << cases[i].id << "," << cases[i].setting;
     for (const auto& kv : d.settings[cases[i].setting]) s << "," << dvi::benchutil::csvField(kv.second);
-    s << "," << cases[i].seed << "," << (r.ok ? "ok" : "failed") << "," << (r.exit_code < 0 ? "" : std::to_string(r.exit_code))
-      << "," << num(r.wall);
+    s << "," << cases[i].seed << "," << (r.ok ? "ok" : "failed") << ","
+      << (r.exit_code < 0 ? "" : std::to_string(r.exit_code)) << "," << num(r.wall);
     for (const std::string& n : names) s << "," << (r.metrics.count(n) ? num(r.metrics.at(n)) : "");
     s << "\n";
   }
@@ -436,13 +452,15 @@ void writeRunsCsv(const SweepOptions& o, const Design& d, const std::vector<Case
 }
 
 // Per setting: the finished runs' count, then mean and 95% half-width (sweep.h: meanCi) of wall_s and every metric.
-void writeSummaryCsv(const SweepOptions& o, const Design& d, const std::vector<Case>& cases, const std::vector<Row>& rows) {
+void writeSummaryCsv(const SweepOptions& o, const Design& d, const std::vector<Case>& cases,
+                     const std::vector<Row>& rows) {
   const std::vector<std::string> names = metricNames(rows);
   std::ostringstream s;
   s << "setting";
   for (const std::string& k : d.keys) s << "," << dvi::benchutil::csvField(k);
   s << ",n,wall_s.mean,wall_s.ci95";
-  for (const std::string& n : names) s << "," << dvi::benchutil::csvField(n) << ".mean," << dvi::benchutil::csvField(n) << ".ci95";
+  for (const std::string& n : names)
+    s << "," << dvi::benchutil::csvField(n) << ".mean," << dvi::benchutil::csvField(n) << ".ci95";
   s << "\n";
   for (size_t k = 0; k < d.settings.size(); ++k) {
     std::vector<double> wall;
@@ -501,7 +519,8 @@ int runSweep(const SweepOptions& o) {
   if (!o.no_plots) std::printf("%s\n", plots(o.out, rows).c_str());
   if (g_stopped) {
     std::fflush(stdout);
-    std::fprintf(stderr, "dvisim: sweep interrupted by %s: %zu of %zu runs unfinished; rerun the same command to finish them\n",
+    std::fprintf(stderr,
+                 "dvisim: sweep interrupted by %s: %zu of %zu runs unfinished; rerun the same command to finish them\n",
                  g_stopped == SIGINT ? "SIGINT" : "SIGTERM", failed, cases.size());
     return 4;
   }
@@ -513,8 +532,9 @@ int runSweep(const SweepOptions& o) {
 
 std::function<int()> addSweepCommand(CLI::App& app) {
   auto o = std::make_shared<SweepOptions>();
-  CLI::App* cmd = app.add_subcommand("sweep", "Design of experiments: run a scene (the CES machine by default) over "
-                                              "a grid or list of settings with replicate seeds; statistics and plots");
+  CLI::App* cmd = app.add_subcommand("sweep",
+                                     "Design of experiments: run a scene (the CES machine by default) over "
+                                     "a grid or list of settings with replicate seeds; statistics and plots");
   cmd->add_option("scene", o->scene, "Scene file (.json, a CES document or a plain scene); default: the CES machine");
   cmd->add_option("--grid", o->grids, "KEY=v1,v2,... or KEY=lo:hi:n (repeatable: full factorial)")
       ->expected(1)

@@ -85,11 +85,13 @@ inline std::vector<Setting> parseList(const std::string& text, const std::string
   std::stringstream ss(text);
   for (std::string l; std::getline(ss, l);)
     if (!trimmed(l).empty()) lines.push_back(split(trimmed(l), ','));
-  if (lines.empty()) throw InputError("--list " + origin + ": empty file (expected a header of keys and one row per setting)");
+  if (lines.empty())
+    throw InputError("--list " + origin + ": empty file (expected a header of keys and one row per setting)");
   const std::vector<std::string>& keys = lines[0];
   std::set<std::string> seen;
   for (const std::string& k : keys)
-    if (k.empty() || !seen.insert(k).second) throw InputError("--list " + origin + ": empty or repeated key '" + k + "' in the header");
+    if (k.empty() || !seen.insert(k).second)
+      throw InputError("--list " + origin + ": empty or repeated key '" + k + "' in the header");
   if (lines.size() < 2) throw InputError("--list " + origin + ": empty list (a header and no settings)");
   std::vector<Setting> rows;
   for (size_t r = 1; r < lines.size(); ++r) {
@@ -98,7 +100,8 @@ inline std::vector<Setting> parseList(const std::string& text, const std::string
                        " values for " + std::to_string(keys.size()) + " keys");
     Setting s;
     for (size_t k = 0; k < keys.size(); ++k) {
-      if (lines[r][k].empty()) throw InputError("--list " + origin + ": row " + std::to_string(r) + ": empty value of " + keys[k]);
+      if (lines[r][k].empty())
+        throw InputError("--list " + origin + ": row " + std::to_string(r) + ": empty value of " + keys[k]);
       s.emplace_back(keys[k], lines[r][k]);
     }
     rows.push_back(std::move(s));
@@ -137,9 +140,11 @@ inline void flattenNumbers(const nlohmann::json& j, const std::string& prefix, s
   if (j.is_number()) {
     out[prefix] = j.get<double>();
   } else if (j.is_object()) {
-    for (auto it = j.begin(); it != j.end(); ++it) flattenNumbers(*it, prefix.empty() ? it.key() : prefix + "." + it.key(), out);
+    for (auto it = j.begin(); it != j.end(); ++it)
+      flattenNumbers(*it, prefix.empty() ? it.key() : prefix + "." + it.key(), out);
   } else if (j.is_array()) {
-    for (size_t i = 0; i < j.size(); ++i) flattenNumbers(j[i], prefix.empty() ? std::to_string(i) : prefix + "." + std::to_string(i), out);
+    for (size_t i = 0; i < j.size(); ++i)
+      flattenNumbers(j[i], prefix.empty() ? std::to_string(i) : prefix + "." + std::to_string(i), out);
   }
 }
 

@@ -194,8 +194,10 @@ std::vector<Vec3> boxPoints(Vec3 h) {
 // The points of a box or hull body (body frame, scene units); spheres are Bullet 3 spheres.
 std::vector<Vec3> hullPoints(const SceneSpec& spec, const BodySpec& b) {
   if (b.kind == BodyKind::Box) return boxPoints(b.dims);
-  if (b.kind != BodyKind::Hull) throw InputError(std::string("Bullet3Peer: no Bullet 3 shape for a ") + bodyKindName(b.kind));
-  if (b.hull < 0 || size_t(b.hull) >= spec.hulls.size()) throw InputError("Bullet3Peer: a hull body with a bad hull index");
+  if (b.kind != BodyKind::Hull)
+    throw InputError(std::string("Bullet3Peer: no Bullet 3 shape for a ") + bodyKindName(b.kind));
+  if (b.hull < 0 || size_t(b.hull) >= spec.hulls.size())
+    throw InputError("Bullet3Peer: a hull body with a bad hull index");
   std::vector<Vec3> p = spec.hulls[size_t(b.hull)];
   for (Vec3& q : p) q = Vec3{q.x * b.dims.x, q.y * b.dims.y, q.z * b.dims.z};
   return p;
@@ -221,7 +223,7 @@ bool findOpenClDevice(OpenClDeviceType type, std::string* what) {
 
 struct Bullet3Peer::Impl {
   Bullet3PeerSettings settings;
-  float s = 1;       // length scale
+  float s = 1;        // length scale
   size_t bodies = 0;  // spec.bodies.size()
   FoundDevice device;
   std::string cache_dir;  // must outlive every kernel compilation (Bullet keeps the pointer)
@@ -266,7 +268,8 @@ struct Bullet3Peer::Impl {
   }
 };
 
-Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& settings) : impl_(std::make_unique<Impl>()) {
+Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& settings)
+    : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   const SceneSpec spec = withConvexHulls(scene);
   if (!(settings.dt > 0) || !std::isfinite(double(settings.dt)) || !(settings.length_scale > 0) ||
@@ -290,9 +293,10 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
   m.queue = clCreateCommandQueue(m.context, m.device.device, 0, &err);
   checkCl(err, "clCreateCommandQueue");
 
-  m.cache_dir = settings.kernel_cache_dir.empty()
-                    ? (std::filesystem::temp_directory_path() / ("dvisim-bullet3-kernels-" + std::to_string(getuid()))).string()
-                    : settings.kernel_cache_dir;
+  m.cache_dir =
+      settings.kernel_cache_dir.empty()
+          ? (std::filesystem::temp_directory_path() / ("dvisim-bullet3-kernels-" + std::to_string(getuid()))).string()
+          : settings.kernel_cache_dir;
   std::error_code ec;
   std::filesystem::create_directories(m.cache_dir, ec);  // without it Bullet compiles every time, no harm
   b3OpenCLUtils_setCachePath(m.cache_dir.c_str());
@@ -307,9 +311,12 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
     const BodySpec& b = spec.bodies[i];
     if (!(b.mass > 0) || !std::isfinite(double(b.mass)) || !(b.inertia.x > 0 && b.inertia.y > 0 && b.inertia.z > 0) ||
         !std::isfinite(double(b.inertia.x + b.inertia.y + b.inertia.z)))
-      throw InputError("Bullet3Peer: body " + std::to_string(i) + " has a mass or inertia that is not positive and finite");
-    if (b.kind == BodyKind::Sphere) sphere_radii[float(b.dims.x) * m.s] = -1;
-    else body_hulls[i] = m.makeHull(hullPoints(spec, b));
+      throw InputError("Bullet3Peer: body " + std::to_string(i) +
+                       " has a mass or inertia that is not positive and finite");
+    if (b.kind == BodyKind::Sphere)
+      sphere_radii[float(b.dims.x) * m.s] = -1;
+    else
+      body_hulls[i] = m.makeHull(hullPoints(spec, b));
   }
   size_t faces = 1, vertices = 0, indices = 0, edges = 0, max_faces = 0;  // 1: the ground's face
   for (const auto& h : m.hulls) {
@@ -326,7 +333,8 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
   const size_t nshapes = 1 + m.hulls.size() + sphere_radii.size();
   b3Config& c = m.config;
   const double pairs = double(settings.pairs_per_body) * double(nbodies + 8);
-  if (pairs > 2e9) throw Bullet3Error("Bullet 3's capacities are 32-bit: " + std::to_string(nbodies) + " bodies is too many");
+  if (pairs > 2e9)
+    throw Bullet3Error("Bullet 3's capacities are 32-bit: " + std::to_string(nbodies) + " bodies is too many");
   c.m_maxConvexBodies = int(nbodies + 8);
   c.m_maxConvexShapes = int(nshapes + 8);
   c.m_maxBroadphasePairs = int(pairs);
@@ -360,7 +368,8 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
     const float p[4] = {float(pos.x) * m.s, float(pos.y) * m.s, float(pos.z) * m.s, 0};
     const int id = m.pipeline->registerPhysicsInstance(mass, p, orn, collidable, 0, false);
     if (id < 0)
-      throw Bullet3Error(std::string("Bullet 3 refused ") + what + " (body capacity " + std::to_string(c.m_maxConvexBodies) + ")");
+      throw Bullet3Error(std::string("Bullet 3 refused ") + what + " (body capacity " +
+                         std::to_string(c.m_maxConvexBodies) + ")");
     return id;
   };
   instance(0, Vec3{0, 0, 0}, identity, m.narrow->registerPlaneShape(b3MakeVector3(0, 1, 0), 0), "the ground");
@@ -393,7 +402,8 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
   m.pipeline->writeAllInstancesToGpu();
   m.narrow->writeAllBodiesToGpu();
   m.broad->writeAabbsToGpu();
-  const float g[4] = {float(settings.gravity.x) * m.s, float(settings.gravity.y) * m.s, float(settings.gravity.z) * m.s, 0};
+  const float g[4] = {float(settings.gravity.x) * m.s, float(settings.gravity.y) * m.s, float(settings.gravity.z) * m.s,
+                      0};
   m.pipeline->setGravity(g);
   checkCl(clFinish(m.queue), "clFinish after uploading the scene");
   throwOnErrors("failed to upload the scene");
@@ -423,7 +433,8 @@ std::string Bullet3Peer::deviceName() const { return impl_->device.name; }
 std::string Bullet3Peer::description() const {
   std::ostringstream o;
   o << "b3GpuRigidBodyPipeline (SAP broad phase, PGS 4 it, mu 0.7 fixed by Bullet), "
-    << (impl_->s == 100 ? std::string("cm") : "length x " + std::to_string(impl_->s)) << ", OpenCL: " << impl_->device.name;
+    << (impl_->s == 100 ? std::string("cm") : "length x " + std::to_string(impl_->s))
+    << ", OpenCL: " << impl_->device.name;
   return o.str();
 }
 
@@ -431,9 +442,10 @@ void Bullet3Peer::readBodies(std::vector<Vec3>& pos, std::vector<Quat>& rot, std
   const Impl& m = *impl_;
   std::vector<b3RigidBodyData> b(m.bodies);
   if (m.bodies > 0)
-    checkCl(clEnqueueReadBuffer(m.queue, m.narrow->getBodiesGpu(), CL_TRUE, size_t(kStaticBodies) * sizeof(b3RigidBodyData),
-                                m.bodies * sizeof(b3RigidBodyData), b.data(), 0, nullptr, nullptr),
-            "clEnqueueReadBuffer of the bodies");
+    checkCl(
+        clEnqueueReadBuffer(m.queue, m.narrow->getBodiesGpu(), CL_TRUE, size_t(kStaticBodies) * sizeof(b3RigidBodyData),
+                            m.bodies * sizeof(b3RigidBodyData), b.data(), 0, nullptr, nullptr),
+        "clEnqueueReadBuffer of the bodies");
   pos.resize(m.bodies);
   rot.resize(m.bodies);
   vel.resize(m.bodies);

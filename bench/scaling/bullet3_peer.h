@@ -67,10 +67,10 @@ inline OpenClDeviceType parseOpenClDeviceType(const std::string& name) {
 
 struct Bullet3PeerSettings {
   real dt = real(1e-3);
-  real length_scale = 100;   // Bullet units per scene unit: centimetres (see above)
+  real length_scale = 100;          // Bullet units per scene unit: centimetres (see above)
   Vec3 gravity{0, real(-9.81), 0};  // scene units
   OpenClDeviceType device = OpenClDeviceType::Gpu;
-  int pairs_per_body = 16;   // broad-phase pair and contact capacity per body (Bullet's GPU demos use 16)
+  int pairs_per_body = 16;  // broad-phase pair and contact capacity per body (Bullet's GPU demos use 16)
   // Where Bullet 3 keeps the kernels it compiled (it reads and writes `<dir>/<kernel>.<device>.<driver>.bin`;
   // without a directory it would write ./cache). Empty: <temp>/dvisim-bullet3-kernels-<uid>.
   std::string kernel_cache_dir;
@@ -109,9 +109,9 @@ class Bullet3Peer {
   // read; not part of step()).
   void readBodies(std::vector<Vec3>& pos, std::vector<Quat>& rot, std::vector<Vec3>& vel) const;
 
-  size_t bodyCount() const;        // spec.bodies.size()
-  std::string deviceName() const;  // as findOpenClDevice
-  std::string description() const; // the pipeline and its settings, for a benchmark row
+  size_t bodyCount() const;         // spec.bodies.size()
+  std::string deviceName() const;   // as findOpenClDevice
+  std::string description() const;  // the pipeline and its settings, for a benchmark row
 
  private:
   struct Impl;

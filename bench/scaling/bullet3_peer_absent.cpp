@@ -24,7 +24,9 @@ Bullet3Peer::Bullet3Peer(const SceneSpec&, const Bullet3PeerSettings&) { throw B
 Bullet3Peer::~Bullet3Peer() = default;
 void Bullet3Peer::step() { throw Bullet3Error(kMissing); }
 const Bullet3StepStats& Bullet3Peer::lastStats() const { throw Bullet3Error(kMissing); }
-void Bullet3Peer::readBodies(std::vector<Vec3>&, std::vector<Quat>&, std::vector<Vec3>&) const { throw Bullet3Error(kMissing); }
+void Bullet3Peer::readBodies(std::vector<Vec3>&, std::vector<Quat>&, std::vector<Vec3>&) const {
+  throw Bullet3Error(kMissing);
+}
 size_t Bullet3Peer::bodyCount() const { return 0; }
 std::string Bullet3Peer::deviceName() const { return ""; }
 std::string Bullet3Peer::description() const { return kMissing; }

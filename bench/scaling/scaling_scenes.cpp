@@ -116,12 +116,14 @@ SceneSpec makeMixSpec(long n, real mu) {
     switch (kind) {
       case 0: sphereBody(b, size); break;
       case 1: {
-        const double hx = size * rng.uniform(0.5, 0.7), hy = size * rng.uniform(0.5, 1.0), hz = size * rng.uniform(0.5, 0.7);
+        const double hx = size * rng.uniform(0.5, 0.7), hy = size * rng.uniform(0.5, 1.0),
+                     hz = size * rng.uniform(0.5, 0.7);
         b.kind = BodyKind::Box;
         b.dims = Vec3{real(hx), real(hy), real(hz)};
         const double m = kDensity * 8 * hx * hy * hz;
         b.mass = real(m);
-        b.inertia = Vec3{real(m / 3 * (hy * hy + hz * hz)), real(m / 3 * (hx * hx + hz * hz)), real(m / 3 * (hx * hx + hy * hy))};
+        b.inertia = Vec3{real(m / 3 * (hy * hy + hz * hz)), real(m / 3 * (hx * hx + hz * hz)),
+                         real(m / 3 * (hx * hx + hy * hy))};
         half_y = hy;
         break;
       }
@@ -153,7 +155,8 @@ SceneSpec makeMixSpec(long n, real mu) {
         for (const Vec3& q : s.hulls[size_t(b.hull)]) lo = vmin(lo, q), hi = vmax(hi, q);
         // Mass and inertia of the ellipsoid inscribed in the hull's bounding box (a hull of 16 points on
         // an ellipsoid is close to it); every engine gets these same values.
-        const double a = 0.5 * size * double(hi.x - lo.x), cy = 0.5 * size * double(hi.y - lo.y), c = 0.5 * size * double(hi.z - lo.z);
+        const double a = 0.5 * size * double(hi.x - lo.x), cy = 0.5 * size * double(hi.y - lo.y),
+                     c = 0.5 * size * double(hi.z - lo.z);
         b.mass = real(kDensity * 4.0 / 3.0 * kPi * a * cy * c);
         ellipsoidInertia(b, a, cy, c);
         half_y = size * std::max(std::fabs(double(lo.y)), std::fabs(double(hi.y)));
@@ -192,7 +195,8 @@ std::vector<Vec3> unitIcosphere() {
   const size_t corners = v.size();
   for (size_t i = 0; i < corners; ++i)
     for (size_t j = i + 1; j < corners; ++j)
-      if (std::fabs(double(dot(v[i] - v[j], v[i] - v[j])) - 4.0) < 1e-6) v.push_back(v[i] + v[j]);  // edges have length 2
+      if (std::fabs(double(dot(v[i] - v[j], v[i] - v[j])) - 4.0) < 1e-6)
+        v.push_back(v[i] + v[j]);  // edges have length 2
   for (Vec3& p : v) p = p / length(p);
   return v;  // 12 corners + 30 edge midpoints
 }
@@ -343,7 +347,10 @@ BulletScene makeBulletScene(const SceneSpec& spec) {
           if (spec.name == "pile") shared_sphere = shape;
         }
         break;
-      case BodyKind::Box: own.shapes.emplace_back(new btBoxShape(bt(b.dims))); shape = own.shapes.back().get(); break;
+      case BodyKind::Box:
+        own.shapes.emplace_back(new btBoxShape(bt(b.dims)));
+        shape = own.shapes.back().get();
+        break;
       case BodyKind::Cylinder:
         own.shapes.emplace_back(new btCylinderShape(bt(b.dims)));  // axis y, half extents (r, hh, r)
         shape = own.shapes.back().get();
@@ -359,7 +366,8 @@ BulletScene makeBulletScene(const SceneSpec& spec) {
       }
       case BodyKind::Hull: {
         auto* h = new btConvexHullShape();
-        for (const Vec3& q : spec.hulls[size_t(b.hull)]) h->addPoint(bt(Vec3{q.x * b.dims.x, q.y * b.dims.y, q.z * b.dims.z}), false);
+        for (const Vec3& q : spec.hulls[size_t(b.hull)])
+          h->addPoint(bt(Vec3{q.x * b.dims.x, q.y * b.dims.y, q.z * b.dims.z}), false);
         h->recalcLocalAabb();
         own.shapes.emplace_back(h);
         shape = h;

@@ -35,11 +35,11 @@ struct BodySpec {
 };
 
 struct SceneSpec {
-  std::string name;               // "pile" or "mix"
-  real friction = 0;              // every body's friction; the pair's coefficient is the product = mu
-  real ref_length = 0;            // penetration is reported relative to this (pile: r; mix: smallest size)
+  std::string name;     // "pile" or "mix"
+  real friction = 0;    // every body's friction; the pair's coefficient is the product = mu
+  real ref_length = 0;  // penetration is reported relative to this (pile: r; mix: smallest size)
   real width = 0, wall_height = 0, wall_thickness = 0;  // the container: [0, width]^2 in x, z
-  std::vector<BodySpec> bodies;   // the dynamic bodies
+  std::vector<BodySpec> bodies;                         // the dynamic bodies
   std::vector<std::vector<Vec3>> hulls;
 };
 

@@ -31,8 +31,8 @@ class Scene {
     const btScalar half = 8, cell = 2 * half / n;
     for (int i = 0; i < n; ++i)
       for (int k = 0; k < n; ++k) {
-        btVector3 a(-half + i * cell, 0, -half + k * cell), b = a + btVector3(cell, 0, 0), c = a + btVector3(cell, 0, cell),
-                                                           d = a + btVector3(0, 0, cell);
+        btVector3 a(-half + i * cell, 0, -half + k * cell),
+            b = a + btVector3(cell, 0, 0), c = a + btVector3(cell, 0, cell), d = a + btVector3(0, 0, cell);
         mesh_->addTriangle(a, c, b);
         mesh_->addTriangle(a, d, c);
       }
@@ -54,8 +54,8 @@ class Scene {
                                    own(new btCapsuleShape(btScalar(0.12), btScalar(0.3))),
                                    own(new btConeShape(btScalar(0.2), btScalar(0.4)))};
     for (int i = 0; i < pile; ++i) {
-      const btVector3 p(btScalar(3) + btScalar(0.45) * btScalar(i % 3 - 1), btScalar(0.5) + btScalar(0.5) * btScalar(i / 9),
-                        btScalar(0.45) * btScalar((i / 3) % 3 - 1));
+      const btVector3 p(btScalar(3) + btScalar(0.45) * btScalar(i % 3 - 1),
+                        btScalar(0.5) + btScalar(0.5) * btScalar(i / 9), btScalar(0.45) * btScalar((i / 3) % 3 - 1));
       btRigidBody* b = add(world, shapes[i % 5], btScalar(0.5 + 0.1 * (i % 4)), p);
       b->setFriction(btScalar(0.6));
       pile_bodies.push_back(b);
@@ -95,8 +95,8 @@ class Scene {
   std::string summary(btDiscreteDynamicsWorld& world, double t) const {
     char line[256];
     std::string s;
-    std::snprintf(line, sizeof line, "t = %.3f s, %d rigid bodies, %d constraint(s)\n", t, world.getNumCollisionObjects(),
-                  world.getNumConstraints());
+    std::snprintf(line, sizeof line, "t = %.3f s, %d rigid bodies, %d constraint(s)\n", t,
+                  world.getNumCollisionObjects(), world.getNumConstraints());
     s += line;
     s += "stack heights (m):";
     for (btRigidBody* b : stack) {
@@ -116,8 +116,8 @@ class Scene {
                     mean / double(pile_bodies.size()), lowest);
       s += line;
     }
-    std::snprintf(line, sizeof line, "hinge angle %.3f deg (motor %.2f rad/s)\n", double(hinge->getHingeAngle()) * 180 / M_PI,
-                  double(kHingeSpeed));
+    std::snprintf(line, sizeof line, "hinge angle %.3f deg (motor %.2f rad/s)\n",
+                  double(hinge->getHingeAngle()) * 180 / M_PI, double(kHingeSpeed));
     s += line;
     int points = 0;
     double deepest = 0;
@@ -156,7 +156,8 @@ class Scene {
     btTransform t;
     t.setIdentity();
     t.setOrigin(p);
-    auto* body = new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, new btDefaultMotionState(t), shape, inertia));
+    auto* body =
+        new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, new btDefaultMotionState(t), shape, inertia));
     world.addRigidBody(body);
     bodies_.push_back(body);
     return body;

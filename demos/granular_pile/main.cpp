@@ -31,8 +31,8 @@ int main(int argc, char** argv) {
   shapes.emplace_back(new btStaticPlaneShape(btVector3(0, 1, 0), 0));  // the ground, y up
   addBody(shapes.back().get(), 0, btVector3(0, 0, 0));
 
-  shapes.emplace_back(new btSphereShape(0.01));                     // 1 cm spheres
-  shapes.emplace_back(new btBoxShape(btVector3(0.01, 0.006, 0.008)));  // flakes
+  shapes.emplace_back(new btSphereShape(0.01));                              // 1 cm spheres
+  shapes.emplace_back(new btBoxShape(btVector3(0.01, 0.006, 0.008)));        // flakes
   shapes.emplace_back(new btCylinderShape(btVector3(0.006, 0.012, 0.006)));  // short rods
   const btScalar density = 1000;
   const btScalar masses[3] = {density * 4.18879e-6f, density * 3.84e-6f, density * 2.71434e-6f};
@@ -46,7 +46,7 @@ int main(int argc, char** argv) {
 
   // 2. The one change: a DVI system steps them instead of btDiscreteDynamicsWorld.
   dvi::SystemConfig config;
-  config.step.dt = 1e-3;                 // 1 ms: large for a penalty DEM, fine for DVI
+  config.step.dt = 1e-3;  // 1 ms: large for a penalty DEM, fine for DVI
   config.solver.type = dvi::SolverType::APGD;
   config.solver.max_iterations = 50;
   dvi::System system(config);

@@ -128,7 +128,9 @@ ElectrodeConfig parseSupplied(const Checker& c, const json& e, const std::string
 }
 
 MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string& p) {
-  c.object(m, p, {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "conductivity_S_m", "shapes"});
+  c.object(
+      m, p,
+      {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "conductivity_S_m", "shapes"});
   MaterialConfig out;
   if (!m.contains("kind")) c.fail(p + ".kind", "missing (metal|plastic|middling)");
   const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling"});
@@ -145,8 +147,10 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
   out.mass_fraction = c.range(m["mass_fraction"], p + ".mass_fraction", 0, 1);
   if (m.contains("density_kg_m3")) {
     const json& r = m["density_kg_m3"];
-    if (r.is_number()) out.density_min = out.density_max = c.positive(r, p + ".density_kg_m3");
-    else c.interval(r, p + ".density_kg_m3", out.density_min, out.density_max);
+    if (r.is_number())
+      out.density_min = out.density_max = c.positive(r, p + ".density_kg_m3");
+    else
+      c.interval(r, p + ".density_kg_m3", out.density_min, out.density_max);
   }
   if (m.contains("eps_r")) {
     out.eps_r = c.nonNegativeOrInf(m["eps_r"], p + ".eps_r");
@@ -154,11 +158,13 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
   }
   if (m.contains("relaxation_time_s") && m.contains("conductivity_S_m"))
     c.fail(p + ".conductivity_S_m", "give either relaxation_time_s or conductivity_S_m, not both");
-  if (m.contains("relaxation_time_s")) out.relaxation_time = c.nonNegativeOrInf(m["relaxation_time_s"], p + ".relaxation_time_s");
+  if (m.contains("relaxation_time_s"))
+    out.relaxation_time = c.nonNegativeOrInf(m["relaxation_time_s"], p + ".relaxation_time_s");
   if (m.contains("conductivity_S_m")) {
     // tau = eps0 eps_r / sigma (Haus & Melcher, "Electromagnetic Fields and Energy", 1989, §7.7).
     out.conductivity = c.nonNegativeOrInf(m["conductivity_S_m"], p + ".conductivity_S_m");
-    out.relaxation_time = std::isinf(out.conductivity) ? 0.0 : double(relaxationTime(real(out.eps_r), real(out.conductivity)));
+    out.relaxation_time =
+        std::isinf(out.conductivity) ? 0.0 : double(relaxationTime(real(out.eps_r), real(out.conductivity)));
     if (std::isinf(out.eps_r) && !std::isinf(out.conductivity)) out.relaxation_time = 0.0;  // a metal
   }
   if (m.contains("shapes")) {
@@ -184,7 +190,8 @@ void applyCesOverride(json& doc, const std::string& assignment) {
   const std::string text = assignment.substr(eq + 1);
   const std::string shown = key;
   if (key.rfind("ces.", 0) == 0) key = key.substr(4);
-  if (!doc.contains("ces") || !doc["ces"].is_object()) throw InputError("--set " + shown + ": the scene has no ces object");
+  if (!doc.contains("ces") || !doc["ces"].is_object())
+    throw InputError("--set " + shown + ": the scene has no ces object");
   // A missing intermediate object is created (its keys are then checked by the parser); a missing leaf
   // is added and checked the same way, so an unknown key is still an error.
   jsoncheck::setByPath(doc["ces"], key, shown, jsoncheck::parseSetValue(text),
@@ -209,8 +216,10 @@ void parseCesSolver(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(s, "gyroscopic")) cfg.step.gyroscopic = c.boolean(s["gyroscopic"], "ces.solver.gyroscopic");
   if (has(s, "type"))
     cfg.solver.type = c.named<SolverType>(s["type"], "ces.solver.type",
-                                          {{"jacobi", SolverType::Jacobi}, {"gs", SolverType::GaussSeidel},
-                                           {"apgd", SolverType::APGD}, {"bb", SolverType::BB}});
+                                          {{"jacobi", SolverType::Jacobi},
+                                           {"gs", SolverType::GaussSeidel},
+                                           {"apgd", SolverType::APGD},
+                                           {"bb", SolverType::BB}});
   if (has(s, "iterations"))  // a fixed count (the tolerance stays 0)
     cfg.solver.max_iterations = int(c.integer(s["iterations"], "ces.solver.iterations", 1, 100000));
 }
@@ -255,25 +264,31 @@ void parseCesField(const Checker& c, const json& j, CesConfig& cfg) {
   if (cfg.field_model == "two_cylinder" && (cfg.wire.enabled || !cfg.tube.enabled))
     c.fail("ces.field.model", "two_cylinder is the tube alone: set electrode.wire.enabled = false and keep the tube");
   if (cfg.field_model == "corona" && !cfg.wire.enabled)
-    c.fail("ces.field.model", "the corona model needs the corona wire (electrode.wire.enabled); use csm or two_cylinder without it");
+    c.fail("ces.field.model",
+           "the corona model needs the corona wire (electrode.wire.enabled); use csm or two_cylinder without it");
   if (cfg.field_model == "csm" && !cfg.wire.enabled && !cfg.tube.enabled && cfg.extra_electrodes.empty())
     c.fail("ces.electrode", "no electrode: enable the wire or the tube");
 }
 
 void parseCesCorona(const Checker& c, const json& j, CesConfig& cfg) {
   if (!has(j, "corona")) return;
-  const json& s = c.object(j["corona"], "ces.corona", {"ion_mobility_m2_Vs", "rel_air_density", "roughness", "grid_mm", "image_cutoff_mm"});
-  if (has(s, "ion_mobility_m2_Vs")) cfg.ion_mobility = c.range(s["ion_mobility_m2_Vs"], "ces.corona.ion_mobility_m2_Vs", 0, 1, true);
-  if (has(s, "rel_air_density")) cfg.rel_air_density = c.range(s["rel_air_density"], "ces.corona.rel_air_density", 0, 10, true);
+  const json& s = c.object(j["corona"], "ces.corona",
+                           {"ion_mobility_m2_Vs", "rel_air_density", "roughness", "grid_mm", "image_cutoff_mm"});
+  if (has(s, "ion_mobility_m2_Vs"))
+    cfg.ion_mobility = c.range(s["ion_mobility_m2_Vs"], "ces.corona.ion_mobility_m2_Vs", 0, 1, true);
+  if (has(s, "rel_air_density"))
+    cfg.rel_air_density = c.range(s["rel_air_density"], "ces.corona.rel_air_density", 0, 10, true);
   if (has(s, "roughness")) cfg.roughness = c.range(s["roughness"], "ces.corona.roughness", 0, 1, true);
   if (has(s, "grid_mm")) cfg.corona_grid = c.range(s["grid_mm"], "ces.corona.grid_mm", 0.05, 20) * kMm;
-  if (has(s, "image_cutoff_mm")) cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
+  if (has(s, "image_cutoff_mm"))
+    cfg.image_cutoff = c.nonNegative(s["image_cutoff_mm"], "ces.corona.image_cutoff_mm") * kMm;
 }
 
 void parseCesBrush(const Checker& c, const json& j, CesConfig& cfg) {
   if (!has(j, "brush")) return;
-  const json& s = c.object(j["brush"], "ces.brush",
-                           {"diameter_mm", "core_diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s", "sweep_time_s"});
+  const json& s =
+      c.object(j["brush"], "ces.brush",
+               {"diameter_mm", "core_diameter_mm", "angle_deg", "rpm", "gap_mm", "discharge_time_s", "sweep_time_s"});
   if (has(s, "diameter_mm")) cfg.brush_diameter = c.positive(s["diameter_mm"], "ces.brush.diameter_mm") * kMm;
   cfg.brush_core_diameter = has(s, "core_diameter_mm")
                                 ? c.positive(s["core_diameter_mm"], "ces.brush.core_diameter_mm") * kMm
@@ -283,7 +298,8 @@ void parseCesBrush(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(s, "angle_deg")) cfg.brush_angle = c.range(s["angle_deg"], "ces.brush.angle_deg", -360, 360) * kDeg;
   if (has(s, "rpm")) cfg.brush_rpm = c.range(s["rpm"], "ces.brush.rpm", -10000, 10000);
   if (has(s, "gap_mm")) cfg.brush_gap = c.nonNegative(s["gap_mm"], "ces.brush.gap_mm") * kMm;
-  if (has(s, "discharge_time_s")) cfg.brush_discharge_time = c.nonNegative(s["discharge_time_s"], "ces.brush.discharge_time_s");
+  if (has(s, "discharge_time_s"))
+    cfg.brush_discharge_time = c.nonNegative(s["discharge_time_s"], "ces.brush.discharge_time_s");
   if (has(s, "sweep_time_s")) cfg.brush_sweep_time = c.nonNegative(s["sweep_time_s"], "ces.brush.sweep_time_s");
 }
 
@@ -296,25 +312,29 @@ void parseCesAir(const Checker& c, const json& j, CesConfig& cfg) {
 
 void parseCesFriction(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "friction")) {
-    const json& s = c.object(j["friction"], "ces.friction", {"particle_particle", "particle_drum", "particle_brush", "particle_wall",
-                                                          "rolling_drum"});
-    if (has(s, "particle_particle")) cfg.mu_particle_particle = c.nonNegative(s["particle_particle"], "ces.friction.particle_particle");
+    const json& s = c.object(j["friction"], "ces.friction",
+                             {"particle_particle", "particle_drum", "particle_brush", "particle_wall", "rolling_drum"});
+    if (has(s, "particle_particle"))
+      cfg.mu_particle_particle = c.nonNegative(s["particle_particle"], "ces.friction.particle_particle");
     if (has(s, "particle_drum")) cfg.mu_particle_drum = c.nonNegative(s["particle_drum"], "ces.friction.particle_drum");
-    if (has(s, "particle_brush")) cfg.mu_particle_brush = c.nonNegative(s["particle_brush"], "ces.friction.particle_brush");
+    if (has(s, "particle_brush"))
+      cfg.mu_particle_brush = c.nonNegative(s["particle_brush"], "ces.friction.particle_brush");
     if (has(s, "particle_wall")) cfg.mu_particle_wall = c.nonNegative(s["particle_wall"], "ces.friction.particle_wall");
     if (has(s, "rolling_drum")) cfg.mu_rolling_drum = c.nonNegative(s["rolling_drum"], "ces.friction.rolling_drum");
   }
   if (!(cfg.mu_particle_particle > 0))
-    c.fail("ces.friction.particle_particle", "must be > 0 (the other pairs are expressed through it under the product rule)");
+    c.fail("ces.friction.particle_particle",
+           "must be > 0 (the other pairs are expressed through it under the product rule)");
 }
 
 // The feed and its materials; at least one material, and a feed no wider than the drum.
 void parseCesFeed(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "feed")) {
     const json& s = c.object(j["feed"], "ces.feed",
-                             {"mass_flow_g_s", "start_s", "duration_s", "angle_deg", "height_mm", "speed_m_s", "width_mm",
-                              "diameter_mm", "materials"});
-    if (has(s, "mass_flow_g_s")) cfg.feed_mass_flow = c.range(s["mass_flow_g_s"], "ces.feed.mass_flow_g_s", 0, 1e6) * 1e-3;
+                             {"mass_flow_g_s", "start_s", "duration_s", "angle_deg", "height_mm", "speed_m_s",
+                              "width_mm", "diameter_mm", "materials"});
+    if (has(s, "mass_flow_g_s"))
+      cfg.feed_mass_flow = c.range(s["mass_flow_g_s"], "ces.feed.mass_flow_g_s", 0, 1e6) * 1e-3;
     if (has(s, "start_s")) cfg.feed_start = c.nonNegative(s["start_s"], "ces.feed.start_s");
     if (has(s, "duration_s")) cfg.feed_duration = c.nonNegative(s["duration_s"], "ces.feed.duration_s");
     if (has(s, "angle_deg")) cfg.feed_angle = c.range(s["angle_deg"], "ces.feed.angle_deg", -360, 360) * kDeg;
@@ -339,7 +359,8 @@ void parseCesFeed(const Checker& c, const json& j, CesConfig& cfg) {
     }
   }
   if (cfg.materials.empty()) c.fail("ces.feed.materials", "missing (at least one material)");
-  if (cfg.feed_width > cfg.drum_width) c.fail("ces.feed.width_mm", "wider than the drum (" + num(cfg.drum_width / kMm) + " mm)");
+  if (cfg.feed_width > cfg.drum_width)
+    c.fail("ces.feed.width_mm", "wider than the drum (" + num(cfg.drum_width / kMm) + " mm)");
 }
 
 void parseCesCollection(const Checker& c, const json& j, CesConfig& cfg) {
@@ -349,15 +370,18 @@ void parseCesCollection(const Checker& c, const json& j, CesConfig& cfg) {
     if (has(s, "x0_mm")) cfg.collection_x0 = c.range(s["x0_mm"], "ces.collection.x0_mm", -1e5, 1e5) * kMm;
   }
   if (!(cfg.collection_y < -cfg.drumRadius()))
-    c.fail("ces.collection.y_mm", "the collection plane must lie below the drum (y < " + num(-cfg.drumRadius() / kMm) + " mm)");
+    c.fail("ces.collection.y_mm",
+           "the collection plane must lie below the drum (y < " + num(-cfg.drumRadius() / kMm) + " mm)");
 }
 
 void parseCesSplitters(const Checker& c, const json& j, CesConfig& cfg) {
   if (has(j, "splitters")) {
-    const json& s = c.object(j["splitters"], "ces.splitters", {"s1_mm", "s2_mm", "range_mm", "positions", "grade_targets"});
+    const json& s =
+        c.object(j["splitters"], "ces.splitters", {"s1_mm", "s2_mm", "range_mm", "positions", "grade_targets"});
     if (has(s, "grade_targets")) {
       const json& g = c.object(s["grade_targets"], "ces.splitters.grade_targets", {"conductor", "nonconductor"});
-      if (has(g, "conductor")) cfg.grade_target_conductor = c.range(g["conductor"], "ces.splitters.grade_targets.conductor", 0, 1);
+      if (has(g, "conductor"))
+        cfg.grade_target_conductor = c.range(g["conductor"], "ces.splitters.grade_targets.conductor", 0, 1);
       if (has(g, "nonconductor"))
         cfg.grade_target_nonconductor = c.range(g["nonconductor"], "ces.splitters.grade_targets.nonconductor", 0, 1);
     }
@@ -370,7 +394,8 @@ void parseCesSplitters(const Checker& c, const json& j, CesConfig& cfg) {
       cfg.splitter_hi = c.range(r[1], "ces.splitters.range_mm[1]", -1e5, 1e5) * kMm;
       if (!(cfg.splitter_hi > cfg.splitter_lo)) c.fail("ces.splitters.range_mm", "max must exceed min");
     }
-    if (has(s, "positions")) cfg.splitter_positions = int(c.integer(s["positions"], "ces.splitters.positions", 2, 10000));
+    if (has(s, "positions"))
+      cfg.splitter_positions = int(c.integer(s["positions"], "ces.splitters.positions", 2, 10000));
   }
   if (cfg.s2 < cfg.s1) c.fail("ces.splitters.s2_mm", "must be >= s1_mm (" + num(cfg.s1 / kMm) + ")");
 }
@@ -379,9 +404,11 @@ void parseCesOutput(const Checker& c, const json& j, CesConfig& cfg) {
   if (!has(j, "output")) return;
   const json& s = c.object(j["output"], "ces.output", {"frames", "histogram_bin_mm", "plots", "checkpoint_every_s"});
   if (has(s, "frames")) cfg.frames = int(c.integer(s["frames"], "ces.output.frames", 0, 1000000));
-  if (has(s, "histogram_bin_mm")) cfg.histogram_bin = c.positive(s["histogram_bin_mm"], "ces.output.histogram_bin_mm") * kMm;
+  if (has(s, "histogram_bin_mm"))
+    cfg.histogram_bin = c.positive(s["histogram_bin_mm"], "ces.output.histogram_bin_mm") * kMm;
   if (has(s, "plots")) cfg.plots = c.boolean(s["plots"], "ces.output.plots");
-  if (has(s, "checkpoint_every_s")) cfg.checkpoint_every = c.nonNegative(s["checkpoint_every_s"], "ces.output.checkpoint_every_s");
+  if (has(s, "checkpoint_every_s"))
+    cfg.checkpoint_every = c.nonNegative(s["checkpoint_every_s"], "ces.output.checkpoint_every_s");
 }
 
 // Geometry: the electrodes outside the drum and apart from each other.
@@ -414,8 +441,8 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   for (const std::string& o : overrides) applyCesOverride(doc, o);
   if (!overrides.empty()) checkJsonDepth(doc, origin);
   const json& j = c.object(doc["ces"], "ces",
-                           {"duration_s", "time_step_s", "seed", "solver", "drum", "electrode", "field", "corona", "brush",
-                            "air", "friction", "feed", "collection", "splitters", "output"});
+                           {"duration_s", "time_step_s", "seed", "solver", "drum", "electrode", "field", "corona",
+                            "brush", "air", "friction", "feed", "collection", "splitters", "output"});
   CesConfig cfg;
   // One section at a time, in this order: a section's checks may read the sections before it.
   parseCesRun(c, j, cfg, origin);

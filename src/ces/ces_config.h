@@ -37,13 +37,13 @@ const char* particleShapeName(ParticleShape s);  // "sphere" | "flake" | "wire" 
 struct MaterialConfig {
   std::string name;
   MaterialKind kind = MaterialKind::Plastic;
-  double mass_fraction = 1;              // share of the fed mass (normalised over the materials)
+  double mass_fraction = 1;                     // share of the fed mass (normalised over the materials)
   double density_min = 946, density_max = 946;  // kg/m^3, uniform
-  double eps_r = 2.5;                    // relative permittivity (inf for a metal)
+  double eps_r = 2.5;                           // relative permittivity (inf for a metal)
   // s, charge relaxation through the drum contact tau = eps0 eps_r / sigma (inf: none). Given directly
   // (relaxation_time_s) or through the effective conductivity (conductivity_S_m).
   double relaxation_time = 0;
-  double conductivity = -1;              // S/m as given (-1: not given)
+  double conductivity = -1;                                // S/m as given (-1: not given)
   double shape_weight[kParticleShapes] = {1, 0, 0, 0, 0};  // relative frequency of each shape (by count)
 };
 
@@ -51,10 +51,10 @@ struct MaterialConfig {
 // charge-simulation model. The wire and the tube are on the machine's one supply (CesConfig::voltage).
 struct ElectrodeConfig {
   bool enabled = true;
-  double diameter = 0.038;   // m
-  double distance = 0.230;   // m, centre distance from the drum axis
-  double angle = 0;          // rad, counter-clockwise from +x
-  double voltage = -35000;   // V (extra electrodes only; the wire and tube take the supply's)
+  double diameter = 0.038;  // m
+  double distance = 0.230;  // m, centre distance from the drum axis
+  double angle = 0;         // rad, counter-clockwise from +x
+  double voltage = -35000;  // V (extra electrodes only; the wire and tube take the supply's)
 };
 
 // The machine's step: ces.time_step_s (dt, 2e-4 s) and ces.solver.gyroscopic (the gyroscopic term w x I w, on:
@@ -77,7 +77,7 @@ inline SolverSettings cesDefaultSolver() {
 
 struct CesConfig {
   // Run.
-  double duration = 2.0;      // s of machine time
+  double duration = 2.0;  // s of machine time
   uint64_t seed = 1;
   // The System's step and solver parts (system.h), parsed straight into them; the rest of the System's
   // configuration is makeCesSystem's (apps/dvisim/ces_run.h).
@@ -88,11 +88,11 @@ struct CesConfig {
   // kinematic), "kinematic" or "rheonomic".
   double drum_diameter = 0.320, drum_width = 0.300, drum_rpm = 44.8;
   std::string drum_drive = "auto";
-  double drum_mass = 30;      // kg, for the rheonomic drive (a steel shell; any large value works)
+  double drum_mass = 30;  // kg, for the rheonomic drive (a steel shell; any large value works)
 
   // The electrodes on the one high-voltage supply: a thin corona wire (ionising) and a static tube
   // (shaping the field). voltage = 0 is the supply off.
-  double voltage = -35000;   // V
+  double voltage = -35000;  // V
   ElectrodeConfig wire{true, 0.00025, 0.205, 1.0471975511965976, 0};
   ElectrodeConfig tube{true, 0.038, 0.230, 0.5235987755982988, 0};
   // Field model: "corona" (the steady ionised field of the wire with the tube, field_corona.h; Laplace
@@ -103,11 +103,11 @@ struct CesConfig {
 
   // Corona: ion mobility (Pauthenier's charging time), the air's relative density and the wire's
   // roughness factor (Peek's onset field), the solver's grid spacing; the image-force cutoff.
-  double ion_mobility = 2.1e-4;                    // m^2/(V s), negative ions in air
-  double rel_air_density = 1.0;                    // delta, 1 at 20 C and 101.3 kPa
-  double roughness = 1.0;                          // Peek's m (1: smooth wire)
-  double corona_grid = 0.001;                      // m, grid spacing of the ionised-field solver
-  double image_cutoff = 0.005;                     // m, image force acts within this distance of the drum surface
+  double ion_mobility = 2.1e-4;  // m^2/(V s), negative ions in air
+  double rel_air_density = 1.0;  // delta, 1 at 20 C and 101.3 kPa
+  double roughness = 1.0;        // Peek's m (1: smooth wire)
+  double corona_grid = 0.001;    // m, grid spacing of the ionised-field solver
+  double image_cutoff = 0.005;   // m, image force acts within this distance of the drum surface
 
   // Brush (grounded, rotating): a rigid core of brush_core_diameter (the body particles collide with) set with
   // bristles out to brush_diameter, whose tips are brush_gap from the drum (0: they touch it). Among the
@@ -115,8 +115,8 @@ struct CesConfig {
   // (brush_sweep_time). brush_core_diameter = brush_diameter is a smooth rigid cylinder.
   double brush_diameter = 0.106, brush_core_diameter = 0.066, brush_angle = -2.356194490192345, brush_rpm = 120,
          brush_gap = 0;
-  double brush_discharge_time = 1e-3;              // s
-  double brush_sweep_time = 2e-3;                  // s
+  double brush_discharge_time = 1e-3;  // s
+  double brush_sweep_time = 2e-3;      // s
 
   // Air.
   double air_viscosity = 1.81e-5, air_density = 1.225;
@@ -128,12 +128,12 @@ struct CesConfig {
   double mu_rolling_drum = 0;
 
   // Feed: a vibrating conveyor's outlet, a line across the drum width above the drum.
-  double feed_mass_flow = 0.5e-3;  // kg/s
-  double feed_start = 0, feed_duration = 0.6;      // s
-  double feed_angle = 1.7453292519943295;          // rad, direction of the outlet from the drum axis (100 deg)
-  double feed_height = 0.004;                      // m, above the drum surface
-  double feed_speed = 0.2;                         // m/s, along the drum's surface motion
-  double feed_width = 0.280;                       // m, along z
+  double feed_mass_flow = 0.5e-3;                       // kg/s
+  double feed_start = 0, feed_duration = 0.6;           // s
+  double feed_angle = 1.7453292519943295;               // rad, direction of the outlet from the drum axis (100 deg)
+  double feed_height = 0.004;                           // m, above the drum surface
+  double feed_speed = 0.2;                              // m/s, along the drum's surface motion
+  double feed_width = 0.280;                            // m, along z
   double diameter_min = 0.5e-3, diameter_max = 1.0e-3;  // m, volume-equivalent diameter, uniform
   std::vector<MaterialConfig> materials;
 
@@ -152,9 +152,9 @@ struct CesConfig {
   int frames = 0;
   double histogram_bin = 0.002;  // m
   bool plots = true;
-  double checkpoint_every = 0;   // s of machine time between checkpoints (0: none; one is always written at the end)
+  double checkpoint_every = 0;  // s of machine time between checkpoints (0: none; one is always written at the end)
 
-  double omegaDrum() const;   // rad/s about +z
+  double omegaDrum() const;  // rad/s about +z
   double omegaBrush() const;
   double drumRadius() const { return drum_diameter / 2; }
 };
@@ -169,7 +169,8 @@ bool isCesDocument(const nlohmann::json& doc);
 // overrides KEY=VALUE (KEY relative to "ces", e.g. electrode.voltage_kV=-30, or starting with "ces.").
 // `origin` names the file in error messages. The document is checked for its nesting depth before it is copied
 // (copying a document nested 100,000 deep overflows the stack), and its run for a step count within the limit.
-CesConfig parseCesDocument(const nlohmann::json& document, const std::vector<std::string>& overrides, const std::string& origin);
+CesConfig parseCesDocument(const nlohmann::json& document, const std::vector<std::string>& overrides,
+                           const std::string& origin);
 
 // Applies one override to the document (exposed for the checkpoint, which stores the final document).
 void applyCesOverride(nlohmann::json& doc, const std::string& assignment);

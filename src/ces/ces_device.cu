@@ -93,8 +93,8 @@ class CudaCesDevice final : public CesDevice {
     const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
     if (n == 0) return;
     forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), h, status_.data(), material_.data(),
-                                                        charge_.data(), radius_.data(), bound_.data(), mass_.data(),
-                                                        moment_.data(), b.pos, b.vel, b.omega, b.flags, force, torque);
+                                                       charge_.data(), radius_.data(), bound_.data(), mass_.data(),
+                                                       moment_.data(), b.pos, b.vel, b.omega, b.flags, force, torque);
     DVI_CUDA_LAUNCH("CES forceKernel");
   }
 
@@ -106,9 +106,9 @@ class CudaCesDevice final : public CesDevice {
     changed_.resize(size_t(n));
     changed_status_.resize(size_t(n));
     DVI_CUDA(cudaMemsetAsync(n_changed_.data(), 0, sizeof(int32_t), s));
-    postStepKernel<<<blocks(n), kThreads, 0, s>>>(n, model_.data(), h, status_.data(), material_.data(),
-                                                   charge_.data(), pflags_.data(), radius_.data(), bound_.data(), b.pos,
-                                                   changed_.data(), changed_status_.data(), n_changed_.data());
+    postStepKernel<<<blocks(n), kThreads, 0, s>>>(n, model_.data(), h, status_.data(), material_.data(), charge_.data(),
+                                                  pflags_.data(), radius_.data(), bound_.data(), b.pos, changed_.data(),
+                                                  changed_status_.data(), n_changed_.data());
     DVI_CUDA_LAUNCH("CES postStepKernel");
     std::vector<int32_t> count;
     n_changed_.download(count, 1, s);  // synchronous

@@ -18,9 +18,7 @@ namespace ces {
 // électrique", Revue Générale de l'Électricité 75 (1966) 1145-1160; also N. N. Lebedev, I. P.
 // Skal'skaya, Sov. Phys. Tech. Phys. 7 (1962) 268. The sign is that of the surface charge
 // eps0 E.n of the electrode, so the Coulomb force q E lifts the particle off the drum.
-DVI_HD real feliciCharge(real r, real En) {
-  return real(2) / real(3) * kPi * kPi * kPi * kEps0 * r * r * En;
-}
+DVI_HD real feliciCharge(real r, real En) { return real(2) / real(3) * kPi * kPi * kPi * kEps0 * r * r * En; }
 // Vector form: n is the unit outward normal of the drum at the contact.
 DVI_HD real feliciCharge(real r, Vec3 E, Vec3 n) { return feliciCharge(r, dot(E, n)); }
 

@@ -23,7 +23,8 @@ constexpr double kPiD = 3.14159265358979323846;
 // origin of the sums) int x x^T dV = V/20 (sum x_i x_i^T + s s^T), s = sum x_i (Tonon, "Explicit exact
 // formulas for the 3-D tetrahedron inertia tensor in terms of its vertex coordinates", J. Math. Stat.
 // 1 (2005) 8-11).
-void hullMassProperties(const std::vector<Vec3>& pts, double& volume, Eigen::Vector3d& centroid, Eigen::Matrix3d& inertia) {
+void hullMassProperties(const std::vector<Vec3>& pts, double& volume, Eigen::Vector3d& centroid,
+                        Eigen::Matrix3d& inertia) {
   btConvexHullComputer hull;
   std::vector<double> flat;
   for (const Vec3& p : pts) flat.insert(flat.end(), {double(p.x), double(p.y), double(p.z)});
@@ -178,7 +179,8 @@ Feeder::Feeder(const CesConfig& cfg) : cfg_(cfg), fed_fg_(cfg.materials.size(), 
 Quat Feeder::randomRotation() {
   const double u1 = rng_.uniform(), u2 = rng_.uniform() * 2 * kPiD, u3 = rng_.uniform() * 2 * kPiD;
   const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
-  return normalized(Quat{real(b * std::cos(u3)), real(a * std::sin(u2)), real(a * std::cos(u2)), real(b * std::sin(u3))});
+  return normalized(
+      Quat{real(b * std::cos(u3)), real(a * std::sin(u2)), real(a * std::cos(u2)), real(b * std::sin(u3))});
 }
 
 ParticleSpec Feeder::drawNext() {

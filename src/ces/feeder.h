@@ -29,17 +29,16 @@ namespace ces {
 
 constexpr double kFemtogram = 1e-15;  // kg, the unit of every particle mass
 
-
 // One fed particle: enough to rebuild its body (for a checkpoint) and to account for it.
 struct ParticleSpec {
   int32_t material = 0;
   ParticleShape shape = ParticleShape::Sphere;
-  Vec3 dims{0, 0, 0};          // sphere: (r, 0, 0); flake: half extents; wire: (r, half height, 0); ellipsoid: semi-axes
-  std::vector<Vec3> hull;      // fragment: points in the principal frame (centroid at the origin)
-  int64_t mass_fg = 0;         // mass in femtograms
-  Vec3 inertia{0, 0, 0};       // principal moments, kg m^2
-  real radius = 0;             // volume-equivalent radius (charge, drag)
-  real bound = 0;              // bounding radius about the centre of mass
+  Vec3 dims{0, 0, 0};      // sphere: (r, 0, 0); flake: half extents; wire: (r, half height, 0); ellipsoid: semi-axes
+  std::vector<Vec3> hull;  // fragment: points in the principal frame (centroid at the origin)
+  int64_t mass_fg = 0;     // mass in femtograms
+  Vec3 inertia{0, 0, 0};   // principal moments, kg m^2
+  real radius = 0;         // volume-equivalent radius (charge, drag)
+  real bound = 0;          // bounding radius about the centre of mass
 };
 
 // Emission: the owed mass grows by mass_flow x h each step; while it is >= 0 a particle is emitted and

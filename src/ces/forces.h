@@ -23,9 +23,7 @@ struct DrumGeometry {
 DVI_HD bool insideDrumWidth(const DrumGeometry& g, Vec3 p) { return std::fabs(p.z - g.zc) <= g.halfWidth; }
 
 // Signed distance of a point to the drum surface in the cross-section (> 0 outside the drum).
-DVI_HD real distanceToDrumSurface(const DrumGeometry& g, Vec3 p) {
-  return std::hypot(p.x - g.cx, p.y - g.cy) - g.R;
-}
+DVI_HD real distanceToDrumSurface(const DrumGeometry& g, Vec3 p) { return std::hypot(p.x - g.cx, p.y - g.cy) - g.R; }
 
 // Coulomb force on a point charge: F = q E (Jackson, "Classical Electrodynamics", 3rd ed., §1.2).
 DVI_HD Vec3 coulombForce(real q, Vec3 E) { return q * E; }

@@ -60,7 +60,8 @@ void getVec(std::istream& i, std::vector<T>& v) {
   uint64_t n = 0;
   get(i, n);
   // A length beyond what the file holds is refused before anything is allocated for it.
-  if (n > bytesLeft(i) / sizeof(T)) throw InputError("checkpoint: corrupt array length " + std::to_string(n) + " (truncated file)");
+  if (n > bytesLeft(i) / sizeof(T))
+    throw InputError("checkpoint: corrupt array length " + std::to_string(n) + " (truncated file)");
   v.resize(size_t(n));
   if (n) i.read(reinterpret_cast<char*>(v.data()), std::streamsize(n * sizeof(T)));
   if (!i) throw InputError("checkpoint: truncated file");
@@ -107,11 +108,11 @@ void CesForceField::apply(const BodyArrays& b, const StepContext& step, Vec3* fo
   for (int64_t i = 0; i < n; ++i) {
     const size_t k = size_t(i);
     if (p.status[k] != kStatusInFlight || (b.flags[k] & kBodyFixed)) continue;
-    const Vec3 F = cesParticleForce(model, p.material[k], b.pos[k], b.vel[k], p.charge[k], p.radius[k], p.bound[k],
-                                    p.mass[k], dt);
+    const Vec3 F =
+        cesParticleForce(model, p.material[k], b.pos[k], b.vel[k], p.charge[k], p.radius[k], p.bound[k], p.mass[k], dt);
     force[i] += F;
-    torque[i] += cesParticleTorque(model, b.pos[k], b.vel[k], b.omega[k], w_drum, F, p.radius[k], p.bound[k],
-                                   p.mass[k], p.moment[k], dt);
+    torque[i] += cesParticleTorque(model, b.pos[k], b.vel[k], b.omega[k], w_drum, F, p.radius[k], p.bound[k], p.mass[k],
+                                   p.moment[k], dt);
   }
 }
 
@@ -163,7 +164,8 @@ void DrumDrive::impulses(const real* lambda, size_t count) {
 CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys), feeder_(cfg_) {
   if (sys_.bodies().count() != 0) throw InputError("CES machine: the system must be empty");
   if (cfg_.materials.size() > size_t(kMaxMaterials)) throw InputError("CES machine: at most 64 materials");
-  if (cfg_.extra_electrodes.size() + 2 > size_t(kMaxElectrodes)) throw InputError("CES machine: at most 6 extra electrodes");
+  if (cfg_.extra_electrodes.size() + 2 > size_t(kMaxElectrodes))
+    throw InputError("CES machine: at most 6 extra electrodes");
   sys_.mutableConfig().step.gyroscopic = cfg_.step.gyroscopic;  // see cesDefaultStep
   // Pair coefficients under the product rule (Bullet's, the core's default): f_particle^2 = mu_pp and
   // f_particle f_part = mu_(particle, part).
@@ -198,7 +200,8 @@ void CesMachine::setupField(const std::vector<ElectrodeConfig>& supplied) {
   if (cfg_.field_model == "two_cylinder") {
     const ElectrodeConfig& e = cfg_.tube;
     model_.field.model = 0;
-    if (!makeTwoCylinderField(R, real(e.diameter / 2), real(e.distance), real(e.angle), real(cfg_.voltage), 0, 0, model_.field.tc))
+    if (!makeTwoCylinderField(R, real(e.diameter / 2), real(e.distance), real(e.angle), real(cfg_.voltage), 0, 0,
+                              model_.field.tc))
       throw InputError("ces.electrode.tube: the two-cylinder field needs the tube outside the drum");
   } else if (cfg_.field_model == "csm") {
     model_.field.model = 1;
@@ -221,8 +224,8 @@ void CesMachine::setupCoronaField() {
   model_.field.model = 2;
   CoronaSetup st;
   auto cyl = [](const ElectrodeConfig& e) {
-    return CoronaCylinder{real(e.distance * std::cos(e.angle)), real(e.distance * std::sin(e.angle)), real(e.diameter / 2),
-                          e.enabled};
+    return CoronaCylinder{real(e.distance * std::cos(e.angle)), real(e.distance * std::sin(e.angle)),
+                          real(e.diameter / 2), e.enabled};
   };
   st.drum = CoronaCylinder{0, 0, R, true};
   st.wire = cyl(cfg_.wire);
@@ -298,7 +301,8 @@ void CesMachine::addDrumBody() {
   std::string drive = cfg_.drum_drive;
   if (drive == "auto") drive = coreSolvesConstraintRows() ? "rheonomic" : "kinematic";
   if (drive == "rheonomic" && !coreSolvesConstraintRows())
-    throw InputError("ces.drum.drive: rheonomic needs a core that solves constraint rows (this build does not); use kinematic");
+    throw InputError(
+        "ces.drum.drive: rheonomic needs a core that solves constraint rows (this build does not); use kinematic");
   BodyDesc d;
   d.rot = axisZ();
   d.omega = Vec3{0, 0, real(cfg_.omegaDrum())};
@@ -307,7 +311,8 @@ void CesMachine::addDrumBody() {
   if (drive == "rheonomic") {
     const real M = real(cfg_.drum_mass);
     d.mass = M;
-    d.inertia = Vec3{M * (6 * R * R + W * W) / 12, M * R * R, M * (6 * R * R + W * W) / 12};  // thin shell, axis local y
+    d.inertia =
+        Vec3{M * (6 * R * R + W * W) / 12, M * R * R, M * (6 * R * R + W * W) / 12};  // thin shell, axis local y
     d.has_gravity = true;  // the truss carries its weight: no gravity on the drum
     d.gravity = Vec3{0, 0, 0};
   } else {
@@ -409,8 +414,9 @@ void CesMachine::emit() {
   const real dir = cfg_.drum_rpm >= 0 ? real(1) : real(-1);
   const Vec3 tangent{dir * uy, -dir * ux, 0};  // the drum surface's direction of motion at the outlet
   const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / cfg_.step.dt)));
-  recent_.erase(std::remove_if(recent_.begin(), recent_.end(), [&](const RecentSpawn& r) { return steps_ - r.step > keep; }),
-                recent_.end());
+  recent_.erase(
+      std::remove_if(recent_.begin(), recent_.end(), [&](const RecentSpawn& r) { return steps_ - r.step > keep; }),
+      recent_.end());
   if (due.empty()) return;
   // The recent spawns in a uniform grid (a hash of cells about a bounding diameter across): each spawn is listed
   // in every cell its bounding sphere's box touches, and a candidate is tested against the spawns listed in the
@@ -505,7 +511,7 @@ void CesMachine::syncCharges() const {
 
 // A machine step with CesDevice: the host reads and edits only the bodies named here.
 void CesMachine::stepDevice() {
-  std::vector<int32_t> ids{drum_, brush_};  // their omega is set below
+  std::vector<int32_t> ids{drum_, brush_};                     // their omega is set below
   for (const RecentSpawn& r : recent_) ids.push_back(r.body);  // the feeder's overlap test
   sys_.syncBodiesToHost(ids);
   // The host's charges and flags of earlier particles may be stale here: append() uploads only the new
@@ -568,7 +574,8 @@ void CesMachine::postStep() {
     const size_t k = size_t(i);
     next[k] = p_.status[k];
     if (p_.status[k] != kStatusInFlight) continue;
-    p_.charge[k] = cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h, p_.flags[k]);
+    p_.charge[k] =
+        cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h, p_.flags[k]);
     next[k] = cesClassify(m, b.pos[k]);
   }
   for (int64_t i = n_machine_; i < n; ++i)
@@ -618,8 +625,10 @@ MassBalance CesMachine::balance() const {
       case kStatusCollected: r.collected_fg += mg, ++r.collected; break;
       case kStatusLost: r.lost_fg += mg, ++r.lost; break;
       default:
-        if (heldUp(k)) r.held_up_fg += mg, ++r.held_up;
-        else r.in_flight_fg += mg, ++r.in_flight;
+        if (heldUp(k))
+          r.held_up_fg += mg, ++r.held_up;
+        else
+          r.in_flight_fg += mg, ++r.in_flight;
         break;
     }
   }
@@ -640,18 +649,21 @@ struct CheckpointParts {
 };
 
 CheckpointParts openCheckpoint(const std::string& f) {
-  if (f.size() < kMagicBytes || std::memcmp(f.data(), "DVICES", 6) != 0) throw InputError("checkpoint: not a dvisim CES checkpoint");
+  if (f.size() < kMagicBytes || std::memcmp(f.data(), "DVICES", 6) != 0)
+    throw InputError("checkpoint: not a dvisim CES checkpoint");
   if (std::memcmp(f.data(), kCesCheckpointMagic, kMagicBytes) != 0)
     throw InputError("checkpoint: format " + f.substr(0, kMagicBytes) + " is not the current " + kCesCheckpointMagic +
                      " (written by another version of dvisim; rerun from the start)");
-  if (f.size() < kHeaderBytes + kTrailerBytes) throw InputError("checkpoint: truncated file (" + std::to_string(f.size()) + " bytes)");
+  if (f.size() < kHeaderBytes + kTrailerBytes)
+    throw InputError("checkpoint: truncated file (" + std::to_string(f.size()) + " bytes)");
   uint64_t stored = 0;
   std::memcpy(&stored, f.data() + f.size() - kTrailerBytes, 8);
   if (fnv1a64(f.data(), f.size() - kTrailerBytes) != stored)
     throw InputError("checkpoint: checksum mismatch (the file was edited, truncated or damaged)");
   uint64_t n = 0;
   std::memcpy(&n, f.data() + kMagicBytes, 8);
-  if (n > f.size() - kHeaderBytes - kTrailerBytes) throw InputError("checkpoint: corrupt metadata length " + std::to_string(n));
+  if (n > f.size() - kHeaderBytes - kTrailerBytes)
+    throw InputError("checkpoint: corrupt metadata length " + std::to_string(n));
   CheckpointParts p;
   p.meta = f.substr(kHeaderBytes, size_t(n));
   p.state = f.substr(kHeaderBytes + size_t(n), f.size() - kHeaderBytes - kTrailerBytes - size_t(n));
@@ -690,7 +702,8 @@ void CheckpointSystem::loadCore(std::istream& i) {
   getVec(i, rows);
   getVec(i, lambda);
   // The warm-start cache is looked up by binary search and read 3 impulses a contact; rows name bodies.
-  if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(real(config().step.dt))) || steps < 0 || steps > (int64_t(1) << 40))
+  if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(real(config().step.dt))) || steps < 0 ||
+      steps > (int64_t(1) << 40))
     throw InputError("checkpoint: corrupt core clock");
   if (gamma.size() != 3 * keys.size() || !std::is_sorted(keys.begin(), keys.end()))
     throw InputError("checkpoint: corrupt warm-start cache");
@@ -702,8 +715,8 @@ void CheckpointSystem::loadCore(std::istream& i) {
     if (!(std::fabs(l) <= real(1e6))) throw InputError("checkpoint: corrupt constraint impulse");
   const int32_t n = int32_t(bodies().count());
   for (const ConstraintRow& r : rows) {
-    bool ok = r.a >= -1 && r.a < n && r.b >= -1 && r.b < n && std::isfinite(r.bias) && !(r.lo > r.hi) && !std::isnan(r.lo) &&
-              !std::isnan(r.hi);
+    bool ok = r.a >= -1 && r.a < n && r.b >= -1 && r.b < n && std::isfinite(r.bias) && !(r.lo > r.hi) &&
+              !std::isnan(r.lo) && !std::isnan(r.hi);
     for (int k = 0; k < 6; ++k) ok = ok && std::isfinite(r.Ja[k]) && std::isfinite(r.Jb[k]);
     if (!ok) throw InputError("checkpoint: corrupt constraint row");
   }
@@ -775,7 +788,9 @@ bool plausibleSpec(const ParticleSpec& s, const CesConfig& cfg) {
   const MaterialConfig& mat = cfg.materials[size_t(s.material)];
   const double V = kPi * d * d * d / 6, rho = m / V, slack = kFemtogram / V;  // mass_fg is rounded to 1 fg
   if (!(rho >= mat.density_min * (1 - tol) - slack && rho <= mat.density_max * (1 + tol) + slack)) return false;
-  auto close = [&](double a, double b) { return std::fabs(a - b) <= tol * std::fmax(std::fabs(a), std::fabs(b)) + 1e-30; };
+  auto close = [&](double a, double b) {
+    return std::fabs(a - b) <= tol * std::fmax(std::fabs(a), std::fabs(b)) + 1e-30;
+  };
   if (s.shape != ParticleShape::Fragment) {
     SplitMix64 unused{1};
     const ParticleSpec e = makeParticleSpec(s.material, s.shape, d, rho, unused);
@@ -783,12 +798,14 @@ bool plausibleSpec(const ParticleSpec& s, const CesConfig& cfg) {
            close(s.inertia.x, e.inertia.x) && close(s.inertia.y, e.inertia.y) && close(s.inertia.z, e.inertia.z) &&
            close(s.bound, e.bound);
   }
-  if (s.hull.size() < 4 || s.hull.size() > 64 || !(s.bound >= s.radius * real(1 - tol) && s.bound <= 10 * s.radius)) return false;
+  if (s.hull.size() < 4 || s.hull.size() > 64 || !(s.bound >= s.radius * real(1 - tol) && s.bound <= 10 * s.radius))
+    return false;
   for (const Vec3& p : s.hull)
     if (!(isFinite(p) && length(p) <= s.bound * real(1 + tol))) return false;
   const double I[3] = {s.inertia.x, s.inertia.y, s.inertia.z}, r = double(s.radius), b = double(s.bound);
   for (int k = 0; k < 3; ++k)  // a moment is at most m b^2; the triangle inequality of principal moments
-    if (!(I[k] >= 0.01 * m * r * r && I[k] <= m * b * b * (1 + tol) && I[(k + 1) % 3] + I[(k + 2) % 3] >= I[k] * (1 - tol)))
+    if (!(I[k] >= 0.01 * m * r * r && I[k] <= m * b * b * (1 + tol) &&
+          I[(k + 1) % 3] + I[(k + 2) % 3] >= I[k] * (1 - tol)))
       return false;
   return true;
 }
@@ -811,7 +828,8 @@ void CesMachine::load(std::istream& file, std::string* meta) {
   bytes.clear();
   bytes.shrink_to_fit();
   std::istringstream in(std::move(parts.state), std::ios::binary);
-  if (int(sys_.bodies().count()) != n_machine_ || !specs_.empty()) throw InputError("checkpoint: the machine is not fresh");
+  if (int(sys_.bodies().count()) != n_machine_ || !specs_.empty())
+    throw InputError("checkpoint: the machine is not fresh");
   // The sections in the order save() writes them.
   loadClockAndFeeder(in);
   loadParticleRecords(in);
@@ -827,18 +845,21 @@ void CesMachine::load(std::istream& file, std::string* meta) {
 // The step count and the feeder's state.
 void CesMachine::loadClockAndFeeder(std::istream& in) {
   get(in, steps_);
-  if (steps_ < 0 || steps_ > (int64_t(1) << 40)) throw InputError("checkpoint: corrupt step count " + std::to_string(steps_));
+  if (steps_ < 0 || steps_ > (int64_t(1) << 40))
+    throw InputError("checkpoint: corrupt step count " + std::to_string(steps_));
   Feeder::State fs;
   get(in, fs.rng);
   get(in, fs.owed_kg);
   get(in, fs.fed_total_fg);
   getVec(in, fs.fed_fg);
-  if (fs.fed_fg.size() != cfg_.materials.size()) throw InputError("checkpoint: the materials differ from the configuration");
+  if (fs.fed_fg.size() != cfg_.materials.size())
+    throw InputError("checkpoint: the materials differ from the configuration");
   // The feeder emits while its debt is >= 0 and stops below 0: a saved debt is <= 0 and above minus one particle.
   // (masses in whole femtograms: 1 kg is 1e18 fg, and the balance adds them up in 64 bits)
   int64_t fed_sum = 0;
   for (int64_t f : fs.fed_fg)
-    if (f < 0 || f > int64_t(4e18) || __builtin_add_overflow(fed_sum, f, &fed_sum)) throw InputError("checkpoint: corrupt feeder state");
+    if (f < 0 || f > int64_t(4e18) || __builtin_add_overflow(fed_sum, f, &fed_sum))
+      throw InputError("checkpoint: corrupt feeder state");
   if (!(std::isfinite(fs.owed_kg) && fs.owed_kg <= 0 && fs.owed_kg > -1.0) || fs.fed_total_fg != fed_sum)
     throw InputError("checkpoint: corrupt feeder state");
   feeder_.setState(fs);
@@ -848,7 +869,8 @@ void CesMachine::loadClockAndFeeder(std::istream& in) {
 void CesMachine::loadParticleRecords(std::istream& in) {
   uint64_t ns = 0;
   get(in, ns);
-  if (ns > bytesLeft(in) / 64) throw InputError("checkpoint: corrupt particle count " + std::to_string(ns));  // >= 64 bytes each
+  if (ns > bytesLeft(in) / 64)
+    throw InputError("checkpoint: corrupt particle count " + std::to_string(ns));  // >= 64 bytes each
   for (uint64_t k = 0; k < ns; ++k) {
     ParticleSpec s;
     get(in, s.material);
@@ -860,15 +882,15 @@ void CesMachine::loadParticleRecords(std::istream& in) {
     get(in, s.radius);
     get(in, s.bound);
     const std::string what = "checkpoint: particle " + std::to_string(k) + ": ";
-    if (s.material < 0 || size_t(s.material) >= cfg_.materials.size() || int(s.shape) < 0 || int(s.shape) >= kParticleShapes)
+    if (s.material < 0 || size_t(s.material) >= cfg_.materials.size() || int(s.shape) < 0 ||
+        int(s.shape) >= kParticleShapes)
       throw InputError(what + "corrupt record (material or shape out of range)");
     if (!plausibleSpec(s, cfg_))
-      throw InputError(what + "corrupt record (its size, mass, shape dimensions or moments are not what the feeder makes)");
+      throw InputError(what +
+                       "corrupt record (its size, mass, shape dimensions or moments are not what the feeder makes)");
     try {
       addParticle(s, Vec3{0, 0, 0}, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0});
-    } catch (const InputError& e) {
-      throw InputError(what + e.what());
-    }
+    } catch (const InputError& e) { throw InputError(what + e.what()); }
   }
 }
 
@@ -892,14 +914,15 @@ void CesMachine::loadParticleState(std::istream& in) {
     if (machine ? (status[i] != kStatusMachine || material[i] != p_.material[i])
                 : (status[i] < kStatusInFlight || status[i] > kStatusLost || material[i] != p_.material[i]))
       throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt status or material");
-    if (!(std::fabs(charge[i]) <= real(1e-6)) || (pflags[i] & ~uint8_t(kFlagPinned)))  // 1e-6 C: 1000x the Pauthenier limit of a 1 mm particle
+    if (!(std::fabs(charge[i]) <= real(1e-6)) ||
+        (pflags[i] & ~uint8_t(kFlagPinned)))  // 1e-6 C: 1000x the Pauthenier limit of a 1 mm particle
       throw InputError("checkpoint: body " + std::to_string(i) + ": corrupt charge or flags");
   }
   const int64_t nbodies = int64_t(p_.count());
   for (const CollectedParticle& c : collected_)
     if (c.body < n_machine_ || c.body >= nbodies || c.material != p_.material[size_t(c.body)] || int(c.kind) < 0 ||
-        int(c.kind) >= kMaterialKinds || c.mass_fg != p_.mass_fg[size_t(c.body)] || !std::isfinite(c.x) || !std::isfinite(c.z) ||
-        !std::isfinite(c.t))
+        int(c.kind) >= kMaterialKinds || c.mass_fg != p_.mass_fg[size_t(c.body)] || !std::isfinite(c.x) ||
+        !std::isfinite(c.z) || !std::isfinite(c.t))
       throw InputError("checkpoint: corrupt collected-particle record");
   for (const RecentSpawn& r : recent_)
     if (r.body < n_machine_ || r.body >= nbodies || r.step < 0 || r.step > steps_)

@@ -49,15 +49,15 @@ namespace ces {
 
 // Per-body state of the plug-in (structure of arrays, index = body).
 struct CesParticles {
-  std::vector<uint8_t> status;     // ParticleStatus
-  std::vector<int32_t> material;   // index into CesConfig::materials (-1 for machine parts)
-  std::vector<real> charge;        // C
-  std::vector<uint8_t> flags;      // ParticleFlag bits (kFlagPinned)
-  std::vector<real> radius;        // volume-equivalent radius, m
-  std::vector<real> bound;         // bounding radius, m
-  std::vector<int64_t> mass_fg;    // femtograms
-  std::vector<real> mass;          // kg, the same mass (the brush's sweep force)
-  std::vector<real> moment;        // kg m^2, the smallest principal moment of inertia (the rolling resistance)
+  std::vector<uint8_t> status;    // ParticleStatus
+  std::vector<int32_t> material;  // index into CesConfig::materials (-1 for machine parts)
+  std::vector<real> charge;       // C
+  std::vector<uint8_t> flags;     // ParticleFlag bits (kFlagPinned)
+  std::vector<real> radius;       // volume-equivalent radius, m
+  std::vector<real> bound;        // bounding radius, m
+  std::vector<int64_t> mass_fg;   // femtograms
+  std::vector<real> mass;         // kg, the same mass (the brush's sweep force)
+  std::vector<real> moment;       // kg m^2, the smallest principal moment of inertia (the rolling resistance)
   size_t count() const { return status.size(); }
 };
 
@@ -79,7 +79,8 @@ struct MassBalance {
   int64_t fed_fg = 0, collected_fg = 0, in_flight_fg = 0, held_up_fg = 0, lost_fg = 0;
   int64_t fed = 0, collected = 0, in_flight = 0, held_up = 0, lost = 0;  // particle counts
   bool closes() const {
-    return fed_fg == collected_fg + in_flight_fg + held_up_fg + lost_fg && fed == collected + in_flight + held_up + lost;
+    return fed_fg == collected_fg + in_flight_fg + held_up_fg + lost_fg &&
+           fed == collected + in_flight + held_up + lost;
   }
 };
 
@@ -88,9 +89,9 @@ class CesMachine;
 // The corona of the "corona" field model (field_corona.h); NaN and not ionised for the Laplace models.
 struct CoronaInfo {
   bool ionised = false;
-  double onset_voltage = std::nan("");   // V (signed like the supply)
-  double wire_field_on = std::nan("");   // V/m, Peek's onset field at the wire surface
-  double current_per_m = std::nan("");   // A/m, corona current per metre of wire
+  double onset_voltage = std::nan("");  // V (signed like the supply)
+  double wire_field_on = std::nan("");  // V/m, Peek's onset field at the wire surface
+  double current_per_m = std::nan("");  // A/m, corona current per metre of wire
 };
 
 // Coulomb + image + drag on every particle in flight (IntegrateForces).
@@ -159,7 +160,9 @@ class CesMachine {
   // Particles in the machine now (in flight or held up), in O(1) (balance() walks every particle):
   // fed - collected - lost.
   int64_t particlesInFlight() const { return int64_t(p_.count()) - n_machine_ - int64_t(collected_.size()) - lost_; }
-  int64_t feederMassFg() const { return feeder_.fedMassFg(); }  // what the feeder delivered (excludes particles added by hand)
+  int64_t feederMassFg() const {
+    return feeder_.fedMassFg();
+  }  // what the feeder delivered (excludes particles added by hand)
   int drumBody() const { return drum_; }
   int brushBody() const { return brush_; }
   bool rheonomicDrive() const { return drive_ != nullptr; }
@@ -230,8 +233,8 @@ class CesMachine {
   int drum_ = -1, brush_ = -1, n_machine_ = 0;
   real particle_friction_ = 1;
   int64_t steps_ = 0;
-  int64_t lost_ = 0;             // particles with kStatusLost (kept for particlesInFlight)
-  bool host_forces_ = false;     // device backend without CesDevice: forces applied on the host (see above)
+  int64_t lost_ = 0;                // particles with kStatusLost (kept for particlesInFlight)
+  bool host_forces_ = false;        // device backend without CesDevice: forces applied on the host (see above)
   std::unique_ptr<CesDevice> dev_;  // device backend: the per-particle work as kernels
   size_t dev_uploaded_ = 0;         // particles uploaded to dev_
   mutable bool charges_stale_ = false;

@@ -55,24 +55,24 @@ enum ParticleFlag : uint8_t {
 // Everything the kernels read. Plain data: copyable to the device as one struct.
 struct CesModel {
   FieldView field;
-  DrumGeometry drum;         // axis, radius, width, image-force cutoff (forces.h)
-  real polarity;             // sign of the corona ions = sign of the supply voltage (0: supply off)
-  real ion_mobility;         // m^2/(V s), of the corona's ions (Pauthenier's charging time)
-  real pin_dy;               // a particle touching the drum with y - y_axis < pin_dy is pinned (kFlagPinned)
+  DrumGeometry drum;  // axis, radius, width, image-force cutoff (forces.h)
+  real polarity;      // sign of the corona ions = sign of the supply voltage (0: supply off)
+  real ion_mobility;  // m^2/(V s), of the corona's ions (Pauthenier's charging time)
+  real pin_dy;        // a particle touching the drum with y - y_axis < pin_dy is pinned (kFlagPinned)
   // The brush: a rigid core (the collision body, not here) set with bristles up to `brush` (the circle of the
   // bristle tips, reaching the drum). A particle touching that circle or inside it is among the bristles:
   // discharged with brush_tau and swept toward the bristles' velocity omega_b z x (p - c) with brush_sweep_tau.
   CylinderXY brush;
-  real brush_omega;          // rad/s about +z
-  real brush_tau;            // s, discharge time constant among the bristles
-  real brush_sweep_tau;      // s, velocity relaxation time toward the bristles' velocity
+  real brush_omega;      // rad/s about +z
+  real brush_tau;        // s, discharge time constant among the bristles
+  real brush_sweep_tau;  // s, velocity relaxation time toward the bristles' velocity
   int32_t n_electrodes;
   CylinderXY electrodes[kMaxElectrodes];
   real air_density, air_viscosity;
-  real contact_tol;          // a particle touches a surface when its centre is within contact_tol x its bounding radius
-  real rolling_drum;         // mu_r of the particles on the drum (forces.h drumRollingTorque; 0: none)
-  int32_t drum_body;         // the drum's body index (its angular velocity, for the rolling resistance)
-  Vec3 gravity;              // m/s^2 (the rolling resistance's normal force)
+  real contact_tol;   // a particle touches a surface when its centre is within contact_tol x its bounding radius
+  real rolling_drum;  // mu_r of the particles on the drum (forces.h drumRollingTorque; 0: none)
+  int32_t drum_body;  // the drum's body index (its angular velocity, for the rolling resistance)
+  Vec3 gravity;       // m/s^2 (the rolling resistance's normal force)
   // Collection plane and the domain outside which a particle is lost.
   real collect_y;
   real domain_x_lo, domain_x_hi, domain_y_hi, domain_half_z;
@@ -80,7 +80,7 @@ struct CesModel {
   int32_t n_materials;
   int32_t kind[kMaxMaterials];  // MaterialKind (0 metal, 1 plastic, 2 middling)
   real eps_r[kMaxMaterials];
-  real tau[kMaxMaterials];      // charge relaxation time through a grounded contact, eps0 eps_r / sigma
+  real tau[kMaxMaterials];  // charge relaxation time through a grounded contact, eps0 eps_r / sigma
 };
 
 constexpr int32_t kKindMetal = 0;  // MaterialKind::Metal (ces_config.h), as a plain int for the kernels
@@ -114,7 +114,8 @@ DVI_HD Vec3 bristleVelocity(const CesModel& m, Vec3 p) {
 //  - a conductor in flight: q E (its image in the drum is below 0.1 q E a diameter away and is left out,
 //    so the force does not drop below the contact value as it lifts off);
 //  - insulators and middlings: q E plus the image force of their charge toward the drum (forces.h).
-DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound, real mass, real h) {
+DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound, real mass,
+                             real h) {
   Vec3 F = dragForceSphere(Vec3{0, 0, 0}, v, real(2) * r, m.air_density, m.air_viscosity);
   if (amongBristles(m, p, bound)) F += bristleSweepForce(mass, v, bristleVelocity(m, p), h, m.brush_sweep_tau);
   if (q == real(0) || !insideDrumWidth(m.drum, p)) return F;

@@ -84,8 +84,10 @@ void validateShape(const ShapeDesc& d, int body_index) {
   auto fail = [&](const std::string& what) {
     throw InputError("body " + std::to_string(body_index) + ": " + shapeTypeName(s.type) + " shape " + what);
   };
-  if (int(s.type) < 0 || s.type >= ShapeType::Count) throw InputError("body " + std::to_string(body_index) + ": unsupported shape type");
-  if (!isFinite(s.dims) || !isFinite(s.local.p) || !finite(s.local.q) || !finite(s.plane_d)) fail("has a non-finite dimension or pose");
+  if (int(s.type) < 0 || s.type >= ShapeType::Count)
+    throw InputError("body " + std::to_string(body_index) + ": unsupported shape type");
+  if (!isFinite(s.dims) || !isFinite(s.local.p) || !finite(s.local.q) || !finite(s.plane_d))
+    fail("has a non-finite dimension or pose");
   switch (s.type) {
     case ShapeType::Sphere:
       if (!(s.dims.x > 0)) fail("has a non-positive radius " + std::to_string(s.dims.x));
@@ -219,19 +221,23 @@ bool System::planParts() {
   const size_t nb = bodies_.count();
   const bool gyro = config_.step.gyroscopic && nb > 0 && (!prune || hasGyroscopicBodies());
   part(StagePart::Gyroscopic, gyro,
-       !config_.step.gyroscopic ? "switched off (SystemConfig::step.gyroscopic)" : "every dynamic body has spherical inertia");
+       !config_.step.gyroscopic ? "switched off (SystemConfig::step.gyroscopic)"
+                                : "every dynamic body has spherical inertia");
   // MPR: the shape types present decide whether any pair can need it (pairUsesMpr). It is a per-pair choice of
   // the narrow phase, not a switch: prune = false does not force it on pairs with a closed form.
-  for (; typed_shapes_ < shapes_.count(); ++typed_shapes_) shape_types_ |= 1u << unsigned(shapes_.shape[typed_shapes_].type);
+  for (; typed_shapes_ < shapes_.count(); ++typed_shapes_)
+    shape_types_ |= 1u << unsigned(shapes_.shape[typed_shapes_].type);
   bool mpr = false;
   for (int a = 0; a < int(ShapeType::Count); ++a)
     for (int b = a; b < int(ShapeType::Count); ++b)
       if ((shape_types_ >> a & 1u) && (shape_types_ >> b & 1u) && pairUsesMpr(ShapeType(a), ShapeType(b))) mpr = true;
   if (config_.collision.backend == CollisionBackend::Bullet) mpr = false;
   part(StagePart::Mpr, mpr,
-       config_.collision.backend == CollisionBackend::Bullet ? "Bullet's collision backend (GJK/EPA)"
-                                                     : "every pair of shape types in the scene has a closed form");
-  part(StagePart::RollingSpinningRows, false, "not in the engine: no rolling or spinning friction (Bullet's is not imported)");
+       config_.collision.backend == CollisionBackend::Bullet
+           ? "Bullet's collision backend (GJK/EPA)"
+           : "every pair of shape types in the scene has a closed form");
+  part(StagePart::RollingSpinningRows, false,
+       "not in the engine: no rolling or spinning friction (Bullet's is not imported)");
   return gyro;
 }
 
@@ -261,9 +267,9 @@ void System::integrateForces() {
   for (const auto& f : fields_) f->apply(bodies_, ctx_, bodies_.force.data(), bodies_.torque.data());
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i)
-    integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i],
-                        bodies_.inv_inertia[i], bodies_.force[i], bodies_.torque[i], bodies_.gravity[i],
-                        bodies_.flags[i], gyro, skip_spherical, h, v_free_[i], w_free_[i]);
+    integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i], bodies_.inv_inertia[i],
+                        bodies_.force[i], bodies_.torque[i], bodies_.gravity[i], bodies_.flags[i], gyro, skip_spherical,
+                        h, v_free_[i], w_free_[i]);
 }
 
 void System::detectCollisions() {
@@ -295,8 +301,10 @@ void System::collectRows() {
 void System::buildAndSolve() {
   const int64_t nc = int64_t(contacts_.count());
   solution_ = nullptr;
-  if (stats_.part_ran[int(StagePart::ConstraintRows)]) timed(stats_, StageType::BuildRows, [&] { collectRows(); });
-  else rows_.clear();
+  if (stats_.part_ran[int(StagePart::ConstraintRows)])
+    timed(stats_, StageType::BuildRows, [&] { collectRows(); });
+  else
+    rows_.clear();
   const int64_t nrows = int64_t(rows_.size());
   const int64_t nblk = nc + (nrows + 2) / 3;
   gamma_.assign(size_t(3 * nblk), real(0));
@@ -330,21 +338,24 @@ void System::buildAndSolve() {
     const bool normal_only = config_.prune && nc > 0 && !(max_mu > 0);
     stats_.normal_only = normal_only;
     stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !normal_only;
-    stats_.part_reason[int(StagePart::FrictionRows)] =
-        nc == 0 ? "no contacts" : normal_only ? "no contact with mu > 0 this step" : nullptr;
+    stats_.part_reason[int(StagePart::FrictionRows)] = nc == 0       ? "no contacts"
+                                                       : normal_only ? "no contact with mu > 0 this step"
+                                                                     : nullptr;
     ContactProblemSettings ps;
     ps.dt = ctx_.dt;
     ps.solver = config_.solver;
     ps.threads = omp_get_max_threads();
     ps.normal_only = normal_only;
-    ps.float_jacobians = config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) &&
-                         !std::is_same_v<real, float>;
+    ps.float_jacobians =
+        config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) && !std::is_same_v<real, float>;
     problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_);
   });
   if (config_.solver.warm_start && int64_t(row_lambda_.size()) == nrows)
     for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(3 * nc + i)] = row_lambda_[size_t(i)];
-  if (!config_.solver.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
-  else if (prev_keys_.empty()) leaveOut(StageType::WarmStart, "no contacts in the previous step");
+  if (!config_.solver.warm_start)
+    leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
+  else if (prev_keys_.empty())
+    leaveOut(StageType::WarmStart, "no contacts in the previous step");
   if (config_.solver.warm_start && !prev_keys_.empty()) {
     timed(stats_, StageType::WarmStart, [&] {
 #pragma omp parallel for schedule(static)
@@ -379,7 +390,11 @@ void System::buildAndSolve() {
   row_lambda_.assign(gamma_.begin() + 3 * nc, gamma_.begin() + 3 * nc + nrows);
   for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
     row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
-  // Keep this step's impulses, sorted by key, for the next step's warm start.
+  keepImpulsesForWarmStart(nc);
+}
+
+// This step's contact impulses, sorted by key, for the next step's warm start.
+void System::keepImpulsesForWarmStart(int64_t nc) {
   std::vector<size_t> order(static_cast<size_t>(nc));
   std::iota(order.begin(), order.end(), size_t(0));
   if (!std::is_sorted(contacts_.key.begin(), contacts_.key.end()))

@@ -102,10 +102,10 @@ struct GpuTuning {
 };
 
 struct SystemConfig {
-  StepSettings step;            // dt, gravity, gyroscopic term
-  CollisionSettings collision;  // backend, envelope, speculative contacts, MPR manifold, friction rule, broad phase
-  SolverSettings solver;        // algorithm, stop, warm start, penetration recovery
-  GpuTuning gpu;                // the GPU backend's launch choices
+  StepSettings step;                // dt, gravity, gyroscopic term
+  CollisionSettings collision;      // backend, envelope, speculative contacts, MPR manifold, friction rule, broad phase
+  SolverSettings solver;            // algorithm, stop, warm start, penetration recovery
+  GpuTuning gpu;                    // the GPU backend's launch choices
   int threads = 0;                  // [threads] OpenMP threads of the CPU stages; 0 = OpenMP's default
   int min_bodies_per_thread = 256;  // [bodies] fewer bodies than this per thread: use fewer threads (a small scene
                                     // costs more in OpenMP barriers than it gains; 1 forces all threads)
@@ -128,11 +128,11 @@ struct BodyDesc {
   Quat rot{1, 0, 0, 0};
   Vec3 vel{0, 0, 0};
   Vec3 omega{0, 0, 0};
-  real mass = 1;                  // 0 with kBodyFixed or kBodyKinematic
-  Vec3 inertia{1, 1, 1};          // principal moments, body frame
+  real mass = 1;          // 0 with kBodyFixed or kBodyKinematic
+  Vec3 inertia{1, 1, 1};  // principal moments, body frame
   real friction = real(0.5);
   uint8_t flags = 0;
-  bool has_gravity = false;       // use `gravity` instead of the system's
+  bool has_gravity = false;  // use `gravity` instead of the system's
   Vec3 gravity{0, 0, 0};
   std::vector<ShapeDesc> shapes;
 };
@@ -151,7 +151,7 @@ struct StepStats {
   int64_t contacts = 0;
   int64_t pairs = 0;
   bool pairs_reused = false;  // BroadPhase kept the last step's pairs (BroadPhaseSettings::pair_margin)
-  real max_penetration = 0;  // largest -dist over contacts after the solve's input (>= 0)
+  real max_penetration = 0;   // largest -dist over contacts after the solve's input (>= 0)
   int iterations = 0;
   int trials = 0, speculated = 0;  // APGD: steps tested, and those speculated by the trial before (SolverStats)
   real residual = 0;               // absolute residual the solve reached (m/s)
@@ -228,8 +228,10 @@ class System {
   // InputError naming the problem. Returns the body index.
   int addBody(const BodyDesc& desc);
 
-  virtual void step();                 // one step of config().step.dt
-  void advance(int steps) { for (int i = 0; i < steps; ++i) step(); }
+  virtual void step();  // one step of config().step.dt
+  void advance(int steps) {
+    for (int i = 0; i < steps; ++i) step();
+  }
 
   const SystemConfig& config() const { return config_; }
   SystemConfig& mutableConfig() { return config_; }
@@ -266,8 +268,8 @@ class System {
   // providers add their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).
   void addForceField(std::shared_ptr<ForceField> field) { fields_.push_back(std::move(field)); }
   void addRowProvider(std::shared_ptr<RowProvider> rows) { row_providers_.push_back(std::move(rows)); }
-  const std::vector<ConstraintRow>& constraintRows() const { return rows_; }   // last step's rows
-  const std::vector<real>& rowImpulses() const { return row_lambda_; }          // and their impulses
+  const std::vector<ConstraintRow>& constraintRows() const { return rows_; }  // last step's rows
+  const std::vector<real>& rowImpulses() const { return row_lambda_; }        // and their impulses
 
   // Contact force on each contact in the last step (impulse / dt), world frame, acting on body B.
   Vec3 contactForce(size_t k) const;
@@ -284,10 +286,11 @@ class System {
   }
   // The stages; a GPU subclass overrides them with device versions.
   virtual void integrateForces();
-  virtual void detectCollisions();  // ComputeAabbs + BroadPhase + NarrowPhase
-  virtual void buildAndSolve();     // BuildRows + WarmStart + Solve
-  virtual void integrate();         // IntegrateVelocities + IntegratePositions
-  void collectRows();               // rows_ from the row providers (part of BuildRows)
+  virtual void detectCollisions();            // ComputeAabbs + BroadPhase + NarrowPhase
+  virtual void buildAndSolve();               // BuildRows + WarmStart + Solve
+  virtual void integrate();                   // IntegrateVelocities + IntegratePositions
+  void collectRows();                         // rows_ from the row providers (part of BuildRows)
+  void keepImpulsesForWarmStart(int64_t nc);  // this step's impulses by contact key (end of Solve)
   // Scene-level parts (host arrays): gyroscopic term and MPR needed? Fills stats_.part_ran/part_reason for
   // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
   // term runs.
@@ -314,24 +317,24 @@ class System {
   BodyArrays bodies_;
   ShapeArrays shapes_;
   ContactArrays contacts_;
-  std::vector<real> gamma_;                 // impulses of this step, 3 per contact
-  std::vector<uint64_t> prev_keys_;         // sorted keys of last step's contacts
-  std::vector<real> prev_gamma_;            // their impulses
-  std::vector<Vec3> v_free_, w_free_;       // velocities after forces
+  std::vector<real> gamma_;            // impulses of this step, 3 per contact
+  std::vector<uint64_t> prev_keys_;    // sorted keys of last step's contacts
+  std::vector<real> prev_gamma_;       // their impulses
+  std::vector<Vec3> v_free_, w_free_;  // velocities after forces
   std::vector<std::shared_ptr<ForceField>> fields_;
   std::vector<std::shared_ptr<RowProvider>> row_providers_;
-  std::vector<ConstraintRow> rows_;         // constraint rows of this step
-  std::vector<real> row_lambda_;            // their impulses
-  std::vector<size_t> provider_rows_;       // rows of each provider this step, in order
+  std::vector<ConstraintRow> rows_;               // constraint rows of this step
+  std::vector<real> row_lambda_;                  // their impulses
+  std::vector<size_t> provider_rows_;             // rows of each provider this step, in order
   std::unique_ptr<CollisionDetector> collision_;  // narrow + broad phase backend (native or Bullet's)
   std::unique_ptr<ContactProblem> problem_;
-  std::vector<real> x_;                     // solution in the problem's layout when it is normal-only
-  const real* solution_ = nullptr;          // gamma_ or x_: what IntegrateVelocities applies
-  size_t typed_shapes_ = 0;                 // shapes whose type is in shape_types_
-  uint32_t shape_types_ = 0;                // bit t: the scene has a shape of type t
+  std::vector<real> x_;             // solution in the problem's layout when it is normal-only
+  const real* solution_ = nullptr;  // gamma_ or x_: what IntegrateVelocities applies
+  size_t typed_shapes_ = 0;         // shapes whose type is in shape_types_
+  uint32_t shape_types_ = 0;        // bit t: the scene has a shape of type t
   StepStats stats_;
   ConvergenceLog convergence_;
-  StepContext ctx_;                         // of this step (beginStep)
+  StepContext ctx_;  // of this step (beginStep)
   double time_ = 0;
   int64_t steps_ = 0;
 };

@@ -24,9 +24,9 @@ inline void* deviceAlloc(size_t bytes, const char* what) {
     cudaGetLastError();  // clear the sticky-free allocation error so later calls are not blamed
     size_t free_b = 0, total_b = 0;
     cudaMemGetInfo(&free_b, &total_b);
-    throw CudaError(e, std::string("GPU out of memory: ") + what + " asked for " + std::to_string(bytes) +
-                           " bytes (" + std::to_string(bytes >> 20) + " MiB); " + std::to_string(free_b >> 20) +
-                           " MiB free of " + std::to_string(total_b >> 20) + " MiB");
+    throw CudaError(e, std::string("GPU out of memory: ") + what + " asked for " + std::to_string(bytes) + " bytes (" +
+                           std::to_string(bytes >> 20) + " MiB); " + std::to_string(free_b >> 20) + " MiB free of " +
+                           std::to_string(total_b >> 20) + " MiB");
   }
   cudaCheck(e, (std::string("cudaMalloc for ") + what).c_str(), __FILE__, __LINE__);
   return p;
@@ -40,7 +40,10 @@ class DeviceBuffer {
   DeviceBuffer(const DeviceBuffer&) = delete;
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
   DeviceBuffer(DeviceBuffer&& o) noexcept { swap(o); }
-  DeviceBuffer& operator=(DeviceBuffer&& o) noexcept { swap(o); return *this; }
+  DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
+    swap(o);
+    return *this;
+  }
 
   T* data() { return ptr_; }
   const T* data() const { return ptr_; }
@@ -80,8 +83,8 @@ class DeviceBuffer {
   void uploadTail(const std::vector<T>& v, size_t first, cudaStream_t s = 0) {
     resizeKeep(v.size());
     if (v.size() > first)
-      DVI_CUDA(cudaMemcpyAsync(ptr_ + first, v.data() + first, (v.size() - first) * sizeof(T),
-                               cudaMemcpyHostToDevice, s));
+      DVI_CUDA(
+          cudaMemcpyAsync(ptr_ + first, v.data() + first, (v.size() - first) * sizeof(T), cudaMemcpyHostToDevice, s));
   }
   // Synchronous copy of the first n elements to the host vector (resized to n).
   void download(std::vector<T>& v, size_t n, cudaStream_t s = 0) const {

@@ -71,8 +71,10 @@ __device__ int searchSorted(const real* sorted, int n, real x, bool strict) {
   int lo = 0, hi = n;
   while (lo < hi) {
     const int mid = (lo + hi) / 2;
-    if (strict ? !(x < sorted[mid]) : sorted[mid] < x) lo = mid + 1;
-    else hi = mid;
+    if (strict ? !(x < sorted[mid]) : sorted[mid] < x)
+      lo = mid + 1;
+    else
+      hi = mid;
   }
   return lo;
 }
@@ -161,8 +163,7 @@ struct ExtentToSplit {
 };
 struct ExtentSplitMerge {
   __host__ __device__ ExtentSplit operator()(const ExtentSplit& a, const ExtentSplit& b) const {
-    return ExtentSplit{a.sumS + b.sumS, a.hS > b.hS ? a.hS : b.hS, a.lB < b.lB ? a.lB : b.lB, a.cS + b.cS,
-                       a.cB + b.cB};
+    return ExtentSplit{a.sumS + b.sumS, a.hS > b.hS ? a.hS : b.hS, a.lB < b.lB ? a.lB : b.lB, a.cS + b.cS, a.cB + b.cB};
   }
 };
 
@@ -185,21 +186,22 @@ __global__ void classifyKernel(int n, const real* ext, const Aabb* box, BroadPha
   const real thr = s.large_factor * edge;
   const bool large = ext[i] < real(0) || (edge > real(0) && ext[i] > thr);
   is_binned[i] = large ? 0 : 1;
-  bound_in[i] = large ? Aabb{{real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)}, {-real(FLT_MAX), -real(FLT_MAX), -real(FLT_MAX)}}
-                      : box[i];
+  bound_in[i] =
+      large ? Aabb{{real(FLT_MAX), real(FLT_MAX), real(FLT_MAX)}, {-real(FLT_MAX), -real(FLT_MAX), -real(FLT_MAX)}}
+            : box[i];
 }
 
 __global__ void splitKernel(int n, const int32_t* is_binned, const int32_t* pos, int32_t* binned, int32_t* large) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  if (is_binned[i]) binned[pos[i]] = i;
-  else large[i - pos[i]] = i;
+  if (is_binned[i])
+    binned[pos[i]] = i;
+  else
+    large[i - pos[i]] = i;
 }
 
 struct AabbMerge {
-  __device__ Aabb operator()(const Aabb& a, const Aabb& b) const {
-    return Aabb{vmin(a.lo, b.lo), vmax(a.hi, b.hi)};
-  }
+  __device__ Aabb operator()(const Aabb& a, const Aabb& b) const { return Aabb{vmin(a.lo, b.lo), vmax(a.hi, b.hi)}; }
 };
 
 __device__ double gridDimsDev(Vec3 ext, double edge, double dims[3]) {
@@ -271,7 +273,7 @@ __global__ void entryWriteKernel(int nb, const int32_t* binned, const Aabb* box,
 struct PairSlots {
   int64_t ne;
   int32_t nb, nl;
-  const uint32_t* entry_bin;    // sorted by bin
+  const uint32_t* entry_bin;  // sorted by bin
   const int32_t* entry_shape;
   const int32_t* binned;
   const int32_t* large;
@@ -362,7 +364,7 @@ struct NarrowArgs {
   const Shape* shapes;
   const Vec3* pos;
   const Quat* rot;
-  const Vec3* vel;    // the bodies' velocities after this step's forces (v_free, w_free): keepSpeculative
+  const Vec3* vel;  // the bodies' velocities after this step's forces (v_free, w_free): keepSpeculative
   const Vec3* omega;
   const Vec3* hull;
   const real* sweep;
@@ -513,8 +515,7 @@ constexpr int kDeepLanes = np::kMprRoundTries;
 static_assert(32 % kDeepLanes == 0, "lane groups must tile a warp");
 
 __device__ np::MprResult deepRound(const np::MprShape& SA, const np::MprShape& SB, const Vec3* hull,
-                                   const np::MprRound& round, np::MprResult best, int lane, unsigned mask,
-                                   int base) {
+                                   const np::MprRound& round, np::MprResult best, int lane, unsigned mask, int base) {
   np::MprResult mine;
   mine.n = Vec3{0, 0, 0};
   mine.depth = real(INFINITY);
@@ -531,9 +532,9 @@ __device__ np::MprResult deepRound(const np::MprShape& SA, const np::MprShape& S
   return s;
 }
 
-__global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::MprDeferred* deferred,
-                                                       const int32_t* deep, const int32_t* deep_count,
-                                                       int32_t deep_cap, int64_t* count, FirstPoints first) {
+__global__ void __launch_bounds__(128)
+    narrowDeepKernel(NarrowArgs A, const np::MprDeferred* deferred, const int32_t* deep, const int32_t* deep_count,
+                     int32_t deep_cap, int64_t* count, FirstPoints first) {
   const int lane = int(threadIdx.x % kDeepLanes), base = int(threadIdx.x % 32) - lane;
   const unsigned mask = ((1u << kDeepLanes) - 1u) << base;
   const int64_t groups = int64_t(gridDim.x) * blockDim.x / kDeepLanes;
@@ -546,7 +547,8 @@ __global__ void __launch_bounds__(128) narrowDeepKernel(NarrowArgs A, const np::
     const Shape *fa, *fb;
     deferredMprShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, d.swapped != 0, SA, SB, fa, fb);
     d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
-    if (np::mprTiltRound(SA, *fa, *fb, d.best, d.round)) d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
+    if (np::mprTiltRound(SA, *fa, *fb, d.best, d.round))
+      d.best = deepRound(SA, SB, A.hull, d.round, d.best, lane, mask, base);
     if (lane == 0) {
       ContactPoint pts[kMaxContactsPerPair];
       int m = np::mprFinish(SA, SB, A.hull, d.best, P.envelope, pts, A.manifold);
@@ -569,8 +571,8 @@ struct ContactOut {
   uint64_t* key;
 };
 
-__device__ __forceinline__ void writeContacts(const NarrowArgs& A, int32_t a, int32_t b, const ContactPoint* pts,
-                                              int n, int64_t k, const ContactOut& out) {
+__device__ __forceinline__ void writeContacts(const NarrowArgs& A, int32_t a, int32_t b, const ContactPoint* pts, int n,
+                                              int64_t k, const ContactOut& out) {
   const int32_t ba = A.shapes[a].body, bb = A.shapes[b].body;
   for (int j = 0; j < n; ++j, ++k) {
     out.shape_a[k] = a;
@@ -588,8 +590,8 @@ __device__ __forceinline__ void writeContacts(const NarrowArgs& A, int32_t a, in
 // Write pass, one thread per pair: a pair of one contact copies the count pass's point (a kernel of few
 // registers); a pair of more, or one whose point found no room (FirstPoints), goes to the multi list for
 // narrowMultiKernel.
-__global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count, const int64_t* off,
-                                  FirstPoints first, ContactOut out, int64_t* multi, unsigned long long* multi_count) {
+__global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count, const int64_t* off, FirstPoints first,
+                                  ContactOut out, int64_t* multi, unsigned long long* multi_count) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= np) return;
   const int64_t n = count[i];
@@ -618,8 +620,8 @@ __global__ void narrowWriteKernel(NarrowArgs A, int64_t np, const int64_t* count
 // A pair whose first point the count pass kept and marked as MPR's (mprFinish) gets its other points from it
 // (mprManifoldAgain: the flat-feature manifold without MPR again, the same arithmetic).
 __global__ void narrowMultiKernel(NarrowArgs A, const int64_t* multi, const unsigned long long* multi_count,
-                                  unsigned long long* next, const int64_t* count, const int64_t* off,
-                                  FirstPoints first, ContactOut out) {
+                                  unsigned long long* next, const int64_t* count, const int64_t* off, FirstPoints first,
+                                  ContactOut out) {
   const int64_t m = int64_t(*multi_count);
   for (;;) {
     const int64_t j = warpTake(next);
@@ -658,8 +660,8 @@ void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
   if (n == 0) return;
   aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(
       n, d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(), d.bodies.v_free.data(),
-      d.bodies.w_free.data(), d.shapes.hull.data(), cfg.collision.envelope_rel, cfg.collision.speculative ? real(cfg.step.dt) : real(0), d.shapes.sweep.data(),
-      d.shapes.aabb.data());
+      d.bodies.w_free.data(), d.shapes.hull.data(), cfg.collision.envelope_rel,
+      cfg.collision.speculative ? real(cfg.step.dt) : real(0), d.shapes.sweep.data(), d.shapes.aabb.data());
   DVI_CUDA_LAUNCH("aabbKernel");
 }
 
@@ -716,9 +718,8 @@ static void edgeFromExtentSplit(DeviceState& d, const BroadPhaseSettings& s, int
   auto* split = reinterpret_cast<ExtentSplit*>(B.ext_stats.data());
   real* lo = reinterpret_cast<real*>(B.ext_stats.data() + sizeof(ExtentSplit));
   const auto mins = thrust::make_transform_iterator(B.ext.data(), ExtentMin{});
-  cubRun(d, "cub::DeviceReduce::Min (extents)", [&](void* t, size_t& b) {
-    return cub::DeviceReduce::Min(t, b, mins, lo, n, st);
-  });
+  cubRun(d, "cub::DeviceReduce::Min (extents)",
+         [&](void* t, size_t& b) { return cub::DeviceReduce::Min(t, b, mins, lo, n, st); });
   const auto parts = thrust::make_transform_iterator(B.ext.data(), ExtentToSplit{lo, s.large_factor});
   const ExtentSplit none{0, std::numeric_limits<real>::lowest(), std::numeric_limits<real>::max(), 0, 0};
   cubRun(d, "cub::DeviceReduce::Reduce (extents split)", [&](void* t, size_t& b) {
@@ -742,8 +743,10 @@ static BroadParams classifyShapes(DeviceState& d, const BroadPhaseSettings& s, i
   bool by_sort = B.edge_by_sort;
   BroadParams P{};
   for (;;) {
-    if (by_sort) edgeFromSortedExtents(d, s, n);
-    else edgeFromExtentSplit(d, s, n);
+    if (by_sort)
+      edgeFromSortedExtents(d, s, n);
+    else
+      edgeFromExtentSplit(d, s, n);
     classifyAndGrid(d, s, n, box);
     P = d.readValue(B.params.data());
     if (by_sort || !P.needs_sort) break;
@@ -885,9 +888,9 @@ bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg) {
   B.fat.resize(n);
   B.fat_flags.resize(n);
   if (n > 0) {
-    fatBoxKernel<<<blocksFor(n), kBlock, 0, st>>>(n, d.shapes.shape.data(), d.shapes.aabb.data(),
-                                                  d.bodies.flags.data(), f > real(0) ? f * B.last_edge : real(0),
-                                                  B.fat.data(), B.fat_flags.data());
+    fatBoxKernel<<<blocksFor(n), kBlock, 0, st>>>(n, d.shapes.shape.data(), d.shapes.aabb.data(), d.bodies.flags.data(),
+                                                  f > real(0) ? f * B.last_edge : real(0), B.fat.data(),
+                                                  B.fat_flags.data());
     DVI_CUDA_LAUNCH("fatBoxKernel");
   }
   broadPhase(d, cfg, nullptr, B.fat.data());
@@ -911,18 +914,10 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       std::min<int64_t>({np, std::max<int64_t>(1024, N.general_last + N.general_last / 2), int64_t(INT32_MAX)});
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
-  NarrowArgs A{d.broad.pair_key_sorted.data(),
-               d.shapes.shape.data(),
-               d.bodies.pos.data(),
-               d.bodies.rot.data(),
-               d.bodies.v_free.data(),
-               d.bodies.w_free.data(),
-               d.shapes.hull.data(),
-               d.shapes.sweep.data(),
-               cfg.collision.envelope_rel,
-               real(cfg.step.dt),
-               d.pair_shift,
-               cfg.collision.mpr_manifold};
+  NarrowArgs A{
+      d.broad.pair_key_sorted.data(), d.shapes.shape.data(),  d.bodies.pos.data(),  d.bodies.rot.data(),
+      d.bodies.v_free.data(),         d.bodies.w_free.data(), d.shapes.hull.data(), d.shapes.sweep.data(),
+      cfg.collision.envelope_rel,     real(cfg.step.dt),      d.pair_shift,         cfg.collision.mpr_manifold};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
@@ -948,9 +943,9 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
                                                      N.deep_count.data(), int32_t(deep_cap));
   DVI_CUDA_LAUNCH("narrowCountKernel");
   // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
-  narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(deep_cap * kDeepLanes, 128), 4 * d.multiprocessors)), 128,
-                     0, st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), int32_t(deep_cap),
-                              N.count.data(), first);
+  narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(deep_cap * kDeepLanes, 128), 4 * d.multiprocessors)), 128, 0,
+                     st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), int32_t(deep_cap), N.count.data(),
+                           first);
   DVI_CUDA_LAUNCH("narrowDeepKernel");
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
@@ -974,14 +969,13 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   DeviceContacts& c = d.contacts;
   ContactOut out{c.shape_a.data(), c.shape_b.data(), c.body_a.data(), c.body_b.data(), c.normal.data(),
                  c.pa.data(),      c.pb.data(),      c.dist.data(),   c.key.data()};
-  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), first, out,
-                                                      N.list.data(), N.list_count.data() + 1);
+  narrowWriteKernel<<<blocksFor(np), kBlock, 0, st>>>(A, np, N.count.data(), N.off.data(), first, out, N.list.data(),
+                                                      N.list_count.data() + 1);
   DVI_CUDA_LAUNCH("narrowWriteKernel");
-  const int64_t multi_resident =
-      int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel, &N.multi_blocks_per_sm);
+  const int64_t multi_resident = int64_t(d.multiprocessors) * residentBlocks(narrowMultiKernel, &N.multi_blocks_per_sm);
   const unsigned multi_grid = unsigned(std::min<int64_t>(blocksFor(np), multi_resident));
-  narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1,
-                                                   N.list_count.data() + 3, N.count.data(), N.off.data(), first, out);
+  narrowMultiKernel<<<multi_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data() + 1, N.list_count.data() + 3,
+                                                   N.count.data(), N.off.data(), first, out);
   DVI_CUDA_LAUNCH("narrowMultiKernel");
 }
 

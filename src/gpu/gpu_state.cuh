@@ -22,8 +22,8 @@ inline unsigned blocksFor(int64_t n, int block = kBlock) { return unsigned((n + 
 
 struct DeviceBodies {
   DeviceBuffer<Vec3> pos{"body pos"}, vel{"body vel"}, omega{"body omega"}, inv_inertia{"body inv_inertia"},
-      force{"body force"}, torque{"body torque"}, gravity{"body gravity"}, v_free{"body v_free"},
-      w_free{"body w_free"}, field_force{"body force-field force"}, field_torque{"body force-field torque"};
+      force{"body force"}, torque{"body torque"}, gravity{"body gravity"}, v_free{"body v_free"}, w_free{"body w_free"},
+      field_force{"body force-field force"}, field_torque{"body force-field torque"};
   DeviceBuffer<Quat> rot{"body rot"};
   DeviceBuffer<real> inv_mass{"body inv_mass"}, friction{"body friction"};
   DeviceBuffer<uint8_t> flags{"body flags"};
@@ -50,8 +50,17 @@ struct DeviceContacts {
   DeviceBuffer<uint64_t> key{"contact key"};
   size_t count = 0;
   void resize(size_t n) {
-    shape_a.resize(n); shape_b.resize(n); body_a.resize(n); body_b.resize(n);
-    normal.resize(n); pa.resize(n); pb.resize(n); dist.resize(n); mu.resize(n); size.resize(n); key.resize(n);
+    shape_a.resize(n);
+    shape_b.resize(n);
+    body_a.resize(n);
+    body_b.resize(n);
+    normal.resize(n);
+    pa.resize(n);
+    pb.resize(n);
+    dist.resize(n);
+    mu.resize(n);
+    size.resize(n);
+    key.resize(n);
     count = n;
   }
 };
@@ -80,11 +89,12 @@ struct BroadScratch {
   DeviceBuffer<int32_t> entry_shape{"broad entry shapes"}, entry_shape_sorted{"broad sorted entry shapes"};
   DeviceBuffer<uint32_t> run_bin{"broad run bins"};
   DeviceBuffer<int32_t> run_len{"broad run lengths"}, num_runs{"broad run count"};  // statistics only
-  DeviceBuffer<unsigned long long> pair_counter{"broad pair counter"};  // pairEmitKernel's places taken
+  DeviceBuffer<unsigned long long> pair_counter{"broad pair counter"};              // pairEmitKernel's places taken
   DeviceBuffer<uint64_t> pair_key{"broad pair keys"}, pair_key_sorted{"broad sorted pair keys"};
   DeviceBuffer<BroadParams> params{"broad params"};
-  DeviceBuffer<unsigned char> ext_stats{"broad extent statistics"};  // ExtentSplit and the least extent (gpu_collision.cu)
-  bool edge_by_sort = false;  // last step's BroadParams::needs_sort: start there
+  DeviceBuffer<unsigned char> ext_stats{
+      "broad extent statistics"};  // ExtentSplit and the least extent (gpu_collision.cu)
+  bool edge_by_sort = false;       // last step's BroadParams::needs_sort: start there
   DeviceBuffer<int64_t> tests{"broad bin pair tests"};
   // pair reuse (broadPhaseStep; broadphase_kernels.h: pairsStillHold): the last build's grown boxes and body
   // flags per shape, its bin edge, and the count of shapes that left their grown box this step
@@ -117,9 +127,9 @@ struct NarrowScratch {
 // The APGD control of the device loop (gpu/solver/gpu_apgd_trials.cu: apgdIterateOnDevice), in device memory.
 struct ApgdDeviceState {
   algo::ApgdControl c;
-  const real* schur_x;  // X[c.nw] while running, null when done
-  real* schur_y;        // NX[c.nnw] (real storage)
-  float* schur_yf;      // NX[c.nnw] (float storage, VectorStorage)
+  const real* schur_x;       // X[c.nw] while running, null when done
+  real* schur_y;             // NX[c.nnw] (real storage)
+  float* schur_yf;           // NX[c.nnw] (float storage, VectorStorage)
   unsigned int blocks_done;  // test-reduction blocks finished this trial (the last one updates c)
   double sums[5];            // the persistent kernel's test sums of this trial (written by its last block)
 };
@@ -157,7 +167,7 @@ struct SolverScratch {
   DeviceBuffer<double> scalars{"reduction results"};
   DeviceBuffer<ApgdDeviceState> apgd{"APGD device control"};
   DeviceBuffer<float> vf{"APGD float-storage vectors"};  // 7 x 3 blocks: X[0..3], NX[0..2]
-  DeviceBuffer<long long> stamps{"APGD phase stamps"};  // DVISIM_APGD_PHASES only
+  DeviceBuffer<long long> stamps{"APGD phase stamps"};   // DVISIM_APGD_PHASES only
 };
 
 struct DeviceState {
@@ -170,11 +180,11 @@ struct DeviceState {
   SolverScratch solver;
   ByteBuffer cub_temp{"CUB temporary storage"};
   DeviceBuffer<double> step_scalars{"step scalars"};
-  double* host_scalars = nullptr;  // pinned, for single-value read-backs
+  double* host_scalars = nullptr;        // pinned, for single-value read-backs
   ApgdDeviceState* host_apgd = nullptr;  // pinned staging of the APGD control (copies without a synchronisation)
   int64_t pairs = 0;
-  int pair_shift = 32;  // the pair keys hold (a << pair_shift) | b (gpu_collision.cu: packPair)
-  int multiprocessors = 1;  // of the device (fixed grids of the persistent kernels)
+  int pair_shift = 32;       // the pair keys hold (a << pair_shift) | b (gpu_collision.cu: packPair)
+  int multiprocessors = 1;   // of the device (fixed grids of the persistent kernels)
   bool cooperative = false;  // the device can launch cooperative kernels (grid-wide barriers: apgdPersistentKernel)
   // DVISIM_APGD_PHASES set: the persistent APGD kernel's block 0 stamps its phases (step, wait, gather, wait,
   // Schur/test, wait and control) for the first trials of every solve; the sums (SM cycles) are printed when the

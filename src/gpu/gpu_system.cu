@@ -26,47 +26,49 @@ const double* DeviceState::readScalars(const double* dev, int n) {
   return host_scalars;
 }
 
+// Bytes the buffers hold (their capacity).
+template <class... Buf>
+size_t capacityBytes(const Buf&... buf) {
+  return (size_t(0) + ... + (buf.capacity() * sizeof(*buf.data())));
+}
+
 size_t DeviceState::bytes() const {
-  size_t b = 0;
-  auto add = [&](const auto& buf) { b += buf.capacity() * sizeof(*buf.data()); };
-  add(bodies.pos); add(bodies.vel); add(bodies.omega); add(bodies.inv_inertia); add(bodies.force);
-  add(bodies.torque); add(bodies.gravity); add(bodies.v_free); add(bodies.w_free); add(bodies.rot);
-  add(bodies.inv_mass); add(bodies.friction); add(bodies.flags); add(bodies.inv); add(bodies.delta);
-  add(shapes.shape); add(shapes.hull); add(shapes.aabb); add(shapes.sweep);
-  add(contacts.shape_a); add(contacts.shape_b); add(contacts.body_a); add(contacts.body_b);
-  add(contacts.normal); add(contacts.pa); add(contacts.pb); add(contacts.dist); add(contacts.mu);
-  add(contacts.size); add(contacts.key);
-  add(broad.ext); add(broad.ext_sorted); add(broad.ext_prefix); add(broad.ext_stats); add(broad.is_binned); add(broad.is_large);
-  add(broad.bound_in); add(broad.binned); add(broad.large); add(broad.entry_count); add(broad.entry_off);
-  add(broad.entry_bin); add(broad.entry_bin_sorted); add(broad.entry_shape); add(broad.entry_shape_sorted);
-  add(broad.run_bin); add(broad.run_len); add(broad.pair_counter);
-  add(broad.pair_key); add(broad.pair_key_sorted); add(broad.fat); add(broad.fat_flags); add(broad.moved);
-  add(narrow.count); add(narrow.off); add(narrow.first); add(narrow.first_slot); add(narrow.deferred); add(narrow.deep); add(narrow.deep_count);
-  add(narrow.list); add(narrow.list_count);
-  add(solver.stamps); add(solver.jac); add(solver.rhs); add(solver.block_inv); add(solver.block_step); add(solver.gamma);
-  add(solver.jacobi_step); add(solver.colnorm); add(solver.rowsum); add(solver.bodyq);
-  add(solver.prev_gamma); add(solver.prev_key); add(solver.adj_key); add(solver.adj_key_sorted);
-  add(solver.adj_val); add(solver.adj_val_sorted); add(solver.adj_off);
-  add(solver.v0); add(solver.v1); add(solver.v2); add(solver.v3); add(solver.v4); add(solver.v5); add(solver.v6);
-  add(solver.v7); add(solver.v8);
-  add(solver.jacf); add(solver.entry_jac); add(solver.inv_iso); add(solver.vf); add(solver.x); add(solver.rows);
-  add(solver.row_lo); add(solver.row_hi); add(solver.heavy); add(solver.heavy_count); add(solver.heavy_partial);
-  add(solver.heavy_ticket); add(solver.order); add(solver.order_sorted); add(solver.partial); add(solver.scalars);
-  add(solver.apgd); add(step_scalars);
-  add(cub_temp);
-  return b;
+  const size_t in_bodies = capacityBytes(bodies.pos, bodies.vel, bodies.omega, bodies.inv_inertia, bodies.force,
+                                         bodies.torque, bodies.gravity, bodies.v_free, bodies.w_free, bodies.rot,
+                                         bodies.inv_mass, bodies.friction, bodies.flags, bodies.inv, bodies.delta);
+  const size_t in_shapes = capacityBytes(shapes.shape, shapes.hull, shapes.aabb, shapes.sweep);
+  const size_t in_contacts =
+      capacityBytes(contacts.shape_a, contacts.shape_b, contacts.body_a, contacts.body_b, contacts.normal, contacts.pa,
+                    contacts.pb, contacts.dist, contacts.mu, contacts.size, contacts.key);
+  const size_t in_broad =
+      capacityBytes(broad.ext, broad.ext_sorted, broad.ext_prefix, broad.ext_stats, broad.is_binned, broad.is_large,
+                    broad.bound_in, broad.binned, broad.large, broad.entry_count, broad.entry_off, broad.entry_bin,
+                    broad.entry_bin_sorted, broad.entry_shape, broad.entry_shape_sorted, broad.run_bin, broad.run_len,
+                    broad.pair_counter, broad.pair_key, broad.pair_key_sorted, broad.fat, broad.fat_flags, broad.moved);
+  const size_t in_narrow = capacityBytes(narrow.count, narrow.off, narrow.first, narrow.first_slot, narrow.deferred,
+                                         narrow.deep, narrow.deep_count, narrow.list, narrow.list_count);
+  const size_t in_solver =
+      capacityBytes(solver.stamps, solver.jac, solver.rhs, solver.block_inv, solver.block_step, solver.gamma,
+                    solver.jacobi_step, solver.colnorm, solver.rowsum, solver.bodyq, solver.prev_gamma, solver.prev_key,
+                    solver.adj_key, solver.adj_key_sorted, solver.adj_val, solver.adj_val_sorted, solver.adj_off,
+                    solver.v0, solver.v1, solver.v2, solver.v3, solver.v4, solver.v5, solver.v6, solver.v7, solver.v8,
+                    solver.jacf, solver.entry_jac, solver.inv_iso, solver.vf, solver.x, solver.rows, solver.row_lo,
+                    solver.row_hi, solver.heavy, solver.heavy_count, solver.heavy_partial, solver.heavy_ticket,
+                    solver.order, solver.order_sorted, solver.partial, solver.scalars, solver.apgd);
+  const size_t in_other = capacityBytes(step_scalars, cub_temp);
+  return in_bodies + in_shapes + in_contacts + in_broad + in_narrow + in_solver + in_other;
 }
 
 namespace {
 
-__global__ void integrateForcesKernel(int n, const Vec3* vel, const Vec3* omega, const Quat* rot,
-                                      const real* inv_mass, const Vec3* inv_inertia, const Vec3* force,
-                                      const Vec3* torque, const Vec3* gravity, const uint8_t* flags, bool gyro,
-                                      bool skip_spherical, real h, Vec3* v_free, Vec3* w_free) {
+__global__ void integrateForcesKernel(int n, const Vec3* vel, const Vec3* omega, const Quat* rot, const real* inv_mass,
+                                      const Vec3* inv_inertia, const Vec3* force, const Vec3* torque,
+                                      const Vec3* gravity, const uint8_t* flags, bool gyro, bool skip_spherical, real h,
+                                      Vec3* v_free, Vec3* w_free) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  integrateBodyForces(vel[i], omega[i], rot[i], inv_mass[i], inv_inertia[i], force[i], torque[i], gravity[i],
-                      flags[i], gyro, skip_spherical, h, v_free[i], w_free[i]);
+  integrateBodyForces(vel[i], omega[i], rot[i], inv_mass[i], inv_inertia[i], force[i], torque[i], gravity[i], flags[i],
+                      gyro, skip_spherical, h, v_free[i], w_free[i]);
 }
 
 __global__ void addForcesKernel(int n, const Vec3* f, const Vec3* t, Vec3* force, Vec3* torque) {
@@ -249,8 +251,7 @@ void GpuSystem::integrateForces() {
     deviceBodies(refs);
     std::vector<ForceField*> host_fields;
     for (const auto& f : fields_)
-      if (!f->applyOnDevice(refs, ctx_, b.field_force.data(), b.field_torque.data()))
-        host_fields.push_back(f.get());
+      if (!f->applyOnDevice(refs, ctx_, b.field_force.data(), b.field_torque.data())) host_fields.push_back(f.get());
     if (!host_fields.empty()) {
       b.pos.download(bodies_.pos, b.count, s);
       b.rot.download(bodies_.rot, b.count, s);
@@ -332,14 +333,17 @@ void GpuSystem::buildAndSolve() {
   stats_.stage_ran[int(StageType::BuildRows)] = true;
   stats_.normal_only = d_->normal_only;
   stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !d_->normal_only;
-  stats_.part_reason[int(StagePart::FrictionRows)] =
-      nc == 0 ? "no contacts" : d_->normal_only ? "no contact with mu > 0 this step" : nullptr;
+  stats_.part_reason[int(StagePart::FrictionRows)] = nc == 0           ? "no contacts"
+                                                     : d_->normal_only ? "no contact with mu > 0 this step"
+                                                                       : nullptr;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
   const bool warm = config_.solver.warm_start && d_->prev_count > 0;
   warmStart(*d_, config_.solver.warm_start, config_.solver.warm_start ? row_lambda_ : std::vector<real>{});
   stats_.stage_ran[int(StageType::WarmStart)] = warm;
-  if (!config_.solver.warm_start) leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
-  else if (!warm) leaveOut(StageType::WarmStart, "no contacts in the previous step");
+  if (!config_.solver.warm_start)
+    leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
+  else if (!warm)
+    leaveOut(StageType::WarmStart, "no contacts in the previous step");
   DVI_CUDA(cudaEventRecord(ev[int(StageType::WarmStart) + 1], d_->stream));
   recordSolve(solveCcp(*d_, config_));
   stats_.stage_ran[int(StageType::Solve)] = true;
@@ -405,7 +409,7 @@ void GpuSystem::syncBodiesToHost(const std::vector<int32_t>& ids) {
   b.sel_ids.upload(ids, s);
   b.sel_state.resize(size_t(n));
   gatherBodiesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.pos.data(), b.rot.data(), b.vel.data(),
-                                                      b.omega.data(), b.flags.data(), b.sel_state.data());
+                                                     b.omega.data(), b.flags.data(), b.sel_state.data());
   DVI_CUDA_LAUNCH("gatherBodiesKernel");
   b.sel_state.download(sel_state_, size_t(n), s);  // synchronous
   for (int k = 0; k < n; ++k) {
@@ -429,12 +433,13 @@ void GpuSystem::markBodiesDirty(const std::vector<int32_t>& ids) {
   sel_state_.resize(size_t(n));
   for (int k = 0; k < n; ++k) {
     const size_t i = size_t(ids[size_t(k)]);
-    sel_state_[size_t(k)] = BodyRecord{bodies_.pos[i], bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.flags[i]};
+    sel_state_[size_t(k)] =
+        BodyRecord{bodies_.pos[i], bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.flags[i]};
   }
   b.sel_ids.upload(ids, s);
   b.sel_state.upload(sel_state_, s);
   scatterBodiesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.sel_state.data(), b.pos.data(),
-                                                       b.rot.data(), b.vel.data(), b.omega.data(), b.flags.data());
+                                                      b.rot.data(), b.vel.data(), b.omega.data(), b.flags.data());
   DVI_CUDA_LAUNCH("scatterBodiesKernel");
   DVI_CUDA(cudaStreamSynchronize(s));  // sel_state_ may change after we return
 }

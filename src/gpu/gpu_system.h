@@ -38,7 +38,7 @@ struct BodyRecord {
   Quat rot;
   uint8_t flags;
 };
-}
+}  // namespace gpu
 
 class GpuSystem : public System {
  public:
@@ -78,7 +78,7 @@ class GpuSystem : public System {
   std::unique_ptr<gpu::DeviceState> d_;
   size_t uploaded_bodies_ = 0;
   bool host_dirty_ = true;
-  bool gyro_bodies_ = false;  // an uploaded dynamic body has non-spherical inertia
+  bool gyro_bodies_ = false;                      // an uploaded dynamic body has non-spherical inertia
   std::vector<Vec3> field_force_, field_torque_;  // host scratch of the force fields
   std::vector<int32_t> sel_ids_;                  // host scratch of the selected-body copies
   std::vector<gpu::BodyRecord> sel_state_;

@@ -17,11 +17,11 @@
 namespace fuzz {
 
 inline const dvi::ces::CesConfig& checkpointConfig() {
-  static const dvi::ces::CesConfig cfg = dvi::ces::parseCesDocument(
-      nlohmann::json::parse(dvi::ces::defaultCesJson()),
-      {"field.model=\"two_cylinder\"", "electrode.wire.enabled=false", "feed.mass_flow_g_s=20", "feed.start_s=0",
-       "duration_s=0.01"},
-      "<fuzz ces machine>");
+  static const dvi::ces::CesConfig cfg =
+      dvi::ces::parseCesDocument(nlohmann::json::parse(dvi::ces::defaultCesJson()),
+                                 {"field.model=\"two_cylinder\"", "electrode.wire.enabled=false",
+                                  "feed.mass_flow_g_s=20", "feed.start_s=0", "duration_s=0.01"},
+                                 "<fuzz ces machine>");
   return cfg;
 }
 

@@ -49,9 +49,7 @@ int run(const char* target, F&& f) {
     if (std::getenv("DVISIM_FUZZ_VERBOSE")) std::fprintf(stderr, "%s: InputError: %s\n", target, e.what());
   } catch (const std::exception& e) {
     finding(target, std::string("exception ") + typeid(e).name() + " escaped: " + e.what());
-  } catch (...) {
-    finding(target, "an exception of unknown type escaped");
-  }
+  } catch (...) { finding(target, "an exception of unknown type escaped"); }
   return 0;
 }
 
@@ -64,9 +62,7 @@ inline void checkScene(const char* target, const dvi::Scene& scene) {
   try {
     const std::vector<int> ids = dvi::importBullet(system, scene.bodies());
     if (ids.size() != scene.bodyCount()) finding(target, "importBullet returned a different body count");
-  } catch (const std::exception& e) {
-    finding(target, std::string("a loaded scene does not import: ") + e.what());
-  }
+  } catch (const std::exception& e) { finding(target, std::string("a loaded scene does not import: ") + e.what()); }
 }
 
 }  // namespace fuzz

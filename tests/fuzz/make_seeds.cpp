@@ -86,9 +86,11 @@ int main(int argc, char** argv) {
     const btScalar rad[] = {0.1f, 0.15f};
     w.add(w.keep(new btMultiSphereShape(pos, rad, 2)), 1, btVector3(5, 1, 0));
     auto* inner = new btCompoundShape();
-    inner->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0, 0.2f, 0)), w.keep(new btSphereShape(0.05f)));
+    inner->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0, 0.2f, 0)),
+                         w.keep(new btSphereShape(0.05f)));
     auto* comp = new btCompoundShape();
-    comp->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0.2f, 0, 0)), w.keep(new btSphereShape(0.1f)));
+    comp->addChildShape(btTransform(btQuaternion::getIdentity(), btVector3(0.2f, 0, 0)),
+                        w.keep(new btSphereShape(0.1f)));
     comp->addChildShape(btTransform(btQuaternion(btVector3(0, 1, 0), 0.5f), btVector3(-0.2f, 0, 0)),
                         w.keep(new btBoxShape(btVector3(0.1f, 0.05f, 0.1f))));
     comp->addChildShape(btTransform::getIdentity(), w.keep(inner));

@@ -85,7 +85,7 @@ ConformalMap ConformalMap::bipolar(real dcx, real dcy, real dR, real wcx, real w
   m.st = real((wcy - dcy) / D);
   m.ox = real(dcx + h1 * m.ct);
   m.oy = real(dcy + h1 * m.st);
-  m.tau_wire = real(std::asinh(a / wr));   // circle radius a / sinh(tau)
+  m.tau_wire = real(std::asinh(a / wr));  // circle radius a / sinh(tau)
   m.tau_drum = real(-std::asinh(a / dR));
   return m;
 }
@@ -424,8 +424,7 @@ void ConformalSolver::classifyCells() {
       h2_[q] = h * h;
       if (p_.tube && std::hypot(x - double(p_.tube_cx), y - double(p_.tube_cy)) < p_.tube_R)
         r_.kind[q] = 1;
-      else if (p_.frame_radius > 0 &&
-               std::hypot(x - double(p_.frame_cx), y - double(p_.frame_cy)) > p_.frame_radius)
+      else if (p_.frame_radius > 0 && std::hypot(x - double(p_.frame_cx), y - double(p_.frame_cy)) > p_.frame_radius)
         r_.kind[q] = 2;
     }
 }
@@ -519,8 +518,7 @@ void ConformalSolver::laplaceFromGrid() {
   Eigen::VectorXd b(nu_);
   for (int k = 0; k < nu_; ++k) b(k) = bWire_[k] * psiWire_;
   const Eigen::VectorXd x = ldlt_.solve(b);
-  for (int q = 0; q < n_; ++q)
-    psiLap_[q] = unk_[q] >= 0 ? x(unk_[q]) : (r_.kind[q] == 1 ? psiWire_ : 0.0);
+  for (int q = 0; q < n_; ++q) psiLap_[q] = unk_[q] >= 0 ? x(unk_[q]) : (r_.kind[q] == 1 ? psiWire_ : 0.0);
   for (int i = 0; i < g_.ns; ++i) gLap_[i] = wireNormalDeriv(psiLap_, psiWire_, i) / hWire_[i];
 }
 
@@ -576,7 +574,7 @@ double ConformalSolver::unitSpaceCharge(Eigen::VectorXd& b) {
   for (int q = 0; q < n_; ++q) psiHat_[q] = unk_[q] >= 0 ? x(unk_[q]) : 0.0;
   double sumG = 0;
   for (int i = 0; i < g_.ns; ++i) sumG += wireNormalDeriv(psiHat_, 0.0, i);  // (1/h) * h ds cancels
-  const double gHatMean = sumG / sumH_;  // < 0: the ions screen the wire
+  const double gHatMean = sumG / sumH_;                                      // < 0: the ions screen the wire
   return gHatMean < 0 ? (double(p_.E_on) - gLapMean_) / gHatMean : 0.0;
 }
 
@@ -598,8 +596,7 @@ void ConformalSolver::localKaptzov(double rho0Star, std::vector<double>& shapeNe
 
 // Fixed-point residual f = g(x) - x of x = (psi_sc / |U|, shape) and the Anderson step.
 void ConformalSolver::andersonStep(AndersonMixer& anderson, double rho0Star, const std::vector<double>& shapeNew,
-                                   std::vector<double>& xk, std::vector<double>& fk,
-                                   const std::vector<double>& beta) {
+                                   std::vector<double>& xk, std::vector<double>& fk, const std::vector<double>& beta) {
   for (int q = 0; q < n_; ++q) {
     xk[q] = psiSc_[q] / absU_;
     fk[q] = (rho0Star * psiHat_[q] - psiSc_[q]) / absU_;
@@ -648,8 +645,7 @@ void ConformalSolver::wireFieldSummary() {
   r_.wire_field_mean = real(wsum / sumH_);
   r_.wire_field_min = real(wmin);
   r_.wire_field_max = real(wmax);
-  r_.kaptzov_error =
-      r_.ionised ? real(std::max(std::fabs(wmin / p_.E_on - 1), std::fabs(wmax / p_.E_on - 1))) : 0;
+  r_.kaptzov_error = r_.ionised ? real(std::max(std::fabs(wmin / p_.E_on - 1), std::fabs(wmax / p_.E_on - 1))) : 0;
 }
 
 // Sampling table: rows 0 (drum), 1..nt (cells), nt+1 (wire); (psi_sc, dpsi/dsigma, dpsi/dtau, |rho|).
@@ -748,7 +744,8 @@ ConformalSample sampleConformal(const ConformalCoronaProblem& p, const Conformal
   double v[4];
   for (int c = 0; c < 4; ++c) {
     auto at = [&](int row, int i) { return double(r.table[(size_t(row) * ns + i) * 4 + c]); };
-    v[c] = (1 - wy) * ((1 - wx) * at(r0, i0) + wx * at(r0, i1)) + wy * ((1 - wx) * at(r0 + 1, i0) + wx * at(r0 + 1, i1));
+    v[c] =
+        (1 - wy) * ((1 - wx) * at(r0, i0) + wx * at(r0, i1)) + wy * ((1 - wx) * at(r0 + 1, i0) + wx * at(r0 + 1, i1));
   }
   const double tc = std::min(std::max(ta, std::min(double(p.map.tau_drum), double(p.map.tau_wire))),
                              std::max(double(p.map.tau_drum), double(p.map.tau_wire)));

@@ -38,8 +38,8 @@ namespace ces {
 // (0.308 cm^0.5 = 0.308 * 0.1 m^0.5). delta = relative air density (p / 101.325 kPa) (298 K / T), 1 at
 // 25 C and 1 atm; m = surface roughness factor (1 polished, 0.98-0.93 weathered, ~0.85 stranded: Peek 1929).
 // The coaxial form is used: the field round a 0.1-0.3 mm wire is that of a coaxial one to within r/d.
-constexpr real kPeekE0 = real(3.1e6);    // V/m
-constexpr real kPeekK = real(0.0308);    // m^0.5
+constexpr real kPeekE0 = real(3.1e6);  // V/m
+constexpr real kPeekK = real(0.0308);  // m^0.5
 // Mobility of negative air ions at 1 atm, 20-25 C: 1.8-2.2e-4 m^2/(V s) (e.g. McDonald et al. 1977 use
 // 2.2e-4; K. Adamiak, P. Atten, J. Electrostatics 61 (2004) 85-98 use 2.1e-4 for positive ions).
 constexpr real kNegativeAirIonMobility = real(2.0e-4);  // m^2/(V s)
@@ -141,10 +141,10 @@ struct GridField {
 struct ConformalMap {
   enum Kind { Bipolar, LogPolar };
   Kind kind = Bipolar;
-  real a = 1;                      // bipolar focal half-distance, m
-  real ox = 0, oy = 0;             // origin of f (foci midpoint / coaxial centre)
-  real ct = 1, st = 0;             // cos, sin of the rotation theta
-  real tau_drum = 0, tau_wire = 1; // the two boundaries
+  real a = 1;                       // bipolar focal half-distance, m
+  real ox = 0, oy = 0;              // origin of f (foci midpoint / coaxial centre)
+  real ct = 1, st = 0;              // cos, sin of the rotation theta
+  real tau_drum = 0, tau_wire = 1;  // the two boundaries
 
   // Drum circle (cx, cy, R) and wire circle (cx, cy, r), disjoint: bipolar map. Throws InputError.
   static ConformalMap bipolar(real dcx, real dcy, real dR, real wcx, real wcy, real wr);
@@ -165,9 +165,9 @@ struct ConformalMap {
 struct ConformalCoronaProblem {
   ConformalMap map;
   int n_sigma = 128, n_tau = 192;
-  real U = -30000;            // V, the wire and tube potential; the drum is at 0
-  real wire_radius = 1e-4;    // m (the tau_wire circle)
-  real E_on = 0;              // V/m, Kaptzov's surface field
+  real U = -30000;          // V, the wire and tube potential; the drum is at 0
+  real wire_radius = 1e-4;  // m (the tau_wire circle)
+  real E_on = 0;            // V/m, Kaptzov's surface field
   real mobility = kNegativeAirIonMobility;
   bool tube = false;
   real tube_cx = 0, tube_cy = 0, tube_R = 0;
@@ -175,7 +175,7 @@ struct ConformalCoronaProblem {
   bool frame_earthed = true;  // the frame cells are Dirichlet phi = 0 for the space-charge potential
   real tolerance = 1e-4;      // on max |change of the space-charge potential| / |U| per iteration
   int max_iterations = 300;
-  real relaxation = 0.4;      // damping of the (Anderson-accelerated) update of the space-charge potential
+  real relaxation = 0.4;  // damping of the (Anderson-accelerated) update of the space-charge potential
   // The Laplace field (phi, Ex, Ey at a point of the gas). Empty: the solver solves Laplace's equation on
   // the conformal grid itself (exact on the coaxial grid, where phi is linear in tau).
   std::function<void(real x, real y, real& phi, real& Ex, real& Ey)> laplace;
@@ -183,16 +183,16 @@ struct ConformalCoronaProblem {
 
 struct ConformalCoronaResult {
   bool ionised = false;
-  real onset_voltage = 0;        // V, signed like U: where the mean Laplace surface field of the wire is E_on
-  real laplace_wire_field = 0;   // V/m, mean Laplace surface field of the wire at U
-  real injection_density = 0;    // C/m^3, |rho| injected at the wire
-  real current = 0;              // A/m, injected at the wire
-  real current_drum = 0, current_far = 0, current_tube = 0;  // A/m, where it goes
+  real onset_voltage = 0;       // V, signed like U: where the mean Laplace surface field of the wire is E_on
+  real laplace_wire_field = 0;  // V/m, mean Laplace surface field of the wire at U
+  real injection_density = 0;   // C/m^3, |rho| injected at the wire
+  real current = 0;             // A/m, injected at the wire
+  real current_drum = 0, current_far = 0, current_tube = 0;          // A/m, where it goes
   real wire_field_mean = 0, wire_field_min = 0, wire_field_max = 0;  // V/m, total surface field
-  real kaptzov_error = 0;        // max_i |E_wire(sigma_i) / E_on - 1|
-  real space_charge = 0;         // C/m, total |rho| dA
+  real kaptzov_error = 0;                                            // max_i |E_wire(sigma_i) / E_on - 1|
+  real space_charge = 0;                                             // C/m, total |rho| dA
   int iterations = 0;
-  real last_change = 0;          // max |change| / |U| of the last iteration
+  real last_change = 0;  // max |change| / |U| of the last iteration
   // Per cell (index j * n_sigma + i): potential of the space charge alone (zero on all conductors), the
   // Laplace potential, the ion charge density |rho| (C/m^3); cell kind 0 gas, 1 tube, 2 far-field sink.
   std::vector<real> phi_sc, phi_laplace, rho;
@@ -230,7 +230,7 @@ struct CoronaSetup {
   // configuration sets it]. Default tube: the 38 mm tube at 0.267 m, 30 deg of CesMachineParams.
   CoronaCylinder wire{real(0.110), real(0.190526), real(1e-4), true};
   CoronaCylinder tube{real(0.231229), real(0.1335), real(0.019), true};
-  real U = real(-30000);                       // V, wire and tube (one supply); drum earthed
+  real U = real(-30000);                        // V, wire and tube (one supply); drum earthed
   real ion_mobility = kNegativeAirIonMobility;  // m^2/(V s)
   real rel_air_density = 1;
   real roughness = 1;
@@ -253,9 +253,9 @@ struct CoronaSolution {
   real current_per_m = 0;      // A/m, the ion current per metre of wire (into the drum + far field)
   real injection_density = 0;  // C/m^3 at the wire (magnitude)
   int iterations = 0;
-  real kaptzov_error = 0;      // max over the wire surface of |E / E_on - 1| (0 below onset)
+  real kaptzov_error = 0;                  // max over the wire surface of |E / E_on - 1| (0 below onset)
   real current_drum = 0, current_far = 0;  // A/m
-  real laplace_wire_field = 0;  // V/m, mean Laplace surface field of the wire at U (CSM)
+  real laplace_wire_field = 0;             // V/m, mean Laplace surface field of the wire at U (CSM)
   GridField grid;
 };
 

@@ -52,8 +52,8 @@ namespace dvi {
 namespace ces {
 
 struct CsmLineCharge {
-  real x, y;     // m
-  real lambda;   // C/m
+  real x, y;    // m
+  real lambda;  // C/m
 };
 
 struct CsmConductor {
@@ -62,8 +62,7 @@ struct CsmConductor {
 };
 
 // Raw CSM sum (no region test) at (px, py).
-DVI_HD void csmRaw(const CsmLineCharge* q, int n, real phiInf, real px, real py, real& phi, real& Ex,
-                   real& Ey) {
+DVI_HD void csmRaw(const CsmLineCharge* q, int n, real phiInf, real px, real py, real& phi, real& Ex, real& Ey) {
   real sl = 0, sx = 0, sy = 0;
   for (int j = 0; j < n; ++j) {
     const real dx = px - q[j].x, dy = py - q[j].y;

@@ -45,21 +45,20 @@ namespace ces {
 
 struct TwoCylinderField {
   // Geometry and potentials.
-  real cx, cy;   // drum axis in the cross-section, m
-  real R1;       // drum radius, m (potential 0)
-  real R2;       // electrode radius, m (potential U)
-  real L;        // centre distance, m
-  real U;        // electrode potential, V
+  real cx, cy;  // drum axis in the cross-section, m
+  real R1;      // drum radius, m (potential 0)
+  real R2;      // electrode radius, m (potential U)
+  real L;       // centre distance, m
+  real U;       // electrode potential, V
   // Derived by makeTwoCylinderField.
-  real ex, ey;   // unit vector from the drum axis to the electrode axis
-  real x1, x2;   // distances of the foci F1 (inside the drum) and F2 (inside the electrode) from the drum axis
-  real c, c0;    // phi = c ln(r1/r2) + c0
+  real ex, ey;  // unit vector from the drum axis to the electrode axis
+  real x1, x2;  // distances of the foci F1 (inside the drum) and F2 (inside the electrode) from the drum axis
+  real c, c0;   // phi = c ln(r1/r2) + c0
 };
 
 // Builds the field; returns false (and leaves f unusable) unless R1 > 0, R2 > 0 and L > R1 + R2
 // (the electrode outside the drum, cylinders not touching).
-DVI_HD bool makeTwoCylinderField(real R1, real R2, real L, real alpha, real U, real cx, real cy,
-                                 TwoCylinderField& f) {
+DVI_HD bool makeTwoCylinderField(real R1, real R2, real L, real alpha, real U, real cx, real cy, TwoCylinderField& f) {
   if (!(R1 > real(0)) || !(R2 > real(0)) || !(L > R1 + R2)) return false;
   f.cx = cx;
   f.cy = cy;
@@ -71,10 +70,10 @@ DVI_HD bool makeTwoCylinderField(real R1, real R2, real L, real alpha, real U, r
   f.ey = std::sin(alpha);
   const real h1 = (L * L + R1 * R1 - R2 * R2) / (real(2) * L);
   const real a = std::sqrt((h1 - R1) * (h1 + R1));
-  f.x1 = R1 * R1 / (h1 + a);           // = h1 - a, inside the drum
-  f.x2 = L - R2 * R2 / (L - f.x1);      // = h1 + a, inside the electrode
-  const real k1 = f.x1 / R1;            // r1/r2 on the drum surface
-  const real k2 = (L - f.x1) / R2;      // r1/r2 on the electrode surface
+  f.x1 = R1 * R1 / (h1 + a);        // = h1 - a, inside the drum
+  f.x2 = L - R2 * R2 / (L - f.x1);  // = h1 + a, inside the electrode
+  const real k1 = f.x1 / R1;        // r1/r2 on the drum surface
+  const real k2 = (L - f.x1) / R2;  // r1/r2 on the electrode surface
   f.c = U / std::log(k2 / k1);
   f.c0 = -f.c * std::log(k1);
   return true;

@@ -29,7 +29,8 @@ std::string cesVtpFrame(const CesMachine& m) {
   o.reserve(512 + n * 200);
   o += "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"0.1\" byte_order=\"LittleEndian\">\n<PolyData>\n";
   o += "<Piece NumberOfPoints=\"" + std::to_string(n) + "\" NumberOfVerts=\"" + std::to_string(n) +
-       "\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n<PointData Scalars=\"kind\" Vectors=\"velocity\">\n";
+       "\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n<PointData Scalars=\"kind\" "
+       "Vectors=\"velocity\">\n";
   auto intArray = [&](const char* name, auto get) {
     o += std::string("<DataArray type=\"Int32\" Name=\"") + name + "\" format=\"ascii\">\n";
     for (size_t k = first; k < p.count(); ++k) o += std::to_string(get(k)) + "\n";
@@ -99,13 +100,15 @@ std::string cesMachineVtp(const CesMachine& m) {
   }
   const real y = real(m.config().collection_y), x0 = real(m.config().collection_x0);
   const int base = int(pts.size());
-  for (Vec3 q : {Vec3{x0 - real(0.3), y, real(-hw)}, Vec3{x0 + real(0.5), y, real(-hw)}, Vec3{x0 + real(0.5), y, real(hw)},
-                 Vec3{x0 - real(0.3), y, real(hw)}})
+  for (Vec3 q : {Vec3{x0 - real(0.3), y, real(-hw)}, Vec3{x0 + real(0.5), y, real(-hw)},
+                 Vec3{x0 + real(0.5), y, real(hw)}, Vec3{x0 - real(0.3), y, real(hw)}})
     pts.push_back(q);
   polys.push_back({base, base + 1, base + 2, base + 3});
   part.push_back(int(cyl.size()));
-  std::string o = "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"0.1\" byte_order=\"LittleEndian\">\n<PolyData>\n";
-  o += "<Piece NumberOfPoints=\"" + std::to_string(pts.size()) + "\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"" +
+  std::string o =
+      "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"0.1\" byte_order=\"LittleEndian\">\n<PolyData>\n";
+  o += "<Piece NumberOfPoints=\"" + std::to_string(pts.size()) +
+       "\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"" +
        std::to_string(polys.size()) + "\">\n";
   o += "<CellData Scalars=\"part\">\n<DataArray type=\"Int32\" Name=\"part\" format=\"ascii\">\n";
   for (int p : part) o += std::to_string(p) + "\n";
@@ -145,7 +148,10 @@ std::string cesParticlesCsv(const CesMachine& m) {
     o += ",";
     num(o, p.radius[k]);
     o += std::string(",") +
-         (p.status[k] == kStatusCollected ? "collected" : p.status[k] == kStatusLost ? "lost" : "in_flight") + ",";
+         (p.status[k] == kStatusCollected ? "collected"
+          : p.status[k] == kStatusLost    ? "lost"
+                                          : "in_flight") +
+         ",";
     num(o, p.charge[k]);
     for (real c : {b.pos[k].x, b.pos[k].y, b.pos[k].z}) {
       o += ",";
@@ -159,7 +165,8 @@ std::string cesParticlesCsv(const CesMachine& m) {
 std::string cesCollectedCsv(const CesMachine& m) {
   std::string o = "body,material,kind,mass_kg,x_mm,z_mm,t_s\n";
   for (const CollectedParticle& c : m.collected()) {
-    o += std::to_string(c.body) + "," + m.config().materials[size_t(c.material)].name + "," + materialKindName(c.kind) + ",";
+    o += std::to_string(c.body) + "," + m.config().materials[size_t(c.material)].name + "," + materialKindName(c.kind) +
+         ",";
     num(o, double(c.mass_fg) * kFemtogram);
     o += ",";
     num(o, c.x * 1e3);
@@ -284,7 +291,8 @@ std::string cesMakePlots(const std::string& dir) {
     return "plots not written: python3 with matplotlib is missing (Debian: apt-get install python3-matplotlib)";
   const std::string script = dir + "/plot_ces.py";
   writeFileAtomic(script, cesPlotScript());
-  const std::string cmd = python + " " + shellQuote(script) + " " + shellQuote(dir) + " >" + shellQuote(dir + "/plot_ces.log") + " 2>&1";
+  const std::string cmd =
+      python + " " + shellQuote(script) + " " + shellQuote(dir) + " >" + shellQuote(dir + "/plot_ces.log") + " 2>&1";
   if (std::system(cmd.c_str()) != 0) return "plots not written: plot_ces.py failed (see " + dir + "/plot_ces.log)";
   return "";
 }

@@ -37,7 +37,8 @@ void finishCell(SplitterCell& c, const SplitterBasis& basis) {
   std::array<int64_t, kMaterialKinds> fed{};
   int64_t all = 0;
   for (int k = 0; k < kMaterialKinds; ++k) {
-    fed[size_t(k)] = basis.fed_fg[size_t(k)] > 0 ? basis.fed_fg[size_t(k)] : f[0][size_t(k)] + f[1][size_t(k)] + f[2][size_t(k)];
+    fed[size_t(k)] =
+        basis.fed_fg[size_t(k)] > 0 ? basis.fed_fg[size_t(k)] : f[0][size_t(k)] + f[1][size_t(k)] + f[2][size_t(k)];
     all += fed[size_t(k)];
   }
   const int64_t metal = fed[size_t(M)], plastic = fed[size_t(P)];
@@ -107,7 +108,8 @@ SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, doubl
   t.positions = gridPositions(lo, hi, n);
   std::vector<const CollectedParticle*> sorted;
   for (const CollectedParticle& p : c) sorted.push_back(&p);
-  std::stable_sort(sorted.begin(), sorted.end(), [](const CollectedParticle* a, const CollectedParticle* b) { return a->x < b->x; });
+  std::stable_sort(sorted.begin(), sorted.end(),
+                   [](const CollectedParticle* a, const CollectedParticle* b) { return a->x < b->x; });
   // prefix[k][kind] = mass of the first k particles in x order.
   std::vector<std::array<int64_t, kMaterialKinds>> prefix(sorted.size() + 1);
   for (size_t k = 0; k < sorted.size(); ++k) {
@@ -148,8 +150,9 @@ SplitterTable splitterAnalysis(const std::vector<CollectedParticle>& c, double l
   if (a.cells.size() != b.cells.size()) throw std::logic_error("splitters: the two methods give different table sizes");
   for (size_t k = 0; k < a.cells.size(); ++k)
     if (!(a.cells[k].mass == b.cells[k].mass))
-      throw std::logic_error("splitters: direct binning and cumulative sums differ at s1 = " +
-                             std::to_string(a.cells[k].s1 * 1e3) + " mm, s2 = " + std::to_string(a.cells[k].s2 * 1e3) + " mm");
+      throw std::logic_error(
+          "splitters: direct binning and cumulative sums differ at s1 = " + std::to_string(a.cells[k].s1 * 1e3) +
+          " mm, s2 = " + std::to_string(a.cells[k].s2 * 1e3) + " mm");
   if (a.best != b.best) throw std::logic_error("splitters: the two methods pick different best settings");
   return a;
 }
@@ -175,8 +178,8 @@ std::string distributionCsv(const Distribution& d) {
   char buf[160];
   for (size_t k = 0; k < d.fg.size(); ++k) {
     std::snprintf(buf, sizeof buf, "%.6g,%.6g,%.9g,%.9g,%.9g\n", (d.lo + double(k) * d.bin) * 1e3,
-                  (d.lo + double(k + 1) * d.bin) * 1e3, double(d.fg[k][0]) * kFemtogram, double(d.fg[k][1]) * kFemtogram,
-                  double(d.fg[k][2]) * kFemtogram);
+                  (d.lo + double(k + 1) * d.bin) * 1e3, double(d.fg[k][0]) * kFemtogram,
+                  double(d.fg[k][1]) * kFemtogram, double(d.fg[k][2]) * kFemtogram);
     o += buf;
   }
   return o;
@@ -190,7 +193,8 @@ std::string splittersCsv(const SplitterTable& t) {
   char buf[512];
   for (const SplitterCell& c : t.cells) {
     const auto& f = c.mass.fg;
-    std::snprintf(buf, sizeof buf, "%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%d\n",
+    std::snprintf(buf, sizeof buf,
+                  "%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%d\n",
                   c.s1 * 1e3, c.s2 * 1e3, double(f[0][0]) * kFemtogram, double(f[0][1]) * kFemtogram,
                   double(f[0][2]) * kFemtogram, double(f[1][0]) * kFemtogram, double(f[1][1]) * kFemtogram,
                   double(f[1][2]) * kFemtogram, double(f[2][0]) * kFemtogram, double(f[2][1]) * kFemtogram,

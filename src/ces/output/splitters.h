@@ -41,8 +41,8 @@ struct BinMasses {
 // What recoveries are relative to, and the optimiser's grade targets.
 struct SplitterBasis {
   std::array<int64_t, kMaterialKinds> fed_fg{};  // fed mass per kind (0: the collected mass of that kind)
-  double target_conductor = 0;                    // metal grade the conductor product must reach
-  double target_nonconductor = 0;                 // plastic grade the nonconductor product must reach
+  double target_conductor = 0;                   // metal grade the conductor product must reach
+  double target_nonconductor = 0;                // plastic grade the nonconductor product must reach
 };
 
 struct SplitterCell {
@@ -56,17 +56,18 @@ struct SplitterCell {
 };
 
 struct SplitterTable {
-  std::vector<double> positions;   // m, evenly spaced over [lo, hi]
-  std::vector<SplitterCell> cells; // every (i, j) with i <= j, i major
-  size_t best = 0;                 // index into cells
-  bool targets_met = false;        // the best cell meets both grade targets
+  std::vector<double> positions;    // m, evenly spaced over [lo, hi]
+  std::vector<SplitterCell> cells;  // every (i, j) with i <= j, i major
+  size_t best = 0;                  // index into cells
+  bool targets_met = false;         // the best cell meets both grade targets
 };
 
 // Bins of one splitter setting, by direct assignment.
 BinMasses binDirect(const std::vector<CollectedParticle>& c, double s1, double s2);
 
 // One setting: its masses (direct binning), grade, recovery and score.
-SplitterCell splitterCell(const std::vector<CollectedParticle>& c, double s1, double s2, const SplitterBasis& basis = {});
+SplitterCell splitterCell(const std::vector<CollectedParticle>& c, double s1, double s2,
+                          const SplitterBasis& basis = {});
 
 SplitterTable splittersDirect(const std::vector<CollectedParticle>& c, double lo, double hi, int n,
                               const SplitterBasis& basis = {});

@@ -28,14 +28,27 @@ DVI_HD Vec3 operator-(Vec3 a) { return {-a.x, -a.y, -a.z}; }
 DVI_HD Vec3 operator*(Vec3 a, real s) { return {a.x * s, a.y * s, a.z * s}; }
 DVI_HD Vec3 operator*(real s, Vec3 a) { return {a.x * s, a.y * s, a.z * s}; }
 DVI_HD Vec3 operator/(Vec3 a, real s) { return {a.x / s, a.y / s, a.z / s}; }
-DVI_HD Vec3& operator+=(Vec3& a, Vec3 b) { a.x += b.x; a.y += b.y; a.z += b.z; return a; }
-DVI_HD Vec3& operator-=(Vec3& a, Vec3 b) { a.x -= b.x; a.y -= b.y; a.z -= b.z; return a; }
-DVI_HD Vec3& operator*=(Vec3& a, real s) { a.x *= s; a.y *= s; a.z *= s; return a; }
+DVI_HD Vec3& operator+=(Vec3& a, Vec3 b) {
+  a.x += b.x;
+  a.y += b.y;
+  a.z += b.z;
+  return a;
+}
+DVI_HD Vec3& operator-=(Vec3& a, Vec3 b) {
+  a.x -= b.x;
+  a.y -= b.y;
+  a.z -= b.z;
+  return a;
+}
+DVI_HD Vec3& operator*=(Vec3& a, real s) {
+  a.x *= s;
+  a.y *= s;
+  a.z *= s;
+  return a;
+}
 DVI_HD Vec3 mul(Vec3 a, Vec3 b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }  // component-wise
 DVI_HD real dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-DVI_HD Vec3 cross(Vec3 a, Vec3 b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
+DVI_HD Vec3 cross(Vec3 a, Vec3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
 DVI_HD real length2(Vec3 a) { return dot(a, a); }
 DVI_HD real length(Vec3 a) { return std::sqrt(dot(a, a)); }
 DVI_HD Vec3 vmin(Vec3 a, Vec3 b) { return {std::fmin(a.x, b.x), std::fmin(a.y, b.y), std::fmin(a.z, b.z)}; }

@@ -45,9 +45,7 @@ struct Shape {  // 96 bytes in double
 };
 
 // Bullet's filter test, with both directions required (btOverlapFilterCallback default).
-DVI_HD bool groupsCollide(const Shape& a, const Shape& b) {
-  return (a.group & b.mask) != 0 && (b.group & a.mask) != 0;
-}
+DVI_HD bool groupsCollide(const Shape& a, const Shape& b) { return (a.group & b.mask) != 0 && (b.group & a.mask) != 0; }
 
 // Radius of a sphere about the shape origin that bounds the shape (not used for planes).
 DVI_HD real boundingRadius(const Shape& s, const Vec3* hull_points) {

@@ -59,8 +59,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-
-
 // Characteristic length of a shape: Shape::size when set, else the smallest half-dimension; a plane has
 // no size (infinite), so a pair with a plane uses the other shape's size.
 real shapeSize(const Shape& s, const std::vector<Vec3>& hull) {
@@ -119,7 +117,7 @@ struct ObjectInfo {
   int32_t body = -1;
   std::vector<int32_t> shapes;  // our shape indices; child i of a compound is shapes[i]
   bool compound = false;
-  real thresh_size = 0;         // largest shape size of the object (threshold of its manifolds)
+  real thresh_size = 0;  // largest shape size of the object (threshold of its manifolds)
 };
 
 class BulletCollision final : public CollisionDetector {
@@ -376,8 +374,7 @@ void BulletCollision::rebuild(const BodyArrays& bodies, const ShapeArrays& shape
     obj->setUserIndex(int(oi));
     const uint8_t f = bodies.flags[size_t(o.body)];
     if (f & kBodyFixed) obj->setCollisionFlags(obj->getCollisionFlags() | btCollisionObject::CF_STATIC_OBJECT);
-    if (f & kBodyKinematic)
-      obj->setCollisionFlags(obj->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+    if (f & kBodyKinematic) obj->setCollisionFlags(obj->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
     const btScalar pt = std::isfinite(tsize) ? btScalar(envelope_rel_ * tsize) : btScalar(BT_LARGE_FLOAT);
     obj->setContactProcessingThreshold(pt);
     world_->addCollisionObject(obj.get(), group, mask);
@@ -460,8 +457,9 @@ void BulletCollision::collectManifoldPoints(const BodyArrays& bodies, const Shap
       const real env = rel * fmin(sizes_[size_t(sa)], sizes_[size_t(sb)]);
       const real d = real(p.getDistance());
       if (!(d < env)) continue;
-      Raw r{sa, sb, mi, k, -fromBt(p.m_normalWorldOnB), fromBt(p.getPositionWorldOnA()),
-            fromBt(p.getPositionWorldOnB()), d};
+      Raw r{
+          sa, sb, mi, k, -fromBt(p.m_normalWorldOnB), fromBt(p.getPositionWorldOnA()), fromBt(p.getPositionWorldOnB()),
+          d};
       if (sa > sb) {
         std::swap(r.sa, r.sb);
         std::swap(r.pa, r.pb);
@@ -487,8 +485,10 @@ void BulletCollision::writeContacts(const ShapeArrays& shapes, ContactArrays& ou
     const Raw& r = raw_[i];
     if (i > 0) {
       const Raw& q = raw_[i - 1];
-      if (q.sa != r.sa || q.sb != r.sb) rank = 0;
-      else if (q.manifold != r.manifold) ++rank;
+      if (q.sa != r.sa || q.sb != r.sb)
+        rank = 0;
+      else if (q.manifold != r.manifold)
+        ++rank;
     }
     const int32_t feature = r.point + MANIFOLD_CACHE_SIZE * rank;
     out.shape_a[i] = r.sa;

@@ -21,7 +21,6 @@ namespace dvi {
 
 namespace {
 
-
 // Rotation taking the canonical axis +Y onto Bullet's up axis (0 = X, 1 = Y, 2 = Z).
 Quat upAxisRotation(int up) {
   const real h = std::sqrt(real(0.5));
@@ -114,8 +113,7 @@ void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, st
       out.push_back(makePlane(nw, real(s.getPlaneConstant()) + dot(nw, local.p)));
       return;
     }
-    default:
-      throw InputError(std::string("unsupported collision shape: ") + shape.getName());
+    default: throw InputError(std::string("unsupported collision shape: ") + shape.getName());
   }
 }
 
@@ -178,9 +176,7 @@ std::vector<int> importBullet(System& system, const std::vector<btRigidBody*>& b
     BodyDesc d;
     try {
       d = bodyDescFromBullet(*bodies[i]);
-    } catch (const InputError& e) {
-      throw InputError("rigid body " + std::to_string(i) + ": " + e.what());
-    }
+    } catch (const InputError& e) { throw InputError("rigid body " + std::to_string(i) + ": " + e.what()); }
     // A body living in a world whose gravity differs from the system's keeps its own (Bullet allows
     // per-body gravity). A body never added to a world has zero gravity in Bullet and takes the system's.
     if (!d.has_gravity && bodies[i]->getBroadphaseHandle()) {

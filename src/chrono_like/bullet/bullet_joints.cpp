@@ -27,11 +27,16 @@ struct Dof6 {
 };
 
 void fromDof6(const Dof6& d, const char* kind, JointSpec& j) {
-  auto refuse = [&](const std::string& what) { throw InputError(std::string(kind) + ": " + what + " is not supported"); };
+  auto refuse = [&](const std::string& what) {
+    throw InputError(std::string(kind) + ": " + what + " is not supported");
+  };
   for (int i = 0; i < 3; ++i) {
-    if (d.lo[i] == d.hi[i]) j.lin[i] = JointSpec::Axis::Locked;
-    else if (d.lo[i] > d.hi[i]) j.lin[i] = JointSpec::Axis::Free;
-    else j.lin[i] = JointSpec::Axis::Limited;
+    if (d.lo[i] == d.hi[i])
+      j.lin[i] = JointSpec::Axis::Locked;
+    else if (d.lo[i] > d.hi[i])
+      j.lin[i] = JointSpec::Axis::Free;
+    else
+      j.lin[i] = JointSpec::Axis::Limited;
     j.lin_lo[i] = d.lo[i];
     j.lin_hi[i] = d.hi[i];
   }
@@ -47,12 +52,15 @@ void fromDof6(const Dof6& d, const char* kind, JointSpec& j) {
       refuse("an angular limit range on " + axisName(3 + i) + " (only locked or free rotational axes)");
     }
   }
-  if (locked == 3) j.ang = JointSpec::Angular::Locked;
+  if (locked == 3)
+    j.ang = JointSpec::Angular::Locked;
   else if (locked == 2) {
     j.ang = JointSpec::Angular::Hinge;
     j.hinge_axis = free_axis;
-  } else if (locked == 0) j.ang = JointSpec::Angular::Free;
-  else refuse("a single locked rotational axis");
+  } else if (locked == 0)
+    j.ang = JointSpec::Angular::Free;
+  else
+    refuse("a single locked rotational axis");
   for (int i = 0; i < 6; ++i) {
     if (d.motor[i] && !d.spring[i]) refuse("a motor on " + axisName(i));
     if (!d.spring[i]) continue;
@@ -218,7 +226,8 @@ JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
       return j;
     case FIXED_CONSTRAINT_TYPE:
     case D6_SPRING_2_CONSTRAINT_TYPE:
-      dof6Spring2Spec(static_cast<btGeneric6DofSpring2Constraint&>(mc), c.getConstraintType() == FIXED_CONSTRAINT_TYPE, j);
+      dof6Spring2Spec(static_cast<btGeneric6DofSpring2Constraint&>(mc), c.getConstraintType() == FIXED_CONSTRAINT_TYPE,
+                      j);
       return j;
     default:
       throw InputError("unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
@@ -232,7 +241,9 @@ void BulletJoints::add(btTypedConstraint* c) {
   if (std::find(joints_.begin(), joints_.end(), c) == joints_.end()) joints_.push_back(c);
 }
 
-void BulletJoints::remove(btTypedConstraint* c) { joints_.erase(std::remove(joints_.begin(), joints_.end(), c), joints_.end()); }
+void BulletJoints::remove(btTypedConstraint* c) {
+  joints_.erase(std::remove(joints_.begin(), joints_.end(), c), joints_.end());
+}
 
 JointBody BulletJoints::side(const BodyArrays& bodies, const btRigidBody* body) const {
   JointBody s;

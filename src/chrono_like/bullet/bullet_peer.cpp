@@ -22,10 +22,7 @@
 
 namespace dvi {
 
-namespace {
-
-
-}  // namespace
+namespace {}  // namespace
 
 struct BulletPeer::Impl {
   BulletPeerSettings settings;
@@ -150,8 +147,8 @@ struct BulletPeer::Impl {
         return keep(new btStaticPlaneShape(p->getPlaneNormal(), p->getPlaneConstant() * s));
       }
       default:
-        throw InputError(std::string("BulletPeer: unsupported collision shape '") + src->getName() +
-                         "' (shape type " + std::to_string(src->getShapeType()) + ")");
+        throw InputError(std::string("BulletPeer: unsupported collision shape '") + src->getName() + "' (shape type " +
+                         std::to_string(src->getShapeType()) + ")");
     }
   }
 
@@ -217,8 +214,8 @@ BulletPeer::BulletPeer(const std::vector<btRigidBody*>& bodies, const BulletPeer
   m.dispatcher = std::make_unique<btCollisionDispatcher>(m.config.get());
   m.broadphase = std::make_unique<btDbvtBroadphase>();
   m.solver = std::make_unique<btSequentialImpulseConstraintSolver>();
-  m.world = std::make_unique<btDiscreteDynamicsWorld>(m.dispatcher.get(), m.broadphase.get(), m.solver.get(),
-                                                      m.config.get());
+  m.world =
+      std::make_unique<btDiscreteDynamicsWorld>(m.dispatcher.get(), m.broadphase.get(), m.solver.get(), m.config.get());
   m.world->setGravity(toBt(settings.gravity) * m.s);  // before adding bodies: addRigidBody copies it
   m.world->getSolverInfo().m_numIterations = settings.solver_iterations;
   m.bodies.reserve(bodies.size());
@@ -239,8 +236,8 @@ void BulletPeer::step() {
   for (auto& b : m.bodies) {
     if (!b->isKinematicObject()) continue;
     btTransform next;
-    btTransformUtil::integrateTransform(b->getWorldTransform(), b->getLinearVelocity(), b->getAngularVelocity(),
-                                        dt, next);
+    btTransformUtil::integrateTransform(b->getWorldTransform(), b->getLinearVelocity(), b->getAngularVelocity(), dt,
+                                        next);
     b->setWorldTransform(next);
   }
   m.world->stepSimulation(dt, 0);  // exactly one internal step of dt, no interpolation
@@ -274,9 +271,7 @@ Quat BulletPeer::rotation(size_t i) const {
   const btQuaternion q = impl_->bodies.at(i)->getWorldTransform().getRotation();
   return Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())};
 }
-Vec3 BulletPeer::velocity(size_t i) const {
-  return fromBt(impl_->bodies.at(i)->getLinearVelocity()) / real(impl_->s);
-}
+Vec3 BulletPeer::velocity(size_t i) const { return fromBt(impl_->bodies.at(i)->getLinearVelocity()) / real(impl_->s); }
 Vec3 BulletPeer::angularVelocity(size_t i) const { return fromBt(impl_->bodies.at(i)->getAngularVelocity()); }
 
 }  // namespace dvi

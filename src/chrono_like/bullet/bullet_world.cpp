@@ -17,7 +17,6 @@ namespace dvi {
 
 namespace {
 
-
 bool sameTransform(const btTransform& a, const btTransform& b) {
   return a.getOrigin() == b.getOrigin() && a.getBasis()[0] == b.getBasis()[0] && a.getBasis()[1] == b.getBasis()[1] &&
          a.getBasis()[2] == b.getBasis()[2];
@@ -29,8 +28,12 @@ int bodyKind(const btRigidBody& b) {
   return 0;
 }
 
-int proxyGroup(const btRigidBody& b) { return b.getBroadphaseHandle() ? b.getBroadphaseHandle()->m_collisionFilterGroup : 1; }
-int proxyMask(const btRigidBody& b) { return b.getBroadphaseHandle() ? b.getBroadphaseHandle()->m_collisionFilterMask : -1; }
+int proxyGroup(const btRigidBody& b) {
+  return b.getBroadphaseHandle() ? b.getBroadphaseHandle()->m_collisionFilterGroup : 1;
+}
+int proxyMask(const btRigidBody& b) {
+  return b.getBroadphaseHandle() ? b.getBroadphaseHandle()->m_collisionFilterMask : -1;
+}
 
 // The body as the System takes it; shapes include static triangle geometry (triangle_mesh.h).
 BodyDesc describe(const btRigidBody& body) {
@@ -116,7 +119,8 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
                    (config_.backend == WorldBackend::Auto && config_.gpu_available && config_.gpu_available(nullptr));
   if (gpu) {
     if (!config_.make_gpu_system)
-      throw InputError("WorldBackend::Gpu: DviWorldConfig::make_gpu_system is not set (gpu/gpu_factory.h: makeGpuSystem)");
+      throw InputError(
+          "WorldBackend::Gpu: DviWorldConfig::make_gpu_system is not set (gpu/gpu_factory.h: makeGpuSystem)");
     s = config_.make_gpu_system(c, makeBulletCollision);  // throws InputError naming why when no device is usable
   } else {
     s = std::make_unique<FilteredCpuSystem>(c, [this](int a, int b) { return keepPair(a, b); });
@@ -307,7 +311,8 @@ void DviDynamicsWorld::collectContacts() {
     p.m_positionWorldOnA = w.point_a;
     p.m_positionWorldOnB = w.point_b;
     p.m_appliedImpulse = w.normal_impulse;
-    p.m_combinedFriction = btScalar(tracked_[size_t(ia)].body->getFriction() * tracked_[size_t(ib)].body->getFriction());
+    p.m_combinedFriction =
+        btScalar(tracked_[size_t(ia)].body->getFriction() * tracked_[size_t(ib)].body->getFriction());
     m->addManifoldPoint(p, false);
   }
 }

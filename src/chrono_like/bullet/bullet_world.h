@@ -44,7 +44,7 @@ enum class WorldBackend { Cpu, Gpu, Auto };
 
 struct DviWorldConfig {
   WorldBackend backend = WorldBackend::Cpu;
-  SystemConfig system;       // solver, threads, collision...; step.dt and step.gravity come from Bullet
+  SystemConfig system;  // solver, threads, collision...; step.dt and step.gravity come from Bullet
   JointSettings joints;
   bool fill_manifolds = true;  // mirror the contacts into Bullet's persistent manifolds (dispatcher)
   // The GPU backend for WorldBackend::Gpu and Auto, given by the app (gpu/gpu_factory.h: dvi::makeGpuSystem and
@@ -58,10 +58,10 @@ struct DviWorldConfig {
 struct WorldContact {
   const btCollisionObject* a = nullptr;
   const btCollisionObject* b = nullptr;
-  btVector3 point_a, point_b;  // world points on the surfaces of a and b
-  btVector3 normal;            // unit, from a to b
-  btScalar distance = 0;       // signed, negative = penetration
-  btScalar normal_impulse = 0; // over the sub-step, N s (force = impulse / sub-step)
+  btVector3 point_a, point_b;   // world points on the surfaces of a and b
+  btVector3 normal;             // unit, from a to b
+  btScalar distance = 0;        // signed, negative = penetration
+  btScalar normal_impulse = 0;  // over the sub-step, N s (force = impulse / sub-step)
 };
 
 class DviDynamicsWorld : public btDiscreteDynamicsWorld {
@@ -102,10 +102,10 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
  private:
   struct Tracked {
     btRigidBody* body;
-    btTransform tf;                    // what this world last wrote (or read)
+    btTransform tf;  // what this world last wrote (or read)
     btVector3 v, w;
     const btCollisionShape* shape;
-    int group, mask, kind;             // kind: 0 dynamic, kBodyFixed, kBodyKinematic
+    int group, mask, kind;  // kind: 0 dynamic, kBodyFixed, kBodyKinematic
   };
   std::unique_ptr<System> makeSystem() const;
   void rebuild();
@@ -120,10 +120,10 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::unique_ptr<System> system_;
   std::shared_ptr<BulletJoints> joints_;
   std::unordered_map<const btRigidBody*, int> index_;
-  std::vector<Tracked> tracked_;     // in System order
+  std::vector<Tracked> tracked_;       // in System order
   std::vector<btRigidBody*> pending_;  // added since the last sub-step
   bool rebuild_ = false;
-  bool has_exclusions_ = false;      // some constraint disables collisions between its bodies
+  bool has_exclusions_ = false;  // some constraint disables collisions between its bodies
   std::vector<WorldContact> contacts_;
   std::vector<btPersistentManifold*> manifolds_;
   int64_t substeps_ = 0;

@@ -14,7 +14,6 @@ namespace dvi {
 
 namespace {
 
-
 bool isTriangleShape(int type) {
   return type == TRIANGLE_MESH_SHAPE_PROXYTYPE || type == SCALED_TRIANGLE_MESH_SHAPE_PROXYTYPE ||
          type == TERRAIN_SHAPE_PROXYTYPE;
@@ -102,7 +101,8 @@ void appendShapesWithTriangles(const btCollisionShape& shape, const Pose& local,
     Collect collect(local, out);
     const size_t before = out.size();
     s.processAllTriangles(&collect, lo - pad, hi + pad);
-    if (out.size() == before) throw InputError(std::string("triangle shape without a non-degenerate triangle: ") + shape.getName());
+    if (out.size() == before)
+      throw InputError(std::string("triangle shape without a non-degenerate triangle: ") + shape.getName());
     return;
   }
   if (shape.getShapeType() == COMPOUND_SHAPE_PROXYTYPE && hasTriangles(shape)) {

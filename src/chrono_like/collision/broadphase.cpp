@@ -44,7 +44,10 @@ void sortByB(ShapePair* s, int32_t m) {
   for (int32_t k = 1; k < m; ++k) {
     const ShapePair x = s[k];
     int32_t q = k - 1;
-    while (q >= 0 && s[q].b > x.b) { s[q + 1] = s[q]; --q; }
+    while (q >= 0 && s[q].b > x.b) {
+      s[q + 1] = s[q];
+      --q;
+    }
     s[q + 1] = x;
   }
 }
@@ -53,8 +56,7 @@ void sortByB(ShapePair* s, int32_t m) {
 
 void BroadPhaseBins::run(const ShapeArrays& shapes, const BodyArrays& bodies, std::vector<ShapePair>& out_pairs,
                          BroadPhaseStats* stats) {
-  if (shapes.aabb.size() < shapes.count())
-    throw std::invalid_argument("BroadPhaseBins::run: shapes.aabb not computed");
+  if (shapes.aabb.size() < shapes.count()) throw std::invalid_argument("BroadPhaseBins::run: shapes.aabb not computed");
   run(shapes, shapes.aabb.data(), bodies, out_pairs, stats);
 }
 
@@ -120,13 +122,19 @@ real BroadPhaseBins::classify(const Pass& in) {
     double sum = 0;
     int64_t cnt = 0;
     for (int32_t i = k * kBlock, e = std::min(n, (k + 1) * kBlock); i < e; ++i)
-      if (ext[i] >= real(0) && ext[i] <= cut) { sum += double(ext[i]); ++cnt; }
+      if (ext[i] >= real(0) && ext[i] <= cut) {
+        sum += double(ext[i]);
+        ++cnt;
+      }
     block_sum_[size_t(k)] = sum;
     block_cnt_[size_t(k)] = cnt;
   }
   double sum = 0;
   int64_t cnt = 0;
-  for (int32_t k = 0; k < nblocks; ++k) { sum += block_sum_[size_t(k)]; cnt += block_cnt_[size_t(k)]; }
+  for (int32_t k = 0; k < nblocks; ++k) {
+    sum += block_sum_[size_t(k)];
+    cnt += block_cnt_[size_t(k)];
+  }
   real edge = cnt > 0 ? real(double(settings_.bin_size_factor) * sum / double(cnt)) : real(0);
   if (!(edge > real(0))) return edge;
   // cap the number of bounded shapes treated apart
@@ -173,8 +181,12 @@ BinGrid BroadPhaseBins::makeGrid(const Pass& in, real& edge, Aabb& bounds, Broad
 #pragma omp parallel for schedule(static) reduction(min : lx, ly, lz) reduction(max : hx, hy, hz)
   for (int32_t j = 0; j < nb; ++j) {
     const Aabb& b = box[bl[j]];
-    lx = std::min(lx, b.lo.x); ly = std::min(ly, b.lo.y); lz = std::min(lz, b.lo.z);
-    hx = std::max(hx, b.hi.x); hy = std::max(hy, b.hi.y); hz = std::max(hz, b.hi.z);
+    lx = std::min(lx, b.lo.x);
+    ly = std::min(ly, b.lo.y);
+    lz = std::min(lz, b.lo.z);
+    hx = std::max(hx, b.hi.x);
+    hy = std::max(hy, b.hi.y);
+    hz = std::max(hz, b.hi.z);
   }
   bounds = Aabb{{lx, ly, lz}, {hx, hy, hz}};
   const Vec3 span = bounds.hi - bounds.lo;
@@ -216,7 +228,8 @@ int32_t BroadPhaseBins::writeEntries(const Pass& in, const BinGrid& grid, BroadP
   for (int32_t j = 0; j < nb; ++j) {
     offsets_[size_t(j)] = int32_t(acc);
     acc += cnt[j];
-    if (acc > std::numeric_limits<int32_t>::max()) throw std::length_error("BroadPhaseBins: more than 2^31 bin entries");
+    if (acc > std::numeric_limits<int32_t>::max())
+      throw std::length_error("BroadPhaseBins: more than 2^31 bin entries");
   }
   offsets_[size_t(nb)] = int32_t(acc);
   const int32_t ne = int32_t(acc);

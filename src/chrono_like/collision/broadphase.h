@@ -37,7 +37,7 @@ struct BroadPhaseSettings {
   real bin_size_factor = real(2);  // bin edge = factor x mean AABB extent of the binned shapes
   real large_factor = real(8);     // a shape larger than large_factor bin edges is treated apart
   int64_t max_bins = int64_t(1) << 24;
-  int32_t max_large = 64;          // most bounded (non-plane) shapes treated apart
+  int32_t max_large = 64;  // most bounded (non-plane) shapes treated apart
   // Pairs kept between steps (broadphase_kernels.h: fatAabb, pairsStillHold): each build grows every box by
   // pair_margin x the last build's bin edge (0 on the first build), and the next steps keep its pairs while
   // every shape's box stays inside its grown box and no body's flags change; the contacts are the same as
@@ -52,8 +52,8 @@ struct BroadPhaseStats {
   int32_t large_shapes = 0;
   int64_t pairs = 0;
   real bin_edge = 0;
-  int64_t occupied_bins = 0;  // bins holding at least one entry
-  int64_t bin_pair_tests = 0; // shape pairs tested inside bins (the dominant cost)
+  int64_t occupied_bins = 0;   // bins holding at least one entry
+  int64_t bin_pair_tests = 0;  // shape pairs tested inside bins (the dominant cost)
   int32_t grid[3] = {0, 0, 0};
 };
 
@@ -80,13 +80,13 @@ class BroadPhaseBins {
     int32_t n;
     int nthreads;
   };
-  real classify(const Pass& in);                        // 1: extents and the bin edge
-  void splitBinnedLarge(const Pass& in, real edge);     // 1: binned_ and large_
-  BinGrid makeGrid(const Pass& in, real& edge, Aabb& bounds, BroadPhaseStats& st);  // 2
-  int32_t writeEntries(const Pass& in, const BinGrid& grid, BroadPhaseStats& st);   // 3-5
-  void sortEntriesByBin(uint32_t max_key);              // 4
-  int32_t testBinnedPairs(const Pass& in, int32_t ne, BroadPhaseStats& st);         // 6
-  void pairLargeShapes(const Pass& in);                 // 7
+  real classify(const Pass& in);                                                         // 1: extents and the bin edge
+  void splitBinnedLarge(const Pass& in, real edge);                                      // 1: binned_ and large_
+  BinGrid makeGrid(const Pass& in, real& edge, Aabb& bounds, BroadPhaseStats& st);       // 2
+  int32_t writeEntries(const Pass& in, const BinGrid& grid, BroadPhaseStats& st);        // 3-5
+  void sortEntriesByBin(uint32_t max_key);                                               // 4
+  int32_t testBinnedPairs(const Pass& in, int32_t ne, BroadPhaseStats& st);              // 6
+  void pairLargeShapes(const Pass& in);                                                  // 7
   void writeOutput(const Pass& in, int32_t nchunks, std::vector<ShapePair>& out_pairs);  // 8
   void writeLargeBinnedPairs(const Pass& in, int32_t nchunks, ShapePair* out);
   void mergeLargeLargePairs(ShapePair* out);
@@ -96,8 +96,8 @@ class BroadPhaseBins {
   std::vector<real> extent_, extent_sel_;
   std::vector<double> block_sum_;
   std::vector<int64_t> block_cnt_, hist_, lh_count_, lh_cursor_, lh_total_, ll_count_, chunk_off_, large_off_;
-  std::vector<int32_t> binned_, large_, large_active_, counts_, offsets_, entry_shape_, entry_perm_,
-      entry_perm_tmp_, entry_pos_, sorted_shape_, chunk_begin_;
+  std::vector<int32_t> binned_, large_, large_active_, counts_, offsets_, entry_shape_, entry_perm_, entry_perm_tmp_,
+      entry_pos_, sorted_shape_, chunk_begin_;
   std::vector<uint8_t> entry_mask_, sorted_mask_;
   std::vector<uint32_t> entry_bin_, entry_bin_tmp_;
   std::vector<std::vector<ShapePair>> chunk_pairs_;  // pairs (s, b) found from the binned shapes of a chunk

@@ -96,8 +96,8 @@ DVI_HD int32_t aabbBinCount(const BinGrid& g, const Aabb& box) {
 // increasing index order, and for each entry the box's "start mask" in that bin: bit d set when the bin is
 // the first one the box overlaps along axis d (see binOwnsPairByMask). out_mask may be null.
 // Returns the number written.
-DVI_HD int32_t aabbWriteBins(const BinGrid& g, const Aabb& box, int32_t shape, uint32_t* out_bin,
-                             int32_t* out_shape, uint8_t* out_mask) {
+DVI_HD int32_t aabbWriteBins(const BinGrid& g, const Aabb& box, int32_t shape, uint32_t* out_bin, int32_t* out_shape,
+                             uint8_t* out_mask) {
   int32_t lo[3], hi[3];
   aabbBinRange(g, box, lo, hi);
   int32_t w = 0;
@@ -116,8 +116,7 @@ DVI_HD int32_t aabbWriteBins(const BinGrid& g, const Aabb& box, int32_t shape, u
 // That corner lies in both boxes, hence (binCoord being monotone) in a bin both boxes were written to, and
 // in exactly one bin: testing the pair in every shared bin and keeping it only in the owner reports it once.
 DVI_HD uint32_t pairOwnerBin(const BinGrid& g, const Aabb& a, const Aabb& b) {
-  const Vec3 m{a.lo.x > b.lo.x ? a.lo.x : b.lo.x, a.lo.y > b.lo.y ? a.lo.y : b.lo.y,
-               a.lo.z > b.lo.z ? a.lo.z : b.lo.z};
+  const Vec3 m{a.lo.x > b.lo.x ? a.lo.x : b.lo.x, a.lo.y > b.lo.y ? a.lo.y : b.lo.y, a.lo.z > b.lo.z ? a.lo.z : b.lo.z};
   int32_t c[3];
   binCell(g, m, c);
   return binIndex(g, c[0], c[1], c[2]);
@@ -139,8 +138,8 @@ DVI_HD void binCellOfIndex(const BinGrid& g, uint32_t bin, int32_t c[3]) {
 
 // Branch-free overlap (no short-circuit: both SIMD lanes and GPU warps evaluate it without divergence).
 DVI_HD bool aabbOverlapBranchFree(const Aabb& a, const Aabb& b) {
-  return (a.lo.x <= b.hi.x) & (b.lo.x <= a.hi.x) & (a.lo.y <= b.hi.y) & (b.lo.y <= a.hi.y) &
-         (a.lo.z <= b.hi.z) & (b.lo.z <= a.hi.z);
+  return (a.lo.x <= b.hi.x) & (b.lo.x <= a.hi.x) & (a.lo.y <= b.hi.y) & (b.lo.y <= a.hi.y) & (a.lo.z <= b.hi.z) &
+         (b.lo.z <= a.hi.z);
 }
 
 // First stage of the in-bin test, branch free: the boxes overlap and this bin owns the pair.
@@ -150,8 +149,8 @@ DVI_HD bool binCandidate(const Aabb& a, const Aabb& b, uint8_t mask_a, uint8_t m
 
 // Pair test inside bin `bin` for shapes a and b (both written to that bin): the boxes overlap, the bin owns
 // the pair, and the pair may collide at all.
-DVI_HD bool binPairTest(const BinGrid& g, uint32_t bin, int32_t a, int32_t b, const Shape* shapes,
-                        const Aabb* aabbs, const uint8_t* body_flags) {
+DVI_HD bool binPairTest(const BinGrid& g, uint32_t bin, int32_t a, int32_t b, const Shape* shapes, const Aabb* aabbs,
+                        const uint8_t* body_flags) {
   const Aabb& A = aabbs[a];
   const Aabb& B = aabbs[b];
   if (!aabbOverlap(A, B)) return false;
@@ -169,8 +168,7 @@ DVI_HD bool shapePairAllowed(int32_t a, int32_t b, const Shape* shapes, const ui
 }
 
 // Direct pair test (large shapes against everything, and the brute-force oracle).
-DVI_HD bool directPairTest(int32_t a, int32_t b, const Shape* shapes, const Aabb* aabbs,
-                           const uint8_t* body_flags) {
+DVI_HD bool directPairTest(int32_t a, int32_t b, const Shape* shapes, const Aabb* aabbs, const uint8_t* body_flags) {
   if (!aabbOverlap(aabbs[a], aabbs[b])) return false;
   const Shape& sa = shapes[a];
   const Shape& sb = shapes[b];

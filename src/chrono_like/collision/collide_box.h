@@ -70,9 +70,9 @@ DVI_HD int clipPolygon(const Vec3* in, int n, Vec3 pn, real po, Vec3* outp, int 
 
 // Two boxes' axes and half extents, and what the separating-axis test found along the 15 candidate axes.
 struct BoxBoxAxes {
-  Vec3 ax[3], bx[3];  // the axes of box a and box b (world)
-  real ea[3], eb[3];  // their half extents
-  Vec3 t;             // from a's centre to b's
+  Vec3 ax[3], bx[3];                                                // the axes of box a and box b (world)
+  real ea[3], eb[3];                                                // their half extents
+  Vec3 t;                                                           // from a's centre to b's
   real sepA = real(-1e30), sepB = real(-1e30), sepE = real(-1e30);  // largest separation on a's, b's, edge axes
   int axisA = 0, axisB = 0, edgeI = -1, edgeJ = -1;                 // where (edgeI < 0: no usable edge axis)
   Vec3 edgeL{0, 0, 0};
@@ -178,8 +178,10 @@ DVI_HD int boxBoxFaceContacts(const BoxBoxAxes& g, const Pose& wa, const Pose& w
     real s = dot(polyA[i] - refc, nr);
     if (s < envelope) {
       Vec3 onRef = polyA[i] - nr * s;
-      if (refIsA) setContact(out[m], nr, onRef, polyA[i], s, m);
-      else setContact(out[m], -nr, polyA[i], onRef, s, m);
+      if (refIsA)
+        setContact(out[m], nr, onRef, polyA[i], s, m);
+      else
+        setContact(out[m], -nr, polyA[i], onRef, s, m);
       ++m;
     }
   }
@@ -187,8 +189,7 @@ DVI_HD int boxBoxFaceContacts(const BoxBoxAxes& g, const Pose& wa, const Pose& w
 }
 
 // Edge-edge: the edge of a along ax[edgeI] and the edge of b along bx[edgeJ] that are extreme along L.
-DVI_HD int boxBoxEdgeContact(const BoxBoxAxes& g, const Pose& wa, const Pose& wb, real envelope,
-                             ContactPoint* out) {
+DVI_HD int boxBoxEdgeContact(const BoxBoxAxes& g, const Pose& wa, const Pose& wb, real envelope, ContactPoint* out) {
   const Vec3* ax = g.ax;
   const Vec3* bx = g.bx;
   const real* ea = g.ea;
@@ -214,7 +215,7 @@ DVI_HD int boxBoxEdgeContact(const BoxBoxAxes& g, const Pose& wa, const Pose& wb
 
 // Box a (half extents a.dims) at wa, box b at wb. Normals from a to b.
 DVI_HD_CALL int collideBoxBox(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
-                         ContactPoint* out) {
+                              ContactPoint* out) {
   BoxBoxAxes g;
   if (!boxBoxSeparatingAxes(a, wa, b, wb, envelope, g)) return 0;
   // Prefer face axes (a over b) unless another axis separates clearly more: keeps the manifold's reference

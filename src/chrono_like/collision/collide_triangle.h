@@ -75,8 +75,8 @@ DVI_HD Vec3 nearestOnTriangle(Vec3 a, Vec3 b, Vec3 c, Vec3 t) {
 }
 
 // Convex shape a (any type but Plane and Triangle) against triangle b. Normals from a to b.
-DVI_HD_CALL int collideConvexTriangle(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                                 real envelope, ContactPoint* out) {
+DVI_HD_CALL int collideConvexTriangle(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
+                                      const Vec3* hull_points, real envelope, ContactPoint* out) {
   const Vec3 v0 = transformPoint(wb, triangleVertexLocal(b, 0));
   const Vec3 v1 = transformPoint(wb, triangleVertexLocal(b, 1));
   const Vec3 v2 = transformPoint(wb, triangleVertexLocal(b, 2));

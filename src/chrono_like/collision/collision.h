@@ -37,7 +37,7 @@ struct CollisionSettings {
 struct CollisionTimes {
   double aabbs = 0, broad = 0, narrow = 0;  // seconds
   int64_t pairs = 0;
-  bool pairs_reused = false;  // BroadPhase kept the last build's pairs (BroadPhaseSettings::pair_margin)
+  bool pairs_reused = false;    // BroadPhase kept the last build's pairs (BroadPhaseSettings::pair_margin)
   BroadPhaseStats broad_stats;  // of the last build
 };
 

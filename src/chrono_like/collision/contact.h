@@ -8,12 +8,12 @@
 namespace dvi {
 
 struct ContactPoint {  // 80 bytes in double
-  Vec3 normal;  // unit, pointing from shape A to shape B
-  Vec3 pa;      // world point on the surface of A
-  Vec3 pb;      // world point on the surface of B
-  real dist;    // signed distance along normal: dot(pb - pa, normal); negative = penetration
-  int32_t feature;  // index of the point within its pair's manifold (0..kMaxContactsPerPair-1), part of the
-                    // persistent key that warm starts the solver
+  Vec3 normal;         // unit, pointing from shape A to shape B
+  Vec3 pa;             // world point on the surface of A
+  Vec3 pb;             // world point on the surface of B
+  real dist;           // signed distance along normal: dot(pb - pa, normal); negative = penetration
+  int32_t feature;     // index of the point within its pair's manifold (0..kMaxContactsPerPair-1), part of the
+                       // persistent key that warm starts the solver
   int32_t pad_;
 };
 

@@ -114,8 +114,8 @@ DVI_HD_CALL void mprSupportM(const MprShape& A, const MprShape& B, Vec3 d, const
 }
 
 struct MprResult {
-  Vec3 n;        // unit, from A to B
-  real depth;    // h(n) = penetration of A' and B' along n
+  Vec3 n;      // unit, from A to B
+  real depth;  // h(n) = penetration of A' and B' along n
 };
 
 // One MPR pass with interior point v0 of M. Returns false when the origin is found outside M.
@@ -177,11 +177,15 @@ DVI_HD_CALL bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Ve
     Vec3 w = cross(v0, V4.v);
     real c1 = dot(V1.v, w), c2 = dot(V2.v, w), c3 = dot(V3.v, w);
     if (c1 >= real(0)) {
-      if (c3 <= real(0)) V2 = V4;  // (v1, v4, v3)
-      else V1 = V4;                // (v4, v2, v3)
+      if (c3 <= real(0))
+        V2 = V4;  // (v1, v4, v3)
+      else
+        V1 = V4;  // (v4, v2, v3)
     } else {
-      if (c2 >= real(0)) V3 = V4;  // (v1, v2, v4)
-      else V1 = V4;
+      if (c2 >= real(0))
+        V3 = V4;  // (v1, v2, v4)
+      else
+        V1 = V4;
     }
   }
   // Degenerate portal: report what we have if the origin is inside.
@@ -224,7 +228,7 @@ DVI_HD void mprTryDirection(const MprShape& A, const MprShape& B, const Vec3* hu
 // the poses, never on the MPR portal (whose final triangle can change with the rounding of its branch tests),
 // so CPU and GPU builds agree.
 DVI_HD_CALL void mprContactPoints(const MprShape& A, const MprShape& B, Vec3 n, const Vec3* hull_points, Vec3& pa,
-                             Vec3& pb) {
+                                  Vec3& pb) {
   Vec3 t = (A.center + B.center) * real(0.5);
   pa = mprSurfacePoint(A, n, t, hull_points);
   pb = mprSurfacePoint(B, -n, pa, hull_points);
@@ -293,7 +297,7 @@ DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, cons
 // axes are evaluated exactly by h(n) and MPR is restarted from the best; deep hull pairs also restart from
 // the normal tilted four ways.
 DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
-                    MprResult& best, MprRound& round) {
+                         MprResult& best, MprRound& round) {
   round.n = 0;
   Vec3 v0 = A.center - B.center;
   if (length2(v0) < real(1e-30)) v0 = Vec3{real(1e-10) * (real(1) + boundingRadius(a, hull_points)), 0, 0};
@@ -465,7 +469,7 @@ DVI_HD_CALL int mprManifold(const MprShape& A, const MprShape& B, const Vec3* hu
     pb2[k][0] = dot(b3[k] - o, t1), pb2[k][1] = dot(b3[k] - o, t2);
   }
   const real scale = fmax(spread_a, spread_b);
-  const real eps = real(1e-9) * scale * scale;  // cross products of zero-length (repeated) polygon edges
+  const real eps = real(1e-9) * scale * scale;                // cross products of zero-length (repeated) polygon edges
   const real ha = dot(out[0].pa, n), hb = dot(out[0].pb, n);  // A's and B's support planes along n
   // candidates inside the other polygon and within the envelope; the extreme along each axis direction
   const real ax[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
@@ -516,7 +520,7 @@ DVI_HD_CALL int mprManifold(const MprShape& A, const MprShape& B, const Vec3* hu
 // computes a pair's other points again from it).
 constexpr int32_t kMprFirst = 1;
 DVI_HD_CALL int mprFinish(const MprShape& A, const MprShape& B, const Vec3* hull_points, const MprResult& best,
-                     real envelope, ContactPoint* out, bool manifold = true) {
+                          real envelope, ContactPoint* out, bool manifold = true) {
   if (!(best.depth > real(0))) return 0;
   Vec3 pa, pb;
   mprContactPoints(A, B, best.n, hull_points, pa, pb);
@@ -541,7 +545,7 @@ constexpr int kMprDeferred = -1;  // collideShapes' answer for a pair left in *d
 // four more of two flat features (mprManifold). With `defer`,
 // a deep pair is not finished: its state goes to *defer and the answer is kMprDeferred.
 DVI_HD_CALL int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                      real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true) {
+                           real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true) {
   MprShape A = makeMprShape(a, wa, hull_points, envelope);
   MprShape B = makeMprShape(b, wb, hull_points, real(0));
   MprResult best;

@@ -102,9 +102,8 @@ struct MprDeferred;
 // finishDeferredMpr completes it (the GPU narrow phase runs those apart, a lane per restart: mpr.h).
 // `manifold`: MPR pairs of two flat features get up to 4 more points (mpr.h: mprManifold;
 // CollisionSettings::mpr_manifold).
-DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
-                         const Vec3* hull_points, real envelope, ContactPoint* out,
-                         np::MprDeferred* defer = nullptr, bool manifold = true);
+DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
+                         real envelope, ContactPoint* out, np::MprDeferred* defer = nullptr, bool manifold = true);
 
 }  // namespace dvi
 

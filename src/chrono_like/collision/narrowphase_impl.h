@@ -282,7 +282,7 @@ DVI_HD void rimFrame(Vec3 ax, Vec3 xaxis, Vec3 pn, Vec3& u, Vec3& v) {
 
 // Shape (a) against the half-space {x : dot(pn, x) <= pd}.
 DVI_HD_CALL int collideConvexHalfSpace(const Shape& a, const Pose& wa, Vec3 pn, real pd, const Vec3* hull_points,
-                                  real envelope, ContactPoint* out) {
+                                       real envelope, ContactPoint* out) {
   int m = 0;
   switch (a.type) {
     case ShapeType::Sphere: m += planePoint(wa.p, a.dims.x, pn, pd, envelope, 0, out[m]); break;
@@ -409,7 +409,7 @@ DVI_HD bool bigCylinderSide(const Shape& a, const Pose& wa, const Shape& cyl, co
 }
 
 DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const Shape& cyl, const Pose& wc,
-                                    const Vec3* hull_points, real envelope, ContactPoint* out) {
+                                         const Vec3* hull_points, real envelope, ContactPoint* out) {
   const real R = cyl.dims.x;
   const Vec3 ax = rotate(wc.q, Vec3{0, 1, 0});
   const Vec3 d0 = wa.p - wc.p;
@@ -443,7 +443,8 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
     return collideConvexPlane(a, wa, b, wb, hull_points, envelope, out);
   }
   // A particle against the side of a drum or brush (either order: a.type <= b.type).
-  if (bigCylinderSide(a, wa, b, wb, hull_points)) return collideConvexBigCylinder(a, wa, b, wb, hull_points, envelope, out);
+  if (bigCylinderSide(a, wa, b, wb, hull_points))
+    return collideConvexBigCylinder(a, wa, b, wb, hull_points, envelope, out);
   if (bigCylinderSide(b, wb, a, wa, hull_points)) {
     const int m = collideConvexBigCylinder(b, wb, a, wa, hull_points, envelope, out);
     flipContacts(out, m);

@@ -147,7 +147,8 @@ struct Dna {
       need(4);
       const int32_t n = rd32(p);
       p += 4;
-      if (n < 1 || n > 32767) fail(std::string(what) + ": " + section + " count " + std::to_string(n) + " out of range");
+      if (n < 1 || n > 32767)
+        fail(std::string(what) + ": " + section + " count " + std::to_string(n) + " out of range");
       return n;
     };
     auto strings = [&](int32_t n, std::vector<std::string>& out, const char* section) {
@@ -184,8 +185,11 @@ struct Dna {
       s.type = rd16(p);
       const int nm = rd16(p + 2);
       p += 4;
-      if (s.type < 0 || s.type >= ntypes) fail(std::string(what) + ": struct " + std::to_string(i) + " has type index " + std::to_string(s.type) + " out of range");
-      if (nm < 0 || nm > 4096) fail(std::string(what) + ": struct " + std::to_string(i) + " has " + std::to_string(nm) + " members");
+      if (s.type < 0 || s.type >= ntypes)
+        fail(std::string(what) + ": struct " + std::to_string(i) + " has type index " + std::to_string(s.type) +
+             " out of range");
+      if (nm < 0 || nm > 4096)
+        fail(std::string(what) + ": struct " + std::to_string(i) + " has " + std::to_string(nm) + " members");
       need(int64_t(nm) * 4);
       for (int k = 0; k < nm; ++k, p += 4) {
         Member m{};
@@ -195,7 +199,8 @@ struct Dna {
           fail(std::string(what) + ": struct " + types[size_t(s.type)] + " has a member index out of range");
         s.members.push_back(m);
       }
-      if (!struct_of_type.emplace(s.type, i).second) fail(std::string(what) + ": struct " + types[size_t(s.type)] + " defined twice");
+      if (!struct_of_type.emplace(s.type, i).second)
+        fail(std::string(what) + ": struct " + types[size_t(s.type)] + " defined twice");
       struct_by_name[types[size_t(s.type)]] = i;
       structs.push_back(std::move(s));
     }
@@ -208,8 +213,8 @@ struct Dna {
   // struct's TLEN the sum of its members; struct members that are structs (type >= the first struct's type,
   // as Bullet decides) really are structs, without cycles.
   void check(const Fail& fail, const char* what) {
-    static const std::map<std::string, int> kPrimitive = {{"char", 1}, {"uchar", 1}, {"short", 2}, {"ushort", 2},
-                                                          {"int", 4},  {"long", 4},  {"ulong", 4}, {"float", 4},
+    static const std::map<std::string, int> kPrimitive = {{"char", 1},   {"uchar", 1}, {"short", 2}, {"ushort", 2},
+                                                          {"int", 4},    {"long", 4},  {"ulong", 4}, {"float", 4},
                                                           {"double", 8}, {"void", 0}};
     for (size_t t = 0; t < types.size(); ++t) {
       if (tlen[t] < 0) fail(std::string(what) + ": type " + types[t] + " has a negative length");
@@ -240,7 +245,8 @@ struct Dna {
         }
         if (v < 1) fail(std::string(what) + ": array of zero length " + s.substr(0, 40));
         d *= v;
-        if (close + 1 != s.size() && s[close + 1] != '[') fail(std::string(what) + ": malformed array name " + s.substr(0, 40));
+        if (close + 1 != s.size() && s[close + 1] != '[')
+          fail(std::string(what) + ": malformed array name " + s.substr(0, 40));
         at = close + 1 < s.size() ? close + 1 : std::string::npos;
       }
       if (d > 65536) fail(std::string(what) + ": array " + s.substr(0, 40) + " too long");
@@ -252,7 +258,8 @@ struct Dna {
         m.ptrptr = pp[size_t(m.name)] != 0;
         m.dims = dims[size_t(m.name)];
         if (!m.pointer && m.type >= first_struct_type && !struct_of_type.count(m.type))
-          fail(std::string(what) + ": member " + names[size_t(m.name)] + " of " + types[size_t(s.type)] + " has no struct type");
+          fail(std::string(what) + ": member " + names[size_t(m.name)] + " of " + types[size_t(s.type)] +
+               " has no struct type");
         m.size = m.pointer ? int64_t(8) * m.dims : int64_t(tlen[size_t(m.type)]) * m.dims;
       }
     // Struct lengths and offsets; cycles of structs inside structs (by value) would make the sum infinite.
@@ -363,7 +370,7 @@ inline int64_t bulletDnaScan(const char* buf, int64_t len) {
 }
 
 struct Block {
-  int64_t at;         // offset of the block header
+  int64_t at;  // offset of the block header
   std::string code;
   int32_t len, dna, nr;
   uint64_t old;
@@ -372,11 +379,14 @@ struct Block {
 // The walk of sanitizeBulletFile: one file's blocks, its DNA, and what has been checked and kept so far.
 class FileChecker {
  public:
-  static constexpr int64_t kHead = 24;                         // a block header's bytes
-  static constexpr int64_t kMaxExpanded = int64_t(1) << 24;    // primitives the shapes may expand to
+  static constexpr int64_t kHead = 24;                       // a block header's bytes
+  static constexpr int64_t kMaxExpanded = int64_t(1) << 24;  // primitives the shapes may expand to
 
   FileChecker(const std::string& file, const std::string& origin, int max_compound_depth)
-      : fail(Fail{origin}), origin_(origin), max_depth_(max_compound_depth), buf_(file.data()),
+      : fail(Fail{origin}),
+        origin_(origin),
+        max_depth_(max_compound_depth),
+        buf_(file.data()),
         size_(int64_t(file.size())) {}
 
   // The header; returns whether the file is in double precision.
@@ -389,7 +399,8 @@ class FileChecker {
     if (buf[8] != 'v' && buf[8] != 'V') refuse("not a .bullet file (bad endianness byte)");
     for (int i = 9; i < 12; ++i)
       if (!std::isdigit(static_cast<unsigned char>(buf[i]))) refuse("not a .bullet file (bad version)");
-    if (buf[7] == '_') refuse("written by a 32-bit program (4-byte pointers): not supported, re-export it from a 64-bit build");
+    if (buf[7] == '_')
+      refuse("written by a 32-bit program (4-byte pointers): not supported, re-export it from a 64-bit build");
     if (buf[8] == 'V') refuse("big-endian .bullet file: not supported, re-export it on a little-endian machine");
     if (std::memcmp(buf + 9, "276", 3) == 0) refuse("Bullet 2.76 file (its broken DNA is not supported)");
     return buf[6] == 'd';
@@ -412,10 +423,14 @@ class FileChecker {
       if (b.len < 0 || int64_t(b.len) > size_ - at - kHead)
         refuse("truncated or corrupt .bullet file (block '" + code4(buf + at) + "' at byte " + std::to_string(at) +
                " runs past the end of the file)");
-      if (b.len % 4) fail("block '" + code4(buf + at) + "' at byte " + std::to_string(at) + " has length " + std::to_string(b.len) + ", not a multiple of 4");
+      if (b.len % 4)
+        fail("block '" + code4(buf + at) + "' at byte " + std::to_string(at) + " has length " + std::to_string(b.len) +
+             ", not a multiple of 4");
       if (b.code == "SDNA") fail("SDNA block before the DNA block");
-      if (b.code == "DNA1") dna_at_ = at;
-      else blocks_.push_back(b);
+      if (b.code == "DNA1")
+        dna_at_ = at;
+      else
+        blocks_.push_back(b);
       at += kHead + b.len;
     }
     dna_len_ = rd32(buf + dna_at_ + 4);
@@ -436,9 +451,10 @@ class FileChecker {
       const Block& b = blocks_[i];
       if (b.old == 0) fail(where(i) + " has a null address");
       if (!by_old_.emplace(b.old, i).second)
-        fail("two blocks with the address " + std::to_string(b.old) + " (at bytes " + std::to_string(blocks_[by_old_[b.old]].at) +
-             " and " + std::to_string(b.at) + ")");
-      if (b.dna >= int32_t(dna_.structs.size())) fail(where(i) + " has struct index " + std::to_string(b.dna) + " out of range");
+        fail("two blocks with the address " + std::to_string(b.old) + " (at bytes " +
+             std::to_string(blocks_[by_old_[b.old]].at) + " and " + std::to_string(b.at) + ")");
+      if (b.dna >= int32_t(dna_.structs.size()))
+        fail(where(i) + " has struct index " + std::to_string(b.dna) + " out of range");
       if (b.dna >= 0) {
         if (b.nr < 1) fail(where(i) + " has " + std::to_string(b.nr) + " elements");
         if (int64_t(b.nr) * dna_.structLen(b.dna) > int64_t(b.len))
@@ -508,7 +524,9 @@ class FileChecker {
   enum Role { kBody, kWorld, kShape, kArray, kName };
 
   [[noreturn]] void refuse(const std::string& what) const { throw InputError(origin_ + ": " + what); }
-  std::string where(size_t i) const { return "block '" + code4(buf_ + blocks_[i].at) + "' at byte " + std::to_string(blocks_[i].at); }
+  std::string where(size_t i) const {
+    return "block '" + code4(buf_ + blocks_[i].at) + "' at byte " + std::to_string(blocks_[i].at);
+  }
   const char* data(size_t i) const { return buf_ + blocks_[i].at + kHead; }
   int64_t pointee(uint64_t p) const {
     auto it = by_old_.find(p);
@@ -518,7 +536,8 @@ class FileChecker {
   void mark(size_t i, Role r) {
     static const char* const kRoleCode[] = {"RBDY", "DWLD", "SHAP", "ARAY", "ARAY"};
     if (keep_[i] >= 0 && keep_[i] != r) fail(where(i) + " is used in two roles");
-    if (std::memcmp(blocks_[i].code.data(), kRoleCode[r], 4) != 0) fail(where(i) + " should be a '" + kRoleCode[r] + "' block");
+    if (std::memcmp(blocks_[i].code.data(), kRoleCode[r], 4) != 0)
+      fail(where(i) + " should be a '" + kRoleCode[r] + "' block");
     keep_[i] = r;
   }
 
@@ -526,8 +545,8 @@ class FileChecker {
   void checkRecord(size_t i, const std::string& expected, bool dbl, const char* what) const {
     const Block& b = blocks_[i];
     if (b.dna < 0 || dna_.structName(b.dna) != expected)
-      fail(where(i) + " holds " + (b.dna < 0 ? std::string("no struct") : dna_.structName(b.dna)) + ", but the header says " +
-           (dbl ? "double" : "float") + " precision (" + expected + ")");
+      fail(where(i) + " holds " + (b.dna < 0 ? std::string("no struct") : dna_.structName(b.dna)) +
+           ", but the header says " + (dbl ? "double" : "float") + " precision (" + expected + ")");
     if (b.nr != 1) fail(where(i) + " holds " + std::to_string(b.nr) + " " + what);
   }
 
@@ -538,13 +557,15 @@ class FileChecker {
     const int s = blocks_[i].dna;
     if (struct_checked_[size_t(s)]) return;
     struct_checked_[size_t(s)] = 1;
-    if (mem_.structByName(dna_.structName(s)) < 0) fail(where(i) + ": struct " + dna_.structName(s) + " is unknown to Bullet");
+    if (mem_.structByName(dna_.structName(s)) < 0)
+      fail(where(i) + ": struct " + dna_.structName(s) + " is unknown to Bullet");
     if (copiedUnconverted(dna_, mem_, s) && (mem_.structName(s) != dna_.structName(s) || !sameLayout(dna_, s, mem_, s)))
       fail(where(i) + ": its struct " + dna_.structName(s) + " differs from Bullet's");
     std::vector<int> todo{s};
     for (size_t k = 0; k < todo.size() && k < 256; ++k)
       for (const Dna::Member& m : dna_.structs[size_t(todo[k])].members) {
-        if (m.ptrptr) fail(where(i) + ": pointer-to-pointer member " + dna_.names[size_t(m.name)] + " in " + dna_.structName(s));
+        if (m.ptrptr)
+          fail(where(i) + ": pointer-to-pointer member " + dna_.names[size_t(m.name)] + " in " + dna_.structName(s));
         const int sub = dna_.memberStruct(m);
         if (sub >= 0) todo.push_back(sub);
       }
@@ -567,7 +588,8 @@ class FileChecker {
       // struct members, type names (else the member stays zero): the value read here must be the one it keeps.
       const int ms = mem_.structByName(dna_.structName(s));
       const Dna::Member* mm = ms >= 0 ? mem_.member(ms, path[k]) : nullptr;
-      if (!mm || mm->pointer != m->pointer || (!m->pointer && mem_.types[size_t(mm->type)] != dna_.types[size_t(m->type)]))
+      if (!mm || mm->pointer != m->pointer ||
+          (!m->pointer && mem_.types[size_t(mm->type)] != dna_.types[size_t(m->type)]))
         fail(where(i) + ": member " + path[k] + " of " + dna_.structName(s) + " differs from Bullet's");
       off += m->offset;
       if (k + 1 < path.size()) {
@@ -603,7 +625,8 @@ class FileChecker {
     if (n < 0) fail(where(i) + ": pointer to " + type + " points to no block");
     const Block& b = blocks_[size_t(n)];
     if (b.dna < 0 || dna_.structName(b.dna) != type) fail(where(size_t(n)) + " should hold " + type);
-    if (int64_t(b.nr) < count) fail(where(size_t(n)) + " holds " + std::to_string(b.nr) + " " + type + ", fewer than " + std::to_string(count));
+    if (int64_t(b.nr) < count)
+      fail(where(size_t(n)) + " holds " + std::to_string(b.nr) + " " + type + ", fewer than " + std::to_string(count));
     mark(size_t(n), kArray);
     checkStruct(size_t(n));
   }
@@ -615,22 +638,20 @@ class FileChecker {
     const char* data;
   };
   static const ShapeKind* shapeKind(int type) {
-    static const ShapeKind kShapes[] = {{0, "box", "btConvexInternalShapeData"},
-                                        {4, "convex hull", "btConvexHullShapeData"},
-                                        {8, "sphere", "btConvexInternalShapeData"},
-                                        {9, "multi-sphere", "btMultiSphereShapeData"},
-                                        {10, "capsule", "btCapsuleShapeData"},
-                                        {11, "cone", "btConeShapeData"},
-                                        {13, "cylinder", "btCylinderShapeData"},
-                                        {28, "static plane", "btStaticPlaneShapeData"},
-                                        {31, "compound", "btCompoundShapeData"}};
+    static const ShapeKind kShapes[] = {
+        {0, "box", "btConvexInternalShapeData"},    {4, "convex hull", "btConvexHullShapeData"},
+        {8, "sphere", "btConvexInternalShapeData"}, {9, "multi-sphere", "btMultiSphereShapeData"},
+        {10, "capsule", "btCapsuleShapeData"},      {11, "cone", "btConeShapeData"},
+        {13, "cylinder", "btCylinderShapeData"},    {28, "static plane", "btStaticPlaneShapeData"},
+        {31, "compound", "btCompoundShapeData"}};
     for (const ShapeKind& k : kShapes)
       if (k.type == type) return &k;
     return nullptr;
   }
 
   [[noreturn]] void tooDeepError() const {
-    throw InputError(origin_ + ": compound shapes nested deeper than " + std::to_string(max_depth_) + " levels (the limit)");
+    throw InputError(origin_ + ": compound shapes nested deeper than " + std::to_string(max_depth_) +
+                     " levels (the limit)");
   }
 
   // Per shape block: checked yet, on the current path (a cycle), how many compounds deep it nests (itself
@@ -660,8 +681,12 @@ class FileChecker {
     name(i, field(i, 0, name_path, nullptr));
     const int type = rd32(field(i, 0, type_path, "int"));
     const ShapeKind* kind = shapeKind(type);
-    if (!kind) throw InputError(origin_ + ": shape type " + std::to_string(type) + " at byte " + std::to_string(b.at) + " is not supported (dvisim imports box, sphere, capsule, cylinder, cone, convex hull, multi-sphere, compound and static plane shapes)");
-    if (!dna_.derivesFrom(b.dna, kind->data) || !mem_.derivesFrom(mem_.structByName(dna_.structName(b.dna)), kind->data))
+    if (!kind)
+      throw InputError(origin_ + ": shape type " + std::to_string(type) + " at byte " + std::to_string(b.at) +
+                       " is not supported (dvisim imports box, sphere, capsule, cylinder, cone, convex hull, "
+                       "multi-sphere, compound and static plane shapes)");
+    if (!dna_.derivesFrom(b.dna, kind->data) ||
+        !mem_.derivesFrom(mem_.structByName(dna_.structName(b.dna)), kind->data))
       fail(where(i) + ": a " + kind->name + " shape stored as " + dna_.structName(b.dna));
     if (type == 10 || type == 11 || type == 13) {  // the importer makes no shape for another axis
       const int32_t axis = rd32(field(i, 0, {type == 11 ? "m_upIndex" : "m_upAxis"}, "int"));

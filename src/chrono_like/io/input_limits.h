@@ -27,12 +27,12 @@
 namespace dvi {
 
 struct InputLimits {
-  uint64_t max_json_bytes = uint64_t(256) << 20;   // a JSON scene or CES document
-  uint64_t max_binary_bytes = uint64_t(1) << 30;   // a .bullet file or a CES checkpoint
-  int max_json_depth = 64;                         // nesting of arrays and objects in a JSON document
-  int max_compound_depth = 8;                      // compound shapes inside compound shapes
-  int64_t max_bodies = int64_t(1) << 26;           // bodies of one scene (the schema's largest pile)
-  int64_t max_steps = int64_t(1) << 40;            // steps of one run (the --steps limit)
+  uint64_t max_json_bytes = uint64_t(256) << 20;  // a JSON scene or CES document
+  uint64_t max_binary_bytes = uint64_t(1) << 30;  // a .bullet file or a CES checkpoint
+  int max_json_depth = 64;                        // nesting of arrays and objects in a JSON document
+  int max_compound_depth = 8;                     // compound shapes inside compound shapes
+  int64_t max_bodies = int64_t(1) << 26;          // bodies of one scene (the schema's largest pile)
+  int64_t max_steps = int64_t(1) << 40;           // steps of one run (the --steps limit)
   // Memory a scene body takes once built (its Bullet body, shape and motion state, the engine's arrays and
   // the outputs): 1.8-1.9 KB measured with 100,000 spheres or boxes (peak RSS of `dvisim run`).
   double bytes_per_body = 2048;
@@ -76,10 +76,11 @@ inline std::string readRegularFile(const std::string& path, const std::string& w
   }
   if (S_ISDIR(st.st_mode)) throw InputError(what + ": is a directory" + directory_note);
   if (!S_ISREG(st.st_mode))
-    throw InputError(what + ": is " + inputcheck::fileKind(st.st_mode) + ", not a regular file (refused: reading it may never end)");
+    throw InputError(what + ": is " + inputcheck::fileKind(st.st_mode) +
+                     ", not a regular file (refused: reading it may never end)");
   auto tooLarge = [&](uint64_t size) {
-    return InputError(what + ": is " + std::to_string(size) + " bytes, more than the limit of " + std::to_string(max_bytes) +
-                      " bytes");
+    return InputError(what + ": is " + std::to_string(size) + " bytes, more than the limit of " +
+                      std::to_string(max_bytes) + " bytes");
   };
   if (uint64_t(st.st_size) > max_bytes) throw tooLarge(uint64_t(st.st_size));
   const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
@@ -89,7 +90,8 @@ inline std::string readRegularFile(const std::string& path, const std::string& w
     ~FdCloser() { ::close(fd); }
   } closer{fd};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode))
-    throw InputError(what + ": is " + inputcheck::fileKind(st.st_mode) + ", not a regular file (refused: reading it may never end)");
+    throw InputError(what + ": is " + inputcheck::fileKind(st.st_mode) +
+                     ", not a regular file (refused: reading it may never end)");
   std::string out;
   out.reserve(size_t(st.st_size));
   char buf[1 << 16];
@@ -110,8 +112,8 @@ inline int64_t checkedStepCount(double time, double dt, const std::string& what)
   const double n = std::round(time / dt);
   const int64_t limit = inputLimits().max_steps;
   if (!(n >= 0 && n <= double(limit)))
-    throw InputError(what + ": " + inputcheck::number(time) + " s at a time step of " + inputcheck::number(dt) + " s is " +
-                     inputcheck::number(n) + " steps, more than the limit of " + std::to_string(limit));
+    throw InputError(what + ": " + inputcheck::number(time) + " s at a time step of " + inputcheck::number(dt) +
+                     " s is " + inputcheck::number(n) + " steps, more than the limit of " + std::to_string(limit));
   return int64_t(n);
 }
 
@@ -136,7 +138,8 @@ inline double availableMemoryBytes() {
 inline void checkBodyBudget(int64_t bodies, const std::string& what) {
   const InputLimits& l = inputLimits();
   if (bodies > l.max_bodies)
-    throw InputError(what + ": " + std::to_string(bodies) + " bodies, more than the limit of " + std::to_string(l.max_bodies));
+    throw InputError(what + ": " + std::to_string(bodies) + " bodies, more than the limit of " +
+                     std::to_string(l.max_bodies));
   const double need = double(bodies) * l.bytes_per_body, have = availableMemoryBytes();
   if (need > have)
     throw InputError(what + ": " + std::to_string(bodies) + " bodies need about " + inputcheck::number(need / 1e9) +
@@ -173,7 +176,8 @@ inline void depthWalk(const nlohmann::json& v, int depth, int max_depth, std::st
 }
 }  // namespace inputcheck
 
-inline void checkJsonDepth(const nlohmann::json& doc, const std::string& origin, int max_depth = inputLimits().max_json_depth) {
+inline void checkJsonDepth(const nlohmann::json& doc, const std::string& origin,
+                           int max_depth = inputLimits().max_json_depth) {
   std::string path;
   inputcheck::depthWalk(doc, 1, max_depth, path, origin);
 }

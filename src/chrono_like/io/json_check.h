@@ -108,15 +108,15 @@ struct JsonCheck {
   double number(const json& v, const std::string& path) const {
     const double x = finiteNumber(v, path);
     if (std::fabs(x) > max_magnitude)
-      fail(path, "out of range: the magnitude must be <= " + num(max_magnitude) + " (stored as " + stored_as + "), got " + describe(v));
+      fail(path, "out of range: the magnitude must be <= " + num(max_magnitude) + " (stored as " + stored_as +
+                     "), got " + describe(v));
     return x;
   }
   // Any finite number (for values that are not stored as given: a direction is normalised first).
   double finiteNumber(const json& v, const std::string& path) const {
     if (v.is_string() && (v.get<std::string>() == "nan" || v.get<std::string>() == "NaN"))
       fail(path, "non-finite number " + describe(v));
-    if (!v.is_number())
-      fail(path, std::string("expected a finite number, got ") + typeName(v) + " " + describe(v));
+    if (!v.is_number()) fail(path, std::string("expected a finite number, got ") + typeName(v) + " " + describe(v));
     const double x = v.get<double>();
     if (!std::isfinite(x)) fail(path, "non-finite number " + describe(v));
     return x;
@@ -124,7 +124,8 @@ struct JsonCheck {
   double positive(const json& v, const std::string& path) const {
     const double x = number(v, path);
     if (!(x > 0)) fail(path, "must be > 0, got " + num(x));
-    if (x < min_positive) fail(path, "must be >= " + num(min_positive) + " (stored as " + stored_as + "), got " + describe(v));
+    if (x < min_positive)
+      fail(path, "must be >= " + num(min_positive) + " (stored as " + stored_as + "), got " + describe(v));
     return x;
   }
   double nonNegative(const json& v, const std::string& path) const {
@@ -170,21 +171,19 @@ struct JsonCheck {
     fail(path, "unknown value \"" + s + "\" (expected " + list + ")");
   }
   Vec3 vec3(const json& v, const std::string& path) const {
-    if (!v.is_array() || v.size() != 3)
-      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    if (!v.is_array() || v.size() != 3) fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
     return Vec3{real(number(v[0], path + "[0]")), real(number(v[1], path + "[1]")), real(number(v[2], path + "[2]"))};
   }
   Vec3 positiveVec3(const json& v, const std::string& path) const {
-    if (!v.is_array() || v.size() != 3)
-      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
-    return Vec3{real(positive(v[0], path + "[0]")), real(positive(v[1], path + "[1]")), real(positive(v[2], path + "[2]"))};
+    if (!v.is_array() || v.size() != 3) fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    return Vec3{real(positive(v[0], path + "[0]")), real(positive(v[1], path + "[1]")),
+                real(positive(v[2], path + "[2]"))};
   }
   // A direction (a plane normal, a rotation axis): 3 finite numbers, not all zero, returned as a unit vector.
   // Scaled by the largest component before its length is taken, so [1e300, 1e300, 0] (whose length overflows)
   // and [1e-200, 1e-200, 0] (whose squares underflow) both give their direction instead of a zero vector.
   Vec3 direction(const json& v, const std::string& path) const {
-    if (!v.is_array() || v.size() != 3)
-      fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
+    if (!v.is_array() || v.size() != 3) fail(path, std::string("expected an array of 3 numbers, got ") + describe(v));
     double c[3];
     for (int i = 0; i < 3; ++i) c[i] = finiteNumber(v[size_t(i)], path + "[" + std::to_string(i) + "]");
     const double m = std::fmax(std::fabs(c[0]), std::fmax(std::fabs(c[1]), std::fabs(c[2])));
@@ -199,7 +198,8 @@ struct JsonCheck {
       double c[4];
       for (int i = 0; i < 4; ++i) c[i] = finiteNumber(v[size_t(i)], path + "[" + std::to_string(i) + "]");
       // scaled by the largest component first, as direction() does
-      const double m = std::fmax(std::fmax(std::fabs(c[0]), std::fabs(c[1])), std::fmax(std::fabs(c[2]), std::fabs(c[3])));
+      const double m =
+          std::fmax(std::fmax(std::fabs(c[0]), std::fabs(c[1])), std::fmax(std::fabs(c[2]), std::fabs(c[3])));
       if (!(m > 0)) fail(path, "quaternion has zero length");
       for (double& x : c) x /= m;
       const double n = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3]);
@@ -224,7 +224,8 @@ struct JsonCheck {
   }
   double range(const json& v, const std::string& path, double lo, double hi, bool lo_open = false) const {
     const double x = number(v, path);
-    if (lo_open ? !(x > lo) : !(x >= lo)) fail(path, std::string("must be ") + (lo_open ? "> " : ">= ") + num(lo) + ", got " + num(x));
+    if (lo_open ? !(x > lo) : !(x >= lo))
+      fail(path, std::string("must be ") + (lo_open ? "> " : ">= ") + num(lo) + ", got " + num(x));
     if (!(x <= hi)) fail(path, "must be <= " + num(hi) + ", got " + num(x));
     return x;
   }
@@ -243,7 +244,6 @@ struct JsonCheck {
   }
 };
 
-
 // --set KEY=VALUE: VALUE as JSON, or as a string when it does not parse (a bare word: settings.solver=gs).
 // The offset of the first byte of `s` that does not belong to a well-formed UTF-8 sequence (RFC 3629: no overlong
 // forms, no surrogates, nothing above U+10FFFF), or npos when all of it is valid UTF-8.
@@ -253,11 +253,16 @@ inline size_t invalidUtf8At(const std::string& s) {
     const unsigned char c = static_cast<unsigned char>(s[i]);
     size_t len = 0;
     unsigned char lo = 0x80, hi = 0xBF;  // the range of the second byte
-    if (c < 0x80) len = 1;
-    else if (c >= 0xC2 && c <= 0xDF) len = 2;
-    else if (c >= 0xE0 && c <= 0xEF) len = 3, lo = c == 0xE0 ? 0xA0 : 0x80, hi = c == 0xED ? 0x9F : 0xBF;
-    else if (c >= 0xF0 && c <= 0xF4) len = 4, lo = c == 0xF0 ? 0x90 : 0x80, hi = c == 0xF4 ? 0x8F : 0xBF;
-    else return i;
+    if (c < 0x80)
+      len = 1;
+    else if (c >= 0xC2 && c <= 0xDF)
+      len = 2;
+    else if (c >= 0xE0 && c <= 0xEF)
+      len = 3, lo = c == 0xE0 ? 0xA0 : 0x80, hi = c == 0xED ? 0x9F : 0xBF;
+    else if (c >= 0xF0 && c <= 0xF4)
+      len = 4, lo = c == 0xF0 ? 0x90 : 0x80, hi = c == 0xF4 ? 0x8F : 0xBF;
+    else
+      return i;
     if (len > 1) {
       if (i + len > n) return i;
       const unsigned char c1 = static_cast<unsigned char>(s[i + 1]);
@@ -283,9 +288,7 @@ inline void requireUtf8(const std::string& s, const std::string& what) {
 inline json parseSetValue(const std::string& text) {
   try {
     return json::parse(text);
-  } catch (const json::exception&) {
-    return json(text);
-  }
+  } catch (const json::exception&) { return json(text); }
 }
 
 // Assigns value at the dotted path `key` below root (array elements by index). A missing intermediate

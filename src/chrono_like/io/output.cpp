@@ -77,7 +77,7 @@ std::string bodiesCsv(const std::vector<BodyState>& bodies) {
   for (size_t i = 0; i < bodies.size(); ++i) {
     const BodyState& b = bodies[i];
     out += std::to_string(i);
-    const double v[13] = {b.pos.x, b.pos.y, b.pos.z, b.rot.w, b.rot.x, b.rot.y, b.rot.z,
+    const double v[13] = {b.pos.x, b.pos.y, b.pos.z, b.rot.w,   b.rot.x,   b.rot.y,  b.rot.z,
                           b.vel.x, b.vel.y, b.vel.z, b.omega.x, b.omega.y, b.omega.z};
     for (double x : v) {
       out += ',';
@@ -148,7 +148,9 @@ std::string vtpFrame(const std::vector<BodyState>& bodies) {
 }
 
 namespace {
-const char kPvdHead[] = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n";
+const char kPvdHead[] =
+    "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" "
+    "byte_order=\"LittleEndian\">\n<Collection>\n";
 const char kPvdTail[] = "</Collection>\n</VTKFile>\n";
 }  // namespace
 
@@ -163,7 +165,8 @@ void PvdSeries::add(double time, const std::string& vtp) {
   const std::string path = dir_ + "/frames.pvd";
   if (!pvd_) {
     pvd_ = std::fopen(path.c_str(), "wb");
-    if (!pvd_ || std::fputs(kPvdHead, pvd_) == EOF) throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
+    if (!pvd_ || std::fputs(kPvdHead, pvd_) == EOF)
+      throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
     body_end_ = std::ftell(pvd_);
   }
   std::string line = "<DataSet timestep=\"";

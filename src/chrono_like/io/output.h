@@ -154,17 +154,19 @@ inline void addConvergenceSummary(nlohmann::json& summary, const ConvergenceLog&
 
 // The one warning line of a run whose steps missed the tolerance (empty when every step converged). `remedy`
 // names the options to change; by default the `dvisim run` flags (a CES run names its own keys).
-inline std::string convergenceWarning(const ConvergenceLog& log, const SolverSettings& s, const std::string& remedy = {}) {
+inline std::string convergenceWarning(const ConvergenceLog& log, const SolverSettings& s,
+                                      const std::string& remedy = {}) {
   if (log.steps_not_converged == 0) return {};
   char fix[160];
   std::snprintf(fix, sizeof fix, "raise --max-iterations (now %d)%s", s.max_iterations,
                 s.tolerance > 0 ? " or loosen --tolerance" : ", or drop --iterations for the tolerance stop");
   char buf[512];
-  std::snprintf(buf, sizeof buf,
-                "dvisim: warning: the solver missed the tolerance %.3g (relative residual) in %lld of %lld steps (worst "
-                "%.3g at step %lld); %s",
-                double(judgedTolerance(s)), (long long)log.steps_not_converged, (long long)log.steps,
-                double(log.worst_relative_residual), (long long)log.worst_step, remedy.empty() ? fix : remedy.c_str());
+  std::snprintf(
+      buf, sizeof buf,
+      "dvisim: warning: the solver missed the tolerance %.3g (relative residual) in %lld of %lld steps (worst "
+      "%.3g at step %lld); %s",
+      double(judgedTolerance(s)), (long long)log.steps_not_converged, (long long)log.steps,
+      double(log.worst_relative_residual), (long long)log.worst_step, remedy.empty() ? fix : remedy.c_str());
   return buf;
 }
 

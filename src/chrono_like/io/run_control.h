@@ -62,19 +62,13 @@ inline const char* stopSignalName() {
 inline int exitCodeFor(const std::exception_ptr& e) {
   try {
     std::rethrow_exception(e);
-  } catch (const InputError&) {
-    return kExitBadInput;
-  } catch (const SimulationDiverged&) {
+  } catch (const InputError&) { return kExitBadInput; } catch (const SimulationDiverged&) {
     return kExitDiverged;
   } catch (const SolverError&) {
     return kExitDiverged;  // a solver that met a non-finite value: the state diverged
-  } catch (const std::bad_alloc&) {
+  } catch (const std::bad_alloc&) { return kExitResources; } catch (const DeviceError&) {
     return kExitResources;
-  } catch (const DeviceError&) {
-    return kExitResources;
-  } catch (...) {
-    return kExitFailed;
-  }
+  } catch (...) { return kExitFailed; }
 }
 
 // The summary.json "status" of a run that ended with exit code `code`.
@@ -91,21 +85,18 @@ inline const char* runStatusName(int code) {
 inline std::string exceptionMessage(const std::exception_ptr& e) {
   try {
     std::rethrow_exception(e);
-  } catch (const std::bad_alloc&) {
-    return "out of memory (std::bad_alloc)";
-  } catch (const std::exception& x) {
+  } catch (const std::bad_alloc&) { return "out of memory (std::bad_alloc)"; } catch (const std::exception& x) {
     return x.what();
-  } catch (...) {
-    return "unknown exception";
-  }
+  } catch (...) { return "unknown exception"; }
 }
 
 // The first body whose position, rotation or velocity is not finite (-1: none), and which of them.
 inline int64_t firstNonFiniteBody(const BodyArrays& b, const char** what = nullptr) {
   for (size_t i = 0; i < b.count(); ++i) {
     const Quat& q = b.rot[i];
-    const char* w = !isFinite(b.pos[i])  ? "position"
-                    : !(std::isfinite(q.w) && std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) ? "rotation"
+    const char* w = !isFinite(b.pos[i]) ? "position"
+                    : !(std::isfinite(q.w) && std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z))
+                        ? "rotation"
                     : !isFinite(b.vel[i])   ? "velocity"
                     : !isFinite(b.omega[i]) ? "angular velocity"
                                             : nullptr;

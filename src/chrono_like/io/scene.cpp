@@ -57,7 +57,8 @@ using Rng = SplitMix64;  // base/random.h
 Quat randomRotation(Rng& r) {
   const double u1 = r.uniform(), u2 = r.uniform() * 2 * M_PI, u3 = r.uniform() * 2 * M_PI;
   const double a = std::sqrt(1 - u1), b = std::sqrt(u1);
-  return normalized(Quat{real(b * std::cos(u3)), real(a * std::sin(u2)), real(a * std::cos(u2)), real(b * std::sin(u3))});
+  return normalized(
+      Quat{real(b * std::cos(u3)), real(a * std::sin(u2)), real(a * std::cos(u2)), real(b * std::sin(u3))});
 }
 
 }  // namespace
@@ -118,7 +119,8 @@ int64_t SceneSettings::stepCount() const {
 void SceneSettings::setIterations(int n) {
   iterations_ = n;
   if (!max_iterations_given_) system.solver.max_iterations = n;
-  if (!tolerance_given_) system.solver.tolerance = max_iterations_given_ ? kDefaultTolerance : real(0);  // a fixed count
+  if (!tolerance_given_)
+    system.solver.tolerance = max_iterations_given_ ? kDefaultTolerance : real(0);  // a fixed count
 }
 
 void SceneSettings::setMaxIterations(int n) {
@@ -141,9 +143,27 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   CollisionSettings& col = s.system.collision;
   SolverSettings& sol = s.system.solver;
   c.object(j, path);
-  c.keys(j, path, {"dt", "steps", "time", "solver", "iterations", "max_iterations", "tolerance", "storage", "gravity", "friction_combine",
-                   "envelope_rel", "recovery_rel", "collision", "threads", "frames", "warm_start",
-                   "speculative", "mpr_manifold", "bullet_length_scale", "bullet_iterations"});
+  c.keys(j, path,
+         {"dt",
+          "steps",
+          "time",
+          "solver",
+          "iterations",
+          "max_iterations",
+          "tolerance",
+          "storage",
+          "gravity",
+          "friction_combine",
+          "envelope_rel",
+          "recovery_rel",
+          "collision",
+          "threads",
+          "frames",
+          "warm_start",
+          "speculative",
+          "mpr_manifold",
+          "bullet_length_scale",
+          "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
   if (j.contains("dt")) step.dt = real(c.positive(j["dt"], at("dt")));  // in the engine's precision
   if (j.contains("steps") && j.contains("time")) c.fail(path, "give either steps or time, not both");
@@ -151,8 +171,10 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("time")) s.time = real(c.nonNegative(j["time"], at("time")));
   if (j.contains("solver"))
     sol.type = c.named<SolverType>(j["solver"], at("solver"),
-                                   {{"jacobi", SolverType::Jacobi}, {"gs", SolverType::GaussSeidel},
-                                    {"apgd", SolverType::APGD}, {"bb", SolverType::BB}});
+                                   {{"jacobi", SolverType::Jacobi},
+                                    {"gs", SolverType::GaussSeidel},
+                                    {"apgd", SolverType::APGD},
+                                    {"bb", SolverType::BB}});
   if (j.contains("iterations")) s.setIterations(int(c.integer(j["iterations"], at("iterations"), 0, 1000000)));
   if (j.contains("max_iterations"))
     s.setMaxIterations(int(c.integer(j["max_iterations"], at("max_iterations"), 1, 1000000)));
@@ -169,8 +191,8 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("envelope_rel")) col.envelope_rel = real(c.nonNegative(j["envelope_rel"], at("envelope_rel")));
   if (j.contains("recovery_rel")) sol.recovery_rel = real(c.positive(j["recovery_rel"], at("recovery_rel")));
   if (j.contains("collision"))
-    col.backend = c.named<CollisionBackend>(j["collision"], at("collision"),
-                                            {{"native", CollisionBackend::Native}, {"bullet", CollisionBackend::Bullet}});
+    col.backend = c.named<CollisionBackend>(
+        j["collision"], at("collision"), {{"native", CollisionBackend::Native}, {"bullet", CollisionBackend::Bullet}});
   if (j.contains("threads")) s.system.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
   if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
   if (j.contains("warm_start")) sol.warm_start = c.boolean(j["warm_start"], at("warm_start"));
@@ -257,8 +279,9 @@ class Builder {
   BuiltShape shape(const json& j, const std::string& path, int depth = 0) {
     c_.object(j, path);
     if (!j.contains("type")) c_.fail(path + ".type", "missing shape type");
-    const std::string type = c_.oneOf(j["type"], path + ".type",
-        {"sphere", "box", "cylinder", "capsule", "cone", "ellipsoid", "convex_hull", "plane", "compound"});
+    const std::string type =
+        c_.oneOf(j["type"], path + ".type",
+                 {"sphere", "box", "cylinder", "capsule", "cone", "ellipsoid", "convex_hull", "plane", "compound"});
     const ShapeJson s{c_, j, path, type};
     if (type == "sphere") return sphere(s);
     if (type == "box") return box(s);
@@ -318,10 +341,11 @@ class Builder {
     const double r = c_.positive(sj.need("radius"), sj.at("radius"));
     const double hh = c_.positive(sj.need("half_height"), sj.at("half_height"));
     const int axis = sj.axis();
-    btCylinderShape* s = axis == 0   ? new btCylinderShapeX(btVector3(btScalar(hh), btScalar(r), btScalar(r)))
-                         : axis == 1 ? new btCylinderShape(btVector3(btScalar(r), btScalar(hh), btScalar(r)))
-                                     : static_cast<btCylinderShape*>(
-                                           new btCylinderShapeZ(btVector3(btScalar(r), btScalar(r), btScalar(hh))));
+    btCylinderShape* s =
+        axis == 0 ? new btCylinderShapeX(btVector3(btScalar(hh), btScalar(r), btScalar(r)))
+        : axis == 1
+            ? new btCylinderShape(btVector3(btScalar(r), btScalar(hh), btScalar(r)))
+            : static_cast<btCylinderShape*>(new btCylinderShapeZ(btVector3(btScalar(r), btScalar(r), btScalar(hh))));
     s->setMargin(marginFor(std::min(r, hh)));
     b.shape = keep(s);
     b.volume = M_PI * r * r * 2 * hh;
@@ -383,7 +407,8 @@ class Builder {
     BuiltShape b;
     c_.keys(sj.j, sj.path, {"type", "points"});
     const json& p = c_.array(sj.need("points"), sj.at("points"));
-    if (p.size() < 4) c_.fail(sj.at("points"), "a convex hull needs at least 4 points, got " + std::to_string(p.size()));
+    if (p.size() < 4)
+      c_.fail(sj.at("points"), "a convex hull needs at least 4 points, got " + std::to_string(p.size()));
     std::vector<btVector3> pts;
     Vec3 lo{1e30, 1e30, 1e30}, hi{-1e30, -1e30, -1e30};
     for (size_t i = 0; i < p.size(); ++i) {
@@ -428,7 +453,7 @@ class Builder {
     c_.keys(sj.j, sj.path, {"type", "children"});
     if (depth >= inputLimits().max_compound_depth)
       c_.fail(sj.path, "compound shapes nested deeper than " + std::to_string(inputLimits().max_compound_depth) +
-                        " levels (the limit)");
+                           " levels (the limit)");
     const json& ch = c_.array(sj.need("children"), sj.at("children"));
     if (ch.empty()) c_.fail(sj.at("children"), "a compound needs at least one child");
     std::vector<std::pair<btTransform, btCollisionShape*>> kids;
@@ -475,7 +500,8 @@ class Builder {
     // its inverse mass overflows. A mass given in the file was checked where it was read; these are the ones
     // computed here (density x volume, inertia of the shape, positions of a generator).
     if (!fixed && !(s.mass >= c_.min_positive && s.mass <= c_.max_magnitude))
-      c_.fail(path + ".mass", "mass " + num(s.mass) + " kg (density x volume) is out of range (stored as " + c_.stored_as + ")");
+      c_.fail(path + ".mass",
+              "mass " + num(s.mass) + " kg (density x volume) is out of range (stored as " + c_.stored_as + ")");
     const btScalar mass = fixed ? btScalar(0) : btScalar(s.mass);
     btVector3 inertia(0, 0, 0);
     if (!fixed) {
@@ -526,8 +552,9 @@ class Builder {
 
   void plainBody(const json& j, const std::string& path, Scene& scene, std::vector<std::string>& names,
                  std::vector<btRigidBody*>& out) {
-    c_.keys(j, path, {"name", "shape", "mass", "density", "position", "rotation", "velocity", "angular_velocity",
-                      "friction", "kinematic", "gravity"});
+    c_.keys(j, path,
+            {"name", "shape", "mass", "density", "position", "rotation", "velocity", "angular_velocity", "friction",
+             "kinematic", "gravity"});
     (void)scene;
     if (!j.contains("shape")) c_.fail(path + ".shape", "missing");
     BodySpec s;
@@ -576,9 +603,9 @@ class Builder {
   void generator(const json& g, const std::string& path, std::vector<std::string>& names,
                  std::vector<btRigidBody*>& out) {
     c_.object(g, path);
-    c_.keys(g, path, {"type", "name", "count", "footprint", "counts", "origin", "spacing", "jitter", "seed", "shape",
-                      "shapes", "scale", "mass", "density", "friction", "velocity", "angular_velocity",
-                      "random_rotation"});
+    c_.keys(g, path,
+            {"type", "name", "count", "footprint", "counts", "origin", "spacing", "jitter", "seed", "shape", "shapes",
+             "scale", "mass", "density", "friction", "velocity", "angular_velocity", "random_rotation"});
     if (!g.contains("type")) c_.fail(path + ".type", "missing generator type");
     const std::string type = c_.oneOf(g["type"], path + ".type", {"grid", "pile"});
     auto at = [&](const char* k) { return path + "." + k; };
@@ -586,8 +613,8 @@ class Builder {
     const std::vector<MixEntry> mix = mixture(g, path);
     double smin = 1, smax = 1;
     scaleRange(g, path, smin, smax);
-    const bool random_rot = g.contains("random_rotation") ? c_.boolean(g["random_rotation"], at("random_rotation"))
-                                                          : type == "pile";
+    const bool random_rot =
+        g.contains("random_rotation") ? c_.boolean(g["random_rotation"], at("random_rotation")) : type == "pile";
     const double bound = mixtureBound(mix, smax, random_rot);
     const double jitter = g.contains("jitter") ? c_.nonNegative(g["jitter"], at("jitter")) : 0.0;
     if (jitter >= 0.5) c_.fail(at("jitter"), "must be < 0.5 (a fraction of the spacing), got " + num(jitter));
@@ -598,7 +625,8 @@ class Builder {
     Rng rng{g.contains("seed") ? uint64_t(c_.integer(g["seed"], at("seed"), 0, int64_t(1) << 53)) : 1u};
     const double friction = g.contains("friction") ? c_.nonNegative(g["friction"], at("friction")) : 0.5;
     const Vec3 vel = g.contains("velocity") ? c_.vec3(g["velocity"], at("velocity")) : Vec3{0, 0, 0};
-    const Vec3 omega = g.contains("angular_velocity") ? c_.vec3(g["angular_velocity"], at("angular_velocity")) : Vec3{0, 0, 0};
+    const Vec3 omega =
+        g.contains("angular_velocity") ? c_.vec3(g["angular_velocity"], at("angular_velocity")) : Vec3{0, 0, 0};
     if (g.contains("mass") && g.contains("density")) c_.fail(path, "give either mass or density, not both");
     const bool by_density = g.contains("density");
     const double mass = g.contains("mass") ? c_.positive(g["mass"], at("mass")) : 1.0;
@@ -621,8 +649,10 @@ class Builder {
       } else {
         s.shape = shape(scaled(mix[e].shape, f), mix[e].path);
       }
-      const double jx = rng.uniform(-jitter, jitter), jy = rng.uniform(-jitter, jitter), jz = rng.uniform(-jitter, jitter);
-      s.pos = origin + Vec3{real((ix + 0.5 + jx) * spacing), real((iy + 0.5 + jy) * spacing), real((iz + 0.5 + jz) * spacing)};
+      const double jx = rng.uniform(-jitter, jitter), jy = rng.uniform(-jitter, jitter),
+                   jz = rng.uniform(-jitter, jitter);
+      s.pos = origin +
+              Vec3{real((ix + 0.5 + jx) * spacing), real((iy + 0.5 + jy) * spacing), real((iz + 0.5 + jz) * spacing)};
       s.rot = random_rot ? randomRotation(rng) : Quat{1, 0, 0, 0};
       s.mass = by_density ? rho * s.shape.volume : mass;
       s.friction = friction;
@@ -717,7 +747,8 @@ class Builder {
     auto at = [&](const char* k) { return path + "." + k; };
     Lattice L;
     if (type == "grid") {
-      if (g.contains("count") || g.contains("footprint")) c_.fail(path, "a grid takes counts [nx, ny, nz], not count/footprint");
+      if (g.contains("count") || g.contains("footprint"))
+        c_.fail(path, "a grid takes counts [nx, ny, nz], not count/footprint");
       if (!g.contains("counts")) c_.fail(at("counts"), "missing (required for a grid)");
       const json& cn = g["counts"];
       if (!cn.is_array() || cn.size() != 3) c_.fail(at("counts"), "expected [nx, ny, nz], got " + describe(cn));
@@ -764,19 +795,19 @@ void checkLoadedBody(const btRigidBody& rb, const std::string& where) {
   BodyDesc d;
   try {
     d = bodyDescFromBullet(rb);
-  } catch (const InputError& e) {
-    bad(e.what());
-  }
+  } catch (const InputError& e) { bad(e.what()); }
   const btMatrix3x3& r = rb.getCenterOfMassTransform().getBasis();
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) {
       const double rij = double(r[0][i]) * r[0][j] + double(r[1][i]) * r[1][j] + double(r[2][i]) * r[2][j];
-      if (!(std::fabs(rij - (i == j ? 1.0 : 0.0)) < 1e-3)) bad("orientation is not a rotation (its matrix is not orthonormal)");
+      if (!(std::fabs(rij - (i == j ? 1.0 : 0.0)) < 1e-3))
+        bad("orientation is not a rotation (its matrix is not orthonormal)");
     }
   if (!isFinite(d.pos)) bad("non-finite position");
   if (!isFinite(d.vel) || !isFinite(d.omega)) bad("non-finite velocity");
   if (!isFinite(d.gravity)) bad("non-finite gravity");
-  if (!(std::isfinite(d.friction) && d.friction >= 0)) bad("friction must be finite and >= 0, got " + num(double(d.friction)));
+  if (!(std::isfinite(d.friction) && d.friction >= 0))
+    bad("friction must be finite and >= 0, got " + num(double(d.friction)));
   if (d.flags == 0) {
     if (!(std::isfinite(d.mass) && d.mass > 0)) bad("mass must be finite and > 0, got " + num(double(d.mass)));
     if (!(isFinite(d.inertia) && minComponent(d.inertia) > 0)) bad("moments of inertia must be finite and > 0");
@@ -784,13 +815,15 @@ void checkLoadedBody(const btRigidBody& rb, const std::string& where) {
   for (const ShapeDesc& sd : d.shapes) {
     const Shape& sh = sd.shape;
     if (!isFinite(sh.dims) || !isFinite(sh.local.p) || !std::isfinite(sh.plane_d) ||
-        !(std::isfinite(sh.local.q.w) && std::isfinite(sh.local.q.x) && std::isfinite(sh.local.q.y) && std::isfinite(sh.local.q.z)))
+        !(std::isfinite(sh.local.q.w) && std::isfinite(sh.local.q.x) && std::isfinite(sh.local.q.y) &&
+          std::isfinite(sh.local.q.z)))
       bad(std::string(shapeTypeName(sh.type)) + " shape has a non-finite dimension or pose");
     if (sh.type == ShapeType::Plane) {
       if (!(std::fabs(double(length(sh.dims)) - 1) < 1e-6)) bad("plane normal has no finite non-zero length");
       continue;
     }
-    if (!(sh.size > 0 && std::isfinite(sh.size))) bad(std::string(shapeTypeName(sh.type)) + " shape has a non-positive size");
+    if (!(sh.size > 0 && std::isfinite(sh.size)))
+      bad(std::string(shapeTypeName(sh.type)) + " shape has a non-positive size");
     for (const Vec3& p : sd.hull)
       if (!isFinite(p)) bad("convex hull has a non-finite point");
   }
@@ -803,7 +836,8 @@ std::string lower(std::string s) {
 
 }  // namespace
 
-Scene Scene::fromJsonText(const std::string& text, const std::string& origin, const std::vector<std::string>& overrides) {
+Scene Scene::fromJsonText(const std::string& text, const std::string& origin,
+                          const std::vector<std::string>& overrides) {
   const Check c = checkFor<btScalar>(origin);
   if (text.find_first_not_of(" \t\r\n") == std::string::npos) c.fail("", "file is empty");
   if (text.size() > inputLimits().max_json_bytes)
@@ -840,9 +874,11 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin, co
   for (const json& b : bodies) {
     const json* g = b.is_object() && b.contains("generator") && b["generator"].is_object() ? &b["generator"] : nullptr;
     int64_t n = 1;
-    if (g && g->contains("count") && (*g)["count"].is_number_integer()) n = std::max<int64_t>(1, (*g)["count"].get<int64_t>());
+    if (g && g->contains("count") && (*g)["count"].is_number_integer())
+      n = std::max<int64_t>(1, (*g)["count"].get<int64_t>());
     if (g && g->contains("counts") && (*g)["counts"].is_array() && (*g)["counts"].size() == 3) {
-      for (const json& k : (*g)["counts"]) n *= k.is_number_integer() ? std::clamp<int64_t>(k.get<int64_t>(), 1, 1 << 20) : 1;
+      for (const json& k : (*g)["counts"])
+        n *= k.is_number_integer() ? std::clamp<int64_t>(k.get<int64_t>(), 1, 1 << 20) : 1;
     }
     total = std::min<int64_t>(total + std::min<int64_t>(n, int64_t(1) << 40), int64_t(1) << 62);  // saturates
   }
@@ -909,7 +945,8 @@ Scene Scene::fromBulletFile(const std::string& path, const std::vector<std::stri
   return fromBulletBuffer(readFile(path, inputLimits().max_binary_bytes), path, overrides);
 }
 
-Scene Scene::fromBulletBuffer(const std::string& bytes, const std::string& origin, const std::vector<std::string>& overrides) {
+Scene Scene::fromBulletBuffer(const std::string& bytes, const std::string& origin,
+                              const std::vector<std::string>& overrides) {
   if (bytes.size() > inputLimits().max_binary_bytes)
     throw InputError(origin + ": is " + std::to_string(bytes.size()) + " bytes, more than the limit of " +
                      std::to_string(inputLimits().max_binary_bytes) + " bytes");
@@ -947,7 +984,8 @@ Scene Scene::fromBulletBuffer(const std::string& bytes, const std::string& origi
   if (n == 0) throw InputError(origin + ": the .bullet file holds no rigid bodies Bullet's importer can read");
   if (n != file.m_rigidBodies.size())
     throw InputError(origin + ": " + std::to_string(file.m_rigidBodies.size() - n) + " of " +
-                     std::to_string(file.m_rigidBodies.size()) + " rigid bodies have shapes Bullet's importer cannot read");
+                     std::to_string(file.m_rigidBodies.size()) +
+                     " rigid bodies have shapes Bullet's importer cannot read");
   if (!(std::isfinite(imp.gravity_.x()) && std::isfinite(imp.gravity_.y()) && std::isfinite(imp.gravity_.z())))
     throw InputError(origin + ": the world's gravity is not finite");
   for (int i = 0; i < n; ++i) {

@@ -33,10 +33,10 @@ namespace dvi {
 // field of each); the run's own (how long, frames, the Bullet peer's) are declared here. Command-line options write into
 // the same fields.
 struct SceneSettings {
-  SystemConfig system;       // the System the scene runs on
-  int64_t steps = -1;        // [steps] number of steps; -1: from `time`
-  real time = real(1);       // [s] simulated time when steps < 0
-  int frames = 0;            // VTK frames to write
+  SystemConfig system;           // the System the scene runs on
+  int64_t steps = -1;            // [steps] number of steps; -1: from `time`
+  real time = real(1);           // [s] simulated time when steps < 0
+  int frames = 0;                // VTK frames to write
   real bullet_length_scale = 0;  // [m per Bullet unit] Bullet peer unit scale; 0: automatic from the body sizes
   int bullet_iterations = 10;    // Bullet peer sequential-impulse iterations
 
@@ -103,6 +103,7 @@ class Scene {
 };
 
 // Parses and validates a JSON "settings" object (key path prefix `path`, e.g. "settings").
-SceneSettings parseSceneSettings(const nlohmann::json& j, const std::string& origin, const std::string& path = "settings");
+SceneSettings parseSceneSettings(const nlohmann::json& j, const std::string& origin,
+                                 const std::string& path = "settings");
 
 }  // namespace dvi

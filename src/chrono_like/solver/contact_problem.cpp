@@ -97,7 +97,7 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
     invertSymmetric3(N, binv_.data() + 6 * k);
     eta_[k] = blockStepFromDiagonal(N);
     contactColumnNorms(J, inv_[a], inv_[b], colnorm_.data() + 6 * k);
-    blockRowSums(N, rowsum_.data() + 3 * k);  // absolute row sums of N_kk itself
+    blockRowSums(N, rowsum_.data() + 3 * k);                              // absolute row sums of N_kk itself
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
 
@@ -133,13 +133,15 @@ real ContactProblem::assembleBoxesAndRows(const std::vector<ConstraintRow>* rows
     if (i < nrows) {
       R = (*rows)[size_t(i)];
       for (int32_t c : {R.a, R.b})
-        if (c < -1 || c >= nb) throw InputError("constraint row " + std::to_string(i) + ": body index " +
-                                                std::to_string(c) + " out of range");
-      if (R.a == R.b && R.a >= 0) throw InputError("constraint row " + std::to_string(i) + ": both sides are body " +
-                                                   std::to_string(R.a));
+        if (c < -1 || c >= nb)
+          throw InputError("constraint row " + std::to_string(i) + ": body index " + std::to_string(c) +
+                           " out of range");
+      if (R.a == R.b && R.a >= 0)
+        throw InputError("constraint row " + std::to_string(i) + ": both sides are body " + std::to_string(R.a));
       bool finite = std::isfinite(R.bias) && !std::isnan(R.lo) && !std::isnan(R.hi) && R.lo <= R.hi;
       for (int j = 0; j < 6; ++j) finite = finite && std::isfinite(R.Ja[j]) && std::isfinite(R.Jb[j]);
-      if (!finite) throw InputError("constraint row " + std::to_string(i) + ": non-finite Jacobian or bias, or lo > hi");
+      if (!finite)
+        throw InputError("constraint row " + std::to_string(i) + ": non-finite Jacobian or bias, or lo > hi");
       lo_[size_t(nbox + i)] = R.lo;
       hi_[size_t(nbox + i)] = R.hi;
     } else {
@@ -148,9 +150,9 @@ real ContactProblem::assembleBoxesAndRows(const std::vector<ConstraintRow>* rows
   }
   for (int64_t q = 0; q < nrb_; ++q) {
     const int64_t k = ncb + q;
-    const real d = assembleRowBlock(rows_.data() + 3 * q, inv_.data(), v_free, w_free, rhs_.data() + 3 * k,
-                                    binv_.data() + 6 * k, eta_.data() + k, colnorm_.data() + 6 * k,
-                                    rowsum_.data() + 3 * k);
+    const real d =
+        assembleRowBlock(rows_.data() + 3 * q, inv_.data(), v_free, w_free, rhs_.data() + 3 * k, binv_.data() + 6 * k,
+                         eta_.data() + k, colnorm_.data() + 6 * k, rowsum_.data() + 3 * k);
     max_diag = std::max(max_diag, d);
   }
 
@@ -195,7 +197,6 @@ void ContactProblem::buildAdjacency(int64_t nb) {
     if (R.a >= 0 && movable(inv_[R.a])) adj_[fill[R.a]++] = int32_t(2 * nc + 2 * i);
     if (R.b >= 0 && movable(inv_[R.b])) adj_[fill[R.b]++] = int32_t(2 * nc + 2 * i + 1);
   }
-
 }
 
 void ContactProblem::computeJacobiSteps(int64_t nb) {
@@ -219,8 +220,8 @@ void ContactProblem::computeJacobiSteps(int64_t nb) {
   if (normal_only_) {
 #pragma omp parallel for schedule(static) num_threads(T)
     for (int64_t q = 0; q < ncb; ++q)
-      jeta_[q] = normalBlockJacobiStep(jac_.data() + 3 * q, int(std::min<int64_t>(3, nc - 3 * q)), colnorm_.data() + 6 * q,
-                                       rowsum_.data() + 3 * q, bodyq_.data());
+      jeta_[q] = normalBlockJacobiStep(jac_.data() + 3 * q, int(std::min<int64_t>(3, nc - 3 * q)),
+                                       colnorm_.data() + 6 * q, rowsum_.data() + 3 * q, bodyq_.data());
   } else {
 #pragma omp parallel for schedule(static) num_threads(T)
     for (int64_t k = 0; k < nc; ++k)

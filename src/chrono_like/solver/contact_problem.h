@@ -98,28 +98,28 @@ class ContactProblem final : public CcpProblem {
   void gsApplyBlockChange(int64_t k, const real* dg) const;
 
   int threads_ = 1;
-  int64_t nc_ = 0;                       // contacts
-  int64_t ncb_ = 0;                      // contact blocks: nc_, or ceil(nc_ / 3) when normal_only_
+  int64_t nc_ = 0;   // contacts
+  int64_t ncb_ = 0;  // contact blocks: nc_, or ceil(nc_ / 3) when normal_only_
   bool normal_only_ = false;
-  int64_t nrb_ = 0;                      // constraint-row blocks (3 rows each)
-  std::vector<ConstraintRow> rows_;      // 3 per row block (padded)
-  std::vector<real> lo_, hi_;            // 3 per box block (normal-only contact blocks, then row blocks)
+  int64_t nrb_ = 0;                  // constraint-row blocks (3 rows each)
+  std::vector<ConstraintRow> rows_;  // 3 per row block (padded)
+  std::vector<real> lo_, hi_;        // 3 per box block (normal-only contact blocks, then row blocks)
   real max_diag_ = 1;
-  std::vector<ContactJacobian> jac_;     // per contact
-  std::vector<real> rhs_;                // 3 per block
-  std::vector<real> mu_;                 // per contact
-  std::vector<real> eta_;                // per block: scalar block step
-  std::vector<real> binv_;               // 6 per block: N_kk^-1, symmetric
-  std::vector<real> jeta_;               // per block: Jacobi step (coupling-aware Gershgorin bound)
-  std::vector<real> colnorm_;            // 6 per block: M^-1 norms of the Jacobian columns (build only)
-  std::vector<real> rowsum_;             // 3 per block: absolute row sums of N_kk (build only)
-  std::vector<real> bodyq_;              // per body: sum of its contacts' column norms (build only)
-  std::vector<BodyInverseMass> inv_;     // per body
-  std::vector<int32_t> adj_start_;       // CSR over the active bodies: entries of active body j are
-  std::vector<int32_t> adj_;             //   adj_[adj_start_[j] .. adj_start_[j+1]), each 2 k + side for
-                                         //   contact k, 2 nc + 2 i + side for constraint row i
-  std::vector<int32_t> active_;          // bodies that can move and touch at least one contact
-  mutable std::vector<BodyDelta> delta_; // per body; zero for bodies that are not active
+  std::vector<ContactJacobian> jac_;      // per contact
+  std::vector<real> rhs_;                 // 3 per block
+  std::vector<real> mu_;                  // per contact
+  std::vector<real> eta_;                 // per block: scalar block step
+  std::vector<real> binv_;                // 6 per block: N_kk^-1, symmetric
+  std::vector<real> jeta_;                // per block: Jacobi step (coupling-aware Gershgorin bound)
+  std::vector<real> colnorm_;             // 6 per block: M^-1 norms of the Jacobian columns (build only)
+  std::vector<real> rowsum_;              // 3 per block: absolute row sums of N_kk (build only)
+  std::vector<real> bodyq_;               // per body: sum of its contacts' column norms (build only)
+  std::vector<BodyInverseMass> inv_;      // per body
+  std::vector<int32_t> adj_start_;        // CSR over the active bodies: entries of active body j are
+  std::vector<int32_t> adj_;              //   adj_[adj_start_[j] .. adj_start_[j+1]), each 2 k + side for
+                                          //   contact k, 2 nc + 2 i + side for constraint row i
+  std::vector<int32_t> active_;           // bodies that can move and touch at least one contact
+  mutable std::vector<BodyDelta> delta_;  // per body; zero for bodies that are not active
 };
 
 }  // namespace dvi

@@ -50,8 +50,7 @@ DVI_HD Vec3 symMul(const real* S, Vec3 x) {
 
 DVI_HD Vec3 contactW(const ContactJacobian& J) { return cross(J.n, J.u); }
 
-DVI_HD ContactJacobian makeContactJacobian(Vec3 normal, Vec3 pa, Vec3 pb, Vec3 xA, Vec3 xB, int32_t a,
-                                           int32_t b) {
+DVI_HD ContactJacobian makeContactJacobian(Vec3 normal, Vec3 pa, Vec3 pb, Vec3 xA, Vec3 xB, int32_t a, int32_t b) {
   ContactJacobian J;
   Vec3 u, w;
   tangentBasis(normal, u, w);

@@ -11,7 +11,6 @@ namespace {
 
 constexpr real kInf = std::numeric_limits<real>::infinity();
 
-
 Vec3 unitAxis(int k) { return k == 0 ? Vec3{1, 0, 0} : (k == 1 ? Vec3{0, 1, 0} : Vec3{0, 0, 1}); }
 real comp(Vec3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
@@ -63,10 +62,10 @@ ConstraintRow negated(ConstraintRow r) {
 real clampr(real x, real lo, real hi) { return std::min(std::max(x, lo), hi); }
 
 struct Frames {
-  Pose fa, fb;      // world joint frames
-  Vec3 rA, rB;      // joint origins relative to the centres of mass, world
-  Vec3 d;           // pB - pA
-  Vec3 ea[3];       // axes of frame A, world
+  Pose fa, fb;  // world joint frames
+  Vec3 rA, rB;  // joint origins relative to the centres of mass, world
+  Vec3 d;       // pB - pA
+  Vec3 ea[3];   // axes of frame A, world
 };
 
 Frames frames(const JointSpec& j, const JointBody& A, const JointBody& B) {
@@ -161,7 +160,9 @@ void jointRows(const JointSpec& j, const JointBody& A, const JointBody& B, real 
   }
 }
 
-real jointHingeAngle(const JointSpec& j, const JointBody& A, const JointBody& B) { return hingeTheta(j, frames(j, A, B)); }
+real jointHingeAngle(const JointSpec& j, const JointBody& A, const JointBody& B) {
+  return hingeTheta(j, frames(j, A, B));
+}
 
 JointViolation jointViolation(const JointSpec& j, const JointBody& A, const JointBody& B) {
   const Frames f = frames(j, A, B);

@@ -56,9 +56,9 @@ struct JointSpec {
 };
 
 struct JointSettings {
-  real recovery_rel = real(10);   // bilateral rows correct at most recovery_rel x size per second (linear)
+  real recovery_rel = real(10);          // bilateral rows correct at most recovery_rel x size per second (linear)
   real max_recovery_angular = real(10);  // and this many radians per second
-  bool drift_feedforward = true;  // add the second-order drift of linear rows to their bias (joints.cpp)
+  bool drift_feedforward = true;         // add the second-order drift of linear rows to their bias (joints.cpp)
 };
 
 // World pose and body index of one side of a joint.

@@ -17,8 +17,8 @@ DVI_HD bool isPaddingRow(const ConstraintRow& R) { return R.a < 0 && R.b < 0 && 
 // diagonal block N_ij = sum over the bodies both rows act on of Ji^T M^-1 Jj, its inverse, the block step,
 // the column norms (for the Jacobi bound) and the absolute row sums; returns the largest diagonal entry.
 // inv of a fixed or kinematic body is zero (it takes no part in N, but its velocity enters r).
-DVI_HD real assembleRowBlock(const ConstraintRow* R, const BodyInverseMass* inv, const Vec3* v_free,
-                             const Vec3* w_free, real* rhs, real* binv, real* eta, real* colnorm, real* rowsum) {
+DVI_HD real assembleRowBlock(const ConstraintRow* R, const BodyInverseMass* inv, const Vec3* v_free, const Vec3* w_free,
+                             real* rhs, real* binv, real* eta, real* colnorm, real* rowsum) {
   const BodyInverseMass none{0, {0, 0, 0, 0, 0, 0}};
   real N[6];
   const int ii[6] = {0, 1, 2, 0, 0, 1}, jj[6] = {0, 1, 2, 1, 2, 2};
@@ -75,8 +75,8 @@ DVI_HD real rowFromDeltas(const ConstraintRow& R, const BodyDelta* dl) {
 // rows) or, in a normal-only problem (frictionless contacts, jacobian.h), its normal impulse at x[k], the
 // contacts' normal rows packed three per block; constraint row i at x[3 rb0 + i] in block rb0 + i / 3.
 struct EntryLayout {
-  int64_t nc = 0;            // contacts
-  int64_t rb0 = 0;           // first constraint-row block: nc, or ceil(nc / 3) when normal_only
+  int64_t nc = 0;   // contacts
+  int64_t rb0 = 0;  // first constraint-row block: nc, or ceil(nc / 3) when normal_only
   bool normal_only = false;
 };
 
@@ -109,18 +109,22 @@ DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryLayout& L, const JT* 
   if (ent >= 2 * L.nc) return accumulateRowEntryImpulse(ent, L, rows, x, F, T);
   const int32_t k = ent >> 1;
   const ContactJacobian J = loadJacobian(jac[k]);
-  if (L.normal_only) accumulateContactNormalImpulse(J, ent & 1, x[k], F, T);
-  else accumulateContactImpulse(J, ent & 1, x + 3 * int64_t(k), F, T);
+  if (L.normal_only)
+    accumulateContactNormalImpulse(J, ent & 1, x[k], F, T);
+  else
+    accumulateContactImpulse(J, ent & 1, x + 3 * int64_t(k), F, T);
 }
 
 // accumulateEntryImpulse with the contact side's float record of entry ent (EntryJacobianF, kept in the order of
 // the adjacency entries; unused for rows): the same sums as with ContactJacobianF, bit for bit.
-DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryJacobianF& e, const EntryLayout& L, const ConstraintRow* rows,
-                                   const real* x, Vec3& F, Vec3& T) {
+DVI_HD void accumulateEntryImpulse(int32_t ent, const EntryJacobianF& e, const EntryLayout& L,
+                                   const ConstraintRow* rows, const real* x, Vec3& F, Vec3& T) {
   if (ent >= 2 * L.nc) return accumulateRowEntryImpulse(ent, L, rows, x, F, T);
   const int32_t k = ent >> 1;
-  if (L.normal_only) accumulateEntryNormalImpulse(e, ent & 1, x[k], F, T);
-  else accumulateEntryContactImpulse(e, ent & 1, x + 3 * int64_t(k), F, T);
+  if (L.normal_only)
+    accumulateEntryNormalImpulse(e, ent & 1, x[k], F, T);
+  else
+    accumulateEntryContactImpulse(e, ent & 1, x + 3 * int64_t(k), F, T);
 }
 
 }  // namespace dvi

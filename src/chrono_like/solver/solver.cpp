@@ -26,11 +26,16 @@ const char* solverName(SolverType t) {
 bool parseSolver(const std::string& s0, SolverType& out) {
   std::string s = s0;
   for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
-  if (s == "jacobi") out = SolverType::Jacobi;
-  else if (s == "gs" || s == "gauss-seidel" || s == "gaussseidel" || s == "pgs") out = SolverType::GaussSeidel;
-  else if (s == "apgd" || s == "nesterov") out = SolverType::APGD;
-  else if (s == "bb" || s == "spg" || s == "barzilai-borwein") out = SolverType::BB;
-  else return false;
+  if (s == "jacobi")
+    out = SolverType::Jacobi;
+  else if (s == "gs" || s == "gauss-seidel" || s == "gaussseidel" || s == "pgs")
+    out = SolverType::GaussSeidel;
+  else if (s == "apgd" || s == "nesterov")
+    out = SolverType::APGD;
+  else if (s == "bb" || s == "spg" || s == "barzilai-borwein")
+    out = SolverType::BB;
+  else
+    return false;
   return true;
 }
 

@@ -62,7 +62,7 @@ enum class BlockScaling { Scalar, Inverse3x3 };
 // carries float rounding (its 2-norm over the contacts stays near 1e-7 |N g| sqrt(3 contacts)): ask for
 // Real where a tolerance below that matters. Jacobi, Gauss-Seidel and BB always store real.
 enum class VectorStorage {
-  Auto,   // Float on the GPU backend, Real on the CPU backend
+  Auto,  // Float on the GPU backend, Real on the CPU backend
   Real,
   Float,
 };
@@ -74,10 +74,10 @@ enum class VectorStorage {
 // piles of bench/, and about one accepted trial in 50 restarts the momentum (no speculation then).
 enum class ApgdSpeculation {
   None,
-  Accepted,     // the accepted outcome's step (a rejected trial then runs its step pass again)
-  Both,         // the accepted and the rejected outcome's (one more iterate buffer than Accepted)
-  Auto,         // Accepted (H100, sphere piles of 10k-1M: Both was 4-5% slower than Accepted, its two
-                // projections a block on the test pass's path costing more than the rejected trials' steps)
+  Accepted,  // the accepted outcome's step (a rejected trial then runs its step pass again)
+  Both,      // the accepted and the rejected outcome's (one more iterate buffer than Accepted)
+  Auto,      // Accepted (H100, sphere piles of 10k-1M: Both was 4-5% slower than Accepted, its two
+             // projections a block on the test pass's path costing more than the rejected trials' steps)
 };
 
 // The defaults, chosen by measurement (docs/ARCHITECTURE.md, Solve stage): the tolerance on the relative
@@ -111,11 +111,11 @@ struct SolverSettings {
   // any omega in (0, 1] decreases the objective at every iteration (omega < 2 converges); with Inverse3x3
   // Chrono's 0.3 is the usual choice.
   real jacobi_omega = real(1.0);
-  real gs_omega = real(1.0);     // Gauss-Seidel relaxation
-  real residual_alpha = real(1e-4);  // a in the residual, as a fraction of 1 / max diag(N) (see above)
-  bool record_history = false;   // keep the residual of every iteration
+  real gs_omega = real(1.0);                          // Gauss-Seidel relaxation
+  real residual_alpha = real(1e-4);                   // a in the residual, as a fraction of 1 / max diag(N) (see above)
+  bool record_history = false;                        // keep the residual of every iteration
   BlockScaling block_scaling = BlockScaling::Scalar;  // Jacobi and Gauss-Seidel
-  VectorStorage storage = VectorStorage::Auto;         // APGD (see VectorStorage)
+  VectorStorage storage = VectorStorage::Auto;        // APGD (see VectorStorage)
   ApgdSpeculation apgd_speculation = ApgdSpeculation::Auto;
 };
 
@@ -126,14 +126,14 @@ inline bool floatStorage(const SolverSettings& s, bool gpu_backend) {
 
 struct SolverStats {
   int iterations = 0;
-  int trials = 0;      // APGD: steps tested (iterations plus backtracks)
-  int speculated = 0;  // APGD: trials whose step the previous trial's test pass had computed (apgd_speculation)
+  int trials = 0;              // APGD: steps tested (iterations plus backtracks)
+  int speculated = 0;          // APGD: trials whose step the previous trial's test pass had computed (apgd_speculation)
   real residual = 0;           // absolute residual of the result (m/s for contacts)
   real residual_scale = 0;     // res(0), the residual of the zero impulse (the relative residual's scale)
   real relative_residual = 0;  // residual / residual_scale (0 when both are 0; kHugeResidual when only the scale is)
   bool converged = true;       // relative_residual <= tolerance (kDefaultTolerance when the tolerance is 0)
-  std::vector<real> history;  // when record_history: [0] the projected warm start's residual, [i] after
-                              // iteration i (iterations + 1 entries)
+  std::vector<real> history;   // when record_history: [0] the projected warm start's residual, [i] after
+                               // iteration i (iterations + 1 entries)
 };
 
 // Contacts per block of every deterministic reduction (3 reals each).
@@ -179,8 +179,8 @@ inline real judgedTolerance(const SolverSettings& s) { return s.tolerance > 0 ? 
 
 // Fills relative_residual and converged from residual and residual_scale (every solver, CPU and GPU).
 inline void finishStats(SolverStats& st, const SolverSettings& s) {
-  st.relative_residual = st.residual_scale > 0 ? st.residual / st.residual_scale
-                                                : (st.residual > 0 ? kHugeResidual : real(0));
+  st.relative_residual =
+      st.residual_scale > 0 ? st.residual / st.residual_scale : (st.residual > 0 ? kHugeResidual : real(0));
   st.converged = st.relative_residual <= judgedTolerance(s);
 }
 
@@ -191,7 +191,9 @@ DVI_HD bool reachedStop(real res, real threshold, int iterations, int min_iterat
 }
 
 // The absolute stop threshold of a solve: tolerance x res(0).
-inline real stopThreshold(const SolverSettings& s, real scale) { return s.tolerance > 0 ? s.tolerance * scale : real(0); }
+inline real stopThreshold(const SolverSettings& s, real scale) {
+  return s.tolerance > 0 ? s.tolerance * scale : real(0);
+}
 
 // The alpha the residual uses for this problem: s.residual_alpha / p.maxDiagonal().
 real residualAlpha(const CcpProblem& p, const SolverSettings& s);

@@ -111,8 +111,10 @@ void scaleStart(Ops& p, real* x, real* Nx, const double* sums, const char* who) 
   if (!std::isfinite(sums[0]) || !std::isfinite(sums[1]) || !std::isfinite(sums[2]))
     throw SolverError(std::string(who) + ": non-finite right-hand side, N x or warm start");
   double sc = 1;
-  if (sums[0] > 0) sc = std::max(0.0, -sums[1] / sums[0]);
-  else if (sums[1] > 0 || sums[0] < 0) sc = 0;
+  if (sums[0] > 0)
+    sc = std::max(0.0, -sums[1] / sums[0]);
+  else if (sums[1] > 0 || sums[0] < 0)
+    sc = 0;
   if (sc != 1) p.map(kern::Scale2{real(sc), x, Nx});
 }
 inline real startResidual(double res2, const char* who) {

@@ -23,9 +23,9 @@ namespace dvi {
 
 // How each block is projected.
 struct BlockSet {
-  int64_t nc = 0;             // contact blocks (cones); the blocks after them are row boxes
-  const real* mu = nullptr;   // friction coefficient per contact block
-  const real* lo = nullptr;   // 3 per row block: lower and upper impulse bounds
+  int64_t nc = 0;            // contact blocks (cones); the blocks after them are row boxes
+  const real* mu = nullptr;  // friction coefficient per contact block
+  const real* lo = nullptr;  // 3 per row block: lower and upper impulse bounds
   const real* hi = nullptr;
 };
 
@@ -160,12 +160,14 @@ struct RoundToFloat {
 // normal-only problem solves for x = (gn of every contact, padded to blocks of 3, then the rows).
 
 struct ToNormalLayout {  // x[i] for i in [0, 3 (ncb + nrb))
-  const real* g3;  // 3 per contact, then the rows
+  const real* g3;        // 3 per contact, then the rows
   real* x;
   int64_t nc, ncb;
   DVI_HD void operator()(int64_t i) const {
-    if (i < 3 * ncb) x[i] = i < nc ? g3[3 * i] : real(0);
-    else x[i] = g3[3 * nc + (i - 3 * ncb)];
+    if (i < 3 * ncb)
+      x[i] = i < nc ? g3[3 * i] : real(0);
+    else
+      x[i] = g3[3 * nc + (i - 3 * ncb)];
   }
 };
 
@@ -174,8 +176,10 @@ struct FromNormalLayout {  // g3[i] for i in [0, 3 nc + 3 nrb): tangential impul
   real* g3;
   int64_t nc, ncb;
   DVI_HD void operator()(int64_t i) const {
-    if (i < 3 * nc) g3[i] = i % 3 == 0 ? x[i / 3] : real(0);
-    else g3[i] = x[3 * ncb + (i - 3 * nc)];
+    if (i < 3 * nc)
+      g3[i] = i % 3 == 0 ? x[i / 3] : real(0);
+    else
+      g3[i] = x[3 * ncb + (i - 3 * nc)];
   }
 };
 

@@ -60,8 +60,10 @@ __host__ __device__ inline real** schurXSlot(ApgdDeviceState* st) {
 template <class V>
 __host__ __device__ V** schurYSlot(ApgdDeviceState* st) {
   char* base = reinterpret_cast<char*>(st);
-  if constexpr (std::is_same_v<V, float>) return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_yf));
-  else return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_y));
+  if constexpr (std::is_same_v<V, float>)
+    return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_yf));
+  else
+    return reinterpret_cast<V**>(base + offsetof(ApgdDeviceState, schur_y));
 }
 
 // The trial's speculation (algo::speculationOf, on the device's buffers).
@@ -82,9 +84,20 @@ __device__ __forceinline__ kern::ApgdStepT<V> apgdStepOf(const ApgdBuffers<V>& B
 template <class V>
 __device__ __forceinline__ kern::ApgdTestT<V> apgdTestOf(const ApgdBuffers<V>& B, const algo::ApgdControl& c) {
   constexpr bool grad_form = !std::is_same_v<V, real>;
-  return kern::ApgdTestT<V>{B.bs,           pickX(B, c.cur),  pickX(B, c.old), pickNX(B, c.ncur), pickNX(B, c.nold),
-                            pickX(B, c.nw), pickNX(B, c.nnw), B.r,            B.eta,             c.beta,
-                            B.a,            B.inv_a,          grad_form,       apgdSpeculationOf(B, c)};
+  return kern::ApgdTestT<V>{B.bs,
+                            pickX(B, c.cur),
+                            pickX(B, c.old),
+                            pickNX(B, c.ncur),
+                            pickNX(B, c.nold),
+                            pickX(B, c.nw),
+                            pickNX(B, c.nnw),
+                            B.r,
+                            B.eta,
+                            c.beta,
+                            B.a,
+                            B.inv_a,
+                            grad_form,
+                            apgdSpeculationOf(B, c)};
 }
 
 template <class V>

@@ -95,8 +95,8 @@ __device__ __forceinline__ void phaseStamp(long long* stamps, int trial, int j) 
 // thread's blocks tid + j * stride (j < K).
 template <int K, class V, class JT, int KC>
 __device__ __forceinline__ void loadCachedIterates(const PersistentApgd<V, JT>& p, const algo::ApgdControl& c,
-                                                   int64_t tid, int64_t stride, real (&cur)[KC][3],
-                                                   real (&old)[KC][3], V (&ncur)[KC][3], V (&nold)[KC][3]) {
+                                                   int64_t tid, int64_t stride, real (&cur)[KC][3], real (&old)[KC][3],
+                                                   V (&ncur)[KC][3], V (&nold)[KC][3]) {
   const real *xc = pickX(p.B, c.cur), *xo = pickX(p.B, c.old);
   const V *nc = pickNX(p.B, c.ncur), *no = pickNX(p.B, c.nold);
 #pragma unroll
@@ -127,8 +127,8 @@ __device__ __forceinline__ void loadCachedStep(const PersistentApgd<V, JT>& p, c
 template <int K, class V, class JT, int KC>
 __device__ __forceinline__ void persistentStep(const PersistentApgd<V, JT>& p, const algo::ApgdControl& c, real* xn,
                                                int64_t tid, int64_t stride, const real (&cur)[KC][3],
-                                               const real (&old)[KC][3], const V (&ncur)[KC][3],
-                                               const V (&nold)[KC][3], real (&nxt)[KC][3]) {
+                                               const real (&old)[KC][3], const V (&ncur)[KC][3], const V (&nold)[KC][3],
+                                               real (&nxt)[KC][3]) {
   constexpr bool grad_form = !std::is_same_v<V, real>;  // float Schur buffers hold N x + r
   if constexpr (K > 0) {
     const real t = real(1) / c.L;
@@ -175,8 +175,8 @@ __device__ __forceinline__ void persistentSchurTest(const PersistentApgd<V, JT>&
       const int64_t k = tid + j * stride;
       if (k >= p.n) continue;
       schurBlock(p, k, out, nnxt[j]);
-      kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k,
-                             p.B.eta[k], c.beta, p.B.a, p.B.inv_a, grad_form, acc, sp);
+      kern::apgdTestBlock<V>(p.B.bs, k, cur[j], old[j], ncur[j], nold[j], nxt[j], nnxt[j], p.B.r + 3 * k, p.B.eta[k],
+                             c.beta, p.B.a, p.B.inv_a, grad_form, acc, sp);
     }
     if (int(blockIdx.x) < p.slices) blockSumFixed<5>(acc, p.partial + int64_t(blockIdx.x) * 5);
   } else {
@@ -289,8 +289,10 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid
   using JT = JacobianOf<V>;
   SolverScratch& S = d.solver;
   const JT* jac = nullptr;
-  if constexpr (std::is_same_v<JT, ContactJacobian>) jac = S.jac.data();
-  else jac = S.jacf.data();
+  if constexpr (std::is_same_v<JT, ContactJacobian>)
+    jac = S.jac.data();
+  else
+    jac = S.jacf.data();
   PersistentApgd<V, JT> p{};
   p.B = B;
   p.g = gatherOf<JT>(d, jac, nullptr, nullptr);
@@ -324,8 +326,8 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid
   DVI_CUDA(cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlock), args, 0, d.stream));
   if (d.phase_profile) {  // DVISIM_APGD_PHASES: block 0's clock at each phase boundary of the first trials
     std::vector<long long> h(size_t(kPhaseStampTrials) * kPhaseStamps);
-    DVI_CUDA(cudaMemcpyAsync(h.data(), S.stamps.data(), sizeof(long long) * h.size(), cudaMemcpyDeviceToHost,
-                             d.stream));
+    DVI_CUDA(
+        cudaMemcpyAsync(h.data(), S.stamps.data(), sizeof(long long) * h.size(), cudaMemcpyDeviceToHost, d.stream));
     DVI_CUDA(cudaStreamSynchronize(d.stream));
     for (int t = 0; t + 1 < kPhaseStampTrials && h[size_t(kPhaseStamps * (t + 1))] != 0; ++t) {
       const long long* a = h.data() + kPhaseStamps * t;

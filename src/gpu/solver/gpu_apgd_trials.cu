@@ -30,8 +30,8 @@ __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers<
 // The test reduction, and in its last block to finish (a counter in st; the partials are then summed in
 // block order, so the result does not depend on which block is last) the control update.
 template <class V>
-__global__ void __launch_bounds__(kBlock) apgdTestKernel(int64_t n, ApgdBuffers<V> B, ApgdDeviceState* st,
-                                                         double* partial) {
+__global__ void __launch_bounds__(kBlock)
+    apgdTestKernel(int64_t n, ApgdBuffers<V> B, ApgdDeviceState* st, double* partial) {
   const algo::ApgdControl& c = st->c;
   if (c.done) return;  // uniform: st->c changes only after every block has counted itself below
   reduceBlockSlice<5>(n, apgdTestOf(B, c), partial);
@@ -92,9 +92,8 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
   const bool cached = launch.register_cache && grids.fitsCache(n);
-  if (n <= launch.persistent_max &&
-      (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
-              : apgdPersistent<V, 0>(d, n, B, grids.plain, slices))) {
+  if (n <= launch.persistent_max && (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
+                                            : apgdPersistent<V, 0>(d, n, B, grids.plain, slices))) {
     DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
     DVI_CUDA(cudaStreamSynchronize(d.stream));
     c = h.c;
@@ -121,8 +120,10 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
       const int remaining = c.max_iterations - c.iterations;
       const int batch = s.tolerance > 0 ? std::min(remaining, 16) : remaining;
       for (int b = 0; b < std::max(1, batch); ++b) {
-        if (exec) DVI_CUDA(cudaGraphLaunch(exec, d.stream));
-        else launchApgdTrial<V>(d, n, B, S.apgd.data(), slices);
+        if (exec)
+          DVI_CUDA(cudaGraphLaunch(exec, d.stream));
+        else
+          launchApgdTrial<V>(d, n, B, S.apgd.data(), slices);
       }
       DVI_CUDA(cudaMemcpyAsync(&h, S.apgd.data(), sizeof h, cudaMemcpyDeviceToHost, d.stream));
       DVI_CUDA(cudaStreamSynchronize(d.stream));

@@ -157,8 +157,10 @@ struct AdjOffsetF {
     int64_t lo = 0, hi = n;
     while (lo < hi) {
       const int64_t mid = (lo + hi) / 2;
-      if (keys[mid] < uint32_t(i)) lo = mid + 1;
-      else hi = mid;
+      if (keys[mid] < uint32_t(i))
+        lo = mid + 1;
+      else
+        hi = mid;
     }
     off[i] = int32_t(lo);
   }
@@ -274,9 +276,9 @@ real combinedFriction(DeviceState& d, const SystemConfig& cfg, int64_t nc) {
   C.mu.resize(nc);
   C.size.resize(nc);
   S.v6.resize(nc);  // per-contact penetration
-  launchMap(d, nc, MuF{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.dist.data(),
-                       B.friction.data(), d.shapes.shape.data(), cfg.collision.friction_combine, C.mu.data(), C.size.data(),
-                       S.v6.data()},
+  launchMap(d, nc,
+            MuF{C.body_a.data(), C.body_b.data(), C.shape_a.data(), C.shape_b.data(), C.dist.data(), B.friction.data(),
+                d.shapes.shape.data(), cfg.collision.friction_combine, C.mu.data(), C.size.data(), S.v6.data()},
             "launch of MuF");
   real max_mu = 0;
   if (nc > 0 && cfg.prune && d.all_frictional) {
@@ -284,9 +286,8 @@ real combinedFriction(DeviceState& d, const SystemConfig& cfg, int64_t nc) {
   } else if (nc > 0 && cfg.prune) {
     d.step_scalars.resize(16);
     real* mu_out = reinterpret_cast<real*>(d.step_scalars.data()) + 4;
-    cubRun(d, "cub::DeviceReduce::Max (friction)", [&](void* t, size_t& b) {
-      return cub::DeviceReduce::Max(t, b, C.mu.data(), mu_out, int(nc), d.stream);
-    });
+    cubRun(d, "cub::DeviceReduce::Max (friction)",
+           [&](void* t, size_t& b) { return cub::DeviceReduce::Max(t, b, C.mu.data(), mu_out, int(nc), d.stream); });
     max_mu = d.readValue(mu_out);
   }
   return max_mu;
@@ -343,7 +344,7 @@ void resizeProblem(DeviceState& d, const RowCounts& n) {
   S.adj_val_sorted.resize(nent);
   S.adj_off.resize(nb + 1);
   S.v5.resize(nblk);  // per-block max diagonal entry
-  S.v4.resize(nc);  // key order flags
+  S.v4.resize(nc);    // key order flags
 }
 
 // Every block's rhs, inverse, steps, column norms, row sums and max diagonal, the Jacobians, the unsorted
@@ -354,10 +355,31 @@ void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const RowCounts& n)
   DeviceContacts& C = d.contacts;
   const int64_t nc = n.nc, nb = n.nb, ncb = n.ncb, nrb = n.nrb;
   const bool normal = n.normal;
-  RowsF f{C.body_a.data(), C.body_b.data(), C.normal.data(), C.pa.data(), C.pb.data(), B.pos.data(),
-          B.v_free.data(), B.w_free.data(), C.dist.data(), C.size.data(), B.inv.data(), real(cfg.step.dt), cfg.solver.recovery_rel,
-          int32_t(nb), normal, S.rhs.data(), S.block_inv.data(), S.block_step.data(), S.v5.data(), S.colnorm.data(),
-          S.rowsum.data(), S.jac.data(), S.adj_key.data(), S.adj_val.data(), n.float_jac ? S.jacf.data() : nullptr};
+  RowsF f{C.body_a.data(),
+          C.body_b.data(),
+          C.normal.data(),
+          C.pa.data(),
+          C.pb.data(),
+          B.pos.data(),
+          B.v_free.data(),
+          B.w_free.data(),
+          C.dist.data(),
+          C.size.data(),
+          B.inv.data(),
+          real(cfg.step.dt),
+          cfg.solver.recovery_rel,
+          int32_t(nb),
+          normal,
+          S.rhs.data(),
+          S.block_inv.data(),
+          S.block_step.data(),
+          S.v5.data(),
+          S.colnorm.data(),
+          S.rowsum.data(),
+          S.jac.data(),
+          S.adj_key.data(),
+          S.adj_val.data(),
+          n.float_jac ? S.jacf.data() : nullptr};
   launchMap(d, nc, f, "launch of RowsF");
   if (normal)
     launchMap(d, ncb,
@@ -402,17 +424,15 @@ void jacobiSteps(DeviceState& d, const RowCounts& n) {
             BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), layoutOf(d), S.bodyq.data()},
             "launch of BodyColumnSumF");
   if (n.normal)
-    launchMap(d, ncb,
-              NormalJacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc,
-                                S.jacobi_step.data()},
-              "launch of NormalJacobiStepF");
+    launchMap(
+        d, ncb,
+        NormalJacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), nc, S.jacobi_step.data()},
+        "launch of NormalJacobiStepF");
   else
-    launchMap(d, nc,
-              JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
+    launchMap(d, nc, JacobiStepF{S.jac.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), S.jacobi_step.data()},
               "launch of JacobiStepF");
   launchMap(d, nrb,
-            RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), ncb,
-                           S.jacobi_step.data()},
+            RowJacobiStepF{S.rows.data(), S.colnorm.data(), S.rowsum.data(), S.bodyq.data(), ncb, S.jacobi_step.data()},
             "launch of RowJacobiStepF");
 }
 
@@ -423,21 +443,18 @@ void readMaxima(DeviceState& d, const RowCounts& n, real* max_penetration) {
   const int64_t nc = n.nc, nblk = n.nblk;
   d.step_scalars.resize(16);
   real* out = reinterpret_cast<real*>(d.step_scalars.data());
-  cubRun(d, "cub::DeviceReduce::Max (diagonal)", [&](void* t, size_t& b) {
-    return cub::DeviceReduce::Max(t, b, S.v5.data(), out, int(nblk), d.stream);
-  });
-  cubRun(d, "cub::DeviceReduce::Max (penetration)", [&](void* t, size_t& b) {
-    return cub::DeviceReduce::Max(t, b, S.v6.data(), out + 1, int(nc), d.stream);
-  });
-  cubRun(d, "cub::DeviceReduce::Max (key order)", [&](void* t, size_t& b) {
-    return cub::DeviceReduce::Max(t, b, S.v4.data(), out + 2, int(nc), d.stream);
-  });
+  cubRun(d, "cub::DeviceReduce::Max (diagonal)",
+         [&](void* t, size_t& b) { return cub::DeviceReduce::Max(t, b, S.v5.data(), out, int(nblk), d.stream); });
+  cubRun(d, "cub::DeviceReduce::Max (penetration)",
+         [&](void* t, size_t& b) { return cub::DeviceReduce::Max(t, b, S.v6.data(), out + 1, int(nc), d.stream); });
+  cubRun(d, "cub::DeviceReduce::Max (key order)",
+         [&](void* t, size_t& b) { return cub::DeviceReduce::Max(t, b, S.v4.data(), out + 2, int(nc), d.stream); });
   // with the heavy bodies' count, into the pinned scalars: one synchronisation
   static_assert(3 * sizeof(real) + sizeof(int32_t) <= 64 * sizeof(double), "host_scalars holds the read-back");
   char* hs = reinterpret_cast<char*>(d.host_scalars);
   DVI_CUDA(cudaMemcpyAsync(hs, out, 3 * sizeof(real), cudaMemcpyDeviceToHost, d.stream));
-  DVI_CUDA(cudaMemcpyAsync(hs + 3 * sizeof(real), S.heavy_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost,
-                           d.stream));
+  DVI_CUDA(
+      cudaMemcpyAsync(hs + 3 * sizeof(real), S.heavy_count.data(), sizeof(int32_t), cudaMemcpyDeviceToHost, d.stream));
   DVI_CUDA(cudaStreamSynchronize(d.stream));
   real host[3];
   std::memcpy(host, hs, sizeof host);
@@ -456,8 +473,7 @@ void readMaxima(DeviceState& d, const RowCounts& n, real* max_penetration) {
 
 }  // namespace
 
-void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows,
-               real* max_penetration) {
+void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows, real* max_penetration) {
   RowCounts n;
   n.nc = int64_t(d.contacts.count);
   n.nb = int64_t(d.bodies.count);
@@ -475,8 +491,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   n.nblk = n.ncb + n.nrb;
   d.row_count = rows.size();
   uploadRows(d, rows, n);
-  n.float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) &&
-                !std::is_same_v<real, float>;
+  n.float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) && !std::is_same_v<real, float>;
   n.nent = 2 * n.nc + 6 * n.nrb;
   resizeProblem(d, n);
   assembleBlocks(d, cfg, n);

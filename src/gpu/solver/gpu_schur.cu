@@ -17,8 +17,8 @@ namespace {
 // chunk c of heavy body h. One block per body made every Schur product wait for the drum: 31 us of a 65 us
 // APGD trial in the CES industrial feed (15,000 entries, H200 ncu).
 template <class JT>
-__global__ void __launch_bounds__(kBlock) HeavyGatherKernel(const int32_t* heavy, GatherT<JT> g, real* partial,
-                                                           uint32_t* ticket) {
+__global__ void __launch_bounds__(kBlock)
+    HeavyGatherKernel(const int32_t* heavy, GatherT<JT> g, real* partial, uint32_t* ticket) {
   const real* x = g.input();
   if (!x) return;  // the same for every block of the launch
   heavyGatherChunk(heavy, g, x, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
@@ -46,8 +46,10 @@ void schur(DeviceState& d, const real* x, V* y, const real* const* x_slot, V* co
   using JT = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
   SolverScratch& S = d.solver;
   const JT* jac = nullptr;
-  if constexpr (std::is_same_v<JT, ContactJacobian>) jac = S.jac.data();
-  else jac = S.jacf.data();
+  if constexpr (std::is_same_v<JT, ContactJacobian>)
+    jac = S.jac.data();
+  else
+    jac = S.jacf.data();
   const int64_t nc = int64_t(d.contacts.count);
   const SchurOut<V> out{y, y_slot, add};
   gather<JT>(d, x, "launch of GatherF (Schur pass a)", x_slot, jac);

@@ -38,8 +38,10 @@ struct GatherT {
   __device__ const real* input() const { return x_slot ? *x_slot : x; }
   // Adds entry e (of the sorted adjacency) to (F, T).
   __device__ __forceinline__ void entry(int32_t e, const real* xx, Vec3& F, Vec3& T) const {
-    if (ej) accumulateEntryImpulse(adj[e], ej[e], L, rows, xx, F, T);
-    else accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
+    if (ej)
+      accumulateEntryImpulse(adj[e], ej[e], L, rows, xx, F, T);
+    else
+      accumulateEntryImpulse(adj[e], L, jac, rows, xx, F, T);
   }
   __device__ __forceinline__ BodyDelta bodyDelta(int64_t i, Vec3 F, Vec3 T) const {
     if (iso) {
@@ -180,8 +182,15 @@ inline EntryLayout layoutOf(const DeviceState& d) {
 template <class JT>
 GatherT<JT> gatherOf(DeviceState& d, const JT* jac, const real* x, const real* const* x_slot) {
   SolverScratch& S = d.solver;
-  GatherT<JT> g{S.adj_off.data(), S.adj_val_sorted.data(), jac, S.rows.data(), layoutOf(d),
-                d.bodies.inv.data(), x, d.bodies.delta.data(), x_slot};
+  GatherT<JT> g{S.adj_off.data(),
+                S.adj_val_sorted.data(),
+                jac,
+                S.rows.data(),
+                layoutOf(d),
+                d.bodies.inv.data(),
+                x,
+                d.bodies.delta.data(),
+                x_slot};
   if (d.entry_gather) {
     if constexpr (std::is_same_v<JT, ContactJacobianF>) g.ej = S.entry_jac.data();
     g.iso = S.inv_iso.data();

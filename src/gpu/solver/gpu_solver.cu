@@ -23,8 +23,8 @@ namespace dvi::gpu {
 namespace {
 
 struct ProblemView {
-  int64_t nc = 0;   // contact blocks
-  int64_t nb = 0;   // all blocks (contacts, then constraint-row blocks)
+  int64_t nc = 0;  // contact blocks
+  int64_t nb = 0;  // all blocks (contacts, then constraint-row blocks)
   const real* lo = nullptr;
   const real* hi = nullptr;
   const real* r = nullptr;
@@ -143,8 +143,10 @@ struct WarmF {
     int64_t lo = 0, hi = np;
     while (lo < hi) {
       const int64_t mid = (lo + hi) / 2;
-      if (prev_key[mid] < x) lo = mid + 1;
-      else hi = mid;
+      if (prev_key[mid] < x)
+        lo = mid + 1;
+      else
+        hi = mid;
     }
     const bool hit = lo < np && prev_key[lo] == x;
     for (int r = 0; r < 3; ++r) gamma[3 * k + r] = hit ? prev_gamma[3 * lo + r] : real(0);
@@ -195,7 +197,8 @@ void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda
     DVI_CUDA(cudaStreamSynchronize(d.stream));  // row_lambda may change after we return
     return;
   }
-  launchMap(d, nc, WarmF{d.contacts.key.data(), S.prev_key.data(), S.prev_gamma.data(), int64_t(d.prev_count), S.gamma.data()},
+  launchMap(d, nc,
+            WarmF{d.contacts.key.data(), S.prev_key.data(), S.prev_gamma.data(), int64_t(d.prev_count), S.gamma.data()},
             "launch of WarmF");
 }
 
@@ -209,7 +212,8 @@ SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   const int64_t nc = int64_t(d.contacts.count);
   if (d.normal_only) {  // gamma (3 per contact, then the rows) -> x (normal layout), as ContactProblem::toSolverLayout
     S.x.resize(size_t(3 * pv.nb));
-    launchMap(d, 3 * pv.nb, kern::ToNormalLayout{S.gamma.data(), S.x.data(), nc, d.contact_blocks}, "launch of ToNormalLayout");
+    launchMap(d, 3 * pv.nb, kern::ToNormalLayout{S.gamma.data(), S.x.data(), nc, d.contact_blocks},
+              "launch of ToNormalLayout");
   }
   real* gamma = solution(d);
   SolverStats st;
@@ -247,16 +251,16 @@ void keepImpulsesForWarmStart(DeviceState& d) {
     return cub::DeviceRadixSort::SortPairs(t, b, d.contacts.key.data(), S.prev_key.data(), S.order.data(),
                                            S.order_sorted.data(), int(nc), 0, 64, d.stream);
   });
-  launchMap(d, nc, GatherByIndexF{S.order_sorted.data(), S.gamma.data(), S.prev_gamma.data()}, "launch of GatherByIndexF");
+  launchMap(d, nc, GatherByIndexF{S.order_sorted.data(), S.gamma.data(), S.prev_gamma.data()},
+            "launch of GatherByIndexF");
 }
 
 void applyImpulsesToBodies(DeviceState& d, const real* gamma) {
   DeviceBodies& B = d.bodies;
   const int64_t nb = int64_t(B.count);
-  if (gamma) {
-    gather(d, gamma, "launch of GatherF (impulses)");
-  }
-  launchMap(d, nb, VelocityF{B.v_free.data(), B.w_free.data(), gamma ? B.delta.data() : nullptr, B.vel.data(), B.omega.data()},
+  if (gamma) { gather(d, gamma, "launch of GatherF (impulses)"); }
+  launchMap(d, nb,
+            VelocityF{B.v_free.data(), B.w_free.data(), gamma ? B.delta.data() : nullptr, B.vel.data(), B.omega.data()},
             "launch of VelocityF");
 }
 
