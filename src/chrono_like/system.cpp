@@ -390,11 +390,11 @@ void System::buildAndSolve() {
   row_lambda_.assign(gamma_.begin() + 3 * nc, gamma_.begin() + 3 * nc + nrows);
   for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
     row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
-  keepImpulsesForWarmStart(nc);
+  cacheImpulsesByKey(nc);
 }
 
 // This step's contact impulses, sorted by key, for the next step's warm start.
-void System::keepImpulsesForWarmStart(int64_t nc) {
+void System::cacheImpulsesByKey(int64_t nc) {
   std::vector<size_t> order(static_cast<size_t>(nc));
   std::iota(order.begin(), order.end(), size_t(0));
   if (!std::is_sorted(contacts_.key.begin(), contacts_.key.end()))

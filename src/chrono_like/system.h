@@ -286,11 +286,11 @@ class System {
   }
   // The stages; a GPU subclass overrides them with device versions.
   virtual void integrateForces();
-  virtual void detectCollisions();            // ComputeAabbs + BroadPhase + NarrowPhase
-  virtual void buildAndSolve();               // BuildRows + WarmStart + Solve
-  virtual void integrate();                   // IntegrateVelocities + IntegratePositions
-  void collectRows();                         // rows_ from the row providers (part of BuildRows)
-  void keepImpulsesForWarmStart(int64_t nc);  // this step's impulses by contact key (end of Solve)
+  virtual void detectCollisions();      // ComputeAabbs + BroadPhase + NarrowPhase
+  virtual void buildAndSolve();         // BuildRows + WarmStart + Solve
+  virtual void integrate();             // IntegrateVelocities + IntegratePositions
+  void collectRows();                   // rows_ from the row providers (part of BuildRows)
+  void cacheImpulsesByKey(int64_t nc);  // this step's impulses by contact key (end of Solve)
   // Scene-level parts (host arrays): gyroscopic term and MPR needed? Fills stats_.part_ran/part_reason for
   // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
   // term runs.
