@@ -55,15 +55,6 @@ json parseJson(const std::string& text, const std::string& origin) {
   }
 }
 
-void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
-  std::string list;
-  for (const char* c : choices) {
-    if (v == c) return;
-    list += std::string(list.empty() ? "" : "|") + c;
-  }
-  throw InputError("unknown " + opt.substr(2) + " '" + v + "' (expected " + list + ")");
-}
-
 std::string fmt(double x) {
   char b[40];
   std::snprintf(b, sizeof b, "%.17g", x);

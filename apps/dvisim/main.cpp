@@ -53,6 +53,7 @@ namespace {
 using dvi::InputError;
 using dvi::parseInt;
 using dvi::parseReal;
+using dvi::requireOneOf;
 using Clock = std::chrono::steady_clock;
 
 struct Options {
@@ -71,15 +72,6 @@ std::string oneLine(std::string s) {
     if (c == '\n' || c == '\r') c = ' ';
   while (!s.empty() && s.back() == ' ') s.pop_back();
   return s;
-}
-
-void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
-  std::string list;
-  for (const char* c : choices) {
-    if (v == c) return;
-    list += std::string(list.empty() ? "" : "|") + c;
-  }
-  throw InputError("unknown " + opt.substr(2) + " '" + v + "' (expected " + list + ")");
 }
 
 // Progress bar with ETA on stderr, only when stderr is a terminal.

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
+#include <initializer_list>
 #include <string>
 
 #include "chrono_like/base/errors.h"
@@ -46,6 +47,17 @@ inline long long parseInt(const std::string& opt, const std::string& v, long lon
   if (x < lo || x > hi)
     throw InputError(opt + ": must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v);
   return x;
+}
+
+// An option's value that must be one of `choices`; else InputError "unknown NAME 'v' (expected a|b|c)", NAME
+// being the option without its "--".
+inline void requireOneOf(const std::string& opt, const std::string& v, std::initializer_list<const char*> choices) {
+  std::string list;
+  for (const char* c : choices) {
+    if (v == c) return;
+    list += std::string(list.empty() ? "" : "|") + c;
+  }
+  throw InputError("unknown " + opt.substr(2) + " '" + v + "' (expected " + list + ")");
 }
 
 }  // namespace dvi
