@@ -3,6 +3,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -245,14 +246,21 @@ void System::step() {
   stats_ = StepStats{};
   beginStep();
   // The stages read omp_get_max_threads(); the caller's setting is restored after the step.
+  // threads 0: the team adapts to the machine's load (thread_governor.h); an explicit count stands.
   const int caller_threads = omp_get_max_threads();
-  omp_set_num_threads(effectiveThreads());
+  const int full = effectiveThreads();
+  const int team = config_.threads == 0 ? governor_.choose(full) : full;
+  omp_set_num_threads(team);
+  const auto t0 = std::chrono::steady_clock::now();
   planParts();
 
   timed(stats_, StageType::IntegrateForces, [&] { integrateForces(); });
   detectCollisions();
   buildAndSolve();
   integrate();
+  if (config_.threads == 0)
+    governor_.record(team, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  stats_.threads = team;
   omp_set_num_threads(caller_threads);
   endStep();
 }

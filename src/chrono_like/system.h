@@ -20,6 +20,7 @@
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/base/step_context.h"
+#include "chrono_like/base/thread_governor.h"
 #include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/collision.h"
 #include "chrono_like/force_field.h"
@@ -102,11 +103,13 @@ struct GpuTuning {
 };
 
 struct SystemConfig {
-  StepSettings step;                // dt, gravity, gyroscopic term
-  CollisionSettings collision;      // backend, envelope, speculative contacts, MPR manifold, friction rule, broad phase
-  SolverSettings solver;            // algorithm, stop, warm start, penetration recovery
-  GpuTuning gpu;                    // the GPU backend's launch choices
-  int threads = 0;                  // [threads] OpenMP threads of the CPU stages; 0 = OpenMP's default
+  StepSettings step;            // dt, gravity, gyroscopic term
+  CollisionSettings collision;  // backend, envelope, speculative contacts, MPR manifold, friction rule, broad phase
+  SolverSettings solver;        // algorithm, stop, warm start, penetration recovery
+  GpuTuning gpu;                // the GPU backend's launch choices
+  // [threads] OpenMP threads of the CPU stages; 0 = OpenMP's default team (OMP_NUM_THREADS, else the cores),
+  // dropped to one thread while other processes take the cores (base/thread_governor.h). An explicit count stands.
+  int threads = 0;
   int min_bodies_per_thread = 256;  // [bodies] fewer bodies than this per thread: use fewer threads (a small scene
                                     // costs more in OpenMP barriers than it gains; 1 forces all threads)
   // Leave out the stages and rows the scene does not need (docs/MODEL.md §6): the normal row only when no contact
@@ -165,6 +168,7 @@ struct StepStats {
   std::array<bool, kStagePartCount> part_ran{};
   std::array<const char*, kStagePartCount> part_reason{};
   bool normal_only = false;  // this step's CCP had the normal rows only (no contact with mu > 0)
+  int threads = 0;           // the CPU stages' team size this step (threads 0: as the load allowed)
 };
 
 // Stages and parts over a run (the run summary, output.h: addStageSummary): seconds per stage, whether
@@ -333,6 +337,7 @@ class System {
   size_t typed_shapes_ = 0;         // shapes whose type is in shape_types_
   uint32_t shape_types_ = 0;        // bit t: the scene has a shape of type t
   StepStats stats_;
+  ThreadGovernor governor_;  // the team size of threads 0 under load
   ConvergenceLog convergence_;
   StepContext ctx_;  // of this step (beginStep)
   double time_ = 0;

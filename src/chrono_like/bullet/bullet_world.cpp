@@ -7,7 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
-#include <map>
+#include <string>
 
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
@@ -22,45 +22,98 @@ bool sameTransform(const btTransform& a, const btTransform& b) {
          a.getBasis()[2] == b.getBasis()[2];
 }
 
-int bodyKind(const btRigidBody& b) {
-  if (b.isKinematicObject()) return kBodyKinematic;
-  if (b.isStaticObject() || b.getInvMass() == 0) return kBodyFixed;
+// The System's kind of an object: plain collision objects are fixed geometry; a body Bullet does not simulate
+// (activation state DISABLE_SIMULATION) is held as a fixed body.
+int objectKind(const btCollisionObject& o) {
+  const btRigidBody* b = btRigidBody::upcast(&o);
+  if (!b) return kBodyFixed;
+  if (b->isKinematicObject()) return kBodyKinematic;
+  if (b->isStaticObject() || b->getInvMass() == 0 || b->getActivationState() == DISABLE_SIMULATION) return kBodyFixed;
   return 0;
 }
 
-int proxyGroup(const btRigidBody& b) {
-  return b.getBroadphaseHandle() ? b.getBroadphaseHandle()->m_collisionFilterGroup : 1;
+int proxyGroup(const btCollisionObject& o) {
+  return o.getBroadphaseHandle() ? o.getBroadphaseHandle()->m_collisionFilterGroup : 1;
 }
-int proxyMask(const btRigidBody& b) {
-  return b.getBroadphaseHandle() ? b.getBroadphaseHandle()->m_collisionFilterMask : -1;
+int proxyMask(const btCollisionObject& o) {
+  return o.getBroadphaseHandle() ? o.getBroadphaseHandle()->m_collisionFilterMask : -1;
 }
 
-// The body as the System takes it; shapes include static triangle geometry (triangle_mesh.h).
-BodyDesc describe(const btRigidBody& body) {
-  const btCollisionShape* shape = body.getCollisionShape();
-  if (!shape) throw InputError("rigid body without a collision shape");
-  if (!hasTriangles(*shape)) {
-    BodyDesc d = bodyDescFromBullet(body);
+// The pose the System holds: a body's centre of mass, a plain object's world transform.
+const btTransform& poseOf(const btCollisionObject& o) {
+  const btRigidBody* b = btRigidBody::upcast(&o);
+  return b ? b->getCenterOfMassTransform() : o.getWorldTransform();
+}
+
+// The object as the System takes it (groups and masks are set by the caller); shapes include static triangle
+// geometry (triangle_mesh.h).
+BodyDesc describe(const btCollisionObject& obj) {
+  const btCollisionShape* shape = obj.getCollisionShape();
+  if (!shape) throw InputError("collision object without a collision shape");
+  const btRigidBody* body = btRigidBody::upcast(&obj);
+  const int kind = objectKind(obj);
+  if (body && !hasTriangles(*shape)) {
+    BodyDesc d = bodyDescFromBullet(*body);
     d.has_gravity = true;  // the body's own gravity (Bullet sets it from the world when added)
-    d.gravity = fromBt(body.getGravity());
+    d.gravity = fromBt(body->getGravity());
+    if (kind != 0) {
+      d.flags = uint8_t(kind);
+      d.mass = 0;
+      d.inertia = Vec3{0, 0, 0};
+    }
     return d;
   }
-  const int kind = bodyKind(body);
-  if (kind == 0)
+  if (body && kind == 0)
     throw InputError(std::string("a dynamic body cannot use a triangle shape (") + shape->getName() +
                      "); Bullet supports it only on static or kinematic bodies");
-  BodyDesc d = bodyMotionFromBullet(body);
+  BodyDesc d;
+  if (body) {
+    d = bodyMotionFromBullet(*body);
+  } else {
+    d.pos = fromBt(obj.getWorldTransform().getOrigin());
+    d.rot = fromBt(obj.getWorldTransform().getRotation());
+    d.friction = real(obj.getFriction());
+  }
   d.flags = uint8_t(kind);
   d.mass = 0;
   d.inertia = Vec3{0, 0, 0};
   appendShapesWithTriangles(*shape, Pose{{0, 0, 0}, {1, 0, 0, 0}}, d.shapes);
-  const int16_t group = int16_t(proxyGroup(body)), mask = int16_t(proxyMask(body));
-  for (ShapeDesc& s : d.shapes) {
-    s.shape.group = group;
-    s.shape.mask = mask;
-  }
+  if (d.shapes.empty()) throw InputError(std::string("collision shape has no children: ") + shape->getName());
   return d;
 }
+
+real& component(Vec3& v, int k) { return k == 0 ? v.x : k == 1 ? v.y : v.z; }
+
+}  // namespace
+
+// Bullet's linear and angular factors (btRigidBody::setLinearFactor, setAngularFactor) scale every force and
+// impulse a body receives, per world axis (btRigidBody::applyCentralForce, applyTorque, applyImpulse and the
+// sequential-impulse solver's m_linearFactor / m_angularFactor). A factor of 1 changes nothing; a factor of 0
+// leaves that velocity component as it was: one bilateral row per locked axis, J v = v0 (bias -v0, unbounded
+// impulse), solved with the contacts and joints, so that no force, contact or joint changes it. Other factors
+// would change the body's mass matrix per axis and are refused (syncBody).
+class FactorRows final : public RowProvider {
+ public:
+  struct Lock {
+    int32_t body;
+    int8_t angular;  // 0 linear, 1 angular
+    int8_t axis;     // world x, y, z
+    real target;     // the velocity component kept [m/s or rad/s]
+  };
+  std::vector<Lock> locks;
+
+  void rows(const BodyArrays&, const StepContext&, std::vector<ConstraintRow>& out) override {
+    for (const Lock& l : locks) {
+      ConstraintRow r;
+      r.a = l.body;
+      r.Ja[3 * l.angular + l.axis] = 1;
+      r.bias = -l.target;
+      out.push_back(r);
+    }
+  }
+};
+
+namespace {
 
 // The CPU System with pair exclusions: contacts between bodies that Bullet would not collide (a constraint
 // with disableCollisionsBetweenLinkedBodies, CF_NO_CONTACT_RESPONSE) are dropped after the narrow phase.
@@ -104,7 +157,12 @@ DviDynamicsWorld::DviDynamicsWorld(btDispatcher* dispatcher, btBroadphaseInterfa
                                    btConstraintSolver* constraintSolver,
                                    btCollisionConfiguration* collisionConfiguration, DviWorldConfig config)
     : btDiscreteDynamicsWorld(dispatcher, pairCache, constraintSolver, collisionConfiguration), config_(config) {
+  // Bullet's pair cache is not used by the step (the System finds its own pairs): a Dbvt broad phase only keeps
+  // its trees up to date for the queries (rayTest, contactTest, ...), and the pairs are computed when ghost
+  // objects need them (computeOverlappingPairs in the sub-step).
+  if (auto* dbvt = dynamic_cast<btDbvtBroadphase*>(pairCache)) dbvt->m_deferedcollide = true;
   joints_ = std::make_shared<BulletJoints>(&index_, config_.joints);
+  factors_ = std::make_shared<FactorRows>();
   system_ = makeSystem();
 }
 
@@ -126,20 +184,51 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
     s = std::make_unique<FilteredCpuSystem>(c, [this](int a, int b) { return keepPair(a, b); });
   }
   s->addRowProvider(joints_);
+  s->addRowProvider(factors_);
   return s;
 }
 
+// Bullet's pair test (btOverlappingPairCache needsBroadphaseCollision and btCollisionDispatcher needsCollision)
+// on the full 32-bit groups and masks, contact response and constraint exclusions.
 bool DviDynamicsWorld::keepPair(int a, int b) const {
-  const btRigidBody* ba = tracked_[size_t(a)].body;
-  const btRigidBody* bb = tracked_[size_t(b)].body;
-  if (ba->hasContactResponse() == false || bb->hasContactResponse() == false) return false;
-  if (has_exclusions_ && (!ba->checkCollideWith(bb) || !bb->checkCollideWith(ba))) return false;
+  const Tracked& ta = tracked_[size_t(a)];
+  const Tracked& tb = tracked_[size_t(b)];
+  if ((ta.group & tb.mask) == 0 || (tb.group & ta.mask) == 0) return false;
+  if (!ta.obj->hasContactResponse() || !tb.obj->hasContactResponse()) return false;
+  if (has_exclusions_ && (!ta.obj->checkCollideWith(tb.obj) || !tb.obj->checkCollideWith(ta.obj))) return false;
   return true;
+}
+
+// Group bit positions in use get System bits in order of appearance; a new one renumbers nothing, but the masks
+// already given out lack it, so the System is rebuilt. Beyond 16 positions the filters are folded (bit p onto bit
+// p mod 16: every pair Bullet collides still passes the System's test) and keepPair applies the exact test.
+void DviDynamicsWorld::noteFilter(int group, int /*mask*/) {
+  for (int bit = 0; bit < 32; ++bit) {
+    if (!((uint32_t(group) >> bit) & 1u)) continue;
+    if (std::find(group_bits_.begin(), group_bits_.end(), bit) != group_bits_.end()) continue;
+    group_bits_.push_back(bit);
+    if (!tracked_.empty()) rebuild_ = true;
+    if (group_bits_.size() > 16) folded_filters_ = true;
+  }
+}
+
+int16_t DviDynamicsWorld::mapFilter(int bits) const {
+  const uint32_t u = uint32_t(bits);
+  if (folded_filters_) return int16_t(uint16_t((u & 0xFFFFu) | (u >> 16)));
+  uint32_t out = 0;
+  for (size_t k = 0; k < group_bits_.size(); ++k)
+    if ((u >> group_bits_[k]) & 1u) out |= 1u << k;
+  return int16_t(uint16_t(out));
 }
 
 int DviDynamicsWorld::bodyIndex(const btRigidBody* body) const {
   auto it = index_.find(body);
   return it == index_.end() ? -1 : it->second;
+}
+
+int DviDynamicsWorld::objectIndex(const btCollisionObject* obj) const {
+  auto it = object_index_.find(obj);
+  return it == object_index_.end() ? -1 : it->second;
 }
 
 void DviDynamicsWorld::addRigidBody(btRigidBody* body) {
@@ -156,23 +245,60 @@ void DviDynamicsWorld::addRigidBody(btRigidBody* body, int group, int mask) {
   pending_.push_back(body);
 }
 
-void DviDynamicsWorld::removeRigidBody(btRigidBody* body) {
-  btDiscreteDynamicsWorld::removeRigidBody(body);
-  pending_.erase(std::remove(pending_.begin(), pending_.end(), body), pending_.end());
-  auto it = index_.find(body);
-  if (it != index_.end()) {
-    tracked_.erase(tracked_.begin() + it->second);
-    index_.clear();
-    for (size_t i = 0; i < tracked_.size(); ++i) index_[tracked_[i].body] = int(i);
+void DviDynamicsWorld::addCollisionObject(btCollisionObject* object, int group, int mask) {
+  if (!object) throw InputError("addCollisionObject: null object");
+  const int type = object->getInternalType();
+  if (type == btCollisionObject::CO_RIGID_BODY) {  // from btDiscreteDynamicsWorld::addRigidBody
+    btDiscreteDynamicsWorld::addCollisionObject(object, group, mask);
+    return;
+  }
+  if (type == btCollisionObject::CO_GHOST_OBJECT) {
+    btDiscreteDynamicsWorld::addCollisionObject(object, group, mask);
+    ++ghosts_;
+    return;
+  }
+  if (type != btCollisionObject::CO_COLLISION_OBJECT && type != btCollisionObject::CO_USER_TYPE)
+    throw InputError("addCollisionObject: collision object type " + std::to_string(type) +
+                     " (soft body, fluid or multibody link) is not supported by the drop-in world");
+  (void)describe(*object);
+  btDiscreteDynamicsWorld::addCollisionObject(object, group, mask);
+  pending_.push_back(object);
+}
+
+// Takes an object out of the System's bookkeeping; the System itself is rebuilt at the next sub-step (so that
+// removing many objects costs O(1) each).
+void DviDynamicsWorld::forget(btCollisionObject* obj) {
+  pending_.erase(std::remove(pending_.begin(), pending_.end(), obj), pending_.end());
+  auto it = object_index_.find(obj);
+  if (it != object_index_.end()) {
+    tracked_[size_t(it->second)].obj = nullptr;
+    tracked_[size_t(it->second)].body = nullptr;
+    object_index_.erase(it);
     rebuild_ = true;
   }
+  if (btRigidBody* b = btRigidBody::upcast(obj)) index_.erase(b);
+  releaseManifolds();
+  contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(),
+                                 [&](const WorldContact& c) { return c.a == obj || c.b == obj; }),
+                  contacts_.end());
+}
+
+void DviDynamicsWorld::removeRigidBody(btRigidBody* body) {
+  btDiscreteDynamicsWorld::removeRigidBody(body);
+  forget(body);
   // Joints on the body leave the System with it (Bullet asks the app to remove them first).
   for (btTypedConstraint* c : std::vector<btTypedConstraint*>(joints_->constraints()))
     if (&c->getRigidBodyA() == body || &c->getRigidBodyB() == body) joints_->remove(c);
-  releaseManifolds();
-  contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(),
-                                 [&](const WorldContact& c) { return c.a == body || c.b == body; }),
-                  contacts_.end());
+}
+
+void DviDynamicsWorld::removeCollisionObject(btCollisionObject* object) {
+  if (btRigidBody* b = btRigidBody::upcast(object)) {
+    removeRigidBody(b);
+    return;
+  }
+  if (object && object->getInternalType() == btCollisionObject::CO_GHOST_OBJECT) --ghosts_;
+  btDiscreteDynamicsWorld::removeCollisionObject(object);
+  forget(object);
 }
 
 void DviDynamicsWorld::addConstraint(btTypedConstraint* constraint, bool disableCollisionsBetweenLinkedBodies) {
@@ -186,75 +312,109 @@ void DviDynamicsWorld::removeConstraint(btTypedConstraint* constraint) {
   btDiscreteDynamicsWorld::removeConstraint(constraint);
 }
 
-void DviDynamicsWorld::addToSystem(btRigidBody* body) {
-  BodyDesc d = describe(*body);
-  const int i = system_->addBody(d);
-  index_[body] = i;
+void DviDynamicsWorld::addToSystem(btCollisionObject* obj) {
+  BodyDesc d = describe(*obj);
   Tracked t;
-  t.body = body;
-  t.tf = body->getCenterOfMassTransform();
-  t.v = body->getLinearVelocity();
-  t.w = body->getAngularVelocity();
-  t.shape = body->getCollisionShape();
-  t.group = proxyGroup(*body);
-  t.mask = proxyMask(*body);
-  t.kind = bodyKind(*body);
+  t.obj = obj;
+  t.body = btRigidBody::upcast(obj);
+  t.tf = poseOf(*obj);
+  t.v = t.body ? t.body->getLinearVelocity() : btVector3(0, 0, 0);
+  t.w = t.body ? t.body->getAngularVelocity() : btVector3(0, 0, 0);
+  t.shape = obj->getCollisionShape();
+  t.group = proxyGroup(*obj);
+  t.mask = proxyMask(*obj);
+  t.kind = objectKind(*obj);
+  for (ShapeDesc& s : d.shapes) {
+    s.shape.group = mapFilter(t.group);
+    s.shape.mask = mapFilter(t.mask);
+  }
+  const int i = system_->addBody(d);
   if (size_t(i) != tracked_.size()) throw InputError("drop-in world: body index out of step with the System");
+  object_index_[obj] = i;
+  if (t.body) index_[t.body] = i;
   tracked_.push_back(t);
 }
 
 void DviDynamicsWorld::rebuild() {
-  std::vector<btRigidBody*> bodies;
-  bodies.reserve(tracked_.size());
-  for (const Tracked& t : tracked_) bodies.push_back(t.body);
+  std::vector<btCollisionObject*> objects;
+  objects.reserve(tracked_.size());
+  for (const Tracked& t : tracked_)
+    if (t.obj) objects.push_back(t.obj);
   tracked_.clear();
   index_.clear();
+  object_index_.clear();
+  releaseManifolds();
   system_ = makeSystem();
-  for (btRigidBody* b : bodies) addToSystem(b);
+  for (btCollisionObject* o : objects) addToSystem(o);
   rebuild_ = false;
 }
 
+// A new shape, filter or kind needs the System rebuilt; new group bits do too (noteFilter).
+bool DviDynamicsWorld::structureChanged() const {
+  for (const Tracked& t : tracked_) {
+    if (!t.obj) continue;
+    if (t.obj->getCollisionShape() != t.shape || proxyGroup(*t.obj) != t.group || proxyMask(*t.obj) != t.mask ||
+        objectKind(*t.obj) != t.kind)
+      return true;
+  }
+  return false;
+}
+
 void DviDynamicsWorld::syncIn(btScalar h) {
-  // Structural changes first: a new shape, filter or body kind needs the System rebuilt.
-  for (const Tracked& t : tracked_)
-    if (t.body->getCollisionShape() != t.shape || proxyGroup(*t.body) != t.group || proxyMask(*t.body) != t.mask ||
-        bodyKind(*t.body) != t.kind)
-      rebuild_ = true;
+  for (btCollisionObject* o : pending_) noteFilter(proxyGroup(*o), proxyMask(*o));
+  if (!rebuild_ && structureChanged()) {
+    for (const Tracked& t : tracked_)
+      if (t.obj) noteFilter(proxyGroup(*t.obj), proxyMask(*t.obj));
+    rebuild_ = true;
+  }
   if (rebuild_) rebuild();
-  for (btRigidBody* b : pending_) addToSystem(b);
+  for (btCollisionObject* o : pending_) addToSystem(o);
   pending_.clear();
 
   system_->mutableConfig().step.dt = real(h);
   BodyArrays& B = system_->mutableBodies();
-  for (size_t i = 0; i < tracked_.size(); ++i) {
-    Tracked& t = tracked_[i];
-    const btRigidBody& b = *t.body;
-    const btTransform& tf = b.getCenterOfMassTransform();
-    const bool kinematic = t.kind == kBodyKinematic;
-    if (kinematic || !sameTransform(tf, t.tf)) {
-      B.pos[i] = fromBt(tf.getOrigin());
-      B.rot[i] = normalized(fromBt(tf.getRotation()));
-      t.tf = tf;
-    }
-    if (t.kind == kBodyFixed) continue;
-    if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());
-    if (kinematic || !(b.getAngularVelocity() == t.w)) B.omega[i] = fromBt(b.getAngularVelocity());
-    if (kinematic) continue;
-    B.inv_mass[i] = real(b.getInvMass());
-    B.inv_inertia[i] = fromBt(b.getInvInertiaDiagLocal());
-    B.gravity[i] = fromBt(b.getGravity());
-    B.friction[i] = real(b.getFriction());
-    B.force[i] = fromBt(b.getTotalForce());
-    B.torque[i] = fromBt(b.getTotalTorque());
-    // Bullet's damping rule (btRigidBody::applyDamping), before the forces act.
-    const real ld = real(b.getLinearDamping()), ad = real(b.getAngularDamping());
-    if (ld > 0) B.vel[i] = B.vel[i] * real(std::pow(1 - double(ld), double(h)));
-    if (ad > 0) B.omega[i] = B.omega[i] * real(std::pow(1 - double(ad), double(h)));
-  }
-  for (size_t i = 0; i < tracked_.size(); ++i)
-    if (tracked_[i].kind == kBodyFixed) B.friction[i] = real(tracked_[i].body->getFriction());
+  factors_->locks.clear();
+  for (size_t i = 0; i < tracked_.size(); ++i) syncBody(i, h, B);
   joints_->springForces(B, B.force.data(), B.torque.data());
   system_->markHostDirty();
+}
+
+void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
+  Tracked& t = tracked_[i];
+  const btTransform& tf = poseOf(*t.obj);
+  const bool kinematic = t.kind == kBodyKinematic;
+  if (kinematic || !sameTransform(tf, t.tf)) {
+    B.pos[i] = fromBt(tf.getOrigin());
+    B.rot[i] = normalized(fromBt(tf.getRotation()));
+    t.tf = tf;
+  }
+  B.friction[i] = real(t.obj->getFriction());
+  if (t.kind == kBodyFixed) return;
+  const btRigidBody& b = *t.body;
+  if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());
+  if (kinematic || !(b.getAngularVelocity() == t.w)) B.omega[i] = fromBt(b.getAngularVelocity());
+  if (kinematic) return;
+  B.inv_mass[i] = real(b.getInvMass());
+  B.inv_inertia[i] = fromBt(b.getInvInertiaDiagLocal());
+  B.gravity[i] = fromBt(b.getGravity());
+  B.force[i] = fromBt(b.getTotalForce());
+  B.torque[i] = fromBt(b.getTotalTorque());
+  // Bullet's damping rule (btRigidBody::applyDamping), before the forces act.
+  const real ld = real(b.getLinearDamping()), ad = real(b.getAngularDamping());
+  if (ld > 0) B.vel[i] = B.vel[i] * real(std::pow(1 - double(ld), double(h)));
+  if (ad > 0) B.omega[i] = B.omega[i] * real(std::pow(1 - double(ad), double(h)));
+  const btVector3 factor[2] = {b.getLinearFactor(), b.getAngularFactor()};
+  for (int8_t ang = 0; ang < 2; ++ang) {
+    for (int8_t k = 0; k < 3; ++k) {
+      const btScalar f = factor[ang][k];
+      if (f == 1) continue;
+      if (f != 0)
+        throw InputError("drop-in world: body " + std::to_string(i) + " has " + (ang ? "angular" : "linear") +
+                         " factor " + std::to_string(double(f)) +
+                         " on a world axis; only 0 (locked) and 1 (free) are supported");
+      factors_->locks.push_back({int32_t(i), ang, k, component(ang ? B.omega[i] : B.vel[i], k)});
+    }
+  }
 }
 
 void DviDynamicsWorld::syncOut() {
@@ -276,8 +436,22 @@ void DviDynamicsWorld::syncOut() {
 }
 
 void DviDynamicsWorld::releaseManifolds() {
-  for (btPersistentManifold* m : manifolds_) m_dispatcher1->releaseManifold(m);
+  for (auto& e : manifolds_) m_dispatcher1->releaseManifold(e.second);
   manifolds_.clear();
+}
+
+// One contact into Bullet's persistent manifold of its pair; the manifolds live as long as their pair touches.
+void DviDynamicsWorld::fillManifold(const WorldContact& w, int ia, int ib) {
+  btPersistentManifold*& m = manifolds_[(uint64_t(uint32_t(ia)) << 32) | uint32_t(ib)];
+  if (!m) m = m_dispatcher1->getNewManifold(w.a, w.b);
+  // Bullet's convention: the normal on B points from B toward A.
+  btManifoldPoint p(w.a->getWorldTransform().invXform(w.point_a), w.b->getWorldTransform().invXform(w.point_b),
+                    -w.normal, w.distance);
+  p.m_positionWorldOnA = w.point_a;
+  p.m_positionWorldOnB = w.point_b;
+  p.m_appliedImpulse = w.normal_impulse;
+  p.m_combinedFriction = btScalar(w.a->getFriction() * w.b->getFriction());
+  m->addManifoldPoint(p, false);
 }
 
 void DviDynamicsWorld::collectContacts() {
@@ -285,35 +459,28 @@ void DviDynamicsWorld::collectContacts() {
   const std::vector<real>& g = system_->impulses();
   contacts_.clear();
   contacts_.reserve(c.count());
-  releaseManifolds();
-  std::map<std::pair<int, int>, btPersistentManifold*> by_pair;
+  for (auto& e : manifolds_) e.second->clearManifold();
   for (size_t k = 0; k < c.count(); ++k) {
     const int ia = c.body_a[k], ib = c.body_b[k];
     if (ia < 0 || ib < 0 || size_t(ia) >= tracked_.size() || size_t(ib) >= tracked_.size()) continue;
     WorldContact w;
-    w.a = tracked_[size_t(ia)].body;
-    w.b = tracked_[size_t(ib)].body;
+    w.a = tracked_[size_t(ia)].obj;
+    w.b = tracked_[size_t(ib)].obj;
     w.point_a = toBt(c.pa[k]);
     w.point_b = toBt(c.pb[k]);
     w.normal = toBt(c.normal[k]);
     w.distance = btScalar(c.dist[k]);
     w.normal_impulse = 3 * k < g.size() ? btScalar(g[3 * k]) : 0;
     contacts_.push_back(w);
-    if (!config_.fill_manifolds) continue;
-    btPersistentManifold*& m = by_pair[{ia, ib}];
-    if (!m) {
-      m = m_dispatcher1->getNewManifold(w.a, w.b);
-      manifolds_.push_back(m);
+    if (config_.fill_manifolds) fillManifold(w, ia, ib);
+  }
+  for (auto it = manifolds_.begin(); it != manifolds_.end();) {
+    if (it->second->getNumContacts() > 0) {
+      ++it;
+      continue;
     }
-    // Bullet's convention: the normal on B points from B toward A.
-    btManifoldPoint p(w.a->getWorldTransform().invXform(w.point_a), w.b->getWorldTransform().invXform(w.point_b),
-                      -w.normal, w.distance);
-    p.m_positionWorldOnA = w.point_a;
-    p.m_positionWorldOnB = w.point_b;
-    p.m_appliedImpulse = w.normal_impulse;
-    p.m_combinedFriction =
-        btScalar(tracked_[size_t(ia)].body->getFriction() * tracked_[size_t(ib)].body->getFriction());
-    m->addManifoldPoint(p, false);
+    m_dispatcher1->releaseManifold(it->second);
+    it = manifolds_.erase(it);
   }
 }
 
@@ -325,6 +492,7 @@ void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {
   system_->syncToHost();
   syncOut();
   updateAabbs();
+  if (ghosts_ > 0) computeOverlappingPairs();  // the ghost objects' overlapping pairs (Bullet's pair cache)
   collectContacts();
   updateActions(timeStep);
   ++substeps_;

@@ -5,23 +5,29 @@
 //   btDiscreteDynamicsWorld* world = new btDiscreteDynamicsWorld(dispatcher, broadphase, solver, config);
 //   btDiscreteDynamicsWorld* world = new dvi::DviDynamicsWorld(dispatcher, broadphase, solver, config);
 //
-// How it fits into Bullet (the seam is internalSingleStepSimulation, as STYLE.md notes): Bullet's own
-// stepSimulation still does the fixed sub-steps, maxSubSteps, the kinematic bodies' motion-state read
-// (saveKinematicState), the motion-state interpolation (synchronizeMotionStates) and clearForces. Each
-// sub-step here
+// How it fits into Bullet (the seam is internalSingleStepSimulation): Bullet's own stepSimulation still does the
+// fixed sub-steps, maxSubSteps, the kinematic bodies' motion-state read (saveKinematicState), the motion-state
+// interpolation (synchronizeMotionStates) and clearForces. Each sub-step here
 //   1. calls the internal pre-tick callback;
-//   2. brings the System up to date with Bullet: bodies added since (also inside tick callbacks), bodies
+//   2. brings the System up to date with Bullet: objects added since (also inside tick callbacks), objects
 //      removed (the System is rebuilt from Bullet's state), poses and velocities the app set (compared with
 //      what this world last wrote, so the System keeps its double-precision state otherwise), kinematic
 //      poses and velocities, applied forces and torques, per-body gravity, damping (Bullet's rule,
-//      v *= (1 - d)^h), friction, masses, 6-DoF spring forces;
-//   3. steps the System (contacts and joints in one CCP, joints.h);
+//      v *= (1 - d)^h), friction, masses, 6-DoF spring forces, linear and angular factors;
+//   3. steps the System (contacts, joints and factor rows in one CCP, joints.h);
 //   4. writes poses and velocities of the dynamic bodies back (setCenterOfMassTransform, so Bullet's
 //      interpolation of motion states works), updates the broad-phase AABBs (rayTest, convexSweepTest and
-//      contactTest see the new poses), fills the contact list and, optionally, Bullet's persistent manifolds;
+//      contactTest see the new poses), computes the overlapping pairs when ghost objects need them, fills the
+//      contact list and, optionally, Bullet's persistent manifolds;
 //   5. runs the actions (btActionInterface) and the internal tick callback.
+// Objects: rigid bodies (dynamic, static, kinematic), plain btCollisionObjects (static geometry: fixed bodies
+// of the System, moved when the app moves them) and ghost objects (not simulated; Bullet's pair cache keeps
+// their overlaps). Collision groups and masks are Bullet's 32-bit ones: the group bits in use are renumbered
+// onto the System's 16 (exact while at most 16 distinct group bits are in use; beyond that folded, and the
+// exact test is applied to each contact on the CPU backend).
 // Bullet's gravity force is not added to the bodies' total force (applyGravity is a no-op): the System
-// applies each body's gravity itself. Sleeping is not used: every body is simulated every sub-step.
+// applies each body's gravity itself. A body whose activation state is DISABLE_SIMULATION is held as a fixed
+// body. Sleeping is not used: every other body is simulated every sub-step.
 // docs/DROP_IN.md lists what works and what does not.
 #pragma once
 
@@ -38,6 +44,8 @@
 class btPersistentManifold;
 
 namespace dvi {
+
+class FactorRows;  // bullet_world.cpp: the rows of the bodies' linear and angular factors
 
 // Auto: the GPU when one is usable, else the CPU. Gpu and Auto need DviWorldConfig's GPU functions.
 enum class WorldBackend { Cpu, Gpu, Auto };
@@ -78,6 +86,11 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   // Constraints become DVI rows (bullet_joints.h); a type or feature we cannot represent is refused with an
   // InputError naming it (never ignored).
   void addConstraint(btTypedConstraint* constraint, bool disableCollisionsBetweenLinkedBodies = false) override;
+  // A plain btCollisionObject is static geometry (a fixed body); a ghost object only takes part in Bullet's pair
+  // cache; other object types (soft bodies, multibody links) are refused with an InputError.
+  void addCollisionObject(btCollisionObject* object, int group = btBroadphaseProxy::StaticFilter,
+                          int mask = btBroadphaseProxy::AllFilter ^ btBroadphaseProxy::StaticFilter) override;
+  void removeCollisionObject(btCollisionObject* object) override;
   void removeConstraint(btTypedConstraint* constraint) override;
   void applyGravity() override {}  // the System applies gravity (see above)
 
@@ -85,7 +98,8 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   const std::vector<WorldContact>& contacts() const { return contacts_; }  // last sub-step's contacts
   System& system() { return *system_; }
   const System& system() const { return *system_; }
-  int bodyIndex(const btRigidBody* body) const;  // System index, -1 if not (yet) in the System
+  int bodyIndex(const btRigidBody* body) const;         // System index, -1 if not (yet) in the System
+  int objectIndex(const btCollisionObject* obj) const;  // the same for any object (plain collision objects too)
   std::string backendName() const { return system_->backendName(); }
   int64_t subSteps() const { return substeps_; }
   // The solver's convergence over every sub-step so far (ConvergenceLog: steps that missed the tolerance,
@@ -101,31 +115,43 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
 
  private:
   struct Tracked {
-    btRigidBody* body;
-    btTransform tf;  // what this world last wrote (or read)
+    btCollisionObject* obj;  // null once removed (compacted at the next sub-step)
+    btRigidBody* body;       // null for a plain collision object
+    btTransform tf;          // what this world last wrote (or read)
     btVector3 v, w;
     const btCollisionShape* shape;
     int group, mask, kind;  // kind: 0 dynamic, kBodyFixed, kBodyKinematic
   };
   std::unique_ptr<System> makeSystem() const;
   void rebuild();
-  void addToSystem(btRigidBody* body);
+  void addToSystem(btCollisionObject* obj);
+  void forget(btCollisionObject* obj);
+  bool structureChanged() const;
   void syncIn(btScalar h);
+  void syncBody(size_t i, btScalar h, BodyArrays& B);
   void syncOut();
   void collectContacts();
+  void fillManifold(const WorldContact& w, int ia, int ib);
   void releaseManifolds();
   bool keepPair(int a, int b) const;
+  void noteFilter(int group, int mask);
+  int16_t mapFilter(int bits) const;
 
   DviWorldConfig config_;
   std::unique_ptr<System> system_;
   std::shared_ptr<BulletJoints> joints_;
-  std::unordered_map<const btRigidBody*, int> index_;
-  std::vector<Tracked> tracked_;       // in System order
-  std::vector<btRigidBody*> pending_;  // added since the last sub-step
+  std::shared_ptr<FactorRows> factors_;
+  std::unordered_map<const btRigidBody*, int> index_;               // rigid bodies (the joints read it)
+  std::unordered_map<const btCollisionObject*, int> object_index_;  // every simulated object
+  std::vector<Tracked> tracked_;                                    // in System order
+  std::vector<btCollisionObject*> pending_;                         // added since the last sub-step
   bool rebuild_ = false;
   bool has_exclusions_ = false;  // some constraint disables collisions between its bodies
+  int ghosts_ = 0;               // ghost objects in the world: Bullet's pair cache is computed each sub-step
+  std::vector<int> group_bits_;  // Bullet group bit positions in use, in order of appearance (their System bit)
+  bool folded_filters_ = false;  // more than 16 group bits in use: folded, exact test per contact (CPU)
   std::vector<WorldContact> contacts_;
-  std::vector<btPersistentManifold*> manifolds_;
+  std::unordered_map<uint64_t, btPersistentManifold*> manifolds_;  // by (a, b) System indices, kept across steps
   int64_t substeps_ = 0;
   ConvergenceLog convergence_;  // kept across rebuilds of the System
   double sim_time_ = 0;

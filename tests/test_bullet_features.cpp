@@ -1,0 +1,269 @@
+// Bullet features that Bullet apps rely on, each run the same way on stock btDiscreteDynamicsWorld and on the drop-in
+// world (bullet_world.h), compared side by side: plain collision objects, ghost objects, 32-bit collision filters,
+// linear and angular factors, DISABLE_SIMULATION; and the thread governor (base/thread_governor.h).
+#include <BulletCollision/CollisionDispatch/btGhostObject.h>
+#include <btBulletDynamicsCommon.h>
+
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "bullet_test_world.h"
+#include "chrono_like/base/thread_governor.h"
+
+using namespace dvi;
+
+namespace {
+
+constexpr btScalar kSub = btScalar(1) / 240;
+
+void step(TestWorld& w, int frames) {
+  for (int i = 0; i < frames; ++i) w.world->stepSimulation(btScalar(1) / 60, 10, kSub);
+}
+
+// A static box (top face at y = 0) as a plain btCollisionObject, the way character and level code adds geometry.
+struct PlainGround {
+  btBoxShape shape{btVector3(20, 1, 20)};
+  btCollisionObject obj;
+  PlainGround(btCollisionWorld& w, int group = btBroadphaseProxy::StaticFilter,
+              int mask = btBroadphaseProxy::AllFilter ^ btBroadphaseProxy::StaticFilter) {
+    obj.setCollisionShape(&shape);
+    obj.setWorldTransform(btTransform(btQuaternion::getIdentity(), btVector3(0, -1, 0)));
+    obj.setFriction(btScalar(0.8));
+    w.addCollisionObject(&obj, group, mask);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("drop-in world: a plain btCollisionObject is static geometry, as in Bullet", "[world][features]") {
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    PlainGround g(*w.world);
+    btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.25))), 1, btVector3(0, 2, 0));
+    btRigidBody* box = w.make(w.own(new btBoxShape(btVector3(0.3, 0.3, 0.3))), 1, btVector3(2, 1, 0));
+    step(w, 120);
+    std::vector<btScalar> out = {ball->getCenterOfMassPosition().y(), box->getCenterOfMassPosition().y()};
+    // Moved by the app (a plain object has no velocity): the ball follows the ground 0.5 m down.
+    g.obj.setWorldTransform(btTransform(btQuaternion::getIdentity(), btVector3(0, -1.5, 0)));
+    step(w, 90);
+    out.push_back(ball->getCenterOfMassPosition().y());
+    w.world->removeCollisionObject(&g.obj);
+    step(w, 30);  // and falls once it is gone
+    out.push_back(ball->getCenterOfMassPosition().y());
+    return out;
+  };
+  const auto bullet = run(false), ours = run(true);
+  INFO("Bullet " << bullet[0] << " " << bullet[1] << " " << bullet[2] << " " << bullet[3] << ", ours " << ours[0]
+                 << " " << ours[1] << " " << ours[2] << " " << ours[3]);
+  CHECK(ours[0] == Approx(0.25).margin(2e-3));  // resting on the plain ground, not through it
+  CHECK(ours[1] == Approx(0.3).margin(2e-3));
+  CHECK(ours[2] == Approx(-0.25).margin(5e-3));
+  for (int k = 0; k < 3; ++k) CHECK(std::fabs(ours[size_t(k)] - bullet[size_t(k)]) < 0.01);
+  CHECK(bullet[3] < -0.5);
+  CHECK(ours[3] < -0.5);
+}
+
+TEST_CASE("drop-in world: a ghost object's overlapping pairs begin and end as in Bullet", "[world][features]") {
+  // A trigger volume (btPairCachingGhostObject, no contact response) 1 m below a falling ball: the ghost lists the
+  // ball while their boxes overlap, and not before or after.
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    btGhostPairCallback callback;
+    w.broadphase.getOverlappingPairCache()->setInternalGhostPairCallback(&callback);
+    btBoxShape vol(btVector3(1, 0.5, 1));
+    btPairCachingGhostObject ghost;
+    ghost.setCollisionShape(&vol);
+    ghost.setCollisionFlags(ghost.getCollisionFlags() | btCollisionObject::CF_NO_CONTACT_RESPONSE);
+    ghost.setWorldTransform(btTransform(btQuaternion::getIdentity(), btVector3(0, 5, 0)));
+    w.world->addCollisionObject(&ghost, btBroadphaseProxy::SensorTrigger,
+                                btBroadphaseProxy::AllFilter ^ btBroadphaseProxy::SensorTrigger);
+    btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 7, 0));
+    std::vector<int> overlap;
+    for (int i = 0; i < 60; ++i) {
+      w.world->stepSimulation(btScalar(1) / 60, 10, kSub);
+      overlap.push_back(ghost.getNumOverlappingObjects());
+    }
+    (void)ball;
+    w.world->removeCollisionObject(&ghost);
+    return overlap;
+  };
+  const auto bullet = run(false), ours = run(true);
+  auto first = [](const std::vector<int>& v) {
+    for (size_t i = 0; i < v.size(); ++i)
+      if (v[i] > 0) return int(i);
+    return -1;
+  };
+  auto last = [](const std::vector<int>& v) {
+    for (size_t i = v.size(); i-- > 0;)
+      if (v[i] > 0) return int(i);
+    return -1;
+  };
+  INFO("Bullet frames " << first(bullet) << ".." << last(bullet) << ", ours " << first(ours) << ".." << last(ours));
+  REQUIRE(first(bullet) > 0);
+  REQUIRE(last(bullet) < 59);  // the ball left the volume before the end
+  CHECK(first(ours) == first(bullet));
+  CHECK(std::abs(last(ours) - last(bullet)) <= 2);  // Bullet drops stale pairs a fraction per call (m_cupdates)
+  CHECK(ours.back() == 0);
+}
+
+TEST_CASE("drop-in world: collision groups and masks as Bullet, all 32 bits", "[world][features]") {
+  // A ball over a ground for each (group, mask) of the ball; Bullet's rule: (gA & mB) && (gB & mA). Groups 0 and
+  // 1 << 20 and the sign bit included; the ground is group 1 << 20 | 2, mask -1.
+  const int ground_group = (1 << 20) | 2;
+  const std::vector<std::pair<int, int>> cases = {
+      {1, -1}, {0, -1}, {1, 0}, {1 << 20, -1}, {1 << 20, 1 << 20}, {1 << 31, -1}, {4, 2}, {4, 1 << 20}, {8, 16}};
+  for (const auto& [group, mask] : cases) {
+    auto run = [&, group = group, mask = mask](bool dvi) {
+      TestWorld w(dvi);
+      btRigidBody* g = w.make(w.own(new btBoxShape(btVector3(20, 1, 20))), 0, btVector3(0, -1, 0), false);
+      w.world->addRigidBody(g, ground_group, -1);
+      w.bodies.push_back(g);
+      btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 0.3, 0), false);
+      w.world->addRigidBody(ball, group, mask);
+      w.bodies.push_back(ball);
+      step(w, 30);
+      return ball->getCenterOfMassPosition().y();
+    };
+    const btScalar bullet = run(false), ours = run(true);
+    const bool bullet_rests = bullet > 0, ours_rests = ours > 0;
+    INFO("group " << group << " mask " << mask << ": Bullet y " << bullet << ", ours " << ours);
+    CHECK(ours_rests == bullet_rests);
+  }
+}
+
+TEST_CASE("drop-in world: more than 16 group bits in use keep Bullet's pairs", "[world][features]") {
+  // 24 balls, ball k in group 1 << k with a mask of its own bit and the ground's (bit 30) for even k only: the even
+  // ones rest, the odd ones fall through, as in Bullet; a falling pair of balls in groups 1 << 3 and 1 << 19 (bit 3
+  // and bit 19 fold together) must not touch.
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    btRigidBody* g = w.make(w.own(new btBoxShape(btVector3(40, 1, 40))), 0, btVector3(0, -1, 0), false);
+    w.world->addRigidBody(g, 1 << 30, -1);
+    w.bodies.push_back(g);
+    btCollisionShape* s = w.own(new btSphereShape(btScalar(0.2)));
+    std::vector<btRigidBody*> balls;
+    for (int k = 0; k < 24; ++k) {
+      btRigidBody* b = w.make(s, 1, btVector3(btScalar(k), 0.3, 0), false);
+      w.world->addRigidBody(b, 1 << k, (1 << k) | (k % 2 == 0 ? 1 << 30 : 0));
+      w.bodies.push_back(b);
+      balls.push_back(b);
+    }
+    btRigidBody* top = w.make(s, 1, btVector3(30, 1.0, 0), false);  // dropped onto a ball of group 1 << 19
+    w.world->addRigidBody(top, 1 << 3, -1);
+    w.bodies.push_back(top);
+    btRigidBody* under = w.make(s, 1, btVector3(30, 0.5, 0), false);
+    w.world->addRigidBody(under, 1 << 19, (1 << 19) | (1 << 30));
+    w.bodies.push_back(under);
+    step(w, 30);
+    std::vector<btScalar> y;
+    for (btRigidBody* b : balls) y.push_back(b->getCenterOfMassPosition().y());
+    y.push_back(under->getCenterOfMassPosition().y());
+    y.push_back(top->getCenterOfMassPosition().y());
+    return y;
+  };
+  const auto bullet = run(false), ours = run(true);
+  for (size_t k = 0; k < bullet.size(); ++k) {
+    INFO("body " << k << ": Bullet y " << bullet[k] << ", ours " << ours[k]);
+    CHECK((ours[k] > 0.1) == (bullet[k] > 0.1));
+  }
+  // The top ball fell through the other one (no filter bit in common) and rests on the ground inside it.
+  CHECK(ours[ours.size() - 2] == Approx(0.2).margin(0.01));
+  CHECK(ours.back() == Approx(0.2).margin(0.01));
+}
+
+TEST_CASE("drop-in world: linear and angular factors hold axes as Bullet does", "[world][features]") {
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    w.ground();
+    btCollisionShape* box = w.own(new btBoxShape(btVector3(0.25, 0.25, 0.25)));
+    btRigidBody* held = w.make(box, 1, btVector3(0, 3, 0));  // linear factor 0: Bullet holds it in place
+    held->setLinearFactor(btVector3(0, 0, 0));
+    btRigidBody* planar = w.make(box, 1, btVector3(3, 3, 0));  // moves in x only, keeps its y velocity (0)
+    planar->setLinearFactor(btVector3(1, 0, 0));
+    planar->setLinearVelocity(btVector3(1, 0, 0));
+    btRigidBody* spin = w.make(box, 1, btVector3(6, 0.25, 0));  // turns about y only
+    spin->setAngularFactor(btVector3(0, 1, 0));
+    spin->applyTorqueImpulse(btVector3(0.2, 0.2, 0.2));
+    btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 4, 0));  // lands on `held`
+    step(w, 60);
+    const btVector3 w_spin = spin->getAngularVelocity();
+    return std::vector<btScalar>{held->getCenterOfMassPosition().y(),  planar->getCenterOfMassPosition().x(),
+                                 planar->getCenterOfMassPosition().y(), w_spin.x(),
+                                 w_spin.z(),                            ball->getCenterOfMassPosition().y()};
+  };
+  const auto bullet = run(false), ours = run(true);
+  for (size_t k = 0; k < bullet.size(); ++k) {
+    INFO("value " << k << ": Bullet " << bullet[k] << ", ours " << ours[k]);
+    CHECK(std::fabs(ours[k] - bullet[k]) < 0.01);
+  }
+  // The locked components are rows of the CCP, held to the solver's tolerance: 0.1 mm in 1 s.
+  CHECK(ours[0] == Approx(3).margin(1e-4));  // held in place
+  CHECK(ours[1] == Approx(4).margin(1e-3));  // 1 m/s along x for 1 s
+  CHECK(ours[2] == Approx(3).margin(1e-4));  // no fall
+  CHECK(ours[5] == Approx(3.45).margin(5e-3));  // resting on the held box (top at 3.25)
+}
+
+TEST_CASE("drop-in world: a factor other than 0 or 1 is refused with the body named", "[world][features]") {
+  TestWorld w(true);
+  btRigidBody* b = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 1, 0));
+  b->setLinearFactor(btVector3(1, 0.5, 1));
+  CHECK_THROWS_WITH(step(w, 1), Catch::Contains("linear factor 0.5") && Catch::Contains("body 0"));
+}
+
+TEST_CASE("drop-in world: DISABLE_SIMULATION holds a body as Bullet does", "[world][features]") {
+  // Bullet neither moves nor accelerates a body in DISABLE_SIMULATION; set ACTIVE_TAG again, it falls. (Bullet also
+  // lets an active body that hits it push it; the drop-in world holds it fixed: docs/DROP_IN.md.)
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    w.ground();
+    btRigidBody* box = w.make(w.own(new btBoxShape(btVector3(0.5, 0.25, 0.5))), 1, btVector3(0, 2, 0));
+    box->forceActivationState(DISABLE_SIMULATION);
+    step(w, 60);
+    std::vector<btScalar> out = {box->getCenterOfMassPosition().y(), box->getLinearVelocity().y()};
+    box->forceActivationState(ACTIVE_TAG);
+    step(w, 90);
+    out.push_back(box->getCenterOfMassPosition().y());
+    return out;
+  };
+  const auto bullet = run(false), ours = run(true);
+  for (size_t k = 0; k < bullet.size(); ++k) {
+    INFO("value " << k << ": Bullet " << bullet[k] << ", ours " << ours[k]);
+    CHECK(std::fabs(ours[k] - bullet[k]) < 0.01);
+  }
+  CHECK(ours[0] == Approx(2).margin(1e-6));
+  CHECK(ours[1] == Approx(0).margin(1e-6));
+  CHECK(ours[2] == Approx(0.25).margin(5e-3));
+}
+
+TEST_CASE("thread governor: one thread under load, the full team when it is faster", "[threads]") {
+  // Synthetic step times: the full team takes `full_s`, one thread `one_s`.
+  auto simulate = [](double full_s, double one_s, int steps) {
+    ThreadGovernor g;
+    int used = 0;
+    for (int i = 0; i < steps; ++i) {
+      used = g.choose(8);
+      g.record(used, used > 1 ? full_s : one_s);
+    }
+    return std::pair<int, int64_t>(used, g.switches());
+  };
+  CHECK(simulate(0.010, 0.030, 2000).first == 8);    // an idle machine: the team stays
+  CHECK(simulate(0.010, 0.030, 2000).second == 0);   // and never switches
+  CHECK(simulate(1.0, 0.050, 40).first == 1);        // cores taken (barriers wait seconds): one thread
+  CHECK(simulate(0.5, 0.5, 2000).second == 0);       // equal: no switching back and forth
+  ThreadGovernor g;  // load arrives and goes
+  auto run = [&](double full_s, double one_s, int n) {
+    int used = 0;
+    for (int i = 0; i < n; ++i) {
+      used = g.choose(8);
+      g.record(used, used > 1 ? full_s : one_s);
+    }
+    return used;
+  };
+  CHECK(run(0.010, 0.030, 100) == 8);
+  CHECK(run(0.500, 0.040, 30) == 1);   // a step 50x slower than the average probes at once
+  CHECK(run(0.010, 0.030, 600) == 8);  // the next probe of the full team finds it faster again
+  CHECK(g.choose(1) == 1);             // a team of one is one thread
+}
