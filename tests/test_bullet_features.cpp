@@ -56,8 +56,8 @@ TEST_CASE("drop-in world: a plain btCollisionObject is static geometry, as in Bu
     return out;
   };
   const auto bullet = run(false), ours = run(true);
-  INFO("Bullet " << bullet[0] << " " << bullet[1] << " " << bullet[2] << " " << bullet[3] << ", ours " << ours[0]
-                 << " " << ours[1] << " " << ours[2] << " " << ours[3]);
+  INFO("Bullet " << bullet[0] << " " << bullet[1] << " " << bullet[2] << " " << bullet[3] << ", ours " << ours[0] << " "
+                 << ours[1] << " " << ours[2] << " " << ours[3]);
   CHECK(ours[0] == Approx(0.25).margin(2e-3));  // resting on the plain ground, not through it
   CHECK(ours[1] == Approx(0.3).margin(2e-3));
   CHECK(ours[2] == Approx(-0.25).margin(5e-3));
@@ -190,9 +190,12 @@ TEST_CASE("drop-in world: linear and angular factors hold axes as Bullet does", 
     btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 4, 0));  // lands on `held`
     step(w, 60);
     const btVector3 w_spin = spin->getAngularVelocity();
-    return std::vector<btScalar>{held->getCenterOfMassPosition().y(),  planar->getCenterOfMassPosition().x(),
-                                 planar->getCenterOfMassPosition().y(), w_spin.x(),
-                                 w_spin.z(),                            ball->getCenterOfMassPosition().y()};
+    return std::vector<btScalar>{held->getCenterOfMassPosition().y(),
+                                 planar->getCenterOfMassPosition().x(),
+                                 planar->getCenterOfMassPosition().y(),
+                                 w_spin.x(),
+                                 w_spin.z(),
+                                 ball->getCenterOfMassPosition().y()};
   };
   const auto bullet = run(false), ours = run(true);
   for (size_t k = 0; k < bullet.size(); ++k) {
@@ -200,9 +203,9 @@ TEST_CASE("drop-in world: linear and angular factors hold axes as Bullet does", 
     CHECK(std::fabs(ours[k] - bullet[k]) < 0.01);
   }
   // The locked components are rows of the CCP, held to the solver's tolerance: 0.1 mm in 1 s.
-  CHECK(ours[0] == Approx(3).margin(1e-4));  // held in place
-  CHECK(ours[1] == Approx(4).margin(1e-3));  // 1 m/s along x for 1 s
-  CHECK(ours[2] == Approx(3).margin(1e-4));  // no fall
+  CHECK(ours[0] == Approx(3).margin(1e-4));     // held in place
+  CHECK(ours[1] == Approx(4).margin(1e-3));     // 1 m/s along x for 1 s
+  CHECK(ours[2] == Approx(3).margin(1e-4));     // no fall
   CHECK(ours[5] == Approx(3.45).margin(5e-3));  // resting on the held box (top at 3.25)
 }
 
@@ -249,11 +252,11 @@ TEST_CASE("thread governor: one thread under load, the full team when it is fast
     }
     return std::pair<int, int64_t>(used, g.switches());
   };
-  CHECK(simulate(0.010, 0.030, 2000).first == 8);    // an idle machine: the team stays
-  CHECK(simulate(0.010, 0.030, 2000).second == 0);   // and never switches
-  CHECK(simulate(1.0, 0.050, 40).first == 1);        // cores taken (barriers wait seconds): one thread
-  CHECK(simulate(0.5, 0.5, 2000).second == 0);       // equal: no switching back and forth
-  ThreadGovernor g;  // load arrives and goes
+  CHECK(simulate(0.010, 0.030, 2000).first == 8);   // an idle machine: the team stays
+  CHECK(simulate(0.010, 0.030, 2000).second == 0);  // and never switches
+  CHECK(simulate(1.0, 0.050, 40).first == 1);       // cores taken (barriers wait seconds): one thread
+  CHECK(simulate(0.5, 0.5, 2000).second == 0);      // equal: no switching back and forth
+  ThreadGovernor g;                                 // load arrives and goes
   auto run = [&](double full_s, double one_s, int n) {
     int used = 0;
     for (int i = 0; i < n; ++i) {

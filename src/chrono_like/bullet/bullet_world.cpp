@@ -371,7 +371,17 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   for (btCollisionObject* o : pending_) addToSystem(o);
   pending_.clear();
 
-  system_->mutableConfig().step.dt = real(h);
+  SystemConfig& cfg = system_->mutableConfig();
+  cfg.step.dt = real(h);
+  if (config_.effort == SolverEffort::BulletIterations) {
+    const btContactSolverInfo& info = getSolverInfo();
+    cfg.solver.type = SolverType::GaussSeidel;
+    cfg.solver.max_iterations = std::max(1, info.m_numIterations);
+    cfg.solver.min_iterations = 0;
+    cfg.solver.tolerance = 0;  // a fixed count, judged against the default tolerance in the stats
+    cfg.solver.gs_omega = real(info.m_sor);
+    cfg.solver.warm_start = info.m_warmstartingFactor > 0;
+  }
   BodyArrays& B = system_->mutableBodies();
   factors_->locks.clear();
   for (size_t i = 0; i < tracked_.size(); ++i) syncBody(i, h, B);

@@ -50,8 +50,21 @@ class FactorRows;  // bullet_world.cpp: the rows of the bodies' linear and angul
 // Auto: the GPU when one is usable, else the CPU. Gpu and Auto need DviWorldConfig's GPU functions.
 enum class WorldBackend { Cpu, Gpu, Auto };
 
+// How much work each sub-step's solve does (docs/DROP_IN.md, "Solver effort", measures both on Bullet's scenes).
+enum class SolverEffort {
+  // SystemConfig::solver as given (default: APGD to the relative tolerance, at least 50 iterations): every step
+  // converged; Bullet's iteration count is not used.
+  Converged,
+  // Bullet's effort, read from the world's btContactSolverInfo (getSolverInfo()) each sub-step: projected
+  // Gauss-Seidel (the method of Bullet's sequential impulses, on our cone-complementarity problem) for
+  // m_numIterations sweeps, relaxation m_sor, warm start while m_warmstartingFactor > 0. No convergence test: as
+  // fast as Bullet and as converged as Bullet.
+  BulletIterations,
+};
+
 struct DviWorldConfig {
   WorldBackend backend = WorldBackend::Cpu;
+  SolverEffort effort = SolverEffort::Converged;
   SystemConfig system;  // solver, threads, collision...; step.dt and step.gravity come from Bullet
   JointSettings joints;
   bool fill_manifolds = true;  // mirror the contacts into Bullet's persistent manifolds (dispatcher)
