@@ -241,6 +241,35 @@ TEST_CASE("drop-in world: DISABLE_SIMULATION holds a body as Bullet does", "[wor
   CHECK(ours[2] == Approx(0.25).margin(5e-3));
 }
 
+TEST_CASE("drop-in world: convex hulls keep Bullet's collision margin", "[world][features]") {
+  // A cube hull (half 0.5) and a triangular prism hull rest on the ground one margin above their points, as in
+  // Bullet (default margin 0.04; and with margin 0).
+  for (const btScalar margin : {btScalar(0.04), btScalar(0.1), btScalar(0)}) {
+    auto run = [margin](bool dvi) {
+      TestWorld w(dvi);
+      w.ground();
+      auto* cube = new btConvexHullShape();
+      for (int i = 0; i < 8; ++i) cube->addPoint(btVector3(i & 1 ? 0.5 : -0.5, i & 2 ? 0.5 : -0.5, i & 4 ? 0.5 : -0.5));
+      auto* prism = new btConvexHullShape();
+      for (int z = -1; z <= 1; z += 2)
+        for (const btVector3& p : {btVector3(-0.4, -0.3, 0), btVector3(0.4, -0.3, 0), btVector3(0, 0.4, 0)})
+          prism->addPoint(p + btVector3(0, 0, btScalar(0.3 * z)));
+      cube->setMargin(margin);
+      prism->setMargin(margin);
+      btRigidBody* a = w.make(w.own(cube), 1, btVector3(0, 1, 0));
+      btRigidBody* b = w.make(w.own(prism), 1, btVector3(2, 1, 0));
+      step(w, 90);
+      return std::vector<btScalar>{a->getCenterOfMassPosition().y(), b->getCenterOfMassPosition().y()};
+    };
+    const auto bullet = run(false), ours = run(true);
+    INFO("margin " << margin << ": Bullet " << bullet[0] << " " << bullet[1] << ", ours " << ours[0] << " " << ours[1]);
+    CHECK(ours[0] == Approx(0.5 + margin).margin(3e-3));
+    CHECK(std::fabs(ours[0] - bullet[0]) < 5e-3);
+    // The prism's centre of mass is its centroid (Bullet takes the points' local frame as the body frame).
+    CHECK(std::fabs(ours[1] - bullet[1]) < 5e-3);
+  }
+}
+
 TEST_CASE("thread governor: one thread under load, the full team when it is faster", "[threads]") {
   // Synthetic step times: the full team takes `full_s`, one thread `one_s`.
   auto simulate = [](double full_s, double one_s, int steps) {

@@ -446,13 +446,21 @@ TEST_CASE("Bullet import: X/Y/Z variants are rotated onto Bullet's axes (support
     for (Vec3 d : probeDirections())
       CHECK(supportValue(out[0], d) == Approx(bulletSupport(*c.s, d, c.margin)).margin(1e-5));
   }
-  // A convex hull with local scaling.
+  // A convex hull with local scaling: without a margin its points; with Bullet's margin (0.04) the points grown by
+  // it, inside Bullet's rounded shape and outside the bare points (faces exact: the drop-in's hull test).
   const btScalar pts[] = {0.1f, 0.1f, 0.1f, -0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, -0.3f};
   btConvexHullShape hull(pts, 4, 3 * sizeof(btScalar));
   hull.setLocalScaling(btVector3(1, 2, 0.5f));
   std::vector<ShapeDesc> out;
   appendShapesFromBullet(hull, id, out);
   REQUIRE(out.size() == 1);
+  for (Vec3 d : probeDirections()) {
+    CHECK(supportValue(out[0], d) <= bulletSupport(hull, d, true) + 1e-5);
+    CHECK(supportValue(out[0], d) > bulletSupport(hull, d, false) + 0.2 * hull.getMargin());
+  }
+  hull.setMargin(0);
+  out.clear();
+  appendShapesFromBullet(hull, id, out);
   for (Vec3 d : probeDirections()) CHECK(supportValue(out[0], d) == Approx(bulletSupport(hull, d, false)).margin(1e-5));
 }
 

@@ -12,6 +12,7 @@
 #include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
+#include <LinearMath/btConvexHullComputer.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
 
 #include <cmath>
@@ -36,6 +37,50 @@ Pose withUpAxis(const Pose& local, int up) { return Pose{local.p, local.q * upAx
 bool uniform(const btVector3& s) {
   const btScalar m = std::fabs(s.x());
   return std::fabs(std::fabs(s.y()) - m) <= 1e-6f * m && std::fabs(std::fabs(s.z()) - m) <= 1e-6f * m;
+}
+
+}  // namespace
+
+namespace {
+
+// A btConvexHullShape collides as its points grown by the collision margin (Bullet's GJK adds the margin along the
+// search direction: the hull swept by a sphere of radius margin, 0.04 by default). The System's hull gets each
+// vertex moved out by the margin along the normal of every face it belongs to: every face sits exactly one margin
+// further out, as in Bullet; at edges and corners the rounding becomes a flat chamfer, inside Bullet's shape by at
+// most margin (1 - cos(theta / 2)) for a dihedral turn theta (Bullet: btConvexHullShape, btConvexInternalShape::
+// localGetSupportingVertex). Faces come from Bullet's own btConvexHullComputer.
+std::vector<Vec3> hullWithMargin(const btConvexHullShape& s) {
+  std::vector<Vec3> pts;
+  pts.reserve(size_t(s.getNumPoints()));
+  for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
+  const btScalar m = s.getMargin();
+  if (!(m > 0) || pts.size() < 4) return pts;
+  std::vector<btVector3> in;
+  for (int i = 0; i < s.getNumPoints(); ++i) in.push_back(s.getScaledPoint(i));
+  btConvexHullComputer hc;
+  hc.compute(&in[0].getX(), int(sizeof(btVector3)), int(in.size()), 0, 0);
+  if (hc.faces.size() < 4) return pts;  // flat or degenerate: no volume to grow
+  std::vector<Vec3> grown;
+  for (int f = 0; f < hc.faces.size(); ++f) {
+    const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
+    std::vector<btVector3> poly;
+    const btConvexHullComputer::Edge* e = first;
+    do {
+      poly.push_back(hc.vertices[e->getTargetVertex()]);
+      e = e->getNextEdgeOfFace();
+    } while (e != first && poly.size() < 1024);
+    btVector3 n(0, 0, 0);  // Newell's normal: robust for any planar polygon, outward for counter-clockwise order
+    for (size_t i = 0; i < poly.size(); ++i) {
+      const btVector3& a = poly[i];
+      const btVector3& b = poly[(i + 1) % poly.size()];
+      n += btVector3((a.y() - b.y()) * (a.z() + b.z()), (a.z() - b.z()) * (a.x() + b.x()),
+                     (a.x() - b.x()) * (a.y() + b.y()));
+    }
+    if (!(n.length2() > 0)) continue;
+    n.normalize();
+    for (const btVector3& v : poly) grown.push_back(fromBt(v + n * m));
+  }
+  return grown.size() >= 4 ? grown : pts;
 }
 
 }  // namespace
@@ -74,10 +119,7 @@ void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, st
     }
     case CONVEX_HULL_SHAPE_PROXYTYPE: {
       const auto& s = static_cast<const btConvexHullShape&>(shape);
-      std::vector<Vec3> pts;
-      pts.reserve(size_t(s.getNumPoints()));
-      for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
-      out.push_back(makeConvexHull(std::move(pts), local));
+      out.push_back(makeConvexHull(hullWithMargin(s), local));
       return;
     }
     case MULTI_SPHERE_SHAPE_PROXYTYPE: {
