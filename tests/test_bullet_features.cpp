@@ -270,6 +270,49 @@ TEST_CASE("drop-in world: convex hulls keep Bullet's collision margin", "[world]
   }
 }
 
+TEST_CASE("drop-in world: bodies fall asleep and wake up as in Bullet", "[world][features]") {
+  // A box settles on the ground and sleeps after Bullet's deactivation time (2 s below its thresholds); a ball
+  // dropped on it later wakes it; a body with DISABLE_DEACTIVATION never sleeps.
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    w.ground();
+    btRigidBody* box = w.make(w.own(new btBoxShape(btVector3(0.5, 0.25, 0.5))), 1, btVector3(0, 0.3, 0));
+    box->forceActivationState(ACTIVE_TAG);
+    btRigidBody* awake = w.make(w.own(new btBoxShape(btVector3(0.5, 0.25, 0.5))), 1, btVector3(3, 0.3, 0));
+    std::vector<double> out;
+    int asleep_frame = -1;
+    for (int f = 0; f < 240; ++f) {
+      w.world->stepSimulation(btScalar(1) / 60, 10, kSub);
+      if (asleep_frame < 0 && box->getActivationState() == ISLAND_SLEEPING) asleep_frame = f;
+    }
+    out.push_back(asleep_frame);
+    out.push_back(awake->getActivationState());
+    out.push_back(box->getCenterOfMassPosition().y());
+    btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 1.5, 0));
+    ball->forceActivationState(ACTIVE_TAG);
+    int woke_frame = -1;
+    for (int f = 0; f < 60; ++f) {
+      w.world->stepSimulation(btScalar(1) / 60, 10, kSub);
+      if (woke_frame < 0 && box->getActivationState() != ISLAND_SLEEPING) woke_frame = f;
+    }
+    out.push_back(woke_frame);
+    out.push_back(ball->getCenterOfMassPosition().y());
+    return out;
+  };
+  const auto bullet = run(false), ours = run(true);
+  INFO("asleep at frame: Bullet " << bullet[0] << ", ours " << ours[0] << "; woken at frame: Bullet " << bullet[3]
+                                  << ", ours " << ours[3] << "; ball y: Bullet " << bullet[4] << ", ours " << ours[4]);
+  REQUIRE(bullet[0] > 0);
+  CHECK(ours[0] > 0);
+  CHECK(std::fabs(ours[0] - bullet[0]) <= 12);  // within 0.2 s of Bullet (the settling differs)
+  CHECK(ours[1] == DISABLE_DEACTIVATION);
+  CHECK(ours[2] == Approx(0.25).margin(2e-3));
+  REQUIRE(bullet[3] >= 0);
+  CHECK(ours[3] >= 0);
+  CHECK(std::fabs(ours[3] - bullet[3]) <= 2);
+  CHECK(ours[4] == Approx(0.7).margin(5e-3));  // the ball rests on the woken box (top at 0.5)
+}
+
 TEST_CASE("thread governor: one thread under load, the full team when it is faster", "[threads]") {
   // Synthetic step times: the full team takes `full_s`, one thread `one_s`.
   auto simulate = [](double full_s, double one_s, int steps) {

@@ -404,6 +404,12 @@ void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
   if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());
   if (kinematic || !(b.getAngularVelocity() == t.w)) B.omega[i] = fromBt(b.getAngularVelocity());
   if (kinematic) return;
+  if (b.getActivationState() == ISLAND_SLEEPING) {  // held still until its island wakes (updateSleeping)
+    B.vel[i] = B.omega[i] = B.gravity[i] = B.force[i] = B.torque[i] = Vec3{0, 0, 0};
+    B.inv_mass[i] = 0;
+    B.inv_inertia[i] = Vec3{0, 0, 0};
+    return;
+  }
   B.inv_mass[i] = real(b.getInvMass());
   B.inv_inertia[i] = fromBt(b.getInvInertiaDiagLocal());
   B.gravity[i] = fromBt(b.getGravity());
@@ -442,6 +448,58 @@ void DviDynamicsWorld::syncOut() {
     t.tf = b->getCenterOfMassTransform();
     t.v = b->getLinearVelocity();
     t.w = b->getAngularVelocity();
+  }
+}
+
+// Bullet's deactivation (btDiscreteDynamicsWorld::updateActivationState and btSimulationIslandManager): each
+// dynamic body counts the time its speeds stay below its sleeping thresholds; an island (bodies joined by this
+// sub-step's contacts and by enabled constraints; static, kinematic and no-response objects join none) whose bodies
+// all want to sleep falls asleep (velocities zeroed), any other island is awake.
+void DviDynamicsWorld::updateSleeping(btScalar h) {
+  const size_t n = tracked_.size();
+  std::vector<int> root(n);
+  for (size_t i = 0; i < n; ++i) root[i] = int(i);
+  auto find = [&](int i) {
+    while (root[size_t(i)] != i) i = root[size_t(i)] = root[size_t(root[size_t(i)])];
+    return i;
+  };
+  auto merges = [&](int i) { return i >= 0 && tracked_[size_t(i)].kind == 0 && tracked_[size_t(i)].obj->mergesSimulationIslands(); };
+  auto unite = [&](int a, int b) {
+    if (merges(a) && merges(b)) root[size_t(find(a))] = find(b);
+  };
+  const ContactArrays& c = system_->contacts();
+  for (size_t k = 0; k < c.count(); ++k) unite(c.body_a[k], c.body_b[k]);
+  for (btTypedConstraint* j : joints_->constraints())
+    if (j->isEnabled()) unite(bodyIndex(&j->getRigidBodyA()), bodyIndex(&j->getRigidBodyB()));
+  for (size_t i = 0; i < n; ++i) {  // per body, as updateActivationState
+    if (tracked_[i].kind != 0) continue;
+    btRigidBody* b = tracked_[i].body;
+    b->updateDeactivation(h);
+    if (!b->wantsSleeping())
+      b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
+    else if (b->getActivationState() == ACTIVE_TAG)
+      b->setActivationState(WANTS_DEACTIVATION);
+  }
+  std::vector<char> awake(n, 0);  // per island root: some body is not ready to sleep
+  for (size_t i = 0; i < n; ++i) {
+    if (tracked_[i].kind != 0) continue;
+    const int state = tracked_[i].body->getActivationState();
+    if (state != ISLAND_SLEEPING && state != WANTS_DEACTIVATION) awake[size_t(find(int(i)))] = 1;
+  }
+  for (size_t i = 0; i < n; ++i) {  // per island, as btSimulationIslandManager
+    if (tracked_[i].kind != 0) continue;
+    btRigidBody* b = tracked_[i].body;
+    if (awake[size_t(find(int(i)))]) {
+      if (b->getActivationState() == ISLAND_SLEEPING) {
+        b->setActivationState(WANTS_DEACTIVATION);
+        b->setDeactivationTime(0);
+      }
+    } else if (b->getActivationState() != ISLAND_SLEEPING) {
+      b->setActivationState(ISLAND_SLEEPING);
+      b->setLinearVelocity(btVector3(0, 0, 0));
+      b->setAngularVelocity(btVector3(0, 0, 0));
+      tracked_[i].v = tracked_[i].w = btVector3(0, 0, 0);
+    }
   }
 }
 
@@ -501,6 +559,7 @@ void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {
   convergence_.add(system_->lastStats(), substeps_);
   system_->syncToHost();
   syncOut();
+  updateSleeping(timeStep);
   updateAabbs();
   if (ghosts_ > 0) computeOverlappingPairs();  // the ghost objects' overlapping pairs (Bullet's pair cache)
   collectContacts();

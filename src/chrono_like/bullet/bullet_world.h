@@ -27,7 +27,9 @@
 // exact test is applied to each contact on the CPU backend).
 // Bullet's gravity force is not added to the bodies' total force (applyGravity is a no-op): the System
 // applies each body's gravity itself. A body whose activation state is DISABLE_SIMULATION is held as a fixed
-// body. Sleeping is not used: every other body is simulated every sub-step.
+// body. Sleeping follows Bullet: each body's own thresholds and deactivation time (btRigidBody::updateDeactivation,
+// wantsSleeping), islands of bodies joined by contacts and constraints fall asleep together and wake together; a
+// sleeping body stays in the System, held still (no mass, no gravity) until its island wakes.
 // docs/DROP_IN.md lists what works and what does not.
 #pragma once
 
@@ -143,6 +145,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void syncIn(btScalar h);
   void syncBody(size_t i, btScalar h, BodyArrays& B);
   void syncOut();
+  void updateSleeping(btScalar h);
   void collectContacts();
   void fillManifold(const WorldContact& w, int ia, int ib);
   void releaseManifolds();
