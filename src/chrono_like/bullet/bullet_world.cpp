@@ -404,7 +404,10 @@ void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
   if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());
   if (kinematic || !(b.getAngularVelocity() == t.w)) B.omega[i] = fromBt(b.getAngularVelocity());
   if (kinematic) return;
-  if (b.getActivationState() == ISLAND_SLEEPING) {  // held still until its island wakes (updateSleeping)
+  // A sleeping body is held still until its island wakes (updateSleeping): fixed for this sub-step, so that pairs
+  // of sleeping (or sleeping and static) bodies are not even collided; a body that touches it wakes its island.
+  B.flags[i] = b.getActivationState() == ISLAND_SLEEPING ? uint8_t(kBodyFixed) : uint8_t(0);
+  if (B.flags[i]) {
     B.vel[i] = B.omega[i] = B.gravity[i] = B.force[i] = B.torque[i] = Vec3{0, 0, 0};
     B.inv_mass[i] = 0;
     B.inv_inertia[i] = Vec3{0, 0, 0};
