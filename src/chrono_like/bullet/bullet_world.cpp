@@ -225,6 +225,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   pending_.clear();
 
   system_->mutableConfig().step.dt = real(h);
+  system_->mutableConfig().solver.min_bounce_speed = real(getSolverInfo().m_restitutionVelocityThreshold);
   BodyArrays& B = system_->mutableBodies();
   for (size_t i = 0; i < tracked_.size(); ++i) {
     Tracked& t = tracked_[i];
@@ -244,6 +245,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
     B.inv_inertia[i] = fromBt(b.getInvInertiaDiagLocal());
     B.gravity[i] = fromBt(b.getGravity());
     B.friction[i] = real(b.getFriction());
+    B.restitution[i] = real(b.getRestitution());
     B.force[i] = fromBt(b.getTotalForce());
     B.torque[i] = fromBt(b.getTotalTorque());
     // Bullet's damping rule (btRigidBody::applyDamping), before the forces act.
@@ -252,7 +254,10 @@ void DviDynamicsWorld::syncIn(btScalar h) {
     if (ad > 0) B.omega[i] = B.omega[i] * real(std::pow(1 - double(ad), double(h)));
   }
   for (size_t i = 0; i < tracked_.size(); ++i)
-    if (tracked_[i].kind == kBodyFixed) B.friction[i] = real(tracked_[i].body->getFriction());
+    if (tracked_[i].kind == kBodyFixed) {
+      B.friction[i] = real(tracked_[i].body->getFriction());
+      B.restitution[i] = real(tracked_[i].body->getRestitution());
+    }
   joints_->springForces(B, B.force.data(), B.torque.data());
   system_->markHostDirty();
 }
