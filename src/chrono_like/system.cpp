@@ -164,6 +164,7 @@ int System::addBody(const BodyDesc& d) {
   if (!immovable && d.mass == 0) fail("zero mass on a dynamic body (use a fixed body for static geometry)");
   if (!immovable && !(minComponent(d.inertia) > 0 && isFinite(d.inertia))) fail("non-positive or non-finite inertia");
   if (!std::isfinite(d.friction) || d.friction < 0) fail("negative or non-finite friction");
+  if (!std::isfinite(d.restitution) || d.restitution < 0) fail("negative or non-finite restitution");
   if (d.shapes.empty()) fail("has no collision shape");
   for (const ShapeDesc& s : d.shapes) validateShape(s, index);
   real qn = std::sqrt(d.rot.w * d.rot.w + d.rot.x * d.rot.x + d.rot.y * d.rot.y + d.rot.z * d.rot.z);
@@ -180,6 +181,7 @@ int System::addBody(const BodyDesc& d) {
   bodies_.force[n] = bodies_.torque[n] = Vec3{0, 0, 0};
   bodies_.gravity[n] = d.has_gravity ? d.gravity : config_.step.gravity;
   bodies_.friction[n] = d.friction;
+  bodies_.restitution[n] = d.restitution;
   bodies_.flags[n] = d.flags;
   bodies_.shape_start[n] = int32_t(shapes_.count());
   bodies_.shape_count[n] = int32_t(d.shapes.size());

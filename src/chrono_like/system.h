@@ -134,6 +134,7 @@ struct BodyDesc {
   real mass = 1;          // 0 with kBodyFixed or kBodyKinematic
   Vec3 inertia{1, 1, 1};  // principal moments, body frame
   real friction = real(0.5);
+  real restitution = 0;  // Newton's coefficient (BodyArrays::restitution), finite and >= 0; 0 = inelastic
   uint8_t flags = 0;
   bool has_gravity = false;  // use `gravity` instead of the system's
   Vec3 gravity{0, 0, 0};

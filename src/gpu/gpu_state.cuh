@@ -25,7 +25,7 @@ struct DeviceBodies {
       force{"body force"}, torque{"body torque"}, gravity{"body gravity"}, v_free{"body v_free"}, w_free{"body w_free"},
       field_force{"body force-field force"}, field_torque{"body force-field torque"};
   DeviceBuffer<Quat> rot{"body rot"};
-  DeviceBuffer<real> inv_mass{"body inv_mass"}, friction{"body friction"};
+  DeviceBuffer<real> inv_mass{"body inv_mass"}, friction{"body friction"}, restitution{"body restitution"};
   DeviceBuffer<uint8_t> flags{"body flags"};
   DeviceBuffer<BodyInverseMass> inv{"body world inverse mass"};
   DeviceBuffer<BodyDelta> delta{"body velocity change"};
@@ -200,6 +200,7 @@ struct DeviceState {
   bool normal_only = false;              // this step's CCP has the contacts' normal rows only (jacobian.h)
   bool entry_gather = false;             // GpuTuning::entry_gather of this step's BuildRows
   bool all_frictional = false;           // every uploaded body has friction > 0 (GpuSystem::uploadIfNeeded)
+  bool any_restitution = false;          // some uploaded body has restitution > 0 (else BuildRows reads none)
   int64_t contact_blocks = 0;            // contact blocks: contacts, or ceil(contacts / 3) when normal_only
   std::vector<ConstraintRow> host_rows;  // host staging of the padded rows
   std::vector<real> host_lohi;           //   and of their bounds

@@ -33,9 +33,10 @@ size_t capacityBytes(const Buf&... buf) {
 }
 
 size_t DeviceState::bytes() const {
-  const size_t in_bodies = capacityBytes(bodies.pos, bodies.vel, bodies.omega, bodies.inv_inertia, bodies.force,
-                                         bodies.torque, bodies.gravity, bodies.v_free, bodies.w_free, bodies.rot,
-                                         bodies.inv_mass, bodies.friction, bodies.flags, bodies.inv, bodies.delta);
+  const size_t in_bodies =
+      capacityBytes(bodies.pos, bodies.vel, bodies.omega, bodies.inv_inertia, bodies.force, bodies.torque,
+                    bodies.gravity, bodies.v_free, bodies.w_free, bodies.rot, bodies.inv_mass, bodies.friction,
+                    bodies.restitution, bodies.flags, bodies.inv, bodies.delta);
   const size_t in_shapes = capacityBytes(shapes.shape, shapes.hull, shapes.aabb, shapes.sweep);
   const size_t in_contacts =
       capacityBytes(contacts.shape_a, contacts.shape_b, contacts.body_a, contacts.body_b, contacts.normal, contacts.pa,
@@ -184,6 +185,7 @@ void GpuSystem::uploadIfNeeded() {
   b.torque.uploadTail(bodies_.torque, first_body, s);
   b.gravity.uploadTail(bodies_.gravity, first_body, s);
   b.friction.uploadTail(bodies_.friction, first_body, s);
+  b.restitution.uploadTail(bodies_.restitution, first_body, s);
   b.flags.uploadTail(bodies_.flags, first_body, s);
   b.count = bodies_.count();
   if (first_body == 0) gyro_bodies_ = false;
@@ -197,6 +199,11 @@ void GpuSystem::uploadIfNeeded() {
     const real f = bodies_.friction[i];
     d_->all_frictional = f > 0 && f * f > 0;
   }
+  // Some body with restitution > 0: BuildRows reads the restitution and the pre-step velocities (jacobian.h:
+  // contactNormalBias); else it reads neither (every contact's e is 0).
+  if (first_body == 0) d_->any_restitution = false;
+  for (size_t i = first_body; i < b.count && !d_->any_restitution; ++i)
+    d_->any_restitution = bodies_.restitution[i] > 0;
   b.v_free.resize(b.count);
   b.w_free.resize(b.count);
   b.inv.resize(b.count);

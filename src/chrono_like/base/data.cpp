@@ -13,6 +13,7 @@ void BodyArrays::resize(size_t n) {
   torque.resize(n);
   gravity.resize(n);
   friction.resize(n);
+  restitution.resize(n);
   flags.resize(n);
   shape_start.resize(n);
   shape_count.resize(n);

@@ -28,6 +28,7 @@ struct BodyArrays {
   std::vector<Vec3> torque;          // external torque accumulated for this step, world
   std::vector<Vec3> gravity;         // per-body gravitational acceleration (Bullet allows per-body gravity)
   std::vector<real> friction;        // Coulomb coefficient of the body's surface
+  std::vector<real> restitution;     // Newton's coefficient of the body's surface; a contact's is e_a e_b
   std::vector<uint8_t> flags;        // BodyFlags
   std::vector<int32_t> shape_start;  // first shape of the body in ShapeArrays
   std::vector<int32_t> shape_count;  // number of shapes of the body

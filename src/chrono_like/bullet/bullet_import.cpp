@@ -167,6 +167,7 @@ BodyDesc bodyMotionFromBullet(const btRigidBody& body) {
   d.vel = fromBt(body.getLinearVelocity());
   d.omega = fromBt(body.getAngularVelocity());
   d.friction = real(body.getFriction());
+  d.restitution = real(body.getRestitution());
   return d;
 }
 

@@ -13,12 +13,12 @@ class btCollisionShape;
 
 namespace dvi {
 
-// A BodyDesc with a Bullet body's pose of the centre of mass, velocities and friction only (no mass, flags or
-// shapes).
+// A BodyDesc with a Bullet body's pose of the centre of mass, velocities, friction and restitution only (no mass,
+// flags or shapes).
 BodyDesc bodyMotionFromBullet(const btRigidBody& body);
 
 // Converts a Bullet body into a BodyDesc: pose of the centre of mass, velocities, mass and principal
-// inertia from the body (Bullet's own values), friction from the body, flags (static / kinematic),
+// inertia from the body (Bullet's own values), friction and restitution from the body, flags (static / kinematic),
 // collision group and mask from its broadphase proxy when it has one.
 BodyDesc bodyDescFromBullet(const btRigidBody& body);
 

@@ -373,6 +373,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
 
   SystemConfig& cfg = system_->mutableConfig();
   cfg.step.dt = real(h);
+  cfg.solver.min_bounce_speed = real(getSolverInfo().m_restitutionVelocityThreshold);
   if (config_.effort == SolverEffort::BulletIterations) {
     const btContactSolverInfo& info = getSolverInfo();
     cfg.solver.type = SolverType::GaussSeidel;
@@ -399,6 +400,7 @@ void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
     t.tf = tf;
   }
   B.friction[i] = real(t.obj->getFriction());
+  B.restitution[i] = real(t.obj->getRestitution());
   if (t.kind == kBodyFixed) return;
   const btRigidBody& b = *t.body;
   if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());

@@ -13,7 +13,7 @@
 //      removed (the System is rebuilt from Bullet's state), poses and velocities the app set (compared with
 //      what this world last wrote, so the System keeps its double-precision state otherwise), kinematic
 //      poses and velocities, applied forces and torques, per-body gravity, damping (Bullet's rule,
-//      v *= (1 - d)^h), friction, masses, 6-DoF spring forces, linear and angular factors;
+//      v *= (1 - d)^h), friction, restitution, masses, 6-DoF spring forces, linear and angular factors;
 //   3. steps the System (contacts, joints and factor rows in one CCP, joints.h);
 //   4. writes poses and velocities of the dynamic bodies back (setCenterOfMassTransform, so Bullet's
 //      interpolation of motion states works), updates the broad-phase AABBs (rayTest, convexSweepTest and

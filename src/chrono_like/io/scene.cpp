@@ -156,6 +156,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
           "friction_combine",
           "envelope_rel",
           "recovery_rel",
+          "min_bounce_speed",
           "collision",
           "threads",
           "frames",
@@ -190,6 +191,8 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
         {{"product", FrictionCombine::Product}, {"min", FrictionCombine::Min}, {"average", FrictionCombine::Average}});
   if (j.contains("envelope_rel")) col.envelope_rel = real(c.nonNegative(j["envelope_rel"], at("envelope_rel")));
   if (j.contains("recovery_rel")) sol.recovery_rel = real(c.positive(j["recovery_rel"], at("recovery_rel")));
+  if (j.contains("min_bounce_speed"))
+    sol.min_bounce_speed = real(c.nonNegative(j["min_bounce_speed"], at("min_bounce_speed")));
   if (j.contains("collision"))
     col.backend = c.named<CollisionBackend>(
         j["collision"], at("collision"), {{"native", CollisionBackend::Native}, {"bullet", CollisionBackend::Bullet}});
@@ -487,6 +490,7 @@ class Builder {
     Vec3 pos{0, 0, 0}, vel{0, 0, 0}, omega{0, 0, 0};
     Quat rot{1, 0, 0, 0};
     double friction = 0.5;
+    double restitution = 0;
     bool kinematic = false;
     bool has_gravity = false;
     Vec3 gravity{0, 0, 0};
@@ -521,6 +525,7 @@ class Builder {
     o_.motion_states.emplace_back(ms);
     btRigidBody::btRigidBodyConstructionInfo info(mass, ms, s.shape.shape, inertia);
     info.m_friction = btScalar(s.friction);
+    info.m_restitution = btScalar(s.restitution);
     auto* rb = new btRigidBody(info);
     o_.bodies.emplace_back(rb);
     if (s.kinematic) {
@@ -554,7 +559,7 @@ class Builder {
                  std::vector<btRigidBody*>& out) {
     c_.keys(j, path,
             {"name", "shape", "mass", "density", "position", "rotation", "velocity", "angular_velocity", "friction",
-             "kinematic", "gravity"});
+             "restitution", "kinematic", "gravity"});
     (void)scene;
     if (!j.contains("shape")) c_.fail(path + ".shape", "missing");
     BodySpec s;
@@ -565,6 +570,7 @@ class Builder {
     if (j.contains("velocity")) s.vel = c_.vec3(j["velocity"], path + ".velocity");
     if (j.contains("angular_velocity")) s.omega = c_.vec3(j["angular_velocity"], path + ".angular_velocity");
     if (j.contains("friction")) s.friction = c_.nonNegative(j["friction"], path + ".friction");
+    if (j.contains("restitution")) s.restitution = c_.range(j["restitution"], path + ".restitution", 0, 1);
     if (j.contains("kinematic")) s.kinematic = c_.boolean(j["kinematic"], path + ".kinematic");
     if (j.contains("gravity")) {
       s.has_gravity = true;
@@ -605,7 +611,7 @@ class Builder {
     c_.object(g, path);
     c_.keys(g, path,
             {"type", "name", "count", "footprint", "counts", "origin", "spacing", "jitter", "seed", "shape", "shapes",
-             "scale", "mass", "density", "friction", "velocity", "angular_velocity", "random_rotation"});
+             "scale", "mass", "density", "friction", "restitution", "velocity", "angular_velocity", "random_rotation"});
     if (!g.contains("type")) c_.fail(path + ".type", "missing generator type");
     const std::string type = c_.oneOf(g["type"], path + ".type", {"grid", "pile"});
     auto at = [&](const char* k) { return path + "." + k; };
@@ -624,6 +630,7 @@ class Builder {
     checkBodyBudget(int64_t(out.size()) + L.count, c_.origin + ": " + path);
     Rng rng{g.contains("seed") ? uint64_t(c_.integer(g["seed"], at("seed"), 0, int64_t(1) << 53)) : 1u};
     const double friction = g.contains("friction") ? c_.nonNegative(g["friction"], at("friction")) : 0.5;
+    const double restitution = g.contains("restitution") ? c_.range(g["restitution"], at("restitution"), 0, 1) : 0.0;
     const Vec3 vel = g.contains("velocity") ? c_.vec3(g["velocity"], at("velocity")) : Vec3{0, 0, 0};
     const Vec3 omega =
         g.contains("angular_velocity") ? c_.vec3(g["angular_velocity"], at("angular_velocity")) : Vec3{0, 0, 0};
@@ -656,6 +663,7 @@ class Builder {
       s.rot = random_rot ? randomRotation(rng) : Quat{1, 0, 0, 0};
       s.mass = by_density ? rho * s.shape.volume : mass;
       s.friction = friction;
+      s.restitution = restitution;
       s.vel = vel;
       s.omega = omega;
       out.push_back(body(s, path));
@@ -808,6 +816,8 @@ void checkLoadedBody(const btRigidBody& rb, const std::string& where) {
   if (!isFinite(d.gravity)) bad("non-finite gravity");
   if (!(std::isfinite(d.friction) && d.friction >= 0))
     bad("friction must be finite and >= 0, got " + num(double(d.friction)));
+  if (!(std::isfinite(d.restitution) && d.restitution >= 0))
+    bad("restitution must be finite and >= 0, got " + num(double(d.restitution)));
   if (d.flags == 0) {
     if (!(std::isfinite(d.mass) && d.mass > 0)) bad("mass must be finite and > 0, got " + num(double(d.mass)));
     if (!(isFinite(d.inertia) && minComponent(d.inertia) > 0)) bad("moments of inertia must be finite and > 0");

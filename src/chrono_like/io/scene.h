@@ -28,7 +28,8 @@ class btBulletWorldImporter;
 namespace dvi {
 
 // Run settings of a scene (JSON "settings"). The engine's settings are parsed straight into `system` (the
-// keys dt, gravity, solver, max_iterations, tolerance, storage, warm_start, recovery_rel, friction_combine,
+// keys dt, gravity, solver, max_iterations, tolerance, storage, warm_start, recovery_rel, min_bounce_speed,
+// friction_combine,
 // envelope_rel, collision, speculative, mpr_manifold, threads; docs/ARCHITECTURE.md, "Configuration", lists the
 // field of each); the run's own (how long, frames, the Bullet peer's) are declared here. Command-line options write into
 // the same fields.

@@ -67,14 +67,22 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   if (nblk < kSerialContacts) threads_ = 1;
 }
 
-// Each contact's Jacobian, right-hand side (relative free velocity + bias), diagonal block, its inverse, block step,
-// column norms and row sums (the normal-only blocks are assembled in assembleBoxesAndRows). Returns the largest
-// diagonal entry.
+// Each contact's Jacobian, right-hand side (relative free velocity + bias: jacobian.h contactNormalBias, with
+// restitution), diagonal block, its inverse, block step, column norms and row sums (the normal-only blocks are
+// assembled in assembleBoxesAndRows). Returns the largest diagonal entry.
 real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
                                       const Vec3* w_free, const ContactProblemSettings& settings) {
   const int T = threads_;
   const int64_t nc = nc_;
-  const real h = settings.dt;
+  const bool have_restitution = bodies.restitution.size() == bodies.count();
+  const ContactBiasInputs bias_in{settings.dt,
+                                  settings.solver.recovery_rel,
+                                  settings.solver.min_bounce_speed,
+                                  have_restitution ? bodies.restitution.data() : nullptr,
+                                  bodies.vel.data(),
+                                  bodies.omega.data(),
+                                  v_free,
+                                  w_free};
   real max_diag = 0;
 #pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
   for (int64_t k = 0; k < nc; ++k) {
@@ -86,12 +94,12 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
     mu_[k] = contacts.mu[k];
     if (normal_only_) {  // block data per block of three contacts, below
       rhs_[k] = contactNormalVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b]) +
-                contactBias(contacts.dist[k], h, settings.solver.recovery_rel, contacts.size[k]);
+                contactNormalBias(J, contacts.dist[k], contacts.size[k], bias_in);
       continue;
     }
     real* rk = rhs_.data() + 3 * k;
     contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
-    rk[0] += contactBias(contacts.dist[k], h, settings.solver.recovery_rel, contacts.size[k]);
+    rk[0] += contactNormalBias(J, contacts.dist[k], contacts.size[k], bias_in);
     real N[6];
     contactDiagonalBlock(J, inv_[a], inv_[b], N);
     invertSymmetric3(N, binv_.data() + 6 * k);

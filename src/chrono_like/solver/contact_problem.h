@@ -4,7 +4,8 @@
 // Sign convention: the normal n points from body A to body B; the normal impulse gn >= 0 pushes B along
 // +n and A along -n. For contact k with tangents (u, w) = tangentBasis(n):
 //   D_k^T v = [n; u; w] . (vB + wB x rB - vA - wA x rA),  rA = pa - xA, rB = pb - xB
-//   b_k     = (max(dist/h, -v_rec), 0, 0)   with v_rec = recovery_rel * size (speed relative to body size)
+//   b_k     = (max(dist/h, -v_rec), 0, 0)   with v_rec = recovery_rel * size (speed relative to body size);
+//             on an impact of bodies with restitution, b_k,n = min(that, e v_n-) (jacobian.h: contactNormalBias)
 //
 // Layout (double; see jacobian.h), per contact: ContactJacobian 104 B (n, u, rA, rB, a, b), r 24 B, mu 8 B,
 // eta 8 B, N_kk^-1 48 B, 2 adjacency entries 8 B = 200 B; per body: BodyInverseMass 56 B, BodyDelta 48 B,
@@ -34,7 +35,7 @@ namespace dvi {
 // this step.
 struct ContactProblemSettings {
   real dt = real(1e-3);   // [s] the step h (StepContext::dt)
-  SolverSettings solver;  // the System's (SystemConfig::solver): recovery_rel
+  SolverSettings solver;  // the System's (SystemConfig::solver): recovery_rel, min_bounce_speed
   int threads = 0;        // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
                           // under kSerialContacts contacts solve serially (threads() == 1).
   // Every contact is frictionless (mu = 0): assemble the normal rows only, packed three per block
@@ -46,9 +47,9 @@ struct ContactProblemSettings {
 
 class ContactProblem final : public CcpProblem {
  public:
-  // Reads bodies.{pos, inv_mass, inv_inertia, rot, flags}, contacts.*, and the free velocities (after
-  // external forces, before contact impulses). Writes the Jacobian blocks, r and the body -> contact
-  // adjacency.
+  // Reads bodies.{pos, inv_mass, inv_inertia, rot, flags, restitution} (and vel, omega where a contact's
+  // restitution is > 0), contacts.*, and the free velocities (after external forces, before contact impulses).
+  // Writes the Jacobian blocks, r and the body -> contact adjacency.
   // rows: constraint rows solved with the contacts (may be null or empty); their impulses follow the
   // contacts' in the solution vector (3 per block, the padding rows last).
   void build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,

@@ -329,6 +329,52 @@ DVI_HD real contactNormalVelocity(const ContactJacobian& J, Vec3 vA, Vec3 wA, Ve
   return dot(J.n, rel);
 }
 
+// What the normal row's bias of a contact reads besides the contact itself (ContactProblem::build on the CPU,
+// gpu/solver/gpu_rows.cu RowsF on the device): the step, the solver settings and the body arrays.
+struct ContactBiasInputs {
+  real h = 0;                                       // [s] the step
+  real recovery_rel = 0;                            // [1/s] SolverSettings::recovery_rel
+  real min_bounce_speed = 0;                        // [m/s] SolverSettings::min_bounce_speed
+  const real* restitution = nullptr;                // per body (BodyArrays::restitution); null: every body 0
+  const Vec3 *vel = nullptr, *omega = nullptr;      // per body, before this step's forces (BodyArrays::vel, omega)
+  const Vec3 *v_free = nullptr, *w_free = nullptr;  // per body, after them (the rhs's D^T v_free)
+};
+
+// The normal entry b_k of contact k's right-hand side, r_n = D_n^T v_free + b_k; the CCP row is
+// 0 <= gn _|_ v_n+ + b_k >= 0, i.e. the velocity after the step is v_n+ >= -b_k. One function for both backends.
+//
+// Without restitution (e = 0, the default) b_k = contactBias (position stabilisation and speculative gap), the
+// value and the rounding the problem always had, so e = 0 results are bitwise unchanged.
+//
+// Restitution: Newton's impact law in the DVI step (Anitescu & Potra, "Formulating dynamic multi-rigid-body
+// contact problems with friction as solvable linear complementarity problems", Nonlinear Dynamics 14, 1997;
+// Chrono's ChContactNSC::ContIntLoadConstraint_C, "CASE: BOUNCE"): the row becomes
+// 0 <= gn _|_ v_n+ + e v_n- >= 0, so the contact leaves at least at e times its approach speed, with
+// e = e_a e_b (Bullet's btManifoldResult::calculateCombinedRestitution) and v_n- the relative normal velocity at
+// the contact before the step (Chrono's and Bullet's choice: the velocity the bodies arrive with, not the free
+// velocity, which already holds this step's gravity). It applies only to an impact:
+// - approaching faster than min_bounce_speed, v_n- < -min_bounce_speed (Bullet's restitutionCurve with
+//   m_restitutionVelocityThreshold; Chrono's min_bounce_speed): slow contacts (resting, sliding) stay inelastic;
+// - and the contact closes within this step, v_n,free + b_pos < 0 (the speculative row is active with no
+//   impulse): a speculative contact whose gap the body does not cross this step does not bounce early.
+// Combination with position stabilisation: the row keeps the more demanding of the two targets,
+// b_k = min(b_pos, e v_n-). For a speculative gap (b_pos = dist/h > 0 > e v_n-) that is the bounce, as in Chrono
+// (the body rebounds from where it is, up to one step's travel |v_n-| h above the surface: an O(h) error in the
+// rebound height, not in its speed); for an overlap it is the faster of the rebound and the bounded recovery
+// speed, so a bounce never adds the recovery speed on top (Chrono picks the bounce instead of the recovery; the
+// min differs only when the recovery asks for more, and then never injects more than max(e |v_n-|, v_rec)).
+DVI_HD real contactNormalBias(const ContactJacobian& J, real dist, real size, const ContactBiasInputs& in) {
+  const real b_pos = contactBias(dist, in.h, in.recovery_rel, size);
+  const real e = in.restitution ? in.restitution[J.a] * in.restitution[J.b] : real(0);
+  if (!(e > 0)) return b_pos;
+  const real vn_pre = contactNormalVelocity(J, in.vel[J.a], in.omega[J.a], in.vel[J.b], in.omega[J.b]);
+  if (!(vn_pre < -in.min_bounce_speed)) return b_pos;
+  const real vn_free = contactNormalVelocity(J, in.v_free[J.a], in.w_free[J.a], in.v_free[J.b], in.w_free[J.b]);
+  if (!(vn_free + b_pos < 0)) return b_pos;
+  const real b_bounce = e * vn_pre;
+  return b_bounce < b_pos ? b_bounce : b_pos;
+}
+
 // accumulateContactImpulse for the normal impulse gn alone.
 DVI_HD void accumulateContactNormalImpulse(const ContactJacobian& J, int side, real gn, Vec3& F, Vec3& T) {
   accumulateSidedImpulse(J, side, J.n * gn, F, T);

@@ -92,7 +92,7 @@ constexpr int kDefaultMaxIterations = 1000;
 constexpr int kDefaultMinIterations = 50;
 
 // The solver part of the System's configuration (system.h: SystemConfig::solver), and what every solver
-// algorithm reads. ContactProblem reads recovery_rel (contact_problem.h).
+// algorithm reads. ContactProblem reads recovery_rel and min_bounce_speed (contact_problem.h).
 struct SolverSettings {
   SolverType type = SolverType::APGD;  // the algorithm; default APGD
   // Start each contact's impulse from the last step's impulse of the contact with the same persistent key (and
@@ -101,6 +101,10 @@ struct SolverSettings {
   // [1/s] largest speed at which a penetration is pushed out: recovery_rel x the contact's size per second (the
   // right-hand side's max(dist/h, -v_rec), contact_problem.h). Default 10.
   real recovery_rel = real(10);
+  // [m/s] restitution acts only on impacts approaching faster than this (jacobian.h: contactNormalBias). Default
+  // 0.2, Bullet's btContactSolverInfo::m_restitutionVelocityThreshold (Chrono's min_bounce_speed is 0.15); the
+  // drop-in world copies its world's value. Only read where some body has restitution > 0.
+  real min_bounce_speed = real(0.2);
   // A solve stops at the first iterate whose relative residual (above) is <= tolerance, or after
   // max_iterations. tolerance 0 runs all max_iterations (the fixed count of `--iterations N`); the result is
   // still judged against kDefaultTolerance (SolverStats::converged).

@@ -67,7 +67,7 @@ struct RowsF {
   const Vec3 *normal, *pa, *pb, *pos, *v_free, *w_free;
   const real *dist, *size;
   const BodyInverseMass* inv;
-  real h, recovery_rel;
+  ContactBiasInputs bias;  // the normal rows' bias: step, recovery, restitution (jacobian.h: contactNormalBias)
   int32_t nbodies;
   bool normal_only;  // the normal row only (block data per three contacts: NormalBlockF)
   real *rhs, *binv, *eta, *diag_max, *colnorm, *rowsum;
@@ -86,11 +86,11 @@ struct RowsF {
     const BodyInverseMass A = inv[a], B = inv[b];
     if (normal_only) {
       rhs[k] = contactNormalVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b]) +
-               contactBias(dist[k], h, recovery_rel, size[k]);
+               contactNormalBias(J, dist[k], size[k], bias);
     } else {
       real* rk = rhs + 3 * k;
       contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
-      rk[0] += contactBias(dist[k], h, recovery_rel, size[k]);
+      rk[0] += contactNormalBias(J, dist[k], size[k], bias);
       real N[6];
       contactDiagonalBlock(J, A, B, N);
       invertSymmetric3(N, binv + 6 * k);
@@ -366,8 +366,9 @@ void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const RowCounts& n)
           C.dist.data(),
           C.size.data(),
           B.inv.data(),
-          real(cfg.step.dt),
-          cfg.solver.recovery_rel,
+          ContactBiasInputs{real(cfg.step.dt), cfg.solver.recovery_rel, cfg.solver.min_bounce_speed,
+                            d.any_restitution ? B.restitution.data() : nullptr, B.vel.data(), B.omega.data(),
+                            B.v_free.data(), B.w_free.data()},
           int32_t(nb),
           normal,
           S.rhs.data(),
