@@ -276,15 +276,19 @@ TEST_CASE("constraints we cannot represent are refused with their type named", "
     }
     CHECK(w.world->getNumConstraints() == 0);
   };
-  refused(new btConeTwistConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))), "cone-twist");
+  auto* cone_motor = new btConeTwistConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)));
+  cone_motor->enableMotor(true);
+  refused(cone_motor, "cone-twist motor");
   refused(new btGearConstraint(*a, *b, btVector3(0, 1, 0), btVector3(0, 1, 0), 2), "gear");
   auto* motor6 = new btGeneric6DofConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true);
   motor6->getTranslationalLimitMotor()->m_enableMotor[0] = true;
   refused(motor6, "motor");
-  auto* range6 = new btGeneric6DofConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true);
-  range6->setAngularLowerLimit(btVector3(-0.5, 0, 0));
-  range6->setAngularUpperLimit(btVector3(0.5, 0, 0));
-  refused(range6, "angular limit range");
+  auto* servo = new btGeneric6DofSpring2Constraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)));
+  servo->setAngularLowerLimit(btVector3(-0.5, 0, 0));
+  servo->setAngularUpperLimit(btVector3(0.5, 0, 0));
+  servo->enableMotor(3, true);
+  servo->setServo(3, true);
+  refused(servo, "servo motor");
   // A dynamic body with a triangle mesh is refused too (Bullet cannot collide it either).
   btTriangleMesh mesh;
   mesh.addTriangle(btVector3(0, 0, 0), btVector3(1, 0, 0), btVector3(0, 0, 1));
