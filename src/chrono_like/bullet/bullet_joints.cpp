@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "chrono_like/base/errors.h"
@@ -176,7 +177,6 @@ void sliderSpec(btSliderConstraint& s, JointSpec& j) {
 // obsolete solver path) have no meaning for the DVI rows, which correct the whole error in each step.
 void coneTwistSpec(btConeTwistConstraint& c, JointSpec& j) {
   j.kind = "cone-twist";
-  if (c.isMotorEnabled()) throw InputError("cone-twist: a cone-twist motor (enableMotor) is not supported");
   j.frame_a = fromBt(c.getAFrame());
   j.frame_b = fromBt(c.getBFrame());
   if (!c.getAngularOnly())
@@ -192,6 +192,15 @@ void coneTwistSpec(btConeTwistConstraint& c, JointSpec& j) {
   j.cone_swing_limit = !(j.cone_lock1 && j.cone_lock2) && std::min(j.cone_swing1, j.cone_swing2) < kPi;
   j.cone_twist_limit = tw >= 0 && tw * soft < kPi;
   j.cone_twist = tw * soft;
+  if (c.isMotorEnabled()) {
+    // getInfo2's swing row carries the motor: impulse in [0, max motor impulse] (no bound where it is < 0).
+    // Bullet's "normalized" strength only acts in its obsolete solver path.
+    j.cone_motor = true;
+    j.cone_motor_target = normalized(fromBt(c.getMotorTarget()));
+    const real m = real(c.getMaxMotorImpulse());
+    j.cone_motor_max_impulse = m >= 0 ? m : std::numeric_limits<real>::infinity();
+    j.cone_motor_bias = real(c.getBiasFactor());
+  }
 }
 
 // btGeneric6DofConstraint, and its spring form.

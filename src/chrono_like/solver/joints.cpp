@@ -136,15 +136,38 @@ void hingeRows(const JointSpec& j, const JointBody& A, const JointBody& B, const
     sink.motor(ra, j.hinge_motor_velocity, j.hinge_motor_max_impulse + j.hinge_motor_max_force * sink.dt);
 }
 
+// Bullet's cone-twist motor (btConeTwistConstraint::calcAngleInfo2 with the motor on): the rotation
+// qDelta = qFB target conj(qFA) still to go, about its axis (world), error = bias factor x angle.
+void coneMotorRow(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
+  const Quat qd = normalized(f.fb.q * j.cone_motor_target * conj(f.fa.q));
+  const Vec3 axis{qd.x, qd.y, qd.z};
+  const real s = length(axis);
+  if (!(s > real(1e-7))) return;  // at the target (Bullet: no row)
+  const real angle = real(2) * std::acos(std::min(real(1), std::max(real(-1), qd.w)));
+  ConstraintRow r = angularRow(A, B, axis * (real(-1) / s));  // J v = (wA - wB).axis
+  r.bias = -j.cone_motor_bias * angle / sink.dt;
+  r.lo = 0;
+  r.hi = j.cone_motor_max_impulse;
+  sink.out.push_back(r);
+}
+
 void coneTwistRows(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
+  if (j.cone_motor) {
+    coneMotorRow(j, A, B, f, sink);
+    return;
+  }
   const ConeAngles c = coneAngles(f.fa.q, f.fb.q, j.cone_swing1, j.cone_swing2);
   if (j.cone_lock1) sink.bilateral(angularRow(A, B, c.u_y_g), c.u_y, sink.wmax);
   if (j.cone_lock2) sink.bilateral(angularRow(A, B, c.u_z_g), c.u_z, sink.wmax);
   if (j.cone_swing_limit) sink.unilateral(angularRow(A, B, c.swing_g), c.swing_c, sink.wmax);
   if (j.cone_twist_limit) {
     const ConstraintRow r = angularRow(A, B, c.twist_g);  // J v = d psi / dt
-    sink.unilateral(r, c.twist + j.cone_twist, sink.wmax);
-    sink.unilateral(negated(r), j.cone_twist - c.twist, sink.wmax);
+    if (j.cone_twist == 0) {                              // twist locked (Bullet: a bilateral row at span 0)
+      sink.bilateral(r, c.twist, sink.wmax);
+    } else {
+      sink.unilateral(r, c.twist + j.cone_twist, sink.wmax);
+      sink.unilateral(negated(r), j.cone_twist - c.twist, sink.wmax);
+    }
   }
 }
 

@@ -59,6 +59,13 @@ struct JointSpec {
   bool cone_lock1 = false, cone_lock2 = false;  // swing about z (u.y = 0) or about y (u.z = 0) locked
   bool cone_twist_limit = false;
   real cone_twist = 0;
+  // Bullet's cone-twist motor (enableMotor, setMotorTarget): a servo of frame A towards the orientation
+  // qFB * cone_motor_target, one unilateral row about the rotation left, J v = (wA - wB).axis >= bias x angle / h
+  // with 0 <= impulse <= max impulse; as in Bullet the limits are off while the motor is on.
+  bool cone_motor = false;
+  Quat cone_motor_target{1, 0, 0, 0};  // frame A relative to frame B (constraint space)
+  real cone_motor_max_impulse = 0;     // per step (infinite where Bullet's is negative)
+  real cone_motor_bias = real(0.3);    // Bullet's bias factor: the fraction of the angle corrected per step
   // Angular::Euler: Bullet's 6-DoF angles of A relative to B in the rotate order euler_order (joint_angles.h),
   // each free, locked at lo or limited to [lo, hi], with an optional motor (d phi/dt = velocity, |torque| <= force).
   struct EulerAxis {
