@@ -210,15 +210,16 @@ TEST_CASE("constraints we cannot represent are refused with their type named", "
     }
     CHECK(w.world->getNumConstraints() == 0);
   };
-  refused(new btConeTwistConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))), "cone-twist");
   refused(new btGearConstraint(*a, *b, btVector3(0, 1, 0), btVector3(0, 1, 0), 2), "gear");
   auto* motor6 = new btGeneric6DofConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true);
   motor6->getTranslationalLimitMotor()->m_enableMotor[0] = true;
   refused(motor6, "motor");
-  auto* range6 = new btGeneric6DofConstraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)), true);
-  range6->setAngularLowerLimit(btVector3(-0.5, 0, 0));
-  range6->setAngularUpperLimit(btVector3(0.5, 0, 0));
-  refused(range6, "angular limit range");
+  auto* servo = new btGeneric6DofSpring2Constraint(*a, *b, frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0)));
+  servo->setAngularLowerLimit(btVector3(-0.5, 0, 0));
+  servo->setAngularUpperLimit(btVector3(0.5, 0, 0));
+  servo->enableMotor(3, true);
+  servo->setServo(3, true);
+  refused(servo, "servo motor");
   // A dynamic body with a triangle mesh is refused too (Bullet cannot collide it either).
   btTriangleMesh mesh;
   mesh.addTriangle(btVector3(0, 0, 0), btVector3(1, 0, 0), btVector3(0, 0, 1));
@@ -583,6 +584,11 @@ TEST_CASE("a .bullet scene with each shape and joint type round-trips through th
       new btGeneric6DofSpring2Constraint(*dyn[6], *dyn[7], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
   spring2->setLinearLowerLimit(btVector3(-0.2, 0, 0));
   spring2->setLinearUpperLimit(btVector3(0.2, 0, 0));
+  spring2->setAngularLowerLimit(btVector3(-0.3, 0, 1));  // x limited, y locked, z free: Euler rows
+  spring2->setAngularUpperLimit(btVector3(0.4, 0, -1));
+  auto* cone =
+      src.joint(new btConeTwistConstraint(*dyn[7], *dyn[0], frame(btVector3(0.5, 0, 0)), frame(btVector3(-0.5, 0, 0))));
+  cone->setLimit(btScalar(0.5), btScalar(0.8), btScalar(0.3));
   btDefaultSerializer ser;
   src.world->serialize(&ser);
 
@@ -628,6 +634,15 @@ TEST_CASE("a .bullet scene with each shape and joint type round-trips through th
     CHECK(a.hinge_motor_velocity == Approx(b.hinge_motor_velocity));
     CHECK(a.hinge_limit == b.hinge_limit);
     CHECK(a.springs.size() == b.springs.size());
+    CHECK(a.cone_swing_limit == b.cone_swing_limit);
+    CHECK(a.cone_swing1 == Approx(b.cone_swing1));
+    CHECK(a.cone_swing2 == Approx(b.cone_swing2));
+    CHECK(a.cone_twist == Approx(b.cone_twist));
+    for (int k = 0; k < 3; ++k) {
+      CHECK(int(a.euler[k].mode) == int(b.euler[k].mode));
+      CHECK(a.euler[k].lo == Approx(b.euler[k].lo));
+      CHECK(a.euler[k].hi == Approx(b.euler[k].hi));
+    }
   }
   importer.deleteAllData();
   delete mesh;

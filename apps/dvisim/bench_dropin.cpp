@@ -9,9 +9,8 @@
 //
 //   boxes     3000 boxes (2 m) falling in a 10 x 30 x 10 block onto a ground box
 //   pyramid   a pyramid of 1015 boxes (layers 14 x 14 .. 1 x 1) resting on the ground
-//   ragdolls  ragdolls of 11 capsules each, joined by point-to-point (hips, shoulders, neck) and hinge
-//             (knees, elbows, spine) constraints, falling onto the ground (Bullet's ragdolls use cone-twist
-//             joints at hips, shoulders and neck, which the drop-in world refuses: point-to-point stands in)
+//   ragdolls  ragdolls of 11 capsules each as Bullet's RagdollDemo builds them: cone-twist joints (neck, hips,
+//             shoulders) and hinges with limits (spine, knees, elbows), falling onto the ground
 //   hulls     1000 convex hulls of 14 vertices falling in a 10 x 10 x 10 block
 //   terrain   500 boxes and hulls falling onto a static triangle-mesh terrain of 2 x 40 x 40 triangles
 //   boxes100k 100,000 boxes (1 m) in 50 x 50 columns of 40 resting on the ground (not in the default list:
@@ -185,8 +184,11 @@ void scenePyramid(World& w, int scale) {
   }
 }
 
-// A ragdoll (Bullet's ragdoll proportions: pelvis, spine, head, upper/lower arms and legs as capsules, in metres)
-// at `at`: point-to-point joints at the hips, shoulders and neck, hinges at the knees, elbows and spine.
+// A ragdoll as Bullet's RagdollDemo builds one (its public description, in our own code): pelvis, spine, head,
+// upper/lower legs and arms as capsules (metres, arms horizontal), cone-twist joints at the neck (swing pi/4, pi/4,
+// twist pi/2), hips (pi/4, pi/4, 0) and shoulders (pi/2, pi/2, 0), hinges at the spine (-pi/4 .. pi/2), knees
+// (0 .. pi/2) and elbows (-pi/2 .. 0), damping 0.05 / 0.85. Every joint frame is given in the world (pivot and
+// axes) and read into both bodies, so that each joint starts at its zero angles.
 void ragdoll(World& w, const btVector3& at) {
   struct Part {
     btScalar r, h;
@@ -205,34 +207,41 @@ void ragdoll(World& w, const btVector3& at) {
     b[i] = w.add(s, 1, t);
     b[i]->setDamping(0.05f, 0.85f);
   }
-  auto p2p = [&](int i, int j, const btVector3& world_pivot) {
-    const btVector3 pa = b[i]->getCenterOfMassTransform().inverse() * world_pivot;
-    const btVector3 pb = b[j]->getCenterOfMassTransform().inverse() * world_pivot;
-    w.join(new btPoint2PointConstraint(*b[i], *b[j], pa, pb));
+  // Local frames of bodies i and j for a joint frame given in the world (pivot p, axes q).
+  auto frames = [&](int i, int j, const btVector3& p, const btQuaternion& q, btTransform& fa, btTransform& fb) {
+    const btTransform world(q, at + p);
+    fa = b[i]->getCenterOfMassTransform().inverse() * world;
+    fb = b[j]->getCenterOfMassTransform().inverse() * world;
   };
-  auto hinge = [&](int i, int j, const btVector3& world_pivot, btScalar lo, btScalar hi) {
-    const btVector3 axis(0, 0, 1);
+  auto cone = [&](int i, int j, const btVector3& p, const btQuaternion& q, btScalar s1, btScalar s2, btScalar tw) {
     btTransform fa, fb;
-    fa.setIdentity();
-    fb.setIdentity();
-    fa.setOrigin(b[i]->getCenterOfMassTransform().inverse() * world_pivot);
-    fb.setOrigin(b[j]->getCenterOfMassTransform().inverse() * world_pivot);
-    fa.setBasis(b[i]->getCenterOfMassTransform().getBasis().transpose() * btMatrix3x3(btQuaternion(axis, 0)));
-    fb.setBasis(b[j]->getCenterOfMassTransform().getBasis().transpose() * btMatrix3x3(btQuaternion(axis, 0)));
+    frames(i, j, p, q, fa, fb);
+    auto* c = new btConeTwistConstraint(*b[i], *b[j], fa, fb);
+    c->setLimit(s1, s2, tw);
+    w.join(c);
+  };
+  auto hinge = [&](int i, int j, const btVector3& p, const btQuaternion& q, btScalar lo, btScalar hi) {
+    btTransform fa, fb;
+    frames(i, j, p, q, fa, fb);
     auto* h = new btHingeConstraint(*b[i], *b[j], fa, fb);
     h->setLimit(lo, hi);
     w.join(h);
   };
-  hinge(0, 1, at + btVector3(0, 1.1f, 0), -0.8f, 0.8f);  // spine
-  p2p(1, 2, at + btVector3(0, 1.5f, 0));                 // neck
-  p2p(0, 3, at + btVector3(-0.18f, 0.9f, 0));            // hips
-  p2p(0, 5, at + btVector3(0.18f, 0.9f, 0));
-  hinge(3, 4, at + btVector3(-0.18f, 0.42f, 0), 0.0f, 2.5f);  // knees
-  hinge(5, 6, at + btVector3(0.18f, 0.42f, 0), 0.0f, 2.5f);
-  p2p(1, 7, at + btVector3(-0.18f, 1.45f, 0));  // shoulders
-  p2p(1, 9, at + btVector3(0.18f, 1.45f, 0));
-  hinge(7, 8, at + btVector3(-0.55f, 1.45f, 0), -2.5f, 0.0f);  // elbows
-  hinge(9, 10, at + btVector3(0.55f, 1.45f, 0), -2.5f, 0.0f);
+  const btScalar pi = btScalar(M_PI);
+  const btQuaternion lateral(btVector3(0, 1, 0), pi / 2);  // hinge axis (z) along the body's left-right axis (x)
+  const btQuaternion up(btVector3(0, 0, 1), pi / 2), down(btVector3(0, 0, 1), -pi / 2);  // twist axis (x) up, down
+  const btQuaternion left(btVector3(0, 0, 1), pi), right = btQuaternion::getIdentity();  // twist axis along an arm
+  const btQuaternion vertical(btVector3(1, 0, 0), -pi / 2);                              // hinge axis (z) along y
+  hinge(0, 1, {0, 1.1f, 0}, lateral, -pi / 4, pi / 2);                                   // spine
+  cone(1, 2, {0, 1.5f, 0}, up, pi / 4, pi / 4, pi / 2);                                  // neck
+  cone(0, 3, {-0.18f, 0.9f, 0}, down, pi / 4, pi / 4, 0);                                // hips
+  cone(0, 5, {0.18f, 0.9f, 0}, down, pi / 4, pi / 4, 0);
+  hinge(3, 4, {-0.18f, 0.42f, 0}, lateral, 0, pi / 2);  // knees
+  hinge(5, 6, {0.18f, 0.42f, 0}, lateral, 0, pi / 2);
+  cone(1, 7, {-0.18f, 1.45f, 0}, left, pi / 2, pi / 2, 0);  // shoulders
+  cone(1, 9, {0.18f, 1.45f, 0}, right, pi / 2, pi / 2, 0);
+  hinge(7, 8, {-0.55f, 1.45f, 0}, vertical, -pi / 2, 0);  // elbows
+  hinge(9, 10, {0.55f, 1.45f, 0}, vertical, -pi / 2, 0);
 }
 
 void sceneRagdolls(World& w, int scale) {

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "chrono_like/base/errors.h"
@@ -22,56 +23,82 @@ std::string axisName(int i) { return i < 3 ? std::string(1, "xyz"[i]) : std::str
 struct Dof6 {
   real lo[6], hi[6];
   bool motor[6] = {false, false, false, false, false, false};
+  bool servo[6] = {false, false, false, false, false, false};
+  real motor_velocity[6] = {0, 0, 0, 0, 0, 0}, motor_force[6] = {0, 0, 0, 0, 0, 0};
   bool spring[6] = {false, false, false, false, false, false};
   real k[6] = {0, 0, 0, 0, 0, 0}, c[6] = {0, 0, 0, 0, 0, 0}, eq[6] = {0, 0, 0, 0, 0, 0};
+  int order[3] = {0, 1, 2};  // rotate order of the angles (btGeneric6DofSpring2Constraint's RotateOrder)
 };
+
+JointSpec::Axis axisMode(real lo, real hi) {
+  return lo == hi ? JointSpec::Axis::Locked : (lo > hi ? JointSpec::Axis::Free : JointSpec::Axis::Limited);
+}
+
+// The angular part of a 6-DoF: orientation locked at zero, a hinge (two axes locked at zero, the third free or
+// limited, with its motor and spring), all free, or else Bullet's three Euler angles each locked, limited or free.
+void angularFromDof6(const Dof6& d, JointSpec& j) {
+  int locked_zero = 0, other = -1, active = 0;
+  for (int i = 0; i < 3; ++i) {
+    const JointSpec::Axis m = axisMode(d.lo[3 + i], d.hi[3 + i]);
+    const bool lz = m == JointSpec::Axis::Locked && d.lo[3 + i] == 0;
+    locked_zero += lz;
+    if (!lz) other = i;
+    active += m != JointSpec::Axis::Free || ((d.motor[3 + i] || d.spring[3 + i]) && m != JointSpec::Axis::Locked);
+  }
+  if (locked_zero == 3) {
+    j.ang = JointSpec::Angular::Locked;
+  } else if (locked_zero == 2 && axisMode(d.lo[3 + other], d.hi[3 + other]) != JointSpec::Axis::Locked) {
+    // The hinge angle theta (B relative to A) is minus Bullet's angle (A relative to B) when the other two are 0.
+    j.ang = JointSpec::Angular::Hinge;
+    j.hinge_axis = other;
+    const int i = 3 + other;
+    if (axisMode(d.lo[i], d.hi[i]) == JointSpec::Axis::Limited) {
+      j.hinge_limit = true;
+      j.hinge_lo = -d.hi[i];
+      j.hinge_hi = -d.lo[i];
+    }
+    if (d.motor[i] && !d.spring[i]) {
+      j.hinge_motor = true;
+      j.hinge_motor_velocity = -d.motor_velocity[i];
+      j.hinge_motor_max_force = d.motor_force[i];
+    }
+    if (d.spring[i]) j.springs.push_back({i, d.k[i], d.c[i], -d.eq[i]});
+  } else if (active == 0) {
+    j.ang = JointSpec::Angular::Free;
+  } else {
+    j.ang = JointSpec::Angular::Euler;
+    for (int m = 0; m < 3; ++m) {
+      const int i = 3 + m;
+      JointSpec::EulerAxis& x = j.euler[m];
+      j.euler_order[m] = d.order[m];
+      x.mode = axisMode(d.lo[i], d.hi[i]);
+      x.lo = d.lo[i];
+      x.hi = d.hi[i];
+      if (x.mode == JointSpec::Axis::Locked) continue;
+      x.motor = d.motor[i] && !d.spring[i];
+      x.motor_velocity = d.motor_velocity[i];
+      x.motor_max_force = d.motor_force[i];
+      if (d.spring[i]) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
+    }
+  }
+}
 
 void fromDof6(const Dof6& d, const char* kind, JointSpec& j) {
   auto refuse = [&](const std::string& what) {
     throw InputError(std::string(kind) + ": " + what + " is not supported");
   };
   for (int i = 0; i < 3; ++i) {
-    if (d.lo[i] == d.hi[i])
-      j.lin[i] = JointSpec::Axis::Locked;
-    else if (d.lo[i] > d.hi[i])
-      j.lin[i] = JointSpec::Axis::Free;
-    else
-      j.lin[i] = JointSpec::Axis::Limited;
+    j.lin[i] = axisMode(d.lo[i], d.hi[i]);
     j.lin_lo[i] = d.lo[i];
     j.lin_hi[i] = d.hi[i];
   }
-  int locked = 0, free_axis = -1;
-  for (int i = 0; i < 3; ++i) {
-    const real lo = d.lo[3 + i], hi = d.hi[3 + i];
-    if (lo == hi) {
-      ++locked;
-      if (lo != 0) refuse("a rotational axis locked at a non-zero angle (" + axisName(3 + i) + ")");
-    } else if (lo > hi) {
-      free_axis = i;
-    } else {
-      refuse("an angular limit range on " + axisName(3 + i) + " (only locked or free rotational axes)");
-    }
-  }
-  if (locked == 3)
-    j.ang = JointSpec::Angular::Locked;
-  else if (locked == 2) {
-    j.ang = JointSpec::Angular::Hinge;
-    j.hinge_axis = free_axis;
-  } else if (locked == 0)
-    j.ang = JointSpec::Angular::Free;
-  else
-    refuse("a single locked rotational axis");
   for (int i = 0; i < 6; ++i) {
-    if (d.motor[i] && !d.spring[i]) refuse("a motor on " + axisName(i));
-    if (!d.spring[i]) continue;
-    if (i < 3) {
-      if (j.lin[i] != JointSpec::Axis::Locked) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
-    } else if (j.ang == JointSpec::Angular::Hinge && i - 3 == j.hinge_axis) {
-      j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
-    } else if (!(j.ang == JointSpec::Angular::Locked)) {
-      refuse("a spring on " + axisName(i) + " (angular springs only on the free axis of a hinge-like 6-DoF)");
-    }
+    if (d.servo[i]) refuse("a servo motor on " + axisName(i));
+    if (i < 3 && d.motor[i] && !d.spring[i]) refuse("a linear motor on " + axisName(i));
   }
+  for (int i = 0; i < 3; ++i)
+    if (d.spring[i] && j.lin[i] != JointSpec::Axis::Locked) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
+  angularFromDof6(d, j);
 }
 
 }  // namespace
@@ -143,6 +170,39 @@ void sliderSpec(btSliderConstraint& s, JointSpec& j) {
   }
 }
 
+// btConeTwistConstraint: the point-to-point part (unless angular only), the elliptic swing cone and the twist limit.
+// Bullet enforces its limits at span x softness (the correction of calcAngleInfo2 is taken from the "soft" limit);
+// a swing span below Bullet's fix threshold locks that swing (Bullet turns the joint into a hinge or a fixed
+// joint). Bullet's bias factor (Baumgarte), relaxation factor (a row scale) and damping (used only by its
+// obsolete solver path) have no meaning for the DVI rows, which correct the whole error in each step.
+void coneTwistSpec(btConeTwistConstraint& c, JointSpec& j) {
+  j.kind = "cone-twist";
+  j.frame_a = fromBt(c.getAFrame());
+  j.frame_b = fromBt(c.getBFrame());
+  if (!c.getAngularOnly())
+    for (auto& a : j.lin) a = JointSpec::Axis::Locked;
+  j.ang = JointSpec::Angular::ConeTwist;
+  const real soft = real(c.getLimitSoftness()), fix = real(c.getFixThresh());
+  const real s1 = real(c.getSwingSpan1()), s2 = real(c.getSwingSpan2()), tw = real(c.getTwistSpan());
+  const real kPi = real(3.14159265358979323846);
+  j.cone_lock1 = s1 < fix;
+  j.cone_lock2 = s2 < fix;
+  j.cone_swing1 = j.cone_lock1 ? s2 * soft : s1 * soft;  // one swing locked: the other alone is the limit
+  j.cone_swing2 = j.cone_lock2 ? s1 * soft : s2 * soft;
+  j.cone_swing_limit = !(j.cone_lock1 && j.cone_lock2) && std::min(j.cone_swing1, j.cone_swing2) < kPi;
+  j.cone_twist_limit = tw >= 0 && tw * soft < kPi;
+  j.cone_twist = tw * soft;
+  if (c.isMotorEnabled()) {
+    // getInfo2's swing row carries the motor: impulse in [0, max motor impulse] (no bound where it is < 0).
+    // Bullet's "normalized" strength only acts in its obsolete solver path.
+    j.cone_motor = true;
+    j.cone_motor_target = normalized(fromBt(c.getMotorTarget()));
+    const real m = real(c.getMaxMotorImpulse());
+    j.cone_motor_max_impulse = m >= 0 ? m : std::numeric_limits<real>::infinity();
+    j.cone_motor_bias = real(c.getBiasFactor());
+  }
+}
+
 // btGeneric6DofConstraint, and its spring form.
 void dof6Spec(btGeneric6DofConstraint& g, bool spring, JointSpec& j) {
   j.kind = spring ? "generic 6-DoF spring" : "generic 6-DoF";
@@ -160,7 +220,10 @@ void dof6Spec(btGeneric6DofConstraint& g, bool spring, JointSpec& j) {
     d.lo[3 + i] = alo[i];
     d.hi[3 + i] = ahi[i];
     d.motor[i] = g.getTranslationalLimitMotor()->m_enableMotor[i];
-    d.motor[3 + i] = g.getRotationalLimitMotor(i)->m_enableMotor;
+    const btRotationalLimitMotor* r = g.getRotationalLimitMotor(i);
+    d.motor[3 + i] = r->m_enableMotor;
+    d.motor_velocity[3 + i] = r->m_targetVelocity;  // Bullet: d(getAngle)/dt
+    d.motor_force[3 + i] = r->m_maxMotorForce;      // Bullet bounds the row's impulse by force / fps
   }
   if (spring) {
     auto& sp = static_cast<btGeneric6DofSpringConstraint&>(g);
@@ -193,11 +256,18 @@ void dof6Spring2Spec(btGeneric6DofSpring2Constraint& g, bool fixed, JointSpec& j
     d.lo[3 + i] = r->m_loLimit;
     d.hi[3 + i] = r->m_hiLimit;
     d.motor[3 + i] = r->m_enableMotor;
+    d.servo[3 + i] = r->m_enableMotor && r->m_servoMotor;
+    d.servo[i] = t->m_enableMotor[i] && t->m_servoMotor[i];
+    d.motor_velocity[3 + i] = r->m_targetVelocity;
+    d.motor_force[3 + i] = r->m_maxMotorForce;
     d.spring[3 + i] = r->m_enableSpring;
     d.k[3 + i] = r->m_springStiffness;
     d.c[3 + i] = r->m_springDamping;
     d.eq[3 + i] = r->m_equilibriumPoint;
   }
+  static const int kOrders[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};  // RotateOrder
+  const int o = int(g.getRotationOrder());
+  for (int m = 0; m < 3; ++m) d.order[m] = kOrders[o >= 0 && o < 6 ? o : 0][m];
   fromDof6(d, j.kind, j);
 }
 
@@ -220,6 +290,7 @@ JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
     }
     case HINGE_CONSTRAINT_TYPE: hingeSpec(static_cast<btHingeConstraint&>(mc), j); return j;
     case SLIDER_CONSTRAINT_TYPE: sliderSpec(static_cast<btSliderConstraint&>(mc), j); return j;
+    case CONETWIST_CONSTRAINT_TYPE: coneTwistSpec(static_cast<btConeTwistConstraint&>(mc), j); return j;
     case D6_CONSTRAINT_TYPE:
     case D6_SPRING_CONSTRAINT_TYPE:
       dof6Spec(static_cast<btGeneric6DofConstraint&>(mc), c.getConstraintType() == D6_SPRING_CONSTRAINT_TYPE, j);
@@ -230,8 +301,9 @@ JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
                       j);
       return j;
     default:
-      throw InputError("unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
-                       " (supported: point-to-point, hinge, slider, fixed, generic 6-DoF [spring, spring 2])");
+      throw InputError(
+          "unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
+          " (supported: point-to-point, hinge, cone-twist, slider, fixed, generic 6-DoF [spring, spring 2])");
   }
 }
 

@@ -2,12 +2,18 @@
 // btTypedConstraint is read, each step, into a JointSpec (joints.h: its frames, axis modes and rows).
 //
 // Supported (anything else is refused by jointSpecFromBullet with an InputError naming the type or the
-// feature): point-to-point; hinge with limit and angular motor; slider with linear limits, linear motor and
-// locked or free rotation; fixed; generic 6-DoF (btGeneric6DofConstraint, btGeneric6DofSpringConstraint,
-// btGeneric6DofSpring2Constraint) with locked, free or limited linear axes, and angular axes all locked at
-// zero, two locked at zero (a hinge), or all free; springs on free linear axes, and on the free axis of a
-// hinge-like 6-DoF. Refused: cone-twist, gear, contact constraints, 6-DoF motors, angular limit ranges of
-// a 6-DoF or slider, a single locked rotational axis, non-zero locked angles, slider angular motors.
+// feature): point-to-point; hinge with limit and angular motor; cone-twist (btConeTwistConstraint: the pivot, the
+// elliptic swing cone of swingSpan1/swingSpan2 and the twist span as unilateral rows, in Bullet's definitions of
+// swing and twist; limits at span x softness as in Bullet; a span below Bullet's fix threshold locks that swing;
+// angular-only; the motor towards setMotorTarget as Bullet's servo row); slider with linear limits, linear motor
+// and locked or free rotation; fixed; generic 6-DoF (btGeneric6DofConstraint, btGeneric6DofSpringConstraint,
+// btGeneric6DofSpring2Constraint) with locked, free or limited linear axes and, per rotational axis, locked (at
+// any angle), free or limited to [lo, hi] in Bullet's Euler angles (XYZ, or the rotate order of Spring2), angular
+// motors (target velocity, max motor force), springs on free linear axes and on free or limited rotational axes.
+// Refused: gear and contact constraints, linear 6-DoF motors, Spring2 servo motors, angular limit ranges and
+// angular motors of a slider. Bullet's softness parameters with no meaning for the DVI rows (ERP/bias factors,
+// CFM, the cone-twist's relaxation factor and damping, 6-DoF bounce and Bullet's motor factor near limits) are
+// not used (docs/DROP_IN.md).
 #pragma once
 
 #include <string>

@@ -1,5 +1,6 @@
 // Joint rows, violations and spring forces from a JointSpec (joints.h).
 #include "chrono_like/solver/joints.h"
+#include "chrono_like/solver/joint_angles.h"
 
 #include <algorithm>
 #include <cmath>
@@ -85,24 +86,116 @@ real hingeTheta(const JointSpec& j, const Frames& f) {
   return real(2) * std::atan2(comp(Vec3{qr.x, qr.y, qr.z}, j.hinge_axis), qr.w);
 }
 
+// Largest angle past a cone-twist's limits or locks (radians).
+real coneViolation(const JointSpec& j, const Frames& f) {
+  const ConeAngles c = coneAngles(f.fa.q, f.fb.q, j.cone_swing1, j.cone_swing2);
+  real v = 0;
+  if (j.cone_lock1) v = std::max(v, std::asin(std::min(real(1), std::fabs(c.u_y))));
+  if (j.cone_lock2) v = std::max(v, std::asin(std::min(real(1), std::fabs(c.u_z))));
+  if (j.cone_swing_limit) v = std::max(v, c.swing - c.swing_limit);
+  if (j.cone_twist_limit) v = std::max(v, std::fabs(c.twist) - j.cone_twist);
+  return v;
+}
+
+// Appends rows with their bias: bilateral C = 0 (bias C / h clamped to a recovery speed), unilateral C >= 0 (any
+// approach speed, recovery clamped), and motors J v = target within +-max impulse.
+struct RowSink {
+  std::vector<ConstraintRow>& out;
+  real dt, vmax, wmax;
+  void bilateral(ConstraintRow r, real C, real lim) {
+    r.bias = clampr(C / dt, -lim, lim);
+    out.push_back(r);
+  }
+  void unilateral(ConstraintRow r, real C, real lim) {  // C >= 0 wanted
+    r.bias = C >= 0 ? C / dt : std::max(C / dt, -lim);
+    r.lo = 0;
+    r.hi = kInf;
+    out.push_back(r);
+  }
+  void motor(ConstraintRow r, real target, real max_impulse) {
+    r.bias = -target;
+    r.lo = -max_impulse;
+    r.hi = max_impulse;
+    out.push_back(r);
+  }
+};
+
+void hingeRows(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
+  const int k = j.hinge_axis;
+  const Vec3 a = f.ea[k], b = rotate(f.fb.q, unitAxis(k));
+  const Vec3 c = cross(a, b);
+  for (int m = 0; m < 3; ++m)
+    if (m != k) sink.bilateral(angularRow(A, B, f.ea[m]), dot(f.ea[m], c), sink.wmax);
+  const ConstraintRow ra = angularRow(A, B, a);  // J v = d theta / dt
+  if (j.hinge_limit) {
+    const real theta = hingeTheta(j, f);
+    sink.unilateral(ra, theta - j.hinge_lo, sink.wmax);
+    sink.unilateral(negated(ra), j.hinge_hi - theta, sink.wmax);
+  }
+  if (j.hinge_motor)
+    sink.motor(ra, j.hinge_motor_velocity, j.hinge_motor_max_impulse + j.hinge_motor_max_force * sink.dt);
+}
+
+// Bullet's cone-twist motor (btConeTwistConstraint::calcAngleInfo2 with the motor on): the rotation
+// qDelta = qFB target conj(qFA) still to go, about its axis (world), error = bias factor x angle.
+void coneMotorRow(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
+  const Quat qd = normalized(f.fb.q * j.cone_motor_target * conj(f.fa.q));
+  const Vec3 axis{qd.x, qd.y, qd.z};
+  const real s = length(axis);
+  if (!(s > real(1e-7))) return;  // at the target (Bullet: no row)
+  const real angle = real(2) * std::acos(std::min(real(1), std::max(real(-1), qd.w)));
+  ConstraintRow r = angularRow(A, B, axis * (real(-1) / s));  // J v = (wA - wB).axis
+  r.bias = -j.cone_motor_bias * angle / sink.dt;
+  r.lo = 0;
+  r.hi = j.cone_motor_max_impulse;
+  sink.out.push_back(r);
+}
+
+void coneTwistRows(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
+  if (j.cone_motor) {
+    coneMotorRow(j, A, B, f, sink);
+    return;
+  }
+  const ConeAngles c = coneAngles(f.fa.q, f.fb.q, j.cone_swing1, j.cone_swing2);
+  if (j.cone_lock1) sink.bilateral(angularRow(A, B, c.u_y_g), c.u_y, sink.wmax);
+  if (j.cone_lock2) sink.bilateral(angularRow(A, B, c.u_z_g), c.u_z, sink.wmax);
+  if (j.cone_swing_limit) sink.unilateral(angularRow(A, B, c.swing_g), c.swing_c, sink.wmax);
+  if (j.cone_twist_limit) {
+    const ConstraintRow r = angularRow(A, B, c.twist_g);  // J v = d psi / dt
+    if (j.cone_twist == 0) {                              // twist locked (Bullet: a bilateral row at span 0)
+      sink.bilateral(r, c.twist, sink.wmax);
+    } else {
+      sink.unilateral(r, c.twist + j.cone_twist, sink.wmax);
+      sink.unilateral(negated(r), j.cone_twist - c.twist, sink.wmax);
+    }
+  }
+}
+
+void eulerRows(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
+  const EulerAngles e = eulerAngles(f.fa.q, f.fb.q, j.euler_order);
+  for (int m = 0; m < 3; ++m) {
+    const JointSpec::EulerAxis& x = j.euler[m];
+    const ConstraintRow r = angularRow(A, B, e.g[m]);  // J v = d phi / dt
+    if (x.mode == JointSpec::Axis::Locked) {
+      sink.bilateral(r, e.angle[m] - x.lo, sink.wmax);
+      continue;  // a motor on a locked axis does nothing (as in Bullet)
+    }
+    if (x.mode == JointSpec::Axis::Limited) {
+      sink.unilateral(r, e.angle[m] - x.lo, sink.wmax);
+      sink.unilateral(negated(r), x.hi - e.angle[m], sink.wmax);
+    }
+    if (x.motor) sink.motor(r, x.motor_velocity, x.motor_max_force * sink.dt);
+  }
+}
+
 }  // namespace
 
 void jointRows(const JointSpec& j, const JointBody& A, const JointBody& B, real dt, const JointSettings& s,
                std::vector<ConstraintRow>& out) {
   const Frames f = frames(j, A, B);
   const real size = std::min(A.size, B.size);
-  const real vmax = s.recovery_rel * size, wmax = s.max_recovery_angular;
+  RowSink sink{out, dt, s.recovery_rel * size, s.max_recovery_angular};
   const Vec3 rAB = f.fb.p - A.x;
-  auto bilateral = [&](ConstraintRow r, real C, real lim) {
-    r.bias = clampr(C / dt, -lim, lim);
-    out.push_back(r);
-  };
-  auto unilateral = [&](ConstraintRow r, real C, real lim) {  // C >= 0 wanted
-    r.bias = C >= 0 ? C / dt : std::max(C / dt, -lim);
-    r.lo = 0;
-    r.hi = kInf;
-    out.push_back(r);
-  };
   // Second-order drift of a linear row over one step: the velocity-level row makes C' = C + h J v+ vanish
   // to first order, but the exponential-map rotation of the lever arms (and of e, fixed in A) adds
   //   h^2/2 C'' = h^2/2 [ e.(wB x (wB x rB) - wA x (wA x rAB)) + 2 (wA x e).v_rel + (wA x (wA x e)).d ]
@@ -122,41 +215,23 @@ void jointRows(const JointSpec& j, const JointBody& A, const JointBody& B, real 
     const ConstraintRow r = linearRow(A, B, e, rAB, f.rB);
     const real si = dot(e, f.d);
     if (j.lin[i] == JointSpec::Axis::Locked) {
-      bilateral(r, si - j.lin_lo[i] + drift(e), vmax);
+      sink.bilateral(r, si - j.lin_lo[i] + drift(e), sink.vmax);
     } else {
-      unilateral(r, si - j.lin_lo[i], vmax);
-      unilateral(negated(r), j.lin_hi[i] - si, vmax);
+      sink.unilateral(r, si - j.lin_lo[i], sink.vmax);
+      sink.unilateral(negated(r), j.lin_hi[i] - si, sink.vmax);
     }
   }
-  if (j.lin_motor) {
-    ConstraintRow r = linearRow(A, B, f.ea[0], rAB, f.rB);
-    r.bias = -j.lin_motor_velocity;
-    r.lo = -j.lin_motor_max_force * dt;
-    r.hi = j.lin_motor_max_force * dt;
-    out.push_back(r);
-  }
-  if (j.ang == JointSpec::Angular::Locked) {
-    const Vec3 theta = rotationVector(f.fb.q * conj(f.fa.q));
-    for (int k = 0; k < 3; ++k) bilateral(angularRow(A, B, unitAxis(k)), comp(theta, k), wmax);
-  } else if (j.ang == JointSpec::Angular::Hinge) {
-    const int k = j.hinge_axis;
-    const Vec3 a = f.ea[k], b = rotate(f.fb.q, unitAxis(k));
-    const Vec3 c = cross(a, b);
-    for (int m = 0; m < 3; ++m)
-      if (m != k) bilateral(angularRow(A, B, f.ea[m]), dot(f.ea[m], c), wmax);
-    const ConstraintRow ra = angularRow(A, B, a);  // J v = d theta / dt
-    if (j.hinge_limit) {
-      const real theta = hingeTheta(j, f);
-      unilateral(ra, theta - j.hinge_lo, wmax);
-      unilateral(negated(ra), j.hinge_hi - theta, wmax);
+  if (j.lin_motor) sink.motor(linearRow(A, B, f.ea[0], rAB, f.rB), j.lin_motor_velocity, j.lin_motor_max_force * dt);
+  switch (j.ang) {
+    case JointSpec::Angular::Locked: {
+      const Vec3 theta = rotationVector(f.fb.q * conj(f.fa.q));
+      for (int k = 0; k < 3; ++k) sink.bilateral(angularRow(A, B, unitAxis(k)), comp(theta, k), sink.wmax);
+      break;
     }
-    if (j.hinge_motor) {
-      ConstraintRow r = ra;
-      r.bias = -j.hinge_motor_velocity;
-      r.lo = -j.hinge_motor_max_impulse;
-      r.hi = j.hinge_motor_max_impulse;
-      out.push_back(r);
-    }
+    case JointSpec::Angular::Hinge: hingeRows(j, A, B, f, sink); break;
+    case JointSpec::Angular::ConeTwist: coneTwistRows(j, A, B, f, sink); break;
+    case JointSpec::Angular::Euler: eulerRows(j, A, B, f, sink); break;
+    case JointSpec::Angular::Free: break;
   }
 }
 
@@ -182,8 +257,30 @@ JointViolation jointViolation(const JointSpec& j, const JointBody& A, const Join
       const real th = hingeTheta(j, f);
       v.angular = std::max(v.angular, std::max(j.hinge_lo - th, th - j.hinge_hi));
     }
+  } else if (j.ang == JointSpec::Angular::ConeTwist) {
+    v.angular = coneViolation(j, f);
+  } else if (j.ang == JointSpec::Angular::Euler) {
+    const EulerAngles e = eulerAngles(f.fa.q, f.fb.q, j.euler_order);
+    for (int m = 0; m < 3; ++m) {
+      const JointSpec::EulerAxis& x = j.euler[m];
+      if (x.mode == JointSpec::Axis::Locked) v.angular = std::max(v.angular, std::fabs(e.angle[m] - x.lo));
+      if (x.mode == JointSpec::Axis::Limited)
+        v.angular = std::max(v.angular, std::max(x.lo - e.angle[m], e.angle[m] - x.hi));
+    }
   }
   return v;
+}
+
+JointConeState jointConeState(const JointSpec& j, const JointBody& A, const JointBody& B) {
+  const Frames f = frames(j, A, B);
+  const ConeAngles c = coneAngles(f.fa.q, f.fb.q, j.cone_swing1, j.cone_swing2);
+  return JointConeState{c.swing, c.swing_limit, c.twist};
+}
+
+void jointEulerAngles(const JointSpec& j, const JointBody& A, const JointBody& B, real out[3]) {
+  const Frames f = frames(j, A, B);
+  const EulerAngles e = eulerAngles(f.fa.q, f.fb.q, j.euler_order);
+  for (int m = 0; m < 3; ++m) out[m] = e.angle[m];
 }
 
 void jointSpringForces(const JointSpec& j, const JointBody& A, const JointBody& B, Vec3* force, Vec3* torque) {
@@ -204,8 +301,17 @@ void jointSpringForces(const JointSpec& j, const JointBody& A, const JointBody& 
         torque[A.index] -= cross(rAB, F);
       }
     } else {
-      const Vec3 a = f.ea[s.dof - 3];
-      const real th = hingeTheta(j, f);
+      // The hinge angle theta about axis a, or an Euler angle phi with d phi/dt = (wB - wA).g: the torque on B
+      // is -(k (angle - eq) + c angle') times the angle's rate vector (the generalized force of the spring).
+      Vec3 a = f.ea[s.dof - 3];
+      real th = 0;
+      if (j.ang == JointSpec::Angular::Euler) {
+        const EulerAngles e = eulerAngles(f.fa.q, f.fb.q, j.euler_order);
+        a = e.g[s.dof - 3];
+        th = e.angle[s.dof - 3];
+      } else {
+        th = hingeTheta(j, f);
+      }
       const real thd = dot(a, B.w - A.w);
       const Vec3 T = a * (-s.stiffness * (th - s.equilibrium) - s.damping * thd);
       if (B.index >= 0) torque[B.index] += T;

@@ -104,7 +104,10 @@ real lipschitzLowerBound(Ops& p, real* e, real* Ne) {
 // 1/2 x^T N x + r^T x, i.e. s = max(0, -r^T x / x^T N x) (s = 1 where x^T N x = 0 and r^T x <= 0, 0
 // where both vanish or r^T x > 0): f(start) <= min(f(P(warm)), f(0) = 0). Nx = N x on entry is scaled
 // with x (no second Schur product). Returns the start's residual; throws SolverError on non-finite input.
-// (For row blocks whose box excludes 0 the ray scaling can leave the box; it is projected again.)
+// With row blocks (boxes [lo, hi] around 0) s is kept in [0, 1]: a larger s can carry a row past its bound (a
+// motor's warm start at its impulse limit scaled to the unbounded optimum), and that infeasible start, whose f
+// is below every feasible point's, would then stay the best iterate. f(s x) is convex in s, so the start still
+// satisfies f(start) <= min(f(P(warm)), 0).
 // The scaling s from the StartSums of x (throws on non-finite sums), applied to x and N x.
 template <class Ops>
 void scaleStart(Ops& p, real* x, real* Nx, const double* sums, const char* who) {
@@ -115,6 +118,7 @@ void scaleStart(Ops& p, real* x, real* Nx, const double* sums, const char* who) 
     sc = std::max(0.0, -sums[1] / sums[0]);
   else if (sums[1] > 0 || sums[0] < 0)
     sc = 0;
+  if (p.blocks() > p.blockSet().nc) sc = std::min(sc, 1.0);
   if (sc != 1) p.map(kern::Scale2{real(sc), x, Nx});
 }
 inline real startResidual(double res2, const char* who) {
