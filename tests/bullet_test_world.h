@@ -5,9 +5,11 @@
 #include <btBulletDynamicsCommon.h>
 
 #include <memory>
+#include <random>
 #include <vector>
 
 #include "chrono_like/bullet/bullet_world.h"
+#include "chrono_like/solver/joints.h"
 #include "gpu/gpu_factory.h"
 
 namespace dvi {
@@ -48,12 +50,9 @@ struct TestWorld {
     shapes.emplace_back(s);
     return s;
   }
-  btRigidBody* make(btCollisionShape* s, btScalar mass, const btVector3& p, bool add = true) {
+  btRigidBody* make(btCollisionShape* s, btScalar mass, const btTransform& t, bool add = true) {
     btVector3 inertia(0, 0, 0);
     if (mass > 0) s->calculateLocalInertia(mass, inertia);
-    btTransform t;
-    t.setIdentity();
-    t.setOrigin(p);
     auto* b = new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, new btDefaultMotionState(t), s, inertia));
     b->setActivationState(DISABLE_DEACTIVATION);
     if (add) {
@@ -61,6 +60,9 @@ struct TestWorld {
       bodies.push_back(b);
     }
     return b;
+  }
+  btRigidBody* make(btCollisionShape* s, btScalar mass, const btVector3& p, bool add = true) {
+    return make(s, mass, btTransform(btQuaternion::getIdentity(), p), add);
   }
   btRigidBody* ground() {  // static box, top face at y = 0
     btRigidBody* g = make(own(new btBoxShape(btVector3(20, 1, 20))), 0, btVector3(0, -1, 0));
@@ -78,5 +80,24 @@ struct TestWorld {
     for (int i = 0; i < frames; ++i) world->stepSimulation(btScalar(1) / 60, 10, sub);
   }
 };
+
+// Random rotations and vectors for the joint tests, and a body state advanced by its velocities over d (exact for the
+// position, exponential map for the rotation).
+inline Quat randomRotation(std::mt19937& rng) {
+  std::normal_distribution<double> n(0, 1);
+  return normalized(Quat{real(n(rng)), real(n(rng)), real(n(rng)), real(n(rng))});
+}
+inline Vec3 randomVec(std::mt19937& rng, double s) {
+  std::uniform_real_distribution<double> u(-s, s);
+  return Vec3{real(u(rng)), real(u(rng)), real(u(rng))};
+}
+inline JointBody advanced(JointBody b, real d) {
+  b.x += b.v * d;
+  b.q = normalized(quatFromRotationVector(b.w * d) * b.q);
+  return b;
+}
+inline btTransform frame(const btVector3& p, const btQuaternion& q = btQuaternion::getIdentity()) {
+  return btTransform(q, p);
+}
 
 }  // namespace dvi

@@ -18,73 +18,24 @@
 #include "chrono_like/bullet/bullet_world.h"
 #include "chrono_like/solver/joint_angles.h"
 
+#include "bullet_test_world.h"
+
 using namespace dvi;
 
 namespace {
 
-// A Bullet world (stock, or ours) without gravity unless set, owning its bodies and constraints.
-struct World {
-  btDefaultCollisionConfiguration config;
-  btCollisionDispatcher dispatcher{&config};
-  btDbvtBroadphase broadphase;
-  btSequentialImpulseConstraintSolver solver;
-  std::unique_ptr<btDiscreteDynamicsWorld> world;
-  std::vector<std::unique_ptr<btCollisionShape>> shapes;
-  std::vector<btRigidBody*> bodies;
-  std::vector<std::unique_ptr<btTypedConstraint>> constraints;
-
-  explicit World(bool dvi) {
-    if (dvi)
-      world = std::make_unique<DviDynamicsWorld>(&dispatcher, &broadphase, &solver, &config);
-    else
-      world = std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &broadphase, &solver, &config);
-    world->setGravity(btVector3(0, 0, 0));
-  }
-  ~World() {
-    for (auto& c : constraints) world->removeConstraint(c.get());
-    for (btRigidBody* b : bodies) {
-      world->removeRigidBody(b);
-      delete b->getMotionState();
-      delete b;
-    }
-  }
-  DviDynamicsWorld& dvi() { return static_cast<DviDynamicsWorld&>(*world); }
+// A Bullet world (stock, or ours) without gravity unless set; make() owns the shape.
+struct World : TestWorld {
+  explicit World(bool dvi) : TestWorld(dvi) { world->setGravity(btVector3(0, 0, 0)); }
   btRigidBody* make(btCollisionShape* s, btScalar mass, const btTransform& t) {
-    shapes.emplace_back(s);
-    btVector3 inertia(0, 0, 0);
-    if (mass > 0) s->calculateLocalInertia(mass, inertia);
-    auto* b = new btRigidBody(btRigidBody::btRigidBodyConstructionInfo(mass, new btDefaultMotionState(t), s, inertia));
-    b->setActivationState(DISABLE_DEACTIVATION);
-    world->addRigidBody(b);
-    bodies.push_back(b);
-    return b;
+    return TestWorld::make(own(s), mass, t);
   }
   template <class C>
   C* joint(C* c) {
-    constraints.emplace_back(c);
-    world->addConstraint(c, true);
-    return c;
+    return TestWorld::joint(c, true);
   }
-  void step(int frames) {
-    for (int i = 0; i < frames; ++i) world->stepSimulation(btScalar(1) / 60, 10, btScalar(1) / 240);
-  }
+  void step(int frames) { run(frames / 60.0); }
 };
-
-btTransform frame(const btVector3& p, const btQuaternion& q = btQuaternion::getIdentity()) { return btTransform(q, p); }
-
-Quat randomRotation(std::mt19937& rng) {
-  std::normal_distribution<double> n(0, 1);
-  return normalized(Quat{real(n(rng)), real(n(rng)), real(n(rng)), real(n(rng))});
-}
-Vec3 randomVec(std::mt19937& rng, double s) {
-  std::uniform_real_distribution<double> u(-s, s);
-  return Vec3{real(u(rng)), real(u(rng)), real(u(rng))};
-}
-JointBody advanced(JointBody b, real d) {
-  b.x += b.v * d;
-  b.q = normalized(quatFromRotationVector(b.w * d) * b.q);
-  return b;
-}
 
 // Bullet's swing limit in the direction of swing axis (0, cos a, -sin a) of frame B (computeConeLimitInfo,
 // GetPointForAngle): the ellipse with half-axes span2 (about y) and span1 (about z).

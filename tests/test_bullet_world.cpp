@@ -39,22 +39,6 @@ bool rowsSolved(DviDynamicsWorld& w) {
   return !w.system().constraintRows().empty() && w.system().rowImpulses().size() == w.system().constraintRows().size();
 }
 
-Quat randomRotation(std::mt19937& rng) {
-  std::normal_distribution<double> n(0, 1);
-  return normalized(Quat{real(n(rng)), real(n(rng)), real(n(rng)), real(n(rng))});
-}
-Vec3 randomVec(std::mt19937& rng, double s) {
-  std::uniform_real_distribution<double> u(-s, s);
-  return Vec3{real(u(rng)), real(u(rng)), real(u(rng))};
-}
-
-// Advances a body state by time d with its velocities (exact for the position, exponential map rotation).
-JointBody advanced(JointBody b, real d) {
-  b.x += b.v * d;
-  b.q = normalized(quatFromRotationVector(b.w * d) * b.q);
-  return b;
-}
-
 // Pose of the joint side B that satisfies the joint exactly, then perturbed by a small error.
 JointBody closeB(const JointSpec& j, const JointBody& A, std::mt19937& rng, real err) {
   const Pose fa = compose(Pose{A.x, A.q}, j.frame_a);
@@ -69,8 +53,6 @@ JointBody closeB(const JointSpec& j, const JointBody& A, std::mt19937& rng, real
   B.size = 1;
   return B;
 }
-
-btTransform frame(const btVector3& p, const btQuaternion& q = btQuaternion::getIdentity()) { return btTransform(q, p); }
 
 }  // namespace
 

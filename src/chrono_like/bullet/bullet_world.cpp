@@ -468,7 +468,9 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
     while (root[size_t(i)] != i) i = root[size_t(i)] = root[size_t(root[size_t(i)])];
     return i;
   };
-  auto merges = [&](int i) { return i >= 0 && tracked_[size_t(i)].kind == 0 && tracked_[size_t(i)].obj->mergesSimulationIslands(); };
+  auto merges = [&](int i) {
+    return i >= 0 && tracked_[size_t(i)].kind == 0 && tracked_[size_t(i)].obj->mergesSimulationIslands();
+  };
   auto unite = [&](int a, int b) {
     if (merges(a) && merges(b)) root[size_t(find(a))] = find(b);
   };
