@@ -12,7 +12,7 @@
 #   probe      unrecorded GPU pile timings, float and double APGD storage (PROBE_SIZES, PROBE_SCENES)
 #   ab         unrecorded GPU timings of option variants side by side (AB_VARIANTS, PROBE_SIZES, PROBE_SCENES)
 #   settle     the 100k pile at the default solver stop and at fixed 50 iterations, statistics side by side
-#   accuracy | stability | pruning | cesbench   the other benches, full mode, --record
+#   accuracy | stability | pruning | cesbench | dropin   the other benches, full mode, --record
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
 set -u
@@ -48,6 +48,7 @@ for m in "$@"; do
         > "$LOGS/configure.log" 2>&1 || { tail -30 "$LOGS/configure.log"; cp "$LOGS/configure.log" "$OUT/"; exit 1; }
       cmake --build $B -j16 --target dvisim_cli dvisim_tests > "$LOGS/build.log" 2>&1 ||
         { grep -E "error" "$LOGS/build.log" | head -30; cp "$LOGS/build.log" "$OUT/"; exit 1; } ;;
+    dropin) bench dropin ;;
     tests) $TESTS "[gpu]" -d yes 2>&1 | tee "$LOGS/tests.log" | grep -E "passed|failed|FAILED|with message|^  [a-z]|s: " ;;
     sanitize)
       # Every [gpu] test, one process per test (names from --list-test-names-only), under memcheck and
