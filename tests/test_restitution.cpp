@@ -70,6 +70,7 @@ Bounce dropBall(System& sys, real e_ball, real e_ground, real drop, real seconds
   const int n = int(std::lround(seconds / sys.config().step.dt));
   for (int i = 0; i < n; ++i) {
     sys.step();
+    sys.syncToHost();  // the GPU backend's bodies live on the device (a no-op on the CPU)
     r.y.push_back(sys.bodies().pos[size_t(b)].y - kRadius);
   }
   r.first_rebound = firstRebound(r.y);
