@@ -277,10 +277,9 @@ void DviDynamicsWorld::forget(btCollisionObject* obj) {
     rebuild_ = true;
   }
   if (btRigidBody* b = btRigidBody::upcast(obj)) index_.erase(b);
+  // The last sub-step's contacts and manifolds go with it (they are rebuilt by the next sub-step): O(1) per removal.
   releaseManifolds();
-  contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(),
-                                 [&](const WorldContact& c) { return c.a == obj || c.b == obj; }),
-                  contacts_.end());
+  contacts_.clear();
 }
 
 void DviDynamicsWorld::removeRigidBody(btRigidBody* body) {
