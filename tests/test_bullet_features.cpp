@@ -313,6 +313,39 @@ TEST_CASE("drop-in world: bodies fall asleep and wake up as in Bullet", "[world]
   CHECK(ours[4] == Approx(0.7).margin(5e-3));  // the ball rests on the woken box (top at 0.5)
 }
 
+TEST_CASE("drop-in world: SolverEffort::BulletIterations follows btContactSolverInfo", "[world][features]") {
+  // A stack of 4 boxes: with Bullet's effort each sub-step runs exactly m_numIterations Gauss-Seidel sweeps (10,
+  // then 3 when the app lowers it), and the stack rests as on stock Bullet; converged, the solver runs to its
+  // tolerance (at least 50 iterations).
+  auto run = [](int engine, int iterations) {  // 0 Bullet, 1 ours converged, 2 ours with Bullet's effort
+    TestWorld w(engine != 0);
+    if (engine == 2) {  // rebuilt with the effort set (the config is fixed at construction)
+      DviWorldConfig c;
+      c.effort = SolverEffort::BulletIterations;
+      w.world = std::make_unique<DviDynamicsWorld>(&w.dispatcher, &w.broadphase, &w.solver, &w.config, c);
+      w.world->setGravity(btVector3(0, btScalar(-9.81), 0));
+    }
+    w.world->getSolverInfo().m_numIterations = iterations;
+    w.ground();
+    btCollisionShape* box = w.own(new btBoxShape(btVector3(0.5, 0.5, 0.5)));
+    btRigidBody* top = nullptr;
+    for (int k = 0; k < 4; ++k) top = w.make(box, 1, btVector3(0, btScalar(0.5 + k), 0));
+    step(w, 120);
+    const int its = engine == 0 ? iterations : w.dvi().system().lastStats().iterations;
+    return std::pair<double, int>(top->getCenterOfMassPosition().y(), its);
+  };
+  for (int iterations : {10, 3}) {
+    const auto bullet = run(0, iterations), converged = run(1, iterations), effort = run(2, iterations);
+    INFO(iterations << " iterations: top box y Bullet " << bullet.first << ", ours converged " << converged.first
+                    << " (" << converged.second << " iterations), Bullet's effort " << effort.first << " ("
+                    << effort.second << ")");
+    CHECK(effort.second == iterations);
+    CHECK(converged.second >= 50);
+    CHECK(std::fabs(effort.first - bullet.first) < 0.01);
+    CHECK(converged.first == Approx(3.5).margin(2e-3));
+  }
+}
+
 TEST_CASE("thread governor: one thread under load, the full team when it is faster", "[threads]") {
   // Synthetic step times: the full team takes `full_s`, one thread `one_s`.
   auto simulate = [](double full_s, double one_s, int steps) {

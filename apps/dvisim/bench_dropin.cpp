@@ -56,31 +56,6 @@ struct DropinOptions : BenchBasics {
   std::vector<std::string> engines, scenes;
 };
 
-// Busy child processes that load the cores while the benchmark runs (--load N), killed when it ends.
-class Loader {
- public:
-  explicit Loader(int n) {
-    for (int i = 0; i < n; ++i) {
-      const pid_t pid = fork();
-      if (pid == 0) {
-        volatile unsigned long x = 0;
-        for (;;) x = x + 1;  // spins until killed
-      }
-      if (pid < 0) throw std::runtime_error("--load: fork failed");
-      pids_.push_back(pid);
-    }
-  }
-  ~Loader() {
-    for (pid_t p : pids_) kill(p, SIGKILL);
-    for (pid_t p : pids_) waitpid(p, nullptr, 0);
-  }
-  Loader(const Loader&) = delete;
-  Loader& operator=(const Loader&) = delete;
-
- private:
-  std::vector<pid_t> pids_;
-};
-
 // Everything one world owns: Bullet's collision configuration, dispatcher, broad phase and solver, the world
 // and the bodies, shapes, meshes and constraints of the scene (destroyed in reverse order).
 struct World {
@@ -362,6 +337,37 @@ double meanHeight(const World& w) {
   return n ? s / n : 0;
 }
 
+// Other runs sharing the cores while the benchmark runs (--load N): N child processes, each in a session of its own
+// (as another user's program), each stepping our CPU drop-in world on the pyramid with the benchmark's --threads,
+// killed when the benchmark ends. Two runs of an OpenMP program on the same cores is the case where a fixed team
+// collapses in its barriers (base/thread_governor.h).
+class Loader {
+ public:
+  Loader(int n, int threads) {
+    for (int i = 0; i < n; ++i) {
+      const pid_t pid = fork();
+      if (pid == 0) {
+        setsid();
+        auto w = makeWorld("cpu", threads);
+        sceneBuilders().at("pyramid")(*w, 1);
+        for (auto& b : w->bodies) b->forceActivationState(DISABLE_DEACTIVATION);       // a resting pyramid would sleep
+        for (;;) w->world->stepSimulation(btScalar(1.0 / 60), 1, btScalar(1.0 / 60));  // until killed
+      }
+      if (pid < 0) throw std::runtime_error("--load: fork failed");
+      pids_.push_back(pid);
+    }
+  }
+  ~Loader() {
+    for (pid_t p : pids_) kill(p, SIGKILL);
+    for (pid_t p : pids_) waitpid(p, nullptr, 0);
+  }
+  Loader(const Loader&) = delete;
+  Loader& operator=(const Loader&) = delete;
+
+ private:
+  std::vector<pid_t> pids_;
+};
+
 int runDropin(const DropinOptions& o) {
   const std::vector<std::string> engines = selectNames(
       "--engines", o.engines.empty() ? std::vector<std::string>{"bullet", "cpu", "cpu-si", "gpu"} : o.engines,
@@ -390,7 +396,7 @@ int runDropin(const DropinOptions& o) {
 
   std::vector<Result> results;
   std::string cpu_device;
-  const Loader loader(int(load));  // other processes on the cores, for the whole run
+  const Loader loader{int(load), int(threads)};  // other runs on the cores, for the whole benchmark
   std::printf("bench dropin%s: %d warm-up steps, then %d alternating rounds, %ld timed steps per engine, h = 1/60 s\n",
               o.quick ? " --quick" : "", warmup, rounds, steps);
   for (const std::string& scene : scenes) {
@@ -528,7 +534,7 @@ int runDropin(const DropinOptions& o) {
        << " warm-up, then " << steps << " timed per engine in " << rounds
        << " alternating rounds, stepSimulation(1/60, 1, 1/60); cpu and gpu: ours at its defaults; cpu-si: ours with "
           "SolverEffort::BulletIterations (Bullet's 10 Gauss-Seidel sweeps)\n"
-       << "- load: " << load << " busy processes beside the benchmark (--load)\n"
+       << "- load: " << load << " other runs of our CPU drop-in (pyramid) sharing the cores (--load)\n"
        << "- deepest: the deepest manifold point over the timed steps; drift: pyramid top box height change, ragdolls "
           "the largest joint violation (ours), else the mean height change over the timed steps (m)\n\n";
   const std::string text = head.str() + md.str();
@@ -557,6 +563,7 @@ void registerBenchDropin(CLI::App& app, BenchRegistry& reg) {
       "bullet,cpu,cpu-si,gpu (default all; gpu is skipped without a device; cpu-si: Bullet's solver effort)");
   cmd->add_option("--scenes", o->scenes, "boxes,pyramid,ragdolls,hulls,terrain (the default) and boxes100k");
   cmd->add_option("--steps", o->steps, "Timed steps per engine (default 150; --quick 10)");
-  cmd->add_option("--load", o->load, "Busy processes to start beside the benchmark (a loaded machine; default 0)");
+  cmd->add_option("--load", o->load,
+                  "Runs of our CPU drop-in (pyramid) to start beside the benchmark, sharing the cores (default 0)");
   addBenchRunner(reg, cmd, [o] { return runDropin(*o); });
 }

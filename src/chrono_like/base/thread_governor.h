@@ -3,9 +3,10 @@
 // take the cores, a descheduled team member holds every barrier for a scheduler time slice and a step that takes
 // 35 ms alone can take a second. A single thread degrades gracefully instead (its share of a core). The governor
 // keeps an exponential average of the step time of the team size in use and, now and then, tries the other one
-// for one step; it switches when the other is clearly faster (below kSwitchRatio of the average). The probe
-// interval doubles each time the probe loses (up to kMaxInterval steps), so an idle machine pays one
-// single-threaded step in hundreds; a step much slower than the average (load just arrived) probes at once.
+// for one step; it switches when the other is clearly faster (below kSwitchRatio of the average). Each time the
+// probe loses, the probe interval grows by the probe's cost ratio (at least 2x, up to kMaxInterval steps), so an
+// idle machine pays one single-threaded step in hundreds and a loaded one one collapsed team step in hundreds; a
+// step much slower than the average (load just arrived) probes at once.
 // The results do not depend on the team size (every reduction is blocked and ordered, solver.h), so switching
 // changes the speed only.
 #pragma once
@@ -47,7 +48,11 @@ class ThreadGovernor {
       avg_[m] = seconds;
       interval_ = kFirstInterval;
     } else {
-      interval_ = interval_ * 2 < kMaxInterval ? interval_ * 2 : kMaxInterval;
+      // The probe lost: wait longer, in proportion to how much it cost (a probe 15x slower than the average waits
+      // 15x longer), so that probing a collapsed team costs a bounded, shrinking share of the run.
+      const double ratio = avg_[mode_] > 0 ? seconds / avg_[mode_] : 2.0;
+      const int64_t grow = ratio > 2 ? int64_t(ratio + 0.5) : 2;
+      interval_ = interval_ * grow < kMaxInterval ? interval_ * grow : kMaxInterval;
     }
     next_probe_ = step_ + interval_;
   }
