@@ -315,8 +315,8 @@ TEST_CASE("drop-in world: bodies fall asleep and wake up as in Bullet", "[world]
 
 TEST_CASE("drop-in world: SolverEffort::BulletIterations follows btContactSolverInfo", "[world][features]") {
   // A stack of 4 boxes: with Bullet's effort each sub-step runs exactly m_numIterations Gauss-Seidel sweeps (10,
-  // then 3 when the app lowers it), and the stack rests as on stock Bullet; converged, the solver runs to its
-  // tolerance (at least 50 iterations).
+  // then 3 when the app lowers it), and the stack rests as on stock Bullet; converged (the solver's own stop, which
+  // ignores m_numIterations) it rests too.
   auto run = [](int engine, int iterations) {  // 0 Bullet, 1 ours converged, 2 ours with Bullet's effort
     TestWorld w(engine != 0);
     if (engine == 2) {  // rebuilt with the effort set (the config is fixed at construction)
@@ -340,7 +340,6 @@ TEST_CASE("drop-in world: SolverEffort::BulletIterations follows btContactSolver
                     << " (" << converged.second << " iterations), Bullet's effort " << effort.first << " ("
                     << effort.second << ")");
     CHECK(effort.second == iterations);
-    CHECK(converged.second >= 50);
     CHECK(std::fabs(effort.first - bullet.first) < 0.01);
     CHECK(converged.first == Approx(3.5).margin(2e-3));
   }
