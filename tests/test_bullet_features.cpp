@@ -345,6 +345,31 @@ TEST_CASE("drop-in world: SolverEffort::BulletIterations follows btContactSolver
   }
 }
 
+TEST_CASE("drop-in world: a fast small body does not tunnel, where Bullet needs its CCD", "[world][features]") {
+  // A 5 cm sphere at 60 m/s toward a 2 cm thick wall: 1 m per 1/60 s step, so discrete collision misses the wall.
+  // Bullet catches it with its CCD (setCcdMotionThreshold, setCcdSweptSphereRadius); the drop-in world with its
+  // speculative contacts (the collision envelope grows to each body's sweep over the step), unasked.
+  auto run = [](bool dvi, bool ccd) {
+    TestWorld w(dvi);
+    w.world->setGravity(btVector3(0, 0, 0));
+    w.make(w.own(new btBoxShape(btVector3(0.01, 2, 2))), 0, btVector3(5, 0, 0));
+    // from x = 0.5: at 4.5 it is clear of the wall, one step later at 5.5 behind it
+    btRigidBody* ball = w.make(w.own(new btSphereShape(btScalar(0.05))), 1, btVector3(0.5, 0, 0));
+    ball->setLinearVelocity(btVector3(60, 0, 0));
+    if (ccd) {
+      ball->setCcdMotionThreshold(btScalar(0.05));
+      ball->setCcdSweptSphereRadius(btScalar(0.04));
+    }
+    for (int i = 0; i < 30; ++i) w.world->stepSimulation(btScalar(1) / 60, 1, btScalar(1) / 60);
+    return ball->getCenterOfMassPosition().x();
+  };
+  const btScalar bullet = run(false, false), bullet_ccd = run(false, true), ours = run(true, false);
+  INFO("ball x after 0.5 s: Bullet " << bullet << ", Bullet with CCD " << bullet_ccd << ", ours " << ours);
+  CHECK(bullet > 5);       // through the wall: what the test guards against
+  CHECK(bullet_ccd < 5);   // Bullet's CCD stops it
+  CHECK(ours < 5 - 0.05);  // ours stops it on the near side without being asked
+}
+
 TEST_CASE("thread governor: one thread under load, the full team when it is faster", "[threads]") {
   // Synthetic step times: the full team takes `full_s`, one thread `one_s`.
   auto simulate = [](double full_s, double one_s, int steps) {
