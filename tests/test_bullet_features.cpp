@@ -209,6 +209,34 @@ TEST_CASE("drop-in world: linear and angular factors hold axes as Bullet does", 
   CHECK(ours[5] == Approx(3.45).margin(5e-3));  // resting on the held box (top at 3.25)
 }
 
+TEST_CASE("drop-in world: a kinematic body wakes the sleeping body it pushes, as in Bullet", "[world][features]") {
+  auto run = [](bool dvi) {
+    TestWorld w(dvi);
+    w.ground();
+    btRigidBody* box = w.make(w.own(new btBoxShape(btVector3(0.25, 0.25, 0.25))), 1, btVector3(1.5, 0.25, 0));
+    box->forceActivationState(ACTIVE_TAG);
+    btRigidBody* kin = w.make(w.own(new btBoxShape(btVector3(0.5, 0.5, 0.5))), 0, btVector3(-1, 0.55, 0), false);
+    kin->setCollisionFlags(kin->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+    w.world->addRigidBody(kin);
+    w.bodies.push_back(kin);
+    step(w, 180);  // the box falls asleep (2 s)
+    const bool slept = box->getActivationState() == ISLAND_SLEEPING;
+    for (int i = 0; i < 120; ++i) {  // the kinematic box moves at 1 m/s along x, into the sleeping one
+      kin->getMotionState()->setWorldTransform(
+          btTransform(btQuaternion::getIdentity(), btVector3(btScalar(-1 + (i + 1) / 60.0), 0.55, 0)));
+      w.world->stepSimulation(btScalar(1) / 60, 10, kSub);
+    }
+    return std::pair<bool, btScalar>(slept, box->getCenterOfMassPosition().x());
+  };
+  const auto bullet = run(false), ours = run(true);
+  INFO("slept: Bullet " << bullet.first << ", ours " << ours.first << "; box x after the push: Bullet " << bullet.second
+                        << ", ours " << ours.second);
+  CHECK(bullet.first);
+  CHECK(ours.first);
+  CHECK(ours.second > 1.5 + 0.2);  // pushed ahead of the kinematic box's face (x = 1.5 at the end)
+  CHECK(std::fabs(ours.second - bullet.second) < 0.05);
+}
+
 TEST_CASE("drop-in world: a factor other than 0 or 1 is refused with the body named", "[world][features]") {
   TestWorld w(true);
   btRigidBody* b = w.make(w.own(new btSphereShape(btScalar(0.2))), 1, btVector3(0, 1, 0));

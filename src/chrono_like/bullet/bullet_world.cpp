@@ -455,6 +455,24 @@ void DviDynamicsWorld::syncOut() {
   }
 }
 
+// Kinematic bodies join no island, but wake what they touch (btSimulationIslandManager::buildIslands does the same
+// for its pairs). A sleeping body is fixed in the System, so a kinematic body makes no contact with it: their
+// boxes in Bullet's broad phase are tested instead.
+void DviDynamicsWorld::wakeTouchedByKinematic() {
+  struct Waker : btBroadphaseAabbCallback {
+    bool process(const btBroadphaseProxy* proxy) override {
+      auto* o = static_cast<btCollisionObject*>(proxy->m_clientObject);
+      if (o && o->getActivationState() == ISLAND_SLEEPING && o->hasContactResponse()) o->activate();
+      return true;
+    }
+  } waker;
+  for (const Tracked& t : tracked_) {
+    if (t.kind != kBodyKinematic || !t.obj->hasContactResponse() || !t.obj->getBroadphaseHandle()) continue;
+    const btBroadphaseProxy* p = t.obj->getBroadphaseHandle();
+    m_broadphasePairCache->aabbTest(p->m_aabbMin, p->m_aabbMax, waker);
+  }
+}
+
 // Bullet's deactivation (btDiscreteDynamicsWorld::updateActivationState and btSimulationIslandManager): each
 // dynamic body counts the time its speeds stay below its sleeping thresholds; an island (bodies joined by this
 // sub-step's contacts and by enabled constraints; static, kinematic and no-response objects join none) whose bodies
@@ -475,6 +493,7 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
   };
   const ContactArrays& c = system_->contacts();
   for (size_t k = 0; k < c.count(); ++k) unite(c.body_a[k], c.body_b[k]);
+  wakeTouchedByKinematic();
   for (btTypedConstraint* j : joints_->constraints())
     if (j->isEnabled()) unite(bodyIndex(&j->getRigidBodyA()), bodyIndex(&j->getRigidBodyB()));
   for (size_t i = 0; i < n; ++i) {  // per body, as updateActivationState

@@ -146,6 +146,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void syncBody(size_t i, btScalar h, BodyArrays& B);
   void syncOut();
   void updateSleeping(btScalar h);
+  void wakeTouchedByKinematic();
   void collectContacts();
   void fillManifold(const WorldContact& w, int ia, int ib);
   void releaseManifolds();
