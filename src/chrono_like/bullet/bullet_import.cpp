@@ -54,7 +54,11 @@ std::vector<Vec3> hullWithMargin(const btConvexHullShape& s) {
   pts.reserve(size_t(s.getNumPoints()));
   for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
   const btScalar m = s.getMargin();
-  if (!(m > 0) || pts.size() < 4) return pts;
+  if (!(m > 0) || !std::isfinite(double(m)) || pts.size() < 4) return pts;
+  // Bullet's hull computer crashes on non-finite points (found by the .bullet fuzz target): such a hull is handed on
+  // as it is, and the System refuses it with an InputError naming the body.
+  for (const Vec3& p : pts)
+    if (!isFinite(p)) return pts;
   std::vector<btVector3> in;
   for (int i = 0; i < s.getNumPoints(); ++i) in.push_back(s.getScaledPoint(i));
   btConvexHullComputer hc;
