@@ -96,6 +96,16 @@ inline JointBody advanced(JointBody b, real d) {
   b.q = normalized(quatFromRotationVector(b.w * d) * b.q);
   return b;
 }
+// A random joint side A (index 0): position within 2 m, any rotation, speeds up to 1.
+inline JointBody randomJointSide(std::mt19937& rng) {
+  JointBody A;
+  A.index = 0;
+  A.x = randomVec(rng, 2);
+  A.q = randomRotation(rng);
+  A.v = randomVec(rng, 1);
+  A.w = randomVec(rng, 1);
+  return A;
+}
 inline btTransform frame(const btVector3& p, const btQuaternion& q = btQuaternion::getIdentity()) {
   return btTransform(q, p);
 }

@@ -78,16 +78,6 @@ void checkRowsByFiniteDifferences(const JointSpec& j, const JointBody& A, const 
   }
 }
 
-JointBody randomA(std::mt19937& rng) {
-  JointBody A;
-  A.index = 0;
-  A.x = randomVec(rng, 2);
-  A.q = randomRotation(rng);
-  A.v = randomVec(rng, 1);
-  A.w = randomVec(rng, 1);
-  return A;
-}
-
 }  // namespace
 
 TEST_CASE("cone-twist: swing and twist angles are Bullet's (isPastSwingLimit, getTwistAngle)", "[world][joints]") {
@@ -107,7 +97,7 @@ TEST_CASE("cone-twist: swing and twist angles are Bullet's (isPastSwingLimit, ge
   I.setIdentity();
   int checked = 0;
   for (int trial = 0; trial < 400; ++trial) {
-    JointBody A = randomA(rng);
+    JointBody A = randomJointSide(rng);
     // On either side of the ellipse, in a random direction, with a random twist.
     const double dir = U(rng), psi = U(rng) * 0.9, scale = trial % 2 ? 0.98 : 1.02;
     const double limit = bulletSwingLimit(dir, span1, span2);
@@ -148,7 +138,7 @@ TEST_CASE("cone-twist rows: Jacobians are the time derivatives of the swing and 
     CHECK(j.cone_lock1 == (v == 1 || v == 2));
     CHECK(j.cone_lock2 == (v == 2));
     for (int trial = 0; trial < 30; ++trial) {
-      JointBody A = randomA(rng);
+      JointBody A = randomJointSide(rng);
       // At the limits (where the rows are exact): the swing on the ellipse (or in the unlocked plane), the twist
       // at its span.
       const double dir = v == 1 ? 0.0 : (v == 2 ? 0.3 : U(rng));
@@ -189,7 +179,7 @@ TEST_CASE("6-DoF: Bullet's Euler angles (getAngle) in every rotate order, and th
     INFO(j.kind << ", order " << j.euler_order[0] << j.euler_order[1] << j.euler_order[2]);
     REQUIRE(int(j.ang) == int(JointSpec::Angular::Euler));
     for (int trial = 0; trial < 30; ++trial) {
-      JointBody A = randomA(rng);
+      JointBody A = randomJointSide(rng);
       const Quat q_ab = quatFromRotationVector(randomVec(rng, 0.7));
       JointBody B = bodyBFor(j, A, q_ab);
       B.v = randomVec(rng, 1);

@@ -97,12 +97,7 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
     const JointSpec j = jointSpecFromBullet(*c);
     INFO(j.kind);
     for (int trial = 0; trial < 20; ++trial) {
-      JointBody A;
-      A.index = 0;
-      A.x = randomVec(rng, 2);
-      A.q = randomRotation(rng);
-      A.v = randomVec(rng, 1);
-      A.w = randomVec(rng, 1);
+      const JointBody A = randomJointSide(rng);
       JointBody B = closeB(j, A, rng, real(0.05));
       B.v = randomVec(rng, 1);
       B.w = randomVec(rng, 1);

@@ -479,7 +479,8 @@ void DviDynamicsWorld::wakeTouchedByKinematic() {
 // all want to sleep falls asleep (velocities zeroed), any other island is awake.
 void DviDynamicsWorld::updateSleeping(btScalar h) {
   const size_t n = tracked_.size();
-  std::vector<int> root(n);
+  std::vector<int>& root = island_root_;  // members: no allocation per sub-step once grown
+  root.resize(n);
   for (size_t i = 0; i < n; ++i) root[i] = int(i);
   auto find = [&](int i) {
     while (root[size_t(i)] != i) i = root[size_t(i)] = root[size_t(root[size_t(i)])];
@@ -505,7 +506,8 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
     else if (b->getActivationState() == ACTIVE_TAG)
       b->setActivationState(WANTS_DEACTIVATION);
   }
-  std::vector<char> awake(n, 0);  // per island root: some body is not ready to sleep
+  std::vector<char>& awake = island_awake_;  // per island root: some body is not ready to sleep
+  awake.assign(n, 0);
   for (size_t i = 0; i < n; ++i) {
     if (tracked_[i].kind != 0) continue;
     const int state = tracked_[i].body->getActivationState();

@@ -163,10 +163,12 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<Tracked> tracked_;                                    // in System order
   std::vector<btCollisionObject*> pending_;                         // added since the last sub-step
   bool rebuild_ = false;
-  bool has_exclusions_ = false;  // some constraint disables collisions between its bodies
-  int ghosts_ = 0;               // ghost objects in the world: Bullet's pair cache is computed each sub-step
-  std::vector<int> group_bits_;  // Bullet group bit positions in use, in order of appearance (their System bit)
-  bool folded_filters_ = false;  // more than 16 group bits in use: folded, exact test per contact (CPU)
+  bool has_exclusions_ = false;     // some constraint disables collisions between its bodies
+  int ghosts_ = 0;                  // ghost objects in the world: Bullet's pair cache is computed each sub-step
+  std::vector<int> group_bits_;     // Bullet group bit positions in use, in order of appearance (their System bit)
+  bool folded_filters_ = false;     // more than 16 group bits in use: folded, exact test per contact (CPU)
+  std::vector<int> island_root_;    // updateSleeping's union-find over the bodies
+  std::vector<char> island_awake_;  // and its islands that stay awake
   std::vector<WorldContact> contacts_;
   std::unordered_map<uint64_t, btPersistentManifold*> manifolds_;  // by (a, b) System indices, kept across steps
   int64_t substeps_ = 0;
