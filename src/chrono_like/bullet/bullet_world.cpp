@@ -193,7 +193,8 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
 bool DviDynamicsWorld::keepPair(int a, int b) const {
   const Tracked& ta = tracked_[size_t(a)];
   const Tracked& tb = tracked_[size_t(b)];
-  if ((ta.group & tb.mask) == 0 || (tb.group & ta.mask) == 0) return false;
+  // The renumbered 16-bit filters are exact unless folded: only then does the System's test pass extra pairs.
+  if (folded_filters_ && ((ta.group & tb.mask) == 0 || (tb.group & ta.mask) == 0)) return false;
   if (!ta.obj->hasContactResponse() || !tb.obj->hasContactResponse()) return false;
   if (has_exclusions_ && (!ta.obj->checkCollideWith(tb.obj) || !tb.obj->checkCollideWith(ta.obj))) return false;
   return true;
@@ -202,7 +203,7 @@ bool DviDynamicsWorld::keepPair(int a, int b) const {
 // Group bit positions in use get System bits in order of appearance; a new one renumbers nothing, but the masks
 // already given out lack it, so the System is rebuilt. Beyond 16 positions the filters are folded (bit p onto bit
 // p mod 16: every pair Bullet collides still passes the System's test) and keepPair applies the exact test.
-void DviDynamicsWorld::noteFilter(int group, int /*mask*/) {
+void DviDynamicsWorld::noteFilter(int group) {
   for (int bit = 0; bit < 32; ++bit) {
     if (!((uint32_t(group) >> bit) & 1u)) continue;
     if (std::find(group_bits_.begin(), group_bits_.end(), bit) != group_bits_.end()) continue;
@@ -360,10 +361,10 @@ bool DviDynamicsWorld::structureChanged() const {
 }
 
 void DviDynamicsWorld::syncIn(btScalar h) {
-  for (btCollisionObject* o : pending_) noteFilter(proxyGroup(*o), proxyMask(*o));
+  for (btCollisionObject* o : pending_) noteFilter(proxyGroup(*o));
   if (!rebuild_ && structureChanged()) {
     for (const Tracked& t : tracked_)
-      if (t.obj) noteFilter(proxyGroup(*t.obj), proxyMask(*t.obj));
+      if (t.obj) noteFilter(proxyGroup(*t.obj));
     rebuild_ = true;
   }
   if (rebuild_) rebuild();

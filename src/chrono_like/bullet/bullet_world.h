@@ -151,7 +151,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void fillManifold(const WorldContact& w, int ia, int ib);
   void releaseManifolds();
   bool keepPair(int a, int b) const;
-  void noteFilter(int group, int mask);
+  void noteFilter(int group);
   int16_t mapFilter(int bits) const;
 
   DviWorldConfig config_;
