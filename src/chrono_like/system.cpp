@@ -165,6 +165,8 @@ int System::addBody(const BodyDesc& d) {
   if (!immovable && !(minComponent(d.inertia) > 0 && isFinite(d.inertia))) fail("non-positive or non-finite inertia");
   if (!std::isfinite(d.friction) || d.friction < 0) fail("negative or non-finite friction");
   if (!std::isfinite(d.restitution) || d.restitution < 0) fail("negative or non-finite restitution");
+  if (!std::isfinite(d.rolling_friction) || d.rolling_friction < 0) fail("negative or non-finite rolling friction");
+  if (!std::isfinite(d.spinning_friction) || d.spinning_friction < 0) fail("negative or non-finite spinning friction");
   if (d.shapes.empty()) fail("has no collision shape");
   for (const ShapeDesc& s : d.shapes) validateShape(s, index);
   real qn = std::sqrt(d.rot.w * d.rot.w + d.rot.x * d.rot.x + d.rot.y * d.rot.y + d.rot.z * d.rot.z);
@@ -182,6 +184,8 @@ int System::addBody(const BodyDesc& d) {
   bodies_.gravity[n] = d.has_gravity ? d.gravity : config_.step.gravity;
   bodies_.friction[n] = d.friction;
   bodies_.restitution[n] = d.restitution;
+  bodies_.rolling_friction[n] = d.rolling_friction;
+  bodies_.spinning_friction[n] = d.spinning_friction;
   bodies_.flags[n] = d.flags;
   bodies_.shape_start[n] = int32_t(shapes_.count());
   bodies_.shape_count[n] = int32_t(d.shapes.size());
@@ -239,9 +243,41 @@ bool System::planParts() {
        config_.collision.backend == CollisionBackend::Bullet
            ? "Bullet's collision backend (GJK/EPA)"
            : "every pair of shape types in the scene has a closed form");
-  part(StagePart::RollingSpinningRows, false,
-       "not in the engine: no rolling or spinning friction (Bullet's is not imported)");
+  // Rolling blocks: decided per contact in BuildRows (combineRolling); here only whether any body asks for them.
+  part(StagePart::RollingSpinningRows, false, "no body has rolling or spinning friction");
   return gyro;
+}
+
+bool System::hasRollingBodies() const {
+  const size_t nb = bodies_.count();
+  for (size_t i = 0; i < nb; ++i)
+    if (bodies_.rolling_friction[i] > 0 || bodies_.spinning_friction[i] > 0) return true;
+  return false;
+}
+
+// Each contact's rolling and spinning coefficient from its bodies', by the friction rule: Product is Bullet's rule,
+// mu_r = r_a f_b + r_b f_a capped at 10 (btManifoldResult::calculateCombinedRollingFriction and ...SpinningFriction,
+// with f the bodies' Coulomb coefficients); Min is Chrono's (ChMaterialCompositionStrategy::CombineRollingFriction);
+// Average their mean.
+bool System::combineRolling(int64_t nc) {
+  roll_coef_.resize(size_t(2 * nc));
+  const FrictionCombine rule = config_.collision.friction_combine;
+  const BodyArrays& B = bodies_;
+  bool any = false;
+#pragma omp parallel for schedule(static) reduction(|| : any)
+  for (int64_t k = 0; k < nc; ++k) {
+    const int32_t a = contacts_.body_a[k], b = contacts_.body_b[k];
+    const real ra[2] = {B.spinning_friction[a], B.rolling_friction[a]};
+    const real rb[2] = {B.spinning_friction[b], B.rolling_friction[b]};
+    for (int j = 0; j < 2; ++j) {
+      const real c = rule == FrictionCombine::Product ? fmin(ra[j] * B.friction[b] + rb[j] * B.friction[a], real(10))
+                     : rule == FrictionCombine::Min   ? fmin(ra[j], rb[j])
+                                                      : real(0.5) * (ra[j] + rb[j]);
+      roll_coef_[size_t(2 * k + j)] = c;
+      any = any || c > 0;
+    }
+  }
+  return any;
 }
 
 void System::step() {
@@ -317,10 +353,12 @@ void System::buildAndSolve() {
     rows_.clear();
   const int64_t nrows = int64_t(rows_.size());
   const int64_t nblk = nc + (nrows + 2) / 3;
-  gamma_.assign(size_t(3 * nblk), real(0));
   if (nblk == 0) {
+    gamma_.clear();
     prev_keys_.clear();
     prev_gamma_.clear();
+    prev_roll_.clear();
+    roll_index_.clear();
     row_lambda_.clear();
     stats_.part_ran[int(StagePart::FrictionRows)] = false;
     stats_.part_reason[int(StagePart::FrictionRows)] = "no contacts";
@@ -329,55 +367,24 @@ void System::buildAndSolve() {
     leaveOut(StageType::Solve, "no contacts and no constraint rows");
     return;
   }
-  timed(stats_, StageType::BuildRows, [&] {
-    real max_pen = 0, max_mu = 0;
-    const FrictionCombine rule = config_.collision.friction_combine;
-#pragma omp parallel for schedule(static) reduction(max : max_pen, max_mu)
-    for (int64_t k = 0; k < nc; ++k) {
-      real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
-      contacts_.mu[k] = rule == FrictionCombine::Product ? fa * fb
-                        : rule == FrictionCombine::Min   ? fmin(fa, fb)
-                                                         : real(0.5) * (fa + fb);
-      contacts_.size[k] = fmin(shapes_.shape[contacts_.shape_a[k]].size, shapes_.shape[contacts_.shape_b[k]].size);
-      max_pen = fmax(max_pen, -contacts_.dist[k]);
-      max_mu = fmax(max_mu, contacts_.mu[k]);
-    }
-    stats_.max_penetration = max_pen;
-    // Friction rows only where mu > 0 (docs/MODEL.md §6): a step whose contacts are all frictionless solves the
-    // normal rows alone (jacobian.h); the solution is the same (its tangential impulses would be 0).
-    const bool normal_only = config_.prune && nc > 0 && !(max_mu > 0);
-    stats_.normal_only = normal_only;
-    stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !normal_only;
-    stats_.part_reason[int(StagePart::FrictionRows)] = nc == 0       ? "no contacts"
-                                                       : normal_only ? "no contact with mu > 0 this step"
-                                                                     : nullptr;
-    ContactProblemSettings ps;
-    ps.dt = ctx_.dt;
-    ps.solver = config_.solver;
-    ps.threads = omp_get_max_threads();
-    ps.normal_only = normal_only;
-    ps.float_jacobians =
-        config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) && !std::is_same_v<real, float>;
-    problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_);
-  });
+  timed(stats_, StageType::BuildRows, [&] { buildProblem(nc); });
+  // The impulse vector: 3 per contact, 3 per rolling block, then the rows (3 per block).
+  const int64_t nroll = problem_->rollingBlocks();
+  const int64_t row0 = 3 * (nc + nroll);
+  gamma_.assign(size_t(row0 + 3 * ((nrows + 2) / 3)), real(0));
+  roll_index_.clear();
+  if (nroll > 0) {
+    roll_index_.resize(size_t(nc));
+    for (int64_t k = 0; k < nc; ++k) roll_index_[size_t(k)] = problem_->rollingIndex(k);
+  }
   if (config_.solver.warm_start && int64_t(row_lambda_.size()) == nrows)
-    for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(3 * nc + i)] = row_lambda_[size_t(i)];
+    for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(row0 + i)] = row_lambda_[size_t(i)];
   if (!config_.solver.warm_start)
     leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
   else if (prev_keys_.empty())
     leaveOut(StageType::WarmStart, "no contacts in the previous step");
-  if (config_.solver.warm_start && !prev_keys_.empty()) {
-    timed(stats_, StageType::WarmStart, [&] {
-#pragma omp parallel for schedule(static)
-      for (int64_t k = 0; k < nc; ++k) {
-        auto it = std::lower_bound(prev_keys_.begin(), prev_keys_.end(), contacts_.key[k]);
-        if (it != prev_keys_.end() && *it == contacts_.key[k]) {
-          size_t j = size_t(it - prev_keys_.begin());
-          for (int r = 0; r < 3; ++r) gamma_[3 * k + r] = prev_gamma_[3 * j + r];
-        }
-      }
-    });
-  }
+  if (config_.solver.warm_start && !prev_keys_.empty())
+    timed(stats_, StageType::WarmStart, [&] { warmStartContacts(nc, nroll); });
   timed(stats_, StageType::Solve, [&] {
     // A normal-only problem solves in its own layout (1 impulse per contact): in and out of gamma_.
     real* x = gamma_.data();
@@ -397,10 +404,68 @@ void System::buildAndSolve() {
     solution_ = x;
     recordSolve(s);
   });
-  row_lambda_.assign(gamma_.begin() + 3 * nc, gamma_.begin() + 3 * nc + nrows);
+  row_lambda_.assign(gamma_.begin() + row0, gamma_.begin() + row0 + nrows);
   for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
     row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
   cacheImpulsesByKey(nc);
+}
+
+// BuildRows after the row collection: each contact's friction, size and rolling coefficients, the step's parts, and
+// the contact problem.
+void System::buildProblem(int64_t nc) {
+  real max_pen = 0, max_mu = 0;
+  const FrictionCombine rule = config_.collision.friction_combine;
+#pragma omp parallel for schedule(static) reduction(max : max_pen, max_mu)
+  for (int64_t k = 0; k < nc; ++k) {
+    real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
+    contacts_.mu[k] = rule == FrictionCombine::Product ? fa * fb
+                      : rule == FrictionCombine::Min   ? fmin(fa, fb)
+                                                       : real(0.5) * (fa + fb);
+    contacts_.size[k] = fmin(shapes_.shape[contacts_.shape_a[k]].size, shapes_.shape[contacts_.shape_b[k]].size);
+    max_pen = fmax(max_pen, -contacts_.dist[k]);
+    max_mu = fmax(max_mu, contacts_.mu[k]);
+  }
+  stats_.max_penetration = max_pen;
+  // Rolling blocks only for contacts with rolling or spinning friction (docs/MODEL.md §6).
+  const bool rolling_bodies = nc > 0 && hasRollingBodies();
+  const bool rolling = rolling_bodies && combineRolling(nc);
+  stats_.part_ran[int(StagePart::RollingSpinningRows)] = rolling;
+  stats_.part_reason[int(StagePart::RollingSpinningRows)] =
+      rolling ? nullptr
+              : (rolling_bodies ? "no contact with rolling or spinning friction this step"
+                                : "no body has rolling or spinning friction");
+  // Friction rows only where mu > 0 (docs/MODEL.md §6): a step whose contacts are all frictionless solves the
+  // normal rows alone (jacobian.h); the solution is the same (its tangential impulses would be 0).
+  const bool normal_only = config_.prune && nc > 0 && !(max_mu > 0) && !rolling;
+  stats_.normal_only = normal_only;
+  stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !normal_only;
+  stats_.part_reason[int(StagePart::FrictionRows)] = nc == 0       ? "no contacts"
+                                                     : normal_only ? "no contact with mu > 0 this step"
+                                                                   : nullptr;
+  ContactProblemSettings ps;
+  ps.dt = ctx_.dt;
+  ps.solver = config_.solver;
+  ps.threads = omp_get_max_threads();
+  ps.normal_only = normal_only;
+  ps.float_jacobians =
+      config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) && !std::is_same_v<real, float>;
+  problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_,
+                  rolling ? roll_coef_.data() : nullptr);
+}
+
+// WarmStart: each contact's (and its rolling block's) impulses from last step's by persistent key.
+void System::warmStartContacts(int64_t nc, int64_t nroll) {
+#pragma omp parallel for schedule(static)
+  for (int64_t k = 0; k < nc; ++k) {
+    auto it = std::lower_bound(prev_keys_.begin(), prev_keys_.end(), contacts_.key[k]);
+    if (it != prev_keys_.end() && *it == contacts_.key[k]) {
+      size_t j = size_t(it - prev_keys_.begin());
+      for (int r = 0; r < 3; ++r) gamma_[3 * k + r] = prev_gamma_[3 * j + r];
+      const int32_t q = nroll > 0 ? roll_index_[size_t(k)] : -1;
+      if (q >= 0 && !prev_roll_.empty())
+        for (int r = 0; r < 3; ++r) gamma_[size_t(3 * (nc + q) + r)] = prev_roll_[3 * j + r];
+    }
+  }
 }
 
 // This step's contact impulses, sorted by key, for the next step's warm start.
@@ -411,10 +476,24 @@ void System::cacheImpulsesByKey(int64_t nc) {
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return contacts_.key[a] < contacts_.key[b]; });
   prev_keys_.resize(size_t(nc));
   prev_gamma_.resize(size_t(3 * nc));
+  prev_roll_.assign(roll_index_.empty() ? size_t(0) : size_t(3 * nc), real(0));
   for (size_t i = 0; i < size_t(nc); ++i) {
     prev_keys_[i] = contacts_.key[order[i]];
     for (int r = 0; r < 3; ++r) prev_gamma_[3 * i + r] = gamma_[3 * order[i] + r];
+    const int32_t q = roll_index_.empty() ? -1 : roll_index_[order[i]];
+    if (q >= 0)
+      for (int r = 0; r < 3; ++r) prev_roll_[3 * i + r] = gamma_[size_t(3 * (nc + q) + r)];
   }
+}
+
+Vec3 System::rollingImpulse(size_t k) const {
+  const int32_t q = rollingIndex(k);
+  if (q < 0) return Vec3{0, 0, 0};
+  Vec3 u, w;
+  tangentBasis(contacts_.normal[k], u, w);
+  const real* g = &gamma_[3 * (contacts_.count() + size_t(q))];
+  // the problem's rolling unknowns are the angular impulses divided by a length (contact_problem.h)
+  return (contacts_.normal[k] * g[0] + u * g[1] + w * g[2]) * problem_->rollingLength(q);
 }
 
 void System::integrate() {

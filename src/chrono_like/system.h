@@ -53,7 +53,7 @@ enum class StagePart : int {
   Mpr,                  // NarrowPhase: MPR, for the shape pairs without a closed form
   ConstraintRows,       // BuildRows/Solve: the RowProvider rows (joints, drives)
   FrictionRows,         // BuildRows/Solve: the two tangential rows of every contact
-  RollingSpinningRows,  // BuildRows/Solve: not in the engine (no rolling or spinning friction)
+  RollingSpinningRows,  // BuildRows/Solve: the rolling block of every contact with rolling or spinning friction
   Count
 };
 constexpr int kStagePartCount = int(StagePart::Count);
@@ -135,6 +135,11 @@ struct BodyDesc {
   Vec3 inertia{1, 1, 1};  // principal moments, body frame
   real friction = real(0.5);
   real restitution = 0;  // Newton's coefficient (BodyArrays::restitution), finite and >= 0; 0 = inelastic
+  // [m] rolling and spinning resistance lengths (Tasora & Anitescu 2013; Bullet's m_rollingFriction and
+  // m_spinningFriction): a contact resists rolling and spinning with a torque of at most mu_r (mu_s) times its normal
+  // force, mu_r, mu_s combined from the two bodies by CollisionSettings::friction_combine. Finite and >= 0; 0 = none.
+  real rolling_friction = 0;
+  real spinning_friction = 0;
   uint8_t flags = 0;
   bool has_gravity = false;  // use `gravity` instead of the system's
   Vec3 gravity{0, 0, 0};
@@ -244,8 +249,14 @@ class System {
   BodyArrays& mutableBodies() { return bodies_; }
   const ShapeArrays& shapes() const { return shapes_; }
   const ContactArrays& contacts() const { return contacts_; }
-  // Impulses of the last step: 3 per contact, then the constraint rows' (3 per block of rows).
+  // Impulses of the last step: 3 per contact, then 3 per rolling block (rollingIndex; angular impulses divided by a
+  // length, see rollingImpulse), then the constraint rows' (3 per block of rows).
   const std::vector<real>& impulses() const { return gamma_; }
+  // Contact k's rolling block in impulses() (at 3 (contacts + q)), or -1 where it has no rolling or spinning friction.
+  int32_t rollingIndex(size_t k) const { return k < roll_index_.size() ? roll_index_[k] : -1; }
+  // Contact k's rolling and spinning impulse (angular, on body B; N m s) of the last step; zero without a rolling
+  // block.
+  Vec3 rollingImpulse(size_t k) const;
   const StepStats& lastStats() const { return stats_; }
   // Every step's solve since construction: how many missed the tolerance, the worst relative residual.
   const ConvergenceLog& convergence() const { return convergence_; }
@@ -291,15 +302,21 @@ class System {
   }
   // The stages; a GPU subclass overrides them with device versions.
   virtual void integrateForces();
-  virtual void detectCollisions();      // ComputeAabbs + BroadPhase + NarrowPhase
-  virtual void buildAndSolve();         // BuildRows + WarmStart + Solve
-  virtual void integrate();             // IntegrateVelocities + IntegratePositions
-  void collectRows();                   // rows_ from the row providers (part of BuildRows)
-  void cacheImpulsesByKey(int64_t nc);  // this step's impulses by contact key (end of Solve)
+  virtual void detectCollisions();                    // ComputeAabbs + BroadPhase + NarrowPhase
+  virtual void buildAndSolve();                       // BuildRows + WarmStart + Solve
+  void buildProblem(int64_t nc);                      // BuildRows after the rows: mu, size, parts, the problem
+  void warmStartContacts(int64_t nc, int64_t nroll);  // WarmStart of the contacts and rolling blocks
+  virtual void integrate();                           // IntegrateVelocities + IntegratePositions
+  void collectRows();                                 // rows_ from the row providers (part of BuildRows)
+  void cacheImpulsesByKey(int64_t nc);                // this step's impulses by contact key (end of Solve)
   // Scene-level parts (host arrays): gyroscopic term and MPR needed? Fills stats_.part_ran/part_reason for
   // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
   // term runs.
   bool planParts();
+  // Does any body have rolling or spinning friction? (host arrays)
+  bool hasRollingBodies() const;
+  // Each contact's (mu_s, mu_r) into roll_coef_ (friction_combine); returns whether any is > 0.
+  bool combineRolling(int64_t nc);
   // Does any dynamic body have non-spherical inertia (needsGyroscopic)? Scans the host arrays (they may have
   // been edited through mutableBodies()); the GPU system answers from its last upload instead.
   virtual bool hasGyroscopicBodies() const;
@@ -322,7 +339,10 @@ class System {
   BodyArrays bodies_;
   ShapeArrays shapes_;
   ContactArrays contacts_;
-  std::vector<real> gamma_;            // impulses of this step, 3 per contact
+  std::vector<real> gamma_;            // impulses of this step, 3 per contact, then the rolling blocks', then rows'
+  std::vector<real> roll_coef_;        // 2 per contact: (mu_s, mu_r) this step, when some body has rolling friction
+  std::vector<int32_t> roll_index_;    // per contact: its rolling block, or -1 (empty: none this step)
+  std::vector<real> prev_roll_;        // last step's rolling impulses, 3 per key of prev_keys_ (empty: none)
   std::vector<uint64_t> prev_keys_;    // sorted keys of last step's contacts
   std::vector<real> prev_gamma_;       // their impulses
   std::vector<Vec3> v_free_, w_free_;  // velocities after forces

@@ -204,6 +204,11 @@ void GpuSystem::uploadIfNeeded() {
   if (first_body == 0) d_->any_restitution = false;
   for (size_t i = first_body; i < b.count && !d_->any_restitution; ++i)
     d_->any_restitution = bodies_.restitution[i] > 0;
+  // Rolling and spinning friction: solved by the CPU backend only (its rolling blocks are built on the host).
+  for (size_t i = first_body; i < b.count; ++i)
+    if (bodies_.rolling_friction[i] > 0 || bodies_.spinning_friction[i] > 0)
+      throw InputError("GPU backend: body " + std::to_string(i) +
+                       " has rolling or spinning friction, which only the CPU backend solves");
   b.v_free.resize(b.count);
   b.w_free.resize(b.count);
   b.inv.resize(b.count);

@@ -14,6 +14,8 @@ void BodyArrays::resize(size_t n) {
   gravity.resize(n);
   friction.resize(n);
   restitution.resize(n);
+  rolling_friction.resize(n);
+  spinning_friction.resize(n);
   flags.resize(n);
   shape_start.resize(n);
   shape_count.resize(n);

@@ -18,21 +18,23 @@ enum BodyFlags : uint8_t {
 };
 
 struct BodyArrays {
-  std::vector<Vec3> pos;             // centre of mass, world
-  std::vector<Quat> rot;             // body frame (principal axes) to world
-  std::vector<Vec3> vel;             // linear velocity, world
-  std::vector<Vec3> omega;           // angular velocity, world
-  std::vector<real> inv_mass;        // 0 for fixed and kinematic bodies
-  std::vector<Vec3> inv_inertia;     // principal inverse inertia, body frame (0 for fixed/kinematic)
-  std::vector<Vec3> force;           // external force accumulated for this step, world
-  std::vector<Vec3> torque;          // external torque accumulated for this step, world
-  std::vector<Vec3> gravity;         // per-body gravitational acceleration (Bullet allows per-body gravity)
-  std::vector<real> friction;        // Coulomb coefficient of the body's surface
-  std::vector<real> restitution;     // Newton's coefficient of the body's surface; a contact's is e_a e_b
-  std::vector<uint8_t> flags;        // BodyFlags
-  std::vector<int32_t> shape_start;  // first shape of the body in ShapeArrays
-  std::vector<int32_t> shape_count;  // number of shapes of the body
-  std::vector<real> size;            // characteristic length of the body (smallest shape size)
+  std::vector<Vec3> pos;                // centre of mass, world
+  std::vector<Quat> rot;                // body frame (principal axes) to world
+  std::vector<Vec3> vel;                // linear velocity, world
+  std::vector<Vec3> omega;              // angular velocity, world
+  std::vector<real> inv_mass;           // 0 for fixed and kinematic bodies
+  std::vector<Vec3> inv_inertia;        // principal inverse inertia, body frame (0 for fixed/kinematic)
+  std::vector<Vec3> force;              // external force accumulated for this step, world
+  std::vector<Vec3> torque;             // external torque accumulated for this step, world
+  std::vector<Vec3> gravity;            // per-body gravitational acceleration (Bullet allows per-body gravity)
+  std::vector<real> friction;           // Coulomb coefficient of the body's surface
+  std::vector<real> restitution;        // Newton's coefficient of the body's surface; a contact's is e_a e_b
+  std::vector<real> rolling_friction;   // [m] rolling resistance length of the surface (cone.h: projectRollingCone)
+  std::vector<real> spinning_friction;  // [m] spinning (drilling) resistance length of the surface
+  std::vector<uint8_t> flags;           // BodyFlags
+  std::vector<int32_t> shape_start;     // first shape of the body in ShapeArrays
+  std::vector<int32_t> shape_count;     // number of shapes of the body
+  std::vector<real> size;               // characteristic length of the body (smallest shape size)
 
   size_t count() const { return pos.size(); }
   void resize(size_t n);

@@ -172,6 +172,8 @@ BodyDesc bodyMotionFromBullet(const btRigidBody& body) {
   d.omega = fromBt(body.getAngularVelocity());
   d.friction = real(body.getFriction());
   d.restitution = real(body.getRestitution());
+  d.rolling_friction = real(body.getRollingFriction());
+  d.spinning_friction = real(body.getSpinningFriction());
   return d;
 }
 

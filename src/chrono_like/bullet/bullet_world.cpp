@@ -47,7 +47,18 @@ const btTransform& poseOf(const btCollisionObject& o) {
 
 // The object as the System takes it (groups and masks are set by the caller); shapes include static triangle
 // geometry (triangle_mesh.h).
+BodyDesc describeUnclamped(const btCollisionObject& obj);
+
+// Bullet takes any rolling or spinning friction; a value <= 0 (or not finite) adds no rolling rows in Bullet's solver
+// (they need a combined value > 0), so the System's lengths get 0 for it.
 BodyDesc describe(const btCollisionObject& obj) {
+  BodyDesc d = describeUnclamped(obj);
+  if (!(d.rolling_friction > 0) || !std::isfinite(d.rolling_friction)) d.rolling_friction = 0;
+  if (!(d.spinning_friction > 0) || !std::isfinite(d.spinning_friction)) d.spinning_friction = 0;
+  return d;
+}
+
+BodyDesc describeUnclamped(const btCollisionObject& obj) {
   const btCollisionShape* shape = obj.getCollisionShape();
   if (!shape) throw InputError("collision object without a collision shape");
   const btRigidBody* body = btRigidBody::upcast(&obj);
@@ -73,6 +84,8 @@ BodyDesc describe(const btCollisionObject& obj) {
     d.pos = fromBt(obj.getWorldTransform().getOrigin());
     d.rot = fromBt(obj.getWorldTransform().getRotation());
     d.friction = real(obj.getFriction());
+    d.rolling_friction = real(obj.getRollingFriction());
+    d.spinning_friction = real(obj.getSpinningFriction());
   }
   d.flags = uint8_t(kind);
   d.mass = 0;
@@ -401,6 +414,11 @@ void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
   }
   B.friction[i] = real(t.obj->getFriction());
   B.restitution[i] = real(t.obj->getRestitution());
+  // Bullet takes any value here; the System's are lengths >= 0 (a negative one means none, as in Bullet's solver,
+  // which adds the rolling rows only for a combined value > 0).
+  const real roll = real(t.obj->getRollingFriction()), spin = real(t.obj->getSpinningFriction());
+  B.rolling_friction[i] = roll > 0 && std::isfinite(roll) ? roll : real(0);
+  B.spinning_friction[i] = spin > 0 && std::isfinite(spin) ? spin : real(0);
   if (t.kind == kBodyFixed) return;
   const btRigidBody& b = *t.body;
   if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());

@@ -491,6 +491,7 @@ class Builder {
     Quat rot{1, 0, 0, 0};
     double friction = 0.5;
     double restitution = 0;
+    double rolling_friction = 0, spinning_friction = 0;  // [m]
     bool kinematic = false;
     bool has_gravity = false;
     Vec3 gravity{0, 0, 0};
@@ -526,6 +527,8 @@ class Builder {
     btRigidBody::btRigidBodyConstructionInfo info(mass, ms, s.shape.shape, inertia);
     info.m_friction = btScalar(s.friction);
     info.m_restitution = btScalar(s.restitution);
+    info.m_rollingFriction = btScalar(s.rolling_friction);
+    info.m_spinningFriction = btScalar(s.spinning_friction);
     auto* rb = new btRigidBody(info);
     o_.bodies.emplace_back(rb);
     if (s.kinematic) {
@@ -559,7 +562,7 @@ class Builder {
                  std::vector<btRigidBody*>& out) {
     c_.keys(j, path,
             {"name", "shape", "mass", "density", "position", "rotation", "velocity", "angular_velocity", "friction",
-             "restitution", "kinematic", "gravity"});
+             "restitution", "rolling_friction", "spinning_friction", "kinematic", "gravity"});
     (void)scene;
     if (!j.contains("shape")) c_.fail(path + ".shape", "missing");
     BodySpec s;
@@ -571,6 +574,10 @@ class Builder {
     if (j.contains("angular_velocity")) s.omega = c_.vec3(j["angular_velocity"], path + ".angular_velocity");
     if (j.contains("friction")) s.friction = c_.nonNegative(j["friction"], path + ".friction");
     if (j.contains("restitution")) s.restitution = c_.range(j["restitution"], path + ".restitution", 0, 1);
+    if (j.contains("rolling_friction"))
+      s.rolling_friction = c_.nonNegative(j["rolling_friction"], path + ".rolling_friction");
+    if (j.contains("spinning_friction"))
+      s.spinning_friction = c_.nonNegative(j["spinning_friction"], path + ".spinning_friction");
     if (j.contains("kinematic")) s.kinematic = c_.boolean(j["kinematic"], path + ".kinematic");
     if (j.contains("gravity")) {
       s.has_gravity = true;
@@ -610,8 +617,27 @@ class Builder {
                  std::vector<btRigidBody*>& out) {
     c_.object(g, path);
     c_.keys(g, path,
-            {"type", "name", "count", "footprint", "counts", "origin", "spacing", "jitter", "seed", "shape", "shapes",
-             "scale", "mass", "density", "friction", "restitution", "velocity", "angular_velocity", "random_rotation"});
+            {"type",
+             "name",
+             "count",
+             "footprint",
+             "counts",
+             "origin",
+             "spacing",
+             "jitter",
+             "seed",
+             "shape",
+             "shapes",
+             "scale",
+             "mass",
+             "density",
+             "friction",
+             "restitution",
+             "rolling_friction",
+             "spinning_friction",
+             "velocity",
+             "angular_velocity",
+             "random_rotation"});
     if (!g.contains("type")) c_.fail(path + ".type", "missing generator type");
     const std::string type = c_.oneOf(g["type"], path + ".type", {"grid", "pile"});
     auto at = [&](const char* k) { return path + "." + k; };
@@ -631,6 +657,10 @@ class Builder {
     Rng rng{g.contains("seed") ? uint64_t(c_.integer(g["seed"], at("seed"), 0, int64_t(1) << 53)) : 1u};
     const double friction = g.contains("friction") ? c_.nonNegative(g["friction"], at("friction")) : 0.5;
     const double restitution = g.contains("restitution") ? c_.range(g["restitution"], at("restitution"), 0, 1) : 0.0;
+    const double rolling =
+        g.contains("rolling_friction") ? c_.nonNegative(g["rolling_friction"], at("rolling_friction")) : 0.0;
+    const double spinning =
+        g.contains("spinning_friction") ? c_.nonNegative(g["spinning_friction"], at("spinning_friction")) : 0.0;
     const Vec3 vel = g.contains("velocity") ? c_.vec3(g["velocity"], at("velocity")) : Vec3{0, 0, 0};
     const Vec3 omega =
         g.contains("angular_velocity") ? c_.vec3(g["angular_velocity"], at("angular_velocity")) : Vec3{0, 0, 0};
@@ -664,6 +694,8 @@ class Builder {
       s.mass = by_density ? rho * s.shape.volume : mass;
       s.friction = friction;
       s.restitution = restitution;
+      s.rolling_friction = rolling;
+      s.spinning_friction = spinning;
       s.vel = vel;
       s.omega = omega;
       out.push_back(body(s, path));
@@ -818,6 +850,10 @@ void checkLoadedBody(const btRigidBody& rb, const std::string& where) {
     bad("friction must be finite and >= 0, got " + num(double(d.friction)));
   if (!(std::isfinite(d.restitution) && d.restitution >= 0))
     bad("restitution must be finite and >= 0, got " + num(double(d.restitution)));
+  if (!(std::isfinite(d.rolling_friction) && d.rolling_friction >= 0))
+    bad("rolling friction must be finite and >= 0, got " + num(double(d.rolling_friction)));
+  if (!(std::isfinite(d.spinning_friction) && d.spinning_friction >= 0))
+    bad("spinning friction must be finite and >= 0, got " + num(double(d.spinning_friction)));
   if (d.flags == 0) {
     if (!(std::isfinite(d.mass) && d.mass > 0)) bad("mass must be finite and > 0, got " + num(double(d.mass)));
     if (!(isFinite(d.inertia) && minComponent(d.inertia) > 0)) bad("moments of inertia must be finite and > 0");

@@ -61,4 +61,50 @@ DVI_HD real projectedGradientResidual2(real mu, const real* g, const real* grad,
   return e0 * e0 + e1 * e1 + e2 * e2;
 }
 
+// ---- rolling and spinning friction (Tasora & Anitescu, "A complementarity-based rolling friction model for rigid
+// contacts", Meccanica 48 (2013) 1643-1659; Chrono's ChContactNSCrolling) ----
+// A contact with rolling or spinning friction has, besides (gn, gu, gw), the angular impulses of a rolling block
+// (gs, gr1, gr2): spinning about the normal and rolling about the two tangents, bounded by the same normal impulse:
+//   K = {(gn, gt, gs, gr) : |gt| <= mu gn,  |gs| <= mu_s gn,  |gr| <= mu_r gn}     (mu_s, mu_r: lengths, metres)
+// the intersection of three second-order cones sharing gn. Chrono projects onto the three cones one after the other
+// (not the Euclidean projection); here it is the exact one, so APGD's and BB's projected steps keep their theory:
+// for a fixed gn = t >= 0 the nearest point keeps each part's direction and clips its length to its radius c_i t,
+// so t minimises phi(t) = (t - a)^2 + sum_i (m_i - c_i t)_+^2 (a the given gn, m_i = |part i|, c_i its coefficient).
+// phi' / 2 = h(t) = t - a - sum_i c_i (m_i - c_i t)_+ is increasing and piecewise linear, with breakpoints m_i / c_i;
+// with every part active its root is t_A = (a + sum c_i m_i) / (1 + sum c_i^2) <= t*, so dropping the parts whose
+// breakpoint lies below t_A and solving again reaches the root t* in at most three rounds. t* <= 0: the apex 0.
+// A part with c_i = 0 (no such friction) projects to 0, as the frictionless cone does.
+DVI_HD void projectRollingCone(real mu, real mu_s, real mu_r, real* g, real* s) {
+  const real c[3] = {mu > real(0) ? mu : real(0), mu_s > real(0) ? mu_s : real(0), mu_r > real(0) ? mu_r : real(0)};
+  const real m[3] = {std::sqrt(g[1] * g[1] + g[2] * g[2]), std::fabs(s[0]), std::sqrt(s[1] * s[1] + s[2] * s[2])};
+  bool active[3];
+  for (int i = 0; i < 3; ++i) active[i] = c[i] > real(0) && m[i] > real(0);
+  real t = 0;
+  for (int round = 0; round < 4; ++round) {
+    real num = g[0], den = 1;
+    for (int i = 0; i < 3; ++i)
+      if (active[i]) num += c[i] * m[i], den += c[i] * c[i];
+    t = num / den;
+    if (!(t > real(0))) break;  // h(0) >= 0: the apex (only possible in the first round, all parts active)
+    bool dropped = false;
+    for (int i = 0; i < 3; ++i)
+      if (active[i] && m[i] <= c[i] * t) active[i] = false, dropped = true;
+    if (!dropped) break;
+  }
+  if (!(t > real(0))) {
+    g[0] = g[1] = g[2] = s[0] = s[1] = s[2] = real(0);
+    return;
+  }
+  g[0] = t;
+  auto clip = [](real len, real radius) { return len > radius ? radius / len : real(1); };
+  const real f0 = c[0] > 0 ? clip(m[0], c[0] * t) : real(0);
+  const real f1 = c[1] > 0 ? clip(m[1], c[1] * t) : real(0);
+  const real f2 = c[2] > 0 ? clip(m[2], c[2] * t) : real(0);
+  g[1] *= f0;
+  g[2] *= f0;
+  s[0] *= f1;
+  s[1] *= f2;
+  s[2] *= f2;
+}
+
 }  // namespace dvi

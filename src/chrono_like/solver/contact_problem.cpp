@@ -28,12 +28,20 @@ const BodyInverseMass kNoBody{0, {0, 0, 0, 0, 0, 0}};
 
 void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
                            const Vec3* w_free, const ContactProblemSettings& settings,
-                           const std::vector<ConstraintRow>* rows) {
+                           const std::vector<ConstraintRow>* rows, const real* rolling) {
   threads_ = settings.threads > 0 ? settings.threads : omp_get_max_threads();
   const int T = threads_;
   const int64_t nb = int64_t(bodies.count());
   nc_ = int64_t(contacts.count());
   const int64_t nc = nc_;
+  nroll_ = 0;
+  roll_.clear();
+  roll_mu_.clear();
+  if (rolling && !settings.normal_only) {
+    for (int64_t k = 0; k < nc; ++k)
+      if (rolling[2 * k] > 0 || rolling[2 * k + 1] > 0) ++nroll_;
+    if (nroll_ > 0) { rows = rollingRows(bodies, contacts, rolling, settings.float_jacobians, rows); }
+  }
   const int64_t nrows = rows ? int64_t(rows->size()) : 0;
   nrb_ = (nrows + 2) / 3;
   normal_only_ = settings.normal_only;
@@ -63,6 +71,15 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   max_diag_ = max_diag > 0 ? max_diag : real(1);
   buildAdjacency(nb);
   computeJacobiSteps(nb);
+  // A rolling pair is projected as one (cone.h): the solvers' fixed points are the CCP's only where the step's
+  // scaling is one scalar on the whole pair (the projection is Euclidean), so both blocks take the smaller of their
+  // two steps (each is a valid bound, so their minimum is too).
+  for (int64_t k = 0; k < nc && nroll_ > 0; ++k) {
+    const int32_t p = roll_[size_t(k)];
+    if (p < 0) continue;
+    eta_[size_t(k)] = eta_[size_t(p)] = std::min(eta_[size_t(k)], eta_[size_t(p)]);
+    jeta_[size_t(k)] = jeta_[size_t(p)] = std::min(jeta_[size_t(k)], jeta_[size_t(p)]);
+  }
   // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
   if (nblk < kSerialContacts) threads_ = 1;
 }
@@ -165,6 +182,50 @@ real ContactProblem::assembleBoxesAndRows(const std::vector<ConstraintRow>* rows
   }
 
   return max_diag;
+}
+
+const std::vector<ConstraintRow>* ContactProblem::rollingRows(const BodyArrays& bodies, const ContactArrays& contacts,
+                                                              const real* rolling, bool float_jacobians,
+                                                              const std::vector<ConstraintRow>* rows) {
+  const int64_t nc = nc_;
+  const size_t nprov = rows ? rows->size() : 0;
+  roll_.assign(size_t(nc), -1);
+  roll_mu_.resize(size_t(2 * nroll_));
+  roll_len_.resize(size_t(nroll_));
+  all_rows_.resize(size_t(3 * nroll_) + nprov);
+  const real inf = std::numeric_limits<real>::infinity();
+  int64_t q = 0;
+  for (int64_t k = 0; k < nc; ++k) {
+    if (!(rolling[2 * k] > 0 || rolling[2 * k + 1] > 0)) continue;
+    const int32_t a = contacts.body_a[k], b = contacts.body_b[k];
+    // The contact's own (n, u, w): the same tangent as its friction rows (rounded as they are).
+    ContactJacobian J =
+        makeContactJacobian(contacts.normal[k], contacts.pa[k], contacts.pb[k], bodies.pos[a], bodies.pos[b], a, b);
+    if (float_jacobians) J = roundJacobian(J);
+    // The rows are scaled by the contact's size l (its smaller shape's radius or half-dimension): the unknowns are
+    // the angular impulses divided by l, forces like the contact's own, so the pair's diagonal blocks are of one
+    // magnitude (l^2 I^-1 against m^-1 + r^2 I^-1) and sharing the smaller step (build) costs little; the bounds
+    // become mu_s / l and mu_r / l.
+    const real l = contacts.size[k] > 0 && contacts.size[k] < real(1e29) ? contacts.size[k] : real(1);
+    const Vec3 d[3] = {J.n * l, J.u * l, contactW(J) * l};
+    for (int j = 0; j < 3; ++j) {
+      ConstraintRow& R = all_rows_[size_t(3 * q + j)];
+      R = ConstraintRow{};
+      R.a = a;
+      R.b = b;
+      const real da[6] = {0, 0, 0, -d[j].x, -d[j].y, -d[j].z}, db[6] = {0, 0, 0, d[j].x, d[j].y, d[j].z};
+      for (int i = 0; i < 6; ++i) R.Ja[i] = da[i], R.Jb[i] = db[i];
+      R.lo = -inf;  // bounded with the contact's normal impulse by the pair projection, not by a box
+      R.hi = inf;
+    }
+    roll_[size_t(k)] = int32_t(nc + q);
+    roll_mu_[size_t(2 * q)] = rolling[2 * k] / l;
+    roll_mu_[size_t(2 * q + 1)] = rolling[2 * k + 1] / l;
+    roll_len_[size_t(q)] = l;
+    ++q;
+  }
+  for (size_t i = 0; i < nprov; ++i) all_rows_[size_t(3 * nroll_) + i] = (*rows)[i];
+  return &all_rows_;
 }
 
 void ContactProblem::buildAdjacency(int64_t nb) {
@@ -399,9 +460,12 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   auto residualFromDeltas = [&]() {
     double sum;
     detail::blockReduce<1>(nblk, threads_, part, &sum, [&](int64_t k, double* acc) {
-      real y[3];
+      if (isRollingBlock(bs, k)) return;  // with its contact
+      const int64_t p = rollingPartner(bs, k);
+      real y[3], yp[3] = {0, 0, 0};
       blockGradient(k, y);
-      acc[0] += blockResidual2(bs, k, gamma + 3 * k, y, a, inv_a);
+      if (p >= 0) blockGradient(p, yp);
+      acc[0] += unitResidual2(bs, k, p, gamma + 3 * k, y, p >= 0 ? gamma + 3 * p : nullptr, yp, a, inv_a);
     });
     return real(std::sqrt(sum));
   };
@@ -412,26 +476,36 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   if (!reachedStop(res, thr, 0, s.min_iterations)) {
     for (int it = 0; it < s.max_iterations; ++it) {
       for (int64_t k = 0; k < nblk; ++k) {
-        real* g = gamma + 3 * k;
-        real y[3];
-        blockGradient(k, y);
-        real gn[3];
-        if (full) {
-          const Vec3 sy = symMul(binv_.data() + 6 * k, Vec3{y[0], y[1], y[2]});
-          gn[0] = g[0] - w * sy.x;
-          gn[1] = g[1] - w * sy.y;
-          gn[2] = g[2] - w * sy.z;
-        } else {
-          const real t = w * eta_[k];
-          for (int j = 0; j < 3; ++j) gn[j] = g[j] - t * y[j];
+        if (isRollingBlock(bs, k)) continue;  // updated with its contact (a rolling pair is one Gauss-Seidel unit)
+        const int64_t p = rollingPartner(bs, k);
+        const int64_t blk[2] = {k, p};
+        const int units = p >= 0 ? 2 : 1;
+        real gn[2][3] = {};
+        for (int u = 0; u < units; ++u) {
+          const int64_t b = blk[u];
+          const real* g = gamma + 3 * b;
+          real y[3];
+          blockGradient(b, y);
+          if (full) {
+            const Vec3 sy = symMul(binv_.data() + 6 * b, Vec3{y[0], y[1], y[2]});
+            gn[u][0] = g[0] - w * sy.x;
+            gn[u][1] = g[1] - w * sy.y;
+            gn[u][2] = g[2] - w * sy.z;
+          } else {
+            const real t = w * eta_[b];
+            for (int j = 0; j < 3; ++j) gn[u][j] = g[j] - t * y[j];
+          }
         }
-        projectBlock(bs, k, gn);
-        const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
-        g[0] = gn[0];
-        g[1] = gn[1];
-        g[2] = gn[2];
-        if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-        gsApplyBlockChange(k, dg);
+        projectUnit(bs, k, p, gn[0], gn[1]);
+        for (int u = 0; u < units; ++u) {
+          real* g = gamma + 3 * blk[u];
+          const real dg[3] = {gn[u][0] - g[0], gn[u][1] - g[1], gn[u][2] - g[2]};
+          g[0] = gn[u][0];
+          g[1] = gn[u][1];
+          g[2] = gn[u][2];
+          if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
+          gsApplyBlockChange(blk[u], dg);
+        }
       }
       ++st.iterations;
       const bool need = s.record_history || s.tolerance > 0;

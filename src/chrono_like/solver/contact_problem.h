@@ -18,6 +18,14 @@
 // Constraint rows (constraint_row.h) follow the contacts as blocks of three rows (the last block padded
 // with rows lo = hi = 0 on no body). A row stores its full Jacobian (12 reals): there are few of them
 // (joints, drives), so they are not compressed.
+//
+// Rolling and spinning friction (cone.h: projectRollingCone): a contact with mu_s > 0 or mu_r > 0 gets a rolling
+// block of three angular rows, spinning about n and rolling about u and w, with Jacobians
+//   D_s = [0; n],  D_u = [0; u],  D_w = [0; w] on B and minus that on A
+// (the relative angular velocity wB - wA along n, u, w; Tasora & Anitescu, Meccanica 48 (2013), eq. 10). These
+// rolling blocks are the first row blocks (blocks nc .. nc + nroll - 1, in contact order), built here from the
+// contacts, and the provider rows follow them; each is projected together with its contact (BlockSet::roll). The
+// rows are scaled by the contact's size l (rollingRows), so the solution holds the angular impulses divided by l.
 #pragma once
 
 #include <cstdint>
@@ -52,8 +60,11 @@ class ContactProblem final : public CcpProblem {
   // Writes the Jacobian blocks, r and the body -> contact adjacency.
   // rows: constraint rows solved with the contacts (may be null or empty); their impulses follow the
   // contacts' in the solution vector (3 per block, the padding rows last).
+  // rolling: 2 per contact, (mu_s, mu_r) in metres, or null (no rolling or spinning friction); a contact with
+  // either > 0 gets a rolling block (above), whose impulses come after the contacts' (3 each) and before the rows'.
   void build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,
-             const ContactProblemSettings& settings, const std::vector<ConstraintRow>* rows = nullptr);
+             const ContactProblemSettings& settings, const std::vector<ConstraintRow>* rows = nullptr,
+             const real* rolling = nullptr);
 
   int size() const override;
   const real* rhs() const override;
@@ -61,7 +72,17 @@ class ContactProblem final : public CcpProblem {
   // schur, applyImpulses or solveGaussSeidel of one problem from two threads at once.
   void schur(const real* x, real* y) const override;
   // Normal-only: no cone blocks; the contacts' normal blocks are boxes [0, inf) like the rows' boxes.
-  BlockSet blockSet() const override { return BlockSet{normal_only_ ? 0 : nc_, mu_.data(), lo_.data(), hi_.data()}; }
+  BlockSet blockSet() const override {
+    return BlockSet{normal_only_ ? 0 : nc_, mu_.data(), lo_.data(), hi_.data(), nroll_, roll_.data(), roll_mu_.data()};
+  }
+  // Rolling blocks: how many, and contact k's index among them (-1: none). Their impulses lie at
+  // x[3 (nc + q) .. 3 (nc + q) + 2] for rolling block q.
+  int64_t rollingBlocks() const { return nroll_; }
+  int32_t rollingIndex(int64_t k) const {
+    return nroll_ > 0 && roll_[size_t(k)] >= 0 ? roll_[size_t(k)] - int32_t(nc_) : -1;
+  }
+  // The rolling rows are scaled by a length l (the contact's size): x holds the angular impulses divided by l.
+  real rollingLength(int32_t q) const { return roll_len_[size_t(q)]; }
   bool normalOnly() const { return normal_only_; }
   // The System's impulse vector (3 per contact, then the rows) to this problem's solution vector (size()
   // reals) and back; the identity unless normalOnly() (then the tangential impulses come back as 0).
@@ -92,6 +113,11 @@ class ContactProblem final : public CcpProblem {
                         const ContactProblemSettings& settings);
   real assembleBoxesAndRows(const std::vector<ConstraintRow>* rows, int64_t nb, const Vec3* v_free, const Vec3* w_free,
                             real max_diag);
+  // The rolling rows of the contacts with rolling or spinning friction (roll_, roll_mu_ filled), then `rows`, in
+  // all_rows_; returns &all_rows_.
+  const std::vector<ConstraintRow>* rollingRows(const BodyArrays& bodies, const ContactArrays& contacts,
+                                                const real* rolling, bool float_jacobians,
+                                                const std::vector<ConstraintRow>* rows);
   void buildAdjacency(int64_t nb);
   void computeJacobiSteps(int64_t nb);
   // Gauss-Seidel's block k: its gradient from delta_, and delta_ updated by a change dg of its impulses.
@@ -102,9 +128,14 @@ class ContactProblem final : public CcpProblem {
   int64_t nc_ = 0;   // contacts
   int64_t ncb_ = 0;  // contact blocks: nc_, or ceil(nc_ / 3) when normal_only_
   bool normal_only_ = false;
-  int64_t nrb_ = 0;                  // constraint-row blocks (3 rows each)
-  std::vector<ConstraintRow> rows_;  // 3 per row block (padded)
-  std::vector<real> lo_, hi_;        // 3 per box block (normal-only contact blocks, then row blocks)
+  int64_t nrb_ = 0;                      // constraint-row blocks (3 rows each), the rolling blocks first
+  int64_t nroll_ = 0;                    // rolling blocks (contacts with rolling or spinning friction)
+  std::vector<int32_t> roll_;            // per contact: its rolling block (nc + q), or -1 (empty when nroll_ == 0)
+  std::vector<real> roll_mu_;            // 2 per rolling block: mu_s / l, mu_r / l (l = roll_len_)
+  std::vector<real> roll_len_;           // per rolling block: the length l its rows are scaled by [m]
+  std::vector<ConstraintRow> all_rows_;  // the rolling rows, then the provider rows (when nroll_ > 0)
+  std::vector<ConstraintRow> rows_;      // 3 per row block (padded)
+  std::vector<real> lo_, hi_;            // 3 per box block (normal-only contact blocks, then row blocks)
   real max_diag_ = 1;
   std::vector<ContactJacobian> jac_;      // per contact
   std::vector<real> rhs_;                 // 3 per block

@@ -8,8 +8,16 @@
 // (Tasora & Anitescu, CMAME 200 (2011): bilateral rows have the whole line as their "cone"; a motor with
 // a force limit or a unilateral limit has an interval). Padding rows have lo = hi = 0.
 //
+// Rolling and spinning friction: a contact with either has a rolling block (spinning, rolling u, rolling w: angular
+// impulses) among the first row blocks, projected TOGETHER with its contact block onto the cone of cone.h
+// (projectRollingCone), because both are bounded by the contact's normal impulse. Every functor below that projects
+// handles such a pair in the contact block's call (block k and its partner p = roll[k]) and does nothing in the
+// rolling block's own call; the linear passes (copies, dot products) stay block by block.
+//
 // Preconditioner: S = diag(eta_k I3), one positive scalar per block, so the S-metric projection onto the
-// product of cones and boxes is the Euclidean one block by block (solver.h).
+// product of cones and boxes is the Euclidean one block by block (a rolling pair: block by block in the metric, then
+// the pair's Euclidean projection; with the pair's two steps unequal this is the projection in the metric
+// diag(eta_k I3, eta_p I3) only approximately, see docs/MODEL.md).
 #pragma once
 
 #include <cmath>
@@ -27,7 +35,18 @@ struct BlockSet {
   const real* mu = nullptr;  // friction coefficient per contact block
   const real* lo = nullptr;  // 3 per row block: lower and upper impulse bounds
   const real* hi = nullptr;
+  // Rolling blocks: blocks [nc, nc + nroll), the first row blocks; contact k with roll[k] >= 0 owns block roll[k].
+  int64_t nroll = 0;
+  const int32_t* roll = nullptr;  // per contact block: its rolling block, or -1 (unused when nroll == 0)
+  const real* roll_mu = nullptr;  // 2 per rolling block: mu_s (spinning), mu_r (rolling), metres
 };
+
+// A rolling block: projected by its contact block's call (see above).
+DVI_HD bool isRollingBlock(const BlockSet& s, int64_t k) { return k >= s.nc && k < s.nc + s.nroll; }
+// The rolling block contact block k projects with, or -1.
+DVI_HD int64_t rollingPartner(const BlockSet& s, int64_t k) {
+  return s.nroll > 0 && k < s.nc ? int64_t(s.roll[k]) : int64_t(-1);
+}
 
 DVI_HD real clampRow(real x, real lo, real hi) { return x < lo ? lo : (x > hi ? hi : x); }  // keeps NaN
 
@@ -40,12 +59,34 @@ DVI_HD void projectBlock(const BlockSet& s, int64_t k, real* x) {
   for (int j = 0; j < 3; ++j) x[j] = clampRow(x[j], s.lo[i + j], s.hi[i + j]);
 }
 
+// Projects block k's values x and, where k leads a rolling pair (p >= 0), its partner's values xp with them.
+DVI_HD void projectUnit(const BlockSet& s, int64_t k, int64_t p, real* x, real* xp) {
+  if (p < 0) return projectBlock(s, k, x);
+  const real* c = s.roll_mu + 2 * (p - s.nc);
+  projectRollingCone(s.mu[k], c[0], c[1], x, xp);
+}
+
 // |(g - P(g - a grad)) / a|^2 of block k (the projected-gradient residual, solver.h).
 DVI_HD real blockResidual2(const BlockSet& s, int64_t k, const real* g, const real* grad, real a, real inv_a) {
   real t[3] = {g[0] - a * grad[0], g[1] - a * grad[1], g[2] - a * grad[2]};
   projectBlock(s, k, t);
   const real e0 = (g[0] - t[0]) * inv_a, e1 = (g[1] - t[1]) * inv_a, e2 = (g[2] - t[2]) * inv_a;
   return e0 * e0 + e1 * e1 + e2 * e2;
+}
+
+// blockResidual2 of block k, or of the rolling pair (k, p) when p >= 0 (gp, gradp: the partner's values).
+DVI_HD real unitResidual2(const BlockSet& s, int64_t k, int64_t p, const real* g, const real* grad, const real* gp,
+                          const real* gradp, real a, real inv_a) {
+  if (p < 0) return blockResidual2(s, k, g, grad, a, inv_a);
+  real t[3], tp[3];
+  for (int j = 0; j < 3; ++j) t[j] = g[j] - a * grad[j], tp[j] = gp[j] - a * gradp[j];
+  projectUnit(s, k, p, t, tp);
+  real sum = 0;
+  for (int j = 0; j < 3; ++j) {
+    const real e = (g[j] - t[j]) * inv_a, ep = (gp[j] - tp[j]) * inv_a;
+    sum += e * e + ep * ep;
+  }
+  return sum;
 }
 
 namespace kern {
@@ -55,7 +96,11 @@ namespace kern {
 struct Project {
   BlockSet s;
   real* x;
-  DVI_HD void operator()(int64_t k) const { projectBlock(s, k, x + 3 * k); }
+  DVI_HD void operator()(int64_t k) const {
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    projectUnit(s, k, p, x + 3 * k, p >= 0 ? x + 3 * p : nullptr);
+  }
 };
 
 struct CopyProject {
@@ -63,8 +108,12 @@ struct CopyProject {
   const real* src;
   real* dst;
   DVI_HD void operator()(int64_t k) const {
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
     for (int j = 0; j < 3; ++j) dst[3 * k + j] = src[3 * k + j];
-    projectBlock(s, k, dst + 3 * k);
+    if (p >= 0)
+      for (int j = 0; j < 3; ++j) dst[3 * p + j] = src[3 * p + j];
+    projectUnit(s, k, p, dst + 3 * k, p >= 0 ? dst + 3 * p : nullptr);
   }
 };
 
@@ -130,14 +179,31 @@ struct ApgdStepT {
   real beta, t;
   real* gn;
   bool grad_form = false;
-  DVI_HD void operator()(int64_t k) const {
-    real c[3], o[3], x[3];
-    V nc[3], no[3];
+  // Block b's step before the projection.
+  DVI_HD void value(int64_t b, real* x) const {
     for (int j = 0; j < 3; ++j) {
-      c[j] = gc[3 * k + j], o[j] = go[3 * k + j], nc[j] = Nc[3 * k + j], no[j] = No[3 * k + j];
+      const int64_t i = 3 * b + j;
+      x[j] = apgdStepValue<V>(gc[i], go[i], Nc[i], No[i], grad_form ? nullptr : r + 3 * b, j, t * eta[b], beta);
     }
-    apgdStepBlock<V>(s, k, c, o, nc, no, grad_form ? nullptr : r + 3 * k, t * eta[k], beta, x);
-    for (int j = 0; j < 3; ++j) gn[3 * k + j] = x[j];
+  }
+  DVI_HD void operator()(int64_t k) const {
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    if (p < 0) {  // apgdStepBlock, as the GPU's register-cached kernel runs it
+      real c[3], o[3], x[3];
+      V nc[3], no[3];
+      for (int j = 0; j < 3; ++j) {
+        c[j] = gc[3 * k + j], o[j] = go[3 * k + j], nc[j] = Nc[3 * k + j], no[j] = No[3 * k + j];
+      }
+      apgdStepBlock<V>(s, k, c, o, nc, no, grad_form ? nullptr : r + 3 * k, t * eta[k], beta, x);
+      for (int j = 0; j < 3; ++j) gn[3 * k + j] = x[j];
+      return;
+    }
+    real x[3], xp[3];
+    value(k, x);
+    value(p, xp);
+    projectUnit(s, k, p, x, xp);
+    for (int j = 0; j < 3; ++j) gn[3 * k + j] = x[j], gn[3 * p + j] = xp[j];
   }
 };
 using ApgdStep = ApgdStepT<real>;
@@ -232,8 +298,15 @@ struct Residual {  // 1 sum: squared residual of x given N x
   const real *x, *Nx, *r;
   real a, inv_a;
   DVI_HD void operator()(int64_t k, double* acc) const {
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
     const real grad[3] = {Nx[3 * k] + r[3 * k], Nx[3 * k + 1] + r[3 * k + 1], Nx[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += blockResidual2(s, k, x + 3 * k, grad, a, inv_a);
+    if (p < 0) {
+      acc[0] += blockResidual2(s, k, x + 3 * k, grad, a, inv_a);
+      return;
+    }
+    const real gradp[3] = {Nx[3 * p] + r[3 * p], Nx[3 * p + 1] + r[3 * p + 1], Nx[3 * p + 2] + r[3 * p + 2]};
+    acc[0] += unitResidual2(s, k, p, x + 3 * k, grad, x + 3 * p, gradp, a, inv_a);
   }
 };
 
@@ -242,8 +315,10 @@ struct ZeroResidual {  // 1 sum: squared residual of the zero impulse, res(0)^2 
   const real* r;
   real a, inv_a;
   DVI_HD void operator()(int64_t k, double* acc) const {
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
     const real zero[3] = {0, 0, 0};
-    acc[0] += blockResidual2(s, k, zero, r + 3 * k, a, inv_a);
+    acc[0] += unitResidual2(s, k, p, zero, r + 3 * k, zero, p >= 0 ? r + 3 * p : nullptr, a, inv_a);
   }
 };
 
@@ -255,15 +330,19 @@ struct JacobiScalar {
   bool last;
   real* next;
   DVI_HD void operator()(int64_t k, double* acc) const {
-    const real* g = cur + 3 * k;
-    const real grad[3] = {Ng[3 * k] + r[3 * k], Ng[3 * k + 1] + r[3 * k + 1], Ng[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += blockResidual2(s, k, g, grad, a, inv_a);
-    if (!last) {
-      const real t = w * step[k];
-      real* x = next + 3 * k;
-      for (int j = 0; j < 3; ++j) x[j] = g[j] - t * grad[j];
-      projectBlock(s, k, x);
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    const int64_t b[2] = {k, p};
+    real grad[2][3] = {};
+    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u)
+      for (int j = 0; j < 3; ++j) grad[u][j] = Ng[3 * b[u] + j] + r[3 * b[u] + j];
+    acc[0] += unitResidual2(s, k, p, cur + 3 * k, grad[0], p >= 0 ? cur + 3 * p : nullptr, grad[1], a, inv_a);
+    if (last) return;
+    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u) {
+      const real t = w * step[b[u]];
+      for (int j = 0; j < 3; ++j) next[3 * b[u] + j] = cur[3 * b[u] + j] - t * grad[u][j];
     }
+    projectUnit(s, k, p, next + 3 * k, p >= 0 ? next + 3 * p : nullptr);
   }
 };
 
@@ -275,18 +354,22 @@ struct JacobiInverse {
   bool last;
   real* next;
   DVI_HD void operator()(int64_t k, double* acc) const {
-    const real* g = cur + 3 * k;
-    const real grad[3] = {Ng[3 * k] + r[3 * k], Ng[3 * k + 1] + r[3 * k + 1], Ng[3 * k + 2] + r[3 * k + 2]};
-    acc[0] += blockResidual2(s, k, g, grad, a, inv_a);
-    if (!last) {
-      const real* B = binv + 6 * k;  // symmetric [00, 11, 22, 01, 02, 12]
-      const real sg[3] = {B[0] * grad[0] + B[3] * grad[1] + B[4] * grad[2],
-                          B[3] * grad[0] + B[1] * grad[1] + B[5] * grad[2],
-                          B[4] * grad[0] + B[5] * grad[1] + B[2] * grad[2]};
-      real* x = next + 3 * k;
-      for (int j = 0; j < 3; ++j) x[j] = g[j] - w * sg[j];
-      projectBlock(s, k, x);
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    const int64_t b[2] = {k, p};
+    real grad[2][3] = {};
+    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u)
+      for (int j = 0; j < 3; ++j) grad[u][j] = Ng[3 * b[u] + j] + r[3 * b[u] + j];
+    acc[0] += unitResidual2(s, k, p, cur + 3 * k, grad[0], p >= 0 ? cur + 3 * p : nullptr, grad[1], a, inv_a);
+    if (last) return;
+    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u) {
+      const real* B = binv + 6 * b[u];  // symmetric [00, 11, 22, 01, 02, 12]
+      const real* gr = grad[u];
+      const real sg[3] = {B[0] * gr[0] + B[3] * gr[1] + B[4] * gr[2], B[3] * gr[0] + B[1] * gr[1] + B[5] * gr[2],
+                          B[4] * gr[0] + B[5] * gr[1] + B[2] * gr[2]};
+      for (int j = 0; j < 3; ++j) next[3 * b[u] + j] = cur[3 * b[u] + j] - w * sg[j];
     }
+    projectUnit(s, k, p, next + 3 * k, p >= 0 ? next + 3 * p : nullptr);
   }
 };
 
@@ -309,11 +392,12 @@ struct ApgdSpeculation {
 // sp: also the speculated steps of the next trial (ApgdSpeculation; by value: a pointer to a functor's member put
 // the whole functor in local memory on the GPU), each component from the values the test has loaded, projected and
 // written to sp.xa and sp.xr where they are not null.
+// apgdTestSums: the block's part of the sums but the residual, its gradient at g (grad_n) and its speculated steps
+// before the projection (xa, xr, where sp asks for them).
 template <class V>
-DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
-                          const real* g, const V* ng, const real* r3, real eta, real beta, real a, real inv_a,
-                          bool grad_form, double* acc, const ApgdSpeculation sp = {}) {
-  real grad_n[3], xa[3], xr[3];
+DVI_HD void apgdTestSums(const real* c, const real* o, const V* nc, const V* no, const real* g, const V* ng,
+                         const real* r3, real eta, real beta, bool grad_form, double* acc, const ApgdSpeculation sp,
+                         real* grad_n, real* xa, real* xr) {
   double dd = 0;
   const real* rs = grad_form ? nullptr : r3;  // the step's r (apgdStepBlock)
   DVI_UNROLL
@@ -332,6 +416,14 @@ DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const rea
     if (sp.xr) xr[j] = apgdStepValue<V>(c[j], o[j], nc[j], no[j], rs, j, sp.tr * eta, beta);
   }
   if (eta > 0) acc[1] += dd / eta;  // a block between immovable bodies has no metric weight
+}
+
+template <class V>
+DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
+                          const real* g, const V* ng, const real* r3, real eta, real beta, real a, real inv_a,
+                          bool grad_form, double* acc, const ApgdSpeculation sp = {}) {
+  real grad_n[3], xa[3], xr[3];
+  apgdTestSums<V>(c, o, nc, no, g, ng, r3, eta, beta, grad_form, acc, sp, grad_n, xa, xr);
   acc[2] += blockResidual2(s, k, g, grad_n, a, inv_a);
   if (sp.xa) {
     projectBlock(s, k, xa);
@@ -355,6 +447,9 @@ struct ApgdTestT {
   bool grad_form = false;
   ApgdSpeculation spec = {};
   DVI_HD void operator()(int64_t k, double* acc) const {
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    if (p >= 0) return pair(k, p, acc);
     real c[3], o[3], g[3];
     V nc[3], no[3], ng[3];
     for (int j = 0; j < 3; ++j) {
@@ -362,6 +457,30 @@ struct ApgdTestT {
       c[j] = gc[i], o[j] = go[i], nc[j] = Nc[i], no[j] = No[i], g[j] = gn[i], ng[j] = Nn[i];
     }
     apgdTestBlock<V>(s, k, c, o, nc, no, g, ng, r + 3 * k, eta[k], beta, a, inv_a, grad_form, acc, spec);
+  }
+  // A rolling pair (k, p): the sums block by block, the residual and the speculated steps projected together.
+  DVI_HD void pair(int64_t k, int64_t p, double* acc) const {
+    const int64_t b[2] = {k, p};
+    real c[6], o[6], g[6];
+    V nc[6], no[6], ng[6];
+    for (int u = 0; u < 2; ++u)
+      for (int j = 0; j < 3; ++j) {
+        const int64_t i = 3 * b[u] + j;
+        const int l = 3 * u + j;
+        c[l] = gc[i], o[l] = go[i], nc[l] = Nc[i], no[l] = No[i], g[l] = gn[i], ng[l] = Nn[i];
+      }
+    real grad[6], xa[6], xr[6];
+    for (int u = 0; u < 2; ++u)
+      apgdTestSums<V>(c + 3 * u, o + 3 * u, nc + 3 * u, no + 3 * u, g + 3 * u, ng + 3 * u, r + 3 * b[u], eta[b[u]],
+                      beta, grad_form, acc, spec, grad + 3 * u, xa + 3 * u, xr + 3 * u);
+    acc[2] += unitResidual2(s, k, p, g, grad, g + 3, grad + 3, a, inv_a);
+    real* outs[2] = {spec.xa, spec.xr};
+    real* vals[2] = {xa, xr};
+    for (int q = 0; q < 2; ++q) {
+      if (!outs[q]) continue;
+      projectUnit(s, k, p, vals[q], vals[q] + 3);
+      for (int j = 0; j < 3; ++j) outs[q][3 * k + j] = vals[q][j], outs[q][3 * p + j] = vals[q][3 + j];
+    }
   }
 };
 using ApgdTest = ApgdTestT<real>;
@@ -385,17 +504,25 @@ struct BbDirection {
   real alpha;
   real* d;
   DVI_HD void operator()(int64_t k, double* acc) const {
-    real* dk = d + 3 * k;
-    const real ae = alpha * eta[k];
-    for (int j = 0; j < 3; ++j) dk[j] = x[3 * k + j] - ae * g[3 * k + j];
-    projectBlock(s, k, dk);
-    double dd = 0;
-    for (int j = 0; j < 3; ++j) {
-      dk[j] -= x[3 * k + j];
-      acc[0] += double(g[3 * k + j]) * dk[j];
-      dd += double(dk[j]) * dk[j];
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    const int64_t b[2] = {k, p};
+    const int units = p >= 0 ? 2 : 1;
+    for (int u = 0; u < units; ++u) {
+      const real ae = alpha * eta[b[u]];
+      for (int j = 0; j < 3; ++j) d[3 * b[u] + j] = x[3 * b[u] + j] - ae * g[3 * b[u] + j];
     }
-    if (eta[k] > 0) acc[1] += dd / eta[k];
+    projectUnit(s, k, p, d + 3 * k, p >= 0 ? d + 3 * p : nullptr);
+    for (int u = 0; u < units; ++u) {
+      real* dk = d + 3 * b[u];
+      double dd = 0;
+      for (int j = 0; j < 3; ++j) {
+        dk[j] -= x[3 * b[u] + j];
+        acc[0] += double(g[3 * b[u] + j]) * dk[j];
+        dd += double(dk[j]) * dk[j];
+      }
+      if (eta[b[u]] > 0) acc[1] += dd / eta[b[u]];
+    }
   }
 };
 
@@ -406,16 +533,25 @@ struct BbUpdate {
   real lam, a, inv_a;
   real *g, *xn;
   DVI_HD void operator()(int64_t k, double* acc) const {
-    real* gk = g + 3 * k;
-    real* xk = xn + 3 * k;
-    for (int j = 0; j < 3; ++j) {
-      const int64_t i = 3 * k + j;
-      xk[j] = x[i] + lam * d[i];
-      gk[j] += lam * Nd[i];
-    }
-    projectBlock(s, k, xk);  // x + lambda d is in the convex set; this only removes rounding
-    for (int j = 0; j < 3; ++j) acc[1] += 0.5 * double(xk[j]) * (gk[j] + r[3 * k + j]);
-    acc[0] += blockResidual2(s, k, xk, gk, a, inv_a);
+    if (isRollingBlock(s, k)) return;
+    const int64_t p = rollingPartner(s, k);
+    const int64_t b[2] = {k, p};
+    const int units = p >= 0 ? 2 : 1;
+    for (int u = 0; u < units; ++u)
+      for (int j = 0; j < 3; ++j) {
+        const int64_t i = 3 * b[u] + j;
+        xn[i] = x[i] + lam * d[i];
+        g[i] += lam * Nd[i];
+      }
+    // x + lambda d is in the convex set; this only removes rounding
+    projectUnit(s, k, p, xn + 3 * k, p >= 0 ? xn + 3 * p : nullptr);
+    for (int u = 0; u < units; ++u)
+      for (int j = 0; j < 3; ++j) {
+        const int64_t i = 3 * b[u] + j;
+        acc[1] += 0.5 * double(xn[i]) * (g[i] + r[i]);
+      }
+    acc[0] += unitResidual2(s, k, p, xn + 3 * k, g + 3 * k, p >= 0 ? xn + 3 * p : nullptr, p >= 0 ? g + 3 * p : nullptr,
+                            a, inv_a);
   }
 };
 
