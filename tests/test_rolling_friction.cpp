@@ -191,7 +191,7 @@ TEST_CASE("spinning friction: a ball spinning about the vertical stops at w0 I /
   const Track bullet = bulletBall(false, btScalar(0.01), btScalar(0.0025), btVector3(0, 0, 0), w, 3);
   const Track bullet_alone = bulletBall(false, 0, btScalar(0.0025), btVector3(0, 0, 0), w, 3);
   CHECK(bullet_alone.w.back().y() == Approx(w0).epsilon(1e-3));  // Bullet: no spinning row without rolling friction
-  const size_t at1 = 59;  // t = 1 s
+  const size_t at1 = 59;                                         // t = 1 s
   INFO("spin at 1 s: closed form " << w0 - alpha << " rad/s, ours " << ours.w[at1].y() << ", Bullet "
                                    << bullet.w[at1].y() << "; at 3 s ours " << ours.w.back().y() << ", Bullet "
                                    << bullet.w.back().y() << " (stops at " << t_stop << " s)");
@@ -284,8 +284,8 @@ TEST_CASE("rolling friction: Jacobi, Gauss-Seidel, APGD and BB reach the same op
     s.max_iterations = 200000;
     s.storage = VectorStorage::Real;
     std::vector<real> g(size_t(p.size()), real(0));
-    SolverStats st = t == SolverType::APGD  ? solveApgd(p, g.data(), s)
-                     : t == SolverType::BB  ? solveBB(p, g.data(), s)
+    SolverStats st = t == SolverType::APGD     ? solveApgd(p, g.data(), s)
+                     : t == SolverType::BB     ? solveBB(p, g.data(), s)
                      : t == SolverType::Jacobi ? solveJacobi(p, g.data(), s)
                                                : p.solveGaussSeidel(g.data(), s);
     INFO(solverName(t) << ": " << st.iterations << " iterations, relative residual " << st.relative_residual);
@@ -319,8 +319,8 @@ TEST_CASE("rolling friction: scene keys, validation, pruning and the GPU backend
   CHECK(bodyDescFromBullet(*s.bodies()[0]).spinning_friction == Approx(0.002));
   CHECK(bodyDescFromBullet(*s.bodies()[2]).rolling_friction == Approx(0.03));
   CHECK(bodyDescFromBullet(*s.bodies()[2]).spinning_friction == 0);
-  for (const char* bad : {R"(, "rolling_friction": -0.1)", R"(, "spinning_friction": "nan")",
-                          R"(, "rolling_friction": "x")"}) {
+  for (const char* bad :
+       {R"(, "rolling_friction": -0.1)", R"(, "spinning_friction": "nan")", R"(, "rolling_friction": "x")"}) {
     INFO(bad);
     CHECK_THROWS_AS(Scene::fromJsonText(scene(bad, ""), "test"), InputError);
     CHECK_THROWS_AS(Scene::fromJsonText(scene("", bad), "test"), InputError);

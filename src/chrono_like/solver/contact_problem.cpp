@@ -457,6 +457,30 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   project(gamma);
   gatherBodyDeltas(gamma);  // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
   auto blockGradient = [&](int64_t k, real* y) { gsBlockGradient(k, y); };
+  // Block b's values after its scaled step, before the projection.
+  auto blockStep = [&](int64_t b, real* gn) {
+    const real* g = gamma + 3 * b;
+    real y[3];
+    blockGradient(b, y);
+    if (full) {
+      const Vec3 sy = symMul(binv_.data() + 6 * b, Vec3{y[0], y[1], y[2]});
+      gn[0] = g[0] - w * sy.x;
+      gn[1] = g[1] - w * sy.y;
+      gn[2] = g[2] - w * sy.z;
+    } else {
+      const real t = w * eta_[b];
+      for (int j = 0; j < 3; ++j) gn[j] = g[j] - t * y[j];
+    }
+  };
+  // Block b's projected values into gamma, and their change into delta_.
+  auto commit = [&](int64_t b, const real* gn) {
+    real* g = gamma + 3 * b;
+    const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
+    g[0] = gn[0];
+    g[1] = gn[1];
+    g[2] = gn[2];
+    if (dg[0] != 0 || dg[1] != 0 || dg[2] != 0) gsApplyBlockChange(b, dg);
+  };
   auto residualFromDeltas = [&]() {
     double sum;
     detail::blockReduce<1>(nblk, threads_, part, &sum, [&](int64_t k, double* acc) {
@@ -478,34 +502,18 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
       for (int64_t k = 0; k < nblk; ++k) {
         if (isRollingBlock(bs, k)) continue;  // updated with its contact (a rolling pair is one Gauss-Seidel unit)
         const int64_t p = rollingPartner(bs, k);
-        const int64_t blk[2] = {k, p};
-        const int units = p >= 0 ? 2 : 1;
-        real gn[2][3] = {};
-        for (int u = 0; u < units; ++u) {
-          const int64_t b = blk[u];
-          const real* g = gamma + 3 * b;
-          real y[3];
-          blockGradient(b, y);
-          if (full) {
-            const Vec3 sy = symMul(binv_.data() + 6 * b, Vec3{y[0], y[1], y[2]});
-            gn[u][0] = g[0] - w * sy.x;
-            gn[u][1] = g[1] - w * sy.y;
-            gn[u][2] = g[2] - w * sy.z;
-          } else {
-            const real t = w * eta_[b];
-            for (int j = 0; j < 3; ++j) gn[u][j] = g[j] - t * y[j];
-          }
+        real gk[3];
+        blockStep(k, gk);
+        if (p < 0) {
+          projectBlock(bs, k, gk);
+          commit(k, gk);
+          continue;
         }
-        projectUnit(bs, k, p, gn[0], gn[1]);
-        for (int u = 0; u < units; ++u) {
-          real* g = gamma + 3 * blk[u];
-          const real dg[3] = {gn[u][0] - g[0], gn[u][1] - g[1], gn[u][2] - g[2]};
-          g[0] = gn[u][0];
-          g[1] = gn[u][1];
-          g[2] = gn[u][2];
-          if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-          gsApplyBlockChange(blk[u], dg);
-        }
+        real gp[3];
+        blockStep(p, gp);
+        projectUnit(bs, k, p, gk, gp);
+        commit(k, gk);
+        commit(p, gp);
       }
       ++st.iterations;
       const bool need = s.record_history || s.tolerance > 0;
