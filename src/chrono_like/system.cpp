@@ -12,6 +12,7 @@
 #include <type_traits>
 
 #include "chrono_like/collision/collision.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/integrate.h"
 #include "chrono_like/solver/contact_problem.h"
@@ -329,7 +330,31 @@ void System::detectCollisions() {
       stats_.stage_ran[int(StageType::NarrowPhase)] = true;
   stats_.pairs = t.pairs;
   stats_.pairs_reused = t.pairs_reused;
+  if (hasExclusions()) {
+    const uint64_t* keys = excluded_pairs_.data();
+    const int64_t nk = int64_t(excluded_pairs_.size()), nf = int64_t(no_contact_.size());
+    const uint8_t* flags = no_contact_.empty() ? nullptr : no_contact_.data();
+    contacts_.keepIf(
+        [&](size_t k) { return !contactExcluded(contacts_.body_a[k], contacts_.body_b[k], keys, nk, flags, nf); });
+  }
   stats_.contacts = int64_t(contacts_.count());
+}
+
+void System::setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>& pairs,
+                                  std::vector<uint8_t> no_contact) {
+  excluded_pairs_.clear();
+  for (const auto& p : pairs) {
+    if (p.first < 0 || p.second < 0 || p.first == p.second)
+      throw InputError("contact exclusion: invalid body pair (" + std::to_string(p.first) + ", " +
+                       std::to_string(p.second) + ")");
+    excluded_pairs_.push_back(bodyPairKey(p.first, p.second));
+  }
+  std::sort(excluded_pairs_.begin(), excluded_pairs_.end());
+  excluded_pairs_.erase(std::unique(excluded_pairs_.begin(), excluded_pairs_.end()), excluded_pairs_.end());
+  bool any = false;
+  for (uint8_t f : no_contact) any = any || f != 0;
+  no_contact_ = any ? std::move(no_contact) : std::vector<uint8_t>{};
+  ++exclusions_version_;
 }
 
 void System::collectRows() {

@@ -284,6 +284,11 @@ class System {
   // providers add their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).
   void addForceField(std::shared_ptr<ForceField> field) { fields_.push_back(std::move(field)); }
   void addRowProvider(std::shared_ptr<RowProvider> rows) { row_providers_.push_back(std::move(rows)); }
+  // Contacts the step leaves out (collision/contact.h: contactExcluded), on both backends after the narrow phase:
+  // every contact between the two bodies of a pair in `pairs` (body indices, either order), and every contact of a
+  // body whose entry in `no_contact` is nonzero (empty: none; bodies past its end: none). The Bullet drop-in world
+  // sets them from constraints made with disableCollisionsBetweenLinkedBodies and from CF_NO_CONTACT_RESPONSE.
+  void setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>& pairs, std::vector<uint8_t> no_contact);
   const std::vector<ConstraintRow>& constraintRows() const { return rows_; }  // last step's rows
   const std::vector<real>& rowImpulses() const { return row_lambda_; }        // and their impulses
 
@@ -352,6 +357,10 @@ class System {
   std::vector<real> row_lambda_;                  // their impulses
   std::vector<size_t> provider_rows_;             // rows of each provider this step, in order
   std::unique_ptr<CollisionDetector> collision_;  // narrow + broad phase backend (native or Bullet's)
+  std::vector<uint64_t> excluded_pairs_;          // sorted bodyPairKey of the excluded pairs (setContactExclusions)
+  std::vector<uint8_t> no_contact_;               // per body: makes no contacts (empty: none)
+  uint64_t exclusions_version_ = 0;               // bumped by every setContactExclusions (a device re-uploads)
+  bool hasExclusions() const { return !excluded_pairs_.empty() || !no_contact_.empty(); }
   std::unique_ptr<ContactProblem> problem_;
   std::vector<real> x_;             // solution in the problem's layout when it is normal-only
   const real* solution_ = nullptr;  // gamma_ or x_: what IntegrateVelocities applies

@@ -898,6 +898,18 @@ bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg) {
   return false;
 }
 
+// Pairs whose bodies the scene excludes (collision/contact.h: contactExcluded) make no contacts: their count is zeroed
+// before the scan, so the write passes skip them.
+__global__ void excludePairsKernel(const uint64_t* pairs, int shift, int64_t np, const Shape* shapes,
+                                   const uint64_t* keys, int64_t n_keys, const uint8_t* no_contact, int64_t n_flags,
+                                   int64_t* count) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= np || count[i] == 0) return;
+  int32_t a, b;
+  unpackPair(pairs[i], shift, a, b);
+  if (contactExcluded(shapes[a].body, shapes[b].body, keys, n_keys, no_contact, n_flags)) count[i] = 0;
+}
+
 void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   const int64_t np = d.pairs;
   cudaStream_t st = d.stream;
@@ -947,6 +959,12 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
                      st>>>(A, N.deferred.data(), N.deep.data(), N.deep_count.data(), int32_t(deep_cap), N.count.data(),
                            first);
   DVI_CUDA_LAUNCH("narrowDeepKernel");
+  if (d.excluded_count > 0 || d.no_contact_count > 0) {
+    excludePairsKernel<<<blocksFor(np), kBlock, 0, st>>>(
+        d.broad.pair_key_sorted.data(), d.pair_shift, np, d.shapes.shape.data(), d.excluded.data(), d.excluded_count,
+        d.no_contact_count > 0 ? d.no_contact.data() : nullptr, d.no_contact_count, N.count.data());
+    DVI_CUDA_LAUNCH("excludePairsKernel");
+  }
   cubRun(d, "cub::DeviceScan::ExclusiveSum (contacts)", [&](void* t, size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, N.count.data(), N.off.data(), np + 1, st);
   });

@@ -196,12 +196,18 @@ struct DeviceState {
   size_t prev_count = 0;  // contacts of the previous step (warm start source)
   real max_diag = 1;      // largest diagonal entry of N this step (scales the residual's alpha)
   bool keys_unsorted = false;
-  size_t row_count = 0;                  // constraint rows this step (before padding)
-  bool normal_only = false;              // this step's CCP has the contacts' normal rows only (jacobian.h)
-  bool entry_gather = false;             // GpuTuning::entry_gather of this step's BuildRows
-  bool all_frictional = false;           // every uploaded body has friction > 0 (GpuSystem::uploadIfNeeded)
-  bool any_restitution = false;          // some uploaded body has restitution > 0 (else BuildRows reads none)
-  int64_t contact_blocks = 0;            // contact blocks: contacts, or ceil(contacts / 3) when normal_only
+  size_t row_count = 0;          // constraint rows this step (before padding)
+  bool normal_only = false;      // this step's CCP has the contacts' normal rows only (jacobian.h)
+  bool entry_gather = false;     // GpuTuning::entry_gather of this step's BuildRows
+  bool all_frictional = false;   // every uploaded body has friction > 0 (GpuSystem::uploadIfNeeded)
+  bool any_restitution = false;  // some uploaded body has restitution > 0 (else BuildRows reads none)
+  int64_t contact_blocks = 0;    // contact blocks: contacts, or ceil(contacts / 3) when normal_only
+  // Contacts left out (System::setContactExclusions): sorted body-pair keys and per-body flags, uploaded when their
+  // version changes; the narrow phase zeroes the contact count of such pairs.
+  DeviceBuffer<uint64_t> excluded{"excluded body pairs"};
+  DeviceBuffer<uint8_t> no_contact{"bodies without contacts"};
+  int64_t excluded_count = 0, no_contact_count = 0;
+  uint64_t exclusions_version = ~uint64_t(0);
   std::vector<ConstraintRow> host_rows;  // host staging of the padded rows
   std::vector<real> host_lohi;           //   and of their bounds
 

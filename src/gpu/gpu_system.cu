@@ -289,6 +289,13 @@ void GpuSystem::integrateForces() {
 
 void GpuSystem::detectCollisions() {
   cudaEvent_t* ev = d_->ev;
+  if (d_->exclusions_version != exclusions_version_) {
+    d_->excluded.upload(excluded_pairs_, d_->stream);
+    d_->no_contact.upload(no_contact_, d_->stream);
+    d_->excluded_count = int64_t(excluded_pairs_.size());
+    d_->no_contact_count = int64_t(no_contact_.size());
+    d_->exclusions_version = exclusions_version_;
+  }
   computeAabbs(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::ComputeAabbs) + 1], d_->stream));
   stats_.pairs_reused = broadPhaseStep(*d_, config_);

@@ -36,6 +36,18 @@ void ContactArrays::resize(size_t n) {
   key.resize(n);
 }
 
+void ContactArrays::moveContact(size_t from, size_t to) {
+  shape_a[to] = shape_a[from];
+  shape_b[to] = shape_b[from];
+  body_a[to] = body_a[from];
+  body_b[to] = body_b[from];
+  normal[to] = normal[from];
+  pa[to] = pa[from];
+  pb[to] = pb[from];
+  dist[to] = dist[from];
+  key[to] = key[from];
+}
+
 void ContactArrays::clear() { resize(0); }
 
 }  // namespace dvi

@@ -60,6 +60,21 @@ struct ContactArrays {
   std::vector<uint64_t> key;  // persistent key (contactKey) for warm starting
 
   size_t count() const { return normal.size(); }
+  // Keeps the contacts k with keep(k) true, in order (the narrow phase's fields: shapes, bodies, normal, points,
+  // distance, key); returns how many are left.
+  template <class Keep>
+  size_t keepIf(Keep keep) {
+    const size_t n = count();
+    size_t m = 0;
+    for (size_t k = 0; k < n; ++k) {
+      if (!keep(k)) continue;
+      if (m != k) moveContact(k, m);
+      ++m;
+    }
+    if (m != n) resize(m);
+    return m;
+  }
+  void moveContact(size_t from, size_t to);
   void clear();
   void resize(size_t n);
 };

@@ -139,25 +139,7 @@ class FilteredCpuSystem final : public System {
   void detectCollisions() override {
     System::detectCollisions();
     ContactArrays& c = contacts_;
-    const size_t n = c.count();
-    size_t m = 0;
-    for (size_t k = 0; k < n; ++k) {
-      if (!keep_(c.body_a[k], c.body_b[k])) continue;
-      if (m != k) {
-        c.shape_a[m] = c.shape_a[k];
-        c.shape_b[m] = c.shape_b[k];
-        c.body_a[m] = c.body_a[k];
-        c.body_b[m] = c.body_b[k];
-        c.normal[m] = c.normal[k];
-        c.pa[m] = c.pa[k];
-        c.pb[m] = c.pb[k];
-        c.dist[m] = c.dist[k];
-        c.key[m] = c.key[k];
-      }
-      ++m;
-    }
-    if (m != n) c.resize(m);
-    stats_.contacts = int64_t(m);
+    stats_.contacts = int64_t(c.keepIf([&](size_t k) { return keep_(c.body_a[k], c.body_b[k]); }));
   }
 
  private:
@@ -201,16 +183,14 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
   return s;
 }
 
-// Bullet's pair test (btOverlappingPairCache needsBroadphaseCollision and btCollisionDispatcher needsCollision)
-// on the full 32-bit groups and masks, contact response and constraint exclusions.
+// Bullet's pair test (btOverlappingPairCache needsBroadphaseCollision) on the full 32-bit groups and masks, where the
+// System's 16-bit filters are folded (CPU backend). Contact response and constraint exclusions (btCollisionDispatcher
+// needsCollision) are the System's contact exclusions on both backends (updateExclusions).
 bool DviDynamicsWorld::keepPair(int a, int b) const {
   const Tracked& ta = tracked_[size_t(a)];
   const Tracked& tb = tracked_[size_t(b)];
   // The renumbered 16-bit filters are exact unless folded: only then does the System's test pass extra pairs.
-  if (folded_filters_ && ((ta.group & tb.mask) == 0 || (tb.group & ta.mask) == 0)) return false;
-  if (!ta.obj->hasContactResponse() || !tb.obj->hasContactResponse()) return false;
-  if (has_exclusions_ && (!ta.obj->checkCollideWith(tb.obj) || !tb.obj->checkCollideWith(ta.obj))) return false;
-  return true;
+  return !folded_filters_ || ((ta.group & tb.mask) != 0 && (tb.group & ta.mask) != 0);
 }
 
 // Group bit positions in use get System bits in order of appearance; a new one renumbers nothing, but the masks
@@ -400,7 +380,30 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   factors_->locks.clear();
   for (size_t i = 0; i < tracked_.size(); ++i) syncBody(i, h, B);
   joints_->springForces(B, B.force.data(), B.torque.data());
+  updateExclusions();
   system_->markHostDirty();
+}
+
+void DviDynamicsWorld::updateExclusions() {
+  std::vector<std::pair<int32_t, int32_t>> pairs;
+  std::vector<uint8_t> flags(tracked_.size(), 0);
+  bool any_flag = false;
+  for (size_t i = 0; i < tracked_.size(); ++i) {
+    btCollisionObject* o = tracked_[i].obj;
+    if (!o) continue;
+    if (!o->hasContactResponse()) flags[i] = 1, any_flag = true;
+    if (!has_exclusions_) continue;
+    for (int j = 0; j < o->getNumObjectsWithoutCollision(); ++j) {  // Bullet's checkCollideWith lists
+      auto it = object_index_.find(o->getObjectWithoutCollision(j));
+      if (it != object_index_.end() && it->second != int(i)) pairs.emplace_back(int32_t(i), int32_t(it->second));
+    }
+  }
+  if (!any_flag) flags.clear();
+  if (excl_system_ == system_.get() && pairs == excl_pairs_ && flags == excl_flags_) return;
+  system_->setContactExclusions(pairs, flags);
+  excl_pairs_ = std::move(pairs);
+  excl_flags_ = std::move(flags);
+  excl_system_ = system_.get();
 }
 
 void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {

@@ -151,6 +151,9 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void fillManifold(const WorldContact& w, int ia, int ib);
   void releaseManifolds();
   bool keepPair(int a, int b) const;
+  // The System's contact exclusions (System::setContactExclusions) from Bullet's per-object ignore lists (constraints
+  // made with disableCollisionsBetweenLinkedBodies) and CF_NO_CONTACT_RESPONSE; sent when they change.
+  void updateExclusions();
   void noteFilter(int group);
   int16_t mapFilter(int bits) const;
 
@@ -163,7 +166,10 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<Tracked> tracked_;                                    // in System order
   std::vector<btCollisionObject*> pending_;                         // added since the last sub-step
   bool rebuild_ = false;
-  bool has_exclusions_ = false;     // some constraint disables collisions between its bodies
+  bool has_exclusions_ = false;                          // some constraint disables collisions between its bodies
+  std::vector<std::pair<int32_t, int32_t>> excl_pairs_;  // the exclusions last sent to excl_system_
+  std::vector<uint8_t> excl_flags_;
+  const System* excl_system_ = nullptr;
   int ghosts_ = 0;                  // ghost objects in the world: Bullet's pair cache is computed each sub-step
   std::vector<int> group_bits_;     // Bullet group bit positions in use, in order of appearance (their System bit)
   bool folded_filters_ = false;     // more than 16 group bits in use: folded, exact test per contact (CPU)

@@ -24,4 +24,31 @@ DVI_HD uint64_t contactKey(int32_t shape_a, int32_t shape_b, int32_t feature) {
          uint64_t(feature & 0xFF);
 }
 
+// ---- contacts a scene excludes (System::setContactExclusions; Bullet's disableCollisionsBetweenLinkedBodies and
+// CF_NO_CONTACT_RESPONSE) ----
+
+// Key of an unordered body pair: (min << 32) | max.
+DVI_HD uint64_t bodyPairKey(int32_t a, int32_t b) {
+  const uint32_t lo = uint32_t(a < b ? a : b), hi = uint32_t(a < b ? b : a);
+  return (uint64_t(lo) << 32) | uint64_t(hi);
+}
+
+// Whether a contact between bodies a and b is left out: either body is flagged in no_contact (n_flags entries, null:
+// none), or the pair's key is in the sorted keys[0 .. n_keys) (binary search). One function for the CPU's compaction
+// and the GPU's narrow phase.
+DVI_HD bool contactExcluded(int32_t a, int32_t b, const uint64_t* keys, int64_t n_keys, const uint8_t* no_contact,
+                            int64_t n_flags) {
+  if (no_contact && ((a < n_flags && no_contact[a]) || (b < n_flags && no_contact[b]))) return true;
+  const uint64_t key = bodyPairKey(a, b);
+  int64_t lo = 0, hi = n_keys;
+  while (lo < hi) {
+    const int64_t mid = lo + (hi - lo) / 2;
+    if (keys[mid] < key)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo < n_keys && keys[lo] == key;
+}
+
 }  // namespace dvi
