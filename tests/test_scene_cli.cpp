@@ -446,18 +446,23 @@ TEST_CASE("Bullet import: X/Y/Z variants are rotated onto Bullet's axes (support
     for (Vec3 d : probeDirections())
       CHECK(supportValue(out[0], d) == Approx(bulletSupport(*c.s, d, c.margin)).margin(1e-5));
   }
-  // A convex hull with local scaling: without a margin its points; with Bullet's margin (0.04) the points grown by
-  // it, inside Bullet's rounded shape and outside the bare points (faces exact: the drop-in's hull test).
+  // A convex hull with local scaling: the scaled points as they are, and Bullet's margin (0.04) as the record's
+  // sphere-swept radius, so the support is Bullet's with its margin in every direction; without a margin, the points.
   const btScalar pts[] = {0.1f, 0.1f, 0.1f, -0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, -0.3f};
   btConvexHullShape hull(pts, 4, 3 * sizeof(btScalar));
   hull.setLocalScaling(btVector3(1, 2, 0.5f));
   std::vector<ShapeDesc> out;
   appendShapesFromBullet(hull, id, out);
   REQUIRE(out.size() == 1);
-  for (Vec3 d : probeDirections()) {
-    CHECK(supportValue(out[0], d) <= bulletSupport(hull, d, true) + 1e-5);
-    CHECK(supportValue(out[0], d) > bulletSupport(hull, d, false) + 0.2 * hull.getMargin());
+  CHECK(out[0].shape.type == ShapeType::ConvexHull);
+  CHECK(out[0].shape.margin == 0.04f);
+  REQUIRE(out[0].hull.size() == 4);  // no points added
+  for (int i = 0; i < 4; ++i) {
+    CHECK(out[0].hull[size_t(i)].x == Approx(pts[3 * i]));
+    CHECK(out[0].hull[size_t(i)].y == Approx(2 * pts[3 * i + 1]));
+    CHECK(out[0].hull[size_t(i)].z == Approx(0.5 * pts[3 * i + 2]));
   }
+  for (Vec3 d : probeDirections()) CHECK(supportValue(out[0], d) == Approx(bulletSupport(hull, d, true)).margin(1e-5));
   hull.setMargin(0);
   out.clear();
   appendShapesFromBullet(hull, id, out);
