@@ -469,6 +469,36 @@ TEST_CASE("Bullet import: X/Y/Z variants are rotated onto Bullet's axes (support
   for (Vec3 d : probeDirections()) CHECK(supportValue(out[0], d) == Approx(bulletSupport(hull, d, false)).margin(1e-5));
 }
 
+TEST_CASE("Scene format: a convex hull's optional margin reaches the System's hull record", "[cli][hull]") {
+  auto scene = [](const std::string& margin) {
+    return R"({ "settings": { "steps": 1 }, "bodies": [ { "shape": { "type": "convex_hull", "points": [[0, 0, 0],
+      [1, 0, 0], [0, 1, 0], [0, 0, 1]])" +
+           margin + R"( }, "mass": 1 } ] })";
+  };
+  const Scene s = Scene::fromJsonText(scene(R"(, "margin": 0.015625)"), "m.json");
+  REQUIRE(s.bodyCount() == 1);
+  const BodyDesc d = bodyDescFromBullet(*s.bodies()[0]);
+  REQUIRE(d.shapes.size() == 1);
+  CHECK(d.shapes[0].shape.type == ShapeType::ConvexHull);
+  CHECK(d.shapes[0].shape.margin == 0.015625f);
+  CHECK(d.shapes[0].hull.size() == 4);
+  // margin 0 is the bare points; without the key, the default (5% of the smallest half extent, 0.5 here)
+  CHECK(bodyDescFromBullet(*Scene::fromJsonText(scene(R"(, "margin": 0)"), "z.json").bodies()[0])
+            .shapes[0]
+            .shape.margin == 0);
+  CHECK(bodyDescFromBullet(*Scene::fromJsonText(scene(""), "d.json").bodies()[0]).shapes[0].shape.margin ==
+        Approx(0.025));
+  for (const char* bad : {R"(, "margin": -0.01)", R"(, "margin": "nan")", R"(, "margin": [1])"}) {
+    INFO(bad);
+    try {
+      Scene::fromJsonText(scene(bad), "bad.json");
+      FAIL("accepted");
+    } catch (const InputError& e) {
+      CHECK(std::string(e.what()).find("margin") != std::string::npos);
+    } catch (const std::exception& e) { FAIL("not an InputError: " << e.what()); }
+  }
+}
+
 TEST_CASE("Bullet import: compounds, multi-spheres and planes", "[cli][bullet]") {
   btCompoundShape comp;
   btSphereShape s(0.1f);
