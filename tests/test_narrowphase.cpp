@@ -532,6 +532,26 @@ TEST_CASE("small shapes on the side of a large cylinder: a point per vertex, exa
       const Vec3 x = c[i].pa;
       CHECK(double(c[i].dist) == Approx(std::sqrt(double(x.x * x.x + x.y * x.y)) - double(R)).margin(1e-12));
     }
+    // The same fragment with a margin of 0.05 mm, raised by it: each bottom vertex's sphere touches the drum at the
+    // same depth; the point is the margin below the vertex, along the radial direction through it.
+    Shape fragm = frag;
+    fragm.margin = 0.05e-3f;
+    const double mm = double(fragm.margin);
+    m = collideShapes(fragm, pose(wh.p + radial * real(mm), qr), drum, wd, pts.data(), real(env), c);
+    REQUIRE(m == 6);
+    checkConsistent(c, m, env);
+    for (int i = 0; i < m; ++i) {
+      int vk = -1;  // the bottom vertex this point belongs to
+      for (int k = 0; k < 6; ++k)
+        if (std::fabs(length(transformPoint(pose(wh.p + radial * real(mm), qr), pts[size_t(k)]) - c[i].pa) - mm) <
+            1e-12)
+          vk = k;
+      REQUIRE(vk >= 0);
+      const Vec3 v = transformPoint(pose(wh.p + radial * real(mm), qr), pts[size_t(vk)]);
+      const double rho = std::sqrt(double(v.x * v.x + v.y * v.y));
+      CHECK(double(c[i].dist) == Approx(rho - double(R) - mm).margin(1e-12));
+      CHECK(angleDeg(v - c[i].pa, normalized(Vec3{v.x, v.y, 0})) < 1e-6);
+    }
   }
   // Near a cap the pair is not in the side's regime: the general path answers (MPR; the flake's face lies on the
   // drum's nearly flat side, so with the flat-feature manifold of mpr.h), every point consistent.
@@ -650,8 +670,8 @@ const ShapeType kConvexTypes[] = {ShapeType::Sphere,  ShapeType::Ellipsoid, Shap
                                   ShapeType::Capsule, ShapeType::Cone,      ShapeType::ConvexHull};
 
 // A random shape of type t, with its Bullet twin (margins 0 where Bullet allows; sphere and capsule radii are
-// their margins). Hull points are appended to `pts`.
-Pair randomShape(ShapeType t, Rng& rng, std::vector<Vec3>& pts) {
+// their margins; a hull gets `hull_margin` on both). Hull points are appended to `pts`.
+Pair randomShape(ShapeType t, Rng& rng, std::vector<Vec3>& pts, double hull_margin = 0) {
   Pair p;
   switch (t) {
     case ShapeType::Sphere: {
@@ -708,12 +728,13 @@ Pair randomShape(ShapeType t, Rng& rng, std::vector<Vec3>& pts) {
         b->addPoint(btVector3(btScalar(x.x), btScalar(x.y), btScalar(x.z)), false);
       }
       b->recalcLocalAabb();
-      b->setMargin(0);
+      b->setMargin(btScalar(hull_margin));
+      p.s.margin = float(hull_margin);
       p.bt.reset(b);
       break;
     }
   }
-  p.s.size = t == ShapeType::ConvexHull ? 0.3 : minComponent(p.s.dims);
+  p.s.size = t == ShapeType::ConvexHull ? 0.3 + hull_margin : minComponent(p.s.dims);
   if (t == ShapeType::Sphere || t == ShapeType::Cylinder || t == ShapeType::Capsule || t == ShapeType::Cone)
     p.s.size = std::min(p.s.dims.x, p.s.dims.y);
   return p;
@@ -938,6 +959,159 @@ TEST_CASE("supportLocal agrees with Bullet's support mappings", "[narrowphase][b
       }
     }
   }
+}
+
+// A hull with a margin m is its points swept by a sphere of radius m (Bullet: btConvexInternalShape::
+// localGetSupportingVertex): support s(d) = s_points(d) + m d/|d|. Expected values: the cube's corners in closed form
+// and, for random points, the brute-force maximum of dot(p, d); margins exact in float (Shape::margin is a float).
+TEST_CASE("convex hull margin: the support is the points' support plus m d/|d|", "[narrowphase][hull]") {
+  const double h = 0.5;
+  std::vector<Vec3> cube;
+  for (int i = 0; i < 8; ++i) cube.push_back(Vec3{i & 1 ? h : -h, i & 2 ? h : -h, i & 4 ? h : -h});
+  Rng rng(31);
+  std::vector<Vec3> rnd;
+  for (int i = 0; i < 30; ++i) rnd.push_back(Vec3{rng.uni(-0.1, 0.1), 0.2, 0} + mul(rng.dir(), Vec3{1, 0.5, 0.7}));
+  for (double m : {0.0, 0.03125, 0.125, 0.375}) {
+    Shape s = hull(0, 8);
+    s.margin = float(m);
+    Shape r = hull(0, int(rnd.size()));
+    r.margin = float(m);
+    for (int k = 0; k < 300; ++k) {
+      const Vec3 d = rng.dir() * rng.uni(1e-3, 1e3);  // any length
+      const double l = length(d);
+      const Vec3 expect{(d.x < 0 ? -h : h) + m * d.x / l, (d.y < 0 ? -h : h) + m * d.y / l,
+                        (d.z < 0 ? -h : h) + m * d.z / l};
+      INFO("margin " << m << " d " << d.x << " " << d.y << " " << d.z);
+      CHECK(length(supportLocal(s, d, cube.data()) - expect) < 1e-12);
+      // random points: the support minus m d/|d| is a point of maximal dot(p, d)
+      double best = -1e300;
+      for (const Vec3& p : rnd) best = std::max(best, dot(p, d));
+      const Vec3 core = supportLocal(r, d, rnd.data()) - d * (m / l);
+      double nearest = 1e300;
+      for (const Vec3& p : rnd) nearest = std::min(nearest, length(p - core));
+      CHECK(nearest < 1e-12);
+      CHECK(dot(core, d) == Approx(best).epsilon(1e-12));
+    }
+  }
+}
+
+TEST_CASE("convex hull margin: AABB, bounding radius and plane contacts include it exactly", "[narrowphase][hull]") {
+  const double h = 0.5, m = 0.125;
+  std::vector<Vec3> cube;
+  for (int i = 0; i < 8; ++i) cube.push_back(Vec3{i & 1 ? h : -h, i & 2 ? h : -h, i & 4 ? h : -h});
+  Shape s = hull(0, 8);
+  s.margin = float(m);
+  CHECK(boundingRadius(s, cube.data()) == Approx(std::sqrt(3.0) * h + m).epsilon(1e-14));
+  Rng rng(32);
+  for (int it = 0; it < 50; ++it) {
+    const Pose w = pose(Vec3{rng.uni(-2, 2), rng.uni(-2, 2), rng.uni(-2, 2)}, rng.rot());
+    const double env = rng.uni(0, 0.1);
+    const Aabb bb = shapeAabb(s, w, cube.data(), env);
+    // the rotated cube's half extent along world axis i is h sum_j |R_ij|; the sphere adds m, the envelope env
+    for (int i = 0; i < 3; ++i) {
+      Vec3 e{i == 0 ? 1.0 : 0.0, i == 1 ? 1.0 : 0.0, i == 2 ? 1.0 : 0.0};
+      const Vec3 row = rotateInv(w.q, e);  // row i of R
+      const double half = h * (std::fabs(row.x) + std::fabs(row.y) + std::fabs(row.z)) + m + env;
+      CHECK(np::comp(bb.hi, i) == Approx(np::comp(w.p, i) + half).margin(1e-12));
+      CHECK(np::comp(bb.lo, i) == Approx(np::comp(w.p, i) - half).margin(1e-12));
+    }
+  }
+  // Resting on the plane y = 0 (turned about the vertical): the bottom face is m below the points, so the cube is
+  // touching at centre height h + m; every bottom corner's contact point lies m below it.
+  const Shape P = plane(Vec3{0, 1, 0}, 0);
+  ContactPoint c[kMaxContactsPerPair];
+  for (int it = 0; it < 20; ++it) {
+    const double pen = it == 0 ? 0.0 : rng.uni(0, 0.01);
+    const Quat q = quatFromAxisAngle(Vec3{0, 1, 0}, real(rng.uni(0, 2 * kPi)));
+    const Pose w = pose(Vec3{rng.uni(-1, 1), h + m - pen, rng.uni(-1, 1)}, q);
+    const int n = collideShapes(s, w, P, pose(Vec3{0, 0, 0}), cube.data(), 0.01, c);
+    REQUIRE(n == 4);
+    checkConsistent(c, n, 0.01);
+    for (int i = 0; i < n; ++i) {
+      CHECK(c[i].dist == Approx(-pen).margin(1e-12));
+      CHECK(c[i].pa.y == Approx(-pen).margin(1e-12));
+      CHECK(c[i].pb.y == Approx(0).margin(1e-12));
+      CHECK(c[i].normal.y == Approx(-1).margin(1e-15));
+    }
+  }
+  // Tilted: the lowest corner's sphere decides, dist = (lowest corner height) - m.
+  for (int it = 0; it < 50; ++it) {
+    const Quat q = rng.rot();
+    double low = 1e9;
+    for (const Vec3& p : cube) low = std::min(low, rotate(q, p).y);
+    const double y = rng.uni(-0.05, 0.05) - low + m;
+    const int n = collideShapes(s, pose(Vec3{0, y, 0}, q), P, pose(Vec3{0, 0, 0}), cube.data(), 0.1, c);
+    if (y + low - m >= 0.1) continue;
+    REQUIRE(n >= 1);
+    CHECK(c[deepest(c, n)].dist == Approx(y + low - m).margin(1e-12));
+  }
+  // Far above: nothing; just inside the envelope: found.
+  CHECK(collideShapes(s, pose(Vec3{0, h + m + 0.011, 0}), P, pose(Vec3{0, 0, 0}), cube.data(), 0.01, c) == 0);
+  CHECK(collideShapes(s, pose(Vec3{0, h + m + 0.009, 0}), P, pose(Vec3{0, 0, 0}), cube.data(), 0.01, c) == 4);
+}
+
+// Hulls with a margin against every convex type through MPR (and the closed forms it meets), against Bullet's
+// GJK/EPA on the same shapes (btConvexHullShape::setMargin): the signed distance, and contact points on the swept
+// surfaces (their height along the normal is Bullet's support value there).
+TEST_CASE("convex hull margin: every pair with a swept hull agrees with Bullet's GJK/EPA",
+          "[narrowphase][bullet][hull]") {
+  std::vector<Vec3> pts;
+  pts.reserve(100000);
+  Rng rng(33);
+  double worst = 0, worstGap = 0;
+  int compared = 0;
+  auto btSupport = [](const btConvexShape* s, const Pose& w, Vec3 d) {  // Bullet's support value in world frame
+    const Vec3 dl = rotateInv(w.q, d);
+    const btVector3 v = s->localGetSupportingVertex(btVector3(btScalar(dl.x), btScalar(dl.y), btScalar(dl.z)));
+    return dot(transformPoint(w, Vec3{v.x(), v.y(), v.z()}), d);
+  };
+  for (ShapeType tb : kConvexTypes) {
+    const bool curved = tb == ShapeType::Ellipsoid || tb == ShapeType::Cylinder || tb == ShapeType::Cone;
+    double pWorst = 0, pGap = 0;
+    for (int it = 0; it < 60; ++it) {
+      Pair A = randomShape(ShapeType::ConvexHull, rng, pts, rng.uni(0.02, 0.15));
+      Pair B = randomShape(tb, rng, pts, tb == ShapeType::ConvexHull ? rng.uni(0, 0.1) : 0.0);
+      const bool swap = it % 2 == 1;
+      const Quat qa = rng.rot(), qb = rng.rot();
+      const Vec3 u = rng.dir(), c0{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)};
+      auto at = [&](double t) { return pose(c0 + u * t, qb); };
+      const Pose pa = pose(c0, qa);
+      double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
+      for (int k = 0; k < 30; ++k) {
+        const double mid = 0.5 * (lo + hi);
+        (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0 ? lo : hi) = mid;
+      }
+      const double size = std::min(A.s.size, B.s.size);
+      const Pose pb = at(0.5 * (lo + hi) + rng.uni(-0.08, 0.08) * size);
+      const BtResult ref = bulletDistance(A.bt.get(), pa, B.bt.get(), pb);
+      REQUIRE(ref.ok);
+      const double env = 0.1 * size;
+      if (ref.dist > 0.8 * env) continue;
+      ContactPoint c[kMaxContactsPerPair];
+      const int m = swap ? collideShapes(B.s, pb, A.s, pa, pts.data(), env, c)
+                         : collideShapes(A.s, pa, B.s, pb, pts.data(), env, c);
+      if (swap) np::flipContacts(c, m);
+      INFO("hull-" << shapeTypeName(tb) << " sample " << it << " bullet dist " << ref.dist);
+      REQUIRE(m >= 1);
+      checkConsistent(c, m, env);
+      const ContactPoint& k = c[deepest(c, m)];
+      const double e = std::fabs(k.dist - ref.dist);
+      INFO("ours " << k.dist);
+      CHECK(e < (curved ? 7e-3 : 1e-4));
+      // the deepest point: pa on A's swept surface along n, pb on B's along -n (Bullet's supports, float)
+      const double ga = std::fabs(dot(k.pa, k.normal) - btSupport(A.bt.get(), pa, k.normal));
+      const double gb = std::fabs(dot(k.pb, -k.normal) - btSupport(B.bt.get(), pb, -k.normal));
+      CHECK(ga < 1e-5);
+      CHECK(gb < 1e-5);
+      pWorst = std::max(pWorst, e);
+      pGap = std::max({pGap, ga, gb});
+      ++compared;
+    }
+    std::printf("  margin hull-%-10s |ours-bullet| %.1e  support-plane gap %.1e\n", shapeTypeName(tb), pWorst, pGap);
+    worst = std::max(worst, pWorst), worstGap = std::max(worstGap, pGap);
+  }
+  std::printf("  margin hulls, %d samples: |ours-bullet| %.1e  support-plane gap %.1e\n", compared, worst, worstGap);
+  CHECK(compared > 7 * 60 / 2);
 }
 
 TEST_CASE("shapeAabb contains the support points at any rotation, and is tight", "[narrowphase]") {

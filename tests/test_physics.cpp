@@ -93,6 +93,50 @@ TEST_CASE("a box resting on a plane carries m g", "[physics]") {
   CHECK(length(sys.bodies().vel[b]) < 1e-3);
 }
 
+// A cube hull (half extent h) with a margin m is its corners swept by a sphere of radius m (Shape::margin, Bullet's
+// collision margin): its bottom face lies m below the corners, so it rests with its centre at h + m, and carries m g.
+TEST_CASE("a cube hull with a margin rests one margin above its points", "[physics][hull]") {
+  for (const real margin : {real(0), real(0.0078125), real(0.03125)}) {
+    SystemConfig cfg;
+    cfg.step.dt = real(1e-3);
+    cfg.solver.type = SolverType::APGD;
+    cfg.solver.max_iterations = 100;
+    System sys(cfg);
+    const int gr = sys.addBody(ground());
+    const real h = real(0.05), m = 2;
+    BodyDesc b = box(Vec3{h, h, h}, m, Vec3{0, h + margin + real(0.0005), 0}, real(0.5));
+    std::vector<Vec3> pts;
+    for (int i = 0; i < 8; ++i) pts.push_back(Vec3{i & 1 ? h : -h, i & 2 ? h : -h, i & 4 ? h : -h});
+    b.shapes[0] = makeConvexHull(pts, Pose{{0, 0, 0}, {1, 0, 0, 0}}, margin);
+    CHECK(b.shapes[0].shape.size == Approx(h + margin));
+    const int id = sys.addBody(b);
+    sys.advance(300);
+    INFO("margin " << margin << ": y " << sys.bodies().pos[size_t(id)].y);
+    CHECK(sys.bodies().pos[size_t(id)].y == Approx(h + margin).margin(2e-4));
+    CHECK(forceBetween(sys, gr, id).y == Approx(m * g).epsilon(0.01));
+    CHECK(length(sys.bodies().vel[size_t(id)]) < 1e-3);
+  }
+}
+
+TEST_CASE("a negative or non-finite hull margin, or a margin on another shape, is refused", "[physics][hull]") {
+  SystemConfig cfg;
+  System sys(cfg);
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 8; ++i) pts.push_back(Vec3{real(i & 1), real(i >> 1 & 1), real(i >> 2 & 1)});
+  for (const real bad : {real(-0.01), real(NAN), real(INFINITY)}) {
+    BodyDesc b = box(Vec3{1, 1, 1}, 1, Vec3{0, 0, 0}, real(0.5));
+    b.shapes[0] = makeConvexHull(pts, Pose{{0, 0, 0}, {1, 0, 0, 0}}, bad);
+    CHECK_THROWS_WITH(sys.addBody(b), Catch::Contains("margin"));
+    CHECK_THROWS_AS(sys.addBody(b), InputError);
+  }
+  BodyDesc s = sphere(real(0.1), 1, Vec3{0, 0, 0}, real(0.5));
+  s.shapes[0].shape.margin = 0.01f;
+  CHECK_THROWS_WITH(sys.addBody(s), Catch::Contains("only convex hulls"));
+  BodyDesc ok = box(Vec3{1, 1, 1}, 1, Vec3{0, 0, 0}, real(0.5));
+  ok.shapes[0] = makeConvexHull(pts, Pose{{0, 0, 0}, {1, 0, 0, 0}}, real(0.01));
+  CHECK(sys.addBody(ok) == 0);
+}
+
 TEST_CASE("a box on a 30 degree incline slides with g(sin - mu cos) and sticks above tan 30", "[physics]") {
   // The incline is the ground plane with gravity tilted by 30 degrees about z: same mechanics.
   const real theta = real(M_PI / 6);

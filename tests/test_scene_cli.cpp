@@ -446,22 +446,57 @@ TEST_CASE("Bullet import: X/Y/Z variants are rotated onto Bullet's axes (support
     for (Vec3 d : probeDirections())
       CHECK(supportValue(out[0], d) == Approx(bulletSupport(*c.s, d, c.margin)).margin(1e-5));
   }
-  // A convex hull with local scaling: without a margin its points; with Bullet's margin (0.04) the points grown by
-  // it, inside Bullet's rounded shape and outside the bare points (faces exact: the drop-in's hull test).
+  // A convex hull with local scaling: the scaled points as they are, and Bullet's margin (0.04) as the record's
+  // sphere-swept radius, so the support is Bullet's with its margin in every direction; without a margin, the points.
   const btScalar pts[] = {0.1f, 0.1f, 0.1f, -0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, 0.1f, -0.1f, -0.3f};
   btConvexHullShape hull(pts, 4, 3 * sizeof(btScalar));
   hull.setLocalScaling(btVector3(1, 2, 0.5f));
   std::vector<ShapeDesc> out;
   appendShapesFromBullet(hull, id, out);
   REQUIRE(out.size() == 1);
-  for (Vec3 d : probeDirections()) {
-    CHECK(supportValue(out[0], d) <= bulletSupport(hull, d, true) + 1e-5);
-    CHECK(supportValue(out[0], d) > bulletSupport(hull, d, false) + 0.2 * hull.getMargin());
+  CHECK(out[0].shape.type == ShapeType::ConvexHull);
+  CHECK(out[0].shape.margin == 0.04f);
+  REQUIRE(out[0].hull.size() == 4);  // no points added
+  for (int i = 0; i < 4; ++i) {
+    CHECK(out[0].hull[size_t(i)].x == Approx(pts[3 * i]));
+    CHECK(out[0].hull[size_t(i)].y == Approx(2 * pts[3 * i + 1]));
+    CHECK(out[0].hull[size_t(i)].z == Approx(0.5 * pts[3 * i + 2]));
   }
+  for (Vec3 d : probeDirections()) CHECK(supportValue(out[0], d) == Approx(bulletSupport(hull, d, true)).margin(1e-5));
   hull.setMargin(0);
   out.clear();
   appendShapesFromBullet(hull, id, out);
   for (Vec3 d : probeDirections()) CHECK(supportValue(out[0], d) == Approx(bulletSupport(hull, d, false)).margin(1e-5));
+}
+
+TEST_CASE("Scene format: a convex hull's optional margin reaches the System's hull record", "[cli][hull]") {
+  auto scene = [](const std::string& margin) {
+    return R"({ "settings": { "steps": 1 }, "bodies": [ { "shape": { "type": "convex_hull", "points": [[0, 0, 0],
+      [1, 0, 0], [0, 1, 0], [0, 0, 1]])" +
+           margin + R"( }, "mass": 1 } ] })";
+  };
+  const Scene s = Scene::fromJsonText(scene(R"(, "margin": 0.015625)"), "m.json");
+  REQUIRE(s.bodyCount() == 1);
+  const BodyDesc d = bodyDescFromBullet(*s.bodies()[0]);
+  REQUIRE(d.shapes.size() == 1);
+  CHECK(d.shapes[0].shape.type == ShapeType::ConvexHull);
+  CHECK(d.shapes[0].shape.margin == 0.015625f);
+  CHECK(d.shapes[0].hull.size() == 4);
+  // margin 0 is the bare points; without the key, the default (5% of the smallest half extent, 0.5 here)
+  CHECK(bodyDescFromBullet(*Scene::fromJsonText(scene(R"(, "margin": 0)"), "z.json").bodies()[0])
+            .shapes[0]
+            .shape.margin == 0);
+  CHECK(bodyDescFromBullet(*Scene::fromJsonText(scene(""), "d.json").bodies()[0]).shapes[0].shape.margin ==
+        Approx(0.025));
+  for (const char* bad : {R"(, "margin": -0.01)", R"(, "margin": "nan")", R"(, "margin": [1])"}) {
+    INFO(bad);
+    try {
+      Scene::fromJsonText(scene(bad), "bad.json");
+      FAIL("accepted");
+    } catch (const InputError& e) {
+      CHECK(std::string(e.what()).find("margin") != std::string::npos);
+    } catch (const std::exception& e) { FAIL("not an InputError: " << e.what()); }
+  }
 }
 
 TEST_CASE("Bullet import: compounds, multi-spheres and planes", "[cli][bullet]") {

@@ -25,7 +25,7 @@ ShapeDesc base(ShapeType type, Pose local, Vec3 dims, real size) {
   d.shape.size = size;
   d.shape.group = 1;
   d.shape.mask = -1;  // 0xFFFF: collides with every group
-  d.shape.pad_ = 0;
+  d.shape.margin = 0;
   return d;
 }
 
@@ -51,8 +51,10 @@ ShapeDesc makeEllipsoid(Vec3 semi_axes, Pose local) {
   return base(ShapeType::Ellipsoid, local, semi_axes, minComponent(semi_axes));
 }
 
-// dims of a hull: the half extents of its local bounding box; size: the smallest of them.
-ShapeDesc makeConvexHull(std::vector<Vec3> points, Pose local) {
+// dims of a hull: the half extents of its points' local bounding box; size: the smallest of them plus the margin
+// (the swept hull's smallest half extent). The margin is stored as given: System::addBody refuses a negative or
+// non-finite one.
+ShapeDesc makeConvexHull(std::vector<Vec3> points, Pose local, real margin) {
   Vec3 lo{0, 0, 0}, hi{0, 0, 0};
   if (!points.empty()) {
     lo = hi = points[0];
@@ -62,7 +64,8 @@ ShapeDesc makeConvexHull(std::vector<Vec3> points, Pose local) {
     }
   }
   const Vec3 half = (hi - lo) * real(0.5);
-  ShapeDesc d = base(ShapeType::ConvexHull, local, half, minComponent(half));
+  ShapeDesc d = base(ShapeType::ConvexHull, local, half, minComponent(half) + margin);
+  d.shape.margin = float(margin);
   d.shape.hull_count = int32_t(points.size());
   d.hull = std::move(points);
   return d;

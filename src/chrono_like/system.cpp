@@ -77,6 +77,7 @@ real shapeSize(const Shape& s) {
     case ShapeType::Capsule: return s.dims.x;
     case ShapeType::Cone: return fmin(s.dims.x, real(0.5) * s.dims.y);
     case ShapeType::Plane: return real(1e30);
+    case ShapeType::ConvexHull: return minComponent(s.dims) + real(s.margin);  // the swept hull's
     default: return minComponent(s.dims);
   }
 }
@@ -90,6 +91,11 @@ void validateShape(const ShapeDesc& d, int body_index) {
     throw InputError("body " + std::to_string(body_index) + ": unsupported shape type");
   if (!isFinite(s.dims) || !isFinite(s.local.p) || !finite(s.local.q) || !finite(s.plane_d))
     fail("has a non-finite dimension or pose");
+  // The sphere-swept margin is a convex hull's only (Shape::margin): refused on other types rather than ignored.
+  if (s.type == ShapeType::ConvexHull && !(std::isfinite(s.margin) && s.margin >= 0))
+    fail("has a negative or non-finite margin " + std::to_string(s.margin));
+  if (s.type != ShapeType::ConvexHull && s.margin != 0)
+    fail("has a margin " + std::to_string(s.margin) + " (only convex hulls take one)");
   switch (s.type) {
     case ShapeType::Sphere:
       if (!(s.dims.x > 0)) fail("has a non-positive radius " + std::to_string(s.dims.x));

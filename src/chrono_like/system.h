@@ -153,7 +153,8 @@ ShapeDesc makeCylinder(real r, real half_height, Pose local = {{0, 0, 0}, {1, 0,
 ShapeDesc makeCapsule(real r, real half_length, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
 ShapeDesc makeCone(real r, real height, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
 ShapeDesc makeEllipsoid(Vec3 semi_axes, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
-ShapeDesc makeConvexHull(std::vector<Vec3> points, Pose local = {{0, 0, 0}, {1, 0, 0, 0}});
+// A convex hull of `points` swept by a sphere of radius `margin` (Bullet's collision margin; Shape::margin).
+ShapeDesc makeConvexHull(std::vector<Vec3> points, Pose local = {{0, 0, 0}, {1, 0, 0, 0}}, real margin = 0);
 ShapeDesc makePlane(Vec3 normal, real d);
 
 struct StepStats {

@@ -18,7 +18,8 @@ enum class ShapeType : int32_t {
   Cylinder,    // dims.x = radius, dims.y = half height (axis Y)
   Capsule,     // dims.x = radius, dims.y = half length of the core segment (axis Y)
   Cone,        // dims.x = base radius, dims.y = height; apex at +height/2, base at -height/2 (as btConeShape)
-  ConvexHull,  // points hull_points[hull_start .. hull_start+hull_count) in the shape frame
+  ConvexHull,  // points hull_points[hull_start .. hull_start+hull_count) in the shape frame, swept by a sphere of
+               // radius `margin` (Bullet's collision margin; 0: the bare points' hull); dims = the points' half extents
   Plane,       // static half-space {x : dot(n, x) <= d} in the shape frame: dims = unit normal n, plane_d = d
   Triangle,    // static environment triangle (collide_triangle.h): centroid at the origin, face normal +Y,
                // vertices (dims.x, 0, dims.y), (dims.z, 0, plane_d) and minus their sum
@@ -29,7 +30,7 @@ const char* shapeTypeName(ShapeType t);
 
 constexpr int kMaxContactsPerPair = 8;
 
-struct Shape {  // 96 bytes in double
+struct Shape {  // 120 bytes in double, 72 in float (the static_assert below)
   ShapeType type;
   int32_t body;        // owning body index
   int32_t hull_start;  // ConvexHull only
@@ -41,8 +42,13 @@ struct Shape {  // 96 bytes in double
                        // collision envelope and recovery speed so that they are relative, not absolute
   int16_t group;       // collision filter group (Bullet semantics: a pair collides when
   int16_t mask;        //   (a.group & b.mask) && (b.group & a.mask))
-  int32_t pad_;
+  float margin;        // ConvexHull only (0 for every other type; System::addBody refuses anything else): the radius
+                       // of the sphere that sweeps the hull, as Bullet's collision margin does (its support adds
+                       // margin d/|d| to the points' support: btConvexInternalShape::localGetSupportingVertex). Kept
+                       // in the record, never added to the points, so the support scan stays over the bare points.
 };
+// `margin` took the place of a 32-bit pad: the record (copied to the GPU as it is) did not grow.
+static_assert(sizeof(Shape) == (sizeof(real) == 8 ? 120 : 72), "Shape record size changed");
 
 // Bullet's filter test, with both directions required (btOverlapFilterCallback default).
 DVI_HD bool groupsCollide(const Shape& a, const Shape& b) { return (a.group & b.mask) != 0 && (b.group & a.mask) != 0; }
@@ -56,10 +62,10 @@ DVI_HD real boundingRadius(const Shape& s, const Vec3* hull_points) {
     case ShapeType::Cylinder: return std::sqrt(s.dims.x * s.dims.x + s.dims.y * s.dims.y);
     case ShapeType::Capsule: return s.dims.x + s.dims.y;
     case ShapeType::Cone: return std::sqrt(s.dims.x * s.dims.x + real(0.25) * s.dims.y * s.dims.y);
-    case ShapeType::ConvexHull: {
+    case ShapeType::ConvexHull: {  // the farthest point, plus the sweep (the sphere around it)
       real r2 = 0;
       for (int i = 0; i < s.hull_count; ++i) r2 = fmax(r2, length2(hull_points[s.hull_start + i]));
-      return std::sqrt(r2);
+      return std::sqrt(r2) + real(s.margin);
     }
     case ShapeType::Triangle: {  // vertices as in collide_triangle.h (centroid at the origin)
       const real a = s.dims.x * s.dims.x + s.dims.y * s.dims.y, b = s.dims.z * s.dims.z + s.plane_d * s.plane_d;

@@ -24,7 +24,8 @@
 //     4.6k pairs (as the native broad phase) and 16 ms.
 //   - convex margins (box, cylinder, cone, hull, ellipsoid) are min(0.04, 0.04 x size) instead of 0.04.
 //     Box and cylinder keep their exact extents (rounded edges of that radius); cone and hull are
-//     inflated by the margin (Bullet adds it outside); sphere and capsule are exact (margin = radius).
+//     inflated by the margin (Bullet adds it outside); sphere and capsule are exact (margin = radius). A hull
+//     with its own margin (Shape::margin) gets that one: Bullet then collides exactly the native shape.
 //   - multi-point manifolds against planes in one call (setPlaneConvexMultipointIterations; Bullet
 //     perturbs only polyhedral shapes there): a box on a plane gets 3 of its corners in the first call
 //     instead of one point per call. Convex-convex pairs keep Bullet's default of one new point per call
@@ -78,7 +79,7 @@ real shapeSize(const Shape& s, const std::vector<Vec3>& hull) {
         lo = vmin(lo, hull[size_t(s.hull_start + i)]);
         hi = vmax(hi, hull[size_t(s.hull_start + i)]);
       }
-      return real(0.5) * minComponent(hi - lo);
+      return real(0.5) * minComponent(hi - lo) + real(s.margin);  // the swept hull's
     }
     default: return real(0);
   }
@@ -89,7 +90,7 @@ bool sameShape(const Shape& a, const Shape& b) {
          a.local.p.x == b.local.p.x && a.local.p.y == b.local.p.y && a.local.p.z == b.local.p.z &&
          a.local.q.w == b.local.q.w && a.local.q.x == b.local.q.x && a.local.q.y == b.local.q.y &&
          a.local.q.z == b.local.q.z && a.dims.x == b.dims.x && a.dims.y == b.dims.y && a.dims.z == b.dims.z &&
-         a.plane_d == b.plane_d && a.size == b.size && a.group == b.group && a.mask == b.mask;
+         a.plane_d == b.plane_d && a.size == b.size && a.group == b.group && a.mask == b.mask && a.margin == b.margin;
 }
 
 class BulletCollision;
@@ -290,7 +291,9 @@ btCollisionShape* BulletCollision::makeShape(const Shape& s, const std::vector<V
       auto* h = new btConvexHullShape();
       for (int i = 0; i < s.hull_count; ++i) h->addPoint(toBt(hull[size_t(s.hull_start + i)]), false);
       h->recalcLocalAabb();
-      h->setMargin(margin);
+      // A hull with its own margin (Shape::margin, the sphere-swept radius) is exactly Bullet's hull with that
+      // margin (btConvexInternalShape::localGetSupportingVertex); one without gets the scaled default.
+      h->setMargin(s.margin > 0 ? btScalar(s.margin) : margin);
       out = h;
       break;
     }

@@ -4,15 +4,16 @@
 //  - box and cylinder: Bullet stores the dimensions minus the margin and adds the margin back in its
 //    support function, so the full extents are getHalfExtentsWithMargin();
 //  - sphere, capsule and multi-sphere: the radius is the whole shape (the margin is inside it);
-//  - cone and convex hull: the user's geometry (getRadius/getHeight, the scaled points). Bullet grows
-//    them by the margin on the outside; we take the geometry as given, without that shell.
+//  - cone: the user's geometry (getRadius/getHeight). Bullet grows it by the margin on the outside; we take
+//    the geometry as given, without that shell;
+//  - convex hull: the scaled points with Bullet's margin as the record's sphere-swept radius (Shape::margin),
+//    the shape Bullet collides (hullFromBullet).
 // Axis-symmetric shapes are canonical along +Y here; Bullet's X and Z variants become a child pose
 // rotated so that the record's +Y maps onto Bullet's up axis (a cone keeps its apex at +height/2).
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
-#include <LinearMath/btConvexHullComputer.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
 
 #include <cmath>
@@ -39,52 +40,18 @@ bool uniform(const btVector3& s) {
   return std::fabs(std::fabs(s.y()) - m) <= 1e-6f * m && std::fabs(std::fabs(s.z()) - m) <= 1e-6f * m;
 }
 
-}  // namespace
-
-namespace {
-
-// A btConvexHullShape collides as its points grown by the collision margin (Bullet's GJK adds the margin along the
-// search direction: the hull swept by a sphere of radius margin, 0.04 by default). The System's hull gets each
-// vertex moved out by the margin along the normal of every face it belongs to: every face sits exactly one margin
-// further out, as in Bullet; at edges and corners the rounding becomes a flat chamfer, inside Bullet's shape by at
-// most margin (1 - cos(theta / 2)) for a dihedral turn theta (Bullet: btConvexHullShape, btConvexInternalShape::
-// localGetSupportingVertex). Faces come from Bullet's own btConvexHullComputer.
-std::vector<Vec3> hullWithMargin(const btConvexHullShape& s) {
+// A btConvexHullShape collides as its points swept by a sphere of radius getMargin() (0.04 by default): Bullet's
+// support adds margin * d/|d| to the points' support (btConvexInternalShape::localGetSupportingVertex). The System's
+// hull is the same shape: the bare (scaled) points and Shape::margin = that margin, which the support functions carry
+// (collision/support.h: sweptTerm). A margin that is not a positive finite number (a .bullet file can hold anything)
+// is taken as 0, the bare points, as before this bridge carried margins; a point that is not finite is handed on as it
+// is, and the System refuses the hull with an InputError naming the body.
+ShapeDesc hullFromBullet(const btConvexHullShape& s, const Pose& local) {
   std::vector<Vec3> pts;
   pts.reserve(size_t(s.getNumPoints()));
   for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
   const btScalar m = s.getMargin();
-  if (!(m > 0) || !std::isfinite(double(m)) || pts.size() < 4) return pts;
-  // Bullet's hull computer crashes on non-finite points (found by the .bullet fuzz target): such a hull is handed on
-  // as it is, and the System refuses it with an InputError naming the body.
-  for (const Vec3& p : pts)
-    if (!isFinite(p)) return pts;
-  std::vector<btVector3> in;
-  for (int i = 0; i < s.getNumPoints(); ++i) in.push_back(s.getScaledPoint(i));
-  btConvexHullComputer hc;
-  hc.compute(&in[0].getX(), int(sizeof(btVector3)), int(in.size()), 0, 0);
-  if (hc.faces.size() < 4) return pts;  // flat or degenerate: no volume to grow
-  std::vector<Vec3> grown;
-  for (int f = 0; f < hc.faces.size(); ++f) {
-    const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
-    std::vector<btVector3> poly;
-    const btConvexHullComputer::Edge* e = first;
-    do {
-      poly.push_back(hc.vertices[e->getTargetVertex()]);
-      e = e->getNextEdgeOfFace();
-    } while (e != first && poly.size() < 1024);
-    btVector3 n(0, 0, 0);  // Newell's normal: robust for any planar polygon, outward for counter-clockwise order
-    for (size_t i = 0; i < poly.size(); ++i) {
-      const btVector3& a = poly[i];
-      const btVector3& b = poly[(i + 1) % poly.size()];
-      n += btVector3((a.y() - b.y()) * (a.z() + b.z()), (a.z() - b.z()) * (a.x() + b.x()),
-                     (a.x() - b.x()) * (a.y() + b.y()));
-    }
-    if (!(n.length2() > 0)) continue;
-    n.normalize();
-    for (const btVector3& v : poly) grown.push_back(fromBt(v + n * m));
-  }
-  return grown.size() >= 4 ? grown : pts;
+  return makeConvexHull(std::move(pts), local, m > 0 && std::isfinite(double(m)) ? real(m) : real(0));
 }
 
 }  // namespace
@@ -123,7 +90,7 @@ void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, st
     }
     case CONVEX_HULL_SHAPE_PROXYTYPE: {
       const auto& s = static_cast<const btConvexHullShape&>(shape);
-      out.push_back(makeConvexHull(hullWithMargin(s), local));
+      out.push_back(hullFromBullet(s, local));
       return;
     }
     case MULTI_SPHERE_SHAPE_PROXYTYPE: {

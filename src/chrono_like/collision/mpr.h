@@ -18,7 +18,9 @@
 // the collision envelope e, A is swept by a sphere of radius e (A' = A + ball(e), i.e. its support gets
 // + e * d/|d|); B' = B. The depth of the true shapes along n is then h(n) - e and the signed distance is
 // e - h(n). Spheres and capsules are evaluated as point/segment cores plus their radius (exact, and smooth
-// for MPR). Portal vertices keep the support points of the true A and B (envelope excluded).
+// for MPR), a convex hull with a margin as its points' hull plus the margin (the sphere-swept hull, as Bullet's
+// btConvexInternalShape::localGetSupportingVertex; support.h: sweptTerm). Portal vertices keep the support points
+// of the true A and B (envelope excluded).
 //
 // Contact points (mprContactPoints): pa is taken on A's support face along n and pb on B's along -n, each the
 // point of that face nearest a contact-region point (the portal witness), so both lie on their surfaces and
@@ -61,7 +63,7 @@ struct MprShape {
   Mat33 R;      // world rotation
   Vec3 p;       // world position of the shape frame
   Vec3 center;  // world interior point
-  real sweep;   // the shape's own sweep radius (sphere, capsule) added to the core support
+  real sweep;   // the shape's own sweep radius (sphere, capsule, a hull's margin) added to the core support
   real env;     // the envelope sweep (A only): A' = A + ball(env)
 };
 

@@ -16,7 +16,8 @@ namespace dvi {
 // World pose of a shape attached to a body at pose `body`.
 DVI_HD Pose shapeWorldPose(const Pose& body, const Shape& s) { return compose(body, s.local); }
 
-// Support point of shape s (in its own frame) in local direction d, margin excluded.
+// Support point of shape s (in its own frame) in local direction d: the whole shape (a sphere's or capsule's radius
+// and a convex hull's margin included), the collision envelope excluded.
 DVI_HD Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points);
 
 // World AABB of the shape at world pose `world`, grown by `envelope` on every side. Planes return an

@@ -74,7 +74,10 @@ DVI_HD Aabb shapeAabb(const Shape& s, const Pose& world, const Vec3* hull_points
         lo = i == 0 ? p : vmin(lo, p);
         hi = i == 0 ? p : vmax(hi, p);
       }
-      Vec3 env{envelope, envelope, envelope};
+      // The swept hull's box is the points' box grown by the margin on every side (the support along each axis
+      // gains exactly the margin: sweptTerm in support.h).
+      const real g = envelope + real(s.margin);
+      Vec3 env{g, g, g};
       return Aabb{c + lo - env, c + hi + env};
     }
     case ShapeType::Triangle: {
@@ -336,13 +339,16 @@ DVI_HD_CALL int collideConvexHalfSpace(const Shape& a, const Pose& wa, Vec3 pn, 
       break;
     }
     case ShapeType::ConvexHull: {
-      // Vertices within the envelope, the kMaxContactsPerPair deepest, kept in vertex order; feature = rank.
+      // Vertices within the envelope, the kMaxContactsPerPair deepest, kept in vertex order; feature = rank. With a
+      // margin r the swept hull's point nearest the plane is each vertex's sphere's lowest point: the vertex's
+      // height minus r, as a capsule's ends above (Bullet: btConvexInternalShape::localGetSupportingVertex).
+      const real r = real(a.margin);
       Mat33 R = matFromQuat(wa.q);
       int idx[kMaxContactsPerPair];
       real hv[kMaxContactsPerPair];
       int cnt = 0;
       for (int i = 0; i < a.hull_count; ++i) {
-        real h = dot(pn, wa.p + R * hull_points[a.hull_start + i]) - pd;
+        real h = dot(pn, wa.p + R * hull_points[a.hull_start + i]) - pd - r;
         if (!(h < envelope)) continue;
         if (cnt < kMaxContactsPerPair) {
           idx[cnt] = i;
@@ -363,7 +369,7 @@ DVI_HD_CALL int collideConvexHalfSpace(const Shape& a, const Pose& wa, Vec3 pn, 
         }
       }
       for (int k = 0; k < cnt; ++k)
-        m += planePoint(wa.p + R * hull_points[a.hull_start + idx[k]], 0, pn, pd, envelope, k, out[m]);
+        m += planePoint(wa.p + R * hull_points[a.hull_start + idx[k]], r, pn, pd, envelope, k, out[m]);
       break;
     }
     default: break;
@@ -380,16 +386,18 @@ DVI_HD int collideConvexPlane(const Shape& a, const Pose& wa, const Shape& b, co
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// A small polyhedral shape (a: box, convex hull, cylinder or cone, its points of radius 0) against the side
-// of a large cylinder (b): the CES drum and brush against 0.5-1 mm flakes, wires and fragments. MPR gives one
-// point per pair, and a flat face resting on the drum then tips and sinks (1.2 mm into the drum for a
-// 0.1 mm-thick flake in bench accuracy's CES scene); this gives the face's vertices instead, as the plane pair
-// does. The candidates are the vertices that collideConvexHalfSpace selects against the tangent plane at the
-// point of the side nearest a's centre; each is then measured exactly against the cylinder: dist = rho - R
-// with rho its distance from the axis, normal radial. A point at lateral offset s and height h above the
-// tangent plane has rho = sqrt((R + h)^2 + s^2) >= R + h, so the plane keeps every vertex the exact test
-// would. Used when R >= kBigCylinderRatio x a's bounding radius and a lies within the side's axial span (away
-// from the caps); otherwise the pair goes to MPR.
+// A small polyhedral shape (a: box, convex hull, cylinder or cone, its points of radius 0, or a hull's margin)
+// against the side of a large cylinder (b): the CES drum and brush against 0.5-1 mm flakes, wires and
+// fragments. MPR gives one point per pair, and a flat face resting on the drum then tips and sinks (1.2 mm
+// into the drum for a 0.1 mm-thick flake in bench accuracy's CES scene); this gives the face's vertices
+// instead, as the plane pair does. The candidates are the vertices that collideConvexHalfSpace selects against
+// the tangent plane at the point of the side nearest a's centre; each is then measured exactly against the
+// cylinder: dist = rho - R with rho its distance from the axis, normal radial. A point at lateral offset s and
+// height h above the tangent plane has rho = sqrt((R + h)^2 + s^2) >= R + h, so the plane keeps every vertex
+// the exact test would. A hull's margin r (Shape::margin) sweeps each vertex by a sphere: its point nearest
+// the cylinder lies r from the vertex along the radial normal, dist = rho - R - r. Used when R >=
+// kBigCylinderRatio x a's bounding radius and a lies within the side's axial span (away from the caps);
+// otherwise the pair goes to MPR.
 // ---------------------------------------------------------------------------------------------------------
 
 constexpr real kBigCylinderRatio = 20;
@@ -415,17 +423,18 @@ DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const S
   const Vec3 d0 = wa.p - wc.p;
   const Vec3 n0 = normalized(d0 - ax * dot(d0, ax));
   const int cnt = collideConvexHalfSpace(a, wa, n0, dot(n0, wc.p) + R, hull_points, envelope, out);
+  const real r = sweepRadius(a);  // a hull's margin; 0 for the other polyhedral shapes
   int m = 0;
   for (int k = 0; k < cnt; ++k) {
-    const Vec3 x = out[k].pa;  // the vertex (radius 0)
+    const Vec3 x = out[k].pa + n0 * r;  // the vertex (planePoint put pa r below it along -n0)
     const Vec3 d = x - wc.p;
     const real axial = dot(d, ax);
     const Vec3 dr = d - ax * axial;
     const real rho = length(dr);
     const Vec3 nr = rho > real(0) ? dr / rho : n0;
-    const real dist = rho - R;
+    const real dist = rho - R - r;
     if (!(dist < envelope)) continue;
-    setContact(out[m], -nr, x, wc.p + ax * axial + nr * R, dist, out[k].feature);
+    setContact(out[m], -nr, x - nr * r, wc.p + ax * axial + nr * R, dist, out[k].feature);
     ++m;
   }
   return m;

@@ -45,9 +45,24 @@ DVI_HD void worldPlane(const Shape& s, const Pose& w, Vec3& n, real& d) {
   d = s.plane_d + dot(n, w.p);
 }
 
-// Radius by which the shape is swept around its core (sphere: a point, capsule: a segment); 0 otherwise.
+// Radius by which the shape is swept around its core (sphere: a point, capsule: a segment, convex hull: its
+// points' hull, swept by its margin); 0 otherwise.
 DVI_HD real sweepRadius(const Shape& s) {
+  if (s.type == ShapeType::ConvexHull) return real(s.margin);
   return (s.type == ShapeType::Sphere || s.type == ShapeType::Capsule) ? s.dims.x : real(0);
+}
+
+// Support point of a convex hull's bare points (its margin excluded) in local direction d.
+DVI_HD Vec3 hullPointsSupport(const Shape& s, Vec3 d, const Vec3* hull_points);
+
+// The sphere-swept term of a support mapping: a shape S swept by a ball of radius r has the support
+// s_S(d) + r d/|d| (the support of a Minkowski sum is the sum of the supports; van den Bergen, "Collision
+// Detection in Interactive 3D Environments", 2004, sec. 4.3.4; Bullet: btConvexInternalShape::
+// localGetSupportingVertex adds getMargin() * d/|d| to the bare support). d = 0: no term.
+DVI_HD Vec3 sweptTerm(Vec3 d, real r) {
+  if (!(r > real(0))) return Vec3{0, 0, 0};
+  const real l = length(d);
+  return l > real(0) ? d * (r / l) : Vec3{0, 0, 0};
 }
 
 // Support point of the core (shape without its sweep radius) in local direction d.
@@ -75,7 +90,7 @@ DVI_HD real sgnTol(real x, real tol) { return x < -tol ? real(-1) : real(1); }  
 }  // namespace np
 
 // Support functions h(d) = argmax_{x in S} d.x of the primitives, in the shape frame. d need not be unit.
-// Ties are broken by the deterministic rules above.
+// Ties are broken by the deterministic rules above. A convex hull's is that of its points swept by its margin.
 DVI_HD_CALL Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
   const real tol = np::kSupportTieTol * np::maxAbs3(d);
   switch (s.type) {
@@ -110,27 +125,8 @@ DVI_HD_CALL Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
       if (apex >= rim - tol * (s.dims.x + hh)) return Vec3{0, hh, 0};
       return rho > tol ? Vec3{s.dims.x * d.x / rho, -hh, s.dims.x * d.z / rho} : Vec3{0, -hh, 0};
     }
-    case ShapeType::ConvexHull: {
-      // Lowest index among the points within the tolerance of the maximum: a later point replaces the
-      // current best only when it is clearly further (the values differ by rounding between builds).
-      const Vec3* p = hull_points + s.hull_start;
-      if (s.hull_count <= 0) return Vec3{0, 0, 0};
-      int best = 0;
-      real bd = dot(p[0], d);
-      const real htol = tol * (np::maxAbs3(p[0]) + s.size);
-      for (int i = 1; i < s.hull_count; ++i) {
-        real v = dot(p[i], d);
-        if (v > bd + htol) {
-          bd = v;
-          best = i;
-        }
-      }
-      // The chain above may stop on a point that is within the tolerance of another that is higher still
-      // (two steps of less than htol each): settle on the lowest index within htol of the final maximum.
-      for (int i = 0; i < best; ++i)
-        if (dot(p[i], d) >= bd - htol) return p[i];
-      return p[best];
-    }
+    case ShapeType::ConvexHull:  // the points' support plus the margin's sphere (sweptTerm)
+      return np::hullPointsSupport(s, d, hull_points) + np::sweptTerm(d, real(s.margin));
     case ShapeType::Triangle: {  // vertices as in collide_triangle.h; the lowest index on a tie
       const Vec3 p0{s.dims.x, 0, s.dims.y}, p1{s.dims.z, 0, s.plane_d}, p2 = -(p0 + p1);
       const real d0 = dot(p0, d), d1 = dot(p1, d), d2 = dot(p2, d);
@@ -143,8 +139,32 @@ DVI_HD_CALL Vec3 supportLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
   }
 }
 
+// Lowest index among the points within the tolerance of the maximum: a later point replaces the current best
+// only when it is clearly further (the values differ by rounding between builds).
+DVI_HD Vec3 np::hullPointsSupport(const Shape& s, Vec3 d, const Vec3* hull_points) {
+  const Vec3* p = hull_points + s.hull_start;
+  if (s.hull_count <= 0) return Vec3{0, 0, 0};
+  const real tol = np::kSupportTieTol * np::maxAbs3(d);
+  int best = 0;
+  real bd = dot(p[0], d);
+  const real htol = tol * (np::maxAbs3(p[0]) + s.size);
+  for (int i = 1; i < s.hull_count; ++i) {
+    real v = dot(p[i], d);
+    if (v > bd + htol) {
+      bd = v;
+      best = i;
+    }
+  }
+  // The chain above may stop on a point that is within the tolerance of another that is higher still
+  // (two steps of less than htol each): settle on the lowest index within htol of the final maximum.
+  for (int i = 0; i < best; ++i)
+    if (dot(p[i], d) >= bd - htol) return p[i];
+  return p[best];
+}
+
 DVI_HD Vec3 np::supportCoreLocal(const Shape& s, Vec3 d, const Vec3* hull_points) {
   if (s.type == ShapeType::Sphere) return Vec3{0, 0, 0};
+  if (s.type == ShapeType::ConvexHull) return np::hullPointsSupport(s, d, hull_points);
   if (s.type == ShapeType::Capsule) return Vec3{0, np::sgnTol(d.y, np::kSupportTieTol * np::maxAbs3(d)) * s.dims.y, 0};
   return supportLocal(s, d, hull_points);
 }
@@ -155,10 +175,13 @@ namespace np {
 DVI_HD Vec3 hullSupportNear(const Shape& s, Vec3 d, Vec3 u, Vec3 t, real tol, const Vec3* hull_points) {
   // Nearest point to t of the support face conv(T), T = the points within the tie tolerance of the
   // maximum, by Frank-Wolfe steps (exact line search) from the nearest point of T: continuous in t and
-  // the pose, and on the face by construction (a convex combination of its points).
+  // the pose, and on the face by construction (a convex combination of its points). The swept hull's
+  // support face along u is that face moved out by margin u (sweptTerm), as a capsule's side line below.
   const Vec3* p = hull_points + s.hull_start;
   if (s.hull_count <= 0) return Vec3{0, 0, 0};
-  Vec3 sp = supportLocal(s, d, hull_points);
+  const Vec3 out = u * real(s.margin);
+  t -= out;  // the face is searched at the points' level
+  Vec3 sp = hullPointsSupport(s, d, hull_points);
   const real hmax = dot(sp, u);
   const real htol = tol * (maxAbs3(sp) + s.size);
   Vec3 x = sp;
@@ -190,7 +213,7 @@ DVI_HD Vec3 hullSupportNear(const Shape& s, Vec3 d, Vec3 u, Vec3 t, real tol, co
     if (!(ee > real(0)) || gap <= real(1e-12) * (length2(g) + ee)) break;
     x += e * clampr(gap / ee, 0, 1);
   }
-  return x;
+  return x + out;
 }
 
 // supportNearLocal of a triangle (u: the unit direction, tol: the tie tolerance).

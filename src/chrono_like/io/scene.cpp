@@ -408,8 +408,10 @@ class Builder {
 
   BuiltShape convexHull(const ShapeJson& sj) {
     BuiltShape b;
-    c_.keys(sj.j, sj.path, {"type", "points"});
+    c_.keys(sj.j, sj.path, {"type", "points", "margin"});
     const json& p = c_.array(sj.need("points"), sj.at("points"));
+    // Optional sphere-swept margin (Shape::margin, Bullet's collision margin): >= 0, finite.
+    const double margin = sj.j.contains("margin") ? c_.nonNegative(sj.j["margin"], sj.at("margin")) : -1.0;
     if (p.size() < 4)
       c_.fail(sj.at("points"), "a convex hull needs at least 4 points, got " + std::to_string(p.size()));
     std::vector<btVector3> pts;
@@ -419,13 +421,13 @@ class Builder {
       pts.push_back(bt(v));
       lo = vmin(lo, v);
       hi = vmax(hi, v);
-      b.bound = std::max(b.bound, double(length(v)));
+      b.bound = std::max(b.bound, double(length(v)) + std::max(margin, 0.0));
     }
     b.volume = hullVolume(pts);
     if (!(b.volume > 1e-12 * std::pow(double(maxComponent(hi - lo)), 3)))
       c_.fail(sj.at("points"), "points are coplanar (the hull has zero volume)");
     auto* s = new btConvexHullShape(&pts[0].x(), int(pts.size()), int(sizeof(btVector3)));
-    s->setMargin(marginFor(0.5 * minComponent(hi - lo)));
+    s->setMargin(margin >= 0 ? btScalar(margin) : marginFor(0.5 * minComponent(hi - lo)));
     b.shape = keep(s);
     return b;
   }
@@ -591,7 +593,7 @@ class Builder {
   // Scales every length of a shape description (used for multidisperse generators).
   static json scaled(const json& shape, double f) {
     json s = shape;
-    for (const char* k : {"radius", "half_height", "height"})
+    for (const char* k : {"radius", "half_height", "height", "margin"})
       if (s.contains(k) && s[k].is_number()) s[k] = s[k].get<double>() * f;
     for (const char* k : {"half_extents", "semi_axes"})
       if (s.contains(k) && s[k].is_array())
