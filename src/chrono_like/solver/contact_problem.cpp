@@ -439,12 +439,40 @@ void ContactProblem::gsApplyBlockChange(int64_t k, const real* dg) const {
   }
 }
 
+// Gauss-Seidel on the constraint rows of block k (not a rolling block), one row at a time: each row's impulse takes
+// the exact minimiser along its coordinate, l' = clamp(l - w (J dv + r) / N_jj, lo, hi) with N_jj = J M^-1 J^T its
+// diagonal entry (projected SOR, Cottle, Pang & Stone, "The Linear Complementarity Problem", 1992, sec. 5.2; the
+// row-by-row update of Bullet's sequential impulses), and dv updated before the next row. A box bound is separable per
+// row, so these are exact coordinate steps of the same problem (its fixed points unchanged), where one scalar step
+// for the whole block (1 / its Gershgorin bound) crawls along chains of joints.
+void ContactProblem::gsRowSweep(int64_t k, real* gamma, real w) const {
+  const BlockSet bs = blockSet();
+  for (int j = 0; j < 3; ++j) {
+    const int64_t r = 3 * (k - ncb_) + j;
+    const ConstraintRow& R = rows_[size_t(r)];
+    if (isPaddingRow(R)) continue;
+    real d = 0;
+    if (R.a >= 0) d += rowInner(R.Ja, R.Ja, inv_[size_t(R.a)]);
+    if (R.b >= 0) d += rowInner(R.Jb, R.Jb, inv_[size_t(R.b)]);
+    if (!(d > 0)) continue;  // a row on immovable bodies
+    real& g = gamma[3 * k + j];
+    const real y = rowFromDeltas(R, delta_.data()) + rhs_[size_t(3 * k + j)];
+    const int64_t box = 3 * (k - bs.nc) + j;
+    const real gn = clampRow(g - w * y / d, bs.lo[box], bs.hi[box]);
+    real dg[3] = {0, 0, 0};
+    dg[j] = gn - g;
+    g = gn;
+    if (dg[j] != 0) gsApplyBlockChange(k, dg);
+  }
+}
+
 // Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
 // CMAME 200 (2011)): sweep the contacts in order; for contact k
 //   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
 // with dv = M^-1 D g kept up to date, so each block costs O(1). S_k = eta_k I3 (Scalar, default) or
-// N_kk^-1 (Inverse3x3). dv is formed exactly from the warm start; the history uses the maintained dv, the
-// final residual a fresh Schur product.
+// N_kk^-1 (Inverse3x3). With Scalar scaling the provider rows (joints, drives) go row by row instead (gsRowSweep).
+// dv is formed exactly from the warm start; the history uses the maintained dv, the final residual a fresh Schur
+// product.
 SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
   SolverStats st;
   const int64_t nblk = ncb_ + nrb_;
@@ -457,6 +485,7 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   project(gamma);
   gatherBodyDeltas(gamma);  // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
   auto blockGradient = [&](int64_t k, real* y) { gsBlockGradient(k, y); };
+  const int64_t row0 = ncb_ + nroll_;  // the provider rows' first block
   // Block b's values after its scaled step, before the projection.
   auto blockStep = [&](int64_t b, real* gn) {
     const real* g = gamma + 3 * b;
@@ -501,6 +530,10 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
     for (int it = 0; it < s.max_iterations; ++it) {
       for (int64_t k = 0; k < nblk; ++k) {
         if (isRollingBlock(bs, k)) continue;  // updated with its contact (a rolling pair is one Gauss-Seidel unit)
+        if (k >= row0 && !full) {
+          gsRowSweep(k, gamma, w);
+          continue;
+        }
         const int64_t p = rollingPartner(bs, k);
         real gk[3];
         blockStep(k, gk);

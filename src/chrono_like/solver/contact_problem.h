@@ -123,6 +123,8 @@ class ContactProblem final : public CcpProblem {
   // Gauss-Seidel's block k: its gradient from delta_, and delta_ updated by a change dg of its impulses.
   void gsBlockGradient(int64_t k, real* y) const;
   void gsApplyBlockChange(int64_t k, const real* dg) const;
+  // Gauss-Seidel's update of provider row block k, row by row with each row's exact diagonal step.
+  void gsRowSweep(int64_t k, real* gamma, real w) const;
 
   int threads_ = 1;
   int64_t nc_ = 0;   // contacts
