@@ -369,3 +369,55 @@ TEST_CASE("rolling friction: the GPU backend refuses it by name", "[rolling][gpu
     FAIL("the GPU backend stepped a body with rolling friction");
   } catch (const InputError& e) { CHECK(std::string(e.what()).find("rolling") != std::string::npos); }
 }
+
+TEST_CASE("rolling friction: spheres poured on a plane heap up with it and spread without it", "[rolling][physics]") {
+  // 180 spheres (r = 5 cm, mu = 0.5) in a loose 6 x 6 x 5 block released on a rough plane. Round grains with Coulomb friction
+  // alone keep rolling on the plane and spread into a thin layer; rolling resistance lets them stand in a heap, the
+  // role Zhou et al. (Powder Technology 125 (2002) 45-54, "Rolling friction in the dynamic simulation of sandpile
+  // formation") give it for the angle of repose of spheres. Heap height and the radius holding 90% of the grains after
+  // 4 s, with mu_r = 0 and mu_r = 0.2 r (combined: the ground's friction is 1). Measured: a layer 0.1 m high spread to
+  // 3.65 m (1.6 degrees) without, a heap 0.275 m high within 0.66 m (22.7 degrees, about glass beads' angle of
+  // repose) with.
+  auto heap = [](real mur) {
+    SystemConfig cfg;
+    cfg.step.dt = real(1) / 240;
+    System sys(cfg);
+    sys.addBody(plane(Vec3{0, 1, 0}, 1));
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> j(-0.01, 0.01);
+    const real r = real(0.05);
+    for (int l = 0; l < 5; ++l)
+      for (int i = 0; i < 6; ++i)
+        for (int k = 0; k < 6; ++k) {
+          BodyDesc b;
+          b.pos = Vec3{real(0.105 * (i - 2.5) + j(rng)), real(r + 0.105 * l + 0.002), real(0.105 * (k - 2.5) + j(rng))};
+          b.mass = 1;
+          const real I = real(0.4) * r * r;
+          b.inertia = Vec3{I, I, I};
+          b.friction = real(0.5);
+          b.rolling_friction = mur;
+          b.shapes.push_back(makeSphere(r));
+          sys.addBody(b);
+        }
+    sys.advance(4 * 240);
+    const BodyArrays& B = sys.bodies();
+    double top = 0;
+    std::vector<double> radial;
+    for (size_t i = 1; i < B.count(); ++i) {
+      top = std::max(top, double(B.pos[i].y) + r);
+      radial.push_back(std::hypot(double(B.pos[i].x), double(B.pos[i].z)));
+    }
+    std::sort(radial.begin(), radial.end());
+    return std::pair<double, double>(top, radial[size_t(0.9 * double(radial.size()))]);
+  };
+  const auto free = heap(0), rolling = heap(real(0.01));
+  const double angle_free = std::atan2(free.first, free.second) * 180 / M_PI;
+  const double angle_roll = std::atan2(rolling.first, rolling.second) * 180 / M_PI;
+  INFO("without rolling friction: height " << free.first << " m, 90% radius " << free.second << " m (" << angle_free
+                                           << " deg); with mu_r = 0.2 r: height " << rolling.first << " m, radius "
+                                           << rolling.second << " m (" << angle_roll << " deg)");
+  CHECK(rolling.first >= 2 * free.first);
+  CHECK(rolling.second <= 0.5 * free.second);
+  CHECK(angle_roll >= 15);  // a heap, not a layer
+  CHECK(angle_free <= 10);
+}
