@@ -300,6 +300,21 @@ const std::map<std::string, SceneBuilder>& sceneBuilders() {
   return m;
 }
 
+// Where our drop-in's sub-steps spent their time (DviDynamicsWorld::PhaseTimes), ms per sub-step.
+std::string phaseLine(const dvi::DviDynamicsWorld::PhaseTimes& t) {
+  const double n = double(std::max<int64_t>(1, t.substeps));
+  char line[256];
+  std::snprintf(line, sizeof line,
+                "ms per sub-step: sync-in %.2f, step %.2f, sync-out %.2f, contacts %.2f; step's stages:",
+                1e3 * t.sync_in / n, 1e3 * t.step / n, 1e3 * t.sync_out / n, 1e3 * t.contacts / n);
+  std::string s = line;
+  for (int i = 0; i < dvi::kStageCount; ++i) {
+    std::snprintf(line, sizeof line, " %s %.2f", dvi::stageName(dvi::StageType(i)), 1e3 * t.stages[size_t(i)] / n);
+    s += line;
+  }
+  return s;
+}
+
 struct Result {
   std::string scene, engine, status = "ok";
   size_t bodies = 0, constraints = 0;
@@ -309,6 +324,7 @@ struct Result {
   double max_pen = 0;   // deepest manifold point over the timed steps, m
   double drift = 0;     // see the header
   double msPerStep() const { return steps > 0 ? 1e3 * wall / double(steps) : 0; }
+  std::string phases;  // ours: where a sub-step's time goes (phaseLine)
 };
 
 // Manifold points at negative distance and the deepest one (the same read for every engine: the drop-in world
@@ -422,6 +438,7 @@ int runDropin(const DropinOptions& o) {
         r.constraints = w->constraints.size();
         for (int s = 0; s < scene_warmup; ++s) w->world->stepSimulation(btScalar(1.0 / 60), 1, btScalar(1.0 / 60));
         if (w->ours && cpu_device.empty() && engine == "cpu") cpu_device = w->ours->system().deviceName();
+        if (w->ours) w->ours->resetPhaseTimes();
         worlds.push_back(std::move(w));
       } catch (const std::exception& e) {
         r.status = std::string("refused: ") + e.what();
@@ -453,6 +470,7 @@ int runDropin(const DropinOptions& o) {
     for (size_t i = 0; i < worlds.size(); ++i) {
       if (!worlds[i]) continue;
       rs[i].contacts /= double(std::max(1L, rs[i].steps));
+      if (worlds[i]->ours) rs[i].phases = phaseLine(worlds[i]->ours->phaseTimes());
       if (scene == "ragdolls" && worlds[i]->ours) {
         const dvi::JointViolation v = worlds[i]->ours->maxJointViolation();
         rs[i].drift = std::max(double(v.linear), double(v.angular));
@@ -471,6 +489,7 @@ int runDropin(const DropinOptions& o) {
         std::printf(" %9.2f ms/step, %7.0f contact points, deepest %.4f m, drift %s", r.msPerStep(), r.contacts,
                     r.max_pen, std::isnan(r.drift) ? "-" : num(r.drift, "%+.4f").c_str());
       std::printf("\n");
+      if (r.status == "ok" && !r.phases.empty()) std::printf("    %s\n", r.phases.c_str());
       std::fflush(stdout);
       results.push_back(r);
     }

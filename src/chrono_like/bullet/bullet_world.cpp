@@ -5,6 +5,7 @@
 #include <btBulletDynamicsCommon.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <functional>
 #include <string>
@@ -603,15 +604,27 @@ void DviDynamicsWorld::collectContacts() {
 
 void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {
   if (m_internalPreTickCallback) (*m_internalPreTickCallback)(this, timeStep);
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+  auto t = Clock::now();
   syncIn(timeStep);
+  phase_times_.sync_in += since(t);
+  t = Clock::now();
   system_->step();
   convergence_.add(system_->lastStats(), substeps_);
   system_->syncToHost();
+  phase_times_.step += since(t);
+  for (int s = 0; s < kStageCount; ++s) phase_times_.stages[size_t(s)] += system_->lastStats().stage_seconds[size_t(s)];
+  t = Clock::now();
   syncOut();
   updateSleeping(timeStep);
   updateAabbs();
   if (ghosts_ > 0) computeOverlappingPairs();  // the ghost objects' overlapping pairs (Bullet's pair cache)
+  phase_times_.sync_out += since(t);
+  t = Clock::now();
   collectContacts();
+  phase_times_.contacts += since(t);
+  ++phase_times_.substeps;
   updateActions(timeStep);
   ++substeps_;
   sim_time_ += double(timeStep);

@@ -35,6 +35,7 @@
 
 #include <BulletDynamics/Dynamics/btDiscreteDynamicsWorld.h>
 
+#include <array>
 #include <memory>
 #include <string>
 #include <unordered_map>
@@ -120,6 +121,18 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   // The solver's convergence over every sub-step so far (ConvergenceLog: steps that missed the tolerance,
   // the worst relative residual and its sub-step); the last sub-step's is system().lastStats().
   const ConvergenceLog& convergence() const { return convergence_; }
+  // Wall time of the parts of each sub-step (internalSingleStepSimulation), summed since the last reset: what the
+  // drop-in costs around the System's step.
+  struct PhaseTimes {
+    double sync_in = 0;   // [s] Bullet's state into the System's arrays (syncIn: bodies, joints' springs, exclusions)
+    double step = 0;      // [s] the System's step and its syncToHost (a device backend's copies back)
+    double sync_out = 0;  // [s] the System's state into Bullet's bodies, sleeping, AABBs, ghost pairs
+    double contacts = 0;  // [s] Bullet's manifolds and contacts() filled from the System's contacts
+    std::array<double, kStageCount> stages{};  // [s] the System's own stage times within `step` (StepStats)
+    int64_t substeps = 0;
+  };
+  const PhaseTimes& phaseTimes() const { return phase_times_; }
+  void resetPhaseTimes() { phase_times_ = PhaseTimes{}; }
   double simulatedTime() const { return sim_time_; }
   // Largest joint violation now: linear relative to the smaller body size, angular in radians.
   JointViolation maxJointViolation() const { return joints_->maxViolation(system_->bodies()); }
@@ -179,6 +192,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::unordered_map<uint64_t, btPersistentManifold*> manifolds_;  // by (a, b) System indices, kept across steps
   int64_t substeps_ = 0;
   ConvergenceLog convergence_;  // kept across rebuilds of the System
+  PhaseTimes phase_times_;
   double sim_time_ = 0;
 };
 
