@@ -305,8 +305,10 @@ std::string phaseLine(const dvi::DviDynamicsWorld::PhaseTimes& t) {
   const double n = double(std::max<int64_t>(1, t.substeps));
   char line[256];
   std::snprintf(line, sizeof line,
-                "ms per sub-step: sync-in %.2f, step %.2f, sync-out %.2f, contacts %.2f; step's stages:",
-                1e3 * t.sync_in / n, 1e3 * t.step / n, 1e3 * t.sync_out / n, 1e3 * t.contacts / n);
+                "ms per sub-step: sync-in %.2f, step %.2f, sync-out %.2f (sleeping %.2f, AABBs %.2f), contacts %.2f; "
+                "step's stages:",
+                1e3 * t.sync_in / n, 1e3 * t.step / n, 1e3 * t.sync_out / n, 1e3 * t.sleeping / n, 1e3 * t.aabbs / n,
+                1e3 * t.contacts / n);
   std::string s = line;
   for (int i = 0; i < dvi::kStageCount; ++i) {
     std::snprintf(line, sizeof line, " %s %.2f", dvi::stageName(dvi::StageType(i)), 1e3 * t.stages[size_t(i)] / n);

@@ -617,9 +617,13 @@ void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {
   for (int s = 0; s < kStageCount; ++s) phase_times_.stages[size_t(s)] += system_->lastStats().stage_seconds[size_t(s)];
   t = Clock::now();
   syncOut();
+  auto t1 = Clock::now();
   updateSleeping(timeStep);
+  phase_times_.sleeping += since(t1);
+  t1 = Clock::now();
   updateAabbs();
   if (ghosts_ > 0) computeOverlappingPairs();  // the ghost objects' overlapping pairs (Bullet's pair cache)
+  phase_times_.aabbs += since(t1);
   phase_times_.sync_out += since(t);
   t = Clock::now();
   collectContacts();

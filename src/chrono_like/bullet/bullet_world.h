@@ -126,7 +126,9 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   struct PhaseTimes {
     double sync_in = 0;   // [s] Bullet's state into the System's arrays (syncIn: bodies, joints' springs, exclusions)
     double step = 0;      // [s] the System's step and its syncToHost (a device backend's copies back)
-    double sync_out = 0;  // [s] the System's state into Bullet's bodies, sleeping, AABBs, ghost pairs
+    double sync_out = 0;  // [s] the System's state into Bullet's bodies, sleeping, AABBs, ghost pairs (all three)
+    double sleeping = 0;  // [s]   of which sleeping (updateSleeping)
+    double aabbs = 0;     // [s]   of which Bullet's AABBs and ghost pairs (updateAabbs)
     double contacts = 0;  // [s] Bullet's manifolds and contacts() filled from the System's contacts
     std::array<double, kStageCount> stages{};  // [s] the System's own stage times within `step` (StepStats)
     int64_t substeps = 0;
