@@ -543,6 +543,13 @@ int runDropin(const DropinOptions& o) {
                     speedup >= 50 ? "MET" : "NOT MET", speedup);
       md << goal;
     }
+  bool phases = false;  // where our sub-steps spend their time (DviDynamicsWorld::PhaseTimes)
+  for (const Result& r : results) {
+    if (r.phases.empty()) continue;
+    if (!phases) md << "\nOur sub-steps, where the time goes:\n\n";
+    phases = true;
+    md << "- " << r.scene << " " << r.engine << ": " << r.phases << "\n";
+  }
   std::printf("%s%s", md.str().c_str(), "");
 
   std::ostringstream head;
