@@ -322,34 +322,22 @@ struct ZeroResidual {  // 1 sum: squared residual of the zero impulse, res(0)^2 
   }
 };
 
-// Jacobi with the scalar step: residual of cur; unless last, next = P(cur - w t_k (N cur + r)).
-struct JacobiScalar {
-  BlockSet s;
-  const real *cur, *Ng, *r, *step;
-  real a, inv_a, w;
-  bool last;
-  real* next;
-  DVI_HD void operator()(int64_t k, double* acc) const {
-    if (isRollingBlock(s, k)) return;
-    const int64_t p = rollingPartner(s, k);
-    const int64_t b[2] = {k, p};
-    real grad[2][3] = {};
-    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u)
-      for (int j = 0; j < 3; ++j) grad[u][j] = Ng[3 * b[u] + j] + r[3 * b[u] + j];
-    acc[0] += unitResidual2(s, k, p, cur + 3 * k, grad[0], p >= 0 ? cur + 3 * p : nullptr, grad[1], a, inv_a);
-    if (last) return;
-    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u) {
-      const real t = w * step[b[u]];
-      for (int j = 0; j < 3; ++j) next[3 * b[u] + j] = cur[3 * b[u] + j] - t * grad[u][j];
-    }
-    projectUnit(s, k, p, next + 3 * k, p >= 0 ? next + 3 * p : nullptr);
-  }
-};
+// Jacobi's gradients N cur + r of block k and (p >= 0) its rolling partner, into grad[0] and grad[1], and their
+// unit's squared residual.
+DVI_HD real jacobiUnitResidual2(const BlockSet& s, int64_t k, int64_t p, const real* cur, const real* Ng, const real* r,
+                                real a, real inv_a, real (*grad)[3]) {
+  const int64_t b[2] = {k, p};
+  for (int u = 0; u < (p >= 0 ? 2 : 1); ++u)
+    for (int j = 0; j < 3; ++j) grad[u][j] = Ng[3 * b[u] + j] + r[3 * b[u] + j];
+  return unitResidual2(s, k, p, cur + 3 * k, grad[0], p >= 0 ? cur + 3 * p : nullptr, grad[1], a, inv_a);
+}
 
-// Jacobi with the 3x3 block inverse: residual of cur; unless last, next = P(cur - w N_kk^-1 (N cur + r)).
-struct JacobiInverse {
+// Jacobi: residual of cur; unless last, next = P(cur - w S_k (N cur + r)) with S_k the scalar step t_k (Inverse false:
+// scale holds one step per block) or the 3x3 block inverse N_kk^-1 (Inverse true: scale holds 6 per block).
+template <bool Inverse>
+struct JacobiT {
   BlockSet s;
-  const real *cur, *Ng, *r, *binv;
+  const real *cur, *Ng, *r, *scale;
   real a, inv_a, w;
   bool last;
   real* next;
@@ -358,20 +346,27 @@ struct JacobiInverse {
     const int64_t p = rollingPartner(s, k);
     const int64_t b[2] = {k, p};
     real grad[2][3] = {};
-    for (int u = 0; u < (p >= 0 ? 2 : 1); ++u)
-      for (int j = 0; j < 3; ++j) grad[u][j] = Ng[3 * b[u] + j] + r[3 * b[u] + j];
-    acc[0] += unitResidual2(s, k, p, cur + 3 * k, grad[0], p >= 0 ? cur + 3 * p : nullptr, grad[1], a, inv_a);
+    acc[0] += jacobiUnitResidual2(s, k, p, cur, Ng, r, a, inv_a, grad);
     if (last) return;
     for (int u = 0; u < (p >= 0 ? 2 : 1); ++u) {
-      const real* B = binv + 6 * b[u];  // symmetric [00, 11, 22, 01, 02, 12]
       const real* gr = grad[u];
-      const real sg[3] = {B[0] * gr[0] + B[3] * gr[1] + B[4] * gr[2], B[3] * gr[0] + B[1] * gr[1] + B[5] * gr[2],
-                          B[4] * gr[0] + B[5] * gr[1] + B[2] * gr[2]};
-      for (int j = 0; j < 3; ++j) next[3 * b[u] + j] = cur[3 * b[u] + j] - w * sg[j];
+      real sg[3];
+      if (Inverse) {
+        const real* B = scale + 6 * b[u];  // symmetric [00, 11, 22, 01, 02, 12]
+        sg[0] = w * (B[0] * gr[0] + B[3] * gr[1] + B[4] * gr[2]);
+        sg[1] = w * (B[3] * gr[0] + B[1] * gr[1] + B[5] * gr[2]);
+        sg[2] = w * (B[4] * gr[0] + B[5] * gr[1] + B[2] * gr[2]);
+      } else {
+        const real t = w * scale[b[u]];
+        for (int j = 0; j < 3; ++j) sg[j] = t * gr[j];
+      }
+      for (int j = 0; j < 3; ++j) next[3 * b[u] + j] = cur[3 * b[u] + j] - sg[j];
     }
     projectUnit(s, k, p, next + 3 * k, p >= 0 ? next + 3 * p : nullptr);
   }
 };
+using JacobiScalar = JacobiT<false>;
+using JacobiInverse = JacobiT<true>;
 
 // The next trial's step, speculated by the test pass (SolverSettings::apgd_speculation): its outcome is known only
 // once every block's sums are in, but either outcome's step is a function of values the test has already loaded:
