@@ -386,8 +386,10 @@ void DviDynamicsWorld::syncIn(btScalar h) {
 }
 
 void DviDynamicsWorld::updateExclusions() {
-  std::vector<std::pair<int32_t, int32_t>> pairs;
-  std::vector<uint8_t> flags(tracked_.size(), 0);
+  std::vector<std::pair<int32_t, int32_t>>& pairs = excl_pairs_next_;  // scratch kept between sub-steps
+  std::vector<uint8_t>& flags = excl_flags_next_;
+  pairs.clear();
+  flags.assign(tracked_.size(), 0);
   bool any_flag = false;
   for (size_t i = 0; i < tracked_.size(); ++i) {
     btCollisionObject* o = tracked_[i].obj;
@@ -402,8 +404,8 @@ void DviDynamicsWorld::updateExclusions() {
   if (!any_flag) flags.clear();
   if (excl_system_ == system_.get() && pairs == excl_pairs_ && flags == excl_flags_) return;
   system_->setContactExclusions(pairs, flags);
-  excl_pairs_ = std::move(pairs);
-  excl_flags_ = std::move(flags);
+  excl_pairs_.swap(pairs);
+  excl_flags_.swap(flags);
   excl_system_ = system_.get();
 }
 

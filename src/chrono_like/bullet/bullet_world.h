@@ -184,6 +184,8 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   bool has_exclusions_ = false;                          // some constraint disables collisions between its bodies
   std::vector<std::pair<int32_t, int32_t>> excl_pairs_;  // the exclusions last sent to excl_system_
   std::vector<uint8_t> excl_flags_;
+  std::vector<std::pair<int32_t, int32_t>> excl_pairs_next_;  // updateExclusions' scratch (no allocation per sub-step)
+  std::vector<uint8_t> excl_flags_next_;
   const System* excl_system_ = nullptr;
   int ghosts_ = 0;                  // ghost objects in the world: Bullet's pair cache is computed each sub-step
   std::vector<int> group_bits_;     // Bullet group bit positions in use, in order of appearance (their System bit)
