@@ -389,7 +389,6 @@ void System::buildAndSolve() {
     prev_keys_.clear();
     prev_gamma_.clear();
     prev_roll_.clear();
-    roll_index_.clear();
     row_lambda_.clear();
     stats_.part_ran[int(StagePart::FrictionRows)] = false;
     stats_.part_reason[int(StagePart::FrictionRows)] = "no contacts";
@@ -403,11 +402,6 @@ void System::buildAndSolve() {
   const int64_t nroll = problem_->rollingBlocks();
   const int64_t row0 = 3 * (nc + nroll);
   gamma_.assign(size_t(row0 + 3 * ((nrows + 2) / 3)), real(0));
-  roll_index_.clear();
-  if (nroll > 0) {
-    roll_index_.resize(size_t(nc));
-    for (int64_t k = 0; k < nc; ++k) roll_index_[size_t(k)] = problem_->rollingIndex(k);
-  }
   if (config_.solver.warm_start && int64_t(row_lambda_.size()) == nrows)
     for (int64_t i = 0; i < nrows; ++i) gamma_[size_t(row0 + i)] = row_lambda_[size_t(i)];
   if (!config_.solver.warm_start)
@@ -492,7 +486,7 @@ void System::warmStartContacts(int64_t nc, int64_t nroll) {
     if (it != prev_keys_.end() && *it == contacts_.key[k]) {
       size_t j = size_t(it - prev_keys_.begin());
       for (int r = 0; r < 3; ++r) gamma_[3 * k + r] = prev_gamma_[3 * j + r];
-      const int32_t q = nroll > 0 ? roll_index_[size_t(k)] : -1;
+      const int32_t q = nroll > 0 ? problem_->rollingIndex(k) : -1;
       if (q >= 0 && !prev_roll_.empty())
         for (int r = 0; r < 3; ++r) gamma_[size_t(3 * (nc + q) + r)] = prev_roll_[3 * j + r];
     }
@@ -507,14 +501,19 @@ void System::cacheImpulsesByKey(int64_t nc) {
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return contacts_.key[a] < contacts_.key[b]; });
   prev_keys_.resize(size_t(nc));
   prev_gamma_.resize(size_t(3 * nc));
-  prev_roll_.assign(roll_index_.empty() ? size_t(0) : size_t(3 * nc), real(0));
+  const bool rolling = problem_->rollingBlocks() > 0;
+  prev_roll_.assign(rolling ? size_t(3 * nc) : size_t(0), real(0));
   for (size_t i = 0; i < size_t(nc); ++i) {
     prev_keys_[i] = contacts_.key[order[i]];
     for (int r = 0; r < 3; ++r) prev_gamma_[3 * i + r] = gamma_[3 * order[i] + r];
-    const int32_t q = roll_index_.empty() ? -1 : roll_index_[order[i]];
+    const int32_t q = rolling ? problem_->rollingIndex(int64_t(order[i])) : -1;
     if (q >= 0)
       for (int r = 0; r < 3; ++r) prev_roll_[3 * i + r] = gamma_[size_t(3 * (nc + q) + r)];
   }
+}
+
+int32_t System::rollingIndex(size_t k) const {
+  return k < contacts_.count() && !gamma_.empty() ? problem_->rollingIndex(int64_t(k)) : -1;
 }
 
 Vec3 System::rollingImpulse(size_t k) const {

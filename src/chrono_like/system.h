@@ -254,7 +254,7 @@ class System {
   // length, see rollingImpulse), then the constraint rows' (3 per block of rows).
   const std::vector<real>& impulses() const { return gamma_; }
   // Contact k's rolling block in impulses() (at 3 (contacts + q)), or -1 where it has no rolling or spinning friction.
-  int32_t rollingIndex(size_t k) const { return k < roll_index_.size() ? roll_index_[k] : -1; }
+  int32_t rollingIndex(size_t k) const;
   // Contact k's rolling and spinning impulse (angular, on body B; N m s) of the last step; zero without a rolling
   // block.
   Vec3 rollingImpulse(size_t k) const;
@@ -347,7 +347,6 @@ class System {
   ContactArrays contacts_;
   std::vector<real> gamma_;            // impulses of this step, 3 per contact, then the rolling blocks', then rows'
   std::vector<real> roll_coef_;        // 2 per contact: (mu_s, mu_r) this step, when some body has rolling friction
-  std::vector<int32_t> roll_index_;    // per contact: its rolling block, or -1 (empty: none this step)
   std::vector<real> prev_roll_;        // last step's rolling impulses, 3 per key of prev_keys_ (empty: none)
   std::vector<uint64_t> prev_keys_;    // sorted keys of last step's contacts
   std::vector<real> prev_gamma_;       // their impulses
