@@ -278,6 +278,9 @@ class System {
   // bodies between steps without moving the whole state. No-op on the CPU.
   virtual void syncBodiesToHost(const std::vector<int32_t>& /*ids*/) {}
   virtual void markBodiesDirty(const std::vector<int32_t>& /*ids*/) {}
+  // The same for the other per-body arrays of a few bodies (inv_mass, inv_inertia, force, torque, gravity, friction,
+  // restitution, rolling and spinning friction): the Bullet drop-in world uploads only the bodies the app changed.
+  virtual void markBodyParamsDirty(const std::vector<int32_t>& /*ids*/) {}
   // A device backend's body arrays (force_field.h), for plug-ins with device code; false on the CPU.
   virtual bool deviceBodies(DeviceBodyRefs& /*out*/) { return false; }
 

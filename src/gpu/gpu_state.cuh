@@ -31,6 +31,7 @@ struct DeviceBodies {
   DeviceBuffer<BodyDelta> delta{"body velocity change"};
   DeviceBuffer<int32_t> sel_ids{"selected body ids"};
   DeviceBuffer<BodyRecord> sel_state{"selected body states"};
+  DeviceBuffer<BodyParamsRecord> sel_params{"selected body parameters"};
   size_t count = 0;
 };
 

@@ -100,6 +100,29 @@ __global__ void scatterBodiesKernel(int n, const int32_t* ids, const BodyRecord*
   flags[i] = r.flags;
 }
 
+__global__ void scatterParamsKernel(int n, const int32_t* ids, const BodyParamsRecord* in, real* inv_mass,
+                                    Vec3* inv_inertia, Vec3* force, Vec3* torque, Vec3* gravity, real* friction,
+                                    real* restitution) {
+  const int k = blockIdx.x * blockDim.x + threadIdx.x;
+  if (k >= n) return;
+  const int32_t i = ids[k];
+  const BodyParamsRecord r = in[k];
+  inv_mass[i] = r.inv_mass;
+  inv_inertia[i] = r.inv_inertia;
+  force[i] = r.force;
+  torque[i] = r.torque;
+  gravity[i] = r.gravity;
+  friction[i] = r.friction;
+  restitution[i] = r.restitution;
+}
+
+// Rolling and spinning friction: solved by the CPU backend only (its rolling blocks are built on the host).
+void refuseRolling(const BodyArrays& b, size_t i) {
+  if (b.rolling_friction[i] > 0 || b.spinning_friction[i] > 0)
+    throw InputError("GPU backend: body " + std::to_string(i) +
+                     " has rolling or spinning friction, which only the CPU backend solves");
+}
+
 __global__ void integratePositionsKernel(int n, Vec3* pos, Quat* rot, const Vec3* vel, const Vec3* omega,
                                          const uint8_t* flags, real h, Vec3* force, Vec3* torque) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
@@ -204,11 +227,7 @@ void GpuSystem::uploadIfNeeded() {
   if (first_body == 0) d_->any_restitution = false;
   for (size_t i = first_body; i < b.count && !d_->any_restitution; ++i)
     d_->any_restitution = bodies_.restitution[i] > 0;
-  // Rolling and spinning friction: solved by the CPU backend only (its rolling blocks are built on the host).
-  for (size_t i = first_body; i < b.count; ++i)
-    if (bodies_.rolling_friction[i] > 0 || bodies_.spinning_friction[i] > 0)
-      throw InputError("GPU backend: body " + std::to_string(i) +
-                       " has rolling or spinning friction, which only the CPU backend solves");
+  for (size_t i = first_body; i < b.count; ++i) refuseRolling(bodies_, i);
   b.v_free.resize(b.count);
   b.w_free.resize(b.count);
   b.inv.resize(b.count);
@@ -461,6 +480,35 @@ void GpuSystem::markBodiesDirty(const std::vector<int32_t>& ids) {
                                                       b.rot.data(), b.vel.data(), b.omega.data(), b.flags.data());
   DVI_CUDA_LAUNCH("scatterBodiesKernel");
   DVI_CUDA(cudaStreamSynchronize(s));  // sel_state_ may change after we return
+}
+
+void GpuSystem::markBodyParamsDirty(const std::vector<int32_t>& ids) {
+  if (ids.empty() || host_dirty_) return;  // everything goes up before the next step anyway
+  uploadIfNeeded();
+  checkIds(ids, bodies_.count(), "markBodyParamsDirty");
+  const int n = int(ids.size());
+  sel_params_.resize(size_t(n));
+  for (int k = 0; k < n; ++k) {
+    const size_t i = size_t(ids[size_t(k)]);
+    refuseRolling(bodies_, i);
+    const real f = bodies_.friction[i];
+    sel_params_[size_t(k)] = BodyParamsRecord{bodies_.inv_inertia[i], bodies_.force[i],    bodies_.torque[i],
+                                              bodies_.gravity[i],     bodies_.inv_mass[i], f,
+                                              bodies_.restitution[i]};
+    // What uploadIfNeeded derives from all bodies, kept true where one of these bodies makes it so.
+    gyro_bodies_ = gyro_bodies_ || needsGyroscopic(bodies_.inv_inertia[i], bodies_.flags[i]);
+    d_->all_frictional = d_->all_frictional && f > 0 && f * f > 0;
+    d_->any_restitution = d_->any_restitution || bodies_.restitution[i] > 0;
+  }
+  DeviceBodies& b = d_->bodies;
+  cudaStream_t s = d_->stream;
+  b.sel_ids.upload(ids, s);
+  b.sel_params.upload(sel_params_, s);
+  scatterParamsKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.sel_params.data(), b.inv_mass.data(),
+                                                      b.inv_inertia.data(), b.force.data(), b.torque.data(),
+                                                      b.gravity.data(), b.friction.data(), b.restitution.data());
+  DVI_CUDA_LAUNCH("scatterParamsKernel");
+  DVI_CUDA(cudaStreamSynchronize(s));  // sel_params_ may change after we return
 }
 
 void GpuSystem::syncToHost() {

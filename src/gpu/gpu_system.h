@@ -38,6 +38,11 @@ struct BodyRecord {
   Quat rot;
   uint8_t flags;
 };
+// One body's other arrays as GpuSystem::markBodyParamsDirty moves them.
+struct BodyParamsRecord {
+  Vec3 inv_inertia, force, torque, gravity;
+  real inv_mass, friction, restitution;
+};
 }  // namespace gpu
 
 class GpuSystem : public System {
@@ -58,6 +63,8 @@ class GpuSystem : public System {
   // A few bodies' pos, rot, vel, omega and flags (one gather or scatter kernel and one copy each way).
   void syncBodiesToHost(const std::vector<int32_t>& ids) override;
   void markBodiesDirty(const std::vector<int32_t>& ids) override;
+  // A few bodies' inv_mass, inv_inertia, force, torque, gravity, friction and restitution (one scatter kernel).
+  void markBodyParamsDirty(const std::vector<int32_t>& ids) override;
   bool deviceBodies(DeviceBodyRefs& out) override;
 
   // Device memory held by this system's buffers, bytes.
@@ -82,6 +89,7 @@ class GpuSystem : public System {
   std::vector<Vec3> field_force_, field_torque_;  // host scratch of the force fields
   std::vector<int32_t> sel_ids_;                  // host scratch of the selected-body copies
   std::vector<gpu::BodyRecord> sel_state_;
+  std::vector<gpu::BodyParamsRecord> sel_params_;
 };
 
 }  // namespace dvi

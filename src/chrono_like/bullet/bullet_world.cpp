@@ -3,6 +3,7 @@
 #include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <chrono>
@@ -21,6 +22,25 @@ namespace {
 bool sameTransform(const btTransform& a, const btTransform& b) {
   return a.getOrigin() == b.getOrigin() && a.getBasis()[0] == b.getBasis()[0] && a.getBasis()[1] == b.getBasis()[1] &&
          a.getBasis()[2] == b.getBasis()[2];
+}
+
+bool sameVec(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+// Writes v into dst; true when that changed it.
+bool put(Vec3& dst, Vec3 v) {
+  if (sameVec(dst, v)) return false;
+  dst = v;
+  return true;
+}
+bool put(real& dst, real v) {
+  if (dst == v) return false;
+  dst = v;
+  return true;
+}
+bool put(uint8_t& dst, uint8_t v) {
+  if (dst == v) return false;
+  dst = v;
+  return true;
 }
 
 // The System's kind of an object: plain collision objects are fixed geometry; a body Bullet does not simulate
@@ -379,10 +399,22 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   }
   BodyArrays& B = system_->mutableBodies();
   factors_->locks.clear();
-  for (size_t i = 0; i < tracked_.size(); ++i) syncBody(i, h, B);
+  const int64_t n = int64_t(tracked_.size());
+  changes_.assign(size_t(n), 0);
+  uint8_t* changes = changes_.data();
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= kParallelBodies)
+  for (int64_t i = 0; i < n; ++i) changes[i] = syncBody(size_t(i), h, B);
+  for (int64_t i = 0; i < n; ++i)
+    if (changes[i] & kHasFactors) syncFactors(size_t(i), B);
   joints_->springForces(B, B.force.data(), B.torque.data());
+  for (btTypedConstraint* j : joints_->constraints())  // a spring's force is a parameter change of its bodies
+    for (const btRigidBody* body : {&j->getRigidBodyA(), &j->getRigidBodyB()}) {
+      const int k = bodyIndex(body);
+      if (k >= 0 && !(sameVec(B.force[size_t(k)], Vec3{0, 0, 0}) && sameVec(B.torque[size_t(k)], Vec3{0, 0, 0})))
+        changes[k] |= kChangedParams;
+    }
+  uploadChanges();  // a new System (rebuild) uploads everything anyway, and bodies added since the last step too
   updateExclusions();
-  system_->markHostDirty();
 }
 
 void DviDynamicsWorld::updateExclusions() {
@@ -409,45 +441,66 @@ void DviDynamicsWorld::updateExclusions() {
   excl_system_ = system_.get();
 }
 
-void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
+// One body, independent of every other (syncIn runs it in parallel): Bullet's state into the System's arrays.
+// Returns what changed there (kChangedState, kChangedParams) and kHasFactors for a body with a linear or angular
+// factor other than 1 (syncFactors, serial). The host arrays hold what the device holds after syncToHost (pose and
+// velocities) and after the last upload (the rest), except force and torque, which every step clears: a body with
+// a nonzero force or torque counts as changed.
+uint8_t DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
   Tracked& t = tracked_[i];
   const btTransform& tf = poseOf(*t.obj);
   const bool kinematic = t.kind == kBodyKinematic;
+  bool state = false, params = false;
   if (kinematic || !sameTransform(tf, t.tf)) {
-    B.pos[i] = fromBt(tf.getOrigin());
-    B.rot[i] = normalized(fromBt(tf.getRotation()));
+    state |= put(B.pos[i], fromBt(tf.getOrigin()));
+    const Quat q = normalized(fromBt(tf.getRotation()));
+    state |= !(B.rot[i].w == q.w && B.rot[i].x == q.x && B.rot[i].y == q.y && B.rot[i].z == q.z);
+    B.rot[i] = q;
     t.tf = tf;
   }
-  B.friction[i] = real(t.obj->getFriction());
-  B.restitution[i] = real(t.obj->getRestitution());
+  params |= put(B.friction[i], real(t.obj->getFriction()));
+  params |= put(B.restitution[i], real(t.obj->getRestitution()));
   // Bullet takes any value here; the System's are lengths >= 0 (a negative one means none, as in Bullet's solver,
   // which adds the rolling rows only for a combined value > 0).
   const real roll = real(t.obj->getRollingFriction()), spin = real(t.obj->getSpinningFriction());
-  B.rolling_friction[i] = roll > 0 && std::isfinite(roll) ? roll : real(0);
-  B.spinning_friction[i] = spin > 0 && std::isfinite(spin) ? spin : real(0);
-  if (t.kind == kBodyFixed) return;
+  params |= put(B.rolling_friction[i], roll > 0 && std::isfinite(roll) ? roll : real(0));
+  params |= put(B.spinning_friction[i], spin > 0 && std::isfinite(spin) ? spin : real(0));
+  if (t.kind == kBodyFixed) return uint8_t((state ? kChangedState : 0) | (params ? kChangedParams : 0));
   const btRigidBody& b = *t.body;
-  if (kinematic || !(b.getLinearVelocity() == t.v)) B.vel[i] = fromBt(b.getLinearVelocity());
-  if (kinematic || !(b.getAngularVelocity() == t.w)) B.omega[i] = fromBt(b.getAngularVelocity());
-  if (kinematic) return;
+  if (kinematic || !(b.getLinearVelocity() == t.v)) state |= put(B.vel[i], fromBt(b.getLinearVelocity()));
+  if (kinematic || !(b.getAngularVelocity() == t.w)) state |= put(B.omega[i], fromBt(b.getAngularVelocity()));
+  if (kinematic) return uint8_t((state ? kChangedState : 0) | (params ? kChangedParams : 0));
   // A sleeping body is held still until its island wakes (updateSleeping): fixed for this sub-step, so that pairs
   // of sleeping (or sleeping and static) bodies are not even collided; a body that touches it wakes its island.
-  B.flags[i] = b.getActivationState() == ISLAND_SLEEPING ? uint8_t(kBodyFixed) : uint8_t(0);
-  if (B.flags[i]) {
-    B.vel[i] = B.omega[i] = B.gravity[i] = B.force[i] = B.torque[i] = Vec3{0, 0, 0};
-    B.inv_mass[i] = 0;
-    B.inv_inertia[i] = Vec3{0, 0, 0};
-    return;
+  const bool asleep = b.getActivationState() == ISLAND_SLEEPING;
+  state |= put(B.flags[i], asleep ? uint8_t(kBodyFixed) : uint8_t(0));
+  if (asleep) {
+    const Vec3 zero{0, 0, 0};
+    state |= put(B.vel[i], zero) | put(B.omega[i], zero);
+    params |= put(B.gravity[i], zero) | put(B.inv_mass[i], real(0)) | put(B.inv_inertia[i], zero);
+    B.force[i] = B.torque[i] = zero;
+    return uint8_t((state ? kChangedState : 0) | (params ? kChangedParams : 0));
   }
-  B.inv_mass[i] = real(b.getInvMass());
-  B.inv_inertia[i] = fromBt(b.getInvInertiaDiagLocal());
-  B.gravity[i] = fromBt(b.getGravity());
+  params |= put(B.inv_mass[i], real(b.getInvMass()));
+  params |= put(B.inv_inertia[i], fromBt(b.getInvInertiaDiagLocal()));
+  params |= put(B.gravity[i], fromBt(b.getGravity()));
   B.force[i] = fromBt(b.getTotalForce());
   B.torque[i] = fromBt(b.getTotalTorque());
+  params |= !sameVec(B.force[i], Vec3{0, 0, 0}) || !sameVec(B.torque[i], Vec3{0, 0, 0});
   // Bullet's damping rule (btRigidBody::applyDamping), before the forces act.
   const real ld = real(b.getLinearDamping()), ad = real(b.getAngularDamping());
-  if (ld > 0) B.vel[i] = B.vel[i] * real(std::pow(1 - double(ld), double(h)));
-  if (ad > 0) B.omega[i] = B.omega[i] * real(std::pow(1 - double(ad), double(h)));
+  if (ld > 0) state |= put(B.vel[i], B.vel[i] * real(std::pow(1 - double(ld), double(h))));
+  if (ad > 0) state |= put(B.omega[i], B.omega[i] * real(std::pow(1 - double(ad), double(h))));
+  const btVector3& lf = b.getLinearFactor();
+  const btVector3& af = b.getAngularFactor();
+  const bool factors = !(lf == btVector3(1, 1, 1) && af == btVector3(1, 1, 1));
+  return uint8_t((state ? kChangedState : 0) | (params ? kChangedParams : 0) | (factors ? kHasFactors : 0));
+}
+
+// A body's linear and angular factors other than 1 (syncBody's kHasFactors): a locked world axis becomes a CCP row
+// (FactorRows); a factor other than 0 and 1 is refused. Serial: it appends to the rows.
+void DviDynamicsWorld::syncFactors(size_t i, BodyArrays& B) {
+  const btRigidBody& b = *tracked_[i].body;
   const btVector3 factor[2] = {b.getLinearFactor(), b.getAngularFactor()};
   for (int8_t ang = 0; ang < 2; ++ang) {
     for (int8_t k = 0; k < 3; ++k) {
@@ -462,22 +515,51 @@ void DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
   }
 }
 
+// Bodies whose state or parameters syncIn changed go to a device backend (System::markBodiesDirty,
+// markBodyParamsDirty; no-ops on the CPU); when many changed (an app that sets every body), the whole arrays.
+void DviDynamicsWorld::uploadChanges() {
+  std::vector<int32_t>& state = dirty_state_;
+  std::vector<int32_t>& params = dirty_params_;
+  state.clear();
+  params.clear();
+  for (size_t i = 0; i < changes_.size(); ++i) {
+    if (changes_[i] & kChangedState) state.push_back(int32_t(i));
+    if (changes_[i] & kChangedParams) params.push_back(int32_t(i));
+  }
+  if (8 * (state.size() + params.size()) > changes_.size()) {
+    system_->markHostDirty();
+    return;
+  }
+  system_->markBodiesDirty(state);
+  system_->markBodyParamsDirty(params);
+}
+
 void DviDynamicsWorld::syncOut() {
   const BodyArrays& B = system_->bodies();
-  for (size_t i = 0; i < tracked_.size(); ++i) {
-    Tracked& t = tracked_[i];
+  const int64_t n = int64_t(tracked_.size());
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= kParallelBodies)
+  for (int64_t i = 0; i < n; ++i) {  // each body's own Bullet object only
+    Tracked& t = tracked_[size_t(i)];
     if (t.kind != 0) continue;  // static and kinematic bodies keep Bullet's pose
     btRigidBody* b = t.body;
-    b->setLinearVelocity(toBt(B.vel[i]));
-    b->setAngularVelocity(toBt(B.omega[i]));
+    b->setLinearVelocity(toBt(B.vel[size_t(i)]));
+    b->setAngularVelocity(toBt(B.omega[size_t(i)]));
     btTransform tf;
-    tf.setOrigin(toBt(B.pos[i]));
-    tf.setRotation(toBt(B.rot[i]));
+    tf.setOrigin(toBt(B.pos[size_t(i)]));
+    tf.setRotation(toBt(B.rot[size_t(i)]));
     b->setCenterOfMassTransform(tf);  // also the interpolation transform and velocities
     t.tf = b->getCenterOfMassTransform();
     t.v = b->getLinearVelocity();
     t.w = b->getAngularVelocity();
   }
+}
+
+// The host loops' team: an explicit SystemConfig::threads, else the CPU backend's team of its last step (its
+// governor's choice under load, base/thread_governor.h), else OpenMP's default (the GPU backend).
+int DviDynamicsWorld::hostThreads() const {
+  if (config_.system.threads > 0) return config_.system.threads;
+  const int last = system_ ? system_->lastStats().threads : 0;
+  return last > 0 ? last : omp_get_max_threads();
 }
 
 // Kinematic bodies join no island, but wake what they touch (btSimulationIslandManager::buildIslands does the same
@@ -503,28 +585,35 @@ void DviDynamicsWorld::wakeTouchedByKinematic() {
 // sub-step's contacts and by enabled constraints; static, kinematic and no-response objects join none) whose bodies
 // all want to sleep falls asleep (velocities zeroed), any other island is awake.
 void DviDynamicsWorld::updateSleeping(btScalar h) {
-  const size_t n = tracked_.size();
+  const int64_t n = int64_t(tracked_.size());
+  const int team = hostThreads();
   std::vector<int>& root = island_root_;  // members: no allocation per sub-step once grown
-  root.resize(n);
-  for (size_t i = 0; i < n; ++i) root[i] = int(i);
+  std::vector<char>& merges = island_merges_;
+  root.resize(size_t(n));
+  merges.resize(size_t(n));
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= kParallelBodies)
+  for (int64_t i = 0; i < n; ++i) {
+    root[size_t(i)] = int(i);
+    const Tracked& t = tracked_[size_t(i)];
+    merges[size_t(i)] = t.kind == 0 && t.obj->mergesSimulationIslands();
+  }
   auto find = [&](int i) {
     while (root[size_t(i)] != i) i = root[size_t(i)] = root[size_t(root[size_t(i)])];
     return i;
   };
-  auto merges = [&](int i) {
-    return i >= 0 && tracked_[size_t(i)].kind == 0 && tracked_[size_t(i)].obj->mergesSimulationIslands();
-  };
   auto unite = [&](int a, int b) {
-    if (merges(a) && merges(b)) root[size_t(find(a))] = find(b);
+    if (a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) root[size_t(find(a))] = find(b);
   };
   const ContactArrays& c = system_->contacts();
   for (size_t k = 0; k < c.count(); ++k) unite(c.body_a[k], c.body_b[k]);
   wakeTouchedByKinematic();
   for (btTypedConstraint* j : joints_->constraints())
     if (j->isEnabled()) unite(bodyIndex(&j->getRigidBodyA()), bodyIndex(&j->getRigidBodyB()));
-  for (size_t i = 0; i < n; ++i) {  // per body, as updateActivationState
-    if (tracked_[i].kind != 0) continue;
-    btRigidBody* b = tracked_[i].body;
+  for (int64_t i = 0; i < n; ++i) root[size_t(i)] = find(int(i));  // flat: root[i] is i's island from here on
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= kParallelBodies)
+  for (int64_t i = 0; i < n; ++i) {  // per body, as updateActivationState
+    if (tracked_[size_t(i)].kind != 0) continue;
+    btRigidBody* b = tracked_[size_t(i)].body;
     b->updateDeactivation(h);
     if (!b->wantsSleeping())
       b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
@@ -532,16 +621,18 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
       b->setActivationState(WANTS_DEACTIVATION);
   }
   std::vector<char>& awake = island_awake_;  // per island root: some body is not ready to sleep
-  awake.assign(n, 0);
-  for (size_t i = 0; i < n; ++i) {
-    if (tracked_[i].kind != 0) continue;
-    const int state = tracked_[i].body->getActivationState();
-    if (state != ISLAND_SLEEPING && state != WANTS_DEACTIVATION) awake[size_t(find(int(i)))] = 1;
+  awake.assign(size_t(n), 0);
+  for (int64_t i = 0; i < n; ++i) {
+    if (tracked_[size_t(i)].kind != 0) continue;
+    const int state = tracked_[size_t(i)].body->getActivationState();
+    if (state != ISLAND_SLEEPING && state != WANTS_DEACTIVATION) awake[size_t(root[size_t(i)])] = 1;
   }
-  for (size_t i = 0; i < n; ++i) {  // per island, as btSimulationIslandManager
-    if (tracked_[i].kind != 0) continue;
-    btRigidBody* b = tracked_[i].body;
-    if (awake[size_t(find(int(i)))]) {
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= kParallelBodies)
+  for (int64_t i = 0; i < n; ++i) {  // per island, as btSimulationIslandManager
+    Tracked& t = tracked_[size_t(i)];
+    if (t.kind != 0) continue;
+    btRigidBody* b = t.body;
+    if (awake[size_t(root[size_t(i)])]) {
       if (b->getActivationState() == ISLAND_SLEEPING) {
         b->setActivationState(WANTS_DEACTIVATION);
         b->setDeactivationTime(0);
@@ -550,20 +641,67 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
       b->setActivationState(ISLAND_SLEEPING);
       b->setLinearVelocity(btVector3(0, 0, 0));
       b->setAngularVelocity(btVector3(0, 0, 0));
-      tracked_[i].v = tracked_[i].w = btVector3(0, 0, 0);
+      t.v = t.w = btVector3(0, 0, 0);
     }
   }
 }
 
+// Bullet's AABB update (btCollisionWorld::updateAabbs: every object when m_forceUpdateAllAabbs, else the active
+// ones; each box grown by the contact breaking threshold and, with continuous collision, joined with the box at the
+// interpolation transform), with the boxes computed in parallel; the broad phase's setAabb stays serial. A moving
+// box too large for the broad phase goes to Bullet's own updateSingleAabb, which deactivates the object and reports.
+void DviDynamicsWorld::updateAabbs() {
+  const int n = m_collisionObjects.size();
+  aabb_lo_.resize(size_t(n));
+  aabb_hi_.resize(size_t(n));
+  aabb_set_.resize(size_t(n));
+  const btVector3 grow(gContactBreakingThreshold, gContactBreakingThreshold, gContactBreakingThreshold);
+  const bool continuous = getDispatchInfo().m_useContinuous;
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= kParallelBodies)
+  for (int i = 0; i < n; ++i) {
+    const btCollisionObject* o = m_collisionObjects[i];
+    aabb_set_[size_t(i)] = (m_forceUpdateAllAabbs || o->isActive()) && o->getBroadphaseHandle();
+    if (!aabb_set_[size_t(i)]) continue;
+    btVector3 lo, hi;
+    o->getCollisionShape()->getAabb(o->getWorldTransform(), lo, hi);
+    if (continuous && o->getInternalType() == btCollisionObject::CO_RIGID_BODY && !o->isStaticOrKinematicObject()) {
+      btVector3 lo2, hi2;
+      o->getCollisionShape()->getAabb(o->getInterpolationWorldTransform(), lo2, hi2);
+      lo.setMin(lo2);
+      hi.setMax(hi2);
+    }
+    aabb_lo_[size_t(i)] = lo - grow;
+    aabb_hi_[size_t(i)] = hi + grow;
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!aabb_set_[size_t(i)]) continue;
+    btCollisionObject* o = m_collisionObjects[i];
+    if (o->isStaticObject() || (aabb_hi_[size_t(i)] - aabb_lo_[size_t(i)]).length2() < btScalar(1e12))
+      m_broadphasePairCache->setAabb(o->getBroadphaseHandle(), aabb_lo_[size_t(i)], aabb_hi_[size_t(i)], m_dispatcher1);
+    else
+      updateSingleAabb(o);
+  }
+}
+
 void DviDynamicsWorld::releaseManifolds() {
-  for (auto& e : manifolds_) m_dispatcher1->releaseManifold(e.second);
+  for (auto& e : manifolds_) m_dispatcher1->releaseManifold(e.second.manifold);
   manifolds_.clear();
 }
 
-// One contact into Bullet's persistent manifold of its pair; the manifolds live as long as their pair touches.
-void DviDynamicsWorld::fillManifold(const WorldContact& w, int ia, int ib) {
-  btPersistentManifold*& m = manifolds_[(uint64_t(uint32_t(ia)) << 32) | uint32_t(ib)];
-  if (!m) m = m_dispatcher1->getNewManifold(w.a, w.b);
+// The manifold slot of a body pair (System indices), made on first use.
+DviDynamicsWorld::ManifoldSlot& DviDynamicsWorld::manifoldSlot(int ia, int ib) {
+  ManifoldSlot& slot = manifolds_[pairKey(ia, ib)];
+  if (!slot.manifold) slot.manifold = m_dispatcher1->getNewManifold(tracked_[size_t(ia)].obj, tracked_[size_t(ib)].obj);
+  return slot;
+}
+
+// Contact k of the System's list into its pair's manifold; the manifold is emptied the first time this sub-step.
+void DviDynamicsWorld::fillManifold(ManifoldSlot& slot, const WorldContact& w) {
+  btPersistentManifold* m = slot.manifold;
+  if (slot.used != substeps_) {
+    m->clearManifold();
+    slot.used = substeps_;
+  }
   // Bullet's convention: the normal on B points from B toward A.
   btManifoldPoint p(w.a->getWorldTransform().invXform(w.point_a), w.b->getWorldTransform().invXform(w.point_b),
                     -w.normal, w.distance);
@@ -574,34 +712,95 @@ void DviDynamicsWorld::fillManifold(const WorldContact& w, int ia, int ib) {
   m->addManifoldPoint(p, false);
 }
 
-void DviDynamicsWorld::collectContacts() {
+// contacts() from the System's contacts, in parallel (each entry its own). Contacts between bodies the world
+// does not track (none today) are left out.
+void DviDynamicsWorld::buildWorldContacts() {
   const ContactArrays& c = system_->contacts();
   const std::vector<real>& g = system_->impulses();
-  contacts_.clear();
-  contacts_.reserve(c.count());
-  for (auto& e : manifolds_) e.second->clearManifold();
-  for (size_t k = 0; k < c.count(); ++k) {
-    const int ia = c.body_a[k], ib = c.body_b[k];
-    if (ia < 0 || ib < 0 || size_t(ia) >= tracked_.size() || size_t(ib) >= tracked_.size()) continue;
-    WorldContact w;
+  const int64_t nc = int64_t(c.count());
+  const int64_t nb = int64_t(tracked_.size());
+  contacts_.resize(size_t(nc));
+  int64_t untracked = 0;
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) reduction(+ : untracked) if (nc >= kParallelBodies)
+  for (int64_t k = 0; k < nc; ++k) {
+    const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
+    WorldContact& w = contacts_[size_t(k)];
+    if (ia < 0 || ib < 0 || ia >= nb || ib >= nb) {
+      w.a = w.b = nullptr;
+      ++untracked;
+      continue;
+    }
     w.a = tracked_[size_t(ia)].obj;
     w.b = tracked_[size_t(ib)].obj;
-    w.point_a = toBt(c.pa[k]);
-    w.point_b = toBt(c.pb[k]);
-    w.normal = toBt(c.normal[k]);
-    w.distance = btScalar(c.dist[k]);
-    w.normal_impulse = 3 * k < g.size() ? btScalar(g[3 * k]) : 0;
-    contacts_.push_back(w);
-    if (config_.fill_manifolds) fillManifold(w, ia, ib);
+    w.point_a = toBt(c.pa[size_t(k)]);
+    w.point_b = toBt(c.pb[size_t(k)]);
+    w.normal = toBt(c.normal[size_t(k)]);
+    w.distance = btScalar(c.dist[size_t(k)]);
+    w.normal_impulse = 3 * size_t(k) < g.size() ? btScalar(g[3 * size_t(k)]) : 0;
   }
-  for (auto it = manifolds_.begin(); it != manifolds_.end();) {
-    if (it->second->getNumContacts() > 0) {
+  untracked_contacts_ = untracked;
+}
+
+// Bullet's manifolds from contacts() (still in the System's order). The narrow phase writes a shape pair's
+// points together, so where both bodies have one shape a body pair's contacts form one run, which fills its own
+// manifold: those runs go in parallel (btPersistentManifold::addManifoldPoint touches its manifold only). New
+// manifolds (the dispatcher makes them), runs of bodies with several shapes (one body pair, several runs) and every
+// run while one of Bullet's global contact callbacks is set (user code) go one after the other.
+void DviDynamicsWorld::fillManifolds() {
+  const ContactArrays& c = system_->contacts();
+  const BodyArrays& B = system_->bodies();
+  const int64_t nc = int64_t(contacts_.size());
+  runs_.clear();
+  for (int64_t k = 0; k < nc;) {
+    int64_t e = k + 1;
+    while (e < nc && c.body_a[size_t(e)] == c.body_a[size_t(k)] && c.body_b[size_t(e)] == c.body_b[size_t(k)]) ++e;
+    if (contacts_[size_t(k)].a) runs_.push_back({k, e, nullptr});
+    k = e;
+  }
+  const bool callbacks =
+      gContactStartedCallback || gContactEndedCallback || gContactDestroyedCallback || gContactProcessedCallback;
+  const int team = callbacks ? 1 : hostThreads();
+  const int64_t nr = int64_t(runs_.size());
+  auto single = [&](int i) { return B.shape_count[size_t(i)] == 1; };
+#pragma omp parallel for schedule(static) num_threads(team) if (nr >= kParallelBodies)
+  for (int64_t r = 0; r < nr; ++r) {  // read-only look-ups
+    const int64_t k = runs_[size_t(r)].begin;
+    const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
+    if (!single(ia) || !single(ib)) continue;
+    auto it = manifolds_.find(pairKey(ia, ib));
+    if (it != manifolds_.end()) runs_[size_t(r)].slot = &it->second;
+  }
+  for (Run& run : runs_) {  // serial: new manifolds, and the runs of bodies with several shapes
+    const int ia = c.body_a[size_t(run.begin)], ib = c.body_b[size_t(run.begin)];
+    if (run.slot) continue;
+    if (single(ia) && single(ib)) {
+      run.slot = &manifoldSlot(ia, ib);
+      continue;
+    }
+    for (int64_t k = run.begin; k < run.end; ++k) fillManifold(manifoldSlot(ia, ib), contacts_[size_t(k)]);
+  }
+#pragma omp parallel for schedule(static) num_threads(team) if (nr >= kParallelBodies)
+  for (int64_t r = 0; r < nr; ++r) {
+    const Run& run = runs_[size_t(r)];
+    if (!run.slot) continue;  // filled above
+    for (int64_t k = run.begin; k < run.end; ++k) fillManifold(*run.slot, contacts_[size_t(k)]);
+  }
+  for (auto it = manifolds_.begin(); it != manifolds_.end();) {  // pairs that no longer touch
+    if (it->second.used == substeps_ && it->second.manifold->getNumContacts() > 0) {
       ++it;
       continue;
     }
-    m_dispatcher1->releaseManifold(it->second);
+    m_dispatcher1->releaseManifold(it->second.manifold);
     it = manifolds_.erase(it);
   }
+}
+
+void DviDynamicsWorld::collectContacts() {
+  buildWorldContacts();
+  if (config_.fill_manifolds) fillManifolds();
+  if (untracked_contacts_ > 0)
+    contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [](const WorldContact& w) { return !w.a; }),
+                    contacts_.end());
 }
 
 void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {

@@ -157,13 +157,33 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void addToSystem(btCollisionObject* obj);
   void forget(btCollisionObject* obj);
   bool structureChanged() const;
+  // The per-body host loops run in parallel from this many bodies (or contacts) on.
+  static constexpr int64_t kParallelBodies = 4096;
+  // syncBody's answer: what it changed in the System's arrays, and whether the body has factors other than 1.
+  static constexpr uint8_t kChangedState = 1, kChangedParams = 2, kHasFactors = 4;
+  struct ManifoldSlot {  // a body pair's Bullet manifold, and the sub-step that last filled it
+    btPersistentManifold* manifold = nullptr;
+    int64_t used = -1;
+  };
+  struct Run {  // contacts [begin, end) of the System's list, of one body pair
+    int64_t begin, end;
+    ManifoldSlot* slot;  // filled in parallel when set
+  };
+  static uint64_t pairKey(int a, int b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); }
   void syncIn(btScalar h);
-  void syncBody(size_t i, btScalar h, BodyArrays& B);
+  uint8_t syncBody(size_t i, btScalar h, BodyArrays& B);
+  void syncFactors(size_t i, BodyArrays& B);
+  void uploadChanges();
+  int hostThreads() const;
   void syncOut();
   void updateSleeping(btScalar h);
   void wakeTouchedByKinematic();
+  void updateAabbs() override;
   void collectContacts();
-  void fillManifold(const WorldContact& w, int ia, int ib);
+  void buildWorldContacts();
+  void fillManifolds();
+  ManifoldSlot& manifoldSlot(int ia, int ib);
+  void fillManifold(ManifoldSlot& slot, const WorldContact& w);
   void releaseManifolds();
   bool keepPair(int a, int b) const;
   // The System's contact exclusions (System::setContactExclusions) from Bullet's per-object ignore lists (constraints
@@ -187,13 +207,20 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<std::pair<int32_t, int32_t>> excl_pairs_next_;  // updateExclusions' scratch (no allocation per sub-step)
   std::vector<uint8_t> excl_flags_next_;
   const System* excl_system_ = nullptr;
-  int ghosts_ = 0;                  // ghost objects in the world: Bullet's pair cache is computed each sub-step
-  std::vector<int> group_bits_;     // Bullet group bit positions in use, in order of appearance (their System bit)
-  bool folded_filters_ = false;     // more than 16 group bits in use: folded, exact test per contact (CPU)
-  std::vector<int> island_root_;    // updateSleeping's union-find over the bodies
-  std::vector<char> island_awake_;  // and its islands that stay awake
+  int ghosts_ = 0;                   // ghost objects in the world: Bullet's pair cache is computed each sub-step
+  std::vector<int> group_bits_;      // Bullet group bit positions in use, in order of appearance (their System bit)
+  bool folded_filters_ = false;      // more than 16 group bits in use: folded, exact test per contact (CPU)
+  std::vector<int> island_root_;     // updateSleeping's union-find over the bodies
+  std::vector<char> island_merges_;  // whether a body joins islands (btCollisionObject::mergesSimulationIslands)
+  std::vector<char> island_awake_;   // and its islands that stay awake
+  std::vector<uint8_t> changes_;     // syncIn: syncBody's answer per body
+  std::vector<int32_t> dirty_state_, dirty_params_;  // uploadChanges' lists
+  std::vector<btVector3> aabb_lo_, aabb_hi_;         // updateAabbs' boxes
+  std::vector<char> aabb_set_;
   std::vector<WorldContact> contacts_;
-  std::unordered_map<uint64_t, btPersistentManifold*> manifolds_;  // by (a, b) System indices, kept across steps
+  int64_t untracked_contacts_ = 0;                        // this sub-step's contacts of bodies not tracked (left out)
+  std::vector<Run> runs_;                                 // fillManifolds' runs of one body pair
+  std::unordered_map<uint64_t, ManifoldSlot> manifolds_;  // by (a, b) System indices, kept across steps
   int64_t substeps_ = 0;
   ConvergenceLog convergence_;  // kept across rebuilds of the System
   PhaseTimes phase_times_;
