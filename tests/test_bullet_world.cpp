@@ -640,6 +640,61 @@ TEST_CASE("drop-in world on the GPU backend: the demo's stack rests as on Bullet
   scene.destroy(*w.world);
 }
 
+// 200 boxes 1.5 m apart on the ground; between frames the app edits a few of them, as apps do: a velocity, a
+// teleport, a body's gravity, a force every frame, a friction. Returns every box's final position.
+std::vector<btVector3> appEditsScene(TestWorld& w) {
+  w.ground();
+  btCollisionShape* box = w.own(new btBoxShape(btVector3(btScalar(0.5), btScalar(0.5), btScalar(0.5))));
+  std::vector<btRigidBody*> b;
+  for (int k = 0; k < 10; ++k)
+    for (int i = 0; i < 20; ++i)
+      b.push_back(w.make(box, 1, btVector3(btScalar(-15 + 1.5 * i), btScalar(0.5), btScalar(-7 + 1.5 * k))));
+  for (int f = 0; f < 90; ++f) {
+    if (f == 5) b[0]->setLinearVelocity(btVector3(0, 0, -3));  // row k = 0 slides out of the grid (-z)
+    if (f == 10) b[199]->setCenterOfMassTransform(frame(btVector3(0, 5, 15)));
+    if (f == 15) b[50]->setGravity(btVector3(0, 2, 0));
+    if (f >= 20) b[185]->applyCentralForce(btVector3(0, 0, 20));  // last row (k = 9) pushed out (+z)
+    if (f == 25) {
+      b[5]->setFriction(0);
+      b[5]->setLinearVelocity(btVector3(0, 0, -2));
+    }
+    w.world->stepSimulation(btScalar(1) / 60, 10, btScalar(1) / 240);
+  }
+  std::vector<btVector3> p;
+  for (btRigidBody* r : b) p.push_back(r->getCenterOfMassPosition());
+  return p;
+}
+
+// The edits take effect (closed forms; mu = 0.8 x 0.5 = 0.4 on the ground): the sliding box (3 m/s) stops
+// 3^2 / (2 mu g) = 1.15 m out; the teleported one comes to rest at (0, 0.5, 15); gravity +2 lifts its box 2 t^2 / 2
+// in the 1.25 s left; 20 N less 3.92 N of friction pushes its 1 kg box (the force acts in every sub-step of a frame,
+// as in Bullet) 16.08 t^2 / 2 in 7/6 s; the frictionless one slides 2 m/s for 65 frames.
+void checkAppEdits(const std::vector<btVector3>& p) {
+  CHECK(double(p[0].z()) == Approx(-7 - 9 / (2 * 0.4 * 9.81)).margin(0.05));
+  CHECK(double((p[199] - btVector3(0, btScalar(0.5), 15)).length()) < 0.02);
+  CHECK(double(p[50].y()) == Approx(0.5 + 1.25 * 1.25).margin(0.02));
+  CHECK(double(p[185].z()) == Approx(6.5 + 0.5 * 16.08 * (7.0 / 6) * (7.0 / 6)).margin(0.1));
+  CHECK(double(p[5].z()) == Approx(-7 - 2 * 65.0 / 60).margin(0.02));
+}
+
+TEST_CASE("drop-in world: the app's edits between steps take effect", "[world]") {
+  TestWorld w(true);
+  checkAppEdits(appEditsScene(w));
+}
+
+TEST_CASE("drop-in world on the GPU backend: the app's edits between steps reach the device as on the CPU",
+          "[world][gpu]") {
+  if (!haveDevice()) return;
+  TestWorld cpu(true, WorldBackend::Cpu), gpu(true, WorldBackend::Gpu);
+  const std::vector<btVector3> pc = appEditsScene(cpu), pg = appEditsScene(gpu);
+  CHECK(gpu.dvi().backendName() == "gpu");
+  checkAppEdits(pg);
+  double worst = 0;
+  for (size_t i = 0; i < pc.size(); ++i) worst = std::max(worst, double((pc[i] - pg[i]).length()));
+  INFO("largest GPU - CPU position difference " << worst << " m");
+  CHECK(worst < 2e-3);
+}
+
 TEST_CASE(
     "drop-in world: the GPU backend comes from the app, Gpu without it is refused, Auto without it runs on the CPU",
     "[world]") {
