@@ -29,13 +29,20 @@ struct TestWorld {
     if (dvi) {
       DviWorldConfig c;
       c.backend = backend;
-      c.make_gpu_system = makeGpuSystem;
-      c.gpu_available = gpuAvailable;
-      world = std::make_unique<DviDynamicsWorld>(&dispatcher, &broadphase, &solver, &config, c);
+      makeDvi(c);
     } else {
       world = std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &broadphase, &solver, &config);
     }
     world->setGravity(btVector3(0, btScalar(-9.81), 0));
+  }
+  explicit TestWorld(DviWorldConfig c) {  // our world with these settings
+    makeDvi(c);
+    world->setGravity(btVector3(0, btScalar(-9.81), 0));
+  }
+  void makeDvi(DviWorldConfig& c) {
+    c.make_gpu_system = makeGpuSystem;
+    c.gpu_available = gpuAvailable;
+    world = std::make_unique<DviDynamicsWorld>(&dispatcher, &broadphase, &solver, &config, c);
   }
   ~TestWorld() {
     for (auto& c : constraints) world->removeConstraint(c.get());

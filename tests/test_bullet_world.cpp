@@ -640,6 +640,63 @@ TEST_CASE("drop-in world on the GPU backend: the demo's stack rests as on Bullet
   scene.destroy(*w.world);
 }
 
+// 60 stacks of 3 boxes dropped onto the ground with small offsets, and 20 boxes thrown in a lane beside them: contacts begin
+// and end, manifolds come and go, and the stacks fall asleep (Bullet's 2 s) while the thrown boxes still move.
+// Returns the world's observable state after 3 s: every body's pose, velocity and activation state, and each touching
+// pair's manifold point count, in the dispatcher's order.
+std::vector<double> sleepingStacksState(TestWorld& w) {
+  w.ground();
+  btCollisionShape* box = w.own(new btBoxShape(btVector3(btScalar(0.5), btScalar(0.5), btScalar(0.5))));
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.05, 0.05);
+  std::vector<btRigidBody*> b;
+  for (int k = 0; k < 6; ++k)
+    for (int i = 0; i < 10; ++i)
+      for (int j = 0; j < 3; ++j)
+        b.push_back(w.make(
+            box, 1, btVector3(btScalar(2.5 * i + u(rng)), btScalar(0.55 + 1.05 * j), btScalar(2.5 * k + u(rng)))));
+  for (int i = 0; i < 20; ++i) {
+    btRigidBody* r = w.make(box, 1, btVector3(btScalar(-3), btScalar(1 + 1.5 * (i % 4)), btScalar(-3 - 1.5 * (i / 4))));
+    r->setLinearVelocity(btVector3(btScalar(6 + 0.2 * i), 0, 0));
+    b.push_back(r);
+  }
+  for (btRigidBody* r : b) r->forceActivationState(ACTIVE_TAG);  // TestWorld::make disables deactivation
+  w.run(3, btScalar(1) / 60);
+  std::vector<double> out;
+  for (btRigidBody* r : b) {
+    const btTransform& t = r->getCenterOfMassTransform();
+    for (int k = 0; k < 3; ++k) out.push_back(double(t.getOrigin()[k]));
+    for (int k = 0; k < 4; ++k) out.push_back(double(t.getRotation()[k]));
+    for (int k = 0; k < 3; ++k) out.push_back(double(r->getLinearVelocity()[k]));
+    out.push_back(r->getActivationState());
+  }
+  btDispatcher* d = w.world->getDispatcher();
+  for (int m = 0; m < d->getNumManifolds(); ++m) out.push_back(d->getManifoldByIndexInternal(m)->getNumContacts());
+  return out;
+}
+
+TEST_CASE("drop-in world: its host loops in parallel give the serial loops' results bitwise", "[world]") {
+  DviWorldConfig serial, parallel;
+  serial.system.threads = parallel.system.threads = 1;  // the System alike; only the world's loops differ
+  parallel.host_threads = 2;
+  serial.effort = parallel.effort = SolverEffort::BulletIterations;
+  serial.parallel_min = int64_t(1) << 40;
+  parallel.parallel_min = 1;
+  TestWorld ws(serial), wp(parallel);
+  const std::vector<double> a = sleepingStacksState(ws), b = sleepingStacksState(wp);
+  int asleep = 0;
+  for (btRigidBody* r : ws.bodies) asleep += r->getActivationState() == ISLAND_SLEEPING;
+  INFO("bodies asleep " << asleep << " of " << ws.bodies.size() << ", manifolds "
+                        << ws.world->getDispatcher()->getNumManifolds());
+  CHECK(asleep > 30);                         // the sleeping islands were built
+  CHECK(asleep < int(ws.bodies.size()) - 1);  // and some stayed awake
+  CHECK(ws.world->getDispatcher()->getNumManifolds() > 50);
+  REQUIRE(a.size() == b.size());
+  int differ = 0;
+  for (size_t i = 0; i < a.size(); ++i) differ += !(a[i] == b[i]);
+  CHECK(differ == 0);
+}
+
 // 200 boxes 1.5 m apart on the ground; between frames the app edits a few of them, as apps do: a velocity, a
 // teleport, a body's gravity, a force every frame, a friction. Returns every box's final position.
 std::vector<btVector3> appEditsScene(TestWorld& w) {

@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -365,13 +366,19 @@ void DviDynamicsWorld::rebuild() {
 
 // A new shape, filter or kind needs the System rebuilt; new group bits do too (noteFilter).
 bool DviDynamicsWorld::structureChanged() const {
-  for (const Tracked& t : tracked_) {
+  const int64_t n = int64_t(tracked_.size());
+  int changed = 0;
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) \
+    reduction(|                                                      \
+              : changed) if (n >= config_.parallel_min)
+  for (int64_t i = 0; i < n; ++i) {
+    const Tracked& t = tracked_[size_t(i)];
     if (!t.obj) continue;
     if (t.obj->getCollisionShape() != t.shape || proxyGroup(*t.obj) != t.group || proxyMask(*t.obj) != t.mask ||
         objectKind(*t.obj) != t.kind)
-      return true;
+      changed = 1;
   }
-  return false;
+  return changed != 0;
 }
 
 void DviDynamicsWorld::syncIn(btScalar h) {
@@ -402,7 +409,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   const int64_t n = int64_t(tracked_.size());
   changes_.assign(size_t(n), 0);
   uint8_t* changes = changes_.data();
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) changes[i] = syncBody(size_t(i), h, B);
   for (int64_t i = 0; i < n; ++i)
     if (changes[i] & kHasFactors) syncFactors(size_t(i), B);
@@ -537,7 +544,7 @@ void DviDynamicsWorld::uploadChanges() {
 void DviDynamicsWorld::syncOut() {
   const BodyArrays& B = system_->bodies();
   const int64_t n = int64_t(tracked_.size());
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) {  // each body's own Bullet object only
     Tracked& t = tracked_[size_t(i)];
     if (t.kind != 0) continue;  // static and kinematic bodies keep Bullet's pose
@@ -554,9 +561,10 @@ void DviDynamicsWorld::syncOut() {
   }
 }
 
-// The host loops' team: an explicit SystemConfig::threads, else the CPU backend's team of its last step (its
+// The host loops' team: DviWorldConfig::host_threads, else an explicit SystemConfig::threads, else the CPU backend's team of its last step (its
 // governor's choice under load, base/thread_governor.h), else OpenMP's default (the GPU backend).
 int DviDynamicsWorld::hostThreads() const {
+  if (config_.host_threads > 0) return config_.host_threads;
   if (config_.system.threads > 0) return config_.system.threads;
   const int last = system_ ? system_->lastStats().threads : 0;
   return last > 0 ? last : omp_get_max_threads();
@@ -580,37 +588,45 @@ void DviDynamicsWorld::wakeTouchedByKinematic() {
   }
 }
 
+namespace {
+
+// Concurrent union-find (Anderson & Woll, "Wait-free parallel algorithms for the union-find problem", STOC 1991):
+// a root is linked under the smaller root index by compare-and-swap, so the islands do not depend on the order of
+// the unions or on the threads.
+int findRoot(std::vector<std::atomic<int>>& root, int i) {
+  int r = root[size_t(i)].load(std::memory_order_relaxed);
+  while (r != i) {
+    const int up = root[size_t(r)].load(std::memory_order_relaxed);
+    if (up != r) root[size_t(i)].compare_exchange_weak(r, up, std::memory_order_relaxed);  // path halving
+    i = r;
+    r = root[size_t(i)].load(std::memory_order_relaxed);
+  }
+  return i;
+}
+
+void uniteRoots(std::vector<std::atomic<int>>& root, int a, int b) {
+  for (;;) {
+    a = findRoot(root, a);
+    b = findRoot(root, b);
+    if (a == b) return;
+    if (a < b) std::swap(a, b);  // link the larger root under the smaller
+    int expected = a;
+    if (root[size_t(a)].compare_exchange_strong(expected, b, std::memory_order_relaxed)) return;
+  }
+}
+
+}  // namespace
+
 // Bullet's deactivation (btDiscreteDynamicsWorld::updateActivationState and btSimulationIslandManager): each
 // dynamic body counts the time its speeds stay below its sleeping thresholds; an island (bodies joined by this
 // sub-step's contacts and by enabled constraints; static, kinematic and no-response objects join none) whose bodies
-// all want to sleep falls asleep (velocities zeroed), any other island is awake.
+// all want to sleep falls asleep (velocities zeroed), any other island is awake. While no body wants to sleep and
+// none sleeps, every island is awake and the islands are not built.
 void DviDynamicsWorld::updateSleeping(btScalar h) {
   const int64_t n = int64_t(tracked_.size());
   const int team = hostThreads();
-  std::vector<int>& root = island_root_;  // members: no allocation per sub-step once grown
-  std::vector<char>& merges = island_merges_;
-  root.resize(size_t(n));
-  merges.resize(size_t(n));
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= kParallelBodies)
-  for (int64_t i = 0; i < n; ++i) {
-    root[size_t(i)] = int(i);
-    const Tracked& t = tracked_[size_t(i)];
-    merges[size_t(i)] = t.kind == 0 && t.obj->mergesSimulationIslands();
-  }
-  auto find = [&](int i) {
-    while (root[size_t(i)] != i) i = root[size_t(i)] = root[size_t(root[size_t(i)])];
-    return i;
-  };
-  auto unite = [&](int a, int b) {
-    if (a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) root[size_t(find(a))] = find(b);
-  };
-  const ContactArrays& c = system_->contacts();
-  for (size_t k = 0; k < c.count(); ++k) unite(c.body_a[k], c.body_b[k]);
-  wakeTouchedByKinematic();
-  for (btTypedConstraint* j : joints_->constraints())
-    if (j->isEnabled()) unite(bodyIndex(&j->getRigidBodyA()), bodyIndex(&j->getRigidBodyB()));
-  for (int64_t i = 0; i < n; ++i) root[size_t(i)] = find(int(i));  // flat: root[i] is i's island from here on
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= kParallelBodies)
+  int64_t resting = 0;  // bodies asleep or ready to sleep
+#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : resting) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) {  // per body, as updateActivationState
     if (tracked_[size_t(i)].kind != 0) continue;
     btRigidBody* b = tracked_[size_t(i)].body;
@@ -619,20 +635,49 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
       b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
     else if (b->getActivationState() == ACTIVE_TAG)
       b->setActivationState(WANTS_DEACTIVATION);
+    const int state = b->getActivationState();
+    resting += state == ISLAND_SLEEPING || state == WANTS_DEACTIVATION;
   }
+  wakeTouchedByKinematic();
+  if (resting == 0) return;
+  std::vector<std::atomic<int>>& root = island_root_;  // members: no allocation per sub-step once grown
+  std::vector<char>& merges = island_merges_;
+  if (root.size() != size_t(n)) root = std::vector<std::atomic<int>>(size_t(n));
+  merges.resize(size_t(n));
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
+  for (int64_t i = 0; i < n; ++i) {
+    root[size_t(i)].store(int(i), std::memory_order_relaxed);
+    const Tracked& t = tracked_[size_t(i)];
+    merges[size_t(i)] = t.kind == 0 && t.obj->mergesSimulationIslands();
+  }
+  const ContactArrays& c = system_->contacts();
+  const int64_t nc = int64_t(c.count());
+#pragma omp parallel for schedule(static) num_threads(team) if (nc >= config_.parallel_min)
+  for (int64_t k = 0; k < nc; ++k) {
+    const int a = c.body_a[size_t(k)], b = c.body_b[size_t(k)];
+    if (a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) uniteRoots(root, a, b);
+  }
+  for (btTypedConstraint* j : joints_->constraints()) {
+    const int a = bodyIndex(&j->getRigidBodyA()), b = bodyIndex(&j->getRigidBodyB());
+    if (j->isEnabled() && a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) uniteRoots(root, a, b);
+  }
+  std::vector<int>& island = island_of_;
+  island.resize(size_t(n));
   std::vector<char>& awake = island_awake_;  // per island root: some body is not ready to sleep
   awake.assign(size_t(n), 0);
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
+  for (int64_t i = 0; i < n; ++i) island[size_t(i)] = findRoot(root, int(i));
   for (int64_t i = 0; i < n; ++i) {
     if (tracked_[size_t(i)].kind != 0) continue;
     const int state = tracked_[size_t(i)].body->getActivationState();
-    if (state != ISLAND_SLEEPING && state != WANTS_DEACTIVATION) awake[size_t(root[size_t(i)])] = 1;
+    if (state != ISLAND_SLEEPING && state != WANTS_DEACTIVATION) awake[size_t(island[size_t(i)])] = 1;
   }
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) {  // per island, as btSimulationIslandManager
     Tracked& t = tracked_[size_t(i)];
     if (t.kind != 0) continue;
     btRigidBody* b = t.body;
-    if (awake[size_t(root[size_t(i)])]) {
+    if (awake[size_t(island[size_t(i)])]) {
       if (b->getActivationState() == ISLAND_SLEEPING) {
         b->setActivationState(WANTS_DEACTIVATION);
         b->setDeactivationTime(0);
@@ -657,7 +702,7 @@ void DviDynamicsWorld::updateAabbs() {
   aabb_set_.resize(size_t(n));
   const btVector3 grow(gContactBreakingThreshold, gContactBreakingThreshold, gContactBreakingThreshold);
   const bool continuous = getDispatchInfo().m_useContinuous;
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int i = 0; i < n; ++i) {
     const btCollisionObject* o = m_collisionObjects[i];
     aabb_set_[size_t(i)] = (m_forceUpdateAllAabbs || o->isActive()) && o->getBroadphaseHandle();
@@ -673,9 +718,21 @@ void DviDynamicsWorld::updateAabbs() {
     aabb_lo_[size_t(i)] = lo - grow;
     aabb_hi_[size_t(i)] = hi + grow;
   }
+  // Bullet's Dbvt broad phase: a box inside its leaf's grown volume changes neither tree, and is written into the
+  // proxy directly (what setAabb does there, less moving the proxy to the newest stage, which only orders the
+  // incremental tree optimisation of calculateOverlappingPairs; with ghost objects, which need that, setAabb).
+  auto* dbvt = ghosts_ == 0 ? dynamic_cast<btDbvtBroadphase*>(m_broadphasePairCache) : nullptr;
   for (int i = 0; i < n; ++i) {
     if (!aabb_set_[size_t(i)]) continue;
     btCollisionObject* o = m_collisionObjects[i];
+    if (dbvt) {
+      auto* p = static_cast<btDbvtProxy*>(o->getBroadphaseHandle());
+      if (p->leaf && p->leaf->volume.Contain(btDbvtVolume::FromMM(aabb_lo_[size_t(i)], aabb_hi_[size_t(i)]))) {
+        p->m_aabbMin = aabb_lo_[size_t(i)];
+        p->m_aabbMax = aabb_hi_[size_t(i)];
+        continue;
+      }
+    }
     if (o->isStaticObject() || (aabb_hi_[size_t(i)] - aabb_lo_[size_t(i)]).length2() < btScalar(1e12))
       m_broadphasePairCache->setAabb(o->getBroadphaseHandle(), aabb_lo_[size_t(i)], aabb_hi_[size_t(i)], m_dispatcher1);
     else
@@ -695,10 +752,11 @@ DviDynamicsWorld::ManifoldSlot& DviDynamicsWorld::manifoldSlot(int ia, int ib) {
   return slot;
 }
 
-// Contact k of the System's list into its pair's manifold; the manifold is emptied the first time this sub-step.
-void DviDynamicsWorld::fillManifold(ManifoldSlot& slot, const WorldContact& w) {
+// Contact w into its pair's manifold; the manifold is emptied the first time this sub-step (then true).
+bool DviDynamicsWorld::fillManifold(ManifoldSlot& slot, const WorldContact& w) {
   btPersistentManifold* m = slot.manifold;
-  if (slot.used != substeps_) {
+  const bool first = slot.used != substeps_;
+  if (first) {
     m->clearManifold();
     slot.used = substeps_;
   }
@@ -710,6 +768,7 @@ void DviDynamicsWorld::fillManifold(ManifoldSlot& slot, const WorldContact& w) {
   p.m_appliedImpulse = w.normal_impulse;
   p.m_combinedFriction = btScalar(w.a->getFriction() * w.b->getFriction());
   m->addManifoldPoint(p, false);
+  return first;
 }
 
 // contacts() from the System's contacts, in parallel (each entry its own). Contacts between bodies the world
@@ -721,7 +780,7 @@ void DviDynamicsWorld::buildWorldContacts() {
   const int64_t nb = int64_t(tracked_.size());
   contacts_.resize(size_t(nc));
   int64_t untracked = 0;
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) reduction(+ : untracked) if (nc >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) reduction(+ : untracked) if (nc >= config_.parallel_min)
   for (int64_t k = 0; k < nc; ++k) {
     const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
     WorldContact& w = contacts_[size_t(k)];
@@ -762,7 +821,7 @@ void DviDynamicsWorld::fillManifolds() {
   const int team = callbacks ? 1 : hostThreads();
   const int64_t nr = int64_t(runs_.size());
   auto single = [&](int i) { return B.shape_count[size_t(i)] == 1; };
-#pragma omp parallel for schedule(static) num_threads(team) if (nr >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(team) if (nr >= config_.parallel_min)
   for (int64_t r = 0; r < nr; ++r) {  // read-only look-ups
     const int64_t k = runs_[size_t(r)].begin;
     const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
@@ -770,6 +829,7 @@ void DviDynamicsWorld::fillManifolds() {
     auto it = manifolds_.find(pairKey(ia, ib));
     if (it != manifolds_.end()) runs_[size_t(r)].slot = &it->second;
   }
+  int64_t used = 0;         // manifolds filled this sub-step
   for (Run& run : runs_) {  // serial: new manifolds, and the runs of bodies with several shapes
     const int ia = c.body_a[size_t(run.begin)], ib = c.body_b[size_t(run.begin)];
     if (run.slot) continue;
@@ -777,14 +837,15 @@ void DviDynamicsWorld::fillManifolds() {
       run.slot = &manifoldSlot(ia, ib);
       continue;
     }
-    for (int64_t k = run.begin; k < run.end; ++k) fillManifold(manifoldSlot(ia, ib), contacts_[size_t(k)]);
+    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(manifoldSlot(ia, ib), contacts_[size_t(k)]);
   }
-#pragma omp parallel for schedule(static) num_threads(team) if (nr >= kParallelBodies)
+#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : used) if (nr >= config_.parallel_min)
   for (int64_t r = 0; r < nr; ++r) {
     const Run& run = runs_[size_t(r)];
     if (!run.slot) continue;  // filled above
-    for (int64_t k = run.begin; k < run.end; ++k) fillManifold(*run.slot, contacts_[size_t(k)]);
+    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(*run.slot, contacts_[size_t(k)]);
   }
+  if (size_t(used) == manifolds_.size()) return;                 // every manifold filled: none to release
   for (auto it = manifolds_.begin(); it != manifolds_.end();) {  // pairs that no longer touch
     if (it->second.used == substeps_ && it->second.manifold->getNumContacts() > 0) {
       ++it;

@@ -38,6 +38,7 @@
 #include <array>
 #include <memory>
 #include <string>
+#include <atomic>
 #include <unordered_map>
 #include <vector>
 
@@ -71,6 +72,11 @@ struct DviWorldConfig {
   SystemConfig system;  // solver, threads, collision...; step.dt and step.gravity come from Bullet
   JointSettings joints;
   bool fill_manifolds = true;  // mirror the contacts into Bullet's persistent manifolds (dispatcher)
+  // The world's own per-body and per-contact loops (state in and out, sleeping, AABBs, manifolds) run on the
+  // System's threads from this many bodies or contacts on; fewer run on one thread (the team costs more than it
+  // saves). The results do not depend on it.
+  int64_t parallel_min = 4096;
+  int host_threads = 0;  // threads of those loops; 0: the System's team (SystemConfig::threads, or its governor's)
   // The GPU backend for WorldBackend::Gpu and Auto, given by the app (gpu/gpu_factory.h: dvi::makeGpuSystem and
   // dvi::gpuAvailable) so that the world does not depend on the GPU code. Gpu without make_gpu_system is refused
   // with an InputError; Auto without gpu_available runs on the CPU.
@@ -157,8 +163,6 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void addToSystem(btCollisionObject* obj);
   void forget(btCollisionObject* obj);
   bool structureChanged() const;
-  // The per-body host loops run in parallel from this many bodies (or contacts) on.
-  static constexpr int64_t kParallelBodies = 4096;
   // syncBody's answer: what it changed in the System's arrays, and whether the body has factors other than 1.
   static constexpr uint8_t kChangedState = 1, kChangedParams = 2, kHasFactors = 4;
   struct ManifoldSlot {  // a body pair's Bullet manifold, and the sub-step that last filled it
@@ -183,7 +187,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void buildWorldContacts();
   void fillManifolds();
   ManifoldSlot& manifoldSlot(int ia, int ib);
-  void fillManifold(ManifoldSlot& slot, const WorldContact& w);
+  bool fillManifold(ManifoldSlot& slot, const WorldContact& w);
   void releaseManifolds();
   bool keepPair(int a, int b) const;
   // The System's contact exclusions (System::setContactExclusions) from Bullet's per-object ignore lists (constraints
@@ -207,10 +211,11 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<std::pair<int32_t, int32_t>> excl_pairs_next_;  // updateExclusions' scratch (no allocation per sub-step)
   std::vector<uint8_t> excl_flags_next_;
   const System* excl_system_ = nullptr;
-  int ghosts_ = 0;                   // ghost objects in the world: Bullet's pair cache is computed each sub-step
-  std::vector<int> group_bits_;      // Bullet group bit positions in use, in order of appearance (their System bit)
-  bool folded_filters_ = false;      // more than 16 group bits in use: folded, exact test per contact (CPU)
-  std::vector<int> island_root_;     // updateSleeping's union-find over the bodies
+  int ghosts_ = 0;               // ghost objects in the world: Bullet's pair cache is computed each sub-step
+  std::vector<int> group_bits_;  // Bullet group bit positions in use, in order of appearance (their System bit)
+  bool folded_filters_ = false;  // more than 16 group bits in use: folded, exact test per contact (CPU)
+  std::vector<std::atomic<int>> island_root_;  // updateSleeping's union-find over the bodies
+  std::vector<int> island_of_;                 // and each body's island
   std::vector<char> island_merges_;  // whether a body joins islands (btCollisionObject::mergesSimulationIslands)
   std::vector<char> island_awake_;   // and its islands that stay awake
   std::vector<uint8_t> changes_;     // syncIn: syncBody's answer per body
