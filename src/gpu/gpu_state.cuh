@@ -181,7 +181,9 @@ struct DeviceState {
   SolverScratch solver;
   ByteBuffer cub_temp{"CUB temporary storage"};
   DeviceBuffer<double> step_scalars{"step scalars"};
-  double* host_scalars = nullptr;        // pinned, for single-value read-backs
+  double* host_scalars = nullptr;  // pinned, for single-value read-backs
+  char* host_staging = nullptr;    // pinned, syncToHost's copies (one synchronisation, full copy bandwidth)
+  size_t host_staging_bytes = 0;
   ApgdDeviceState* host_apgd = nullptr;  // pinned staging of the APGD control (copies without a synchronisation)
   int64_t pairs = 0;
   int pair_shift = 32;       // the pair keys hold (a << pair_shift) | b (gpu_collision.cu: packPair)

@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 
 #include <algorithm>
 #include <stdexcept>
@@ -15,6 +16,7 @@
 #include "gpu/cuda_check.h"
 #include "gpu/gpu_info.h"
 #include "gpu/gpu_state.cuh"
+#include "gpu/host_copy.h"
 
 namespace dvi {
 
@@ -177,6 +179,7 @@ GpuSystem::~GpuSystem() {
   for (auto& e : d_->ev)
     if (e) cudaEventDestroy(e);
   if (d_->host_scalars) cudaFreeHost(d_->host_scalars);
+  if (d_->host_staging) cudaFreeHost(d_->host_staging);
   if (d_->host_apgd) cudaFreeHost(d_->host_apgd);
   if (d_->stream) cudaStreamDestroy(d_->stream);
 }
@@ -511,29 +514,69 @@ void GpuSystem::markBodyParamsDirty(const std::vector<int32_t>& ids) {
   DVI_CUDA(cudaStreamSynchronize(s));  // sel_params_ may change after we return
 }
 
+namespace {
+
+// syncToHost's copies: each device array goes into the pinned staging buffer at its offset (asynchronous copies at
+// the full copy bandwidth, one synchronisation), then into its host vector on the OpenMP team (host_copy.h). A
+// pageable cudaMemcpy per array (17 synchronisations, staged by the driver) took ~8 ms for 100k bodies and 290k
+// contacts on an H100 host.
+struct Staged {
+  void* host;  // the host vector's data, resized to the count
+  const void* device;
+  size_t bytes, offset;
+};
+
+template <class T>
+Staged staged(std::vector<T>& v, const DeviceBuffer<T>& d, size_t n) {
+  v.resize(n);
+  return Staged{v.data(), d.data(), n * sizeof(T), 0};
+}
+
+}  // namespace
+
 void GpuSystem::syncToHost() {
   uploadIfNeeded();  // bodies added since the last step: the host copy is the current one
   cudaStream_t s = d_->stream;
   const DeviceBodies& b = d_->bodies;
-  b.pos.download(bodies_.pos, b.count, s);
-  b.rot.download(bodies_.rot, b.count, s);
-  b.vel.download(bodies_.vel, b.count, s);
-  b.omega.download(bodies_.omega, b.count, s);
-  d_->shapes.aabb.download(shapes_.aabb, d_->shapes.count, s);
   const DeviceContacts& c = d_->contacts;
   const size_t nc = c.count;
-  c.shape_a.download(contacts_.shape_a, nc, s);
-  c.shape_b.download(contacts_.shape_b, nc, s);
-  c.body_a.download(contacts_.body_a, nc, s);
-  c.body_b.download(contacts_.body_b, nc, s);
-  c.normal.download(contacts_.normal, nc, s);
-  c.pa.download(contacts_.pa, nc, s);
-  c.pb.download(contacts_.pb, nc, s);
-  c.dist.download(contacts_.dist, nc, s);
-  c.mu.download(contacts_.mu, nc, s);
-  c.size.download(contacts_.size, nc, s);
-  c.key.download(contacts_.key, nc, s);
-  d_->solver.gamma.download(gamma_, d_->solver.gamma.size(), s);
+  Staged parts[] = {staged(bodies_.pos, b.pos, b.count),
+                    staged(bodies_.rot, b.rot, b.count),
+                    staged(bodies_.vel, b.vel, b.count),
+                    staged(bodies_.omega, b.omega, b.count),
+                    staged(shapes_.aabb, d_->shapes.aabb, d_->shapes.count),
+                    staged(contacts_.shape_a, c.shape_a, nc),
+                    staged(contacts_.shape_b, c.shape_b, nc),
+                    staged(contacts_.body_a, c.body_a, nc),
+                    staged(contacts_.body_b, c.body_b, nc),
+                    staged(contacts_.normal, c.normal, nc),
+                    staged(contacts_.pa, c.pa, nc),
+                    staged(contacts_.pb, c.pb, nc),
+                    staged(contacts_.dist, c.dist, nc),
+                    staged(contacts_.mu, c.mu, nc),
+                    staged(contacts_.size, c.size, nc),
+                    staged(contacts_.key, c.key, nc),
+                    staged(gamma_, d_->solver.gamma, d_->solver.gamma.size())};
+  size_t total = 0;
+  for (Staged& p : parts) {
+    p.offset = total;
+    total += (p.bytes + 255) / 256 * 256;
+  }
+  if (total > d_->host_staging_bytes) {
+    if (d_->host_staging) DVI_CUDA(cudaFreeHost(d_->host_staging));
+    d_->host_staging = nullptr;
+    d_->host_staging_bytes = 0;
+    const size_t grown = total + total / 4;
+    DVI_CUDA(cudaMallocHost(&d_->host_staging, grown));
+    d_->host_staging_bytes = grown;
+  }
+  for (const Staged& p : parts)
+    if (p.bytes) DVI_CUDA(cudaMemcpyAsync(d_->host_staging + p.offset, p.device, p.bytes, cudaMemcpyDeviceToHost, s));
+  DVI_CUDA(cudaStreamSynchronize(s));
+  HostCopy copies[sizeof(parts) / sizeof(parts[0])];
+  int nc_copies = 0;
+  for (const Staged& p : parts) copies[nc_copies++] = HostCopy{p.host, d_->host_staging + p.offset, p.bytes};
+  copyInParallel(copies, nc_copies);
 }
 
 }  // namespace dvi

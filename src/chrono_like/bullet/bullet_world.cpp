@@ -428,13 +428,20 @@ void DviDynamicsWorld::updateExclusions() {
   std::vector<std::pair<int32_t, int32_t>>& pairs = excl_pairs_next_;  // scratch kept between sub-steps
   std::vector<uint8_t>& flags = excl_flags_next_;
   pairs.clear();
-  flags.assign(tracked_.size(), 0);
-  bool any_flag = false;
-  for (size_t i = 0; i < tracked_.size(); ++i) {
-    btCollisionObject* o = tracked_[i].obj;
+  const int64_t n = int64_t(tracked_.size());
+  flags.resize(size_t(n));
+  int any_flag = 0;
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) \
+    reduction(|                                                      \
+              : any_flag) if (n >= config_.parallel_min)
+  for (int64_t i = 0; i < n; ++i) {
+    const btCollisionObject* o = tracked_[size_t(i)].obj;
+    flags[size_t(i)] = o && !o->hasContactResponse();
+    any_flag |= flags[size_t(i)];
+  }
+  for (int64_t i = 0; i < n && has_exclusions_; ++i) {
+    btCollisionObject* o = tracked_[size_t(i)].obj;
     if (!o) continue;
-    if (!o->hasContactResponse()) flags[i] = 1, any_flag = true;
-    if (!has_exclusions_) continue;
     for (int j = 0; j < o->getNumObjectsWithoutCollision(); ++j) {  // Bullet's checkCollideWith lists
       auto it = object_index_.find(o->getObjectWithoutCollision(j));
       if (it != object_index_.end() && it->second != int(i)) pairs.emplace_back(int32_t(i), int32_t(it->second));
