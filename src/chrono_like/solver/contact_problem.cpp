@@ -248,7 +248,8 @@ void ContactProblem::buildAdjacency(int64_t nb) {
   std::vector<int32_t> fill(size_t(nb), 0);
   int32_t total = 0;
   for (int64_t i = 0; i < nb; ++i) {
-    if (count[i] == 0) continue;
+    // A body shared with other processes is gathered even without a contact here (a zero share, process_group.h).
+    if (count[i] == 0 && !(group_ && movable(inv_[i]) && group_->shared(int32_t(i)))) continue;
     active_.push_back(int32_t(i));
     adj_start_.push_back(total);
     fill[i] = total;
@@ -337,6 +338,7 @@ void ContactProblem::gatherBodyDeltas(const real* x) const {
       accumulateEntryImpulse(adj_[e], L, jac_.data(), rows_.data(), x, F, Tq);
     delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
   }
+  if (group_) group_->exchangeDeltas(delta_.data());  // shares summed over the processes
 }
 
 void ContactProblem::schur(const real* x, real* y) const {
@@ -474,6 +476,8 @@ void ContactProblem::gsRowSweep(int64_t k, real* gamma, real w) const {
 // dv is formed exactly from the warm start; the history uses the maintained dv, the final residual a fresh Schur
 // product.
 SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
+  // Row by row over one process's contacts: not an algorithm that splits over processes (process_group.h).
+  if (group_) throw InputError("solver gs: Gauss-Seidel does not run over several processes (use apgd)");
   SolverStats st;
   const int64_t nblk = ncb_ + nrb_;
   if (nblk == 0) return st;
