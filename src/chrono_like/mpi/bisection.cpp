@@ -54,8 +54,8 @@ int Bisection::split(const std::vector<Vec3>& points, std::vector<int32_t>& idx,
   const size_t n = end - begin, n_low = size_t(uint64_t(n) * uint64_t(low_parts) / uint64_t(parts));
   real cut = 0;
   if (n_low > 0 && n_low < n)
-    cut = real(0.5) * (axisOf(points[size_t(idx[begin + n_low - 1])], axis) +
-                       axisOf(points[size_t(idx[begin + n_low])], axis));
+    cut = real(0.5) *
+          (axisOf(points[size_t(idx[begin + n_low - 1])], axis) + axisOf(points[size_t(idx[begin + n_low])], axis));
   else if (n > 0)
     cut = n_low == 0 ? axisOf(points[size_t(idx[begin])], axis)
                      : std::nextafter(axisOf(points[size_t(idx[end - 1])], axis), inf);

@@ -97,8 +97,8 @@ int DistributedSystem::addBody(const BodyDesc& d) {
   }
   const bool immovable = (d.flags & (kBodyFixed | kBodyKinematic)) != 0;
   if (d.rolling_friction > 0 || d.spinning_friction > 0)
-    throw InputError("body " + std::to_string(id) + ": rolling or spinning friction does not run over several "
-                     "processes (MPI)");
+    throw InputError("body " + std::to_string(id) +
+                     ": rolling or spinning friction does not run over several processes (MPI)");
   for (const ShapeDesc& s : d.shapes)
     if (!immovable && s.shape.type == ShapeType::Plane)
       throw InputError("body " + std::to_string(id) + ": a dynamic plane has no owner (MPI)");
@@ -262,8 +262,11 @@ void DistributedSystem::readBack() {
     const int32_t ga = local_ids_[size_t(la)], gb = local_ids_[size_t(lb)];
     const int32_t sa = shape_start_[size_t(ga)] + (c.shape_a[k] - b.shape_start[size_t(la)]);
     const int32_t sb = shape_start_[size_t(gb)] + (c.shape_b[k] - b.shape_start[size_t(lb)]);
-    WarmEntry e{contactKey(sa, sb, int32_t(c.key[k] & 0xFF)), ga, gb, pairOwner(ga, gb), {g[3 * k], g[3 * k + 1],
-                                                                                          g[3 * k + 2]}};
+    WarmEntry e{contactKey(sa, sb, int32_t(c.key[k] & 0xFF)),
+                ga,
+                gb,
+                pairOwner(ga, gb),
+                {g[3 * k], g[3 * k + 1], g[3 * k + 2]}};
     warm_.push_back(e);
   }
 }
