@@ -47,6 +47,9 @@
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
 #include "parse.h"
+#ifdef DVISIM_HAVE_MPI
+#include "mpi_run.h"
+#endif
 
 namespace {
 
@@ -190,6 +193,10 @@ int run(const Options& o) {
   if (!o.collision.empty())
     cfg.collision.backend = o.collision == "bullet" ? dvi::CollisionBackend::Bullet : dvi::CollisionBackend::Native;
   const int64_t steps = st.stepCount();
+#ifdef DVISIM_HAVE_MPI
+  // Under `mpirun -np K` (K > 1): the domain decomposition (mpi_run.h).
+  if (mpiProcesses() > 1) return runSceneMpi(scene, cfg, steps, o.out, o.backend);
+#endif
 
   // Backend.
   std::string backend = o.backend, gpu_name;
@@ -447,6 +454,9 @@ void registerBenchPruning(CLI::App& app, BenchRegistry& reg);
 void registerBenchDropin(CLI::App& app, BenchRegistry& reg);
 
 int main(int argc, char** argv) {
+#ifdef DVISIM_HAVE_MPI
+  MpiSession mpi(&argc, &argv);  // MPI_Init under mpirun only
+#endif
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
   app.require_subcommand(1);
   app.footer(
