@@ -156,7 +156,12 @@ int runCes(const Options& o) {
 }
 
 int run(const Options& o) {
-  if (o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene)) return runCes(o);
+  const bool ces = o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene);
+#ifdef DVISIM_HAVE_MPI
+  if (ces && mpiProcesses() > 1)
+    throw InputError("a CES machine does not run over several processes (MPI): run it without mpirun");
+#endif
+  if (ces) return runCes(o);
   // Validate the command line before doing any work.
   requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu", "bullet"});
   if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
@@ -510,6 +515,10 @@ int main(int argc, char** argv) {
   }
   try {
     refuseEmptyValues(app);
+#ifdef DVISIM_HAVE_MPI
+    if (mpiProcesses() > 1 && !app.got_subcommand("run"))
+      throw InputError("only `dvisim run SCENE` runs over several processes (MPI): run the others without mpirun");
+#endif
     if (app.got_subcommand("compare")) return compare();
     if (app.got_subcommand("sweep")) return sweep();
     if (app.got_subcommand("bench")) return runBenchCommand(bench);

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # `mpirun -np 2 dvisim run SCENE` against `dvisim run SCENE --backend cpu` (one process): the same bodies.csv up to
 # the order of summation (every position within 1e-6 of the smallest radius, 1e-8 m for scenes/pile.json), a
-# summary.json that says 2 processes, and a refused option (exit code 2 on every process).
+# summary.json that says 2 processes, and a refused option and the CES machine (exit code 2 on every process).
 # Usage: cli_same_as_one.sh MPIEXEC DVISIM SOURCE_DIR WORK_DIR
 set -euo pipefail
 mpiexec=$1 dvisim=$2 src=$3 work=$4
@@ -34,3 +34,10 @@ set -e
 grep -q "only apgd runs over several processes" "$work/refused.log" || { cat "$work/refused.log"; exit 1; }
 [ "$rc" -ne 0 ] || { echo "a refused option exited 0"; exit 1; }
 echo "cli: --solver gs refused (exit $rc)"
+set +e
+"${mpirun[@]}" "$dvisim" run --steps 2 --out "$work/ces" > "$work/ces.log" 2>&1
+rc=$?
+set -e
+grep -q "a CES machine does not run over several processes" "$work/ces.log" || { cat "$work/ces.log"; exit 1; }
+[ "$rc" -ne 0 ] && [ ! -e "$work/ces" ] || { echo "the CES machine under mpirun: exit $rc"; exit 1; }
+echo "cli: the CES machine refused under mpirun (exit $rc)"
