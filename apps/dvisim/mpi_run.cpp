@@ -63,8 +63,8 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   }
   const bool root = sys.rank() == 0;
   if (root)
-    std::printf("scene: %s (%zu bodies), %lld steps of %g s on %d processes (MPI)\n", scene.name.c_str(),
-                bodies.size(), (long long)steps, cfg.step.dt, sys.processes());
+    std::printf("scene: %s (%zu bodies), %lld steps of %g s on %d processes (MPI)\n", scene.name.c_str(), bodies.size(),
+                (long long)steps, cfg.step.dt, sys.processes());
   int64_t contacts = 0, iterations = 0;
   double relative = 0;
   const auto t0 = std::chrono::steady_clock::now();
