@@ -159,8 +159,7 @@ int System::effectiveThreads() const {
   return int(std::min<int64_t>(requested, useful));
 }
 
-int System::addBody(const BodyDesc& d) {
-  const int index = int(bodies_.count());
+void System::validateBody(const BodyDesc& d, int index) {
   auto fail = [&](const std::string& what) { throw InputError("body " + std::to_string(index) + ": " + what); };
   if (!isFinite(d.pos)) fail("non-finite position");
   if (!finite(d.rot)) fail("non-finite rotation");
@@ -178,7 +177,12 @@ int System::addBody(const BodyDesc& d) {
   for (const ShapeDesc& s : d.shapes) validateShape(s, index);
   real qn = std::sqrt(d.rot.w * d.rot.w + d.rot.x * d.rot.x + d.rot.y * d.rot.y + d.rot.z * d.rot.z);
   if (!(qn > 0)) fail("zero rotation quaternion");
+}
 
+int System::addBody(const BodyDesc& d) {
+  const int index = int(bodies_.count());
+  validateBody(d, index);
+  const bool immovable = (d.flags & (kBodyFixed | kBodyKinematic)) != 0;
   const size_t n = bodies_.count();
   bodies_.resize(n + 1);
   bodies_.pos[n] = d.pos;

@@ -238,6 +238,8 @@ class System {
   // Adds a body; validates it (finite numbers, mass >= 0, positive shape dimensions) and throws
   // InputError naming the problem. Returns the body index.
   int addBody(const BodyDesc& desc);
+  // addBody's checks alone: InputError naming body `index` and the problem.
+  static void validateBody(const BodyDesc& desc, int index);
 
   virtual void step();  // one step of config().step.dt
   void advance(int steps) {

@@ -90,11 +90,7 @@ DistributedSystem::~DistributedSystem() {
 int DistributedSystem::addBody(const BodyDesc& d) {
   const int id = int(descs_.size());
   if (started_) throw InputError("body " + std::to_string(id) + ": bodies are added before the first step (MPI)");
-  {
-    System check(config_);  // System::addBody's validation, with the same messages
-    BodyDesc probe = d;
-    check.addBody(probe);
-  }
+  System::validateBody(d, id);  // System::addBody's checks, with the same messages
   const bool immovable = (d.flags & (kBodyFixed | kBodyKinematic)) != 0;
   if (d.rolling_friction > 0 || d.spinning_friction > 0)
     throw InputError("body " + std::to_string(id) +
