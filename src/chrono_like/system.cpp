@@ -370,9 +370,10 @@ void System::setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>
 }
 
 void System::setProcessGroup(const ProcessGroup* group) {
-  if (group && config_.solver.type != SolverType::APGD)
-    throw InputError(std::string("solver ") + solverName(config_.solver.type) +
-                     ": only apgd runs over several processes (MPI)");
+  if (group && config_.solver.type == SolverType::GaussSeidel)
+    throw InputError(
+        "solver gs: Gauss-Seidel is sequential and does not run over several processes (MPI); use apgd, "
+        "jacobi or bb");
   if (group && config_.collision.backend != CollisionBackend::Native)
     throw InputError("collision backend 'bullet': not available over several processes (MPI)");
   group_ = group;

@@ -297,8 +297,8 @@ class System {
 
   // A domain decomposition's share (solver/process_group.h; chrono_like/mpi/distributed_system.h): this System
   // holds one process's bodies (its own and copies of its neighbours'), keeps only the contacts the group says it
-  // owns, and solves them with the other processes (APGD only; no constraint rows, rolling friction or Bullet
-  // collision: InputError). null: this System alone (the default). The group outlives the System's steps.
+  // owns, and solves them with the other processes (APGD, Jacobi or BB; no Gauss-Seidel, constraint rows, rolling
+  // friction or Bullet collision: InputError). null: this System alone (the default). The group outlives the System's steps.
   void setProcessGroup(const ProcessGroup* group);
   // The next step's warm start (WarmStart stage): impulses (3 per key) of the contacts with these keys, sorted
   // ascending, in place of the last step's. For a driver that rebuilds the System between steps.

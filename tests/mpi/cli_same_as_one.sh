@@ -31,7 +31,7 @@ set +e
 "${mpirun[@]}" "$dvisim" run "$scene" --steps 2 --solver gs --out "$work/refused" > "$work/refused.log" 2>&1
 rc=$?
 set -e
-grep -q "only apgd runs over several processes" "$work/refused.log" || { cat "$work/refused.log"; exit 1; }
+grep -q "Gauss-Seidel is sequential and does not run over several processes" "$work/refused.log" || { cat "$work/refused.log"; exit 1; }
 [ "$rc" -ne 0 ] || { echo "a refused option exited 0"; exit 1; }
 echo "cli: --solver gs refused (exit $rc)"
 set +e

@@ -61,9 +61,10 @@ real bodyRadius(const BodyDesc& d) {
 
 DistributedSystem::DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings)
     : config_(config), settings_(settings) {
-  if (config_.solver.type != SolverType::APGD)
-    throw InputError(std::string("solver ") + solverName(config_.solver.type) +
-                     ": only apgd runs over several processes (MPI)");
+  if (config_.solver.type == SolverType::GaussSeidel)
+    throw InputError(
+        "solver gs: Gauss-Seidel is sequential and does not run over several processes (MPI); use apgd, "
+        "jacobi or bb");
   if (config_.collision.backend != CollisionBackend::Native)
     throw InputError("collision backend 'bullet': not available over several processes (MPI)");
   if (!(settings_.rebalance_ratio > 1) || !std::isfinite(settings_.rebalance_ratio))

@@ -8,8 +8,8 @@
 //
 // Every process adds the same bodies in the same order (the scene): the bodies' descriptions (shapes, masses,
 // materials) are kept on every process, their state (position, rotation, velocities) only on the owner.
-// A collective object: every process calls the same methods in the same order. APGD only; constraint rows,
-// rolling or spinning friction, Bullet's collision and dynamic planes are refused (InputError).
+// A collective object: every process calls the same methods in the same order. APGD, Jacobi or BB; Gauss-Seidel,
+// constraint rows, rolling or spinning friction, Bullet's collision and dynamic planes are refused (InputError).
 #pragma once
 
 #include <mpi.h>
@@ -48,8 +48,8 @@ struct MigrationLog {
 
 class DistributedSystem {
  public:
-  // comm is duplicated (the object's messages never meet the caller's). config as for System: its solver must be
-  // APGD and its collision backend native (InputError).
+  // comm is duplicated (the object's messages never meet the caller's). config as for System: its solver must not be
+  // Gauss-Seidel and its collision backend must be native (InputError).
   DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings = {});
   ~DistributedSystem();
   DistributedSystem(const DistributedSystem&) = delete;

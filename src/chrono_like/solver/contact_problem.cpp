@@ -287,6 +287,7 @@ void ContactProblem::computeJacobiSteps(int64_t nb) {
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) q += entryColumnSum(adj_[e], L, colnorm_.data());
     bodyq_[size_t(active_[j])] = q;
   }
+  if (group_) shareBodySums(bodyq_);  // Q_c over every process's contacts of a shared body
   if (normal_only_) {
 #pragma omp parallel for schedule(static) num_threads(T)
     for (int64_t q = 0; q < ncb; ++q)
@@ -301,6 +302,15 @@ void ContactProblem::computeJacobiSteps(int64_t nb) {
   for (int64_t q = 0; q < nrb_; ++q)
     jeta_[ncb + q] = rowBlockJacobiStep(rows_.data() + 3 * q, colnorm_.data() + 6 * (ncb + q),
                                         rowsum_.data() + 3 * (ncb + q), bodyq_.data());
+}
+
+// A per-body sum over the contacts, completed with the other processes' shares of the shared bodies (through the
+// velocity-change exchange, one value per body).
+void ContactProblem::shareBodySums(std::vector<real>& per_body) const {
+  std::vector<BodyDelta> d(per_body.size(), BodyDelta{{0, 0, 0}, {0, 0, 0}});
+  for (size_t i = 0; i < per_body.size(); ++i) d[i].v.x = per_body[i];
+  group_->exchangeDeltas(d.data());
+  for (size_t i = 0; i < per_body.size(); ++i) per_body[i] = d[i].v.x;
 }
 
 int ContactProblem::size() const { return int(3 * (ncb_ + nrb_)); }

@@ -126,6 +126,7 @@ class ContactProblem final : public CcpProblem {
                                                 const std::vector<ConstraintRow>* rows);
   void buildAdjacency(int64_t nb);
   void computeJacobiSteps(int64_t nb);
+  void shareBodySums(std::vector<real>& per_body) const;  // with a group: the shared bodies' sums over processes
   // Gauss-Seidel's block k: its gradient from delta_, and delta_ updated by a change dg of its impulses.
   void gsBlockGradient(int64_t k, real* y) const;
   void gsApplyBlockChange(int64_t k, const real* dg) const;
