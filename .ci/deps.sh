@@ -4,9 +4,11 @@
 set -euo pipefail
 # clang, libclang-rt-14-dev (libFuzzer and the sanitizer runtimes) and libomp-dev (OpenMP for clang): the fuzz
 # tests (CTest label fuzz, docs/HARDENING.md) build an instrumented tree with them. clang-format (14 in Debian 12):
-# the format check (CTest test clang_format, tests/check_format.sh).
+# the format check (CTest test clang_format, tests/check_format.sh). libopenmpi-dev and openmpi-bin (mpirun): the
+# domain decomposition over MPI (DVISIM_ENABLE_MPI, on where CMake finds MPI) and its tests (CTest label mpi).
 pkgs=(build-essential cmake pkg-config libbullet-dev libbullet-extras-dev libeigen3-dev catch2
-      nlohmann-json3-dev libcli11-dev python3 python3-matplotlib clang libclang-rt-14-dev libomp-dev clang-format)
+      nlohmann-json3-dev libcli11-dev python3 python3-matplotlib clang libclang-rt-14-dev libomp-dev clang-format
+      libopenmpi-dev openmpi-bin)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

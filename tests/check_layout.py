@@ -12,6 +12,7 @@ Layers of src/chrono_like, lowest first; a file may include its own layer and th
     the files at the top of src/chrono_like (the System):  base/, collision/, solver/
     bullet/     base/, collision/, solver/, the top
     io/         base/, collision/, solver/, the top, bullet/ (a .bullet scene is read through the bridge)
+    mpi/        base/, collision/, solver/, the top (the domain decomposition over MPI drives Systems)
 src/gpu may include src/chrono_like; src/ces may include src/chrono_like and src/gpu. Nothing in src/ includes
 apps/, bench/, tests/ or demos/ (nor anything else outside src/). Prints one line per violation and exits 1 when
 there is any.
@@ -34,6 +35,7 @@ ALLOWED = {
     "chrono_like/bullet": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver", "chrono_like"},
     "chrono_like/io": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver", "chrono_like",
                        "chrono_like/bullet"},
+    "chrono_like/mpi": {"chrono_like/base", "chrono_like/collision", "chrono_like/solver", "chrono_like"},
     "gpu": {"chrono_like/*"},
     "ces": {"chrono_like/*", "gpu"},
 }

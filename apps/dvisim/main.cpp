@@ -47,6 +47,9 @@
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
 #include "parse.h"
+#ifdef DVISIM_HAVE_MPI
+#include "mpi_run.h"
+#endif
 
 namespace {
 
@@ -153,7 +156,12 @@ int runCes(const Options& o) {
 }
 
 int run(const Options& o) {
-  if (o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene)) return runCes(o);
+  const bool ces = o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene);
+#ifdef DVISIM_HAVE_MPI
+  if (ces && mpiProcesses() > 1)
+    throw InputError("a CES machine does not run over several processes (MPI): run it without mpirun");
+#endif
+  if (ces) return runCes(o);
   // Validate the command line before doing any work.
   requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu", "bullet"});
   if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
@@ -190,6 +198,10 @@ int run(const Options& o) {
   if (!o.collision.empty())
     cfg.collision.backend = o.collision == "bullet" ? dvi::CollisionBackend::Bullet : dvi::CollisionBackend::Native;
   const int64_t steps = st.stepCount();
+#ifdef DVISIM_HAVE_MPI
+  // Under `mpirun -np K` (K > 1): the domain decomposition (mpi_run.h).
+  if (mpiProcesses() > 1) return runSceneMpi(scene, cfg, steps, o.out, o.backend);
+#endif
 
   // Backend.
   std::string backend = o.backend, gpu_name;
@@ -447,6 +459,9 @@ void registerBenchPruning(CLI::App& app, BenchRegistry& reg);
 void registerBenchDropin(CLI::App& app, BenchRegistry& reg);
 
 int main(int argc, char** argv) {
+#ifdef DVISIM_HAVE_MPI
+  MpiSession mpi(&argc, &argv);  // MPI_Init under mpirun only
+#endif
   CLI::App app{"dvisim: DVI multibody engine for dense granular flows (CPU/OpenMP, GPU, Bullet peer)", "dvisim"};
   app.require_subcommand(1);
   app.footer(
@@ -500,6 +515,10 @@ int main(int argc, char** argv) {
   }
   try {
     refuseEmptyValues(app);
+#ifdef DVISIM_HAVE_MPI
+    if (mpiProcesses() > 1 && !app.got_subcommand("run"))
+      throw InputError("only `dvisim run SCENE` runs over several processes (MPI): run the others without mpirun");
+#endif
     if (app.got_subcommand("compare")) return compare();
     if (app.got_subcommand("sweep")) return sweep();
     if (app.got_subcommand("bench")) return runBenchCommand(bench);

@@ -159,8 +159,7 @@ int System::effectiveThreads() const {
   return int(std::min<int64_t>(requested, useful));
 }
 
-int System::addBody(const BodyDesc& d) {
-  const int index = int(bodies_.count());
+void System::validateBody(const BodyDesc& d, int index) {
   auto fail = [&](const std::string& what) { throw InputError("body " + std::to_string(index) + ": " + what); };
   if (!isFinite(d.pos)) fail("non-finite position");
   if (!finite(d.rot)) fail("non-finite rotation");
@@ -178,7 +177,12 @@ int System::addBody(const BodyDesc& d) {
   for (const ShapeDesc& s : d.shapes) validateShape(s, index);
   real qn = std::sqrt(d.rot.w * d.rot.w + d.rot.x * d.rot.x + d.rot.y * d.rot.y + d.rot.z * d.rot.z);
   if (!(qn > 0)) fail("zero rotation quaternion");
+}
 
+int System::addBody(const BodyDesc& d) {
+  const int index = int(bodies_.count());
+  validateBody(d, index);
+  const bool immovable = (d.flags & (kBodyFixed | kBodyKinematic)) != 0;
   const size_t n = bodies_.count();
   bodies_.resize(n + 1);
   bodies_.pos[n] = d.pos;
@@ -336,6 +340,8 @@ void System::detectCollisions() {
       stats_.stage_ran[int(StageType::NarrowPhase)] = true;
   stats_.pairs = t.pairs;
   stats_.pairs_reused = t.pairs_reused;
+  if (group_)  // a domain decomposition: only the contacts this process owns (exactly one process keeps each)
+    contacts_.keepIf([&](size_t k) { return group_->ownsContact(contacts_.body_a[k], contacts_.body_b[k]); });
   if (hasExclusions()) {
     const uint64_t* keys = excluded_pairs_.data();
     const int64_t nk = int64_t(excluded_pairs_.size()), nf = int64_t(no_contact_.size());
@@ -363,6 +369,25 @@ void System::setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>
   ++exclusions_version_;
 }
 
+void System::setProcessGroup(const ProcessGroup* group) {
+  if (group && config_.solver.type == SolverType::GaussSeidel)
+    throw InputError(
+        "solver gs: Gauss-Seidel is sequential and does not run over several processes (MPI); use apgd, "
+        "jacobi or bb");
+  if (group && config_.collision.backend != CollisionBackend::Native)
+    throw InputError("collision backend 'bullet': not available over several processes (MPI)");
+  group_ = group;
+  problem_->setProcessGroup(group);
+}
+
+void System::setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses) {
+  if (impulses.size() != 3 * sorted_keys.size() || !std::is_sorted(sorted_keys.begin(), sorted_keys.end()))
+    throw InputError("warm start: keys must be sorted, with 3 impulses each");
+  prev_keys_ = std::move(sorted_keys);
+  prev_gamma_ = std::move(impulses);
+  prev_roll_.clear();
+}
+
 void System::collectRows() {
   const size_t before = rows_.size();
   rows_.clear();
@@ -383,8 +408,10 @@ void System::buildAndSolve() {
   else
     rows_.clear();
   const int64_t nrows = int64_t(rows_.size());
+  if (group_ && nrows > 0) throw InputError("constraint rows (joints, drives) do not run over several processes (MPI)");
   const int64_t nblk = nc + (nrows + 2) / 3;
-  if (nblk == 0) {
+  // Over several processes a process without contacts still takes part in the solve's reductions and exchanges.
+  if (nblk == 0 && !group_) {
     gamma_.clear();
     prev_keys_.clear();
     prev_gamma_.clear();
@@ -452,6 +479,8 @@ void System::buildProblem(int64_t nc) {
   }
   stats_.max_penetration = max_pen;
   // Rolling blocks only for contacts with rolling or spinning friction (docs/MODEL.md §6).
+  if (group_ && hasRollingBodies())
+    throw InputError("rolling or spinning friction does not run over several processes (MPI)");
   const bool rolling_bodies = nc > 0 && hasRollingBodies();
   const bool rolling = rolling_bodies && combineRolling(nc);
   stats_.part_ran[int(StagePart::RollingSpinningRows)] = rolling;
@@ -461,7 +490,9 @@ void System::buildProblem(int64_t nc) {
                                 : "no body has rolling or spinning friction");
   // Friction rows only where mu > 0 (docs/MODEL.md §6): a step whose contacts are all frictionless solves the
   // normal rows alone (jacobian.h); the solution is the same (its tangential impulses would be 0).
-  const bool normal_only = config_.prune && nc > 0 && !(max_mu > 0) && !rolling;
+  // Over several processes the choice is the whole problem's: some contact anywhere, none with mu > 0.
+  const bool normal_only = group_ ? config_.prune && group_->any(nc > 0) && !group_->any(max_mu > 0)
+                                  : config_.prune && nc > 0 && !(max_mu > 0) && !rolling;
   stats_.normal_only = normal_only;
   stats_.part_ran[int(StagePart::FrictionRows)] = nc > 0 && !normal_only;
   stats_.part_reason[int(StagePart::FrictionRows)] = nc == 0       ? "no contacts"
@@ -534,7 +565,8 @@ void System::integrate() {
       bodies_.vel[i] = v_free_[i];
       bodies_.omega[i] = w_free_[i];
     }
-    if (gamma_.empty() || !solution_) return;
+    // Over several processes every process applies (and exchanges) its share, with or without contacts.
+    if ((gamma_.empty() || !solution_) && !group_) return;
     problem_->applyImpulses(solution_, bodies_.vel.data(), bodies_.omega.data());
   });
   timed(stats_, StageType::IntegratePositions, [&] {

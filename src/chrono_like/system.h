@@ -238,6 +238,8 @@ class System {
   // Adds a body; validates it (finite numbers, mass >= 0, positive shape dimensions) and throws
   // InputError naming the problem. Returns the body index.
   int addBody(const BodyDesc& desc);
+  // addBody's checks alone: InputError naming body `index` and the problem.
+  static void validateBody(const BodyDesc& desc, int index);
 
   virtual void step();  // one step of config().step.dt
   void advance(int steps) {
@@ -295,6 +297,15 @@ class System {
   void setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>& pairs, std::vector<uint8_t> no_contact);
   const std::vector<ConstraintRow>& constraintRows() const { return rows_; }  // last step's rows
   const std::vector<real>& rowImpulses() const { return row_lambda_; }        // and their impulses
+
+  // A domain decomposition's share (solver/process_group.h; chrono_like/mpi/distributed_system.h): this System
+  // holds one process's bodies (its own and copies of its neighbours'), keeps only the contacts the group says it
+  // owns, and solves them with the other processes (APGD, Jacobi or BB; no Gauss-Seidel, constraint rows, rolling
+  // friction or Bullet collision: InputError). null: this System alone (the default). The group outlives the System's steps.
+  void setProcessGroup(const ProcessGroup* group);
+  // The next step's warm start (WarmStart stage): impulses (3 per key) of the contacts with these keys, sorted
+  // ascending, in place of the last step's. For a driver that rebuilds the System between steps.
+  void setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses);
 
   // Contact force on each contact in the last step (impulse / dt), world frame, acting on body B.
   Vec3 contactForce(size_t k) const;
@@ -365,10 +376,11 @@ class System {
   uint64_t exclusions_version_ = 0;               // bumped by every setContactExclusions (a device re-uploads)
   bool hasExclusions() const { return !excluded_pairs_.empty() || !no_contact_.empty(); }
   std::unique_ptr<ContactProblem> problem_;
-  std::vector<real> x_;             // solution in the problem's layout when it is normal-only
-  const real* solution_ = nullptr;  // gamma_ or x_: what IntegrateVelocities applies
-  size_t typed_shapes_ = 0;         // shapes whose type is in shape_types_
-  uint32_t shape_types_ = 0;        // bit t: the scene has a shape of type t
+  const ProcessGroup* group_ = nullptr;  // setProcessGroup
+  std::vector<real> x_;                  // solution in the problem's layout when it is normal-only
+  const real* solution_ = nullptr;       // gamma_ or x_: what IntegrateVelocities applies
+  size_t typed_shapes_ = 0;              // shapes whose type is in shape_types_
+  uint32_t shape_types_ = 0;             // bit t: the scene has a shape of type t
   StepStats stats_;
   ThreadGovernor governor_;  // the team size of threads 0 under load
   ConvergenceLog convergence_;

@@ -22,7 +22,7 @@ build)
   launcher=()
   command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
   cmake -S "$src" -B "$tree" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDVISIM_FUZZ=ON \
-    -DDVISIM_ENABLE_CUDA=OFF -DDVISIM_BUILD_TESTS=OFF -DDVISIM_BUILD_DEMOS=OFF -DDVISIM_BUILD_BENCH=OFF \
+    -DDVISIM_ENABLE_CUDA=OFF -DDVISIM_ENABLE_MPI=OFF -DDVISIM_BUILD_TESTS=OFF -DDVISIM_BUILD_DEMOS=OFF -DDVISIM_BUILD_BENCH=OFF \
     "${launcher[@]}" > "$probe/configure.log" 2>&1 || { cat "$probe/configure.log"; exit 1; }
   start=$SECONDS
   cmake --build "$tree" -j"${DVISIM_FUZZ_JOBS:-2}" --target "${targets[@]/#/fuzz_}" 2>&1 | tail -n 20

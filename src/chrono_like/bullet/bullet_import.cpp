@@ -183,24 +183,26 @@ BodyDesc bodyDescFromBullet(const btRigidBody& body) {
   return d;
 }
 
+BodyDesc bodyDescForSystem(const btRigidBody* body, size_t index, Vec3 gravity) {
+  if (!body) throw InputError("rigid body " + std::to_string(index) + " is null");
+  BodyDesc d;
+  try {
+    d = bodyDescFromBullet(*body);
+  } catch (const InputError& e) { throw InputError("rigid body " + std::to_string(index) + ": " + e.what()); }
+  // A body living in a world whose gravity differs from the system's keeps its own (Bullet allows
+  // per-body gravity). A body never added to a world has zero gravity in Bullet and takes the system's.
+  if (!d.has_gravity && body->getBroadphaseHandle()) {
+    const Vec3 diff = d.gravity - gravity;
+    if (length(diff) > real(1e-6) * (length(gravity) + 1)) d.has_gravity = true;
+  }
+  return d;
+}
+
 std::vector<int> importBullet(System& system, const std::vector<btRigidBody*>& bodies) {
   std::vector<int> ids;
   ids.reserve(bodies.size());
   const Vec3 g = system.config().step.gravity;
-  for (size_t i = 0; i < bodies.size(); ++i) {
-    if (!bodies[i]) throw InputError("rigid body " + std::to_string(i) + " is null");
-    BodyDesc d;
-    try {
-      d = bodyDescFromBullet(*bodies[i]);
-    } catch (const InputError& e) { throw InputError("rigid body " + std::to_string(i) + ": " + e.what()); }
-    // A body living in a world whose gravity differs from the system's keeps its own (Bullet allows
-    // per-body gravity). A body never added to a world has zero gravity in Bullet and takes the system's.
-    if (!d.has_gravity && bodies[i]->getBroadphaseHandle()) {
-      const Vec3 diff = d.gravity - g;
-      if (length(diff) > real(1e-6) * (length(g) + 1)) d.has_gravity = true;
-    }
-    ids.push_back(system.addBody(d));
-  }
+  for (size_t i = 0; i < bodies.size(); ++i) ids.push_back(system.addBody(bodyDescForSystem(bodies[i], i, g)));
   return ids;
 }
 

@@ -25,6 +25,9 @@ BodyDesc bodyDescFromBullet(const btRigidBody& body);
 // Converts a collision shape (recursively for compounds) into shape records at `local` in the body frame.
 void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, std::vector<ShapeDesc>& out);
 
+// The BodyDesc importBullet adds for body `index` of a scene whose System has this gravity: bodyDescFromBullet, with
+// the body's own gravity kept where it differs from the System's. A null body or an unsupported shape: InputError.
+BodyDesc bodyDescForSystem(const btRigidBody* body, size_t index, Vec3 gravity);
 // Adds every body to the system in order; returns the system index of each.
 std::vector<int> importBullet(System& system, const std::vector<btRigidBody*>& bodies);
 

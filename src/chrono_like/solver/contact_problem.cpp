@@ -248,7 +248,8 @@ void ContactProblem::buildAdjacency(int64_t nb) {
   std::vector<int32_t> fill(size_t(nb), 0);
   int32_t total = 0;
   for (int64_t i = 0; i < nb; ++i) {
-    if (count[i] == 0) continue;
+    // A body shared with other processes is gathered even without a contact here (a zero share, process_group.h).
+    if (count[i] == 0 && !(group_ && movable(inv_[i]) && group_->shared(int32_t(i)))) continue;
     active_.push_back(int32_t(i));
     adj_start_.push_back(total);
     fill[i] = total;
@@ -286,6 +287,7 @@ void ContactProblem::computeJacobiSteps(int64_t nb) {
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) q += entryColumnSum(adj_[e], L, colnorm_.data());
     bodyq_[size_t(active_[j])] = q;
   }
+  if (group_) shareBodySums(bodyq_);  // Q_c over every process's contacts of a shared body
   if (normal_only_) {
 #pragma omp parallel for schedule(static) num_threads(T)
     for (int64_t q = 0; q < ncb; ++q)
@@ -300,6 +302,15 @@ void ContactProblem::computeJacobiSteps(int64_t nb) {
   for (int64_t q = 0; q < nrb_; ++q)
     jeta_[ncb + q] = rowBlockJacobiStep(rows_.data() + 3 * q, colnorm_.data() + 6 * (ncb + q),
                                         rowsum_.data() + 3 * (ncb + q), bodyq_.data());
+}
+
+// A per-body sum over the contacts, completed with the other processes' shares of the shared bodies (through the
+// velocity-change exchange, one value per body).
+void ContactProblem::shareBodySums(std::vector<real>& per_body) const {
+  std::vector<BodyDelta> d(per_body.size(), BodyDelta{{0, 0, 0}, {0, 0, 0}});
+  for (size_t i = 0; i < per_body.size(); ++i) d[i].v.x = per_body[i];
+  group_->exchangeDeltas(d.data());
+  for (size_t i = 0; i < per_body.size(); ++i) per_body[i] = d[i].v.x;
 }
 
 int ContactProblem::size() const { return int(3 * (ncb_ + nrb_)); }
@@ -337,6 +348,7 @@ void ContactProblem::gatherBodyDeltas(const real* x) const {
       accumulateEntryImpulse(adj_[e], L, jac_.data(), rows_.data(), x, F, Tq);
     delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
   }
+  if (group_) group_->exchangeDeltas(delta_.data());  // shares summed over the processes
 }
 
 void ContactProblem::schur(const real* x, real* y) const {
@@ -474,6 +486,8 @@ void ContactProblem::gsRowSweep(int64_t k, real* gamma, real w) const {
 // dv is formed exactly from the warm start; the history uses the maintained dv, the final residual a fresh Schur
 // product.
 SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
+  // Row by row over one process's contacts: not an algorithm that splits over processes (process_group.h).
+  if (group_) throw InputError("solver gs: Gauss-Seidel does not run over several processes (use apgd)");
   SolverStats st;
   const int64_t nblk = ncb_ + nrb_;
   if (nblk == 0) return st;

@@ -34,6 +34,7 @@
 #include "chrono_like/base/data.h"
 #include "chrono_like/solver/constraint_row.h"
 #include "chrono_like/solver/jacobian.h"
+#include "chrono_like/solver/process_group.h"
 #include "chrono_like/solver/row_kernels.h"
 #include "chrono_like/solver/solver.h"
 
@@ -94,6 +95,11 @@ class ContactProblem final : public CcpProblem {
   const real* blockSteps() const override { return eta_.data(); }
   const real* jacobiSteps() const override { return jeta_.data(); }
   real maxDiagonal() const override { return max_diag_; }
+  // The processes sharing this problem (process_group.h; null: none), set before build(): their shared bodies
+  // are gathered by every pass (a) and exchanged after it (schur, applyImpulses). The group outlives the problem's
+  // use of it.
+  void setProcessGroup(const ProcessGroup* group) { group_ = group; }
+  const ProcessGroup* processGroup() const override { return group_; }
 
   // Velocity change of every body from impulses gamma: dv = M^-1 D gamma (adds into dv, dw).
   void applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const;
@@ -120,6 +126,7 @@ class ContactProblem final : public CcpProblem {
                                                 const std::vector<ConstraintRow>* rows);
   void buildAdjacency(int64_t nb);
   void computeJacobiSteps(int64_t nb);
+  void shareBodySums(std::vector<real>& per_body) const;  // with a group: the shared bodies' sums over processes
   // Gauss-Seidel's block k: its gradient from delta_, and delta_ updated by a change dg of its impulses.
   void gsBlockGradient(int64_t k, real* y) const;
   void gsApplyBlockChange(int64_t k, const real* dg) const;
@@ -127,6 +134,7 @@ class ContactProblem final : public CcpProblem {
   void gsRowSweep(int64_t k, real* gamma, real w) const;
 
   int threads_ = 1;
+  const ProcessGroup* group_ = nullptr;
   int64_t nc_ = 0;   // contacts
   int64_t ncb_ = 0;  // contact blocks: nc_, or ceil(nc_ / 3) when normal_only_
   bool normal_only_ = false;

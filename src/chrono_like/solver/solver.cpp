@@ -61,17 +61,34 @@ int solverThreads(const CcpProblem& p) { return p.size() / 3 < kSerialContacts ?
 
 // The OpenMP execution backend of the algorithm templates (solver_algorithms.h): every map is a static
 // parallel loop over blocks, every reduction a detail::blockReduce (bitwise identical for any thread count).
+// A problem shared by several processes (CcpProblem::processGroup) maps over its own blocks and sums each
+// reduction over the processes (one collective per reduction); the block count and the largest diagonal are the
+// whole problem's.
 class CpuOps {
  public:
   static constexpr bool kDeviceLoop = false;
-  explicit CpuOps(const CcpProblem& p) : p_(p), T_(solverThreads(p)), nb_(p.size() / 3), ws_(workspace()) {}
+  explicit CpuOps(const CcpProblem& p)
+      : p_(p), T_(solverThreads(p)), nb_(p.size() / 3), ws_(workspace()), group_(p.processGroup()) {
+    total_ = nb_;
+    max_diag_ = p.maxDiagonal();
+    if (group_) {
+      double v[1] = {double(nb_)};
+      group_->sum(v, 1);
+      total_ = int64_t(v[0]);
+      // A process without blocks has no diagonal (its problem says 1): the largest of the others', or 1 where no
+      // process has any (ContactProblem::maxDiagonal's rule).
+      const double d = group_->max(nb_ > 0 ? double(p.maxDiagonal()) : 0.0);
+      max_diag_ = d > 0 ? real(d) : real(1);
+    }
+  }
   int64_t blocks() const { return nb_; }
+  int64_t totalBlocks() const { return total_; }
   BlockSet blockSet() const { return p_.blockSet(); }
   const real* rhs() const { return p_.rhs(); }
   const real* blockSteps() const { return p_.blockSteps(); }
   const real* jacobiSteps() const { return p_.jacobiSteps(); }
   const real* blockInverses() const { return p_.blockInverses(); }
-  real maxDiagonal() const { return p_.maxDiagonal(); }
+  real maxDiagonal() const { return max_diag_; }
   real* vec(int i) { return ws_.get(i, 3 * nb_); }
   void schur(const real* x, real* y) { p_.schur(x, y); }
   template <class F>
@@ -83,6 +100,7 @@ class CpuOps {
   template <int M, class F>
   void reduce(const F& f, double* out) {
     detail::blockReduce<M>(nb_, T_, ws_.part, out, [&](int64_t k, double* acc) { f(k, acc); });
+    if (group_) group_->sum(out, M);
   }
   template <int M, class F>
   void reduceLater(const F& f, double* out) {  // on the host the sum is there at once
@@ -98,6 +116,9 @@ class CpuOps {
   int T_;
   int64_t nb_;
   Workspace& ws_;
+  const ProcessGroup* group_;
+  int64_t total_ = 0;
+  real max_diag_ = 1;
 };
 
 }  // namespace

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "chrono_like/base/hd.h"
+#include "chrono_like/solver/process_group.h"
 #include "chrono_like/solver/solver_kernels.h"
 
 namespace dvi {
@@ -170,6 +171,9 @@ class CcpProblem {
   virtual const real* blockInverses() const = 0;
   // Largest diagonal entry of N (scales the residual's alpha).
   virtual real maxDiagonal() const = 0;
+  // The processes that solve this problem together (process_group.h), each its own blocks; null: this process
+  // alone. The CPU solvers then sum every reduction over them and take the largest diagonal of all.
+  virtual const ProcessGroup* processGroup() const { return nullptr; }
 
   void project(real* x) const;                           // x <- P_Y(x)
   void applyBlockInverse(const real* x, real* y) const;  // y = B^-1 x, B = block diagonal of N

@@ -18,6 +18,8 @@
 //                                                next fetch() at the latest (the GPU reads several at once)
 //   void fetch();                                completes every reduceLater since the last fetch
 //   void copy(const real* src, real* dst);       3 blocks() reals
+//   int64_t totalBlocks() const;                 optional: the blocks of every process sharing the problem
+//                                                (process_group.h); blocks() where absent (totalBlocks below)
 //   static constexpr bool kDeviceLoop;           true: p.apgdIterate(...) runs the APGD iterations itself
 //                                                (same signature as algo::apgdIterate, same ApgdControl)
 #pragma once
@@ -43,6 +45,22 @@ inline int freeBuffer(int count, int a, int b, int c) {
   for (int i = 0; i < count; ++i)
     if (i != a && i != b && i != c) return i;
   return -1;
+}
+
+// The blocks of the whole problem: Ops::totalBlocks() where the backend splits it over processes
+// (process_group.h), else blocks(). An empty problem and the Lipschitz start read it, so that every process takes
+// the same branch.
+template <class Ops>
+auto totalBlocks(const Ops& p, int) -> decltype(p.totalBlocks()) {
+  return p.totalBlocks();
+}
+template <class Ops>
+int64_t totalBlocks(const Ops& p, long) {
+  return p.blocks();
+}
+template <class Ops>
+int64_t totalBlocks(const Ops& p) {
+  return totalBlocks(p, 0);
 }
 
 template <class Ops>
@@ -97,7 +115,7 @@ real lipschitzLowerBound(Ops& p, real* e, real* Ne) {
   double s;
   lipschitzProduct(p, e, Ne, &s);
   p.fetch();
-  return lipschitzBound(s, p.blocks());
+  return lipschitzBound(s, totalBlocks(p));
 }
 
 // The start of every solver: x = P(warm start), then x <- s x with s = argmin_{s >= 0} f(s x), f(x) =
@@ -144,7 +162,7 @@ real scaledStart(Ops& p, real* x, real* Nx, real a, const char* who) {
 template <class Ops>
 SolverStats jacobi(Ops& p, real* gamma, const SolverSettings& s) {
   SolverStats st;
-  if (p.blocks() == 0) return st;
+  if (totalBlocks(p) == 0) return st;
   const BlockSet bs = p.blockSet();
   const real* r = p.rhs();
   const real a = alphaOf(p, s), inv_a = real(1) / a;
@@ -357,7 +375,7 @@ void apgdIterate(Ops& p, ApgdControl& c, real* const* X, real* const* NX, real a
 template <class Ops>
 SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   SolverStats st;
-  if (p.blocks() == 0) return st;
+  if (totalBlocks(p) == 0) return st;
   const BlockSet bs = p.blockSet();
   const real* r = p.rhs();
   const real a = alphaOf(p, s), inv_a = real(1) / a;
@@ -394,7 +412,7 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
   c.min_iterations = s.min_iterations;
   c.done = reachedStop(c.res, c.tolerance, 0, s.min_iterations) || !(s.max_iterations > 0);
   if (!c.done) {
-    c.L = lipschitzBound(squares, p.blocks());
+    c.L = lipschitzBound(squares, totalBlocks(p));
     c.setSpeculation(specs, both);
     c.pick();
     c.speculate();
@@ -431,7 +449,7 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
 template <class Ops>
 SolverStats bb(Ops& p, real* gamma, const SolverSettings& s) {
   SolverStats st;
-  if (p.blocks() == 0) return st;
+  if (totalBlocks(p) == 0) return st;
   const BlockSet bs = p.blockSet();
   const real* eta = p.blockSteps();
   const real* r = p.rhs();

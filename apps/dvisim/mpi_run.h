@@ -1,0 +1,31 @@
+// `dvisim run SCENE` over several processes: `mpirun -np K dvisim run SCENE ...` steps a plain (non-CES) scene with
+// the domain decomposition (chrono_like/mpi/distributed_system.h); process 0 writes summary.json and bodies.csv,
+// every body in scene order. Built where MPI is (DVISIM_HAVE_MPI); the same binary started without mpirun runs as
+// before.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace dvi {
+class Scene;
+struct SystemConfig;
+}  // namespace dvi
+
+// MPI_Init when this process was started by mpirun (an Open MPI or PMI launcher's environment), MPI_Finalize at the
+// end; nothing otherwise.
+class MpiSession {
+ public:
+  MpiSession(int* argc, char*** argv);
+  ~MpiSession();
+  MpiSession(const MpiSession&) = delete;
+  MpiSession& operator=(const MpiSession&) = delete;
+};
+
+// Processes of this run: MPI_COMM_WORLD's size under mpirun, else 1.
+int mpiProcesses();
+
+// The scene's run over mpiProcesses() processes, steps of cfg.step.dt; results into `out` (process 0). `backend`:
+// auto or cpu (the GPU and Bullet backends do not run over several processes: InputError).
+int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps, const std::string& out,
+                const std::string& backend);

@@ -1,0 +1,126 @@
+// The System over several MPI processes by domain decomposition (docs/ARCHITECTURE.md, "Domain decomposition over
+// MPI"): every process owns the dynamic bodies whose centre lies in its box of a recursive coordinate bisection
+// (bisection.h), holds copies (ghosts) of its neighbours' bodies near its box and every fixed or kinematic body, and
+// steps a System of those bodies whose contacts it owns. The solve runs over all processes (solver/process_group.h):
+// the Schur product exchanges the shared bodies' velocity changes, every reduction is summed over the processes,
+// so the iterates equal one process's up to the order of summation. After each step the bodies that left a box
+// move to their new owner, with the warm-start impulses of the contacts they own.
+//
+// Every process adds the same bodies in the same order (the scene): the bodies' descriptions (shapes, masses,
+// materials) are kept on every process, their state (position, rotation, velocities) only on the owner.
+// A collective object: every process calls the same methods in the same order. APGD, Jacobi or BB; Gauss-Seidel,
+// constraint rows, rolling or spinning friction, Bullet's collision and dynamic planes are refused (InputError).
+#pragma once
+
+#include <mpi.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "chrono_like/mpi/bisection.h"
+#include "chrono_like/mpi/mpi_group.h"
+#include "chrono_like/system.h"
+
+namespace dvi {
+
+struct DecompositionSettings {
+  // Recompute the bisection (re-balance) after a step whose largest owned count exceeds this times the mean
+  // (> 1). Default 1.2.
+  real rebalance_ratio = real(1.2);
+  // Factor (>= 1) on the ghost width: 2 x the largest bounding radius + the largest collision envelope + 2 x the
+  // largest sweep of a step (the farthest two bodies' centres can be and still touch). Default 1.5.
+  real ghost_safety = real(1.5);
+};
+
+struct MotionState {
+  Vec3 pos;
+  Quat rot;
+  Vec3 vel, omega;
+};
+
+// Bodies handed between processes since construction, per other process (index = rank).
+struct MigrationLog {
+  std::vector<int64_t> sent;      // to that process
+  std::vector<int64_t> received;  // from it
+  int64_t rebalances = 0;         // bisections recomputed after the first
+};
+
+class DistributedSystem {
+ public:
+  // comm is duplicated (the object's messages never meet the caller's). config as for System: its solver must not be
+  // Gauss-Seidel and its collision backend must be native (InputError).
+  DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings = {});
+  ~DistributedSystem();
+  DistributedSystem(const DistributedSystem&) = delete;
+  DistributedSystem& operator=(const DistributedSystem&) = delete;
+
+  // Adds a body on every process (call with the same bodies in the same order everywhere) before the first step;
+  // validated as System::addBody does. Returns its global id (the order of addition).
+  int addBody(const BodyDesc& desc);
+  void step();
+  void advance(int steps) {
+    for (int i = 0; i < steps; ++i) step();
+  }
+
+  int rank() const { return rank_; }
+  int processes() const { return size_; }
+  size_t bodyCount() const { return descs_.size(); }
+  size_t dynamicCount() const { return dynamic_.size(); }
+  // Global ids of the dynamic bodies this process owns, ascending (fixed and kinematic bodies are every process's).
+  const std::vector<int32_t>& ownedIds() const { return owned_; }
+  // Every body's state in global order, on every process (collective).
+  std::vector<MotionState> gatherState() const;
+  // This process's System of the last step (its contacts are the ones it owns) and the global id of each of its
+  // bodies. Null before the first step.
+  const System* local() const { return sys_.get(); }
+  const std::vector<int32_t>& localIds() const { return local_ids_; }
+  const MigrationLog& migrations() const { return log_; }
+  const Bisection& bisection() const { return tree_; }
+  double time() const { return time_; }
+  int64_t stepCount() const { return steps_; }
+
+ private:
+  struct WarmEntry {  // a contact's impulses by global key, kept by the owner of its owning body
+    uint64_t key;
+    int32_t body_a, body_b, owner;  // global ids; owner: the pair's smaller dynamic id (-1: none)
+    real gamma[3];
+  };
+  struct Record {  // a body's state on the wire
+    int32_t id;
+    MotionState s;
+  };
+  void start();
+  real ghostWidth() const;
+  void exchangeGhosts(std::vector<std::vector<Record>>& ghosts);
+  void buildLocal(const std::vector<std::vector<Record>>& ghosts);
+  void setLocalWarmStart();
+  void readBack();
+  void migrate();
+  void rebalanceIfNeeded();
+  int32_t pairOwner(int32_t a, int32_t b) const;
+
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  int rank_ = 0, size_ = 1;
+  SystemConfig config_;
+  DecompositionSettings settings_;
+  std::vector<BodyDesc> descs_;
+  std::vector<int32_t> shape_start_;  // global index of each body's first shape
+  std::vector<uint8_t> replicated_;   // fixed or kinematic: on every process
+  std::vector<real> radius_;          // bounding radius about the centre
+  std::vector<int32_t> dynamic_, fixed_;
+  std::vector<MotionState> state_;  // current for owned and replicated bodies
+  std::vector<int32_t> owned_;
+  std::vector<WarmEntry> warm_;
+  Bisection tree_;
+  bool started_ = false;
+  std::unique_ptr<MpiGroup> group_;
+  std::unique_ptr<System> sys_;
+  std::vector<int32_t> local_ids_;  // per local body: global id
+  std::vector<int32_t> local_of_;   // per global id: local index or -1
+  MigrationLog log_;
+  double time_ = 0;
+  int64_t steps_ = 0;
+};
+
+}  // namespace dvi
