@@ -125,6 +125,12 @@ TEST_CASE("sweep: Student-t 95% interval against tabulated quantiles and hand-co
   CHECK(one.mean == 7.0);
   CHECK(std::isnan(one.half));
   CHECK(meanCi({}).n == 0);
+
+  // Paired differences over the seeds in both (seed 4 only in one): {1, 2, 3}, mean 2, s = 1, half = t_{0.975,2}/sqrt(3).
+  const MeanCi p = pairedDifference({{1, 10.0}, {2, 20.0}, {3, 30.0}}, {{1, 11.0}, {2, 22.0}, {3, 33.0}, {4, 99.0}});
+  CHECK(p.n == 3);
+  CHECK(p.mean == Approx(2));
+  CHECK(p.half == Approx(0.95 * std::sqrt(2 / (1 - 0.95 * 0.95)) / std::sqrt(3.0)).epsilon(1e-9));
 }
 
 TEST_CASE("sweep: metrics from summary.json, ces.metrics first, else every number flattened", "[sweep]") {
@@ -268,6 +274,22 @@ TEST_CASE("sweep: quick CES sweep, 3 voltages x 3 drum speeds x 2 seeds", "[swee
     CHECK(std::stod(s.at(fed + ".ci95")) == Approx(12.7062 * std::fabs(a - b) / 2).epsilon(1e-4));
   }
   CHECK(settings.size() == 9);
+  // paired.csv: each setting k >= 1 against setting 0, seed by seed, from runs.csv.
+  const auto paired = readCsv(d / "paired.csv");
+  REQUIRE(paired.size() == 8);
+  auto value = [&](size_t setting, const std::string& seed) {
+    for (const auto& row : runs)
+      if (row.at("setting") == std::to_string(setting) && row.at("seed") == seed) return std::stod(row.at(fed));
+    return std::nan("");
+  };
+  for (size_t k = 1; k < 9; ++k) {
+    const auto& p = paired[k - 1];
+    CHECK(p.at("setting") == std::to_string(k));
+    CHECK(p.at("n") == "2");
+    const double d1 = value(k, "1") - value(0, "1"), d2 = value(k, "2") - value(0, "2");
+    CHECK(std::stod(p.at(fed + ".diff")) == Approx((d1 + d2) / 2).margin(1e-12));
+    CHECK(std::stod(p.at(fed + ".ci95")) == Approx(12.7062 * std::fabs(d1 - d2) / 2).epsilon(1e-4).margin(1e-15));
+  }
   if (r.out.find("not written") == std::string::npos) {  // python3 with matplotlib present: one plot per swept key
     CHECK(fs::is_regular_file(d / "sweep_electrode.voltage_kV.png"));
     CHECK(fs::is_regular_file(d / "sweep_drum.rpm.png"));

@@ -8,7 +8,8 @@
 // output in run.log there; up to --jobs at a time (one per GPU, through CUDA_VISIBLE_DEVICES, when the runs go to
 // GPUs). A case whose child exited 0 with a readable summary.json gets the marker sweep_done.json (written
 // atomically), and a re-run with the same arguments (DIR/sweep.json) skips it. Outputs: DIR/runs.csv,
-// DIR/summary.csv (mean and Student-t 95% half-width per setting), DIR/sweep_<key>.png (scripts/plot_sweep.py).
+// DIR/summary.csv (mean and Student-t 95% half-width per setting), DIR/paired.csv (each setting against the first,
+// seed by seed), DIR/sweep_<key>.png (scripts/plot_sweep.py).
 // The design and the statistics are in sweep.h; docs/SWEEP.md is the user's guide.
 #include "sweep.h"
 
@@ -483,6 +484,37 @@ void writeSummaryCsv(const SweepOptions& o, const Design& d, const std::vector<C
   dvi::writeFileAtomic(o.out + "/summary.csv", s.str());
 }
 
+// Per setting after the first and per metric: the paired difference against setting 0, seed by seed (sweep.h:
+// pairedDifference): seeds in both, mean difference and its 95% half-width.
+void writePairedCsv(const SweepOptions& o, const Design& d, const std::vector<Case>& cases,
+                    const std::vector<Row>& rows) {
+  const std::vector<std::string> names = metricNames(rows);
+  std::vector<std::map<std::string, std::map<int, double>>> by(d.settings.size());  // setting -> metric -> seed
+  for (size_t i = 0; i < cases.size(); ++i)
+    if (rows[i].ok)
+      for (const auto& kv : rows[i].metrics) by[cases[i].setting][kv.first][cases[i].seed] = kv.second;
+  std::ostringstream s;
+  s << "setting";
+  for (const std::string& k : d.keys) s << "," << dvi::benchutil::csvField(k);
+  s << ",n";
+  for (const std::string& n : names)
+    s << "," << dvi::benchutil::csvField(n) << ".diff," << dvi::benchutil::csvField(n) << ".ci95";
+  s << "\n";
+  for (size_t k = 1; k < d.settings.size(); ++k) {
+    s << k;
+    for (const auto& kv : d.settings[k]) s << "," << dvi::benchutil::csvField(kv.second);
+    size_t n = 0;
+    std::ostringstream cols;
+    for (const std::string& m : names) {
+      const MeanCi c = pairedDifference(by[0][m], by[k][m]);
+      n = std::max(n, c.n);
+      cols << "," << num(c.mean) << "," << num(c.half);
+    }
+    s << "," << n << cols.str() << "\n";
+  }
+  dvi::writeFileAtomic(o.out + "/paired.csv", s.str());
+}
+
 // scripts/plot_sweep.py plots the grade and recovery metrics (names containing "grade" or "recovery").
 std::string plots(const std::string& out, const std::vector<Row>& rows) {
   for (const std::string& n : metricNames(rows))
@@ -508,6 +540,7 @@ int runSweep(const SweepOptions& o) {
   const std::vector<Row> rows = collectRows(cases, codes);
   writeRunsCsv(o, d, cases, rows);
   writeSummaryCsv(o, d, cases, rows);
+  if (d.settings.size() > 1) writePairedCsv(o, d, cases, rows);
   size_t failed = 0;
   for (size_t i = 0; i < cases.size(); ++i)
     if (!rows[i].ok) {
@@ -515,7 +548,7 @@ int runSweep(const SweepOptions& o) {
       std::fprintf(stderr, "dvisim: run %s failed (exit %d), log: %s\n", cases[i].id.c_str(), rows[i].exit_code,
                    (cases[i].dir / "run.log").c_str());
     }
-  std::printf("results: %s/ (sweep.json, runs.csv, summary.csv, runs/)\n", o.out.c_str());
+  std::printf("results: %s/ (sweep.json, runs.csv, summary.csv, paired.csv, runs/)\n", o.out.c_str());
   if (!o.no_plots) std::printf("%s\n", plots(o.out, rows).c_str());
   if (g_stopped) {
     std::fflush(stdout);

@@ -215,4 +215,18 @@ inline MeanCi meanCi(const std::vector<double>& x) {
   return r;
 }
 
+// A setting against the baseline with common random numbers: replicate seed s runs every setting from the same
+// random input (the same feed, the same generated bodies), so the difference of a metric taken seed by seed has a
+// much smaller spread than either value, and its confidence interval resolves effects the per-setting intervals do
+// not (paired comparison; Law, Simulation Modeling and Analysis, 5th ed. (2015), sec. 11.2 "common random numbers";
+// Montgomery & Runger, sec. 10-4, the paired t-test). `base` and `other` map seed -> value; seeds present in both.
+inline MeanCi pairedDifference(const std::map<int, double>& base, const std::map<int, double>& other) {
+  std::vector<double> d;
+  for (const auto& kv : other) {
+    auto it = base.find(kv.first);
+    if (it != base.end()) d.push_back(kv.second - it->second);
+  }
+  return meanCi(d);
+}
+
 }  // namespace dvi::sweep

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <functional>
 #include <string>
+#include <typeinfo>
 
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
@@ -700,8 +701,12 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
 
 // Bullet's AABB update (btCollisionWorld::updateAabbs: every object when m_forceUpdateAllAabbs, else the active
 // ones; each box grown by the contact breaking threshold and, with continuous collision, joined with the box at the
-// interpolation transform), with the boxes computed in parallel; the broad phase's setAabb stays serial. A moving
-// box too large for the broad phase goes to Bullet's own updateSingleAabb, which deactivates the object and reports.
+// interpolation transform), with the boxes computed in parallel. With Bullet's btDbvtBroadphase and no ghost objects,
+// a box inside its leaf's grown volume changes neither tree and is written into its own proxy there (what setAabb
+// does in that case, less moving the proxy to the newest stage, which only orders the incremental tree optimisation
+// of calculateOverlappingPairs; with ghost objects, which need that, every box goes through setAabb). The other
+// boxes go through the broad phase's setAabb, serially; a moving box too large for it goes to Bullet's own
+// updateSingleAabb, which deactivates the object and reports.
 void DviDynamicsWorld::updateAabbs() {
   const int n = m_collisionObjects.size();
   aabb_lo_.resize(size_t(n));
@@ -709,9 +714,10 @@ void DviDynamicsWorld::updateAabbs() {
   aabb_set_.resize(size_t(n));
   const btVector3 grow(gContactBreakingThreshold, gContactBreakingThreshold, gContactBreakingThreshold);
   const bool continuous = getDispatchInfo().m_useContinuous;
+  const bool dbvt = ghosts_ == 0 && dynamic_cast<btDbvtBroadphase*>(m_broadphasePairCache) != nullptr;
 #pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int i = 0; i < n; ++i) {
-    const btCollisionObject* o = m_collisionObjects[i];
+    btCollisionObject* o = m_collisionObjects[i];
     aabb_set_[size_t(i)] = (m_forceUpdateAllAabbs || o->isActive()) && o->getBroadphaseHandle();
     if (!aabb_set_[size_t(i)]) continue;
     btVector3 lo, hi;
@@ -722,29 +728,60 @@ void DviDynamicsWorld::updateAabbs() {
       lo.setMin(lo2);
       hi.setMax(hi2);
     }
-    aabb_lo_[size_t(i)] = lo - grow;
-    aabb_hi_[size_t(i)] = hi + grow;
-  }
-  // Bullet's Dbvt broad phase: a box inside its leaf's grown volume changes neither tree, and is written into the
-  // proxy directly (what setAabb does there, less moving the proxy to the newest stage, which only orders the
-  // incremental tree optimisation of calculateOverlappingPairs; with ghost objects, which need that, setAabb).
-  auto* dbvt = ghosts_ == 0 ? dynamic_cast<btDbvtBroadphase*>(m_broadphasePairCache) : nullptr;
-  for (int i = 0; i < n; ++i) {
-    if (!aabb_set_[size_t(i)]) continue;
-    btCollisionObject* o = m_collisionObjects[i];
+    lo -= grow;
+    hi += grow;
     if (dbvt) {
       auto* p = static_cast<btDbvtProxy*>(o->getBroadphaseHandle());
-      if (p->leaf && p->leaf->volume.Contain(btDbvtVolume::FromMM(aabb_lo_[size_t(i)], aabb_hi_[size_t(i)]))) {
-        p->m_aabbMin = aabb_lo_[size_t(i)];
-        p->m_aabbMax = aabb_hi_[size_t(i)];
+      if (p->leaf && p->leaf->volume.Contain(btDbvtVolume::FromMM(lo, hi))) {
+        p->m_aabbMin = lo;
+        p->m_aabbMax = hi;
+        aabb_set_[size_t(i)] = 0;
         continue;
       }
     }
+    aabb_lo_[size_t(i)] = lo;
+    aabb_hi_[size_t(i)] = hi;
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!aabb_set_[size_t(i)]) continue;
+    btCollisionObject* o = m_collisionObjects[i];
     if (o->isStaticObject() || (aabb_hi_[size_t(i)] - aabb_lo_[size_t(i)]).length2() < btScalar(1e12))
       m_broadphasePairCache->setAabb(o->getBroadphaseHandle(), aabb_lo_[size_t(i)], aabb_hi_[size_t(i)], m_dispatcher1);
     else
       updateSingleAabb(o);
   }
+}
+
+// Bullet's motion-state update (btDiscreteDynamicsWorld::synchronizeMotionStates: every rigid body when
+// m_synchronizeAllMotionStates, else the active non-static ones; synchronizeSingleMotionState per body). Bodies with
+// Bullet's own btDefaultMotionState (which writes only itself) go in parallel; an app's motion states are user code
+// and are called one after the other, in order.
+void DviDynamicsWorld::synchronizeMotionStates() {
+  const bool all = m_synchronizeAllMotionStates;
+  const int n = all ? m_collisionObjects.size() : m_nonStaticRigidBodies.size();
+  aabb_set_.resize(size_t(n));  // scratch: 1 for an app's motion state
+  auto bodyAt = [&](int i) { return all ? btRigidBody::upcast(m_collisionObjects[i]) : m_nonStaticRigidBodies[i]; };
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
+  for (int i = 0; i < n; ++i) {
+    btRigidBody* b = bodyAt(i);
+    aabb_set_[size_t(i)] = 0;
+    if (!b || (!all && !b->isActive())) continue;
+    const btMotionState* ms = b->getMotionState();
+    if (ms && typeid(*ms) != typeid(btDefaultMotionState)) {
+      aabb_set_[size_t(i)] = 1;
+      continue;
+    }
+    synchronizeSingleMotionState(b);
+  }
+  for (int i = 0; i < n; ++i)
+    if (aabb_set_[size_t(i)]) synchronizeSingleMotionState(bodyAt(i));
+}
+
+// Bullet's force reset (btDiscreteDynamicsWorld::clearForces, every non-static rigid body), in parallel.
+void DviDynamicsWorld::clearForces() {
+  const int n = m_nonStaticRigidBodies.size();
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
+  for (int i = 0; i < n; ++i) m_nonStaticRigidBodies[i]->clearForces();
 }
 
 void DviDynamicsWorld::releaseManifolds() {

@@ -115,6 +115,11 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void removeCollisionObject(btCollisionObject* object) override;
   void removeConstraint(btTypedConstraint* constraint) override;
   void applyGravity() override {}  // the System applies gravity (see above)
+  // Bullet's own per-object loops, with the same results, in parallel where Bullet's objects allow it (a large world
+  // spent most of its host time in them): AABBs into the broad phase, motion states, forces cleared.
+  void updateAabbs() override;
+  void synchronizeMotionStates() override;
+  void clearForces() override;
 
   // Our API.
   const std::vector<WorldContact>& contacts() const { return contacts_; }  // last sub-step's contacts
@@ -182,7 +187,6 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void syncOut();
   void updateSleeping(btScalar h);
   void wakeTouchedByKinematic();
-  void updateAabbs() override;
   void collectContacts();
   void buildWorldContacts();
   void fillManifolds();
