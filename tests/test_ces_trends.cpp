@@ -19,7 +19,9 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <map>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -33,6 +35,29 @@ json readJson(const fs::path& p) {
   std::stringstream s;
   s << f.rdbuf();
   return json::parse(s.str());
+}
+
+// Rows of a CSV file with a header line (plain comma-separated, no quoting), as name -> text.
+std::vector<std::map<std::string, std::string>> readCsv(const fs::path& p) {
+  std::ifstream f(p);
+  std::string line;
+  std::vector<std::string> head;
+  std::vector<std::map<std::string, std::string>> rows;
+  auto split = [](const std::string& l) {
+    std::vector<std::string> v;
+    std::stringstream ss(l);
+    std::string x;
+    while (std::getline(ss, x, ',')) v.push_back(x);
+    return v;
+  };
+  if (std::getline(f, line)) head = split(line);
+  while (std::getline(f, line)) {
+    const std::vector<std::string> v = split(line);
+    std::map<std::string, std::string> r;
+    for (size_t i = 0; i < head.size() && i < v.size(); ++i) r[head[i]] = v[i];
+    rows.push_back(r);
+  }
+  return rows;
 }
 
 double num(const json& m, const char* key) {
@@ -67,6 +92,23 @@ TEST_CASE("CES trends of the default machine: landing, induced sign, onset, pinn
     CHECK((*s)["balance_closes"] == true);
     CHECK((*s)["lost_particles"] == 0);
     CHECK(double((*s)["collected_mass_kg"]) >= 0.98 * double((*s)["fed_mass_kg"]));
+  }
+
+  // The landing of the collected copper by charge sign (metrics copper.mean_landing_q_pos_mm / _q_neg_mm), from the
+  // run's own particle tables: mass-weighted x' of the copper whose final charge is > 0 / <= 0.
+  {
+    std::map<std::string, std::map<std::string, std::string>> parts;
+    for (const auto& r : readCsv(dir / "runs" / "002-seed1" / "ces_particles.csv")) parts[r.at("body")] = r;
+    double xm[2] = {0, 0}, mm[2] = {0, 0};
+    for (const auto& c : readCsv(dir / "runs" / "002-seed1" / "ces_collected.csv")) {
+      if (c.at("material") != "copper") continue;
+      const int pos = std::stod(parts.at(c.at("body")).at("charge_C")) > 0 ? 1 : 0;
+      xm[pos] += std::stod(c.at("mass_kg")) * std::stod(c.at("x_mm"));
+      mm[pos] += std::stod(c.at("mass_kg"));
+    }
+    REQUIRE(mm[1] > 0);
+    CHECK(num(m45, "copper.mean_landing_q_pos_mm") == Approx(xm[1] / mm[1]).epsilon(1e-6));
+    if (mm[0] > 0) CHECK(num(m45, "copper.mean_landing_q_neg_mm") == Approx(xm[0] / mm[0]).epsilon(1e-6));
   }
 
   // (c) Below onset (-8 kV; onset -11.9 kV): no ions, no plastic pinned.

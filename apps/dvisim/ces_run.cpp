@@ -270,7 +270,7 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
   const SplitterCell& best = table.cells[table.best];
   const size_t nm = cfg.materials.size();
   std::vector<int64_t> fed(nm, 0), pinned(nm, 0), binned(nm, 0), col_fg(nm, 0), col_n(nm, 0), positive(nm, 0);
-  std::vector<double> x_fg(nm, 0), q_sum(nm, 0);
+  std::vector<double> x_fg(nm, 0), q_sum(nm, 0), x_pos(nm, 0), fg_pos(nm, 0), x_neg(nm, 0), fg_neg(nm, 0);
   for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) {
     const size_t k = size_t(p.material[i]);
     fed[k] += p.mass_fg[i];
@@ -290,6 +290,8 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
     const double q = double(p.charge[size_t(c.body)]);
     q_sum[k] += q;
     positive[k] += q > 0;
+    (q > 0 ? x_pos : x_neg)[k] += c.x * double(c.mass_fg);  // by charge sign: a conductor's induced one or not
+    (q > 0 ? fg_pos : fg_neg)[k] += double(c.mass_fg);
     const int bin = c.x < best.s1 ? kBinNonconductor : c.x < best.s2 ? kBinMiddling : kBinConductor;
     if (bin == ownBin(c.kind)) binned[k] += c.mass_fg;
   }
@@ -302,6 +304,8 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
     o[n + ".mean_landing_mm"] = numberOrNull(col_fg[k] > 0 ? 1e3 * x_fg[k] / double(col_fg[k]) : std::nan(""));
     o[n + ".mean_charge_C"] = numberOrNull(col_n[k] > 0 ? q_sum[k] / double(col_n[k]) : std::nan(""));
     o[n + ".positive_charge_fraction"] = numberOrNull(frac(positive[k], col_n[k]));
+    o[n + ".mean_landing_q_pos_mm"] = numberOrNull(fg_pos[k] > 0 ? 1e3 * x_pos[k] / fg_pos[k] : std::nan(""));
+    o[n + ".mean_landing_q_neg_mm"] = numberOrNull(fg_neg[k] > 0 ? 1e3 * x_neg[k] / fg_neg[k] : std::nan(""));
     o[n + ".recovery"] = numberOrNull(frac(binned[k], fed[k]));
     o["pinned." + n] = numberOrNull(frac(pinned[k], fed[k]));
   }
