@@ -777,6 +777,21 @@ void DviDynamicsWorld::synchronizeMotionStates() {
     if (aabb_set_[size_t(i)]) synchronizeSingleMotionState(bodyAt(i));
 }
 
+// Bullet's kinematic-velocity update (btDiscreteDynamicsWorld::saveKinematicState: every kinematic rigid body not
+// asleep derives its velocity from its motion state's pose). The kinematic bodies are found in parallel; their
+// motion states (an app's code) are called one after the other, in order.
+void DviDynamicsWorld::saveKinematicState(btScalar timeStep) {
+  const int n = m_collisionObjects.size();
+  aabb_set_.resize(size_t(n));  // scratch: 1 for a kinematic body to update
+#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
+  for (int i = 0; i < n; ++i) {
+    const btRigidBody* b = btRigidBody::upcast(m_collisionObjects[i]);
+    aabb_set_[size_t(i)] = b && b->getActivationState() != ISLAND_SLEEPING && b->isKinematicObject();
+  }
+  for (int i = 0; i < n; ++i)
+    if (aabb_set_[size_t(i)]) btRigidBody::upcast(m_collisionObjects[i])->saveKinematicState(timeStep);
+}
+
 // Bullet's force reset (btDiscreteDynamicsWorld::clearForces, every non-static rigid body), in parallel.
 void DviDynamicsWorld::clearForces() {
   const int n = m_nonStaticRigidBodies.size();

@@ -153,6 +153,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
 
  protected:
   void internalSingleStepSimulation(btScalar timeStep) override;
+  void saveKinematicState(btScalar timeStep) override;  // Bullet's, with the kinematic bodies found in parallel
 
  private:
   struct Tracked {
