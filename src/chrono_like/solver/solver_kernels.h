@@ -417,7 +417,7 @@ template <class V>
 DVI_HD void apgdTestBlock(const BlockSet& s, int64_t k, const real* c, const real* o, const V* nc, const V* no,
                           const real* g, const V* ng, const real* r3, real eta, real beta, real a, real inv_a,
                           bool grad_form, double* acc, const ApgdSpeculation sp = {}) {
-  real grad_n[3], xa[3], xr[3];
+  real grad_n[3], xa[3] = {0, 0, 0}, xr[3] = {0, 0, 0};  // written and read only where sp asks (GCC cannot see it)
   apgdTestSums<V>(c, o, nc, no, g, ng, r3, eta, beta, grad_form, acc, sp, grad_n, xa, xr);
   acc[2] += blockResidual2(s, k, g, grad_n, a, inv_a);
   if (sp.xa) {
