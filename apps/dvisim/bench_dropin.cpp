@@ -439,7 +439,8 @@ int runDropin(const DropinOptions& o) {
         r.bodies = w->bodies.size();
         r.constraints = w->constraints.size();
         for (int s = 0; s < scene_warmup; ++s) w->world->stepSimulation(btScalar(1.0 / 60), 1, btScalar(1.0 / 60));
-        if (w->ours && cpu_device.empty() && engine == "cpu") cpu_device = w->ours->system().deviceName();
+        if (w->ours && cpu_device.empty() && (engine == "cpu" || engine == "cpu-si"))
+          cpu_device = w->ours->system().deviceName();
         if (w->ours) w->ours->resetPhaseTimes();
         worlds.push_back(std::move(w));
       } catch (const std::exception& e) {
