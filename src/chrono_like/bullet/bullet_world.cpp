@@ -904,9 +904,18 @@ void DviDynamicsWorld::fillManifolds() {
     if (!run.slot) continue;  // filled above
     for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(*run.slot, contacts_[size_t(k)]);
   }
-  if (size_t(used) == manifolds_.size()) return;                 // every manifold filled: none to release
+  if (size_t(used) == manifolds_.size()) return;  // every manifold filled: none to release
+  // A body asleep is held fixed, so a pair of resting bodies (asleep, or asleep and static) makes no contacts; its
+  // manifold keeps its last points while both rest, as Bullet's does (its dispatcher skips such pairs).
+  auto resting = [&](uint32_t i) {
+    const Tracked& t = tracked_[i];
+    return t.obj && (t.kind != 0 || t.obj->getActivationState() == ISLAND_SLEEPING);
+  };
   for (auto it = manifolds_.begin(); it != manifolds_.end();) {  // pairs that no longer touch
-    if (it->second.used == substeps_ && it->second.manifold->getNumContacts() > 0) {
+    const bool kept = it->second.used == substeps_
+                          ? it->second.manifold->getNumContacts() > 0
+                          : resting(uint32_t(it->first >> 32)) && resting(uint32_t(it->first & 0xffffffffu));
+    if (kept) {
       ++it;
       continue;
     }
