@@ -711,15 +711,15 @@ void DviDynamicsWorld::updateAabbs() {
   const int n = m_collisionObjects.size();
   aabb_lo_.resize(size_t(n));
   aabb_hi_.resize(size_t(n));
-  aabb_set_.resize(size_t(n));
+  object_flags_.resize(size_t(n));
   const btVector3 grow(gContactBreakingThreshold, gContactBreakingThreshold, gContactBreakingThreshold);
   const bool continuous = getDispatchInfo().m_useContinuous;
   const bool dbvt = ghosts_ == 0 && dynamic_cast<btDbvtBroadphase*>(m_broadphasePairCache) != nullptr;
 #pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int i = 0; i < n; ++i) {
     btCollisionObject* o = m_collisionObjects[i];
-    aabb_set_[size_t(i)] = (m_forceUpdateAllAabbs || o->isActive()) && o->getBroadphaseHandle();
-    if (!aabb_set_[size_t(i)]) continue;
+    object_flags_[size_t(i)] = (m_forceUpdateAllAabbs || o->isActive()) && o->getBroadphaseHandle();
+    if (!object_flags_[size_t(i)]) continue;
     btVector3 lo, hi;
     o->getCollisionShape()->getAabb(o->getWorldTransform(), lo, hi);
     if (continuous && o->getInternalType() == btCollisionObject::CO_RIGID_BODY && !o->isStaticOrKinematicObject()) {
@@ -735,7 +735,7 @@ void DviDynamicsWorld::updateAabbs() {
       if (p->leaf && p->leaf->volume.Contain(btDbvtVolume::FromMM(lo, hi))) {
         p->m_aabbMin = lo;
         p->m_aabbMax = hi;
-        aabb_set_[size_t(i)] = 0;
+        object_flags_[size_t(i)] = 0;
         continue;
       }
     }
@@ -743,7 +743,7 @@ void DviDynamicsWorld::updateAabbs() {
     aabb_hi_[size_t(i)] = hi;
   }
   for (int i = 0; i < n; ++i) {
-    if (!aabb_set_[size_t(i)]) continue;
+    if (!object_flags_[size_t(i)]) continue;
     btCollisionObject* o = m_collisionObjects[i];
     if (o->isStaticObject() || (aabb_hi_[size_t(i)] - aabb_lo_[size_t(i)]).length2() < btScalar(1e12))
       m_broadphasePairCache->setAabb(o->getBroadphaseHandle(), aabb_lo_[size_t(i)], aabb_hi_[size_t(i)], m_dispatcher1);
@@ -759,22 +759,22 @@ void DviDynamicsWorld::updateAabbs() {
 void DviDynamicsWorld::synchronizeMotionStates() {
   const bool all = m_synchronizeAllMotionStates;
   const int n = all ? m_collisionObjects.size() : m_nonStaticRigidBodies.size();
-  aabb_set_.resize(size_t(n));  // scratch: 1 for an app's motion state
+  object_flags_.resize(size_t(n));  // scratch: 1 for an app's motion state
   auto bodyAt = [&](int i) { return all ? btRigidBody::upcast(m_collisionObjects[i]) : m_nonStaticRigidBodies[i]; };
 #pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int i = 0; i < n; ++i) {
     btRigidBody* b = bodyAt(i);
-    aabb_set_[size_t(i)] = 0;
+    object_flags_[size_t(i)] = 0;
     if (!b || (!all && !b->isActive())) continue;
     const btMotionState* ms = b->getMotionState();
     if (ms && typeid(*ms) != typeid(btDefaultMotionState)) {
-      aabb_set_[size_t(i)] = 1;
+      object_flags_[size_t(i)] = 1;
       continue;
     }
     synchronizeSingleMotionState(b);
   }
   for (int i = 0; i < n; ++i)
-    if (aabb_set_[size_t(i)]) synchronizeSingleMotionState(bodyAt(i));
+    if (object_flags_[size_t(i)]) synchronizeSingleMotionState(bodyAt(i));
 }
 
 // Bullet's kinematic-velocity update (btDiscreteDynamicsWorld::saveKinematicState: every kinematic rigid body not
@@ -782,14 +782,14 @@ void DviDynamicsWorld::synchronizeMotionStates() {
 // motion states (an app's code) are called one after the other, in order.
 void DviDynamicsWorld::saveKinematicState(btScalar timeStep) {
   const int n = m_collisionObjects.size();
-  aabb_set_.resize(size_t(n));  // scratch: 1 for a kinematic body to update
+  object_flags_.resize(size_t(n));  // scratch: 1 for a kinematic body to update
 #pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int i = 0; i < n; ++i) {
     const btRigidBody* b = btRigidBody::upcast(m_collisionObjects[i]);
-    aabb_set_[size_t(i)] = b && b->getActivationState() != ISLAND_SLEEPING && b->isKinematicObject();
+    object_flags_[size_t(i)] = b && b->getActivationState() != ISLAND_SLEEPING && b->isKinematicObject();
   }
   for (int i = 0; i < n; ++i)
-    if (aabb_set_[size_t(i)]) btRigidBody::upcast(m_collisionObjects[i])->saveKinematicState(timeStep);
+    if (object_flags_[size_t(i)]) btRigidBody::upcast(m_collisionObjects[i])->saveKinematicState(timeStep);
 }
 
 // Bullet's force reset (btDiscreteDynamicsWorld::clearForces, every non-static rigid body), in parallel.

@@ -226,7 +226,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<uint8_t> changes_;     // syncIn: syncBody's answer per body
   std::vector<int32_t> dirty_state_, dirty_params_;  // uploadChanges' lists
   std::vector<btVector3> aabb_lo_, aabb_hi_;         // updateAabbs' boxes
-  std::vector<char> aabb_set_;
+  std::vector<char> object_flags_;                   // per Bullet object: scratch of the loops over m_collisionObjects
   std::vector<WorldContact> contacts_;
   int64_t untracked_contacts_ = 0;                        // this sub-step's contacts of bodies not tracked (left out)
   std::vector<Run> runs_;                                 // fillManifolds' runs of one body pair
