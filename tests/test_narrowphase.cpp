@@ -1374,3 +1374,68 @@ TEST_CASE("deferred deep MPR pairs finish to exactly the one-call contacts", "[n
   INFO(deferred << " of " << total << " pairs deferred");
   CHECK(deferred > total / 10);  // the split is exercised, not just the shallow path
 }
+
+// The pair envelope from relative motion (narrowphase.h: pairEnvelope) against the sum of the two sweeps it
+// replaced, for random pairs of every convex type with a large common velocity (a falling block, grains riding a
+// drum) plus random relative linear and angular velocities:
+//  - every point that the speculative rule keeps among those found with the sum of the sweeps lies within the
+//    relative envelope: the bound (a point of B moves relative to a point of A at most |v_b - v_a| + |w_a| L_a +
+//    |w_b| L_b, rigid-body kinematics) holds, so the smaller envelope drops no point the rule keeps;
+//  - the pair's nearest point within the relative envelope is found with it as with the larger one, at a distance
+//    as good or better (MPR's distance is a lower bound of the true one);
+//  - the relative envelope is never larger, and for most of these pairs under half the sum.
+TEST_CASE("speculative contacts: the relative-motion envelope keeps every point the sum of sweeps keeps",
+          "[narrowphase][speculative]") {
+  Rng rng(31);
+  std::vector<Vec3> pts;
+  pts.reserve(20000);
+  const real h = real(1) / 60;
+  int kept = 0, smaller = 0, pairs = 0, nearest = 0;
+  for (ShapeType ta : kConvexTypes)
+    for (ShapeType tb : kConvexTypes)
+      for (int it = 0; it < 40; ++it) {
+        Pair A = randomShape(ta, rng, pts), B = randomShape(tb, rng, pts);
+        const Pose pa = pose(Vec3{0.3, 0.2, 0.1}, rng.rot());
+        const real reach = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data());
+        const Pose pb = pose(pa.p + rng.dir() * (reach * rng.uni(0.6, 1.1)), rng.rot());
+        const Vec3 common = rng.dir() * rng.uni(0, 20);  // up to 20 m/s, shared
+        const PairMotion m{pa.p, common + rng.dir() * rng.uni(0, 2), rng.dir() * rng.uni(0, 10),
+                           pb.p, common + rng.dir() * rng.uni(0, 2), rng.dir() * rng.uni(0, 10)};
+        const real sa = shapeSweep(A.s, pts.data(), m.va, m.wa, h), sb = shapeSweep(B.s, pts.data(), m.vb, m.wb, h);
+        const real plain = plainEnvelope(A.s, B.s, real(0.05));
+        const real e_sum = std::fmax(plain, sa + sb), e_rel = pairEnvelope(A.s, B.s, real(0.05), sa, sb, h, m);
+        INFO(shapeTypeName(ta) << "-" << shapeTypeName(tb) << " #" << it << ": envelopes " << e_sum << ", " << e_rel);
+        REQUIRE(e_rel <= e_sum);
+        REQUIRE(e_rel >= plain);
+        smaller += e_rel < real(0.5) * e_sum;
+        ++pairs;
+        ContactPoint c_sum[kMaxContactsPerPair], c_rel[kMaxContactsPerPair];
+        const int n_sum = collideShapes(A.s, pa, B.s, pb, pts.data(), e_sum, c_sum);
+        const int n_rel = collideShapes(A.s, pa, B.s, pb, pts.data(), e_rel, c_rel);
+        const real size = std::fmin(A.s.size, B.s.size);
+        if (n_sum > 0 && c_sum[0].dist < e_rel - real(0.02) * size) {
+          // MPR's distance along its normal n, -h_A(n) - h_B(-n), is a lower bound of the true signed distance
+          // (the separation along any one direction), closer to the truth the better n is. With the smaller
+          // envelope it came out up to 10% of the size larger (better) for these pairs, never smaller beyond
+          // MPR's accuracy.
+          const real tol = c_sum[0].dist >= 0 ? real(1e-4) * size : real(0.01) * size;
+          INFO("nearest point " << c_sum[0].dist << ", " << n_rel << " found with the relative envelope");
+          REQUIRE(n_rel > 0);
+          CHECK(c_rel[0].dist >= c_sum[0].dist - tol);
+          ++nearest;
+        }
+        ContactPoint k_sum[kMaxContactsPerPair];
+        std::copy(c_sum, c_sum + n_sum, k_sum);
+        const int nk = keepSpeculativePoints(k_sum, n_sum, plain, h, m);
+        for (int i = 0; i < nk; ++i) {
+          INFO("kept point " << i << " of " << nk << ": dist " << k_sum[i].dist);
+          CHECK(k_sum[i].dist < e_rel);
+        }
+        kept += nk;
+      }
+  INFO(pairs << " pairs, " << kept << " points kept, " << nearest << " nearest points compared, " << smaller
+             << " pairs with a relative envelope under half the sum");
+  CHECK(kept > pairs / 4);  // the poses make contacts, so the bound is tested
+  CHECK(nearest > pairs / 4);
+  CHECK(smaller > pairs / 2);  // and the common velocity makes the relative envelope the smaller one
+}

@@ -390,7 +390,9 @@ __device__ PairPoses pairPoses(const NarrowArgs& A, int64_t i) {
   P.sb = A.shapes[P.b];
   P.wa = shapeWorldPose(Pose{A.pos[P.sa.body], A.rot[P.sa.body]}, P.sa);
   P.wb = shapeWorldPose(Pose{A.pos[P.sb.body], A.rot[P.sb.body]}, P.sb);
-  P.envelope = pairEnvelope(P.sa, P.sb, A.envelope_rel, A.sweep[P.a], A.sweep[P.b]);
+  const int32_t ba = P.sa.body, bb = P.sb.body;
+  const PairMotion m{A.pos[ba], A.vel[ba], A.omega[ba], A.pos[bb], A.vel[bb], A.omega[bb]};
+  P.envelope = pairEnvelope(P.sa, P.sb, A.envelope_rel, A.sweep[P.a], A.sweep[P.b], A.h, m);
   P.plain = plainEnvelope(P.sa, P.sb, A.envelope_rel);
   return P;
 }

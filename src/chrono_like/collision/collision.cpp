@@ -120,11 +120,11 @@ class NativeCollision final : public CollisionDetector {
         const Shape& b = sh[pairs_[p].b];
         Pose wa = shapeWorldPose(Pose{bodies.pos[a.body], bodies.rot[a.body]}, a);
         Pose wb = shapeWorldPose(Pose{bodies.pos[b.body], bodies.rot[b.body]}, b);
-        const real envelope =
-            pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b]);
-        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
         const PairMotion m{bodies.pos[a.body], vel[a.body], omega[a.body],
                            bodies.pos[b.body], vel[b.body], omega[b.body]};
+        const real envelope =
+            pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b], step.dt, m);
+        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
         n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), step.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }

@@ -43,18 +43,30 @@ DVI_HD real plainEnvelope(const Shape& a, const Shape& b, real envelope_rel) {
   return envelope_rel * fmin(a.size, b.size);
 }
 
-// Envelope a pair is collided with: the plain envelope or the sum of the two sweeps, whichever is larger. Never
-// more than the two AABB margins together (shapeMargin), so every pair within it is found by the broad phase.
-// Points found between the plain envelope and this one are speculative: keepSpeculative decides which stay.
-DVI_HD real pairEnvelope(const Shape& a, const Shape& b, real envelope_rel, real sweep_a, real sweep_b) {
-  return fmax(plainEnvelope(a, b, envelope_rel), sweep_a + sweep_b);
-}
-
 // The two bodies of a pair in this step: centres of mass and velocities after the step's forces.
 struct PairMotion {
   Vec3 xa, va, wa;
   Vec3 xb, vb, wb;
 };
+
+// Envelope a pair is collided with. Two bounds on how far the pair's gap can close within the step, the smaller
+// one taken, plus the plain envelope:
+//  - the sum of the two sweeps, sweep_a + sweep_b (shapeSweep: each shape's own motion);
+//  - the RELATIVE motion: a point of B moves relative to a point of A at most |v_b - v_a| + |w_a| L_a + |w_b| L_b,
+//    L the shape's farthest point from its body's centre of mass, and |w| L h = sweep - |v| h by shapeSweep.
+//    Bodies that move together (a falling block, particles riding a drum) have a small relative bound where
+//    their own sweeps are large.
+// A point at dist >= plain + h x (relative bound) has dist + h u_n >= plain, so keepSpeculative would drop it:
+// this envelope loses no point that the sum of the sweeps would keep, and spares the narrow phase the pairs
+// that are only near because everything moves. Never more than the two AABB margins together (shapeMargin),
+// so every pair within it is found by the broad phase. h = 0 (speculative contacts off): the plain envelope.
+DVI_HD real pairEnvelope(const Shape& a, const Shape& b, real envelope_rel, real sweep_a, real sweep_b, real h,
+                         const PairMotion& m) {
+  const real plain = plainEnvelope(a, b, envelope_rel);
+  const real spin_a = fmax(real(0), sweep_a - h * length(m.va)), spin_b = fmax(real(0), sweep_b - h * length(m.vb));
+  const real relative = plain + h * length(m.vb - m.va) + spin_a + spin_b;
+  return fmin(fmax(plain, sweep_a + sweep_b), relative);
+}
 
 // Relative normal velocity of the two material points of contact c (positive: separating), u_n = n . (v_B(pb) -
 // v_A(pa)) with v(p) = v + w x (p - x).

@@ -140,7 +140,7 @@ void DistributedSystem::step() {
 }
 
 // The ghost width (DecompositionSettings::ghost_safety): two bodies farther apart than this make no contact in
-// this step. A pair is collided with max(envelope, sweep_a + sweep_b) (narrowphase.h: pairEnvelope), the sweep
+// this step. A pair is collided with at most max(envelope, sweep_a + sweep_b) (narrowphase.h: pairEnvelope), the sweep
 // h (|v_free| + |w| reach) from the velocities after the step's forces (here gravity: |v_free| <= |v| + h |g|).
 real DistributedSystem::ghostWidth() const {
   const real h = real(config_.step.dt);
