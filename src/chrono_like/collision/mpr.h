@@ -78,14 +78,14 @@ DVI_HD MprShape makeMprShape(const Shape& s, const Pose& w, const Vec3* hull_poi
   return m;
 }
 
-// Support point of the true shape (its own sweep included, the envelope not).
-DVI_HD Vec3 mprSupport(const MprShape& m, Vec3 d, const Vec3* hull_points) {
+// Support point of the true shape (its own sweep included, the envelope not); l = |d|.
+DVI_HD Vec3 mprSupportL(const MprShape& m, Vec3 d, real l, const Vec3* hull_points) {
   Vec3 c = m.p + m.R * supportCoreLocal(*m.s, mulTransposed(m.R, d), hull_points);
-  if (m.sweep > real(0)) {
-    real l = length(d);
-    if (l > real(0)) c += d * (m.sweep / l);
-  }
+  if (m.sweep > real(0) && l > real(0)) c += d * (m.sweep / l);
   return c;
+}
+DVI_HD Vec3 mprSupport(const MprShape& m, Vec3 d, const Vec3* hull_points) {
+  return mprSupportL(m, d, m.sweep > real(0) ? length(d) : real(0), hull_points);
 }
 
 // Support value of the true shape along d.
@@ -106,13 +106,11 @@ struct MprVert {
 };
 
 DVI_HD_CALL void mprSupportM(const MprShape& A, const MprShape& B, Vec3 d, const Vec3* hull_points, MprVert& o) {
-  o.a = mprSupport(A, d, hull_points);
-  o.b = mprSupport(B, -d, hull_points);
+  const real l = length(d);  // |d| = |-d|: one square root for both sweeps and the envelope
+  o.a = mprSupportL(A, d, l, hull_points);
+  o.b = mprSupportL(B, -d, l, hull_points);
   o.v = o.a - o.b;
-  if (A.env > real(0)) {
-    real l = length(d);
-    if (l > real(0)) o.v += d * (A.env / l);
-  }
+  if (A.env > real(0) && l > real(0)) o.v += d * (A.env / l);
 }
 
 struct MprResult {

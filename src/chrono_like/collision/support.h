@@ -10,7 +10,10 @@ namespace dvi {
 namespace np {
 
 DVI_HD real sgn1(real x) { return x < real(0) ? real(-1) : real(1); }  // sign with sgn(0) = +1
-DVI_HD real clampr(real x, real lo, real hi) { return std::fmin(std::fmax(x, lo), hi); }
+// max and clamp by comparison: std::fmax and fmin are library calls on the host (GCC does not inline them without
+// -ffinite-math-only), and these run in every support mapping. clampr(NaN) = lo, as fmin(fmax(NaN, lo), hi).
+DVI_HD real maxr(real a, real b) { return a > b ? a : b; }
+DVI_HD real clampr(real x, real lo, real hi) { return !(x > lo) ? lo : (x > hi ? hi : x); }
 template <class T>
 DVI_HD void swapv(T& a, T& b) {  // std::swap is not usable in device code
   T t = a;
@@ -84,7 +87,7 @@ DVI_HD Vec3 interiorPointLocal(const Shape& s, const Vec3* hull_points) {
 // the rim, a hull the lowest vertex index.
 constexpr real kSupportTieTol = sizeof(real) == 8 ? real(1e-9) : real(2e-6);
 
-DVI_HD real maxAbs3(Vec3 d) { return std::fmax(std::fabs(d.x), std::fmax(std::fabs(d.y), std::fabs(d.z))); }
+DVI_HD real maxAbs3(Vec3 d) { return maxr(std::fabs(d.x), maxr(std::fabs(d.y), std::fabs(d.z))); }
 DVI_HD real sgnTol(real x, real tol) { return x < -tol ? real(-1) : real(1); }  // sign, +1 within the tolerance
 
 }  // namespace np
