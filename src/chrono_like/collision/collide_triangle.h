@@ -11,6 +11,10 @@
 // centre. Contacts (collideConvexTriangle):
 //  1. Face axis: the depth of the convex shape below the triangle's plane along the face normal; when the
 //     shape is farther than the envelope in front of the plane (or behind it beyond the back), no contact.
+//  1b. Edge axes: the outward normals of the three edges in the triangle's plane reject a shape beside the
+//     triangle (the neighbours' triangles under a body lying on a mesh) before MPR.
+//  1c. A shape whose lowest point and centre lie over the triangle, far enough inside its edges, has the face
+//     axis as its best axis (faceAxisIsBest, a bound on every other axis): the face contacts of 3., without MPR.
 //  2. MPR on the pair (the triangle's support mapping is its three vertices) gives the signed distance and
 //     normal of the deepest feature pair.
 //  3. When the face axis is within a small tolerance of MPR's answer (the shape lies on the face), the
@@ -74,38 +78,87 @@ DVI_HD Vec3 nearestOnTriangle(Vec3 a, Vec3 b, Vec3 c, Vec3 t) {
   return best;
 }
 
+// Least distance of x's foot on the triangle's plane from the edges of (v0, v1, v2), inside positive (nw: the
+// winding normal).
+DVI_HD real footMargin(Vec3 x, const Vec3* v, Vec3 nw) {
+  real m = real(INFINITY);
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 e = v[(i + 1) % 3] - v[i];
+    const Vec3 in = cross(nw, e);
+    const real l = length(in);
+    m = std::fmin(m, l > real(0) ? dot(in, x - v[i]) / l : real(-INFINITY));
+  }
+  return m;
+}
+
+// Whether the face axis is the pair's minimum-separation axis, so the face contacts stand without MPR. With d the
+// face distance of the lowest point p (negative: p below the face) and n = cos t nf + sin t u any other axis (u in
+// the plane), the separation along n is at most cos t d - sin t m_p where m_p is the distance of p's foot inside
+// the triangle (the triangle reaches m_p beyond it along u), and for t > 90 degrees at most
+// cos t H_c - sin t m_c with the interior point c (height H_c, foot m_c inside). Both are <= d when d >= 0 and
+// m_p >= 0, or when m_p, m_c and H_c are all >= -d: then no axis separates more than the face's.
+DVI_HD bool faceAxisIsBest(Vec3 low, real face_dist, Vec3 c, real c_height, const Vec3* v, Vec3 nw) {
+  const real need = std::fmax(real(0), -face_dist);
+  if (!(footMargin(low, v, nw) >= need)) return false;
+  return face_dist >= real(0) || (c_height >= need && footMargin(c, v, nw) >= need);
+}
+
+// The convex shape's plane contacts against the triangle's face (normal nf, the side of a), those whose foot lies
+// inside the triangle; their count.
+DVI_HD int triangleFaceContacts(const Shape& a, const Pose& wa, const Shape& b, const Vec3* v, Vec3 nw, Vec3 nf,
+                                const Vec3* hull_points, real envelope, ContactPoint* out) {
+  Shape pl = b;
+  pl.type = ShapeType::Plane;
+  pl.dims = nf;  // plane {x : dot(nf, x) <= dot(nf, v0)}, solid behind the face
+  pl.plane_d = dot(nf, v[0]);
+  const Pose id{{0, 0, 0}, {1, 0, 0, 0}};
+  ContactPoint pts[kMaxContactsPerPair];
+  const int n = collideConvexPlane(a, wa, pl, id, hull_points, envelope, pts);
+  const real edge_tol = real(1e-9) * (length(v[1] - v[0]) + length(v[2] - v[0]));
+  int m = 0;
+  for (int k = 0; k < n; ++k)
+    if (insideTriangle(pts[k].pb, v[0], v[1], v[2], nw, edge_tol)) out[m++] = pts[k];
+  return m;
+}
+
 // Convex shape a (any type but Plane and Triangle) against triangle b. Normals from a to b.
 DVI_HD_CALL int collideConvexTriangle(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
                                       const Vec3* hull_points, real envelope, ContactPoint* out) {
-  const Vec3 v0 = transformPoint(wb, triangleVertexLocal(b, 0));
-  const Vec3 v1 = transformPoint(wb, triangleVertexLocal(b, 1));
-  const Vec3 v2 = transformPoint(wb, triangleVertexLocal(b, 2));
+  const Vec3 v[3] = {transformPoint(wb, triangleVertexLocal(b, 0)), transformPoint(wb, triangleVertexLocal(b, 1)),
+                     transformPoint(wb, triangleVertexLocal(b, 2))};
   const Vec3 nw = rotate(wb.q, Vec3{0, 1, 0});  // winding normal
   Vec3 nf = nw;
   // The side of a's centre (two-sided triangle).
   const Vec3 ca = wa.p + rotate(wa.q, interiorPointLocal(a, hull_points));
-  if (dot(ca - v0, nf) < 0) nf = -nf;
+  if (dot(ca - v[0], nf) < 0) nf = -nf;
   // 1. Face axis: lowest point of a along -nf.
   const Vec3 low = transformPoint(wa, supportLocal(a, rotateInv(wa.q, -nf), hull_points));
-  const real face_dist = dot(low - v0, nf);
+  const real face_dist = dot(low - v[0], nf);
   if (!(face_dist < envelope)) return 0;
+  // 1b. Edge axes: the outward normal o of each edge in the triangle's plane. The triangle's extent along o ends at
+  // that edge, so a shape whose lowest point along o is beyond it by the envelope or more is that far away: no
+  // contact (any direction separates: Ericson, Real-Time Collision Detection, 5.2.1). Most triangles under a body
+  // lying on a mesh are its neighbours' and end here, before MPR.
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 o = cross(v[(i + 1) % 3] - v[i], nw);  // outward: nw x e points inside
+    const real lo = length(o);
+    if (!(lo > real(0))) continue;
+    const Vec3 ou = o / lo;
+    const Vec3 near = transformPoint(wa, supportLocal(a, rotateInv(wa.q, -ou), hull_points));
+    if (!(dot(near - v[i], ou) < envelope)) return 0;
+  }
+  // 1c. A shape resting inside the triangle: the face axis is the best one (faceAxisIsBest), no MPR needed.
+  if (faceAxisIsBest(low, face_dist, ca, dot(ca - v[0], nf), v, nw)) {
+    const int m = triangleFaceContacts(a, wa, b, v, nw, nf, hull_points, envelope, out);
+    if (m > 0) return m;
+  }
   // 2. MPR (signed distance and normal of the deepest feature pair).
   ContactPoint mpr[1];
   if (collideMpr(a, wa, b, wb, hull_points, envelope, mpr, nullptr, false) == 0) return 0;
   // 3. Face contacts when the face axis is (nearly) the best one.
   const real tol = real(0.02) * a.size;
   if (face_dist >= mpr[0].dist - tol) {
-    Shape pl = b;
-    pl.type = ShapeType::Plane;
-    pl.dims = nf;  // plane {x : dot(nf, x) <= dot(nf, v0)}, solid behind the face
-    pl.plane_d = dot(nf, v0);
-    const Pose id{{0, 0, 0}, {1, 0, 0, 0}};
-    ContactPoint pts[kMaxContactsPerPair];
-    const int n = collideConvexPlane(a, wa, pl, id, hull_points, envelope, pts);
-    const real edge_tol = real(1e-9) * (length(v1 - v0) + length(v2 - v0));
-    int m = 0;
-    for (int k = 0; k < n; ++k)
-      if (insideTriangle(pts[k].pb, v0, v1, v2, nw, edge_tol)) out[m++] = pts[k];
+    const int m = triangleFaceContacts(a, wa, b, v, nw, nf, hull_points, envelope, out);
     if (m > 0) return m;
   }
   mpr[0].feature = kMaxContactsPerPair;  // distinct from the face points' features (warm start keys)
