@@ -297,6 +297,7 @@ void DviDynamicsWorld::forget(btCollisionObject* obj) {
   // The last sub-step's contacts and manifolds go with it (they are rebuilt by the next sub-step): O(1) per removal.
   releaseManifolds();
   contacts_.clear();
+  contacts_current_ = true;  // none until the next sub-step
 }
 
 void DviDynamicsWorld::removeRigidBody(btRigidBody* body) {
@@ -633,9 +634,10 @@ void uniteRoots(std::vector<std::atomic<int>>& root, int a, int b) {
 void DviDynamicsWorld::updateSleeping(btScalar h) {
   const int64_t n = int64_t(tracked_.size());
   const int team = hostThreads();
-  int64_t resting = 0;  // bodies asleep or ready to sleep
-#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : resting) if (n >= config_.parallel_min)
+  int64_t resting = 0, kinematic = 0;  // bodies asleep or ready to sleep; kinematic bodies
+#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : resting, kinematic) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) {  // per body, as updateActivationState
+    kinematic += tracked_[size_t(i)].kind == kBodyKinematic;
     if (tracked_[size_t(i)].kind != 0) continue;
     btRigidBody* b = tracked_[size_t(i)].body;
     b->updateDeactivation(h);
@@ -646,7 +648,7 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
     const int state = b->getActivationState();
     resting += state == ISLAND_SLEEPING || state == WANTS_DEACTIVATION;
   }
-  wakeTouchedByKinematic();
+  if (kinematic > 0) wakeTouchedByKinematic();  // its loop over the bodies is serial
   if (resting == 0) return;
   std::vector<std::atomic<int>>& root = island_root_;  // members: no allocation per sub-step once grown
   std::vector<char>& merges = island_merges_;
@@ -800,6 +802,9 @@ void DviDynamicsWorld::clearForces() {
 }
 
 void DviDynamicsWorld::releaseManifolds() {
+  // Nothing to release (e.g. the second of many removals in a row): clear() would still wipe every bucket of the
+  // map, which a 100,000-body world has ~300,000 of, once per removed body.
+  if (manifolds_.empty()) return;
   for (auto& e : manifolds_) m_dispatcher1->releaseManifold(e.second.manifold);
   manifolds_.clear();
 }
@@ -811,39 +816,49 @@ DviDynamicsWorld::ManifoldSlot& DviDynamicsWorld::manifoldSlot(int ia, int ib) {
   return slot;
 }
 
-// Contact w into its pair's manifold; the manifold is emptied the first time this sub-step (then true).
-bool DviDynamicsWorld::fillManifold(ManifoldSlot& slot, const WorldContact& w) {
+// Contact k of the System into its pair's manifold; the manifold is emptied the first time this sub-step (then true).
+bool DviDynamicsWorld::fillManifold(ManifoldSlot& slot, int64_t k) {
+  const ContactArrays& c = system_->contacts();
+  const std::vector<real>& g = system_->impulses();
+  const btCollisionObject* a = tracked_[size_t(c.body_a[size_t(k)])].obj;
+  const btCollisionObject* b = tracked_[size_t(c.body_b[size_t(k)])].obj;
   btPersistentManifold* m = slot.manifold;
   const bool first = slot.used != substeps_;
   if (first) {
     m->clearManifold();
     slot.used = substeps_;
   }
+  const btVector3 pa = toBt(c.pa[size_t(k)]), pb = toBt(c.pb[size_t(k)]);
   // Bullet's convention: the normal on B points from B toward A.
-  btManifoldPoint p(w.a->getWorldTransform().invXform(w.point_a), w.b->getWorldTransform().invXform(w.point_b),
-                    -w.normal, w.distance);
-  p.m_positionWorldOnA = w.point_a;
-  p.m_positionWorldOnB = w.point_b;
-  p.m_appliedImpulse = w.normal_impulse;
-  p.m_combinedFriction = btScalar(w.a->getFriction() * w.b->getFriction());
+  btManifoldPoint p(a->getWorldTransform().invXform(pa), b->getWorldTransform().invXform(pb),
+                    -toBt(c.normal[size_t(k)]), btScalar(c.dist[size_t(k)]));
+  p.m_positionWorldOnA = pa;
+  p.m_positionWorldOnB = pb;
+  p.m_appliedImpulse = 3 * size_t(k) < g.size() ? btScalar(g[3 * size_t(k)]) : 0;
+  p.m_combinedFriction = btScalar(a->getFriction() * b->getFriction());
   m->addManifoldPoint(p, false);
   return first;
 }
 
+// Whether both bodies of a System contact are the world's (every one today).
+bool DviDynamicsWorld::tracksPair(int ia, int ib) const {
+  const int nb = int(tracked_.size());
+  return ia >= 0 && ib >= 0 && ia < nb && ib < nb && tracked_[size_t(ia)].obj && tracked_[size_t(ib)].obj;
+}
+
 // contacts() from the System's contacts, in parallel (each entry its own). Contacts between bodies the world
 // does not track (none today) are left out.
-void DviDynamicsWorld::buildWorldContacts() {
+void DviDynamicsWorld::buildWorldContacts() const {
   const ContactArrays& c = system_->contacts();
   const std::vector<real>& g = system_->impulses();
   const int64_t nc = int64_t(c.count());
-  const int64_t nb = int64_t(tracked_.size());
   contacts_.resize(size_t(nc));
   int64_t untracked = 0;
 #pragma omp parallel for schedule(static) num_threads(hostThreads()) reduction(+ : untracked) if (nc >= config_.parallel_min)
   for (int64_t k = 0; k < nc; ++k) {
     const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
     WorldContact& w = contacts_[size_t(k)];
-    if (ia < 0 || ib < 0 || ia >= nb || ib >= nb) {
+    if (!tracksPair(ia, ib)) {
       w.a = w.b = nullptr;
       ++untracked;
       continue;
@@ -856,10 +871,20 @@ void DviDynamicsWorld::buildWorldContacts() {
     w.distance = btScalar(c.dist[size_t(k)]);
     w.normal_impulse = 3 * size_t(k) < g.size() ? btScalar(g[3 * size_t(k)]) : 0;
   }
-  untracked_contacts_ = untracked;
+  if (untracked > 0)
+    contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [](const WorldContact& w) { return !w.a; }),
+                    contacts_.end());
 }
 
-// Bullet's manifolds from contacts() (still in the System's order). The narrow phase writes a shape pair's
+const std::vector<WorldContact>& DviDynamicsWorld::contacts() const {
+  if (!contacts_current_) {
+    buildWorldContacts();
+    contacts_current_ = true;
+  }
+  return contacts_;
+}
+
+// Bullet's manifolds from the System's contacts (in its order). The narrow phase writes a shape pair's
 // points together, so where both bodies have one shape a body pair's contacts form one run, which fills its own
 // manifold: those runs go in parallel (btPersistentManifold::addManifoldPoint touches its manifold only). New
 // manifolds (the dispatcher makes them), runs of bodies with several shapes (one body pair, several runs) and every
@@ -867,12 +892,12 @@ void DviDynamicsWorld::buildWorldContacts() {
 void DviDynamicsWorld::fillManifolds() {
   const ContactArrays& c = system_->contacts();
   const BodyArrays& B = system_->bodies();
-  const int64_t nc = int64_t(contacts_.size());
+  const int64_t nc = int64_t(c.count());
   runs_.clear();
   for (int64_t k = 0; k < nc;) {
     int64_t e = k + 1;
     while (e < nc && c.body_a[size_t(e)] == c.body_a[size_t(k)] && c.body_b[size_t(e)] == c.body_b[size_t(k)]) ++e;
-    if (contacts_[size_t(k)].a) runs_.push_back({k, e, nullptr});
+    if (tracksPair(c.body_a[size_t(k)], c.body_b[size_t(k)])) runs_.push_back({k, e, nullptr});
     k = e;
   }
   const bool callbacks =
@@ -896,13 +921,13 @@ void DviDynamicsWorld::fillManifolds() {
       run.slot = &manifoldSlot(ia, ib);
       continue;
     }
-    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(manifoldSlot(ia, ib), contacts_[size_t(k)]);
+    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(manifoldSlot(ia, ib), k);
   }
 #pragma omp parallel for schedule(static) num_threads(team) reduction(+ : used) if (nr >= config_.parallel_min)
   for (int64_t r = 0; r < nr; ++r) {
     const Run& run = runs_[size_t(r)];
     if (!run.slot) continue;  // filled above
-    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(*run.slot, contacts_[size_t(k)]);
+    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(*run.slot, k);
   }
   if (size_t(used) == manifolds_.size()) return;  // every manifold filled: none to release
   // A body asleep is held fixed, so a pair of resting bodies (asleep, or asleep and static) makes no contacts; its
@@ -925,11 +950,8 @@ void DviDynamicsWorld::fillManifolds() {
 }
 
 void DviDynamicsWorld::collectContacts() {
-  buildWorldContacts();
+  contacts_current_ = false;  // contacts() makes them when asked
   if (config_.fill_manifolds) fillManifolds();
-  if (untracked_contacts_ > 0)
-    contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [](const WorldContact& w) { return !w.a; }),
-                    contacts_.end());
 }
 
 void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {

@@ -122,7 +122,9 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void clearForces() override;
 
   // Our API.
-  const std::vector<WorldContact>& contacts() const { return contacts_; }  // last sub-step's contacts
+  // The last sub-step's contacts, made from the System's on the first call after a sub-step (an app that does not
+  // read them does not pay for them). Not for concurrent calls, as the rest of a Bullet world.
+  const std::vector<WorldContact>& contacts() const;
   System& system() { return *system_; }
   const System& system() const { return *system_; }
   int bodyIndex(const btRigidBody* body) const;         // System index, -1 if not (yet) in the System
@@ -189,10 +191,11 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void updateSleeping(btScalar h);
   void wakeTouchedByKinematic();
   void collectContacts();
-  void buildWorldContacts();
+  void buildWorldContacts() const;
+  bool tracksPair(int ia, int ib) const;
   void fillManifolds();
   ManifoldSlot& manifoldSlot(int ia, int ib);
-  bool fillManifold(ManifoldSlot& slot, const WorldContact& w);
+  bool fillManifold(ManifoldSlot& slot, int64_t k);
   void releaseManifolds();
   bool keepPair(int a, int b) const;
   // The System's contact exclusions (System::setContactExclusions) from Bullet's per-object ignore lists (constraints
@@ -227,9 +230,9 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<int32_t> dirty_state_, dirty_params_;  // uploadChanges' lists
   std::vector<btVector3> aabb_lo_, aabb_hi_;         // updateAabbs' boxes
   std::vector<char> object_flags_;                   // per Bullet object: scratch of the loops over m_collisionObjects
-  std::vector<WorldContact> contacts_;
-  int64_t untracked_contacts_ = 0;                        // this sub-step's contacts of bodies not tracked (left out)
-  std::vector<Run> runs_;                                 // fillManifolds' runs of one body pair
+  mutable std::vector<WorldContact> contacts_;       // contacts(), made on demand
+  mutable bool contacts_current_ = true;             // contacts_ holds the last sub-step's contacts (or none)
+  std::vector<Run> runs_;                            // fillManifolds' runs of one body pair
   std::unordered_map<uint64_t, ManifoldSlot> manifolds_;  // by (a, b) System indices, kept across steps
   int64_t substeps_ = 0;
   ConvergenceLog convergence_;  // kept across rebuilds of the System
