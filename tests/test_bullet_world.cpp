@@ -515,9 +515,25 @@ TEST_CASE("drop-in world: contacts readable through our list and Bullet's manifo
   CHECK(n == 4);
   CHECK(sum == Approx(2 * 9.81 / 240).epsilon(1e-2));
   int points = 0;
-  for (int i = 0; i < w.dispatcher.getNumManifolds(); ++i)
-    points += w.dispatcher.getManifoldByIndexInternal(i)->getNumContacts();
+  for (int i = 0; i < w.dispatcher.getNumManifolds(); ++i) {
+    const btPersistentManifold* m = w.dispatcher.getManifoldByIndexInternal(i);
+    points += m->getNumContacts();
+    // Each manifold point is one of contacts()'s (the list is made on demand from the same System contacts).
+    for (int k = 0; k < m->getNumContacts(); ++k) {
+      const btManifoldPoint& p = m->getContactPoint(k);
+      int same = 0;
+      for (const WorldContact& c : w.dvi().contacts())
+        same += (c.point_a - p.getPositionWorldOnA()).length() < 1e-6 && (c.normal + p.m_normalWorldOnB).length() < 1e-6;
+      CHECK(same == 1);
+    }
+  }
   CHECK(points == 4);
+  // A removal drops the last sub-step's contacts (none until the next sub-step), then they come back.
+  w.world->removeRigidBody(b);
+  CHECK(w.dvi().contacts().empty());
+  w.world->addRigidBody(b);
+  w.world->stepSimulation(btScalar(1) / 240, 0);
+  CHECK(w.dvi().contacts().size() == 4);
 }
 
 TEST_CASE("a .bullet scene with each shape and joint type round-trips through the importer", "[world][import]") {
