@@ -523,7 +523,8 @@ TEST_CASE("drop-in world: contacts readable through our list and Bullet's manifo
       const btManifoldPoint& p = m->getContactPoint(k);
       int same = 0;
       for (const WorldContact& c : w.dvi().contacts())
-        same += (c.point_a - p.getPositionWorldOnA()).length() < 1e-6 && (c.normal + p.m_normalWorldOnB).length() < 1e-6;
+        same +=
+            (c.point_a - p.getPositionWorldOnA()).length() < 1e-6 && (c.normal + p.m_normalWorldOnB).length() < 1e-6;
       CHECK(same == 1);
     }
   }
