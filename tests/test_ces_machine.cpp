@@ -793,35 +793,31 @@ int64_t overlappingSpawns(const CesMachine& m, double slack) {
   return n;
 }
 
+// Steps the default machine with `sets` (a short time step, so that nothing moves before the check) and checks that
+// more than `min_spawned` particles were fed and that none of them overlaps another.
+void checkSpawnsApart(const std::vector<std::string>& sets, int steps, int64_t min_spawned) {
+  const CesConfig cfg = configWith(sets);
+  SystemConfig sc;
+  sc.step.dt = real(cfg.step.dt);
+  sc.solver.max_iterations = cfg.solver.max_iterations;
+  CheckpointSystem sys(sc);
+  CesMachine m(cfg, sys);
+  for (int k = 0; k < steps; ++k) m.step();
+  const int64_t spawned = int64_t(m.particles().count()) - m.firstParticleBody();
+  INFO(spawned << " particles");
+  CHECK(spawned > min_spawned);
+  CHECK(overlappingSpawns(m, 1e-3) == 0);
+}
+
 TEST_CASE("CES feeder: a feed of 1e6 g/s spawns without overlaps, in time linear in the spawns", "[ces][ces_machine]") {
   // (about 2.5 million particles a kilogram: 0.5-1 mm, half of the mass plastic)
   SECTION("1e6 g/s at a 0.1 us step: ~250 particles a step, none overlapping another") {
-    const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-7", "field.model=\"csm\""});
-    SystemConfig sc;
-    sc.step.dt = real(cfg.step.dt);
-    sc.solver.max_iterations = cfg.solver.max_iterations;
-    CheckpointSystem sys(sc);
-    CesMachine m(cfg, sys);
-    for (int k = 0; k < 20; ++k) m.step();
-    const int64_t spawned = int64_t(m.particles().count()) - m.firstParticleBody();
-    INFO(spawned << " particles");
-    CHECK(spawned > 2000);
-    CHECK(overlappingSpawns(m, 1e-3) == 0);
+    checkSpawnsApart({"feed.mass_flow_g_s=1e6", "time_step_s=1e-7", "field.model=\"csm\""}, 20, 2000);
   }
   SECTION("4e4 g/s at a 0.1 us step: ~10 particles a step, tested pairwise, none overlapping another") {
     // Fewer than SpawnIndex::kGridFrom (64) candidates a step take the pairwise test instead of the grid (the
-    // industrial feed's ~4 a step); the step is short so that nothing moves before the check.
-    const CesConfig cfg = configWith({"feed.mass_flow_g_s=4e4", "time_step_s=1e-7", "field.model=\"csm\""});
-    SystemConfig sc;
-    sc.step.dt = real(cfg.step.dt);
-    sc.solver.max_iterations = cfg.solver.max_iterations;
-    CheckpointSystem sys(sc);
-    CesMachine m(cfg, sys);
-    for (int k = 0; k < 40; ++k) m.step();
-    const int64_t spawned = int64_t(m.particles().count()) - m.firstParticleBody();
-    INFO(spawned << " particles");
-    CHECK(spawned > 300);
-    CHECK(overlappingSpawns(m, 1e-3) == 0);
+    // industrial feed's ~4 a step).
+    checkSpawnsApart({"feed.mass_flow_g_s=4e4", "time_step_s=1e-7", "field.model=\"csm\""}, 40, 300);
   }
   SECTION("1e6 g/s at a 10 us step: ~25,000 particles a step against up to 75,000 recent ones") {
     const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-5", "field.model=\"csm\""});
