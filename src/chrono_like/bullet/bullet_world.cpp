@@ -819,7 +819,6 @@ DviDynamicsWorld::ManifoldSlot& DviDynamicsWorld::manifoldSlot(int ia, int ib) {
 // Contact k of the System into its pair's manifold; the manifold is emptied the first time this sub-step (then true).
 bool DviDynamicsWorld::fillManifold(ManifoldSlot& slot, int64_t k) {
   const ContactArrays& c = system_->contacts();
-  const std::vector<real>& g = system_->impulses();
   const btCollisionObject* a = tracked_[size_t(c.body_a[size_t(k)])].obj;
   const btCollisionObject* b = tracked_[size_t(c.body_b[size_t(k)])].obj;
   btPersistentManifold* m = slot.manifold;
@@ -834,10 +833,16 @@ bool DviDynamicsWorld::fillManifold(ManifoldSlot& slot, int64_t k) {
                     -toBt(c.normal[size_t(k)]), btScalar(c.dist[size_t(k)]));
   p.m_positionWorldOnA = pa;
   p.m_positionWorldOnB = pb;
-  p.m_appliedImpulse = 3 * size_t(k) < g.size() ? btScalar(g[3 * size_t(k)]) : 0;
+  p.m_appliedImpulse = normalImpulse(k);
   p.m_combinedFriction = btScalar(a->getFriction() * b->getFriction());
   m->addManifoldPoint(p, false);
   return first;
+}
+
+// Contact k's normal impulse over the last sub-step (0 where the solver kept none).
+btScalar DviDynamicsWorld::normalImpulse(int64_t k) const {
+  const std::vector<real>& g = system_->impulses();
+  return 3 * size_t(k) < g.size() ? btScalar(g[3 * size_t(k)]) : 0;
 }
 
 // Whether both bodies of a System contact are the world's (every one today).
@@ -850,7 +855,6 @@ bool DviDynamicsWorld::tracksPair(int ia, int ib) const {
 // does not track (none today) are left out.
 void DviDynamicsWorld::buildWorldContacts() const {
   const ContactArrays& c = system_->contacts();
-  const std::vector<real>& g = system_->impulses();
   const int64_t nc = int64_t(c.count());
   contacts_.resize(size_t(nc));
   int64_t untracked = 0;
@@ -869,7 +873,7 @@ void DviDynamicsWorld::buildWorldContacts() const {
     w.point_b = toBt(c.pb[size_t(k)]);
     w.normal = toBt(c.normal[size_t(k)]);
     w.distance = btScalar(c.dist[size_t(k)]);
-    w.normal_impulse = 3 * size_t(k) < g.size() ? btScalar(g[3 * size_t(k)]) : 0;
+    w.normal_impulse = normalImpulse(k);
   }
   if (untracked > 0)
     contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [](const WorldContact& w) { return !w.a; }),

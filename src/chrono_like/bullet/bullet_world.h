@@ -193,6 +193,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void collectContacts();
   void buildWorldContacts() const;
   bool tracksPair(int ia, int ib) const;
+  btScalar normalImpulse(int64_t k) const;
   void fillManifolds();
   ManifoldSlot& manifoldSlot(int ia, int ib);
   bool fillManifold(ManifoldSlot& slot, int64_t k);
