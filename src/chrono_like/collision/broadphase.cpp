@@ -52,6 +52,35 @@ void sortByB(ShapePair* s, int32_t m) {
   }
 }
 
+// The sorted entries of one build, as testBinnedPairs reads them.
+struct BinRun {
+  const uint32_t* bin;      // entry_bin_, sorted
+  const int32_t* shape;     // sorted_shape_
+  const uint8_t* mask;      // sorted_mask_
+  const int32_t* next_mov;  // next_movable_
+  int32_t n;
+};
+
+// Stage 1 for an immovable shape at sorted position q0 (box A): the movable shapes after it in its bin, through the
+// next-movable chain, whose boxes overlap A and whose pair this bin owns, into cand; returns their number and adds
+// the shapes tested to `tests`.
+int32_t movableCandidates(const BinRun& r, int32_t q0, const Aabb& A, const Aabb* box, std::vector<int32_t>& cand,
+                          int64_t& tests) {
+  const uint32_t bin = r.bin[q0];
+  const uint8_t ms = r.mask[q0];
+  int32_t w = 0;
+  for (int32_t q = q0 + 1; q < r.n && r.bin[q] == bin; ++q) {
+    q = r.next_mov[q];
+    if (q >= r.n || r.bin[q] != bin) break;
+    if (cand.size() <= size_t(w)) cand.resize(size_t(w) + 16);
+    const int32_t b = r.shape[q];
+    cand[size_t(w)] = b;
+    w += binCandidate(A, box[b], ms, r.mask[q]) ? 1 : 0;
+    ++tests;
+  }
+  return w;
+}
+
 }  // namespace
 
 void BroadPhaseBins::run(const ShapeArrays& shapes, const BodyArrays& bodies, std::vector<ShapePair>& out_pairs,
@@ -242,8 +271,14 @@ int32_t BroadPhaseBins::writeEntries(const Pass& in, const BinGrid& grid, BroadP
     int32_t* es = entry_shape_.data();
     uint8_t* em = entry_mask_.data();
     const int32_t* off = offsets_.data();
+    const Shape* sh = in.sh;
+    const uint8_t* flags = in.flags;
 #pragma omp parallel for schedule(static)
-    for (int32_t j = 0; j < nb; ++j) aabbWriteBins(grid, box[bl[j]], bl[j], eb + off[j], es + off[j], em + off[j]);
+    for (int32_t j = 0; j < nb; ++j) {
+      const int32_t w = aabbWriteBins(grid, box[bl[j]], bl[j], eb + off[j], es + off[j], em + off[j]);
+      if (flags[sh[bl[j]].body] & (kBodyFixed | kBodyKinematic))
+        for (int32_t k = 0; k < w; ++k) em[off[j] + k] |= kMaskImmovable;
+    }
   }
 
   // 4. stable radix sort by bin: entry_bin_ sorted, entry_perm_[sorted position] = written entry. Stability
@@ -272,7 +307,38 @@ int32_t BroadPhaseBins::writeEntries(const Pass& in, const BinGrid& grid, BroadP
     heads += (q == 0 || eb[q] != eb[q - 1]) ? 1 : 0;
   }
   st.occupied_bins = heads;
+  nextMovableEntries(ne);
   return ne;
+}
+
+// ---- 5b. next_movable_[q]: the first sorted position >= q of q's bin run whose shape is movable, or the run's end
+//          (an immovable shape walks only these: immovable pairs never collide, and on a static mesh they are most
+//          of every bin). Backward scans over blocks of positions, then the runs that cross a block's end are
+//          resolved from the next block's first position, last block first. ----
+void BroadPhaseBins::nextMovableEntries(int32_t ne) {
+  next_movable_.resize(size_t(ne));
+  int32_t* nm = next_movable_.data();
+  const uint32_t* eb = entry_bin_.data();
+  const uint8_t* sm = sorted_mask_.data();
+  constexpr int32_t kBlock = 16384, kOpen = -1;
+  const int32_t nblocks = (ne + kBlock - 1) / kBlock;
+#pragma omp parallel for schedule(static)
+  for (int32_t k = 0; k < nblocks; ++k) {
+    const int32_t begin = k * kBlock, end = std::min(ne, begin + kBlock);
+    for (int32_t q = end - 1; q >= begin; --q) {
+      const bool run_ends = q + 1 == ne || eb[q + 1] != eb[q];
+      if (!(sm[q] & kMaskImmovable))
+        nm[q] = q;
+      else if (run_ends)
+        nm[q] = q + 1;
+      else
+        nm[q] = q + 1 == end ? kOpen : nm[q + 1];
+    }
+  }
+  for (int32_t k = nblocks - 2; k >= 0; --k) {
+    const int32_t end = (k + 1) * kBlock;
+    for (int32_t q = end - 1; q >= k * kBlock && nm[q] == kOpen; --q) nm[q] = nm[end];
+  }
 }
 
 // ---- 6. pair tests, in chunks of consecutive binned shapes. Shape s visits each of its bins from its own place
@@ -308,6 +374,7 @@ int32_t BroadPhaseBins::testBinnedPairs(const Pass& in, int32_t ne, BroadPhaseSt
   const int32_t* la = large_active_.data();
   const int32_t* lg = large_.data();
   const uint8_t* sm = sorted_mask_.data();
+  const int32_t* nm = next_movable_.data();
   if (int(cand_.size()) < nthreads) cand_.resize(size_t(nthreads));
   if (int(lhc_local_.size()) < nthreads) lhc_local_.resize(size_t(nthreads));
   int64_t tests = 0;
@@ -330,20 +397,25 @@ int32_t BroadPhaseBins::testBinnedPairs(const Pass& in, int32_t ne, BroadPhaseSt
         for (int32_t e = off[j]; e < off[j + 1]; ++e) {
           const int32_t q0 = pos[e];
           const uint32_t bin = eb[q0];
-          int32_t q1 = q0 + 1;
-          while (q1 < ne && eb[q1] == bin) ++q1;
-          if (q1 == q0 + 1) continue;
-          tests += q1 - q0 - 1;
-          if (cand.size() < size_t(q1 - q0)) cand.resize(size_t(q1 - q0));
           const uint8_t ms = sm[q0];
-          // stage 1, branch free: overlap and ownership; compacts the survivors into cand
           int32_t w = 0;
-          int32_t* cd = cand.data();
-          for (int32_t q = q0 + 1; q < q1; ++q) {
-            const int32_t b = ss[q];
-            cd[w] = b;
-            w += binCandidate(A, box[b], ms, sm[q]) ? 1 : 0;
+          if (ms & kMaskImmovable) {
+            w = movableCandidates(BinRun{eb, ss, sm, nm, ne}, q0, A, box, cand, tests);
+          } else {
+            int32_t q1 = q0 + 1;
+            while (q1 < ne && eb[q1] == bin) ++q1;
+            if (q1 == q0 + 1) continue;
+            tests += q1 - q0 - 1;
+            if (cand.size() < size_t(q1 - q0)) cand.resize(size_t(q1 - q0));
+            // stage 1, branch free: overlap and ownership; compacts the survivors into cand
+            int32_t* cd = cand.data();
+            for (int32_t q = q0 + 1; q < q1; ++q) {
+              const int32_t b = ss[q];
+              cd[w] = b;
+              w += binCandidate(A, box[b], ms, sm[q]) ? 1 : 0;
+            }
           }
+          const int32_t* cd = cand.data();
           // stage 2: the filter (bodies, immovable pairs, groups)
           for (int32_t i = 0; i < w; ++i)
             if (shapePairAllowed(s, cd[i], sh, flags)) buf.push_back(ShapePair{s, cd[i]});

@@ -85,6 +85,7 @@ class BroadPhaseBins {
   BinGrid makeGrid(const Pass& in, real& edge, Aabb& bounds, BroadPhaseStats& st);       // 2
   int32_t writeEntries(const Pass& in, const BinGrid& grid, BroadPhaseStats& st);        // 3-5
   void sortEntriesByBin(uint32_t max_key);                                               // 4
+  void nextMovableEntries(int32_t ne);                                                   // 5b
   int32_t testBinnedPairs(const Pass& in, int32_t ne, BroadPhaseStats& st);              // 6
   void pairLargeShapes(const Pass& in);                                                  // 7
   void writeOutput(const Pass& in, int32_t nchunks, std::vector<ShapePair>& out_pairs);  // 8
@@ -97,7 +98,7 @@ class BroadPhaseBins {
   std::vector<double> block_sum_;
   std::vector<int64_t> block_cnt_, hist_, lh_count_, lh_cursor_, lh_total_, ll_count_, chunk_off_, large_off_;
   std::vector<int32_t> binned_, large_, large_active_, counts_, offsets_, entry_shape_, entry_perm_, entry_perm_tmp_,
-      entry_pos_, sorted_shape_, chunk_begin_;
+      entry_pos_, sorted_shape_, chunk_begin_, next_movable_;
   std::vector<uint8_t> entry_mask_, sorted_mask_;
   std::vector<uint32_t> entry_bin_, entry_bin_tmp_;
   std::vector<std::vector<ShapePair>> chunk_pairs_;  // pairs (s, b) found from the binned shapes of a chunk

@@ -126,7 +126,12 @@ DVI_HD uint32_t pairOwnerBin(const BinGrid& g, const Aabb& a, const Aabb& b) {
 // max(cell(lo_a), cell(lo_b)) per axis (binCoord is monotone), and as both boxes overlap X,
 // max(lo_a[d], lo_b[d]) == X[d] exactly when one of them starts in X along d. So X owns the pair iff
 // every axis has a box starting in X. Equal to pairOwnerBin(g, a, b) == X, bit for bit.
-DVI_HD bool binOwnsPairByMask(uint8_t mask_a, uint8_t mask_b) { return (mask_a | mask_b) == 7; }
+// Bits above the three axis bits (the CPU's kMaskImmovable) are ignored.
+DVI_HD bool binOwnsPairByMask(uint8_t mask_a, uint8_t mask_b) { return ((mask_a | mask_b) & 7) == 7; }
+
+// Entry-mask bit of the CPU broad phase: the entry's shape belongs to an immovable (fixed or kinematic) body, so it
+// pairs with no other immovable shape (pairAllowed) and is tested against the bin's movable shapes only.
+constexpr uint8_t kMaskImmovable = 8;
 
 // Cell coordinates of a bin index.
 DVI_HD void binCellOfIndex(const BinGrid& g, uint32_t bin, int32_t c[3]) {
