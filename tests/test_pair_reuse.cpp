@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
 #include "scaling/scaling_scenes.h"
@@ -93,6 +94,51 @@ void checkFlagsChange(bool gpu) {
   CHECK(sys->lastStats().contacts == 1);
 }
 
+// The CPU ComputeAabbs keeps the boxes of a fixed body that has not moved (a static mesh's triangles). A fixed body
+// the application moves between steps must get its new boxes: a platform teleported under a floating ball makes
+// the contact on the next step, and its boxes equal shapeAabb at its new pose, turned as well.
+void checkFixedBodyMoved() {
+  SystemConfig cfg;
+  cfg.step.gravity = Vec3{0, 0, 0};
+  System sys(cfg);
+  BodyDesc base;
+  base.flags = kBodyFixed;
+  base.mass = 0;
+  base.shapes.push_back(makeBox(Vec3{real(0.5), real(0.05), real(0.5)}));
+  const int p = sys.addBody(base);
+  BodyDesc ball;
+  ball.pos = Vec3{0, 1, 0};
+  ball.shapes.push_back(makeSphere(real(0.02)));
+  sys.addBody(ball);
+  auto boxesCurrent = [&] {  // the fixed body's (the ball's moved after its boxes were taken)
+    const ShapeArrays& sh = sys.shapes();
+    const BodyArrays& b = sys.bodies();
+    for (size_t i = 0; i < sh.count(); ++i) {
+      const Shape& s = sh.shape[i];
+      if (s.body != p) continue;
+      const Aabb want = shapeAabb(s, shapeWorldPose(Pose{b.pos[size_t(s.body)], b.rot[size_t(s.body)]}, s),
+                                  sh.hull_points.data(), shapeMargin(s, cfg.collision.envelope_rel, sh.sweep[i]));
+      const Aabb& got = sh.aabb[i];
+      if (!(got.lo.x == want.lo.x && got.lo.y == want.lo.y && got.lo.z == want.lo.z && got.hi.x == want.hi.x &&
+            got.hi.y == want.hi.y && got.hi.z == want.hi.z))
+        return false;
+    }
+    return true;
+  };
+  for (int s = 0; s < 3; ++s) {
+    sys.step();
+    CHECK(sys.lastStats().contacts == 0);
+    CHECK(boxesCurrent());
+  }
+  sys.mutableBodies().pos[size_t(p)] = Vec3{0, real(0.9305), 0};  // top face 0.5 mm below the ball
+  sys.step();
+  CHECK(boxesCurrent());
+  CHECK(sys.lastStats().contacts >= 1);
+  sys.mutableBodies().rot[size_t(p)] = quatFromAxisAngle(Vec3{0, 0, 1}, real(0.3));
+  sys.step();
+  CHECK(boxesCurrent());
+}
+
 bool haveDevice() {
   std::string why;
   if (gpuAvailable(&why)) return true;
@@ -109,6 +155,10 @@ TEST_CASE("BroadPhase keeps its pairs between steps: contacts and trajectory equ
 
 TEST_CASE("BroadPhase builds again when a body's flags change inside its grown box (CPU)", "[broadphase][pair_reuse]") {
   checkFlagsChange(false);
+}
+
+TEST_CASE("ComputeAabbs gives a moved fixed body its new boxes (CPU)", "[broadphase][pair_reuse]") {
+  checkFixedBodyMoved();
 }
 
 TEST_CASE("GPU BroadPhase keeps its pairs between steps: contacts and trajectory equal a build every step",

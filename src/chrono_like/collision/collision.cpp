@@ -47,23 +47,45 @@ class NativeCollision final : public CollisionDetector {
   }
 
  private:
-  // ComputeAabbs: reads bodies.pos/rot, the free velocities, shapes.shape; writes shapes.sweep, shapes.aabb.
-  static void computeAabbs(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
-                           const StepContext& step, const Vec3* vel, const Vec3* omega) {
-    const int64_t ns = int64_t(shapes.count());
+  // ComputeAabbs: reads bodies.pos/rot, the free velocities, shapes.shape; writes shapes.sweep, shapes.aabb. A fixed
+  // body at rest in the pose of the last step keeps its shapes' boxes (a static mesh's thousands of triangles): its
+  // sweep is 0 and shapes are never edited, only appended, so the box is a function of the pose and the envelope.
+  void computeAabbs(const BodyArrays& bodies, ShapeArrays& shapes, const CollisionSettings& config,
+                    const StepContext& step, const Vec3* vel, const Vec3* omega) {
+    const int64_t ns = int64_t(shapes.count()), nb = int64_t(bodies.count());
     const Shape* sh = shapes.shape.data();
     const Vec3* hull = shapes.hull_points.data();
+    const bool reuse =
+        int64_t(shapes.aabb.size()) == ns && int64_t(box_pose_.size()) == nb && box_env_ == config.envelope_rel;
     shapes.aabb.resize(size_t(ns));
     shapes.sweep.resize(size_t(ns));
+    box_pose_.resize(size_t(nb));
+    box_keep_.resize(size_t(nb));
+    box_env_ = config.envelope_rel;
+    uint8_t* keep = box_keep_.data();
+#pragma omp parallel for schedule(static)
+    for (int64_t b = 0; b < nb; ++b) {
+      const Pose now{bodies.pos[b], bodies.rot[b]};
+      const Pose& last = box_pose_[size_t(b)];
+      const Vec3 zero{0, 0, 0};
+      keep[b] = reuse && (bodies.flags[b] & kBodyFixed) && samePose(now, last) && sameVec(vel[b], zero) &&
+                sameVec(omega[b], zero);
+      box_pose_[size_t(b)] = now;
+    }
     const real h_sweep = config.speculative ? step.dt : real(0);
 #pragma omp parallel for schedule(static)
     for (int64_t i = 0; i < ns; ++i) {
       const Shape& s = sh[i];
+      if (keep[s.body]) continue;
       Pose body{bodies.pos[s.body], bodies.rot[s.body]};
       const real sweep = shapeSweep(s, hull, vel[s.body], omega[s.body], h_sweep);
       shapes.sweep[i] = sweep;
       shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, config.envelope_rel, sweep));
     }
+  }
+  static bool sameVec(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+  static bool samePose(const Pose& a, const Pose& b) {
+    return sameVec(a.p, b.p) && a.q.w == b.q.w && a.q.x == b.q.x && a.q.y == b.q.y && a.q.z == b.q.z;
   }
 
   // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
@@ -156,6 +178,11 @@ class NativeCollision final : public CollisionDetector {
     }
   }
 
+  // box reuse of fixed bodies at rest: each body's pose at the last ComputeAabbs, whether its boxes were kept, and
+  // the relative envelope they were computed with
+  std::vector<Pose> box_pose_;
+  std::vector<uint8_t> box_keep_;
+  real box_env_ = -1;
   BroadPhaseBins broad_;
   std::vector<ShapePair> pairs_;
   // pair reuse: the grown boxes and body flags of the last build, its bin edge and statistics
