@@ -15,8 +15,11 @@
 //     triangle (the neighbours' triangles under a body lying on a mesh) before MPR.
 //  1c. A shape whose lowest point and centre lie over the triangle, far enough inside its edges, has the face
 //     axis as its best axis (faceAxisIsBest, a bound on every other axis): the face contacts of 3., without MPR.
+//  1d. A box: the rest of the pair's separating axes (the box's three face normals and the nine cross products of
+//     its axes with the edges; boxTriangleSeparation) rule the pair out, or show the face axis best as 3. does,
+//     without MPR.
 //  2. MPR on the pair (the triangle's support mapping is its three vertices) gives the signed distance and
-//     normal of the deepest feature pair.
+//     normal of the deepest feature pair; its contact point is computed only when 3. does not stand.
 //  3. When the face axis is within a small tolerance of MPR's answer (the shape lies on the face), the
 //     contacts are the convex shape's plane contacts against the triangle's plane (box corners, cylinder rim
 //     points, hull vertices, ...) whose foot lies inside the triangle: several points per pair, so a box rests
@@ -103,6 +106,38 @@ DVI_HD bool faceAxisIsBest(Vec3 low, real face_dist, Vec3 c, real c_height, cons
   return face_dist >= real(0) || (c_height >= need && footMargin(c, v, nw) >= need);
 }
 
+// Largest separation of box a (half extents a.dims, pose wa) and triangle v over the separating axes of the pair
+// other than the triangle's face normal: the box's three face normals and the nine cross products of a box axis
+// with a triangle edge (Gottschalk, Lin, Manocha, "OBBTree", SIGGRAPH 1996; Ericson, Real-Time Collision
+// Detection, 5.2.9). Along a unit axis n the separation is max(min_k n.(v_k - c) - r, -max_k n.(v_k - c) - r) with
+// r = sum_i h_i |n.u_i| the box's reach. With the face normal these axes are every candidate for two convex
+// polytopes, so the largest separation is minus the penetration depth when they overlap, and a lower bound on the
+// distance when they do not (any axis with separation >= the envelope rules the pair out).
+DVI_HD real boxTriangleSeparation(const Shape& a, const Pose& wa, const Vec3* v) {
+  const Vec3 u[3] = {rotate(wa.q, Vec3{1, 0, 0}), rotate(wa.q, Vec3{0, 1, 0}), rotate(wa.q, Vec3{0, 0, 1})};
+  const real h[3] = {a.dims.x, a.dims.y, a.dims.z};
+  const Vec3 d[3] = {v[0] - wa.p, v[1] - wa.p, v[2] - wa.p};
+  real best = real(-INFINITY);
+  for (int i = 0; i < 3; ++i) {
+    const real p0 = dot(u[i], d[0]), p1 = dot(u[i], d[1]), p2 = dot(u[i], d[2]);
+    best = std::fmax(best, std::fmax(std::fmin(p0, std::fmin(p1, p2)), -std::fmax(p0, std::fmax(p1, p2))) - h[i]);
+  }
+  for (int j = 0; j < 3; ++j) {
+    const Vec3 e = v[(j + 1) % 3] - v[j];
+    const real le = length(e);
+    for (int i = 0; i < 3; ++i) {
+      Vec3 n = cross(u[i], e);
+      const real ln = length(n);
+      if (!(ln > real(1e-6) * le)) continue;  // box axis along the edge: no axis of its own
+      n = n / ln;
+      const real r = h[0] * std::fabs(dot(n, u[0])) + h[1] * std::fabs(dot(n, u[1])) + h[2] * std::fabs(dot(n, u[2]));
+      const real p0 = dot(n, d[j]), p2 = dot(n, d[(j + 2) % 3]);  // the edge's two ends project alike
+      best = std::fmax(best, std::fmax(std::fmin(p0, p2), -std::fmax(p0, p2)) - r);
+    }
+  }
+  return best;
+}
+
 // The convex shape's plane contacts against the triangle's face (normal nf, the side of a), those whose foot lies
 // inside the triangle; their count.
 DVI_HD int triangleFaceContacts(const Shape& a, const Pose& wa, const Shape& b, const Vec3* v, Vec3 nw, Vec3 nf,
@@ -152,17 +187,33 @@ DVI_HD_CALL int collideConvexTriangle(const Shape& a, const Pose& wa, const Shap
     const int m = triangleFaceContacts(a, wa, b, v, nw, nf, hull_points, envelope, out);
     if (m > 0) return m;
   }
-  // 2. MPR (signed distance and normal of the deepest feature pair).
-  ContactPoint mpr[1];
-  if (collideMpr(a, wa, b, wb, hull_points, envelope, mpr, nullptr, false) == 0) return 0;
-  // 3. Face contacts when the face axis is (nearly) the best one.
   const real tol = real(0.02) * a.size;
-  if (face_dist >= mpr[0].dist - tol) {
+  // 1d. A box: the remaining separating axes decide without MPR whether the pair is apart, or whether the face
+  // axis is (within tol) its best axis, as step 3 does on MPR's answer.
+  if (a.type == ShapeType::Box) {
+    const real other = boxTriangleSeparation(a, wa, v);
+    if (!(other < envelope)) return 0;
+    if (face_dist >= other - tol) {
+      const int m = triangleFaceContacts(a, wa, b, v, nw, nf, hull_points, envelope, out);
+      if (m > 0) return m;
+    }
+  }
+  // 2. MPR: normal and depth of the deepest feature pair (A grown by the envelope, so the signed distance of the
+  // true shapes along n is envelope - depth); its contact point only when the face contacts do not stand.
+  const MprShape A = makeMprShape(a, wa, hull_points, envelope), B = makeMprShape(b, wb, hull_points, real(0));
+  MprResult best;
+  MprRound round;
+  const int stage = mprBegin(A, B, a, b, hull_points, best, round);
+  if (stage == 0) return 0;
+  if (stage == 2) mprDeepRounds(A, B, a, b, hull_points, round, best);
+  if (!(best.depth > real(0))) return 0;
+  // 3. Face contacts when the face axis is (nearly) the best one.
+  if (face_dist >= envelope - best.depth - tol) {
     const int m = triangleFaceContacts(a, wa, b, v, nw, nf, hull_points, envelope, out);
     if (m > 0) return m;
   }
-  mpr[0].feature = kMaxContactsPerPair;  // distinct from the face points' features (warm start keys)
-  out[0] = mpr[0];
+  if (mprFinish(A, B, hull_points, best, envelope, out, false) == 0) return 0;
+  out[0].feature = kMaxContactsPerPair;  // distinct from the face points' features (warm start keys)
   return 1;
 }
 

@@ -532,6 +532,13 @@ DVI_HD_CALL int mprFinish(const MprShape& A, const MprShape& B, const Vec3* hull
   return mprManifold(A, B, hull_points, envelope, out);
 }
 
+// The deep stage on the CPU: the global candidates' round, then the tilted one where mprTiltRound asks for it.
+DVI_HD_CALL void mprDeepRounds(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b,
+                               const Vec3* hull_points, MprRound& round, MprResult& best) {
+  mprRunRound(A, B, hull_points, round, best);
+  if (mprTiltRound(A, a, b, best, round)) mprRunRound(A, B, hull_points, round, best);
+}
+
 // A deep pair left for later (collideMpr with `defer`): the state after mprBegin. `swapped`: the pair's shapes
 // were collided in the opposite order (collideShapes' canonical order), so the contacts get flipped.
 struct MprDeferred {
@@ -558,8 +565,7 @@ DVI_HD_CALL int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const
       defer->round = round;
       return kMprDeferred;
     }
-    mprRunRound(A, B, hull_points, round, best);
-    if (mprTiltRound(A, a, b, best, round)) mprRunRound(A, B, hull_points, round, best);
+    mprDeepRounds(A, B, a, b, hull_points, round, best);
   }
   return mprFinish(A, B, hull_points, best, envelope, out, manifold);
 }
