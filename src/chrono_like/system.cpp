@@ -155,7 +155,9 @@ int System::effectiveThreads() const {
   // 0: OpenMP's default team size (OMP_NUM_THREADS, else the cores), as read outside any parallel region.
   const int requested = config_.threads > 0 ? config_.threads : omp_get_max_threads();
   const int64_t per = std::max(1, config_.min_bodies_per_thread);
-  const int64_t useful = std::max<int64_t>(1, int64_t(bodies_.count()) / per);
+  // the work grows with the shapes as much as with the bodies (a static mesh is one body of thousands of triangles)
+  const int64_t items = std::max<int64_t>(int64_t(bodies_.count()), int64_t(shapes_.count()));
+  const int64_t useful = std::max<int64_t>(1, items / per);
   return int(std::min<int64_t>(requested, useful));
 }
 

@@ -110,8 +110,9 @@ struct SystemConfig {
   // [threads] OpenMP threads of the CPU stages; 0 = OpenMP's default team (OMP_NUM_THREADS, else the cores),
   // dropped to one thread while other processes take the cores (base/thread_governor.h). An explicit count stands.
   int threads = 0;
-  int min_bodies_per_thread = 256;  // [bodies] fewer bodies than this per thread: use fewer threads (a small scene
-                                    // costs more in OpenMP barriers than it gains; 1 forces all threads)
+  int min_bodies_per_thread = 256;  // [bodies] fewer bodies (or shapes, whichever are more) than this per thread: use
+                                    // fewer threads (a small scene costs more in OpenMP barriers than it gains; 1
+                                    // forces all threads)
   // Leave out the stages and rows the scene does not need (docs/MODEL.md §6): the normal row only when no contact
   // of the step has mu > 0, no gyroscopic term for spherical inertia, no row or field round trips without
   // row providers or fields. false runs every one of them (3 rows per contact even for mu = 0, the
