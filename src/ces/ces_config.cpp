@@ -54,7 +54,7 @@ const char* defaultCesJson() {
     "drum": { "diameter_mm": 320, "width_mm": 300, "rpm": 44.8, "drive": "auto", "mass_kg": 30 },
     "electrode": {
       "voltage_kV": -35,
-      "wire": { "enabled": true, "angle_deg": 60, "distance_mm": 205, "diameter_mm": 0.25 },
+      "wire": { "enabled": true, "angle_deg": 75, "distance_mm": 205, "diameter_mm": 0.25 },
       "tube": { "enabled": true, "angle_deg": 30, "distance_mm": 230, "diameter_mm": 38 }
     },
     "field": { "model": "corona", "extra_electrodes": [] },

@@ -92,8 +92,8 @@ struct CesConfig {
 
   // The electrodes on the one high-voltage supply: a thin corona wire (ionising) and a static tube
   // (shaping the field). voltage = 0 is the supply off.
-  double voltage = -35000;  // V
-  ElectrodeConfig wire{true, 0.00025, 0.205, 1.0471975511965976, 0};
+  double voltage = -35000;                                            // V
+  ElectrodeConfig wire{true, 0.00025, 0.205, 1.3089969389957472, 0};  // 75 deg: ions end before conductors leave
   ElectrodeConfig tube{true, 0.038, 0.230, 0.5235987755982988, 0};
   // Field model: "corona" (the steady ionised field of the wire with the tube, field_corona.h; Laplace
   // below onset), "csm" (Laplace field of the wire, the tube and extra_electrodes, no ions) or
