@@ -90,7 +90,7 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
   CHECK(c.wire.enabled);
   CHECK(c.wire.diameter == Approx(0.25e-3));
   CHECK(c.wire.distance == Approx(0.205));
-  CHECK(c.wire.angle == Approx(M_PI / 3));
+  CHECK(c.wire.angle == Approx(5 * M_PI / 12));  // 75 degrees
   CHECK(c.tube.enabled);
   CHECK(c.tube.diameter == Approx(0.038));
   CHECK(c.tube.distance == Approx(0.230));
@@ -340,7 +340,7 @@ TEST_CASE(
     "CES machine: above corona onset an insulator takes ion charge and is pinned until the brush, below it is not",
     "[ces][ces_machine]") {
   // A plastic sphere (d = 0.75 mm, rotation locked: shredded plastic does not roll) placed on the drum at
-  // 80 deg, before the corona wire (60 deg), on the default composite machine.
+  // 80 deg, before the corona wire (75 deg), on the default composite machine.
   for (const double U : {-35.0, -8.0}) {
     INFO("U = " << U << " kV");
     CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=" + std::to_string(U)});

@@ -4,8 +4,8 @@
 // to the brush and 0.2-0.3 s to fall, so at 1.3 s up to 7% of the fed mass of seeds 1-3 was still falling), at three supply voltages through `dvisim sweep` (two runs at a time). docs/CES.md,
 // "Validation", gives the full-length table with replicates; these checks are its criteria, on the CPU backend
 // (the one CI has; the GPU's CES run is not bitwise the CPU's and its particles reach the plane at other times):
-//  (a) conductors land farther from the drum as |U| rises (Dascalescu et al., J. Electrostatics 29 (1993)
-//      211-225; Younes et al., IEEE Trans. Ind. Appl. 43 (2007) 1130-1136);
+//  (a) conductors land farther from the drum as |U| rises and as the drum speeds up (Dascalescu et al., J.
+//      Electrostatics 29 (1993) 211-225; Younes et al., IEEE Trans. Ind. Appl. 43 (2007) 1130-1136);
 //  (b) they carry the induced charge, opposite to the electrodes' (Félici 1966);
 //  (c) below corona onset no ions exist and insulators are not pinned to the drum;
 //  (d) above onset the share of insulators pinned until the brush, and with it the plastic product at the
@@ -111,13 +111,13 @@ TEST_CASE("CES trends of the default machine: landing, induced sign, onset, pinn
     if (mm[0] > 0) CHECK(num(m45, "copper.mean_landing_q_neg_mm") == Approx(xm[0] / mm[0]).epsilon(1e-6));
   }
 
-  // (c) Below onset (-8 kV; onset -11.9 kV): no ions, no plastic pinned.
+  // (c) Below onset (-8 kV; onset -10.9 kV): no ions, no plastic pinned.
   CHECK(m8["ionised"] == 0);
   CHECK(num(m8, "pinned.plastic") < 0.05);
   CHECK(m20["ionised"] == 1);
   CHECK(m45["ionised"] == 1);
 
-  // (a) Copper lands farther out at -45 kV than at -20 kV (~390 vs ~305 mm), and at -20 than below onset.
+  // (a) Copper lands farther out at -45 kV than at -20 kV (~380 vs ~300 mm), and at -20 than below onset.
   INFO("copper landing " << m8["copper.mean_landing_mm"] << " / " << m20["copper.mean_landing_mm"] << " / "
                          << m45["copper.mean_landing_mm"] << " mm at -8 / -20 / -45 kV");
   CHECK(num(m45, "copper.mean_landing_mm") > num(m20, "copper.mean_landing_mm") + 30);
@@ -137,6 +137,22 @@ TEST_CASE("CES trends of the default machine: landing, induced sign, onset, pinn
   CHECK(num(m45, "pinned.plastic") > num(m20, "pinned.plastic") + 0.5);
   CHECK(num(m45, "fixed.nonconductor.recovery") > num(m20, "fixed.nonconductor.recovery") + 0.5);
   CHECK(num(m45, "fixed.nonconductor.grade") > 0.9);
+
+  // (a) in drum speed: at the default supply, copper lands farther out at 60 rpm than at 30 (the short feed, seeds
+  // 1-3: 342 / 340 / 342 against 352 / 355 / 355 mm; +12.5 +- 4.1 mm on the full machine, docs/CES.md).
+  const fs::path dir_rpm = dir.string() + "_rpm";
+  const std::string cmd_rpm = std::string("\"") + DVISIM_CLI_PATH +
+                              "\" sweep --grid drum.rpm=30,60 --seeds 1 --jobs 2 --threads 1 --backend cpu --no-plots"
+                              " --set feed.duration_s=0.2 --time 1.4 --out \"" +
+                              dir_rpm.string() + "\" > \"" + dir_rpm.string() + ".log\" 2>&1";
+  REQUIRE(std::system(cmd_rpm.c_str()) == 0);
+  const json r30 = readJson(dir_rpm / "runs" / "000-seed1" / "summary.json")["ces"]["metrics"];
+  const json r60 = readJson(dir_rpm / "runs" / "001-seed1" / "summary.json")["ces"]["metrics"];
+  INFO("copper landing " << r30["copper.mean_landing_mm"] << " / " << r60["copper.mean_landing_mm"]
+                         << " mm at 30 / 60 rpm");
+  CHECK(num(r60, "copper.mean_landing_mm") > num(r30, "copper.mean_landing_mm") + 5);
+  CHECK(num(r60, "copper.positive_charge_fraction") > 0.6);
+  fs::remove_all(dir_rpm);
 
   fs::remove_all(dir);
   fs::remove(fs::path(dir.string() + ".log"));
