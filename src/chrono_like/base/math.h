@@ -115,6 +115,11 @@ struct Pose {
   Quat q;
 };
 DVI_HD Vec3 transformPoint(const Pose& t, Vec3 x) { return t.p + rotate(t.q, x); }
+// Exact (bitwise-value) equality: whether a value the application or the last step wrote is unchanged.
+DVI_HD bool sameVec(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+DVI_HD bool samePose(const Pose& a, const Pose& b) {
+  return sameVec(a.p, b.p) && a.q.w == b.q.w && a.q.x == b.q.x && a.q.y == b.q.y && a.q.z == b.q.z;
+}
 DVI_HD Vec3 inverseTransformPoint(const Pose& t, Vec3 x) { return rotateInv(t.q, x - t.p); }
 DVI_HD Pose compose(const Pose& a, const Pose& b) { return Pose{transformPoint(a, b.p), a.q * b.q}; }
 

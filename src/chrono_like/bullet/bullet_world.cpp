@@ -26,8 +26,6 @@ bool sameTransform(const btTransform& a, const btTransform& b) {
          a.getBasis()[2] == b.getBasis()[2];
 }
 
-bool sameVec(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
-
 // Writes v into dst; true when that changed it.
 bool put(Vec3& dst, Vec3 v) {
   if (sameVec(dst, v)) return false;

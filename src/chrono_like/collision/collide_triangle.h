@@ -120,7 +120,7 @@ DVI_HD real boxTriangleSeparation(const Shape& a, const Pose& wa, const Vec3* v)
   real best = real(-INFINITY);
   for (int i = 0; i < 3; ++i) {
     const real p0 = dot(u[i], d[0]), p1 = dot(u[i], d[1]), p2 = dot(u[i], d[2]);
-    best = std::fmax(best, std::fmax(std::fmin(p0, std::fmin(p1, p2)), -std::fmax(p0, std::fmax(p1, p2))) - h[i]);
+    best = maxr(best, maxr(minr(p0, minr(p1, p2)), -maxr(p0, maxr(p1, p2))) - h[i]);
   }
   for (int j = 0; j < 3; ++j) {
     const Vec3 e = v[(j + 1) % 3] - v[j];
@@ -132,7 +132,7 @@ DVI_HD real boxTriangleSeparation(const Shape& a, const Pose& wa, const Vec3* v)
       n = n / ln;
       const real r = h[0] * std::fabs(dot(n, u[0])) + h[1] * std::fabs(dot(n, u[1])) + h[2] * std::fabs(dot(n, u[2]));
       const real p0 = dot(n, d[j]), p2 = dot(n, d[(j + 2) % 3]);  // the edge's two ends project alike
-      best = std::fmax(best, std::fmax(std::fmin(p0, p2), -std::fmax(p0, p2)) - r);
+      best = maxr(best, maxr(minr(p0, p2), -maxr(p0, p2)) - r);
     }
   }
   return best;

@@ -83,10 +83,6 @@ class NativeCollision final : public CollisionDetector {
       shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, config.envelope_rel, sweep));
     }
   }
-  static bool sameVec(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
-  static bool samePose(const Pose& a, const Pose& b) {
-    return sameVec(a.p, b.p) && a.q.w == b.q.w && a.q.x == b.q.x && a.q.y == b.q.y && a.q.z == b.q.z;
-  }
 
   // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
   // fat_flags_ when it builds). Last step's pairs are kept while every box is inside its grown box

@@ -532,7 +532,8 @@ DVI_HD_CALL int mprFinish(const MprShape& A, const MprShape& B, const Vec3* hull
   return mprManifold(A, B, hull_points, envelope, out);
 }
 
-// The deep stage on the CPU: the global candidates' round, then the tilted one where mprTiltRound asks for it.
+// The deep stage in one thread (the GPU's deferred pairs run a round's restarts on separate lanes instead): the
+// global candidates' round, then the tilted one where mprTiltRound asks for it.
 DVI_HD_CALL void mprDeepRounds(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b,
                                const Vec3* hull_points, MprRound& round, MprResult& best) {
   mprRunRound(A, B, hull_points, round, best);

@@ -13,6 +13,7 @@ DVI_HD real sgn1(real x) { return x < real(0) ? real(-1) : real(1); }  // sign w
 // max and clamp by comparison: std::fmax and fmin are library calls on the host (GCC does not inline them without
 // -ffinite-math-only), and these run in every support mapping. clampr(NaN) = lo, as fmin(fmax(NaN, lo), hi).
 DVI_HD real maxr(real a, real b) { return a > b ? a : b; }
+DVI_HD real minr(real a, real b) { return a < b ? a : b; }
 DVI_HD real clampr(real x, real lo, real hi) { return !(x > lo) ? lo : (x > hi ? hi : x); }
 template <class T>
 DVI_HD void swapv(T& a, T& b) {  // std::swap is not usable in device code
