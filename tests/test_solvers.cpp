@@ -400,6 +400,45 @@ TEST_CASE("every solver reaches the dense reference on random contact scenes", "
   checkAgainstReference(cp, dense(s), true, true, "random scene, unique");
 }
 
+// What a solver does not read is not assembled (ContactProblemSettings::jacobi_steps, block_inverses): asking for it
+// throws. Gauss-Seidel keeps dv = M^-1 D gamma through its sweeps, and applyImpulses of its result uses that: it
+// must equal a fresh gather of the same impulses (up to the rounding of the updates) on a scene whose contacts share
+// bodies.
+TEST_CASE("Gauss-Seidel's kept velocity changes equal a fresh gather; unbuilt Jacobi steps are refused", "[solver]") {
+  Scene s = randomScene(33, 12, 40, true);
+  s.ps.jacobi_steps = false;
+  s.ps.block_inverses = false;
+  ContactProblem cp;
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  CHECK_THROWS_AS(cp.jacobiSteps(), std::logic_error);
+  CHECK_THROWS_AS(cp.blockInverses(), std::logic_error);
+  SolverSettings st;
+  st.type = SolverType::GaussSeidel;
+  st.max_iterations = 10;
+  st.tolerance = 0;
+  st.record_history = false;
+  std::vector<real> gam(size_t(cp.size()), 0);
+  cp.solveGaussSeidel(gam.data(), st);
+  const size_t nb = s.bodies.count();
+  std::vector<Vec3> dv(nb, Vec3{0, 0, 0}), dw(nb, Vec3{0, 0, 0}), dv2 = dv, dw2 = dw;
+  cp.applyImpulses(gam.data(), dv.data(), dw.data());  // the kept changes
+  std::vector<real> copy = gam;
+  cp.applyImpulses(copy.data(), dv2.data(), dw2.data());  // another vector: a fresh gather
+  real scale = 0, worst = 0;
+  for (size_t i = 0; i < nb; ++i) {
+    scale = std::max(scale, std::max(length(dv2[i]), length(dw2[i])));
+    worst = std::max(worst, std::max(length(dv[i] - dv2[i]), length(dw[i] - dw2[i])));
+  }
+  REQUIRE(scale > 0);
+  CHECK(worst <= 1e-12 * scale);
+  // The same problem built with them hands them out, each step positive and finite.
+  s.ps.jacobi_steps = s.ps.block_inverses = true;
+  ContactProblem full;
+  full.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  for (int k = 0; k < full.size() / 3; ++k) CHECK((full.jacobiSteps()[k] > 0 && std::isfinite(full.jacobiSteps()[k])));
+  CHECK_NOTHROW(full.blockInverses());
+}
+
 // VectorStorage::Float (the GPU's default) on the CPU: APGD's Schur buffers hold the gradient N g + r rounded to
 // float, the iterates stay real. Against the dense reference (an independent solver) the solution must reach
 // float precision; Auto is real storage on the CPU (bitwise).

@@ -505,6 +505,11 @@ void System::buildProblem(int64_t nc) {
   ps.solver = config_.solver;
   ps.threads = omp_get_max_threads();
   ps.normal_only = normal_only;
+  // Only the Jacobi solver reads the Jacobi steps; the block inverses only Jacobi's and Gauss-Seidel's Inverse3x3.
+  const SolverType type = config_.solver.type;
+  ps.jacobi_steps = type == SolverType::Jacobi;
+  ps.block_inverses = (type == SolverType::Jacobi || type == SolverType::GaussSeidel) &&
+                      config_.solver.block_scaling == BlockScaling::Inverse3x3;
   ps.float_jacobians =
       config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) && !std::is_same_v<real, float>;
   problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_,
@@ -512,12 +517,22 @@ void System::buildProblem(int64_t nc) {
 }
 
 // WarmStart: each contact's (and its rolling block's) impulses from last step's by persistent key.
+// A contact's key is looked up first just after the previous contact's match (contacts mostly come in last
+// step's order), then by binary search.
 void System::warmStartContacts(int64_t nc, int64_t nroll) {
-#pragma omp parallel for schedule(static)
-  for (int64_t k = 0; k < nc; ++k) {
-    auto it = std::lower_bound(prev_keys_.begin(), prev_keys_.end(), contacts_.key[k]);
-    if (it != prev_keys_.end() && *it == contacts_.key[k]) {
-      size_t j = size_t(it - prev_keys_.begin());
+  const size_t np = prev_keys_.size();
+#pragma omp parallel
+  {
+    size_t next = np;  // per thread: where the previous contact's key matched, plus one
+#pragma omp for schedule(static)
+    for (int64_t k = 0; k < nc; ++k) {
+      const uint64_t key = contacts_.key[k];
+      size_t j = next;
+      if (j >= np || prev_keys_[j] != key) {
+        j = size_t(std::lower_bound(prev_keys_.begin(), prev_keys_.end(), key) - prev_keys_.begin());
+        if (j == np || prev_keys_[j] != key) continue;
+      }
+      next = j + 1;
       for (int r = 0; r < 3; ++r) gamma_[3 * k + r] = prev_gamma_[3 * j + r];
       const int32_t q = nroll > 0 ? problem_->rollingIndex(k) : -1;
       if (q >= 0 && !prev_roll_.empty())

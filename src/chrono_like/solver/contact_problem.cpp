@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "chrono_like/base/errors.h"
@@ -52,6 +53,11 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   rhs_.resize(size_t(3 * nblk));
   mu_.resize(size_t(nc));
   eta_.resize(size_t(nblk));
+  have_jacobi_steps_ = settings.jacobi_steps;
+  have_block_inverses_ = settings.block_inverses;
+  gs_deltas_of_ = nullptr;
+  // Sized in full either way (the normal-only and row blocks' assembly writes them all; the contacts' skips the
+  // unwanted): binv_ feeds blockInverses(), colnorm_ and rowsum_ the Jacobi steps.
   binv_.resize(size_t(6 * nblk));
   jeta_.resize(size_t(nblk));
   colnorm_.resize(size_t(6 * nblk));
@@ -70,7 +76,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   max_diag = assembleBoxesAndRows(rows, nb, v_free, w_free, max_diag);
   max_diag_ = max_diag > 0 ? max_diag : real(1);
   buildAdjacency(nb);
-  computeJacobiSteps(nb);
+  if (have_jacobi_steps_) computeJacobiSteps(nb);
   // A rolling pair is projected as one (cone.h): the solvers' fixed points are the CCP's only where the step's
   // scaling is one scalar on the whole pair (the projection is Euclidean), so both blocks take the smaller of their
   // two steps (each is a valid bound, so their minimum is too).
@@ -78,7 +84,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     const int32_t p = roll_[size_t(k)];
     if (p < 0) continue;
     eta_[size_t(k)] = eta_[size_t(p)] = std::min(eta_[size_t(k)], eta_[size_t(p)]);
-    jeta_[size_t(k)] = jeta_[size_t(p)] = std::min(jeta_[size_t(k)], jeta_[size_t(p)]);
+    if (have_jacobi_steps_) jeta_[size_t(k)] = jeta_[size_t(p)] = std::min(jeta_[size_t(k)], jeta_[size_t(p)]);
   }
   // Small problems run serially (solver.h: kSerialContacts); bitwise identical to the parallel path.
   if (nblk < kSerialContacts) threads_ = 1;
@@ -119,10 +125,12 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
     rk[0] += contactNormalBias(J, contacts.dist[k], contacts.size[k], bias_in);
     real N[6];
     contactDiagonalBlock(J, inv_[a], inv_[b], N);
-    invertSymmetric3(N, binv_.data() + 6 * k);
+    if (have_block_inverses_) invertSymmetric3(N, binv_.data() + 6 * k);
     eta_[k] = blockStepFromDiagonal(N);
-    contactColumnNorms(J, inv_[a], inv_[b], colnorm_.data() + 6 * k);
-    blockRowSums(N, rowsum_.data() + 3 * k);                              // absolute row sums of N_kk itself
+    if (have_jacobi_steps_) {
+      contactColumnNorms(J, inv_[a], inv_[b], colnorm_.data() + 6 * k);
+      blockRowSums(N, rowsum_.data() + 3 * k);  // absolute row sums of N_kk itself
+    }
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
   }
 
@@ -335,9 +343,18 @@ void ContactProblem::fromSolverLayout(const real* x, real* g3) const {
   for (int64_t i = 0; i < n; ++i) f(i);
 }
 const real* ContactProblem::rhs() const { return rhs_.data(); }
+const real* ContactProblem::blockInverses() const {
+  if (!have_block_inverses_) throw std::logic_error("ContactProblem: built without block inverses");
+  return binv_.data();
+}
+const real* ContactProblem::jacobiSteps() const {
+  if (!have_jacobi_steps_) throw std::logic_error("ContactProblem: built without Jacobi steps");
+  return jeta_.data();
+}
 int ContactProblem::threads() const { return threads_; }
 
 void ContactProblem::gatherBodyDeltas(const real* x) const {
+  gs_deltas_of_ = nullptr;
   const int64_t na = int64_t(active_.size());
   const EntryLayout L = layout();
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
@@ -375,7 +392,7 @@ void ContactProblem::schur(const real* x, real* y) const {
 }
 
 void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {
-  gatherBodyDeltas(gamma);
+  if (gamma != gs_deltas_of_ || !gamma) gatherBodyDeltas(gamma);
   const int64_t na = int64_t(active_.size());
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
   for (int64_t j = 0; j < na; ++j) {
@@ -478,6 +495,38 @@ void ContactProblem::gsRowSweep(int64_t k, real* gamma, real w) const {
   }
 }
 
+// One Gauss-Seidel sweep over the contact blocks alone, for problems whose contacts are all plain friction cones
+// under Scalar scaling (no rolling block, not normal-only): the general sweep's operations in the same order (so
+// the same iterates), in one loop the compiler sees whole. It is a drop-in world's hot loop.
+void ContactProblem::gsContactSweep(real* gamma, real w) const {
+  BodyDelta* dl = delta_.data();
+  for (int64_t k = 0; k < nc_; ++k) {
+    const ContactJacobian& J = jac_[size_t(k)];
+    real y[3];
+    contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+    real* g = gamma + 3 * k;
+    const real t = w * eta_[size_t(k)];
+    real gn[3];
+    for (int j = 0; j < 3; ++j) gn[j] = g[j] - t * (y[j] + rhs_[size_t(3 * k + j)]);
+    projectConeBlock(mu_[size_t(k)], gn);
+    const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
+    g[0] = gn[0];
+    g[1] = gn[1];
+    g[2] = gn[2];
+    if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
+    for (int side = 0; side < 2; ++side) {
+      const int32_t i = side ? J.b : J.a;
+      const BodyInverseMass& M = inv_[size_t(i)];
+      if (!movable(M)) continue;
+      Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+      accumulateContactImpulse(J, side, dg, F, Tq);
+      const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
+      dl[i].v += d.v;
+      dl[i].w += d.w;
+    }
+  }
+}
+
 // Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
 // CMAME 200 (2011)): sweep the contacts in order; for contact k
 //   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
@@ -497,14 +546,13 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   const BlockSet bs = blockSet();
   std::vector<double> part;
   project(gamma);
-  gatherBodyDeltas(gamma);  // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
-  auto blockGradient = [&](int64_t k, real* y) { gsBlockGradient(k, y); };
+  gatherBodyDeltas(gamma);             // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
   const int64_t row0 = ncb_ + nroll_;  // the provider rows' first block
   // Block b's values after its scaled step, before the projection.
   auto blockStep = [&](int64_t b, real* gn) {
     const real* g = gamma + 3 * b;
     real y[3];
-    blockGradient(b, y);
+    gsBlockGradient(b, y);
     if (full) {
       const Vec3 sy = symMul(binv_.data() + 6 * b, Vec3{y[0], y[1], y[2]});
       gn[0] = g[0] - w * sy.x;
@@ -530,8 +578,8 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
       if (isRollingBlock(bs, k)) return;  // with its contact
       const int64_t p = rollingPartner(bs, k);
       real y[3], yp[3] = {0, 0, 0};
-      blockGradient(k, y);
-      if (p >= 0) blockGradient(p, yp);
+      gsBlockGradient(k, y);
+      if (p >= 0) gsBlockGradient(p, yp);
       acc[0] += unitResidual2(bs, k, p, gamma + 3 * k, y, p >= 0 ? gamma + 3 * p : nullptr, yp, a, inv_a);
     });
     return real(std::sqrt(sum));
@@ -539,13 +587,15 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   st.residual_scale = ccpResidualScale(*this, a);
   const real thr = stopThreshold(s, st.residual_scale);
   // A fixed count (no tolerance, no history: Bullet's effort) needs no residual before the sweeps; the one after
-  // them comes from the maintained deltas too. Each saved a pass of the ~12 such a 10-sweep solve made.
+  // them comes from the maintained deltas too (each saved a pass of the ~12 a 10-sweep solve made).
   const bool fixed_count = !(s.tolerance > 0) && !s.record_history;
   real res = fixed_count ? real(INFINITY) : residualFromDeltas();
   if (s.record_history) st.history.push_back(res);
+  const bool plain = !full && !normal_only_ && nroll_ == 0;  // every contact a plain cone: gsContactSweep
   if (!reachedStop(res, thr, 0, s.min_iterations)) {
     for (int it = 0; it < s.max_iterations; ++it) {
-      for (int64_t k = 0; k < nblk; ++k) {
+      if (plain) gsContactSweep(gamma, w);
+      for (int64_t k = plain ? ncb_ : 0; k < nblk; ++k) {
         if (isRollingBlock(bs, k)) continue;  // updated with its contact (a rolling pair is one Gauss-Seidel unit)
         if (k >= row0 && !full) {
           gsRowSweep(k, gamma, w);
@@ -578,8 +628,9 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
     st.residual = residualFromDeltas();
   } else {
     std::vector<real> scratch;
-    st.residual = ccpResidual(*this, gamma, a, scratch);
+    st.residual = ccpResidual(*this, gamma, a, scratch);  // its Schur product recomputes delta_ from gamma
   }
+  gs_deltas_of_ = gamma;  // delta_ = M^-1 D gamma: applyImpulses(gamma) needs no gather
   finishStats(st, s);
   return st;
 }

@@ -52,6 +52,13 @@ struct ContactProblemSettings {
   bool normal_only = false;
   // VectorStorage::Float with APGD: the Jacobians rounded to float (roundJacobian), as the GPU's are.
   bool float_jacobians = false;
+  // What only some solvers read, assembled only where wanted: the Jacobi
+  // solver's coupling-aware steps (jacobiSteps(): the column norms, row sums and per-body sums behind them), and
+  // the blocks' inverses N_kk^-1 (blockInverses(): BlockScaling::Inverse3x3 of Jacobi and Gauss-Seidel). Both
+  // default on; System::buildProblem turns off what its solver does not read. Asking a problem built without
+  // them throws std::logic_error.
+  bool jacobi_steps = true;
+  bool block_inverses = true;
 };
 
 class ContactProblem final : public CcpProblem {
@@ -91,9 +98,9 @@ class ContactProblem final : public CcpProblem {
   void fromSolverLayout(const real* x, real* g3) const;
   EntryLayout layout() const { return EntryLayout{nc_, ncb_, normal_only_}; }
   int threads() const override;
-  const real* blockInverses() const override { return binv_.data(); }
+  const real* blockInverses() const override;
   const real* blockSteps() const override { return eta_.data(); }
-  const real* jacobiSteps() const override { return jeta_.data(); }
+  const real* jacobiSteps() const override;
   real maxDiagonal() const override { return max_diag_; }
   // The processes sharing this problem (process_group.h; null: none), set before build(): their shared bodies
   // are gathered by every pass (a) and exchanged after it (schur, applyImpulses). The group outlives the problem's
@@ -101,7 +108,8 @@ class ContactProblem final : public CcpProblem {
   void setProcessGroup(const ProcessGroup* group) { group_ = group; }
   const ProcessGroup* processGroup() const override { return group_; }
 
-  // Velocity change of every body from impulses gamma: dv = M^-1 D gamma (adds into dv, dw).
+  // Velocity change of every body from impulses gamma: dv = M^-1 D gamma (adds into dv, dw). Right after
+  // solveGaussSeidel(gamma), with gamma as it left it, the velocity changes it kept are used (no gather).
   void applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const;
 
   // Projected Gauss-Seidel, the sequential CPU reference solver.
@@ -130,11 +138,17 @@ class ContactProblem final : public CcpProblem {
   // Gauss-Seidel's block k: its gradient from delta_, and delta_ updated by a change dg of its impulses.
   void gsBlockGradient(int64_t k, real* y) const;
   void gsApplyBlockChange(int64_t k, const real* dg) const;
+  // Gauss-Seidel's sweep over the contact blocks where all are plain friction cones under Scalar scaling.
+  void gsContactSweep(real* gamma, real w) const;
   // Gauss-Seidel's update of provider row block k, row by row with each row's exact diagonal step.
   void gsRowSweep(int64_t k, real* gamma, real w) const;
 
   int threads_ = 1;
   const ProcessGroup* group_ = nullptr;
+  bool have_jacobi_steps_ = false, have_block_inverses_ = false;  // built (ContactProblemSettings)
+  // The impulses delta_ is current for, where Gauss-Seidel left it so (it keeps delta_ = M^-1 D gamma through its
+  // sweeps): applyImpulses of those impulses then skips pass (a). Any other use of delta_ clears it.
+  mutable const real* gs_deltas_of_ = nullptr;
   int64_t nc_ = 0;   // contacts
   int64_t ncb_ = 0;  // contact blocks: nc_, or ceil(nc_ / 3) when normal_only_
   bool normal_only_ = false;
