@@ -945,6 +945,98 @@ TEST_CASE("every convex pair agrees with Bullet's GJK/EPA and a brute-force orac
   CHECK(compared > 28 * kSamples / 2);
 }
 
+// Pairs whose cores are apart (the swept shapes separated, or overlapping within their sweeps: a hull's margin, a
+// sphere's or capsule's radius) take their normal and distance from the cores' closest points (gjk.h), which are
+// exact: for every MPR pair type, placed at a random gap from touching in [-sweeps / 2, 8 % of the smaller size],
+// the deepest point must equal the brute-force oracle to 1e-7 (polytope and point/segment cores: GJK ends on the
+// exact features) or 1e-5 (curved cores: GJK stops at its relative tolerance, or leaves the pair to MPR), and its
+// normal the oracle's to 0.01 degree where the gap is above 1e-3. Far apart, gjkDistance proves it (kGjkApart);
+// with the cores overlapping it answers kGjkOverlap.
+TEST_CASE("cores apart: GJK's closest points give the oracle's distance and normal", "[narrowphase]") {
+  std::vector<Vec3> pts;
+  pts.reserve(100000);
+  Rng rng(41);
+  double worst = 0, worstAng = 0;
+  int compared = 0, close = 0;
+  for (int ia = 0; ia < 7; ++ia)
+    for (int ib = ia; ib < 7; ++ib) {
+      const ShapeType ta = kConvexTypes[ia], tb = kConvexTypes[ib];
+      if (!pairUsesMpr(ta, tb)) continue;
+      auto curved = [](ShapeType t) {
+        return t == ShapeType::Ellipsoid || t == ShapeType::Cylinder || t == ShapeType::Cone;
+      };
+      const double tol = curved(ta) || curved(tb) ? 1e-5 : 1e-7;
+      int pc = 0, pg = 0;
+      double pw = 0;
+      for (int it = 0; it < 40; ++it) {
+        Pair A = randomShape(ta, rng, pts, rng.uni(0, 0.1)), B = randomShape(tb, rng, pts, rng.uni(0, 0.1));
+        const Quat qa = rng.rot(), qb = rng.rot();
+        const Vec3 u = rng.dir(), c0{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)};
+        auto at = [&](double t) { return pose(c0 + u * t, qb); };
+        const Pose pa = pose(c0, qa);
+        Vec3 nor;
+        double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
+        for (int k = 0; k < 30; ++k) {  // touching by Bullet's distance (float: ~1e-6)
+          const double mid = 0.5 * (lo + hi);
+          (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0 ? lo : hi) = mid;
+        }
+        const double sweeps = np::sweepRadius(A.s) + np::sweepRadius(B.s);
+        const double size = std::min(A.s.size, B.s.size);
+        const Pose pb = at(0.5 * (lo + hi) + rng.uni(-0.5 * sweeps, 0.08 * size));
+        const double env = 0.1 * size;
+        // the cores' own answer, as the narrow phase asks it
+        const np::MprShape MA = np::makeMprShape(A.s, pa, pts.data(), env),
+                           MB = np::makeMprShape(B.s, pb, pts.data(), 0);
+        np::MprResult r;
+        const int g = np::mprCoresApart(MA, MB, pts.data(), r);
+        ContactPoint c[kMaxContactsPerPair];
+        const int m = collideShapes(A.s, pa, B.s, pb, pts.data(), env, c);
+        // The oracle searches from our normal too: ours is -h(n) for that normal, so the oracle's value is never
+        // below it, and exceeds it where a better normal exists.
+        const Vec3 hints[2] = {u, m > 0 ? c[deepest(c, m)].normal : u};
+        const double orc = oracleSignedDistance(A.s, pa, B.s, pb, pts.data(), hints, 2, &nor);
+        INFO(shapeTypeName(ta) << "-" << shapeTypeName(tb) << " sample " << it << " oracle " << orc);
+        if (orc < -0.5 * sweeps - 1e-5) continue;  // placed deeper than half the sweeps (Bullet's rounding)
+        if (orc >= env) {
+          CHECK(g == np::kGjkApart);
+          continue;
+        }
+        REQUIRE(m >= 1);
+        checkConsistent(c, m, env);
+        const ContactPoint& k = c[deepest(c, m)];
+        INFO("ours " << k.dist << " gjk answer " << g);
+        CHECK(orc - k.dist > -1e-9);
+        CHECK(orc - k.dist < tol);
+        worst = std::max(worst, std::fabs(k.dist - orc));
+        if (orc > 1e-3) {
+          CHECK(angleDeg(k.normal, nor) < 0.01);
+          worstAng = std::max(worstAng, angleDeg(k.normal, nor));
+        }
+        close += g == np::kGjkClose;
+        ++compared;
+        pg += g == np::kGjkClose;
+        ++pc;
+        pw = std::max(pw, orc - k.dist);
+      }
+      std::printf("  %-26s %2d samples, %2d through GJK: |ours-oracle| %.1e\n",
+                  (std::string(shapeTypeName(ta)) + "-" + shapeTypeName(tb)).c_str(), pc, pg, pw);
+    }
+  std::printf("  cores apart, %d samples (%d through GJK): |ours-oracle| %.1e  normal %.4f deg\n", compared, close,
+              worst, worstAng);
+  CHECK(close > compared / 2);
+  // Overlapping cores: two unit boxes 1.5 apart (cores overlap by 0.5) go to MPR.
+  const Shape bx = box(1, 1, 1);
+  const np::MprShape O1 = np::makeMprShape(bx, pose(Vec3{0, 0, 0}), pts.data(), 0.1);
+  const np::MprShape O2 = np::makeMprShape(bx, pose(Vec3{1.5, 0.2, 0}), pts.data(), 0);
+  np::MprResult r;
+  CHECK(np::mprCoresApart(O1, O2, pts.data(), r) == np::kGjkOverlap);
+  // 0.05 apart along x within an envelope of 0.1: exact, normal +x, depth 0.1 - 0.05.
+  const np::MprShape N2 = np::makeMprShape(bx, pose(Vec3{2.05, 0.2, 0.1}), pts.data(), 0);
+  REQUIRE(np::mprCoresApart(O1, N2, pts.data(), r) == np::kGjkClose);
+  CHECK(r.depth == Approx(0.05).margin(1e-12));
+  CHECK(angleDeg(r.n, Vec3{1, 0, 0}) < 1e-9);
+}
+
 TEST_CASE("supportLocal agrees with Bullet's support mappings", "[narrowphase][bullet]") {
   Rng rng(10);
   std::vector<Vec3> pts;

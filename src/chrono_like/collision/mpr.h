@@ -39,6 +39,7 @@
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
 #include "chrono_like/collision/contact.h"
+#include "chrono_like/collision/gjk.h"
 #include "chrono_like/collision/support.h"
 
 namespace dvi {
@@ -117,6 +118,29 @@ struct MprResult {
   Vec3 n;      // unit, from A to B
   real depth;  // h(n) = penetration of A' and B' along n
 };
+
+// Support point of the core (the shape without its own sweep).
+DVI_HD Vec3 mprCoreSupport(const MprShape& m, Vec3 d, const Vec3* hull_points) {
+  return m.p + m.R * supportCoreLocal(*m.s, mulTransposed(m.R, d), hull_points);
+}
+
+// The pair through its cores' closest points (gjk.h), before MPR: kGjkApart (no contact: the swept shapes are
+// apart by more than the envelope), kGjkClose (best is the exact normal, from A to B, and depth of A' and B'), or
+// kGjkOverlap (the cores overlap: MPR's case).
+DVI_HD_CALL int mprCoresApart(const MprShape& A, const MprShape& B, const Vec3* hull_points, MprResult& best) {
+  const real reach = A.sweep + B.sweep + A.env;  // swept shapes within the envelope: cores closer than this
+  auto support = [&](Vec3 d, Vec3& a, Vec3& b) {
+    a = mprCoreSupport(A, d, hull_points);
+    b = mprCoreSupport(B, -d, hull_points);
+  };
+  real dist = 0;
+  Vec3 pa, pb;
+  const int g = gjkDistance(support, A.center - B.center, reach, dist, pa, pb);
+  if (g != kGjkClose) return g;
+  best.n = (pb - pa) / dist;
+  best.depth = reach - dist;
+  return best.depth > real(0) ? kGjkClose : kGjkApart;
+}
 
 // One MPR pass with interior point v0 of M. Returns false when the origin is found outside M.
 DVI_HD_CALL bool mprPass(const MprShape& A, const MprShape& B, Vec3 v0, const Vec3* hull_points, MprResult& res) {
@@ -299,6 +323,10 @@ DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, cons
 DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
                          MprResult& best, MprRound& round) {
   round.n = 0;
+  // Cores apart (resting shapes with a margin, speculative contacts): their closest points answer exactly.
+  const int g = mprCoresApart(A, B, hull_points, best);
+  if (g == kGjkApart) return 0;
+  if (g == kGjkClose) return 1;
   Vec3 v0 = A.center - B.center;
   if (length2(v0) < real(1e-30)) v0 = Vec3{real(1e-10) * (real(1) + boundingRadius(a, hull_points)), 0, 0};
   if (!mprPass(A, B, v0, hull_points, best)) return 0;
@@ -471,7 +499,11 @@ DVI_HD_CALL int mprManifold(const MprShape& A, const MprShape& B, const Vec3* hu
   const real scale = fmax(spread_a, spread_b);
   const real eps = real(1e-9) * scale * scale;                // cross products of zero-length (repeated) polygon edges
   const real ha = dot(out[0].pa, n), hb = dot(out[0].pb, n);  // A's and B's support planes along n
-  // candidates inside the other polygon and within the envelope; the extreme along each axis direction
+  // candidates inside the other polygon and within the envelope; the extreme along each axis direction. Samples
+  // of a regular polygon or disc tie along an axis (45 and 135 degrees): within `tie` the first sample stays, so
+  // the choice, and with it the point's feature key, does not hang on the normal's last bits (MPR's and the
+  // cores' closest points give the same normal to rounding, not bit for bit).
+  const real tie = real(1e-9) * scale;
   const real ax[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
   int best[4] = {-1, -1, -1, -1};
   real best_v[4] = {0, 0, 0, 0};
@@ -484,7 +516,7 @@ DVI_HD_CALL int mprManifold(const MprShape& A, const MprShape& B, const Vec3* hu
     if (!(dist < envelope)) continue;
     for (int j = 0; j < 4; ++j) {
       const real v = q[0] * ax[j][0] + q[1] * ax[j][1];
-      if (best[j] < 0 || v > best_v[j]) best[j] = c, best_v[j] = v;
+      if (best[j] < 0 || v > best_v[j] + tie) best[j] = c, best_v[j] = v;
     }
   }
   int m = 1;
