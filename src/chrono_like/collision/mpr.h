@@ -312,21 +312,19 @@ DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, cons
   return true;
 }
 
-// The first stage of collideMpr: the first pass and its refinement and, for a deep pair, the global candidates.
-// Returns 0 (no contact), 1 (best is final) or 2 (deep: run `round`, then mprTiltRound's, then mprFinish).
+// The first stage of collideMpr (mprBegin below) for overlapping cores: the first pass and its refinement and, for a
+// deep pair, the global candidates. Returns 0 (no contact), 1 (best is final) or 2 (deep: run `round`, then
+// mprTiltRound's, then mprFinish).
 //
 // MPR's fixed points are faces of M whose plane holds the origin's projection, not necessarily the nearest
 // one, least of all for deep penetrations. Global candidates guard against the wrong face (see the block
 // below): known face normals, side normals, axis cross products, the centre line and, for hulls, the frame
 // axes are evaluated exactly by h(n) and MPR is restarted from the best; deep hull pairs also restart from
 // the normal tilted four ways.
-DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
-                         MprResult& best, MprRound& round) {
+// mprBegin's MPR, for overlapping cores.
+DVI_HD_CALL int mprBeginOverlap(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b,
+                                const Vec3* hull_points, MprResult& best, MprRound& round) {
   round.n = 0;
-  // Cores apart (resting shapes with a margin, speculative contacts): their closest points answer exactly.
-  const int g = mprCoresApart(A, B, hull_points, best);
-  if (g == kGjkApart) return 0;
-  if (g == kGjkClose) return 1;
   Vec3 v0 = A.center - B.center;
   if (length2(v0) < real(1e-30)) v0 = Vec3{real(1e-10) * (real(1) + boundingRadius(a, hull_points)), 0, 0};
   if (!mprPass(A, B, v0, hull_points, best)) return 0;
@@ -422,6 +420,16 @@ DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, c
   for (int i = 0; i < ntry; ++i)
     if (th[i] > real(0) && th[i] < real(1e30)) round.dir[round.n++] = td[i];
   return 2;
+}
+
+// The first stage of a pair: with the cores apart (resting shapes with a margin, speculative contacts) their closest
+// points answer exactly (mprCoresApart); overlapping cores go through MPR (mprBeginOverlap). Returns as above.
+DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
+                         MprResult& best, MprRound& round) {
+  const int g = mprCoresApart(A, B, hull_points, best);
+  if (g == kGjkOverlap) return mprBeginOverlap(A, B, a, b, hull_points, best, round);
+  round.n = 0;
+  return g == kGjkClose ? 1 : 0;
 }
 
 // ---- the manifold of two flat features ----
