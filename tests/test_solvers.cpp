@@ -404,7 +404,8 @@ TEST_CASE("every solver reaches the dense reference on random contact scenes", "
 // throws. Gauss-Seidel keeps dv = M^-1 D gamma through its sweeps, and applyImpulses of its result uses that: it
 // must equal a fresh gather of the same impulses (up to the rounding of the updates) on a scene whose contacts share
 // bodies.
-TEST_CASE("Gauss-Seidel's kept velocity changes equal a fresh gather, and unbuilt Jacobi steps are refused", "[solver]") {
+TEST_CASE("Gauss-Seidel's kept velocity changes equal a fresh gather, and unbuilt Jacobi steps are refused",
+          "[solver]") {
   Scene s = randomScene(33, 12, 40, true);
   s.ps.jacobi_steps = false;
   s.ps.block_inverses = false;

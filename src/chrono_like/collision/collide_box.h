@@ -79,7 +79,10 @@ struct BoxBoxAxes {
 };
 
 // Separation along each candidate axis: |t.L| - (radius of a along L) - (radius of b along L). false as soon as
-// one axis separates the boxes by the envelope or more (no contact).
+// one axis separates the boxes by the envelope or more (no contact). In a's frame, with R_ij = a_i . b_j and t_i =
+// t . a_i (Gottschalk, Lin & Manocha, "OBBTree", SIGGRAPH 1996; Ericson, Real-Time Collision Detection, 4.4.1), the
+// edge axis L = a_i x b_j has a_(i+1) . L = -R_(i+2)j and a_(i+2) . L = R_(i+1)j, b_(j+1) . L = R_i(j+2) and
+// b_(j+2) . L = -R_i(j+1): its radii and t . L come from R without forming the dot products again.
 DVI_HD bool boxBoxSeparatingAxes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, real envelope,
                                  BoxBoxAxes& g) {
   const Mat33 Ra = matFromQuat(wa.q), Rb = matFromQuat(wb.q);
@@ -91,11 +94,16 @@ DVI_HD bool boxBoxSeparatingAxes(const Shape& a, const Pose& wa, const Shape& b,
   const real* ea = g.ea;
   const real* eb = g.eb;
   const Vec3 t = g.t = wb.p - wa.p;
-  real absR[3][3];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) absR[i][j] = std::fabs(dot(ax[i], bx[j])) + real(1e-12);
+  real R[3][3], absR[3][3], ta[3];
   for (int i = 0; i < 3; ++i) {
-    real s = std::fabs(dot(t, ax[i])) - (ea[i] + eb[0] * absR[i][0] + eb[1] * absR[i][1] + eb[2] * absR[i][2]);
+    ta[i] = dot(t, ax[i]);
+    for (int j = 0; j < 3; ++j) {
+      R[i][j] = dot(ax[i], bx[j]);
+      absR[i][j] = std::fabs(R[i][j]) + real(1e-12);
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    real s = std::fabs(ta[i]) - (ea[i] + eb[0] * absR[i][0] + eb[1] * absR[i][1] + eb[2] * absR[i][2]);
     if (s >= envelope) return false;
     if (s > g.sepA) {
       g.sepA = s;
@@ -111,20 +119,22 @@ DVI_HD bool boxBoxSeparatingAxes(const Shape& a, const Pose& wa, const Shape& b,
     }
   }
   for (int i = 0; i < 3; ++i) {
+    const int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
     for (int j = 0; j < 3; ++j) {
-      Vec3 L = cross(ax[i], bx[j]);
-      real l = length(L);
-      if (l < real(1e-5)) continue;  // (nearly) parallel edges: covered by the face axes
-      L = L / l;
-      real ra = ea[0] * std::fabs(dot(ax[0], L)) + ea[1] * std::fabs(dot(ax[1], L)) + ea[2] * std::fabs(dot(ax[2], L));
-      real rb = eb[0] * std::fabs(dot(bx[0], L)) + eb[1] * std::fabs(dot(bx[1], L)) + eb[2] * std::fabs(dot(bx[2], L));
-      real s = std::fabs(dot(t, L)) - ra - rb;
+      const int j1 = (j + 1) % 3, j2 = (j + 2) % 3;
+      const Vec3 L = cross(ax[i], bx[j]);
+      const real l2 = length2(L);
+      if (l2 < real(1e-10)) continue;  // (nearly) parallel edges: covered by the face axes
+      const real ra = ea[i1] * absR[i2][j] + ea[i2] * absR[i1][j];
+      const real rb = eb[j1] * absR[i][j2] + eb[j2] * absR[i][j1];
+      const real l = std::sqrt(l2);
+      const real s = (std::fabs(ta[i2] * R[i1][j] - ta[i1] * R[i2][j]) - ra - rb) / l;
       if (s >= envelope) return false;
       if (s > g.sepE) {
         g.sepE = s;
         g.edgeI = i;
         g.edgeJ = j;
-        g.edgeL = L;
+        g.edgeL = L / l;
       }
     }
   }
