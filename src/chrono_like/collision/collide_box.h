@@ -125,8 +125,8 @@ DVI_HD bool boxBoxSeparatingAxes(const Shape& a, const Pose& wa, const Shape& b,
       const Vec3 L = cross(ax[i], bx[j]);
       const real l2 = length2(L);
       if (l2 < real(1e-10)) continue;  // (nearly) parallel edges: covered by the face axes
-      const real ra = ea[i1] * absR[i2][j] + ea[i2] * absR[i1][j];
-      const real rb = eb[j1] * absR[i][j2] + eb[j2] * absR[i][j1];
+      const real ra = ea[i1] * std::fabs(R[i2][j]) + ea[i2] * std::fabs(R[i1][j]);  // exact: no parallel-axis guard
+      const real rb = eb[j1] * std::fabs(R[i][j2]) + eb[j2] * std::fabs(R[i][j1]);
       const real l = std::sqrt(l2);
       const real s = (std::fabs(ta[i2] * R[i1][j] - ta[i1] * R[i2][j]) - ra - rb) / l;
       if (s >= envelope) return false;
