@@ -49,6 +49,9 @@
 
 #include "bench_common.h"
 #include "bench_scaling_bullet3.h"
+#ifdef DVISIM_HAVE_MPI
+#include "bench_scaling_mpi.h"
+#endif
 #include "bench_util.h"
 #include "chrono_like/bullet/bullet_peer.h"
 #include "chrono_like/system.h"
@@ -93,6 +96,8 @@ struct ScalingOptions : BenchBasics {
   std::string speculation = "auto";
   std::string stop_compare = "on";  // run ours again at the solver's default stop (ratio to the fixed 50)
   std::string bullet3_device = "gpu";
+  bool mpi = false;  // the domain decomposition's weak and strong scaling instead (bench_scaling_mpi.h)
+  std::string per_process = "20000", total = "40000", mpi_steps = "20";
 };
 
 // How the GPU launches APGD's trials under cfg (GpuTuning::persistent_max_blocks, graphs).
@@ -570,6 +575,18 @@ std::string makePlot(const std::string& dir) {
 // ---------- the benchmark ----------
 
 int runScaling(const ScalingOptions& o) {
+  if (o.mpi) {
+#ifdef DVISIM_HAVE_MPI
+    MpiScalingOptions m;
+    static_cast<BenchBasics&>(m) = o;
+    m.per_process = o.per_process;
+    m.total = o.total;
+    m.steps = o.mpi_steps;
+    return runScalingMpi(m);
+#else
+    throw InputError("--mpi: this build has no MPI (configure with DVISIM_ENABLE_MPI=ON and libopenmpi-dev)");
+#endif
+  }
   // Validate everything before any work.
   std::vector<long> sizes;
   for (const std::string& t : splitList(o.sizes)) sizes.push_back(parseCount("--sizes", t));
@@ -895,6 +912,12 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
       ->check(CLI::IsMember({"gpu", "cpu", "any"}));
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
+  cmd->add_flag("--mpi", o->mpi,
+                "The domain decomposition instead, under `mpirun -np K`: the sphere pile's weak and strong scaling on "
+                "the CPU backend, each against process 0 alone in the same run (scaling_mpi.{md,csv})");
+  cmd->add_option("--per-process", o->per_process, "--mpi: spheres a process in the weak run (default 20000)");
+  cmd->add_option("--total", o->total, "--mpi: spheres in the strong run (default 40000)");
+  cmd->add_option("--steps", o->mpi_steps, "--mpi: timed steps of each run (default 20; 3 warm-up steps before)");
   addBenchRunner(reg, cmd, [o] { return runScaling(*o); });
   registerBenchBullet3Worker(app, reg);
 }

@@ -440,6 +440,13 @@ int fail(int code, const std::string& msg) {
   return code;
 }
 
+// Whether `bench scaling --mpi` was parsed: the one benchmark that runs over several processes.
+bool mpiBenchParsed(CLI::App& app) {
+  if (!app.got_subcommand("bench")) return false;
+  CLI::App* scaling = app.get_subcommand("bench")->get_subcommand("scaling");
+  return scaling->parsed() && scaling->get_option("--mpi")->count() > 0;
+}
+
 }  // namespace
 
 // `dvisim compare` (compare.cpp): registers the subcommand; the returned function runs it.
@@ -516,8 +523,10 @@ int main(int argc, char** argv) {
   try {
     refuseEmptyValues(app);
 #ifdef DVISIM_HAVE_MPI
-    if (mpiProcesses() > 1 && !app.got_subcommand("run"))
-      throw InputError("only `dvisim run SCENE` runs over several processes (MPI): run the others without mpirun");
+    if (mpiProcesses() > 1 && !app.got_subcommand("run") && !mpiBenchParsed(app))
+      throw InputError(
+          "only `dvisim run SCENE` and `dvisim bench scaling --mpi` run over several processes (MPI): run the others "
+          "without mpirun");
 #endif
     if (app.got_subcommand("compare")) return compare();
     if (app.got_subcommand("sweep")) return sweep();

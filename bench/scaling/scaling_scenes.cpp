@@ -238,18 +238,20 @@ std::vector<WallSpec> containerWalls(const SceneSpec& s) {
           {Vec3{w / 2, h / 2, w + t}, Vec3{w / 2 + 2 * t, h / 2, t}}};
 }
 
-void addToSystem(const SceneSpec& spec, System& sys) {
+std::vector<BodyDesc> bodyDescs(const SceneSpec& spec) {
+  std::vector<BodyDesc> out;
+  out.reserve(size_t(kStaticBodies) + spec.bodies.size());
   BodyDesc g;
   g.mass = 0;
   g.flags = kBodyFixed;
   g.friction = spec.friction;
   g.shapes.push_back(makePlane(Vec3{0, 1, 0}, 0));
-  sys.addBody(g);
+  out.push_back(g);
   for (const WallSpec& w : containerWalls(spec)) {
     g.shapes.clear();
     g.shapes.push_back(makeBox(w.half));
     g.pos = w.centre;
-    sys.addBody(g);
+    out.push_back(g);
   }
   BodyDesc d;
   d.friction = spec.friction;
@@ -271,8 +273,13 @@ void addToSystem(const SceneSpec& spec, System& sys) {
     d.rot = b.rot;
     d.mass = b.mass;
     d.inertia = b.inertia;
-    sys.addBody(d);
+    out.push_back(d);
   }
+  return out;
+}
+
+void addToSystem(const SceneSpec& spec, System& sys) {
+  for (const BodyDesc& d : bodyDescs(spec)) sys.addBody(d);
 }
 
 real deepestPenetration(const SceneSpec& spec, const std::vector<Vec3>& pos, const std::vector<Quat>& rot) {

@@ -69,8 +69,10 @@ struct WallSpec {
 };
 std::vector<WallSpec> containerWalls(const SceneSpec& spec);
 
-// Adds the ground, the walls and every body to `sys` (ground first, then 4 walls, then the bodies).
+// The ground, the walls and every body as the System takes them (ground first, then 4 walls, then the bodies).
 constexpr int kStaticBodies = 5;  // the ground and the 4 walls, ahead of spec.bodies in every engine
+std::vector<BodyDesc> bodyDescs(const SceneSpec& spec);
+// Adds bodyDescs(spec) to `sys`.
 void addToSystem(const SceneSpec& spec, System& sys);
 
 // The deepest penetration (scene units, >= 0) of the scene with spec.bodies[i] at pos[i], rot[i]: the

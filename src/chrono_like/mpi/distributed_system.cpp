@@ -1,6 +1,7 @@
 #include "chrono_like/mpi/distributed_system.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <string>
 
@@ -11,13 +12,19 @@ namespace dvi {
 
 namespace {
 
-// Alltoallv of plain records: out[q] to process q; returns what each process sent here, by source.
+// Alltoallv of plain records: out[q] to process q; returns what each process sent here, by source. Adds the bytes
+// sent to other processes to *sent.
 template <class T>
-std::vector<std::vector<T>> exchangeAll(MPI_Comm comm, const std::vector<std::vector<T>>& out) {
+std::vector<std::vector<T>> exchangeAll(MPI_Comm comm, const std::vector<std::vector<T>>& out, int64_t* sent) {
   const int n = int(out.size());
   const size_t un = static_cast<size_t>(n);
   std::vector<int> send_counts(un), recv_counts(un), sdispl(un), rdispl(un);
-  for (int q = 0; q < n; ++q) send_counts[size_t(q)] = int(out[size_t(q)].size() * sizeof(T));
+  int self = 0;
+  MPI_Comm_rank(comm, &self);
+  for (int q = 0; q < n; ++q) {
+    send_counts[size_t(q)] = int(out[size_t(q)].size() * sizeof(T));
+    if (q != self) *sent += send_counts[size_t(q)];
+  }
   MPI_Alltoall(send_counts.data(), 1, MPI_INT, recv_counts.data(), 1, MPI_INT, comm);
   std::vector<char> sbuf, rbuf;
   int stot = 0, rtot = 0;
@@ -126,17 +133,36 @@ void DistributedSystem::start() {
 }
 
 void DistributedSystem::step() {
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
   if (!started_) start();
   std::vector<std::vector<Record>> ghosts;
+  auto t = Clock::now();
   exchangeGhosts(ghosts);
+  prof_.ghosts_s += since(t);
+  t = Clock::now();
   buildLocal(ghosts);
   setLocalWarmStart();
+  prof_.build_s += since(t);
+  t = Clock::now();
   sys_->step();
+  prof_.step_s += since(t);
+  for (int k = 0; k < kStageCount; ++k) prof_.stages_s[size_t(k)] += sys_->lastStats().stage_seconds[size_t(k)];
+  t = Clock::now();
   readBack();
+  prof_.readback_s += since(t);
+  t = Clock::now();
   migrate();
   rebalanceIfNeeded();
+  prof_.migrate_s += since(t);
   time_ += config_.step.dt;
   ++steps_;
+}
+
+DecompositionProfile DistributedSystem::profile() const {
+  DecompositionProfile p = prof_;
+  p.group = group_->traffic();
+  return p;
 }
 
 // The ghost width (DecompositionSettings::ghost_safety): two bodies farther apart than this make no contact in
@@ -165,7 +191,7 @@ void DistributedSystem::exchangeGhosts(std::vector<std::vector<Record>>& ghosts)
     for (int q = 0; q < size_; ++q)
       if (q != rank_ && tree_.distance(s.pos, q) <= width) out[size_t(q)].push_back(Record{id, s});
   }
-  ghosts = exchangeAll(comm_, out);
+  ghosts = exchangeAll(comm_, out, &prof_.ghost_bytes);
   // What this process sent, by process, for the group's lists (buildLocal).
   group_->sentTo().assign(size_t(size_), {});
   for (int q = 0; q < size_; ++q)
@@ -290,8 +316,8 @@ void DistributedSystem::migrate() {
     const int q = e.owner >= 0 ? dest[size_t(e.owner)] : -1;
     (q >= 0 ? out_warm[size_t(q)] : kept_warm).push_back(e);
   }
-  const auto in = exchangeAll(comm_, out);
-  const auto in_warm = exchangeAll(comm_, out_warm);
+  const auto in = exchangeAll(comm_, out, &prof_.migrate_bytes);
+  const auto in_warm = exchangeAll(comm_, out_warm, &prof_.migrate_bytes);
   for (int q = 0; q < size_; ++q) {
     log_.received[size_t(q)] += int64_t(in[size_t(q)].size());
     for (const Record& r : in[size_t(q)]) {

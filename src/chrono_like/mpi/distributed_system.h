@@ -14,6 +14,7 @@
 
 #include <mpi.h>
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -37,6 +38,18 @@ struct MotionState {
   Vec3 pos;
   Quat rot;
   Vec3 vel, omega;
+};
+
+// Where this process's steps went and what it sent, summed since construction (seconds by steady clock, bytes).
+struct DecompositionProfile {
+  double ghosts_s = 0;    // the ghost width's reduction and the ghosts' exchange
+  double build_s = 0;     // the step's local System (its bodies added) and its warm start
+  double step_s = 0;      // the local System's step: its stages in stages_s, the solver's collectives in group
+  double readback_s = 0;  // the owned bodies' states and the owned contacts' impulses
+  double migrate_s = 0;   // bodies to their new owners, and re-balancing
+  std::array<double, kStageCount> stages_s{};
+  int64_t ghost_bytes = 0, migrate_bytes = 0;  // sent to other processes
+  GroupTraffic group;                          // the solver's exchanges and reductions (MpiGroup)
 };
 
 // Bodies handed between processes since construction, per other process (index = rank).
@@ -76,6 +89,7 @@ class DistributedSystem {
   const System* local() const { return sys_.get(); }
   const std::vector<int32_t>& localIds() const { return local_ids_; }
   const MigrationLog& migrations() const { return log_; }
+  DecompositionProfile profile() const;
   const Bisection& bisection() const { return tree_; }
   double time() const { return time_; }
   int64_t stepCount() const { return steps_; }
@@ -119,6 +133,7 @@ class DistributedSystem {
   std::vector<int32_t> local_ids_;  // per local body: global id
   std::vector<int32_t> local_of_;   // per global id: local index or -1
   MigrationLog log_;
+  DecompositionProfile prof_;
   double time_ = 0;
   int64_t steps_ = 0;
 };

@@ -15,11 +15,19 @@ MpiGroup::MpiGroup(MPI_Comm comm) : comm_(comm) {
   in_.resize(size_t(size_));
 }
 
-void MpiGroup::sum(double* v, int n) const { MPI_Allreduce(MPI_IN_PLACE, v, n, MPI_DOUBLE, MPI_SUM, comm_); }
+void MpiGroup::sum(double* v, int n) const {
+  const double t0 = MPI_Wtime();
+  MPI_Allreduce(MPI_IN_PLACE, v, n, MPI_DOUBLE, MPI_SUM, comm_);
+  traffic_.reduce_s += MPI_Wtime() - t0;
+  ++traffic_.reductions;
+}
 
 double MpiGroup::max(double v) const {
+  const double t0 = MPI_Wtime();
   double out = v;
   MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, comm_);
+  traffic_.reduce_s += MPI_Wtime() - t0;
+  ++traffic_.reductions;
   return out;
 }
 
@@ -47,6 +55,7 @@ bool MpiGroup::ownsContact(int32_t a, int32_t b) const {
 }
 
 void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
+  const double t0 = MPI_Wtime();
   const int bytes = int(sizeof(BodyDelta));
   // Round 1: the ghosts' shares to their owners.
   requests_.clear();
@@ -62,6 +71,7 @@ void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
       auto& out = out_[size_t(q)];
       out.resize(from.size());
       for (size_t j = 0; j < from.size(); ++j) out[j] = delta[from[j]];
+      traffic_.exchange_bytes += int64_t(out.size()) * bytes;
       requests_.emplace_back();
       MPI_Isend(out.data(), int(out.size()) * bytes, MPI_BYTE, q, kTagShares, comm_, &requests_.back());
     }
@@ -89,6 +99,7 @@ void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
       auto& out = out_[size_t(q)];
       out.resize(to.size());
       for (size_t j = 0; j < to.size(); ++j) out[j] = delta[to[j]];
+      traffic_.exchange_bytes += int64_t(out.size()) * bytes;
       requests_.emplace_back();
       MPI_Isend(out.data(), int(out.size()) * bytes, MPI_BYTE, q, kTagSums, comm_, &requests_.back());
     }
@@ -98,6 +109,8 @@ void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
     const auto& from = ghosts_from_[size_t(q)];
     for (size_t j = 0; j < from.size(); ++j) delta[from[j]] = in_[size_t(q)][j];
   }
+  traffic_.exchange_s += MPI_Wtime() - t0;
+  ++traffic_.exchanges;
 }
 
 }  // namespace dvi

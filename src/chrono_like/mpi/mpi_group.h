@@ -12,6 +12,13 @@
 
 namespace dvi {
 
+// What the solver's collectives cost on this process since construction: MPI_Wtime seconds and bytes sent.
+struct GroupTraffic {
+  double exchange_s = 0, reduce_s = 0;  // exchangeDeltas; sum and max
+  int64_t exchanges = 0, reductions = 0;
+  int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours (both rounds)
+};
+
 class MpiGroup final : public ProcessGroup {
  public:
   explicit MpiGroup(MPI_Comm comm);
@@ -32,6 +39,7 @@ class MpiGroup final : public ProcessGroup {
   std::vector<std::vector<int32_t>>& ghostsFrom() { return ghosts_from_; }
   std::vector<std::vector<int32_t>>& sentTo() { return sent_to_; }
   void markShared();  // shared_ from the two lists (after they are filled)
+  const GroupTraffic& traffic() const { return traffic_; }
 
  private:
   MPI_Comm comm_;
@@ -41,6 +49,7 @@ class MpiGroup final : public ProcessGroup {
   std::vector<std::vector<int32_t>> ghosts_from_, sent_to_;
   mutable std::vector<std::vector<BodyDelta>> out_, in_;  // message buffers per process
   mutable std::vector<MPI_Request> requests_;
+  mutable GroupTraffic traffic_;
 };
 
 }  // namespace dvi
