@@ -18,7 +18,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS_DIR = os.path.join(ROOT, "bench", "results")
 RESULTS_MD = os.path.join(ROOT, "bench", "RESULTS.md")
 
-KINDS = ["scaling", "ces", "accuracy", "pruning", "stability", "dropin"]
+KINDS = ["scaling", "scaling_mpi", "ces", "accuracy", "pruning", "stability", "dropin"]
 DASH = "-"
 
 
@@ -324,8 +324,34 @@ DROPIN_INTRO = (
     "contact points, the deepest penetration and each scene's drift."
 )
 
+# --- scaling --mpi ---------------------------------------------------------------------------
+def scaling_mpi(text):
+    r = common(text, device_names=("CPU",))
+    for mode in ("weak", "strong"):
+        rows = re.findall(r"^\| " + mode + r" \| (\d+) \| (\d+) \| ([\d.]+) \| ([\d.]+) \|", text, re.M)
+        many = [x for x in rows if x[0] != "1"]
+        one = [x for x in rows if x[0] == "1"]
+        r["processes"] = many[0][0] if many else r.get("processes")
+        r[mode + " n"] = "%s -> %s" % (one[0][1], many[0][1]) if one and many else None
+        r[mode + " ms"] = "%s -> %s" % (one[0][2], many[0][2]) if one and many else None
+        r[mode + " eff"] = many[0][3] if many else None
+    return r
+
+
+SCALING_MPI_COLS = [("date", "date"), ("device", "CPU"), ("commit", "commit"), ("processes", "processes"),
+                    ("weak n", "weak spheres"), ("weak ms", "weak ms/step"), ("weak eff", "weak efficiency"),
+                    ("strong n", "strong spheres"), ("strong ms", "strong ms/step"),
+                    ("strong eff", "strong efficiency")]
+SCALING_MPI_INTRO = (
+    "The domain decomposition over MPI (`mpirun -np K dvisim bench scaling --mpi`, CPU backend): the sphere pile on "
+    "process 0 alone and on all K processes in one run, weak (N a process) and strong (the same pile). The record "
+    "has the time per phase and stage and the bytes moved per step."
+)
+
 PARSERS = {
     "scaling": (scaling, SCALING_COLS, SCALING_INTRO, "Scaling (`dvisim bench scaling`)"),
+    "scaling_mpi": (scaling_mpi, SCALING_MPI_COLS, SCALING_MPI_INTRO,
+                    "Domain decomposition over MPI (`dvisim bench scaling --mpi`)"),
     "ces": (ces, CES_COLS, CES_INTRO, "CES industrial feed (`dvisim bench ces`)"),
     "accuracy": (accuracy, ACCURACY_COLS, ACCURACY_INTRO, "Accuracy (`dvisim bench accuracy`)"),
     "pruning": (pruning, PRUNING_COLS, PRUNING_INTRO, "Pruning (`dvisim bench pruning`)"),
@@ -346,7 +372,7 @@ def render(results_dir):
     for name in sorted(os.listdir(results_dir)):
         if not name.endswith(".md"):
             continue
-        kind = name.split("_", 1)[0]
+        kind = "scaling_mpi" if name.startswith("scaling_mpi_") else name.split("_", 1)[0]
         if kind not in PARSERS:
             others.append(name)
             continue
