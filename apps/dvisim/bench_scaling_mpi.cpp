@@ -29,10 +29,10 @@ struct MpiRow {
   int processes = 1;
   long bodies = 0;  // spheres
   int steps = 0;
-  double ms = 0;  // per step, the slowest process
+  double ms = 0;                                                      // per step, the slowest process
   double ghosts = 0, build = 0, step = 0, readback = 0, migrate = 0;  // ms per step, the slowest process
   double exchange = 0, reduce = 0;  // the solver's collectives inside step, ms per step, the slowest process
-  std::array<double, dvi::kStageCount> stages{};  // the local step's stages, ms per step, the slowest process
+  std::array<double, dvi::kStageCount> stages{};         // the local step's stages, ms per step, the slowest process
   double ghost_kb = 0, exchange_kb = 0, migrate_kb = 0;  // KiB per step, summed over the processes
   double exchanges = 0, reductions = 0;                  // per step, process 0
   double contacts = 0;                                   // per step, summed over the processes
@@ -157,8 +157,8 @@ std::string tableText(const std::vector<MpiRow>& rows) {
       << num(r.efficiency, "%.2f") << " | " << num(r.ghosts, "%.2f") << " | " << num(r.build, "%.2f") << " | "
       << num(r.step, "%.2f") << " | " << num(r.exchange, "%.2f") << ", " << num(r.reduce, "%.2f") << " | "
       << num(r.readback, "%.2f") << " | " << num(r.migrate, "%.2f") << " | " << num(r.ghost_kb, "%.0f") << ", "
-      << num(r.exchange_kb, "%.0f") << ", " << num(r.migrate_kb, "%.0f") << " | " << num(r.exchanges, "%.0f")
-      << ", " << num(r.reductions, "%.0f") << " |\n";
+      << num(r.exchange_kb, "%.0f") << ", " << num(r.migrate_kb, "%.0f") << " | " << num(r.exchanges, "%.0f") << ", "
+      << num(r.reductions, "%.0f") << " |\n";
   m << "\nThe local step's stages (ms per step, the slowest process):\n\n";
   for (const MpiRow& r : rows)
     m << "- " << r.mode << ", " << r.processes << " processes, " << r.bodies << " spheres: " << stagesText(r) << "\n";
@@ -182,9 +182,7 @@ int runScalingMpi(const MpiScalingOptions& o) {
     std::string why;
     if (rank == 0) try {
         prepareOutDir(o.out, "scaling_mpi.csv");
-      } catch (const std::exception& e) {
-        why = e.what();
-      }
+      } catch (const std::exception& e) { why = e.what(); }
     int bad = why.empty() ? 0 : 1;
     MPI_Bcast(&bad, 1, MPI_INT, 0, MPI_COMM_WORLD);
     if (bad) throw InputError(rank == 0 ? why : "--out: unusable (process 0 says why)");
@@ -196,9 +194,10 @@ int runScalingMpi(const MpiScalingOptions& o) {
   cfg.solver.tolerance = 0;  // a fixed count: every run does the same solver work
   cfg.solver.max_iterations = 50;
   if (rank == 0)
-    std::printf("bench scaling --mpi: %d processes, %d threads each; weak %ld spheres a process, strong %ld in all; "
-                "%d warm-up and %d timed steps\n",
-                size, cfg.threads, n1, nt, warmup, steps);
+    std::printf(
+        "bench scaling --mpi: %d processes, %d threads each; weak %ld spheres a process, strong %ld in all; "
+        "%d warm-up and %d timed steps\n",
+        size, cfg.threads, n1, nt, warmup, steps);
   std::vector<MpiRow> rows;
   runMode("weak", n1, n1 * size, warmup, steps, cfg, rows);
   runMode("strong", nt, nt, warmup, steps, cfg, rows);

@@ -523,10 +523,10 @@ int main(int argc, char** argv) {
   try {
     refuseEmptyValues(app);
 #ifdef DVISIM_HAVE_MPI
-    if (mpiProcesses() > 1 && !app.got_subcommand("run") && !mpiBenchParsed(app))
+    if (mpiProcesses() > 1 && !app.got_subcommand("run") && !app.got_subcommand("sweep") && !mpiBenchParsed(app))
       throw InputError(
-          "only `dvisim run SCENE` and `dvisim bench scaling --mpi` run over several processes (MPI): run the others "
-          "without mpirun");
+          "only `dvisim run SCENE`, `dvisim sweep` and `dvisim bench scaling --mpi` run over several processes (MPI): "
+          "run the others without mpirun");
 #endif
     if (app.got_subcommand("compare")) return compare();
     if (app.got_subcommand("sweep")) return sweep();

@@ -47,6 +47,63 @@ int mpiProcesses() {
   return n;
 }
 
+int mpiRank() {
+  int init = 0, r = 0;
+  MPI_Initialized(&init);
+  if (init) MPI_Comm_rank(MPI_COMM_WORLD, &r);
+  return r;
+}
+
+namespace {
+// The size of, or this process's rank in, the processes sharing its host (MPI-3 shared-memory split); 1 or 0
+// without mpirun.
+int hostQuery(bool size) {
+  int init = 0, v = size ? 1 : 0;
+  MPI_Initialized(&init);
+  if (!init) return v;
+  MPI_Comm host = MPI_COMM_NULL;
+  MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, mpiRank(), MPI_INFO_NULL, &host);
+  if (size)
+    MPI_Comm_size(host, &v);
+  else
+    MPI_Comm_rank(host, &v);
+  MPI_Comm_free(&host);
+  return v;
+}
+}  // namespace
+
+int mpiHostProcesses() { return hostQuery(true); }
+int mpiHostRank() { return hostQuery(false); }
+
+void mpiBarrier() {
+  int init = 0;
+  MPI_Initialized(&init);
+  if (init) MPI_Barrier(MPI_COMM_WORLD);
+}
+
+int mpiBroadcast(int value) {
+  int init = 0;
+  MPI_Initialized(&init);
+  if (init) MPI_Bcast(&value, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  return value;
+}
+
+std::vector<long long> mpiGatherToRoot(const std::vector<long long>& mine) {
+  int init = 0;
+  MPI_Initialized(&init);
+  if (!init) return mine;
+  const int n = mpiProcesses(), me = mpiRank();
+  int count = int(mine.size());
+  std::vector<int> counts(size_t(n), 0), displ(size_t(n), 0);
+  MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
+  int total = 0;
+  for (int q = 0; q < n; ++q) displ[size_t(q)] = total, total += counts[size_t(q)];
+  std::vector<long long> all(me == 0 ? size_t(total) : size_t(0));
+  MPI_Gatherv(mine.data(), count, MPI_LONG_LONG, all.data(), counts.data(), displ.data(), MPI_LONG_LONG, 0,
+              MPI_COMM_WORLD);
+  return all;
+}
+
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps, const std::string& out,
                 const std::string& backend) {
   if (backend != "auto" && backend != "cpu")

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace dvi {
 class Scene;
@@ -24,6 +25,16 @@ class MpiSession {
 
 // Processes of this run: MPI_COMM_WORLD's size under mpirun, else 1.
 int mpiProcesses();
+// This process's rank in MPI_COMM_WORLD (0 without mpirun), the processes on its host and its rank among them.
+int mpiRank();
+int mpiHostProcesses();
+int mpiHostRank();
+// Waits for every process (nothing without mpirun).
+void mpiBarrier();
+// Process 0's value on every process.
+int mpiBroadcast(int value);
+// The concatenation over the processes, in rank order, on process 0 (the others get an empty list).
+std::vector<long long> mpiGatherToRoot(const std::vector<long long>& mine);
 
 // The scene's run over mpiProcesses() processes, steps of cfg.step.dt; results into `out` (process 0). `backend`:
 // auto or cpu (the GPU and Bullet backends do not run over several processes: InputError).

@@ -10,6 +10,9 @@
 // atomically), and a re-run with the same arguments (DIR/sweep.json) skips it. Outputs: DIR/runs.csv,
 // DIR/summary.csv (mean and Student-t 95% half-width per setting), DIR/paired.csv (each setting against the first,
 // seed by seed), DIR/sweep_<key>.png (scripts/plot_sweep.py).
+// Under `mpirun -np K` (an MPI build) the cases are shared out over the processes, case i to process i mod K, each
+// running its share on its host's cores (or GPUs) as above; process 0 writes the design first and the tables last
+// from every case's directory under DIR (which the hosts must share).
 // The design and the statistics are in sweep.h; docs/SWEEP.md is the user's guide.
 #include "sweep.h"
 
@@ -47,6 +50,10 @@
 #include "gpu/gpu_factory.h"
 
 extern char** environ;
+
+#ifdef DVISIM_HAVE_MPI
+#include "mpi_run.h"
+#endif
 
 namespace {
 
@@ -230,6 +237,23 @@ void recordDesign(const SweepOptions& o, const Design& d, const std::vector<Case
 }
 
 // The GPUs the runs go to (ids for CUDA_VISIBLE_DEVICES): none for --backend cpu|bullet or without a usable device.
+// This process's place among the processes sharing the sweep (mpirun), and among those on its host.
+struct Share {
+  int rank = 0, size = 1;
+  int host_rank = 0, host_size = 1;
+};
+
+Share processShare() {
+  Share s;
+#ifdef DVISIM_HAVE_MPI
+  s.rank = mpiRank();
+  s.size = mpiProcesses();
+  s.host_rank = mpiHostRank();
+  s.host_size = mpiHostProcesses();
+#endif
+  return s;
+}
+
 std::vector<std::string> gpuDevices(const std::string& backend) {
   if (backend == "cpu" || backend == "bullet" || !dvi::gpuAvailable()) return {};
   std::vector<std::string> ids;
@@ -270,8 +294,17 @@ pid_t spawnChild(const std::vector<std::string>& args, const fs::path& log, cons
   for (const std::string& s : args) argv.push_back(const_cast<char*>(s.c_str()));
   argv.push_back(nullptr);
   std::vector<std::string> env_store;
-  for (char** e = environ; *e; ++e)
-    if (gpu.empty() || std::string(*e).rfind("CUDA_VISIBLE_DEVICES=", 0) != 0) env_store.push_back(*e);
+  // The MPI launcher's variables stay behind: a run started by a sweep under mpirun is a plain process of its own.
+  auto launcher = [](const std::string& v) {
+    for (const char* p : {"OMPI_", "PMIX_", "PMI_", "OPAL_", "HYDRA_", "MPI_LOCALNRANKS", "MPI_LOCALRANKID"})
+      if (v.rfind(p, 0) == 0) return true;
+    return false;
+  };
+  for (char** e = environ; *e; ++e) {
+    const std::string v = *e;
+    if (launcher(v) || (!gpu.empty() && v.rfind("CUDA_VISIBLE_DEVICES=", 0) == 0)) continue;
+    env_store.push_back(v);
+  }
   if (!gpu.empty()) env_store.push_back("CUDA_VISIBLE_DEVICES=" + gpu);
   std::vector<char*> envp;
   for (std::string& s : env_store) envp.push_back(s.data());
@@ -311,10 +344,18 @@ struct Slots {
   std::string child_threads;      // --threads of each child
 };
 
-Slots planSlots(const SweepOptions& o) {
+// The host's cores and GPUs shared out over the sweep's processes on it (sh): each takes cores / host processes, and
+// the GPUs whose position is its host rank modulo the host processes (all of them when there are fewer GPUs).
+Slots planSlots(const SweepOptions& o, const Share& sh) {
   Slots s;
   s.gpus = gpuDevices(o.backend);
-  const int cores = std::max(1, int(std::thread::hardware_concurrency()));
+  if (sh.host_size > 1 && int(s.gpus.size()) >= sh.host_size) {
+    std::vector<std::string> mine;
+    for (size_t k = 0; k < s.gpus.size(); ++k)
+      if (int(k) % sh.host_size == sh.host_rank) mine.push_back(s.gpus[k]);
+    s.gpus = mine;
+  }
+  const int cores = std::max(1, int(std::thread::hardware_concurrency()) / std::max(1, sh.host_size));
   s.jobs = !o.jobs.empty()  ? int(dvi::parseInt("--jobs", o.jobs, 1, 4096))
            : s.gpus.empty() ? cores
                             : int(s.gpus.size());
@@ -347,13 +388,21 @@ void keepLog(const Case& c) {
 }
 
 // Runs the unfinished cases, up to s.jobs at a time. Returns the exit code of each case run now (index -> code).
-std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std::vector<Case>& cases, const Slots& s) {
+std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std::vector<Case>& cases, const Slots& s,
+                               const Share& sh) {
   std::vector<size_t> todo;
-  for (size_t i = 0; i < cases.size(); ++i)
+  size_t share = 0;  // this process's cases (i mod size == rank)
+  for (size_t i = 0; i < cases.size(); ++i) {
+    if (int(i % size_t(sh.size)) != sh.rank) continue;
+    ++share;
     if (!finished(cases[i])) todo.push_back(i);
-  std::printf("sweep: %zu settings x %lld seeds = %zu runs; %zu already finished, %zu to run, %d at a time%s\n",
-              d.settings.size(), d.seeds, cases.size(), cases.size() - todo.size(), todo.size(), s.jobs,
-              s.gpus.empty() ? "" : (" on " + std::to_string(s.gpus.size()) + " GPU(s)").c_str());
+  }
+  const std::string who =
+      sh.size > 1 ? "process " + std::to_string(sh.rank) + " of " + std::to_string(sh.size) + ": " : std::string();
+  std::printf("%ssweep: %zu settings x %lld seeds = %zu runs%s; %zu already finished, %zu to run, %d at a time%s\n",
+              who.c_str(), d.settings.size(), d.seeds, cases.size(),
+              sh.size > 1 ? (", " + std::to_string(share) + " of them here").c_str() : "", share - todo.size(),
+              todo.size(), s.jobs, s.gpus.empty() ? "" : (" on " + std::to_string(s.gpus.size()) + " GPU(s)").c_str());
   std::fflush(stdout);
   std::map<pid_t, std::pair<size_t, Clock::time_point>> running;  // pid -> (case, start)
   std::vector<int> slot_of(cases.size(), 0), free_slots;
@@ -391,7 +440,7 @@ std::map<size_t, int> runCases(const SweepOptions& o, const Design& d, const std
     free_slots.push_back(slot_of[i]);
     keepLog(cases[i]);
     codes[i] = recordExit(cases[i], status, wall);
-    std::printf("[%zu/%zu] %s: %s (%.1f s)\n", ++done, todo.size(), cases[i].id.c_str(),
+    std::printf("%s[%zu/%zu] %s: %s (%.1f s)\n", who.c_str(), ++done, todo.size(), cases[i].id.c_str(),
                 codes[i] == 0 ? "ok" : ("FAILED, exit " + std::to_string(codes[i])).c_str(), wall);
     std::fflush(stdout);
   }
@@ -523,20 +572,56 @@ std::string plots(const std::string& out, const std::vector<Row>& rows) {
   return "no plots: no grade or recovery metric to plot";
 }
 
+// Process 0 checks DIR and writes the design (sweep.json) before any process starts a run; an error there stops
+// every process with it (the others with a pointer to process 0's message).
+void prepareShared(const SweepOptions& o, const Design& d, const std::vector<Case>& cases, const Share& sh) {
+  std::exception_ptr failed;
+  if (sh.rank == 0) try {
+      dvi::benchutil::prepareOutDir(o.out, ".sweep-probe");
+      fs::remove(fs::path(o.out) / ".sweep-probe");
+      recordDesign(o, d, cases);
+    } catch (...) {
+      if (sh.size == 1) throw;
+      failed = std::current_exception();
+    }
+#ifdef DVISIM_HAVE_MPI
+  if (mpiBroadcast(failed ? 1 : 0) != 0) {
+    if (failed) std::rethrow_exception(failed);
+    throw dvi::InputError("the sweep's output directory: see process 0's message");
+  }
+#endif
+}
+
+// Every process's exit codes of the cases it ran, on process 0 (index -> code); after all have finished.
+std::map<size_t, int> gatherCodes(const std::map<size_t, int>& mine, const Share& sh) {
+  if (sh.size == 1) return mine;
+#ifdef DVISIM_HAVE_MPI
+  std::vector<long long> flat;
+  for (const auto& [i, c] : mine) flat.insert(flat.end(), {(long long)i, (long long)c});
+  mpiBarrier();
+  const std::vector<long long> all = mpiGatherToRoot(flat);
+  std::map<size_t, int> codes;
+  for (size_t k = 0; k + 1 < all.size(); k += 2) codes[size_t(all[k])] = int(all[k + 1]);
+  return codes;
+#else
+  return mine;
+#endif
+}
+
 int runSweep(const SweepOptions& o) {
   const Design d = makeDesign(o);
   validate(o, d);
-  dvi::benchutil::prepareOutDir(o.out, ".sweep-probe");
-  fs::remove(fs::path(o.out) / ".sweep-probe");
+  const Share sh = processShare();
   std::vector<Case> cases;
   for (size_t i = 0; i < d.settings.size(); ++i)
     for (long long seed = 1; seed <= d.seeds; ++seed) {
       const std::string id = caseId(i, d.settings.size(), seed);
       cases.push_back({id, i, seed, fs::path(o.out) / "runs" / id});
     }
-  recordDesign(o, d, cases);
-  const Slots slots = planSlots(o);
-  const std::map<size_t, int> codes = runCases(o, d, cases, slots);
+  prepareShared(o, d, cases, sh);
+  const Slots slots = planSlots(o, sh);
+  const std::map<size_t, int> codes = gatherCodes(runCases(o, d, cases, slots, sh), sh);
+  if (sh.rank != 0) return g_stopped ? 4 : 0;  // process 0 tabulates every case and answers for the sweep
   const std::vector<Row> rows = collectRows(cases, codes);
   writeRunsCsv(o, d, cases, rows);
   writeSummaryCsv(o, d, cases, rows);
