@@ -200,7 +200,7 @@ int run(const Options& o) {
   const int64_t steps = st.stepCount();
 #ifdef DVISIM_HAVE_MPI
   // Under `mpirun -np K` (K > 1): the domain decomposition (mpi_run.h).
-  if (mpiProcesses() > 1) return runSceneMpi(scene, cfg, steps, o.out, o.backend);
+  if (mpiProcesses() > 1) return runSceneMpi(scene, cfg, steps, frameSteps(st.frames, steps), o.out, o.backend);
 #endif
 
   // Backend.

@@ -2,9 +2,12 @@
 
 #include <mpi.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "chrono_like/base/errors.h"
@@ -104,8 +107,59 @@ std::vector<long long> mpiGatherToRoot(const std::vector<long long>& mine) {
   return all;
 }
 
-int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps, const std::string& out,
-                const std::string& backend) {
+namespace {
+
+// Process 0's results directory (ResultDir, made before the run so that the frames go into it), its path on every
+// process; an unusable --out stops every process with InputError.
+std::string sharedResultDir(std::unique_ptr<dvi::ResultDir>& rd, const std::string& out, bool root) {
+  std::string path, why;
+  if (root) try {
+      rd = std::make_unique<dvi::ResultDir>(out);
+      path = rd->path();
+    } catch (const std::exception& e) { why = e.what(); }
+  const std::string& msg = why.empty() ? path : why;
+  int head[2] = {why.empty() ? 0 : 1, int(msg.size())};
+  MPI_Bcast(head, 2, MPI_INT, 0, MPI_COMM_WORLD);
+  std::string text(size_t(head[1]), '\0');
+  if (root) text = msg;
+  MPI_Bcast(text.data(), head[1], MPI_CHAR, 0, MPI_COMM_WORLD);
+  if (head[0]) throw dvi::InputError(root ? why : "--out: " + text);
+  return text;
+}
+
+// Frame `index` at `time`: each process writes its piece (process 0: the fixed and kinematic bodies too) as
+// frame_<index>_p<rank>.vtp, process 0 the frame_<index>.pvtp that names the pieces and its frames.pvd entry.
+void writeFramePieces(const dvi::DistributedSystem& sys, const std::vector<dvi::real>& sizes, const std::string& dir,
+                      int index, double time, dvi::PvdSeries* series) {
+  std::vector<dvi::BodyState> states;
+  std::vector<int64_t> ids;
+  const bool root = sys.rank() == 0, before = sys.stepCount() == 0;  // before the first step: process 0 has all
+  for (size_t id = 0; id < sys.bodyCount(); ++id) {
+    const bool mine = before || sys.replicated(int32_t(id))
+                          ? root
+                          : std::binary_search(sys.ownedIds().begin(), sys.ownedIds().end(), int32_t(id));
+    if (!mine) continue;
+    const dvi::MotionState m = sys.stateOf(int32_t(id));
+    states.push_back(dvi::BodyState{m.pos, m.rot, m.vel, m.omega, sizes[id]});
+    ids.push_back(int64_t(id));
+  }
+  char name[48];
+  std::snprintf(name, sizeof name, "frame_%04d_p%d.vtp", index, sys.rank());
+  dvi::writeFileAtomic(dir + "/" + name, dvi::vtpFrame(states, &ids));
+  if (!series) return;
+  std::vector<std::string> pieces;
+  for (int q = 0; q < sys.processes(); ++q) {
+    std::snprintf(name, sizeof name, "frame_%04d_p%d.vtp", index, q);
+    pieces.push_back(name);
+  }
+  std::snprintf(name, sizeof name, "frame_%04d.pvtp", index);
+  series->addFile(time, name, dvi::pvtpFrame(pieces));
+}
+
+}  // namespace
+
+int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
+                const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend) {
   if (backend != "auto" && backend != "cpu")
     throw dvi::InputError("--backend " + backend + ": not available over several processes (MPI runs the CPU backend)");
   dvi::DistributedSystem sys(MPI_COMM_WORLD, cfg);
@@ -119,13 +173,21 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     sys.addBody(d);
   }
   const bool root = sys.rank() == 0;
+  std::unique_ptr<dvi::ResultDir> rd;
+  const std::string dir = sharedResultDir(rd, out, root);
+  std::unique_ptr<dvi::PvdSeries> series = root ? std::make_unique<dvi::PvdSeries>(dir) : nullptr;
   if (root)
     std::printf("scene: %s (%zu bodies), %lld steps of %g s on %d processes (MPI)\n", scene.name.c_str(), bodies.size(),
                 (long long)steps, cfg.step.dt, sys.processes());
   int64_t contacts = 0, iterations = 0;
+  int frames = 0;
+  size_t next_frame = 0;
   double relative = 0;
   const auto t0 = std::chrono::steady_clock::now();
-  for (int64_t k = 0; k < steps; ++k) {
+  for (int64_t k = 0;; ++k) {
+    for (; next_frame < frame_at.size() && frame_at[next_frame] == k; ++next_frame)
+      writeFramePieces(sys, sizes, dir, frames++, double(k) * cfg.step.dt, series.get());
+    if (k == steps) break;
     sys.step();
     contacts += int64_t(sys.local()->contacts().count());
     iterations += sys.local()->lastStats().iterations;  // the same on every process (collective solve)
@@ -137,8 +199,8 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   int64_t moved = 0;
   for (int64_t v : sys.migrations().sent) moved += v;
   moved = sumOverProcesses(moved);
+  MPI_Barrier(MPI_COMM_WORLD);  // every piece written before process 0 puts the directory in place
   if (!root) return 0;
-  dvi::ResultDir rd(out);
   std::vector<dvi::BodyState> state(all.size());
   for (size_t i = 0; i < all.size(); ++i)
     state[i] = dvi::BodyState{all[i].pos, all[i].rot, all[i].vel, all[i].omega, sizes[i]};
@@ -159,14 +221,16 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
   summary["migrations"] = moved;
   summary["rebalances"] = sys.migrations().rebalances;
-  summary["frames"] = 0;
+  summary["frames"] = frames;
   summary["status"] = "done";
   summary["wall_time_s"] = wall;
   summary["ms_per_step"] = steps > 0 ? 1000.0 * wall / double(steps) : 0.0;
-  dvi::writeBodiesCsv(rd.path() + "/bodies.csv", state);
-  dvi::writeSummary(rd.path() + "/summary.json", summary);
-  rd.commit();
-  std::printf("results: %s/ (summary.json, bodies.csv), %.3f s wall, %.2f ms/step\n", rd.out().c_str(), wall,
-              steps > 0 ? 1000.0 * wall / double(steps) : 0.0);
+  dvi::writeBodiesCsv(dir + "/bodies.csv", state);
+  dvi::writeSummary(dir + "/summary.json", summary);
+  series.reset();  // frames.pvd closed before the directory moves
+  rd->commit();
+  std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", rd->out().c_str(),
+              frames ? (", " + std::to_string(frames) + " frames: frame_NNNN.pvtp + pieces, frames.pvd").c_str() : "",
+              wall, steps > 0 ? 1000.0 * wall / double(steps) : 0.0);
   return 0;
 }

@@ -36,7 +36,9 @@ int mpiBroadcast(int value);
 // The concatenation over the processes, in rank order, on process 0 (the others get an empty list).
 std::vector<long long> mpiGatherToRoot(const std::vector<long long>& mine);
 
-// The scene's run over mpiProcesses() processes, steps of cfg.step.dt; results into `out` (process 0). `backend`:
-// auto or cpu (the GPU and Bullet backends do not run over several processes: InputError).
-int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps, const std::string& out,
-                const std::string& backend);
+// The scene's run over mpiProcesses() processes, steps of cfg.step.dt; results into `out` (process 0), with a
+// parallel VTK frame (frame_NNNN.pvtp, one frame_NNNN_pR.vtp piece a process, in frames.pvd) before each step
+// listed in frame_at (ascending; `steps` for after the last). `backend`: auto or cpu (the GPU and Bullet backends
+// do not run over several processes: InputError).
+int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
+                const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend);

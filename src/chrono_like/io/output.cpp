@@ -92,7 +92,10 @@ void writeBodiesCsv(const std::string& path, const std::vector<BodyState>& bodie
   writeFileAtomic(path, bodiesCsv(bodies));
 }
 
-std::string vtpFrame(const std::vector<BodyState>& bodies) {
+std::string vtpFrame(const std::vector<BodyState>& bodies, const std::vector<int64_t>* ids) {
+  if (ids && ids->size() != bodies.size())
+    throw std::invalid_argument("vtpFrame: " + std::to_string(ids->size()) + " ids for " +
+                                std::to_string(bodies.size()) + " bodies");
   const size_t n = bodies.size();
   std::string o;
   o.reserve(256 + n * 300);
@@ -115,7 +118,8 @@ std::string vtpFrame(const std::vector<BodyState>& bodies) {
     o += "</DataArray>\n";
   };
   o += "<DataArray type=\"Int64\" Name=\"id\" format=\"ascii\">\n";
-  for (size_t i = 0; i < n; ++i) o += std::to_string(i) + (i + 1 == n || i % 16 == 15 ? "\n" : " ");
+  for (size_t i = 0; i < n; ++i)
+    o += std::to_string(ids ? (*ids)[i] : int64_t(i)) + (i + 1 == n || i % 16 == 15 ? "\n" : " ");
   o += "</DataArray>\n";
   o += "<DataArray type=\"Float64\" Name=\"size\" format=\"ascii\">\n";
   for (size_t i = 0; i < n; ++i) {
@@ -147,6 +151,20 @@ std::string vtpFrame(const std::vector<BodyState>& bodies) {
   return o;
 }
 
+std::string pvtpFrame(const std::vector<std::string>& pieces) {
+  std::string o =
+      "<?xml version=\"1.0\"?>\n<VTKFile type=\"PPolyData\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
+      "<PPolyData GhostLevel=\"0\">\n<PPointData Scalars=\"size\" Vectors=\"velocity\">\n"
+      "<PDataArray type=\"Int64\" Name=\"id\"/>\n<PDataArray type=\"Float64\" Name=\"size\"/>\n"
+      "<PDataArray type=\"Float64\" Name=\"velocity\" NumberOfComponents=\"3\"/>\n"
+      "<PDataArray type=\"Float64\" Name=\"angular_velocity\" NumberOfComponents=\"3\"/>\n"
+      "<PDataArray type=\"Float64\" Name=\"orientation\" NumberOfComponents=\"4\"/>\n</PPointData>\n"
+      "<PPoints>\n<PDataArray type=\"Float64\" Name=\"position\" NumberOfComponents=\"3\"/>\n</PPoints>\n";
+  for (const std::string& p : pieces) o += "<Piece Source=\"" + xmlEscape(p) + "\"/>\n";
+  o += "</PPolyData>\n</VTKFile>\n";
+  return o;
+}
+
 namespace {
 const char kPvdHead[] =
     "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" "
@@ -161,7 +179,11 @@ PvdSeries::~PvdSeries() {
 void PvdSeries::add(double time, const std::string& vtp) {
   char name[32];
   std::snprintf(name, sizeof name, "frame_%04d.vtp", count_);
-  writeFileAtomic(dir_ + "/" + name, vtp);
+  addFile(time, name, vtp);
+}
+
+void PvdSeries::addFile(double time, const std::string& name, const std::string& content) {
+  writeFileAtomic(dir_ + "/" + name, content);
   const std::string path = dir_ + "/frames.pvd";
   if (!pvd_) {
     pvd_ = std::fopen(path.c_str(), "wb");

@@ -4,6 +4,7 @@
 // directory is replaced the same way (ResultDir).
 #pragma once
 
+#include <cstdint>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -40,8 +41,13 @@ std::string bodiesCsv(const std::vector<BodyState>& bodies);
 void writeBodiesCsv(const std::string& path, const std::vector<BodyState>& bodies);
 
 // One VTK XML PolyData file (ASCII): points = body positions, one vertex cell per body; point data:
-// id, size (radius), velocity, angular_velocity, orientation (quaternion w,x,y,z).
-std::string vtpFrame(const std::vector<BodyState>& bodies);
+// id, size (radius), velocity, angular_velocity, orientation (quaternion w,x,y,z). The ids are the bodies' positions
+// in `bodies`, or `ids` (one per body) where given: a piece of a parallel frame holds some of the bodies.
+std::string vtpFrame(const std::vector<BodyState>& bodies, const std::vector<int64_t>* ids = nullptr);
+
+// The parallel frame (VTK XML PPolyData, .pvtp) made of the vtpFrame pieces named in `pieces` (file names relative
+// to the .pvtp's directory), each holding some of the bodies.
+std::string pvtpFrame(const std::vector<std::string>& pieces);
 
 // frames.pvd, the time series ParaView opens, kept valid after every frame in linear time: the file stays open, and
 // each frame writes its <DataSet> line over the closing tags and the closing tags after it (one seek and two
@@ -55,6 +61,8 @@ class PvdSeries {
   PvdSeries& operator=(const PvdSeries&) = delete;
   // Writes dir/frame_<index>.vtp (index zero-padded to 4 digits) with `vtp` and adds it to dir/frames.pvd.
   void add(double time, const std::string& vtp);
+  // Writes dir/<name> with `content` (e.g. a .pvtp whose pieces are written elsewhere) and adds it to frames.pvd.
+  void addFile(double time, const std::string& name, const std::string& content);
   int count() const { return count_; }
 
  private:

@@ -347,6 +347,18 @@ void DistributedSystem::rebalanceIfNeeded() {
   migrate();
 }
 
+MotionState DistributedSystem::stateOf(int32_t id) const {
+  if (id < 0 || size_t(id) >= descs_.size())
+    throw InputError("body " + std::to_string(id) + ": no such body (" + std::to_string(descs_.size()) + " bodies)");
+  const bool mine = replicated_[size_t(id)] || !started_ || std::binary_search(owned_.begin(), owned_.end(), id);
+  if (!mine) throw InputError("body " + std::to_string(id) + ": owned by another process");
+  if (!started_) {
+    const BodyDesc& d = descs_[size_t(id)];
+    return MotionState{d.pos, normalized(d.rot), d.vel, d.omega};
+  }
+  return state_[size_t(id)];
+}
+
 std::vector<MotionState> DistributedSystem::gatherState() const {
   std::vector<MotionState> all = state_;
   if (!started_) return all;

@@ -84,6 +84,11 @@ class DistributedSystem {
   const std::vector<int32_t>& ownedIds() const { return owned_; }
   // Every body's state in global order, on every process (collective).
   std::vector<MotionState> gatherState() const;
+  // The current state of a body this process owns, or of a fixed or kinematic body (every process's); InputError
+  // for another (its state is its owner's).
+  MotionState stateOf(int32_t id) const;
+  // Whether body id is fixed or kinematic (held by every process).
+  bool replicated(int32_t id) const { return replicated_[size_t(id)] != 0; }
   // This process's System of the last step (its contacts are the ones it owns) and the global id of each of its
   // bodies. Null before the first step.
   const System* local() const { return sys_.get(); }
