@@ -49,6 +49,7 @@
 #include "parse.h"
 #ifdef DVISIM_HAVE_MPI
 #include "mpi_run.h"
+#include "progress.h"
 #endif
 
 namespace {
@@ -76,35 +77,6 @@ std::string oneLine(std::string s) {
   while (!s.empty() && s.back() == ' ') s.pop_back();
   return s;
 }
-
-// Progress bar with ETA on stderr, only when stderr is a terminal.
-class Progress {
- public:
-  explicit Progress(int64_t total) : total_(total), on_(total > 0 && ::isatty(2)), t0_(Clock::now()), last_(t0_) {}
-  void update(int64_t done) {
-    if (!on_) return;
-    const auto now = Clock::now();
-    if (done < total_ && now - last_ < std::chrono::milliseconds(100)) return;
-    last_ = now;
-    const double el = std::chrono::duration<double>(now - t0_).count();
-    const double frac = double(done) / double(total_);
-    const double eta = done > 0 ? el * (1 - frac) / frac : 0;
-    const int width = 30, fill = int(frac * width);
-    std::string bar(size_t(fill), '=');
-    bar.resize(size_t(width), ' ');
-    std::fprintf(stderr, "\r[%s] %3d%%  %lld/%lld steps  ETA %.1f s ", bar.c_str(), int(frac * 100), (long long)done,
-                 (long long)total_, eta);
-    std::fflush(stderr);
-  }
-  void finish() {
-    if (on_) std::fprintf(stderr, "\r\033[K");
-  }
-
- private:
-  int64_t total_;
-  bool on_;
-  Clock::time_point t0_, last_;
-};
 
 // Characteristic size of each body (for the frames), from the Bullet shapes.
 std::vector<dvi::real> bodySizes(const std::vector<btRigidBody*>& bodies) {

@@ -15,6 +15,7 @@
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/mpi/distributed_system.h"
+#include "progress.h"
 
 namespace {
 
@@ -179,6 +180,7 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   if (root)
     std::printf("scene: %s (%zu bodies), %lld steps of %g s on %d processes (MPI)\n", scene.name.c_str(), bodies.size(),
                 (long long)steps, cfg.step.dt, sys.processes());
+  Progress progress(steps, root);  // process 0: a bar on a terminal, else a line every 10 %
   int64_t contacts = 0, iterations = 0;
   int frames = 0;
   size_t next_frame = 0;
@@ -192,7 +194,9 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     contacts += int64_t(sys.local()->contacts().count());
     iterations += sys.local()->lastStats().iterations;  // the same on every process (collective solve)
     relative = double(sys.local()->lastStats().relative_residual);
+    if (root) progress.update(k + 1);
   }
+  if (root) progress.finish();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   contacts = sumOverProcesses(contacts);
   const std::vector<dvi::MotionState> all = sys.gatherState();
