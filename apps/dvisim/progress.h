@@ -14,7 +14,10 @@ class Progress {
  public:
   using Clock = std::chrono::steady_clock;
   explicit Progress(int64_t total, bool lines = false)
-      : total_(total), bar_(total > 0 && ::isatty(2)), lines_(total > 0 && lines && !bar_), t0_(Clock::now()),
+      : total_(total),
+        bar_(total > 0 && ::isatty(2)),
+        lines_(total > 0 && lines && !bar_),
+        t0_(Clock::now()),
         last_(t0_) {}
   void update(int64_t done) {
     if (!bar_ && !lines_) return;
@@ -27,8 +30,8 @@ class Progress {
       if (done < total_ && tenth <= tenth_ && now - last_ < std::chrono::seconds(30)) return;
       tenth_ = tenth;
       last_ = now;
-      std::printf("step %lld/%lld (%d%%), %.1f s, ETA %.1f s\n", (long long)done, (long long)total_,
-                  int(frac * 100), el, eta);
+      std::printf("step %lld/%lld (%d%%), %.1f s, ETA %.1f s\n", (long long)done, (long long)total_, int(frac * 100),
+                  el, eta);
       std::fflush(stdout);
       return;
     }
