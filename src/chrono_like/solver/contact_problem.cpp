@@ -25,7 +25,21 @@ bool movable(const BodyInverseMass& B) {
 
 namespace {
 const BodyInverseMass kNoBody{0, {0, 0, 0, 0, 0, 0}};
+
+// Gauss-Seidel: contact J's impulses changed by dg; dl += M^-1 D_J dg on its movable bodies.
+inline void applyContactChange(const ContactJacobian& J, const real* dg, const BodyInverseMass* inv, BodyDelta* dl) {
+  for (int side = 0; side < 2; ++side) {
+    const int32_t i = side ? J.b : J.a;
+    const BodyInverseMass& M = inv[i];
+    if (!movable(M)) continue;
+    Vec3 F{0, 0, 0}, Tq{0, 0, 0};
+    accumulateContactImpulse(J, side, dg, F, Tq);
+    const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
+    dl[i].v += d.v;
+    dl[i].w += d.w;
+  }
 }
+}  // namespace
 
 void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
                            const Vec3* w_free, const ContactProblemSettings& settings,
@@ -441,16 +455,7 @@ void ContactProblem::gsApplyBlockChange(int64_t k, const real* dg) const {
     }
   } else if (k < ncb) {
     const ContactJacobian& J = jac_[k];
-    for (int side = 0; side < 2; ++side) {
-      const int32_t i = side ? J.b : J.a;
-      const BodyInverseMass& M = inv_[i];
-      if (!movable(M)) continue;
-      Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-      accumulateContactImpulse(J, side, dg, F, Tq);
-      const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
-      dl[i].v += d.v;
-      dl[i].w += d.w;
-    }
+    applyContactChange(J, dg, inv_.data(), dl);
   } else {
     for (int j = 0; j < 3; ++j) {
       if (dg[j] == 0) continue;
@@ -514,16 +519,7 @@ void ContactProblem::gsContactSweep(real* gamma, real w) const {
     g[1] = gn[1];
     g[2] = gn[2];
     if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-    for (int side = 0; side < 2; ++side) {
-      const int32_t i = side ? J.b : J.a;
-      const BodyInverseMass& M = inv_[size_t(i)];
-      if (!movable(M)) continue;
-      Vec3 F{0, 0, 0}, Tq{0, 0, 0};
-      accumulateContactImpulse(J, side, dg, F, Tq);
-      const BodyDelta d = bodyDeltaFromImpulse(M, F, Tq);
-      dl[i].v += d.v;
-      dl[i].w += d.w;
-    }
+    applyContactChange(J, dg, inv_.data(), dl);
   }
 }
 
