@@ -13,6 +13,7 @@
 #include "chrono_like/base/errors.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/io/output.h"
+#include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/mpi/distributed_system.h"
 #include "progress.h"
@@ -181,16 +182,27 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     std::printf("scene: %s (%zu bodies), %lld steps of %g s on %d processes (MPI)\n", scene.name.c_str(), bodies.size(),
                 (long long)steps, cfg.step.dt, sys.processes());
   Progress progress(steps, root);  // process 0: a bar on a terminal, else a line every 10 %
-  int64_t contacts = 0, iterations = 0;
+  int64_t contacts = 0, iterations = 0, done = 0;
   int frames = 0;
   size_t next_frame = 0;
   double relative = 0;
+  // SIGINT or SIGTERM on any process stops every process after the same step (one reduction a step); the results
+  // so far are written with status "interrupted", exit code 4, as one process's run does.
+  dvi::installStopHandlers();
+  bool interrupted = false;
   const auto t0 = std::chrono::steady_clock::now();
   for (int64_t k = 0;; ++k) {
     for (; next_frame < frame_at.size() && frame_at[next_frame] == k; ++next_frame)
       writeFramePieces(sys, sizes, dir, frames++, double(k) * cfg.step.dt, series.get());
     if (k == steps) break;
+    int stop = dvi::stopRequested() ? 1 : 0;
+    MPI_Allreduce(MPI_IN_PLACE, &stop, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    if (stop) {
+      interrupted = true;
+      break;
+    }
     sys.step();
+    done = k + 1;
     contacts += int64_t(sys.local()->contacts().count());
     iterations += sys.local()->lastStats().iterations;  // the same on every process (collective solve)
     relative = double(sys.local()->lastStats().relative_residual);
@@ -204,7 +216,8 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   for (int64_t v : sys.migrations().sent) moved += v;
   moved = sumOverProcesses(moved);
   MPI_Barrier(MPI_COMM_WORLD);  // every piece written before process 0 puts the directory in place
-  if (!root) return 0;
+  const int code = interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
+  if (!root) return code;
   std::vector<dvi::BodyState> state(all.size());
   for (size_t i = 0; i < all.size(); ++i)
     state[i] = dvi::BodyState{all[i].pos, all[i].rot, all[i].vel, all[i].omega, sizes[i]};
@@ -213,28 +226,33 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   summary["scene_name"] = scene.name;
   summary["bodies"] = bodies.size();
   summary["dt"] = cfg.step.dt;
-  summary["steps"] = steps;
+  summary["steps"] = done;
   summary["steps_planned"] = steps;
-  summary["sim_time"] = double(steps) * cfg.step.dt;
+  summary["sim_time"] = double(done) * cfg.step.dt;
   summary["backend"] = "cpu";
   summary["processes"] = sys.processes();
   summary["solver"] = dvi::solverName(cfg.solver.type);
   summary["collision"] = "native";
-  summary["iterations_mean"] = steps > 0 ? double(iterations) / double(steps) : 0.0;
+  summary["iterations_mean"] = done > 0 ? double(iterations) / double(done) : 0.0;
   summary["residual_final"] = relative;
-  summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
+  summary["contacts_mean"] = done > 0 ? double(contacts) / double(done) : 0.0;
   summary["migrations"] = moved;
   summary["rebalances"] = sys.migrations().rebalances;
   summary["frames"] = frames;
-  summary["status"] = "done";
+  summary["status"] = dvi::runStatusName(code);
   summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = steps > 0 ? 1000.0 * wall / double(steps) : 0.0;
+  summary["ms_per_step"] = done > 0 ? 1000.0 * wall / double(done) : 0.0;
   dvi::writeBodiesCsv(dir + "/bodies.csv", state);
   dvi::writeSummary(dir + "/summary.json", summary);
   series.reset();  // frames.pvd closed before the directory moves
   rd->commit();
   std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", rd->out().c_str(),
               frames ? (", " + std::to_string(frames) + " frames: frame_NNNN.pvtp + pieces, frames.pvd").c_str() : "",
-              wall, steps > 0 ? 1000.0 * wall / double(steps) : 0.0);
-  return 0;
+              wall, done > 0 ? 1000.0 * wall / double(done) : 0.0);
+  if (interrupted) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "dvisim: interrupted by a signal after step %lld of %lld; the results so far are in %s/\n",
+                 (long long)done, (long long)steps, rd->out().c_str());
+  }
+  return code;
 }
