@@ -3,9 +3,9 @@
 # rows step the same pile, so two processes must find the one process's contacts (each owned once: the same count
 # per step within 0.5 %); the two-process rows move ghosts and velocity changes, the one-process rows nothing; the
 # efficiencies are positive and finite. Another benchmark under mpirun is refused with exit code 2.
-# Usage: bench_scaling_mpi.sh MPIEXEC DVISIM WORK_DIR
+# Usage: bench_scaling_mpi.sh MPIEXEC DVISIM SOURCE_DIR WORK_DIR (SOURCE_DIR unused: the scene is built in)
 set -euo pipefail
-mpiexec=$1 dvisim=$2 work=$3
+mpiexec=$1 dvisim=$2 work=$4
 rm -rf "$work" && mkdir -p "$work"
 mpirun=("$mpiexec" -np 2 --oversubscribe --allow-run-as-root)
 "${mpirun[@]}" "$dvisim" bench scaling --mpi --quick --out "$work/out" > "$work/bench.log"
