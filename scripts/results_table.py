@@ -326,19 +326,22 @@ DROPIN_INTRO = (
 
 # --- scaling --mpi ---------------------------------------------------------------------------
 def scaling_mpi(text):
-    r = common(text, device_names=("CPU",))
+    r = common(text, device_names=("GPU", "CPU") if field(text, "GPU") not in (None, "none") else ("CPU",))
     for mode in ("weak", "strong"):
         rows = re.findall(r"^\| " + mode + r" \| (\d+) \| (\d+) \| ([\d.]+) \| ([\d.]+) \|", text, re.M)
         many = [x for x in rows if x[0] != "1"]
         one = [x for x in rows if x[0] == "1"]
         r["processes"] = many[0][0] if many else r.get("processes")
-        r[mode + " n"] = "%s -> %s" % (one[0][1], many[0][1]) if one and many else None
-        r[mode + " ms"] = "%s -> %s" % (one[0][2], many[0][2]) if one and many else None
-        r[mode + " eff"] = many[0][3] if many else None
+        if one and many:
+            r[mode + " n"] = "%s -> %s" % (one[0][1], many[0][1])
+            r[mode + " ms"] = "%s -> %s" % (one[0][2], many[0][2])
+            r[mode + " eff"] = many[0][3]
+        elif many:  # --baseline off: the K-process run alone
+            r[mode + " n"], r[mode + " ms"], r[mode + " eff"] = many[0][1], many[0][2], "-"
     return r
 
 
-SCALING_MPI_COLS = [("date", "date"), ("device", "CPU"), ("commit", "commit"), ("processes", "processes"),
+SCALING_MPI_COLS = [("date", "date"), ("device", "device"), ("commit", "commit"), ("processes", "processes"),
                     ("weak n", "weak spheres"), ("weak ms", "weak ms/step"), ("weak eff", "weak efficiency"),
                     ("strong n", "strong spheres"), ("strong ms", "strong ms/step"),
                     ("strong eff", "strong efficiency")]

@@ -98,6 +98,7 @@ struct ScalingOptions : BenchBasics {
   std::string bullet3_device = "gpu";
   bool mpi = false;  // the domain decomposition's weak and strong scaling instead (bench_scaling_mpi.h)
   std::string per_process = "20000", total = "40000", mpi_steps = "20";
+  std::string mpi_backend = "cpu", mpi_modes = "weak,strong", mpi_baseline = "on";
 };
 
 // How the GPU launches APGD's trials under cfg (GpuTuning::persistent_max_blocks, graphs).
@@ -582,6 +583,9 @@ int runScaling(const ScalingOptions& o) {
     m.per_process = o.per_process;
     m.total = o.total;
     m.steps = o.mpi_steps;
+    m.backend = o.mpi_backend;
+    m.modes = o.mpi_modes;
+    m.baseline = o.mpi_baseline;
     return runScalingMpi(m);
 #else
     throw InputError("--mpi: this build has no MPI (configure with DVISIM_ENABLE_MPI=ON and libopenmpi-dev)");
@@ -914,10 +918,17 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   cmd->add_flag("--mpi", o->mpi,
                 "The domain decomposition instead, under `mpirun -np K`: the sphere pile's weak and strong scaling on "
-                "the CPU backend, each against process 0 alone in the same run (scaling_mpi.{md,csv})");
+                "the CPU backend or one GPU a process, each against process 0 alone in the same run "
+                "(scaling_mpi.{md,csv})");
   cmd->add_option("--per-process", o->per_process, "--mpi: spheres a process in the weak run (default 20000)");
   cmd->add_option("--total", o->total, "--mpi: spheres in the strong run (default 40000)");
   cmd->add_option("--steps", o->mpi_steps, "--mpi: timed steps of each run (default 20; 3 warm-up steps before)");
+  cmd->add_option("--mpi-backend", o->mpi_backend, "--mpi: cpu (the default) or gpu (one device a process)")
+      ->check(CLI::IsMember({"cpu", "gpu"}));
+  cmd->add_option("--modes", o->mpi_modes, "--mpi: weak, strong or both (default weak,strong)");
+  cmd->add_option("--baseline", o->mpi_baseline,
+                  "--mpi: on (the default): each mode's one-process run first; off: the K-process runs alone")
+      ->check(CLI::IsMember({"on", "off"}));
   addBenchRunner(reg, cmd, [o] { return runScaling(*o); });
   registerBenchBullet3Worker(app, reg);
 }

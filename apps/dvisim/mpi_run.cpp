@@ -16,6 +16,8 @@
 #include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/mpi/distributed_system.h"
+#include "chrono_like/mpi/mpi_collectives.h"
+#include "gpu/gpu_factory.h"
 #include "progress.h"
 
 namespace {
@@ -24,12 +26,6 @@ bool launchedByMpirun() {
   for (const char* v : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK"})
     if (std::getenv(v)) return true;
   return false;
-}
-
-int64_t sumOverProcesses(int64_t v) {
-  int64_t out = 0;
-  MPI_Allreduce(&v, &out, 1, MPI_INT64_T, MPI_SUM, MPI_COMM_WORLD);
-  return out;
 }
 
 }  // namespace
@@ -136,14 +132,25 @@ void writeFramePieces(const dvi::DistributedSystem& sys, const std::vector<dvi::
   std::vector<dvi::BodyState> states;
   std::vector<int64_t> ids;
   const bool root = sys.rank() == 0, before = sys.stepCount() == 0;  // before the first step: process 0 has all
-  for (size_t id = 0; id < sys.bodyCount(); ++id) {
-    const bool mine = before || sys.replicated(int32_t(id))
-                          ? root
-                          : std::binary_search(sys.ownedIds().begin(), sys.ownedIds().end(), int32_t(id));
-    if (!mine) continue;
-    const dvi::MotionState m = sys.stateOf(int32_t(id));
-    states.push_back(dvi::BodyState{m.pos, m.rot, m.vel, m.omega, sizes[id]});
+  auto add = [&](int32_t id, const dvi::MotionState& m) {
+    states.push_back(dvi::BodyState{m.pos, m.rot, m.vel, m.omega, sizes[size_t(id)]});
     ids.push_back(int64_t(id));
+  };
+  if (!before) {  // the owned bodies in one copy; process 0 adds the fixed and kinematic ones
+    const std::vector<dvi::MotionState> owned = sys.ownedStates();
+    for (size_t j = 0; j < owned.size(); ++j) add(sys.ownedIds()[j], owned[j]);
+  }
+  for (size_t id = 0; id < sys.bodyCount() && root; ++id)
+    if (before || sys.replicated(int32_t(id))) add(int32_t(id), sys.stateOf(int32_t(id)));
+  if (!before) {  // scene order in the piece
+    std::vector<size_t> order(ids.size());
+    for (size_t j = 0; j < order.size(); ++j) order[j] = j;
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return ids[a] < ids[b]; });
+    std::vector<dvi::BodyState> s2;
+    std::vector<int64_t> i2;
+    for (size_t j : order) s2.push_back(states[j]), i2.push_back(ids[j]);
+    states.swap(s2);
+    ids.swap(i2);
   }
   char name[48];
   std::snprintf(name, sizeof name, "frame_%04d_p%d.vtp", index, sys.rank());
@@ -162,9 +169,16 @@ void writeFramePieces(const dvi::DistributedSystem& sys, const std::vector<dvi::
 
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
                 const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend) {
-  if (backend != "auto" && backend != "cpu")
-    throw dvi::InputError("--backend " + backend + ": not available over several processes (MPI runs the CPU backend)");
-  dvi::DistributedSystem sys(MPI_COMM_WORLD, cfg);
+  if (backend != "auto" && backend != "cpu" && backend != "gpu")
+    throw dvi::InputError("--backend " + backend + ": not available over several processes (MPI runs cpu or gpu)");
+  // gpu: one device a process, host rank i on device i (mod the devices); auto: the CPU.
+  const bool gpu = backend == "gpu";
+  if (gpu && dvi::selectGpu(mpiHostRank()) < 0)
+    throw dvi::InputError("--backend gpu: process " + std::to_string(mpiRank()) + " sees no CUDA device");
+  dvi::DistributedSystem sys(
+      MPI_COMM_WORLD, cfg, {},
+      gpu ? dvi::DistributedSystem::LocalFactory([](const dvi::SystemConfig& c) { return dvi::makeGpuSystem(c); })
+          : nullptr);
   const std::vector<btRigidBody*>& bodies = scene.bodies();
   std::vector<dvi::real> sizes;
   for (size_t i = 0; i < bodies.size(); ++i) {
@@ -203,18 +217,18 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     }
     sys.step();
     done = k + 1;
-    contacts += int64_t(sys.local()->contacts().count());
+    contacts += sys.local()->lastStats().contacts;
     iterations += sys.local()->lastStats().iterations;  // the same on every process (collective solve)
     relative = double(sys.local()->lastStats().relative_residual);
     if (root) progress.update(k + 1);
   }
   if (root) progress.finish();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  contacts = sumOverProcesses(contacts);
+  contacts = dvi::mpiSum(MPI_COMM_WORLD, contacts);
   const std::vector<dvi::MotionState> all = sys.gatherState();
   int64_t moved = 0;
   for (int64_t v : sys.migrations().sent) moved += v;
-  moved = sumOverProcesses(moved);
+  moved = dvi::mpiSum(MPI_COMM_WORLD, moved);
   MPI_Barrier(MPI_COMM_WORLD);  // every piece written before process 0 puts the directory in place
   const int code = interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
   if (!root) return code;
@@ -229,7 +243,7 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   summary["steps"] = done;
   summary["steps_planned"] = steps;
   summary["sim_time"] = double(done) * cfg.step.dt;
-  summary["backend"] = "cpu";
+  summary["backend"] = gpu ? "gpu" : "cpu";
   summary["processes"] = sys.processes();
   summary["solver"] = dvi::solverName(cfg.solver.type);
   summary["collision"] = "native";

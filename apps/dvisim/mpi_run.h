@@ -38,7 +38,7 @@ std::vector<long long> mpiGatherToRoot(const std::vector<long long>& mine);
 
 // The scene's run over mpiProcesses() processes, steps of cfg.step.dt; results into `out` (process 0), with a
 // parallel VTK frame (frame_NNNN.pvtp, one frame_NNNN_pR.vtp piece a process, in frames.pvd) before each step
-// listed in frame_at (ascending; `steps` for after the last). `backend`: auto or cpu (the GPU and Bullet backends
-// do not run over several processes: InputError).
+// listed in frame_at (ascending; `steps` for after the last). `backend`: auto or cpu, or gpu (one device a process:
+// host rank i on device i mod the devices); the Bullet backend does not run over several processes (InputError).
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
                 const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend);

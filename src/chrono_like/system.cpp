@@ -352,6 +352,57 @@ void System::detectCollisions() {
         [&](size_t k) { return !contactExcluded(contacts_.body_a[k], contacts_.body_b[k], keys, nk, flags, nf); });
   }
   stats_.contacts = int64_t(contacts_.count());
+  if (group_) {
+    group_->takeOwnerChanges();  // read in place here (a device backend copies them)
+    group_->setTouchedCopies(touchedCopies());
+  }
+}
+
+// The copies of other processes' bodies that this process's contacts touch (ProcessGroup::setTouchedCopies).
+std::vector<int32_t> System::touchedCopies() const {
+  const std::vector<int32_t>& owner = group_->bodyOwners();
+  const int self = group_->rank();
+  std::vector<int32_t> out;
+  for (size_t k = 0; k < contacts_.count(); ++k)
+    for (int32_t b : {contacts_.body_a[k], contacts_.body_b[k]})
+      if (owner[size_t(b)] >= 0 && owner[size_t(b)] != self) out.push_back(b);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+void System::motionBounds(real& vmax, real& wmax) const {
+  vmax = wmax = 0;
+  for (size_t i = 0; i < bodies_.count(); ++i) {
+    const bool mine = group_ ? group_->ownsBody(int32_t(i)) : !(bodies_.flags[i] & (kBodyFixed | kBodyKinematic));
+    if (!mine) continue;
+    vmax = std::max(vmax, length(bodies_.vel[i]));
+    wmax = std::max(wmax, length(bodies_.omega[i]));
+  }
+}
+
+std::vector<int32_t> System::ownedBodiesOutside(Vec3 lo, Vec3 hi) const {
+  std::vector<int32_t> out;
+  for (size_t i = 0; i < bodies_.count(); ++i) {
+    const bool mine = group_ ? group_->ownsBody(int32_t(i)) : !(bodies_.flags[i] & (kBodyFixed | kBodyKinematic));
+    const Vec3 p = bodies_.pos[i];
+    if (mine && !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
+      out.push_back(int32_t(i));
+  }
+  return out;
+}
+
+std::vector<ContactImpulse> System::contactImpulsesOf(const std::vector<int32_t>& bodies) const {
+  std::vector<ContactImpulse> out;
+  if (gamma_.size() < 3 * contacts_.count()) return out;  // no solve in the last step
+  for (size_t k = 0; k < contacts_.count(); ++k) {
+    const int32_t a = contacts_.body_a[k], b = contacts_.body_b[k];
+    if (!std::binary_search(bodies.begin(), bodies.end(), a) && !std::binary_search(bodies.begin(), bodies.end(), b))
+      continue;
+    out.push_back(ContactImpulse{contacts_.key[k], a, b, {gamma_[3 * k], gamma_[3 * k + 1], gamma_[3 * k + 2]}});
+  }
+  std::sort(out.begin(), out.end(), [](const ContactImpulse& x, const ContactImpulse& y) { return x.key < y.key; });
+  return out;
 }
 
 void System::setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>& pairs,
@@ -371,7 +422,7 @@ void System::setContactExclusions(const std::vector<std::pair<int32_t, int32_t>>
   ++exclusions_version_;
 }
 
-void System::setProcessGroup(const ProcessGroup* group) {
+void System::setProcessGroup(ProcessGroup* group) {
   if (group && config_.solver.type == SolverType::GaussSeidel)
     throw InputError(
         "solver gs: Gauss-Seidel is sequential and does not run over several processes (MPI); use apgd, "
@@ -387,6 +438,27 @@ void System::setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> i
     throw InputError("warm start: keys must be sorted, with 3 impulses each");
   prev_keys_ = std::move(sorted_keys);
   prev_gamma_ = std::move(impulses);
+  prev_roll_.clear();
+}
+
+void System::addWarmStart(const std::vector<uint64_t>& keys, const std::vector<real>& impulses) {
+  if (impulses.size() != 3 * keys.size() || !std::is_sorted(keys.begin(), keys.end()))
+    throw InputError("warm start: keys must be sorted, with 3 impulses each");
+  if (keys.empty()) return;
+  std::vector<uint64_t> k;
+  std::vector<real> g;
+  size_t i = 0, j = 0;
+  while (i < prev_keys_.size() || j < keys.size()) {  // a merge; the added entry wins a tie
+    const bool add = j < keys.size() && (i == prev_keys_.size() || keys[j] <= prev_keys_[i]);
+    if (add && i < prev_keys_.size() && keys[j] == prev_keys_[i]) ++i;
+    const uint64_t key = add ? keys[j] : prev_keys_[i];
+    const real* src = add ? &impulses[3 * j] : &prev_gamma_[3 * i];
+    k.push_back(key);
+    g.insert(g.end(), src, src + 3);
+    (add ? j : i)++;
+  }
+  prev_keys_ = std::move(k);
+  prev_gamma_ = std::move(g);
   prev_roll_.clear();
 }
 

@@ -226,6 +226,14 @@ struct ConvergenceLog {
 
 class ContactProblem;
 
+// A contact of the last step with its impulses (System::contactImpulsesOf): its persistent key (contact.h: contactKey),
+// its bodies, and 3 impulses (normal, then the two tangents).
+struct ContactImpulse {
+  uint64_t key;
+  int32_t body_a, body_b;
+  real gamma[3];
+};
+
 class System {
  public:
   // `bullet_collision` makes the collision backend when config.collision is CollisionBackend::Bullet
@@ -303,10 +311,21 @@ class System {
   // holds one process's bodies (its own and copies of its neighbours'), keeps only the contacts the group says it
   // owns, and solves them with the other processes (APGD, Jacobi or BB; no Gauss-Seidel, constraint rows, rolling
   // friction or Bullet collision: InputError). null: this System alone (the default). The group outlives the System's steps.
-  void setProcessGroup(const ProcessGroup* group);
+  void setProcessGroup(ProcessGroup* group);
   // The next step's warm start (WarmStart stage): impulses (3 per key) of the contacts with these keys, sorted
   // ascending, in place of the last step's. For a driver that rebuilds the System between steps.
   void setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses);
+  // Adds to the next step's warm start (an entry of a key already there replaces it): a driver hands over the impulses
+  // of the contacts another process solved in the last step. Keys sorted ascending, 3 impulses each.
+  virtual void addWarmStart(const std::vector<uint64_t>& sorted_keys, const std::vector<real>& impulses);
+
+  // For a domain decomposition (chrono_like/mpi/distributed_system.h), on the current state without copying it:
+  // the largest |v| and |w| of the dynamic bodies this process owns (all dynamic bodies without a process group),
+  virtual void motionBounds(real& vmax, real& wmax) const;
+  // those of them whose centre lies outside the box [lo, hi] (ascending; the box may be infinite on a side),
+  virtual std::vector<int32_t> ownedBodiesOutside(Vec3 lo, Vec3 hi) const;
+  // and the last step's contacts (those this process kept) that touch one of `bodies` (ascending), in key order.
+  virtual std::vector<ContactImpulse> contactImpulsesOf(const std::vector<int32_t>& bodies) const;
 
   // Contact force on each contact in the last step (impulse / dt), world frame, acting on body B.
   Vec3 contactForce(size_t k) const;
@@ -330,6 +349,7 @@ class System {
   virtual void integrate();                           // IntegrateVelocities + IntegratePositions
   void collectRows();                                 // rows_ from the row providers (part of BuildRows)
   void cacheImpulsesByKey(int64_t nc);                // this step's impulses by contact key (end of Solve)
+  std::vector<int32_t> touchedCopies() const;         // the group's copies this process's contacts touch
   // Scene-level parts (host arrays): gyroscopic term and MPR needed? Fills stats_.part_ran/part_reason for
   // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
   // term runs.
@@ -377,11 +397,11 @@ class System {
   uint64_t exclusions_version_ = 0;               // bumped by every setContactExclusions (a device re-uploads)
   bool hasExclusions() const { return !excluded_pairs_.empty() || !no_contact_.empty(); }
   std::unique_ptr<ContactProblem> problem_;
-  const ProcessGroup* group_ = nullptr;  // setProcessGroup
-  std::vector<real> x_;                  // solution in the problem's layout when it is normal-only
-  const real* solution_ = nullptr;       // gamma_ or x_: what IntegrateVelocities applies
-  size_t typed_shapes_ = 0;              // shapes whose type is in shape_types_
-  uint32_t shape_types_ = 0;             // bit t: the scene has a shape of type t
+  ProcessGroup* group_ = nullptr;   // setProcessGroup
+  std::vector<real> x_;             // solution in the problem's layout when it is normal-only
+  const real* solution_ = nullptr;  // gamma_ or x_: what IntegrateVelocities applies
+  size_t typed_shapes_ = 0;         // shapes whose type is in shape_types_
+  uint32_t shape_types_ = 0;        // bit t: the scene has a shape of type t
   StepStats stats_;
   ThreadGovernor governor_;  // the team size of threads 0 under load
   ConvergenceLog convergence_;

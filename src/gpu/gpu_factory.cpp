@@ -28,4 +28,13 @@ std::unique_ptr<System> makeGpuSystem(const SystemConfig& config, CollisionFacto
 #endif
 }
 
+int selectGpu(int index) {
+#if defined(DVISIM_HAVE_CUDA)
+  return gpu::selectDevice(index);
+#else
+  (void)index;
+  return -1;
+#endif
+}
+
 }  // namespace dvi

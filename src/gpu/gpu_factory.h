@@ -19,4 +19,8 @@ bool gpuAvailable(std::string* name = nullptr);
 // device is present. bullet_collision: as for System.
 std::unique_ptr<System> makeGpuSystem(const SystemConfig& config, CollisionFactory bullet_collision = nullptr);
 
+// One GPU a process (a domain decomposition over MPI): makes device index % (the devices this process sees) the
+// current one, before the first GPU System; returns its index, or -1 where there is none (or no CUDA backend).
+int selectGpu(int index);
+
 }  // namespace dvi

@@ -25,4 +25,18 @@ bool queryDevice(std::string* name) {
   return true;
 }
 
+int selectDevice(int index) {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess || count == 0) {
+    cudaGetLastError();
+    return -1;
+  }
+  const int dev = index % count;
+  if (cudaSetDevice(dev) != cudaSuccess) {
+    cudaGetLastError();
+    return -1;
+  }
+  return dev;
+}
+
 }  // namespace dvi::gpu

@@ -8,5 +8,7 @@ namespace dvi::gpu {
 
 // True when a CUDA device can be used; its name (and memory) go to *name when given.
 bool queryDevice(std::string* name);
+// Makes device index % (the device count) this process's current device; returns it, or -1 without a device.
+int selectDevice(int index);
 
 }  // namespace dvi::gpu

@@ -10,6 +10,7 @@
 #include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/solver/jacobian.h"
+#include "chrono_like/solver/process_group.h"
 #include "chrono_like/solver/solver_algorithms.h"
 #include "chrono_like/system.h"
 #include "gpu/device_buffer.h"
@@ -213,6 +214,23 @@ struct DeviceState {
   uint64_t exclusions_version = ~uint64_t(0);
   std::vector<ConstraintRow> host_rows;  // host staging of the padded rows
   std::vector<real> host_lohi;           //   and of their bounds
+  // A domain decomposition (System::setProcessGroup, gpu_decomposition.cu): the group; per body its owner and key
+  // (both uploaded when bodiesVersion changes, the changed owners scattered); this step's exchange list (local indices) with its device and pinned
+  // host staging; scratch of the selections (marks, indices, a count); the warm start handed over by
+  // System::addWarmStart (sorted keys, 3 impulses each), read by the next WarmStart and then dropped.
+  ProcessGroup* group = nullptr;
+  DeviceBuffer<int32_t> owner{"body owners"}, owner_key{"body keys"};
+  uint64_t owners_version = ~uint64_t(0);
+  DeviceBuffer<int32_t> ex_ids{"exchanged bodies"};
+  DeviceBuffer<BodyDelta> ex_buf{"exchanged velocity changes"};
+  BodyDelta* ex_host = nullptr;  // pinned, ex_host_cap entries
+  size_t ex_host_cap = 0, ex_count = 0;
+  DeviceBuffer<uint8_t> mark{"selection marks"};
+  DeviceBuffer<int32_t> sel{"selected indices"}, sel_count{"selected count"}, ex_scatter{"changed owners"};
+  DeviceBuffer<uint64_t> extra_key{"handed-over warm-start keys"};
+  DeviceBuffer<real> extra_gamma{"handed-over warm-start impulses"};
+  size_t extra_count = 0;
+  DeviceContacts contacts_kept;  // the owned contacts while they are compacted (swapped with contacts)
 
   // Reads `n` doubles from device memory into host_scalars (one synchronisation).
   const double* readScalars(const double* dev, int n);
@@ -246,6 +264,21 @@ SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg);
 void keepImpulsesForWarmStart(DeviceState& d);
 // v = v_free + M^-1 D gamma for every body (and positions), the IntegrateVelocities/Positions stages.
 void applyImpulsesToBodies(DeviceState& d, const real* gamma);
+
+// The domain decomposition's device side (gpu_decomposition.cu; solver/process_group.h).
+// The group's owners and keys to the device when they changed.
+void uploadOwners(DeviceState& d);
+// Keeps the contacts this process owns (in order), then names the copies they touch to the group (collective) and
+// uploads the step's exchange list.
+void keepOwnedContacts(DeviceState& d);
+// delta (per body) of the exchange list's bodies: this process's shares in, the sums over the processes out.
+void exchangeDeltas(DeviceState& d, BodyDelta* delta);
+// The same for one value per body (Jacobi's column sums).
+void exchangeBodyValues(DeviceState& d, real* per_body);
+// System::motionBounds, ownedBodiesOutside and contactImpulsesOf on the device arrays.
+void motionBounds(DeviceState& d, real& vmax, real& wmax);
+std::vector<int32_t> ownedBodiesOutside(DeviceState& d, Vec3 lo, Vec3 hi);
+std::vector<ContactImpulse> contactImpulsesOf(DeviceState& d, const std::vector<int32_t>& bodies);
 // The solution in the problem's layout (solver.x when normal_only, else solver.gamma).
 real* solution(DeviceState& d);
 

@@ -181,6 +181,7 @@ GpuSystem::~GpuSystem() {
   if (d_->host_scalars) cudaFreeHost(d_->host_scalars);
   if (d_->host_staging) cudaFreeHost(d_->host_staging);
   if (d_->host_apgd) cudaFreeHost(d_->host_apgd);
+  if (d_->ex_host) cudaFreeHost(d_->ex_host);
   if (d_->stream) cudaStreamDestroy(d_->stream);
 }
 
@@ -250,6 +251,8 @@ void GpuSystem::step() {
   stats_ = StepStats{};
   beginStep();
   uploadIfNeeded();
+  d_->group = group_;
+  uploadOwners(*d_);
   planParts();
   cudaEvent_t* ev = d_->ev;
   DVI_CUDA(cudaEventRecord(ev[0], d_->stream));
@@ -323,6 +326,7 @@ void GpuSystem::detectCollisions() {
   stats_.pairs_reused = broadPhaseStep(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BroadPhase) + 1], d_->stream));
   narrowPhase(*d_, config_);
+  if (group_) keepOwnedContacts(*d_);  // a domain decomposition: the contacts this process owns
   DVI_CUDA(cudaEventRecord(ev[int(StageType::NarrowPhase) + 1], d_->stream));
   stats_.stage_ran[int(StageType::ComputeAabbs)] = stats_.stage_ran[int(StageType::BroadPhase)] =
       stats_.stage_ran[int(StageType::NarrowPhase)] = true;
@@ -354,7 +358,8 @@ void GpuSystem::buildAndSolve() {
     rows_.clear();
     row_lambda_.clear();
   }
-  if (nc == 0 && rows_.empty()) {
+  // Over several processes a process without contacts still takes part in the solve's reductions and exchanges.
+  if (nc == 0 && rows_.empty() && !group_) {
     d_->prev_count = 0;
     d_->row_count = 0;
     d_->solver.rows.resize(0);
@@ -378,8 +383,18 @@ void GpuSystem::buildAndSolve() {
                                                      : d_->normal_only ? "no contact with mu > 0 this step"
                                                                        : nullptr;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
-  const bool warm = config_.solver.warm_start && d_->prev_count > 0;
+  // Impulses handed over (setWarmStart, addWarmStart: a distributed driver) go up for this WarmStart alone.
+  d_->extra_count = prev_keys_.size();
+  if (!prev_keys_.empty()) {
+    d_->extra_key.upload(prev_keys_, d_->stream);
+    d_->extra_gamma.upload(prev_gamma_, d_->stream);
+    DVI_CUDA(cudaStreamSynchronize(d_->stream));
+    prev_keys_.clear();
+    prev_gamma_.clear();
+  }
+  const bool warm = config_.solver.warm_start && (d_->prev_count > 0 || d_->extra_count > 0);
   warmStart(*d_, config_.solver.warm_start, config_.solver.warm_start ? row_lambda_ : std::vector<real>{});
+  d_->extra_count = 0;
   stats_.stage_ran[int(StageType::WarmStart)] = warm;
   if (!config_.solver.warm_start)
     leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");
@@ -405,7 +420,8 @@ void GpuSystem::integrate() {
   DeviceBodies& b = d_->bodies;
   const int n = int(b.count);
   // IntegrateVelocities: v = v_free + M^-1 D gamma (the gather of the Schur product).
-  const bool impulses = d_->contacts.count > 0 || d_->row_count > 0;
+  // Over several processes every process applies (and exchanges) its share, with or without contacts.
+  const bool impulses = d_->contacts.count > 0 || d_->row_count > 0 || group_;
   if (n > 0) applyImpulsesToBodies(*d_, impulses ? solution(*d_) : nullptr);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegrateVelocities) + 1], d_->stream));
   if (n > 0) {
@@ -416,6 +432,20 @@ void GpuSystem::integrate() {
   }
   DVI_CUDA(cudaEventRecord(ev[int(StageType::IntegratePositions) + 1], d_->stream));
   stats_.stage_ran[int(StageType::IntegrateVelocities)] = stats_.stage_ran[int(StageType::IntegratePositions)] = true;
+}
+
+void GpuSystem::motionBounds(real& vmax, real& wmax) const {
+  d_->group = group_;
+  gpu::motionBounds(*d_, vmax, wmax);
+}
+
+std::vector<int32_t> GpuSystem::ownedBodiesOutside(Vec3 lo, Vec3 hi) const {
+  d_->group = group_;
+  return gpu::ownedBodiesOutside(*d_, lo, hi);
+}
+
+std::vector<ContactImpulse> GpuSystem::contactImpulsesOf(const std::vector<int32_t>& bodies) const {
+  return gpu::contactImpulsesOf(*d_, bodies);
 }
 
 bool GpuSystem::deviceBodies(DeviceBodyRefs& out) {

@@ -67,6 +67,11 @@ class GpuSystem : public System {
   void markBodyParamsDirty(const std::vector<int32_t>& ids) override;
   bool deviceBodies(DeviceBodyRefs& out) override;
 
+  // On the device arrays (one selection kernel, the selected elements read back).
+  void motionBounds(real& vmax, real& wmax) const override;
+  std::vector<int32_t> ownedBodiesOutside(Vec3 lo, Vec3 hi) const override;
+  std::vector<ContactImpulse> contactImpulsesOf(const std::vector<int32_t>& bodies) const override;
+
   // Device memory held by this system's buffers, bytes.
   size_t deviceBytes() const;
 

@@ -24,6 +24,7 @@
 
 #include "chrono_like/mpi/distributed_system.h"
 #include "chrono_like/system.h"
+#include "gpu/gpu_factory.h"
 
 using namespace dvi;
 
@@ -190,6 +191,11 @@ TEST_CASE("MPI: a sphere pile split over the processes follows the one-process r
   CHECK(a.kinetic == Approx(b.kinetic).epsilon(1e-6));
   // Both processes own part of it.
   CHECK(r.many.ownedIds().size() > 0);
+  // The local System lives from one rebuild to the next: a body must come from beyond the halo to force one.
+  if (worldRank() == 0)
+    std::printf("pile: %lld local Systems built in %d steps\n", (long long)r.many.migrations().rebuilds, steps);
+  CHECK(r.many.migrations().rebuilds >= 1);
+  CHECK(r.many.migrations().rebuilds <= steps / 10);
 }
 
 TEST_CASE("MPI: Jacobi and BB over the processes follow the one-process run", "[mpi]") {
@@ -358,6 +364,79 @@ TEST_CASE("MPI: what does not run over several processes is refused", "[mpi]") {
   BodyDesc bad = sphere(Vec3{0, 1, 0}, Vec3{0, 0, 0});
   bad.mass = -1;
   CHECK_THROWS_AS(d.addBody(bad), InputError);
+}
+
+namespace {
+
+// The scene on one GPU a process (this process's rank on device rank mod the devices) against the plain CPU System:
+// the largest position difference over `steps` steps and the steps whose contact counts differ. Real storage of
+// APGD's vectors, so the two backends compare to rounding (the GPU's float storage has its own tests).
+struct GpuRun {
+  real worst = 0;
+  int64_t contact_mismatch = 0, contacts = 0, rebuilds = 0;
+};
+GpuRun gpuAgainstCpu(const std::vector<BodyDesc>& scene, SystemConfig c, int steps, DecompositionSettings d = {}) {
+  c.solver.storage = VectorStorage::Real;
+  System one(c);
+  DistributedSystem many(MPI_COMM_WORLD, c, d, [](const SystemConfig& cc) { return makeGpuSystem(cc); });
+  for (const BodyDesc& b : scene) {
+    one.addBody(b);
+    many.addBody(b);
+  }
+  GpuRun g;
+  for (int s = 0; s < steps; ++s) {
+    one.step();
+    many.step();
+    g.worst = std::max(g.worst, maxPositionDifference(many.gatherState(), oneRankState(one)));
+    g.contacts = sumOverRanks(many.local()->lastStats().contacts);
+    g.contact_mismatch += g.contacts != one.lastStats().contacts ? 1 : 0;
+  }
+  g.rebuilds = many.migrations().rebuilds;
+  return g;
+}
+
+// Whether every process has a device (each says for itself; all skip when one has none).
+bool everyProcessHasGpu() {
+  std::string why;
+  const int64_t have = gpuAvailable(&why) && selectGpu(worldRank()) >= 0 ? 1 : 0;
+  const bool all = sumOverRanks(have) == worldSize();
+  if (!all && worldRank() == 0) std::printf("skipped: a process has no CUDA device (%s)\n", why.c_str());
+  return all;
+}
+
+}  // namespace
+
+// The GPU backend under the decomposition: the owned contacts kept on the device, the shared bodies' velocity
+// changes staged through pinned host memory each Schur product, APGD on the host with the test sums reduced over the
+// processes. Against the CPU System: the pile (tolerance stop and fixed count), the rows crossing the split both ways
+// (migrations with their warm starts), Jacobi (the column sums exchanged) and a frictionless pile (normal rows).
+TEST_CASE("MPI GPU: one GPU a process follows the one-process CPU run", "[mpi][gpu]") {
+  if (!everyProcessHasGpu()) return;
+  const GpuRun pile_run = gpuAgainstCpu(pile(12, 3, 8), config(), 200);
+  std::vector<BodyDesc> rows{ground()};
+  for (int row = 0; row < 2; ++row)
+    for (int i = 0; i < 24; ++i)
+      rows.push_back(sphere(Vec3{real(i * 0.1), kRadius, real(row * 0.3)}, Vec3{row == 0 ? real(2) : real(-2), 0, 0}));
+  const GpuRun rows_run = gpuAgainstCpu(rows, config(10), 200, DecompositionSettings{real(100), real(1.5)});
+  SystemConfig jac = config(30);
+  jac.solver.type = SolverType::Jacobi;
+  const GpuRun jacobi_run = gpuAgainstCpu(pile(8, 2, 6), jac, 100);
+  std::vector<BodyDesc> smooth = pile(8, 2, 6);
+  for (BodyDesc& b : smooth) b.friction = 0;
+  const GpuRun smooth_run = gpuAgainstCpu(smooth, config(100), 100);
+  if (worldRank() == 0)
+    std::printf(
+        "GPU over %d processes against the CPU: pile %.3e m (%lld contacts, %lld built), crossing rows %.3e m (%lld "
+        "built), Jacobi %.3e m, frictionless %.3e m\n",
+        worldSize(), double(pile_run.worst), (long long)pile_run.contacts, (long long)pile_run.rebuilds,
+        double(rows_run.worst), (long long)rows_run.rebuilds, double(jacobi_run.worst), double(smooth_run.worst));
+  CHECK(pile_run.worst < real(1e-6) * kRadius);
+  CHECK(pile_run.contact_mismatch == 0);
+  CHECK(pile_run.contacts > 300);
+  CHECK(rows_run.worst < real(1e-9));
+  CHECK(jacobi_run.worst < real(1e-9));
+  CHECK(jacobi_run.contact_mismatch == 0);
+  CHECK(smooth_run.worst < real(1e-9));
 }
 
 // Catch2 inside MPI: every process runs the same tests (they are collective); the exit code is the worst of all.

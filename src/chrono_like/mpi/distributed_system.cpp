@@ -7,50 +7,11 @@
 
 #include "chrono_like/base/shape.h"
 #include "chrono_like/collision/contact.h"
+#include "chrono_like/mpi/mpi_collectives.h"
 
 namespace dvi {
 
 namespace {
-
-// Alltoallv of plain records: out[q] to process q; returns what each process sent here, by source. Adds the bytes
-// sent to other processes to *sent.
-template <class T>
-std::vector<std::vector<T>> exchangeAll(MPI_Comm comm, const std::vector<std::vector<T>>& out, int64_t* sent) {
-  const int n = int(out.size());
-  const size_t un = static_cast<size_t>(n);
-  std::vector<int> send_counts(un), recv_counts(un), sdispl(un), rdispl(un);
-  int self = 0;
-  MPI_Comm_rank(comm, &self);
-  for (int q = 0; q < n; ++q) {
-    send_counts[size_t(q)] = int(out[size_t(q)].size() * sizeof(T));
-    if (q != self) *sent += send_counts[size_t(q)];
-  }
-  MPI_Alltoall(send_counts.data(), 1, MPI_INT, recv_counts.data(), 1, MPI_INT, comm);
-  std::vector<char> sbuf, rbuf;
-  int stot = 0, rtot = 0;
-  for (int q = 0; q < n; ++q) {
-    sdispl[size_t(q)] = stot;
-    rdispl[size_t(q)] = rtot;
-    stot += send_counts[size_t(q)];
-    rtot += recv_counts[size_t(q)];
-  }
-  sbuf.resize(size_t(stot) + 1);
-  rbuf.resize(size_t(rtot) + 1);
-  for (int q = 0; q < n; ++q)
-    if (!out[size_t(q)].empty())
-      std::copy_n(reinterpret_cast<const char*>(out[size_t(q)].data()), send_counts[size_t(q)],
-                  sbuf.data() + sdispl[size_t(q)]);
-  MPI_Alltoallv(sbuf.data(), send_counts.data(), sdispl.data(), MPI_BYTE, rbuf.data(), recv_counts.data(),
-                rdispl.data(), MPI_BYTE, comm);
-  std::vector<std::vector<T>> in(static_cast<size_t>(n));
-  for (int q = 0; q < n; ++q) {
-    in[size_t(q)].resize(size_t(recv_counts[size_t(q)]) / sizeof(T));
-    if (recv_counts[size_t(q)] > 0)
-      std::copy_n(rbuf.data() + rdispl[size_t(q)], recv_counts[size_t(q)],
-                  reinterpret_cast<char*>(in[size_t(q)].data()));
-  }
-  return in;
-}
 
 // Bounding radius of a body about its centre: the farthest reach of its shapes.
 real bodyRadius(const BodyDesc& d) {
@@ -66,8 +27,9 @@ real bodyRadius(const BodyDesc& d) {
 
 }  // namespace
 
-DistributedSystem::DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings)
-    : config_(config), settings_(settings) {
+DistributedSystem::DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings,
+                                     LocalFactory make_local)
+    : config_(config), settings_(settings), make_local_(std::move(make_local)) {
   if (config_.solver.type == SolverType::GaussSeidel)
     throw InputError(
         "solver gs: Gauss-Seidel is sequential and does not run over several processes (MPI); use apgd, "
@@ -78,6 +40,9 @@ DistributedSystem::DistributedSystem(MPI_Comm comm, SystemConfig config, Decompo
     throw InputError("rebalance ratio must be a finite number > 1");
   if (!(settings_.ghost_safety >= 1) || !std::isfinite(settings_.ghost_safety))
     throw InputError("ghost safety factor must be a finite number >= 1");
+  if (!(settings_.halo_factor >= 1) || !std::isfinite(settings_.halo_factor))
+    throw InputError("halo factor must be a finite number >= 1");
+  if (!make_local_) make_local_ = [](const SystemConfig& c) { return std::make_unique<System>(c); };
   System probe(config_);  // the configuration's own checks (dt, iterations)
   MPI_Comm_dup(comm, &comm_);
   MPI_Comm_rank(comm_, &rank_);
@@ -118,43 +83,39 @@ int DistributedSystem::addBody(const BodyDesc& d) {
 void DistributedSystem::start() {
   const size_t n = descs_.size();
   state_.resize(n);
+  owner_.assign(n, kReplicated);
   for (size_t i = 0; i < n; ++i) {
     const BodyDesc& d = descs_[i];
     const bool fixed = (d.flags & kBodyFixed) != 0;
     state_[i] = MotionState{d.pos, normalized(d.rot), fixed ? Vec3{0, 0, 0} : d.vel, fixed ? Vec3{0, 0, 0} : d.omega};
+    gmax_ = std::max(gmax_, length(d.has_gravity ? d.gravity : config_.step.gravity));
   }
   std::vector<Vec3> points;
-  for (int32_t id : dynamic_) points.push_back(state_[size_t(id)].pos);
+  for (int32_t id : dynamic_) {
+    points.push_back(state_[size_t(id)].pos);
+    rmax_ = std::max(rmax_, radius_[size_t(id)]);
+  }
   tree_ = Bisection::build(points, size_);
-  for (int32_t id : dynamic_)
-    if (tree_.owner(state_[size_t(id)].pos) == rank_) owned_.push_back(id);
+  owned_count_ = 0;
+  for (int32_t id : dynamic_) {
+    owner_[size_t(id)] = tree_.owner(state_[size_t(id)].pos);
+    owned_count_ += owner_[size_t(id)] == rank_ ? 1 : 0;
+  }
+  owned_stale_ = true;
   local_of_.assign(n, -1);
   started_ = true;
+  width_ = ghostWidth();
 }
 
 void DistributedSystem::step() {
   using Clock = std::chrono::steady_clock;
-  auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
   if (!started_) start();
-  std::vector<std::vector<Record>> ghosts;
-  auto t = Clock::now();
-  exchangeGhosts(ghosts);
-  prof_.ghosts_s += since(t);
-  t = Clock::now();
-  buildLocal(ghosts);
-  setLocalWarmStart();
-  prof_.build_s += since(t);
-  t = Clock::now();
+  if (!sys_) rebuild(false);
+  const auto t = Clock::now();
   sys_->step();
-  prof_.step_s += since(t);
+  prof_.step_s += std::chrono::duration<double>(Clock::now() - t).count();
   for (int k = 0; k < kStageCount; ++k) prof_.stages_s[size_t(k)] += sys_->lastStats().stage_seconds[size_t(k)];
-  t = Clock::now();
-  readBack();
-  prof_.readback_s += since(t);
-  t = Clock::now();
-  migrate();
-  rebalanceIfNeeded();
-  prof_.migrate_s += since(t);
+  afterStep();
   time_ += config_.step.dt;
   ++steps_;
 }
@@ -166,75 +127,121 @@ DecompositionProfile DistributedSystem::profile() const {
 }
 
 // The ghost width (DecompositionSettings::ghost_safety): two bodies farther apart than this make no contact in
-// this step. A pair is collided with at most max(envelope, sweep_a + sweep_b) (narrowphase.h: pairEnvelope), the sweep
-// h (|v_free| + |w| reach) from the velocities after the step's forces (here gravity: |v_free| <= |v| + h |g|).
+// the coming step. A pair is collided with at most max(envelope, sweep_a + sweep_b) (narrowphase.h: pairEnvelope), the
+// sweep h (|v_free| + |w| reach) from the velocities after the step's forces (here gravity: |v_free| <= |v| + h |g|),
+// bounded with the fastest owned body's |v| and |w| and the largest body.
 real DistributedSystem::ghostWidth() const {
   const real h = real(config_.step.dt);
-  real rmax = 0, sweep = 0;
-  for (int32_t id : dynamic_) rmax = std::max(rmax, radius_[size_t(id)]);
-  for (int32_t id : owned_) {
-    const BodyDesc& d = descs_[size_t(id)];
-    const MotionState& s = state_[size_t(id)];
-    const Vec3 g = d.has_gravity ? d.gravity : config_.step.gravity;
-    sweep = std::max(sweep, h * (length(s.vel) + h * length(g) + length(s.omega) * radius_[size_t(id)]));
+  real vmax = 0, wmax = 0;
+  if (sys_) {
+    sys_->motionBounds(vmax, wmax);
+  } else {
+    for (int32_t id : dynamic_)
+      if (owner_[size_t(id)] == rank_) {
+        vmax = std::max(vmax, length(state_[size_t(id)].vel));
+        wmax = std::max(wmax, length(state_[size_t(id)].omega));
+      }
   }
-  sweep = real(group_->max(double(sweep)));
-  return settings_.ghost_safety * (2 * rmax + config_.collision.envelope_rel * rmax + 2 * sweep);
+  const real sweep = real(group_->max(double(h * (vmax + h * gmax_ + wmax * rmax_))));
+  return settings_.ghost_safety * (2 * rmax_ + config_.collision.envelope_rel * rmax_ + 2 * sweep);
 }
 
-// Each owned body within the ghost width of another process's box goes there as a ghost.
-void DistributedSystem::exchangeGhosts(std::vector<std::vector<Record>>& ghosts) {
-  const real width = ghostWidth();
+// A new local System (collective): the fixed and kinematic bodies, the owned ones and the copies of the neighbours'
+// bodies within the halo, in global order (so every pair is collided in the order one process collides it), with
+// their exact states; the copies farther than the ghost width parked. read_local: first the current System's owned
+// states and contacts to the host (else they are there already: the first build, or after migrateAll).
+void DistributedSystem::rebuild(bool read_local) {
+  using Clock = std::chrono::steady_clock;
+  const auto t = Clock::now();
+  if (read_local) readLocal(true);
+  const real halo = settings_.halo_factor * width_;
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
-  for (int32_t id : owned_) {
+  for (int32_t id : dynamic_) {
+    if (owner_[size_t(id)] != rank_) continue;
     const MotionState& s = state_[size_t(id)];
     for (int q = 0; q < size_; ++q)
-      if (q != rank_ && tree_.distance(s.pos, q) <= width) out[size_t(q)].push_back(Record{id, s});
+      if (q != rank_ && tree_.distance(s.pos, q) <= halo) out[size_t(q)].push_back(Record{id, s});
   }
-  ghosts = exchangeAll(comm_, out, &prof_.ghost_bytes);
-  // What this process sent, by process, for the group's lists (buildLocal).
-  group_->sentTo().assign(size_t(size_), {});
-  for (int q = 0; q < size_; ++q)
-    for (const Record& r : out[size_t(q)]) group_->sentTo()[size_t(q)].push_back(r.id);  // global ids for now
-}
-
-// This step's System: the fixed and kinematic bodies, the owned ones and the ghosts, in global order (so every
-// pair is collided in the order one process collides it), with their exact states.
-void DistributedSystem::buildLocal(const std::vector<std::vector<Record>>& ghosts) {
+  const auto in = mpiExchange(comm_, out, &prof_.ghost_bytes);
   for (int32_t id : local_ids_) local_of_[size_t(id)] = -1;
   local_ids_ = fixed_;
-  local_ids_.insert(local_ids_.end(), owned_.begin(), owned_.end());
-  for (const auto& l : ghosts)
-    for (const Record& r : l) {
+  for (int32_t id : dynamic_)
+    if (owner_[size_t(id)] == rank_) local_ids_.push_back(id);
+  for (int q = 0; q < size_; ++q)
+    for (const Record& r : in[size_t(q)]) {
       local_ids_.push_back(r.id);
       state_[size_t(r.id)] = r.s;
+      owner_[size_t(r.id)] = q;
     }
   std::sort(local_ids_.begin(), local_ids_.end());
   const size_t nl = local_ids_.size();
   for (size_t i = 0; i < nl; ++i) local_of_[size_t(local_ids_[i])] = int32_t(i);
-  std::vector<uint8_t> owned(nl, 0), dynamic(nl, 0);
-  for (int32_t id : owned_) owned[size_t(local_of_[size_t(id)])] = 1;
-  for (size_t i = 0; i < nl; ++i) dynamic[i] = replicated_[size_t(local_ids_[i])] ? 0 : 1;
-  std::vector<std::vector<int32_t>> sent = std::move(group_->sentTo());
-  group_->setBodies(local_ids_, std::move(owned), std::move(dynamic));
-  for (int q = 0; q < size_; ++q) {
-    for (int32_t id : sent[size_t(q)]) group_->sentTo()[size_t(q)].push_back(local_of_[size_t(id)]);
-    for (const Record& r : ghosts[size_t(q)]) group_->ghostsFrom()[size_t(q)].push_back(local_of_[size_t(r.id)]);
-  }
-  group_->markShared();
-  sys_ = std::make_unique<System>(config_);
-  for (int32_t id : local_ids_) {
+  sys_.reset();
+  sys_ = make_local_(config_);
+  std::vector<int32_t> owners(nl);
+  fresh_.clear();
+  for (size_t i = 0; i < nl; ++i) {
+    const int32_t id = local_ids_[i];
     BodyDesc d = descs_[size_t(id)];
-    const MotionState& s = state_[size_t(id)];
+    MotionState s = state_[size_t(id)];
+    owners[i] = replicated_[size_t(id)] ? kReplicated : owner_[size_t(id)];
+    if (owners[i] >= 0 && owners[i] != rank_) {
+      if (tree_.distance(s.pos, rank_) <= width_)
+        fresh_.push_back(int32_t(i));
+      else
+        owners[i] = kNoOwner;  // parked until a refresh (setLocalState)
+    }
     d.pos = s.pos;
     d.rot = s.rot;
     d.vel = s.vel;
     d.omega = s.omega;
     sys_->addBody(d);
   }
-  BodyArrays& b = sys_->mutableBodies();
-  for (size_t i = 0; i < nl; ++i) b.rot[i] = state_[size_t(local_ids_[i])].rot;  // exactly (addBody normalizes)
+  for (size_t i = 0; i < nl; ++i) {  // exactly (addBody normalizes); the parked copies keep their masses
+    const bool parked = owners[i] == kNoOwner;
+    setLocalState(int32_t(i), state_[size_t(local_ids_[i])], parked);
+  }
+  sys_->markHostDirty();
+  group_->setBodies(local_ids_, std::move(owners));
   sys_->setProcessGroup(group_.get());
+  setLocalWarmStart(warm_, true);
+  warm_.clear();
+  ++log_.rebuilds;
+  prof_.build_s += std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// The owned bodies' states (and, with_contacts, the impulses of this process's contacts by global key, into warm_)
+// from the local System to the host.
+void DistributedSystem::readLocal(bool with_contacts) {
+  sys_->syncToHost();
+  const BodyArrays& b = sys_->bodies();
+  for (size_t i = 0; i < local_ids_.size(); ++i) {
+    const int32_t id = local_ids_[i];
+    if (replicated_[size_t(id)] || owner_[size_t(id)] == rank_)
+      state_[size_t(id)] = MotionState{b.pos[i], b.rot[i], b.vel[i], b.omega[i]};
+  }
+  if (!with_contacts) return;
+  std::vector<int32_t> all(local_ids_.size());
+  for (size_t i = 0; i < all.size(); ++i) all[i] = int32_t(i);
+  const std::vector<WarmEntry> mine = warmEntries(sys_->contactImpulsesOf(all));
+  warm_.insert(warm_.end(), mine.begin(), mine.end());  // after the entries that arrived this step
+}
+
+// Contacts of the local System under global keys, each with its owning body.
+std::vector<DistributedSystem::WarmEntry> DistributedSystem::warmEntries(
+    const std::vector<ContactImpulse>& contacts) const {
+  const BodyArrays& b = sys_->bodies();
+  std::vector<WarmEntry> out;
+  out.reserve(contacts.size());
+  for (const ContactImpulse& c : contacts) {
+    const int32_t ga = local_ids_[size_t(c.body_a)], gb = local_ids_[size_t(c.body_b)];
+    const int32_t la_shape = int32_t(c.key >> 36), lb_shape = int32_t((c.key >> 8) & 0xFFFFFFFu);
+    const int32_t sa = shape_start_[size_t(ga)] + (la_shape - b.shape_start[size_t(c.body_a)]);
+    const int32_t sb = shape_start_[size_t(gb)] + (lb_shape - b.shape_start[size_t(c.body_b)]);
+    out.push_back(WarmEntry{
+        contactKey(sa, sb, int32_t(c.key & 0xFF)), ga, gb, pairOwner(ga, gb), {c.gamma[0], c.gamma[1], c.gamma[2]}});
+  }
+  return out;
 }
 
 // The pair's smaller dynamic global id (the contact's owning body), or -1 for two fixed or kinematic bodies.
@@ -244,12 +251,13 @@ int32_t DistributedSystem::pairOwner(int32_t a, int32_t b) const {
   return da ? a : (db ? b : -1);
 }
 
-// Last step's impulses of the contacts this process may own now, under this step's local shape indices.
-void DistributedSystem::setLocalWarmStart() {
-  if (!config_.solver.warm_start || warm_.empty()) return;
+// Impulses by global key into the local System's warm start, under its shape indices (replace: as the whole table,
+// else added to it).
+void DistributedSystem::setLocalWarmStart(const std::vector<WarmEntry>& entries, bool replace) {
+  if (!config_.solver.warm_start || entries.empty()) return;
   const ShapeArrays& shapes = sys_->shapes();
   std::vector<std::pair<uint64_t, const WarmEntry*>> keyed;
-  for (const WarmEntry& e : warm_) {
+  for (const WarmEntry& e : entries) {
     const int32_t la = local_of_[size_t(e.body_a)], lb = local_of_[size_t(e.body_b)];
     if (la < 0 || lb < 0) continue;
     const int32_t ga = int32_t(e.key >> 36), gb = int32_t((e.key >> 8) & 0xFFFFFFFu);
@@ -265,105 +273,277 @@ void DistributedSystem::setLocalWarmStart() {
     keys[i] = keyed[i].first;
     for (int r = 0; r < 3; ++r) gamma[3 * i + size_t(r)] = keyed[i].second->gamma[r];
   }
-  sys_->setWarmStart(std::move(keys), std::move(gamma));
+  if (replace)
+    sys_->setWarmStart(std::move(keys), std::move(gamma));
+  else
+    sys_->addWarmStart(keys, gamma);
 }
 
-// The step's outcome: the owned and replicated bodies' states, and the owned contacts' impulses by global key.
-void DistributedSystem::readBack() {
+// After the local step (collective): the next step's ghost width; the owned bodies near a face of this process's box
+// to the host; those that left it to their new owners; the copies refreshed for the next step; a re-balance or a
+// rebuild where needed.
+void DistributedSystem::afterStep() {
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+  auto t = Clock::now();
+  warm_.clear();  // holds this step's arrivals from here to a rebuild
+  width_ = ghostWidth();
+  std::vector<int32_t> near_locals;
+  std::vector<Record> near = nearFaceBodies(near_locals);
+  prof_.readback_s += since(t);
+  t = Clock::now();
+  bool need_rebuild = false;
+  migrate(near, near_locals, need_rebuild);
+  prof_.migrate_s += since(t);
+  t = Clock::now();
+  refreshCopies(near, need_rebuild);
+  prof_.ghosts_s += since(t);
+  t = Clock::now();
+  const bool rebalanced = rebalanceIfNeeded();  // with a rebuild of its own
+  prof_.migrate_s += since(t);
+  if (!rebalanced && group_->any(need_rebuild)) rebuild(true);
+}
+
+// The owned bodies farther than the ghost width inside this process's box from none of its faces (the only ones that
+// can be copies elsewhere or leave the box), with their states, read from the local System.
+std::vector<DistributedSystem::Record> DistributedSystem::nearFaceBodies(std::vector<int32_t>& locals) {
+  const Vec3 lo = tree_.boxLow(rank_), hi = tree_.boxHigh(rank_);
+  const Vec3 w{width_, width_, width_};
+  locals = sys_->ownedBodiesOutside(lo + w, hi - w);
+  sys_->syncBodiesToHost(locals);
   const BodyArrays& b = sys_->bodies();
-  for (size_t i = 0; i < local_ids_.size(); ++i) {
-    const int32_t id = local_ids_[i];
-    if (replicated_[size_t(id)] || std::binary_search(owned_.begin(), owned_.end(), id))
-      state_[size_t(id)] = MotionState{b.pos[i], b.rot[i], b.vel[i], b.omega[i]};
+  std::vector<Record> out;
+  out.reserve(locals.size());
+  for (int32_t l : locals) {
+    const int32_t id = local_ids_[size_t(l)];
+    state_[size_t(id)] = MotionState{b.pos[size_t(l)], b.rot[size_t(l)], b.vel[size_t(l)], b.omega[size_t(l)]};
+    out.push_back(Record{id, state_[size_t(id)]});
   }
-  const ContactArrays& c = sys_->contacts();
-  const std::vector<real>& g = sys_->impulses();
-  warm_.clear();
-  if (g.size() < 3 * c.count()) return;  // no solve this step
-  for (size_t k = 0; k < c.count(); ++k) {
-    const int32_t la = c.body_a[k], lb = c.body_b[k];
-    const int32_t ga = local_ids_[size_t(la)], gb = local_ids_[size_t(lb)];
-    const int32_t sa = shape_start_[size_t(ga)] + (c.shape_a[k] - b.shape_start[size_t(la)]);
-    const int32_t sb = shape_start_[size_t(gb)] + (c.shape_b[k] - b.shape_start[size_t(lb)]);
-    WarmEntry e{contactKey(sa, sb, int32_t(c.key[k] & 0xFF)),
-                ga,
-                gb,
-                pairOwner(ga, gb),
-                {g[3 * k], g[3 * k + 1], g[3 * k + 2]}};
-    warm_.push_back(e);
-  }
+  return out;
 }
 
-// Each owned body whose centre left this process's box goes to the box's owner, with the warm-start entries of the
-// contacts it owns.
-void DistributedSystem::migrate() {
+// Each near-face body whose centre left this process's box goes to the box's owner, with the impulses of the contacts
+// it owns (the new owner solves them from the next step on). On return `near` holds this process's near-face bodies
+// after the moves.
+void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int32_t>& near_locals,
+                                bool& need_rebuild) {
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
   std::vector<std::vector<WarmEntry>> out_warm(static_cast<size_t>(size_));
-  std::vector<int32_t> kept;
-  std::vector<int> dest(descs_.size(), -1);
-  for (int32_t id : owned_) {
-    const int q = tree_.owner(state_[size_t(id)].pos);
+  std::vector<Record> kept;
+  std::vector<int32_t> leaving;  // local indices
+  for (size_t j = 0; j < near.size(); ++j) {
+    const int q = tree_.owner(near[j].s.pos);
     if (q == rank_) {
-      kept.push_back(id);
+      kept.push_back(near[j]);
       continue;
     }
-    dest[size_t(id)] = q;
-    out[size_t(q)].push_back(Record{id, state_[size_t(id)]});
+    out[size_t(q)].push_back(near[j]);
+    leaving.push_back(near_locals[j]);
+    owner_[size_t(near[j].id)] = q;
+    group_->setOwner(near_locals[j], q);
     ++log_.sent[size_t(q)];
+    --owned_count_;
   }
-  std::vector<WarmEntry> kept_warm;
-  for (const WarmEntry& e : warm_) {
-    const int q = e.owner >= 0 ? dest[size_t(e.owner)] : -1;
-    (q >= 0 ? out_warm[size_t(q)] : kept_warm).push_back(e);
+  if (!leaving.empty()) {
+    for (const WarmEntry& e : warmEntries(sys_->contactImpulsesOf(leaving)))
+      if (e.owner >= 0 && owner_[size_t(e.owner)] != rank_) out_warm[size_t(owner_[size_t(e.owner)])].push_back(e);
   }
-  const auto in = exchangeAll(comm_, out, &prof_.migrate_bytes);
-  const auto in_warm = exchangeAll(comm_, out_warm, &prof_.migrate_bytes);
+  const auto in = mpiExchange(comm_, out, &prof_.migrate_bytes);
+  const auto in_warm = mpiExchange(comm_, out_warm, &prof_.migrate_bytes);
+  std::vector<int32_t> dirty;
+  std::vector<WarmEntry> arrived;
   for (int q = 0; q < size_; ++q) {
     log_.received[size_t(q)] += int64_t(in[size_t(q)].size());
     for (const Record& r : in[size_t(q)]) {
-      kept.push_back(r.id);
+      owner_[size_t(r.id)] = rank_;
       state_[size_t(r.id)] = r.s;
+      ++owned_count_;
+      kept.push_back(r);
+      const int32_t l = local_of_[size_t(r.id)];
+      if (l < 0) {  // not held here: a rebuild adds it
+        need_rebuild = true;
+        continue;
+      }
+      group_->setOwner(l, rank_);
+      setLocalState(l, r.s, false);
+      dirty.push_back(l);
     }
-    kept_warm.insert(kept_warm.end(), in_warm[size_t(q)].begin(), in_warm[size_t(q)].end());
+    arrived.insert(arrived.end(), in_warm[size_t(q)].begin(), in_warm[size_t(q)].end());
   }
-  std::sort(kept.begin(), kept.end());
-  owned_ = std::move(kept);
-  warm_ = std::move(kept_warm);
+  if (!dirty.empty()) sys_->markBodiesDirty(dirty);
+  if (!arrived.empty()) {
+    warm_.insert(warm_.end(), arrived.begin(), arrived.end());  // kept for a rebuild this step
+    setLocalWarmStart(arrived, false);
+  }
+  owned_stale_ = owned_stale_ || !leaving.empty();
+  for (const auto& l : in) owned_stale_ = owned_stale_ || !l.empty();
+  // A body that left is a copy here now: parked by refreshCopies unless its new owner refreshes it.
+  fresh_.insert(fresh_.end(), leaving.begin(), leaving.end());
+  near = std::move(kept);
 }
 
-// A new bisection of the current positions when the owned counts drift apart (DecompositionSettings), and the
-// bodies moved to their new boxes.
-void DistributedSystem::rebalanceIfNeeded() {
-  double counts[2] = {double(owned_.size()), double(owned_.size())};
+// A local body's state written to the local System's host arrays (markBodiesDirty uploads it): a refreshed or arrived
+// body takes its own flags again; a parked one is fixed and at rest.
+void DistributedSystem::setLocalState(int32_t l, const MotionState& s, bool parked) {
+  BodyArrays& b = sys_->mutableBodies();
+  const int32_t id = local_ids_[size_t(l)];
+  b.pos[size_t(l)] = s.pos;
+  b.rot[size_t(l)] = s.rot;
+  b.vel[size_t(l)] = parked ? Vec3{0, 0, 0} : s.vel;
+  b.omega[size_t(l)] = parked ? Vec3{0, 0, 0} : s.omega;
+  b.flags[size_t(l)] = parked ? uint8_t(descs_[size_t(id)].flags | kBodyFixed) : descs_[size_t(id)].flags;
+}
+
+// Each owned near-face body within the ghost width of another process's box goes there: the copy takes its state and
+// owner; a copy that no record refreshes is parked; a record of a body not held here asks for a rebuild.
+void DistributedSystem::refreshCopies(const std::vector<Record>& near, bool& need_rebuild) {
+  std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
+  for (const Record& r : near)
+    for (int q = 0; q < size_; ++q)
+      if (q != rank_ && tree_.distance(r.s.pos, q) <= width_) out[size_t(q)].push_back(r);
+  const auto in = mpiExchange(comm_, out, &prof_.ghost_bytes);
+  std::vector<int32_t> now, dirty;
+  for (int q = 0; q < size_; ++q)
+    for (const Record& r : in[size_t(q)]) {
+      const int32_t l = local_of_[size_t(r.id)];
+      owner_[size_t(r.id)] = q;
+      if (l < 0) {
+        need_rebuild = true;
+        state_[size_t(r.id)] = r.s;
+        continue;
+      }
+      group_->setOwner(l, q);
+      setLocalState(l, r.s, false);
+      now.push_back(l);
+      dirty.push_back(l);
+    }
+  std::sort(now.begin(), now.end());
+  for (int32_t l : fresh_)  // refreshed last step, not now, and not own: parked
+    if (!std::binary_search(now.begin(), now.end(), l) && group_->bodyOwners()[size_t(l)] != rank_) {
+      group_->setOwner(l, kNoOwner);
+      setLocalState(l, state_[size_t(local_ids_[size_t(l)])], true);
+      dirty.push_back(l);
+    }
+  if (!dirty.empty()) {
+    std::sort(dirty.begin(), dirty.end());
+    dirty.erase(std::unique(dirty.begin(), dirty.end()), dirty.end());
+    sys_->markBodiesDirty(dirty);
+  }
+  fresh_ = std::move(now);
+}
+
+// A new bisection of the current positions when the owned counts drift apart (DecompositionSettings), every body
+// moved to its new box, and a new local System.
+bool DistributedSystem::rebalanceIfNeeded() {
+  double counts[2] = {double(owned_count_), double(owned_count_)};
   const double most = group_->max(counts[0]);
   group_->sum(counts + 1, 1);
   const double mean = counts[1] / size_;
-  if (!(mean > 0) || most <= double(settings_.rebalance_ratio) * mean) return;
+  if (!(mean > 0) || most <= double(settings_.rebalance_ratio) * mean) return false;
+  readLocal(true);
   const std::vector<MotionState> all = gatherState();
   std::vector<Vec3> points;
   for (int32_t id : dynamic_) points.push_back(all[size_t(id)].pos);
   tree_ = Bisection::build(points, size_);
   ++log_.rebalances;
-  migrate();
+  migrateAll();
+  rebuild(false);
+  return true;
+}
+
+// Every owned body whose centre is outside this process's (new) box to the box's owner, with the warm-start entries of
+// the contacts it owns (from warm_, read by readLocal).
+void DistributedSystem::migrateAll() {
+  std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
+  std::vector<std::vector<WarmEntry>> out_warm(static_cast<size_t>(size_));
+  for (int32_t id : dynamic_) {
+    if (owner_[size_t(id)] != rank_) continue;
+    const int q = tree_.owner(state_[size_t(id)].pos);
+    if (q == rank_) continue;
+    owner_[size_t(id)] = q;
+    out[size_t(q)].push_back(Record{id, state_[size_t(id)]});
+    ++log_.sent[size_t(q)];
+    --owned_count_;
+  }
+  std::vector<WarmEntry> kept_warm;
+  for (const WarmEntry& e : warm_) {
+    const int q = e.owner >= 0 ? owner_[size_t(e.owner)] : rank_;
+    (q != rank_ && q >= 0 ? out_warm[size_t(q)] : kept_warm).push_back(e);
+  }
+  const auto in = mpiExchange(comm_, out, &prof_.migrate_bytes);
+  const auto in_warm = mpiExchange(comm_, out_warm, &prof_.migrate_bytes);
+  for (int q = 0; q < size_; ++q) {
+    log_.received[size_t(q)] += int64_t(in[size_t(q)].size());
+    for (const Record& r : in[size_t(q)]) {
+      owner_[size_t(r.id)] = rank_;
+      state_[size_t(r.id)] = r.s;
+      ++owned_count_;
+    }
+    kept_warm.insert(kept_warm.end(), in_warm[size_t(q)].begin(), in_warm[size_t(q)].end());
+  }
+  warm_ = std::move(kept_warm);
+  owned_stale_ = true;
+}
+
+const std::vector<int32_t>& DistributedSystem::ownedIds() const {
+  if (owned_stale_) {
+    owned_.clear();
+    for (int32_t id : dynamic_)
+      if (started_ ? owner_[size_t(id)] == rank_ : false) owned_.push_back(id);
+    owned_stale_ = false;
+  }
+  return owned_;
+}
+
+// The owned bodies' current states from the local System into state_.
+void DistributedSystem::syncOwned() const {
+  if (!sys_) return;
+  std::vector<int32_t> mine;
+  for (size_t i = 0; i < local_ids_.size(); ++i)
+    if (owner_[size_t(local_ids_[i])] == rank_ || replicated_[size_t(local_ids_[i])]) mine.push_back(int32_t(i));
+  sys_->syncBodiesToHost(mine);
+  const BodyArrays& b = sys_->bodies();
+  for (int32_t l : mine)
+    state_[size_t(local_ids_[size_t(l)])] =
+        MotionState{b.pos[size_t(l)], b.rot[size_t(l)], b.vel[size_t(l)], b.omega[size_t(l)]};
 }
 
 MotionState DistributedSystem::stateOf(int32_t id) const {
   if (id < 0 || size_t(id) >= descs_.size())
     throw InputError("body " + std::to_string(id) + ": no such body (" + std::to_string(descs_.size()) + " bodies)");
-  const bool mine = replicated_[size_t(id)] || !started_ || std::binary_search(owned_.begin(), owned_.end(), id);
-  if (!mine) throw InputError("body " + std::to_string(id) + ": owned by another process");
   if (!started_) {
     const BodyDesc& d = descs_[size_t(id)];
     return MotionState{d.pos, normalized(d.rot), d.vel, d.omega};
   }
+  if (!replicated_[size_t(id)] && owner_[size_t(id)] != rank_)
+    throw InputError("body " + std::to_string(id) + ": owned by another process");
+  const int32_t l = local_of_[size_t(id)];
+  if (sys_ && l >= 0) {
+    sys_->syncBodiesToHost({l});
+    const BodyArrays& b = sys_->bodies();
+    return MotionState{b.pos[size_t(l)], b.rot[size_t(l)], b.vel[size_t(l)], b.omega[size_t(l)]};
+  }
   return state_[size_t(id)];
 }
 
+std::vector<MotionState> DistributedSystem::ownedStates() const {
+  std::vector<MotionState> out;
+  if (!started_) return out;
+  syncOwned();
+  for (int32_t id : ownedIds()) out.push_back(state_[size_t(id)]);
+  return out;
+}
+
 std::vector<MotionState> DistributedSystem::gatherState() const {
+  if (!started_) {
+    std::vector<MotionState> all(descs_.size());
+    for (size_t i = 0; i < all.size(); ++i) all[i] = stateOf(int32_t(i));
+    return all;
+  }
+  syncOwned();
   std::vector<MotionState> all = state_;
-  if (!started_) return all;
   std::vector<Record> mine;
-  for (int32_t id : owned_) mine.push_back(Record{id, state_[size_t(id)]});
+  for (int32_t id : ownedIds()) mine.push_back(Record{id, state_[size_t(id)]});
   std::vector<int> counts(static_cast<size_t>(size_)), displ(static_cast<size_t>(size_));
   int bytes = int(mine.size() * sizeof(Record));
   MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);

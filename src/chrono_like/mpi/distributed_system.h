@@ -6,6 +6,12 @@
 // so the iterates equal one process's up to the order of summation. After each step the bodies that left a box
 // move to their new owner, with the warm-start impulses of the contacts they own.
 //
+// The local System lives from one rebuild to the next, on either backend (a factory makes it: the CPU System or the
+// GPU one). It holds the copies within a halo (DecompositionSettings::halo_factor times the ghost width); each step
+// only the copies within the ghost width are refreshed from their owners, the others are parked (fixed, none of their
+// contacts kept), and only bodies near a box face cross to the host. It is rebuilt when a body comes from beyond the
+// halo, and after a re-balance.
+//
 // Every process adds the same bodies in the same order (the scene): the bodies' descriptions (shapes, masses,
 // materials) are kept on every process, their state (position, rotation, velocities) only on the owner.
 // A collective object: every process calls the same methods in the same order. APGD, Jacobi or BB; Gauss-Seidel,
@@ -16,6 +22,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -32,6 +39,9 @@ struct DecompositionSettings {
   // Factor (>= 1) on the ghost width: 2 x the largest bounding radius + the largest collision envelope + 2 x the
   // largest sweep of a step (the farthest two bodies' centres can be and still touch). Default 1.5.
   real ghost_safety = real(1.5);
+  // Factor (>= 1) on the ghost width for the copies the local System keeps between rebuilds: the wider, the rarer the
+  // rebuilds (a body must come from beyond it) and the more parked copies collide for nothing. Default 2.
+  real halo_factor = real(2);
 };
 
 struct MotionState {
@@ -42,11 +52,11 @@ struct MotionState {
 
 // Where this process's steps went and what it sent, summed since construction (seconds by steady clock, bytes).
 struct DecompositionProfile {
-  double ghosts_s = 0;    // the ghost width's reduction and the ghosts' exchange
-  double build_s = 0;     // the step's local System (its bodies added) and its warm start
+  double ghosts_s = 0;    // the copies' refresh: records to the neighbours, and their states into the local System
+  double build_s = 0;     // rebuilds of the local System (its bodies added, its warm start)
   double step_s = 0;      // the local System's step: its stages in stages_s, the solver's collectives in group
-  double readback_s = 0;  // the owned bodies' states and the owned contacts' impulses
-  double migrate_s = 0;   // bodies to their new owners, and re-balancing
+  double readback_s = 0;  // the ghost width, and the states of the owned bodies near a box face to the host
+  double migrate_s = 0;   // bodies to their new owners (with their contacts' impulses), and re-balancing
   std::array<double, kStageCount> stages_s{};
   int64_t ghost_bytes = 0, migrate_bytes = 0;  // sent to other processes
   GroupTraffic group;                          // the solver's exchanges and reductions (MpiGroup)
@@ -57,13 +67,17 @@ struct MigrationLog {
   std::vector<int64_t> sent;      // to that process
   std::vector<int64_t> received;  // from it
   int64_t rebalances = 0;         // bisections recomputed after the first
+  int64_t rebuilds = 0;           // local Systems built (the first included)
 };
 
 class DistributedSystem {
  public:
+  // Makes the local System (null: the CPU System): makeGpuSystem (gpu/gpu_factory.h) puts it on this process's GPU.
+  using LocalFactory = std::function<std::unique_ptr<System>(const SystemConfig&)>;
   // comm is duplicated (the object's messages never meet the caller's). config as for System: its solver must not be
   // Gauss-Seidel and its collision backend must be native (InputError).
-  DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings = {});
+  DistributedSystem(MPI_Comm comm, SystemConfig config, DecompositionSettings settings = {},
+                    LocalFactory make_local = nullptr);
   ~DistributedSystem();
   DistributedSystem(const DistributedSystem&) = delete;
   DistributedSystem& operator=(const DistributedSystem&) = delete;
@@ -81,16 +95,18 @@ class DistributedSystem {
   size_t bodyCount() const { return descs_.size(); }
   size_t dynamicCount() const { return dynamic_.size(); }
   // Global ids of the dynamic bodies this process owns, ascending (fixed and kinematic bodies are every process's).
-  const std::vector<int32_t>& ownedIds() const { return owned_; }
+  const std::vector<int32_t>& ownedIds() const;
   // Every body's state in global order, on every process (collective).
   std::vector<MotionState> gatherState() const;
+  // The states of the bodies this process owns, in ownedIds() order (one copy from the local System).
+  std::vector<MotionState> ownedStates() const;
   // The current state of a body this process owns, or of a fixed or kinematic body (every process's); InputError
   // for another (its state is its owner's).
   MotionState stateOf(int32_t id) const;
   // Whether body id is fixed or kinematic (held by every process).
   bool replicated(int32_t id) const { return replicated_[size_t(id)] != 0; }
-  // This process's System of the last step (its contacts are the ones it owns) and the global id of each of its
-  // bodies. Null before the first step.
+  // This process's System (its contacts are the ones it owns; a GPU System's host arrays are current after
+  // syncToHost) and the global id of each of its bodies. Null before the first step.
   const System* local() const { return sys_.get(); }
   const std::vector<int32_t>& localIds() const { return local_ids_; }
   const MigrationLog& migrations() const { return log_; }
@@ -102,7 +118,7 @@ class DistributedSystem {
  private:
   struct WarmEntry {  // a contact's impulses by global key, kept by the owner of its owning body
     uint64_t key;
-    int32_t body_a, body_b, owner;  // global ids; owner: the pair's smaller dynamic id (-1: none)
+    int32_t body_a, body_b, owner;  // global ids; owner: the pair's owning body (pairOwner; -1: none)
     real gamma[3];
   };
   struct Record {  // a body's state on the wire
@@ -111,31 +127,44 @@ class DistributedSystem {
   };
   void start();
   real ghostWidth() const;
-  void exchangeGhosts(std::vector<std::vector<Record>>& ghosts);
-  void buildLocal(const std::vector<std::vector<Record>>& ghosts);
-  void setLocalWarmStart();
-  void readBack();
-  void migrate();
-  void rebalanceIfNeeded();
+  void rebuild(bool read_local);
+  void afterStep();
+  std::vector<Record> nearFaceBodies(std::vector<int32_t>& locals);
+  void migrate(std::vector<Record>& near, const std::vector<int32_t>& near_locals, bool& need_rebuild);
+  void refreshCopies(const std::vector<Record>& near, bool& need_rebuild);
+  void readLocal(bool with_contacts);
+  void setLocalWarmStart(const std::vector<WarmEntry>& entries, bool replace);
+  std::vector<WarmEntry> warmEntries(const std::vector<ContactImpulse>& contacts) const;
+  bool rebalanceIfNeeded();
+  void migrateAll();
   int32_t pairOwner(int32_t a, int32_t b) const;
+  void setLocalState(int32_t local, const MotionState& s, bool parked);
+  void syncOwned() const;
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   int rank_ = 0, size_ = 1;
   SystemConfig config_;
   DecompositionSettings settings_;
+  LocalFactory make_local_;
   std::vector<BodyDesc> descs_;
   std::vector<int32_t> shape_start_;  // global index of each body's first shape
   std::vector<uint8_t> replicated_;   // fixed or kinematic: on every process
   std::vector<real> radius_;          // bounding radius about the centre
+  real rmax_ = 0, gmax_ = 0;          // the largest dynamic body's radius, the largest gravity
   std::vector<int32_t> dynamic_, fixed_;
-  std::vector<MotionState> state_;  // current for owned and replicated bodies
-  std::vector<int32_t> owned_;
-  std::vector<WarmEntry> warm_;
+  mutable std::vector<MotionState> state_;  // current for replicated bodies; for owned ones after syncOwned()
+  std::vector<int32_t> owner_;              // per global id: its owner as this process knows it (exact for its own)
+  int64_t owned_count_ = 0;
+  mutable std::vector<int32_t> owned_;  // ownedIds(), made on demand
+  mutable bool owned_stale_ = true;
+  std::vector<WarmEntry> warm_;  // between readLocal and a rebuild
+  std::vector<int32_t> fresh_;   // copies refreshed by the last step's records (local indices)
+  real width_ = 0;               // the ghost width of the coming step
   Bisection tree_;
   bool started_ = false;
   std::unique_ptr<MpiGroup> group_;
   std::unique_ptr<System> sys_;
-  std::vector<int32_t> local_ids_;  // per local body: global id
+  std::vector<int32_t> local_ids_;  // per local body: global id (ascending)
   std::vector<int32_t> local_of_;   // per global id: local index or -1
   MigrationLog log_;
   DecompositionProfile prof_;

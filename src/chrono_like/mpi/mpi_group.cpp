@@ -1,5 +1,10 @@
 #include "chrono_like/mpi/mpi_group.h"
 
+#include <algorithm>
+
+#include "chrono_like/base/errors.h"
+#include "chrono_like/mpi/mpi_collectives.h"
+
 namespace dvi {
 
 namespace {
@@ -9,8 +14,8 @@ constexpr int kTagShares = 101, kTagSums = 102;
 MpiGroup::MpiGroup(MPI_Comm comm) : comm_(comm) {
   MPI_Comm_rank(comm_, &rank_);
   MPI_Comm_size(comm_, &size_);
-  ghosts_from_.resize(size_t(size_));
-  sent_to_.resize(size_t(size_));
+  copies_of_.resize(size_t(size_));
+  touched_by_.resize(size_t(size_));
   out_.resize(size_t(size_));
   in_.resize(size_t(size_));
 }
@@ -24,44 +29,84 @@ void MpiGroup::sum(double* v, int n) const {
 
 double MpiGroup::max(double v) const {
   const double t0 = MPI_Wtime();
-  double out = v;
-  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, comm_);
+  const double out = mpiMax(comm_, v);
   traffic_.reduce_s += MPI_Wtime() - t0;
   ++traffic_.reductions;
   return out;
 }
 
-void MpiGroup::setBodies(std::vector<int32_t> ids, std::vector<uint8_t> owned, std::vector<uint8_t> dynamic) {
-  ids_ = std::move(ids);
-  owned_ = std::move(owned);
-  dynamic_ = std::move(dynamic);
-  shared_.assign(ids_.size(), 0);
-  ghosts_from_.assign(size_t(size_), {});
-  sent_to_.assign(size_t(size_), {});
+void MpiGroup::setBodies(std::vector<int32_t> keys, std::vector<int32_t> owners) {
+  if (keys.size() != owners.size() || !std::is_sorted(keys.begin(), keys.end()))
+    throw std::logic_error("MpiGroup::setBodies: one owner per key, keys ascending");
+  keys_ = std::move(keys);
+  owners_ = std::move(owners);
+  ++version_;
+  changed_.clear();
+  list_.clear();
+  pos_.assign(keys_.size(), -1);
+  for (auto& l : copies_of_) l.clear();
+  for (auto& l : touched_by_) l.clear();
 }
 
-void MpiGroup::markShared() {
-  for (const auto& l : ghosts_from_)
-    for (int32_t i : l) shared_[size_t(i)] = 1;
-  for (const auto& l : sent_to_)
-    for (int32_t i : l) shared_[size_t(i)] = 1;
+void MpiGroup::setOwner(int32_t body, int32_t owner) {
+  int32_t& o = owners_[size_t(body)];
+  if (o == owner) return;
+  o = owner;
+  changed_.push_back(body);
 }
 
-bool MpiGroup::ownsContact(int32_t a, int32_t b) const {
-  const bool da = dynamic_[size_t(a)] != 0, db = dynamic_[size_t(b)] != 0;
-  if (!da && !db) return rank_ == 0;
-  const int32_t pick = da && db ? (ids_[size_t(a)] < ids_[size_t(b)] ? a : b) : (da ? a : b);
-  return owned_[size_t(pick)] != 0;
+std::vector<int32_t> MpiGroup::takeOwnerChanges() {
+  std::vector<int32_t> out;
+  out.swap(changed_);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
 }
 
-void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
+void MpiGroup::setTouchedCopies(const std::vector<int32_t>& copies) {
+  const double t0 = MPI_Wtime();
+  for (int32_t i : list_) pos_[size_t(i)] = -1;
+  std::vector<std::vector<int32_t>> out(
+      static_cast<size_t>(size_));  // keys, ascending per owner (copies are ascending)
+  for (int32_t i : copies) {
+    const int32_t q = owners_[size_t(i)];
+    if (q < 0 || q == rank_ || q >= size_) throw std::logic_error("MpiGroup::setTouchedCopies: not another's body");
+    out[size_t(q)].push_back(keys_[size_t(i)]);
+  }
+  const std::vector<std::vector<int32_t>> in = mpiExchange(comm_, out, &traffic_.exchange_bytes);
+  // The list: the touched copies and the own bodies others touch, ascending.
+  list_ = copies;
+  std::vector<std::vector<int32_t>> touched(static_cast<size_t>(size_));
+  for (int q = 0; q < size_; ++q)
+    for (int32_t key : in[size_t(q)]) {
+      const auto it = std::lower_bound(keys_.begin(), keys_.end(), key);
+      if (it == keys_.end() || *it != key || owners_[size_t(it - keys_.begin())] != rank_)
+        throw std::logic_error("MpiGroup::setTouchedCopies: process " + std::to_string(q) + " touches body " +
+                               std::to_string(key) + ", which this process does not own");
+      touched[size_t(q)].push_back(int32_t(it - keys_.begin()));
+      list_.push_back(touched[size_t(q)].back());
+    }
+  std::sort(list_.begin(), list_.end());
+  list_.erase(std::unique(list_.begin(), list_.end()), list_.end());
+  for (size_t j = 0; j < list_.size(); ++j) pos_[size_t(list_[j])] = int32_t(j);
+  for (int q = 0; q < size_; ++q) {
+    copies_of_[size_t(q)].clear();
+    touched_by_[size_t(q)].clear();
+    for (int32_t i : touched[size_t(q)]) touched_by_[size_t(q)].push_back(pos_[size_t(i)]);
+  }
+  for (int32_t i : copies) copies_of_[size_t(owners_[size_t(i)])].push_back(pos_[size_t(i)]);
+  traffic_.shared_bodies += int64_t(list_.size());
+  traffic_.exchange_s += MPI_Wtime() - t0;
+}
+
+void MpiGroup::exchangeCompact(BodyDelta* delta) const {
   const double t0 = MPI_Wtime();
   const int bytes = int(sizeof(BodyDelta));
-  // Round 1: the ghosts' shares to their owners.
+  // Round 1: the copies' shares to their owners.
   requests_.clear();
   for (int q = 0; q < size_; ++q) {
-    const auto& from = ghosts_from_[size_t(q)];
-    const auto& to = sent_to_[size_t(q)];
+    const auto& from = copies_of_[size_t(q)];
+    const auto& to = touched_by_[size_t(q)];
     if (!to.empty()) {
       in_[size_t(q)].resize(to.size());
       requests_.emplace_back();
@@ -78,18 +123,18 @@ void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
   }
   MPI_Waitall(int(requests_.size()), requests_.data(), MPI_STATUSES_IGNORE);
   for (int q = 0; q < size_; ++q) {  // in rank order: the same sums on every run
-    const auto& to = sent_to_[size_t(q)];
+    const auto& to = touched_by_[size_t(q)];
     for (size_t j = 0; j < to.size(); ++j) {
       BodyDelta& d = delta[to[j]];
       d.v = d.v + in_[size_t(q)][j].v;
       d.w = d.w + in_[size_t(q)][j].w;
     }
   }
-  // Round 2: the owners' sums back to the processes holding the ghosts.
+  // Round 2: the owners' sums back to the processes that sent shares.
   requests_.clear();
   for (int q = 0; q < size_; ++q) {
-    const auto& from = ghosts_from_[size_t(q)];
-    const auto& to = sent_to_[size_t(q)];
+    const auto& from = copies_of_[size_t(q)];
+    const auto& to = touched_by_[size_t(q)];
     if (!from.empty()) {
       in_[size_t(q)].resize(from.size());
       requests_.emplace_back();
@@ -106,7 +151,7 @@ void MpiGroup::exchangeDeltas(BodyDelta* delta) const {
   }
   MPI_Waitall(int(requests_.size()), requests_.data(), MPI_STATUSES_IGNORE);
   for (int q = 0; q < size_; ++q) {
-    const auto& from = ghosts_from_[size_t(q)];
+    const auto& from = copies_of_[size_t(q)];
     for (size_t j = 0; j < from.size(); ++j) delta[from[j]] = in_[size_t(q)][j];
   }
   traffic_.exchange_s += MPI_Wtime() - t0;

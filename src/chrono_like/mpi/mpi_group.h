@@ -1,6 +1,6 @@
 // The ProcessGroup (solver/process_group.h) of a domain decomposition over MPI: collectives on a communicator, the
-// velocity-change exchange of the shared bodies with the neighbouring processes, and the contact ownership rule.
-// DistributedSystem fills its per-step lists.
+// owners and keys of the local bodies, the step's list of shared bodies (from setTouchedCopies) and the velocity-change
+// exchange over it with the neighbouring processes. DistributedSystem keeps the owners up to date.
 #pragma once
 
 #include <mpi.h>
@@ -14,39 +14,46 @@ namespace dvi {
 
 // What the solver's collectives cost on this process since construction: MPI_Wtime seconds and bytes sent.
 struct GroupTraffic {
-  double exchange_s = 0, reduce_s = 0;  // exchangeDeltas; sum and max
+  double exchange_s = 0, reduce_s = 0;  // exchangeCompact (with setTouchedCopies); sum and max
   int64_t exchanges = 0, reductions = 0;
-  int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours (both rounds)
+  int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours (both rounds), and the touched lists
+  int64_t shared_bodies = 0;   // exchange list lengths, summed over the steps
 };
 
 class MpiGroup final : public ProcessGroup {
  public:
   explicit MpiGroup(MPI_Comm comm);
+  int rank() const override { return rank_; }
   void sum(double* v, int n) const override;
   double max(double v) const override;
-  bool shared(int32_t body) const override { return shared_[size_t(body)] != 0; }
-  // Two rounds with the neighbours: each ghost's share to its owner, which adds them (in rank order) to its own;
-  // then the owner's sum back to every process holding the body as a ghost.
-  void exchangeDeltas(BodyDelta* delta) const override;
-  // The owner of the pair's dynamic body with the smaller global id keeps the contact; a pair of two fixed or
-  // kinematic bodies is process 0's.
-  bool ownsContact(int32_t body_a, int32_t body_b) const override;
+  const std::vector<int32_t>& bodyOwners() const override { return owners_; }
+  const std::vector<int32_t>& bodyKeys() const override { return keys_; }
+  uint64_t bodiesVersion() const override { return version_; }
+  std::vector<int32_t> takeOwnerChanges() override;
+  // Sends each copy's key to its owner and learns which own bodies the others touch (one all-to-all).
+  void setTouchedCopies(const std::vector<int32_t>& copies) override;
+  const std::vector<int32_t>& exchangeBodies() const override { return list_; }
+  bool shared(int32_t body) const override { return pos_[size_t(body)] >= 0; }
+  // Two rounds with the neighbours: each copy's share to its owner, which adds them (in rank order) to its own; then
+  // the owner's sum back to every process that sent a share.
+  void exchangeCompact(BodyDelta* compact) const override;
 
-  // The step's local bodies: global id, owned here, dynamic (neither fixed nor kinematic); clears the lists.
-  void setBodies(std::vector<int32_t> ids, std::vector<uint8_t> owned, std::vector<uint8_t> dynamic);
-  // Per process q: the local indices of the ghosts that q owns, in q's order, and of the owned bodies q holds as
-  // ghosts, in the order sent (both processes list a body at the same place).
-  std::vector<std::vector<int32_t>>& ghostsFrom() { return ghosts_from_; }
-  std::vector<std::vector<int32_t>>& sentTo() { return sent_to_; }
-  void markShared();  // shared_ from the two lists (after they are filled)
+  // The local bodies after the local System is (re)built: keys ascending (the global ids), owners as
+  // ProcessGroup::bodyOwners. Clears the exchange list.
+  void setBodies(std::vector<int32_t> keys, std::vector<int32_t> owners);
+  void setOwner(int32_t body, int32_t owner);
   const GroupTraffic& traffic() const { return traffic_; }
 
  private:
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
-  std::vector<int32_t> ids_;
-  std::vector<uint8_t> owned_, dynamic_, shared_;
-  std::vector<std::vector<int32_t>> ghosts_from_, sent_to_;
+  std::vector<int32_t> keys_, owners_;
+  uint64_t version_ = 0;
+  std::vector<int32_t> changed_;     // owners changed since the last takeOwnerChanges (may repeat a body)
+  std::vector<int32_t> list_, pos_;  // the exchange list; per body its place in it, or -1
+  // Per process q: places in list_ of the copies q owns (q's keys ascending), and of the own bodies q touches (in the
+  // order q sent them). Both processes list a body at the same place of their message.
+  std::vector<std::vector<int32_t>> copies_of_, touched_by_;
   mutable std::vector<std::vector<BodyDelta>> out_, in_;  // message buffers per process
   mutable std::vector<MPI_Request> requests_;
   mutable GroupTraffic traffic_;

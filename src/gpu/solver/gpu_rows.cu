@@ -424,6 +424,7 @@ void jacobiSteps(DeviceState& d, const RowCounts& n) {
   launchMap(d, nb,
             BodyColumnSumF{S.adj_off.data(), S.adj_val_sorted.data(), S.colnorm.data(), layoutOf(d), S.bodyq.data()},
             "launch of BodyColumnSumF");
+  if (d.group) exchangeBodyValues(d, S.bodyq.data());  // Q_c over every process's contacts of a shared body
   if (n.normal)
     launchMap(
         d, ncb,
@@ -483,7 +484,9 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   // Combined friction first: friction rows only where mu > 0 (docs/MODEL.md §6). When no contact of the step has
   // mu > 0 the CCP has the normal rows only (jacobian.h), as on the CPU (System::buildAndSolve).
   const real max_mu = combinedFriction(d, cfg, n.nc);
-  d.normal_only = cfg.prune && n.nc > 0 && !(max_mu > 0);
+  // Over several processes the choice is the whole problem's: some contact anywhere, none with mu > 0.
+  d.normal_only = d.group ? cfg.prune && d.group->any(n.nc > 0) && !d.group->any(max_mu > 0)
+                          : cfg.prune && n.nc > 0 && !(max_mu > 0);
   n.normal = d.normal_only;
   n.ncb = n.normal ? (n.nc + 2) / 3 : n.nc;
   d.contact_blocks = n.ncb;
@@ -492,7 +495,9 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   n.nblk = n.ncb + n.nrb;
   d.row_count = rows.size();
   uploadRows(d, rows, n);
-  n.float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) && !std::is_same_v<real, float>;
+  // The float Jacobians serve the device loop alone (over several processes APGD iterates on the host).
+  n.float_jac =
+      cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) && !std::is_same_v<real, float> && !d.group;
   n.nent = 2 * n.nc + 6 * n.nrb;
   resizeProblem(d, n);
   assembleBlocks(d, cfg, n);

@@ -39,6 +39,8 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
         S.heavy.data(), g, S.heavy_partial.data(), S.heavy_ticket.data());
     cudaCheck(cudaGetLastError(), "launch of HeavyGatherKernel", __FILE__, __LINE__);
   }
+  // Over several processes the shared bodies' shares are summed (x_slot: the device loop, which runs alone).
+  if (d.group && !x_slot) exchangeDeltas(d, d.bodies.delta.data());
 }
 
 template <class V>

@@ -47,13 +47,25 @@ const char* functorName() {
 class GpuOps {
  public:
   static constexpr bool kDeviceLoop = true;
+  // Over several processes (d.group) every reduction is summed over them, the block count and the largest
+  // diagonal are the whole problem's, and APGD iterates on the host (each trial's test sums cross the processes).
   GpuOps(DeviceState& d, const ProblemView& p, const ApgdLaunch& launch, bool float_storage)
-      : d_(d), p_(p), launch_(launch), float_(float_storage) {
+      : d_(d), p_(p), launch_(launch), float_(float_storage), group_(d.group) {
     SolverScratch& S = d.solver;
     DeviceBuffer<real>* bufs[kVecs] = {&S.v0, &S.v1, &S.v2, &S.v3, &S.v4, &S.v5, &S.v6, &S.v7, &S.v8};
     for (int i = 0; i < kVecs; ++i) bufs_[i] = bufs[i];
     for (int i = 0; i < 7; ++i) vec(i);  // 7 and 8 (APGD's speculation) only when asked for
+    total_ = p_.nb;
+    if (group_) {
+      double v[1] = {double(p_.nb)};
+      group_->sum(v, 1);
+      total_ = int64_t(v[0]);
+      const double m = group_->max(p_.nb > 0 ? double(p_.max_diag) : 0.0);  // ContactProblem::maxDiagonal's rule
+      p_.max_diag = m > 0 ? real(m) : real(1);
+    }
   }
+  bool deviceLoop() const { return group_ == nullptr; }
+  int64_t totalBlocks() const { return total_; }
   int64_t blocks() const { return p_.nb; }
   BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, p_.lo, p_.hi}; }
   const real* rhs() const { return p_.r; }
@@ -75,6 +87,7 @@ class GpuOps {
   void reduce(const F& f, double* out) {
     const double* h = launchReduce<M>(d_, p_.nb, f, functorName<F>());
     for (int m = 0; m < M; ++m) out[m] = h[m];
+    if (group_) group_->sum(out, M);
   }
   // The sums land in slots of 8 doubles of S.scalars, read back together by fetch().
   template <int M, class F>
@@ -89,8 +102,14 @@ class GpuOps {
   void fetch() {
     if (pending_ == 0) return;
     const double* h = d_.readScalars(d_.solver.scalars.data(), pending_ * kSlotSize);
+    double all[kSlots * kSlotSize];
+    int n = 0;
     for (int i = 0; i < pending_; ++i)
-      for (int m = 0; m < pending_m_[i]; ++m) pending_out_[i][m] = h[i * kSlotSize + m];
+      for (int m = 0; m < pending_m_[i]; ++m) all[n++] = h[i * kSlotSize + m];
+    if (group_) group_->sum(all, n);  // one collective for every sum of the fetch
+    n = 0;
+    for (int i = 0; i < pending_; ++i)
+      for (int m = 0; m < pending_m_[i]; ++m) pending_out_[i][m] = all[n++];
     pending_ = 0;
   }
   void copy(const real* src, real* dst) {
@@ -109,6 +128,8 @@ class GpuOps {
   ProblemView p_;
   ApgdLaunch launch_;
   bool float_;
+  const ProcessGroup* group_;
+  int64_t total_ = 0;
   static constexpr int kVecs = 9;
   DeviceBuffer<real>* bufs_[kVecs] = {};
   static constexpr int kSlots = 8, kSlotSize = 8;  // 64 doubles: DeviceState::host_scalars
@@ -132,24 +153,35 @@ ProblemView view(DeviceState& d, real max_diag) {
   return p;
 }
 
+__device__ int64_t findKey(const uint64_t* keys, int64_t n, uint64_t x) {
+  int64_t lo = 0, hi = n;
+  while (lo < hi) {
+    const int64_t mid = (lo + hi) / 2;
+    if (keys[mid] < x)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo < n && keys[lo] == x ? lo : -1;
+}
+
+// Each contact's impulses from the handed-over table (DeviceState::extra_key) where it has the key, else from last
+// step's, else zero.
 struct WarmF {
   const uint64_t* key;
   const uint64_t* prev_key;
   const real* prev_gamma;
   int64_t np;
+  const uint64_t* extra_key;
+  const real* extra_gamma;
+  int64_t ne;
   real* gamma;
   __device__ void operator()(int64_t k) const {
     const uint64_t x = key[k];
-    int64_t lo = 0, hi = np;
-    while (lo < hi) {
-      const int64_t mid = (lo + hi) / 2;
-      if (prev_key[mid] < x)
-        lo = mid + 1;
-      else
-        hi = mid;
-    }
-    const bool hit = lo < np && prev_key[lo] == x;
-    for (int r = 0; r < 3; ++r) gamma[3 * k + r] = hit ? prev_gamma[3 * lo + r] : real(0);
+    const int64_t e = findKey(extra_key, ne, x);
+    const int64_t j = e >= 0 ? -1 : findKey(prev_key, np, x);
+    for (int r = 0; r < 3; ++r)
+      gamma[3 * k + r] = e >= 0 ? extra_gamma[3 * e + r] : (j >= 0 ? prev_gamma[3 * j + r] : real(0));
   }
 };
 
@@ -193,12 +225,13 @@ void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda
   if (nrows > 0 && int64_t(row_lambda.size()) == nrows)  // rows: by index, while their count is unchanged
     DVI_CUDA(cudaMemcpyAsync(S.gamma.data() + 3 * nc, row_lambda.data(), sizeof(real) * size_t(nrows),
                              cudaMemcpyHostToDevice, d.stream));
-  if (!enabled || nc == 0 || d.prev_count == 0) {
+  if (!enabled || nc == 0 || (d.prev_count == 0 && d.extra_count == 0)) {
     DVI_CUDA(cudaStreamSynchronize(d.stream));  // row_lambda may change after we return
     return;
   }
   launchMap(d, nc,
-            WarmF{d.contacts.key.data(), S.prev_key.data(), S.prev_gamma.data(), int64_t(d.prev_count), S.gamma.data()},
+            WarmF{d.contacts.key.data(), S.prev_key.data(), S.prev_gamma.data(), int64_t(d.prev_count),
+                  d.extra_key.data(), d.extra_gamma.data(), int64_t(d.extra_count), S.gamma.data()},
             "launch of WarmF");
 }
 
@@ -258,6 +291,10 @@ void keepImpulsesForWarmStart(DeviceState& d) {
 void applyImpulsesToBodies(DeviceState& d, const real* gamma) {
   DeviceBodies& B = d.bodies;
   const int64_t nb = int64_t(B.count);
+  if (d.group && !gamma) {  // no contacts here: a gather of zero shares still takes part in the exchange
+    d.solver.v0.resize(3);
+    gamma = d.solver.v0.data();
+  }
   if (gamma) { gather(d, gamma, "launch of GatherF (impulses)"); }
   launchMap(d, nb,
             VelocityF{B.v_free.data(), B.w_free.data(), gamma ? B.delta.data() : nullptr, B.vel.data(), B.omega.data()},

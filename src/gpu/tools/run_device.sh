@@ -13,6 +13,8 @@
 #   ab         unrecorded GPU timings of option variants side by side (AB_VARIANTS, PROBE_SIZES, PROBE_SCENES)
 #   settle     the 100k pile at the default solver stop and at fixed 50 iterations, statistics side by side
 #   accuracy | stability | pruning | cesbench | dropin   the other benches, full mode, --record
+#   mpitests   the domain decomposition's tests on MPI_NP (default 2) processes, one GPU each ([gpu], then the rest)
+#   mpiscaling `mpirun -np MPI_NP dvisim bench scaling --mpi --mpi-backend gpu --record` with MPI_ARGS
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
 set -u
@@ -25,6 +27,17 @@ source .deps/env.sh
 export DVISIM_COMMIT=${DVISIM_COMMIT:-unknown}
 # Benchmarks find scripts and bench/results through the source directory compiled into the binaries.
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee -a "$LOGS/gpu.txt"
+# Open MPI: the machine's, or the one carried in .deps (relocated: its prefix and PMIx's follow /opt/deps; the
+# Debian packages name their programs *.openmpi, the alternatives' links are made here). No CMA in containers.
+if ! command -v mpirun > /dev/null && [ -x /opt/deps/usr/bin/mpiexec.openmpi ]; then
+  for p in mpirun mpiexec mpicxx mpicc; do
+    src=/opt/deps/usr/bin/$p.openmpi; [ $p = mpirun ] && src=/opt/deps/usr/bin/mpiexec.openmpi
+    ln -sf "$src" /opt/deps/usr/bin/$p
+  done
+  export OPAL_PREFIX=/opt/deps/usr PMIX_INSTALL_PREFIX=/opt/deps/usr/lib/x86_64-linux-gnu/pmix2
+fi
+export OMPI_MCA_btl_vader_single_copy_mechanism=none
+MPIRUN="mpirun --allow-run-as-root --bind-to none --oversubscribe"
 B=${BUILD_DIR:-build-dev}
 BIN=$B/bin/dvisim
 TESTS=$B/tests/dvisim_tests
@@ -46,8 +59,18 @@ for m in "$@"; do
     build)
       cmake -S . -B $B -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_BUILD_TYPE=Release -DDVISIM_BUILD_DEMOS=OFF \
         > "$LOGS/configure.log" 2>&1 || { tail -30 "$LOGS/configure.log"; cp "$LOGS/configure.log" "$OUT/"; exit 1; }
-      cmake --build $B -j16 --target dvisim_cli dvisim_tests > "$LOGS/build.log" 2>&1 ||
+      targets="dvisim_cli dvisim_tests"
+      cmake --build $B --target help | grep -q dvisim_mpi_tests && targets="$targets dvisim_mpi_tests"
+      cmake --build $B -j$(nproc) --target $targets > "$LOGS/build.log" 2>&1 ||
         { grep -E "error" "$LOGS/build.log" | head -30; cp "$LOGS/build.log" "$OUT/"; exit 1; } ;;
+    mpitests)
+      $MPIRUN -np ${MPI_NP:-2} $B/tests/mpi/dvisim_mpi_tests "[gpu]" 2>&1 | tee "$LOGS/mpitests.log" | grep -v "^$" | tail -25
+      $MPIRUN -np ${MPI_NP:-2} $B/tests/mpi/dvisim_mpi_tests "[mpi]~[gpu]" 2>&1 | grep -E "passed|failed|FAILED" | tail -4 ;;
+    mpiscaling)
+      rm -rf "$LOGS/mpiscaling"
+      timeout ${BENCH_TIMEOUT:-86400} $MPIRUN -np ${MPI_NP:-2} $BIN bench scaling --mpi --mpi-backend gpu --record \
+        --out "$LOGS/mpiscaling" ${MPI_ARGS:-} > "$LOGS/mpiscaling.log" 2>&1
+      echo "mpiscaling rc=$?"; tail -30 "$LOGS/mpiscaling.log" ;;
     dropin) bench dropin ;;
     tests) $TESTS "[gpu]" -d yes 2>&1 | tee "$LOGS/tests.log" | grep -E "passed|failed|FAILED|with message|^  [a-z]|s: " ;;
     sanitize)
