@@ -507,6 +507,10 @@ int main(int argc, char** argv) {
   } catch (...) {
     // InputError 2, SimulationDiverged/SolverError 3, std::bad_alloc/DeviceError 5, anything else 1 (run_control.h).
     const std::exception_ptr e = std::current_exception();
-    return fail(dvi::exitCodeFor(e), dvi::exceptionMessage(e));
+    const int code = fail(dvi::exitCodeFor(e), dvi::exceptionMessage(e));
+    // Under mpirun a process that fails alone (a GPU out of memory) would leave the others waiting in a collective:
+    // every process stops with this exit code.
+    if (mpiProcesses() > 1) mpiAbort(code);
+    return code;
   }
 }

@@ -41,6 +41,12 @@ MpiSession::~MpiSession() {
   if (init && !done) MPI_Finalize();
 }
 
+void mpiAbort(int code) {
+  std::fflush(stdout);
+  std::fflush(stderr);
+  MPI_Abort(MPI_COMM_WORLD, code);
+}
+
 int mpiProcesses() {
   int init = 0, n = 1;
   MPI_Initialized(&init);

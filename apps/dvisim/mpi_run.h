@@ -23,6 +23,8 @@ class MpiSession {
   MpiSession& operator=(const MpiSession&) = delete;
 };
 
+// Stops every process of the run with exit code `code` (MPI_Abort): an error on one process ends the run.
+void mpiAbort(int code);
 // Processes of this run: MPI_COMM_WORLD's size under mpirun, else 1.
 int mpiProcesses();
 // This process's rank in MPI_COMM_WORLD (0 without mpirun), the processes on its host and its rank among them.

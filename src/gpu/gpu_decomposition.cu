@@ -262,10 +262,24 @@ void keepOwnedContacts(DeviceState& d) {
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // the group's list may change after we return
 }
 
-void exchangeDeltas(DeviceState& d, BodyDelta* delta) {
+void sendSharesAsync(DeviceState& d) {
   const int64_t n = int64_t(d.ex_count);
-  launchMap(d, n, GatherByF<BodyDelta>{d.ex_ids.data(), delta, d.ex_buf.data()}, "launch of GatherByF (shares)");
-  exchangeStaged(d, n);
+  if (n == 0) return;
+  DVI_CUDA(cudaEventRecord(d.ev_shares, d.stream));
+  DVI_CUDA(cudaStreamWaitEvent(d.copy_stream, d.ev_shares, 0));
+  DVI_CUDA(cudaMemcpyAsync(d.ex_host, d.ex_buf.data(), sizeof(BodyDelta) * size_t(n), cudaMemcpyDeviceToHost,
+                           d.copy_stream));
+}
+
+void receiveSums(DeviceState& d, BodyDelta* delta) {
+  const int64_t n = int64_t(d.ex_count);
+  if (n > 0) DVI_CUDA(cudaStreamSynchronize(d.copy_stream));  // the shares alone; d.stream runs on
+  d.group->exchangeCompact(d.ex_host);  // with nothing listed: no messages (the neighbours list nothing either)
+  if (n == 0) return;
+  DVI_CUDA(cudaMemcpyAsync(d.ex_buf.data(), d.ex_host, sizeof(BodyDelta) * size_t(n), cudaMemcpyHostToDevice,
+                           d.copy_stream));
+  DVI_CUDA(cudaEventRecord(d.ev_sums, d.copy_stream));
+  DVI_CUDA(cudaStreamWaitEvent(d.stream, d.ev_sums, 0));
   launchMap(d, n, ScatterByF<BodyDelta>{d.ex_ids.data(), d.ex_buf.data(), delta}, "launch of ScatterByF (sums)");
 }
 

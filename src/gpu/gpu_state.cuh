@@ -219,6 +219,8 @@ struct DeviceState {
   // host staging; scratch of the selections (marks, indices, a count); the warm start handed over by
   // System::addWarmStart (sorted keys, 3 impulses each), read by the next WarmStart and then dropped.
   ProcessGroup* group = nullptr;
+  cudaStream_t copy_stream = nullptr;  // the exchange's copies, beside the gather on `stream`
+  cudaEvent_t ev_shares = nullptr, ev_sums = nullptr;
   DeviceBuffer<int32_t> owner{"body owners"}, owner_key{"body keys"};
   uint64_t owners_version = ~uint64_t(0);
   DeviceBuffer<int32_t> ex_ids{"exchanged bodies"};
@@ -271,8 +273,11 @@ void uploadOwners(DeviceState& d);
 // Keeps the contacts this process owns (in order), then names the copies they touch to the group (collective) and
 // uploads the step's exchange list.
 void keepOwnedContacts(DeviceState& d);
-// delta (per body) of the exchange list's bodies: this process's shares in, the sums over the processes out.
-void exchangeDeltas(DeviceState& d, BodyDelta* delta);
+// The velocity-change exchange of a gather, overlapped with it: the listed bodies' shares, written to ex_buf on
+// d.stream, start for the host on copy_stream (sendSharesAsync); receiveSums waits for that copy alone while the
+// gather runs on, exchanges over the group, and queues the sums into delta on d.stream after the gather.
+void sendSharesAsync(DeviceState& d);
+void receiveSums(DeviceState& d, BodyDelta* delta);
 // The same for one value per body (Jacobi's column sums).
 void exchangeBodyValues(DeviceState& d, real* per_body);
 // System::motionBounds, ownedBodiesOutside and contactImpulsesOf on the device arrays.

@@ -150,6 +150,9 @@ GpuSystem::GpuSystem(SystemConfig config, CollisionFactory bullet_collision)
   if (config_.solver.type == SolverType::GaussSeidel)
     throw InputError("GPU backend: Gauss-Seidel is sequential; use jacobi, apgd or bb on the GPU");
   DVI_CUDA(cudaStreamCreateWithFlags(&d_->stream, cudaStreamNonBlocking));
+  DVI_CUDA(cudaStreamCreateWithFlags(&d_->copy_stream, cudaStreamNonBlocking));
+  DVI_CUDA(cudaEventCreateWithFlags(&d_->ev_shares, cudaEventDisableTiming));
+  DVI_CUDA(cudaEventCreateWithFlags(&d_->ev_sums, cudaEventDisableTiming));
   {
     int dev = 0;
     DVI_CUDA(cudaGetDevice(&dev));
@@ -183,6 +186,9 @@ GpuSystem::~GpuSystem() {
   if (d_->host_apgd) cudaFreeHost(d_->host_apgd);
   if (d_->ex_host) cudaFreeHost(d_->ex_host);
   if (d_->stream) cudaStreamDestroy(d_->stream);
+  if (d_->copy_stream) cudaStreamDestroy(d_->copy_stream);
+  if (d_->ev_shares) cudaEventDestroy(d_->ev_shares);
+  if (d_->ev_sums) cudaEventDestroy(d_->ev_sums);
 }
 
 std::string GpuSystem::deviceName() const {

@@ -24,6 +24,22 @@ __global__ void __launch_bounds__(kBlock)
   heavyGatherChunk(heavy, g, x, partial, ticket, int32_t(blockIdx.y), int32_t(blockIdx.x));
 }
 
+// The velocity change of each body of the exchange list (a domain decomposition), into the compact exchange buffer:
+// all its entries in order, in one thread even for a heavy body.
+template <class JT>
+struct ListGatherF {
+  GatherT<JT> g;
+  const int32_t* ids;
+  BodyDelta* out;
+  __device__ void operator()(int64_t j) const {
+    const real* xx = g.input();
+    const int32_t i = ids[j];
+    Vec3 F{0, 0, 0}, T{0, 0, 0};
+    for (int32_t e = g.off[i]; e < g.off[i + 1]; ++e) g.entry(e, xx, F, T);
+    out[j] = g.bodyDelta(i, F, T);
+  }
+};
+
 }  // namespace
 
 template <class JT>
@@ -33,14 +49,21 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
     if (!jac) jac = S.jac.data();
   }
   const GatherT<JT> g = gatherOf(d, jac, x, x_slot);
+  // Over several processes (not the device loop, x_slot, which runs alone) the shared bodies' shares go first and
+  // travel to the other processes while every body's gather runs; their sums then replace the gather's values.
+  const bool exchange = d.group && !x_slot;
+  if (exchange) {
+    launchMap(d, int64_t(d.ex_count), ListGatherF<JT>{g, d.ex_ids.data(), d.ex_buf.data()},
+              "launch of ListGatherF (shared bodies' shares)");
+    sendSharesAsync(d);
+  }
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {
     HeavyGatherKernel<JT><<<dim3(kHeavyChunks, unsigned(S.n_heavy)), kBlock, 0, d.stream>>>(
         S.heavy.data(), g, S.heavy_partial.data(), S.heavy_ticket.data());
     cudaCheck(cudaGetLastError(), "launch of HeavyGatherKernel", __FILE__, __LINE__);
   }
-  // Over several processes the shared bodies' shares are summed (x_slot: the device loop, which runs alone).
-  if (d.group && !x_slot) exchangeDeltas(d, d.bodies.delta.data());
+  if (exchange) receiveSums(d, d.bodies.delta.data());
 }
 
 template <class V>
