@@ -110,7 +110,7 @@ void DistributedSystem::start() {
 void DistributedSystem::step() {
   using Clock = std::chrono::steady_clock;
   if (!started_) start();
-  if (!sys_) rebuild(false);
+  if (!sys_ || rebuild_pending_) rebuild(sys_ && !host_states_);  // after a step the last System stays readable
   const auto t = Clock::now();
   sys_->step();
   prof_.step_s += std::chrono::duration<double>(Clock::now() - t).count();
@@ -206,6 +206,7 @@ void DistributedSystem::rebuild(bool read_local) {
   sys_->setProcessGroup(group_.get());
   setLocalWarmStart(warm_, true);
   warm_.clear();
+  rebuild_pending_ = host_states_ = false;
   ++log_.rebuilds;
   prof_.build_s += std::chrono::duration<double>(Clock::now() - t).count();
 }
@@ -299,9 +300,9 @@ void DistributedSystem::afterStep() {
   refreshCopies(near, need_rebuild);
   prof_.ghosts_s += since(t);
   t = Clock::now();
-  const bool rebalanced = rebalanceIfNeeded();  // with a rebuild of its own
+  const bool rebalanced = rebalanceIfNeeded();
   prof_.migrate_s += since(t);
-  if (!rebalanced && group_->any(need_rebuild)) rebuild(true);
+  rebuild_pending_ = rebalanced || group_->any(need_rebuild);  // rebuilt at the next step's start
 }
 
 // The owned bodies farther than the ghost width inside this process's box from none of its faces (the only ones that
@@ -447,7 +448,7 @@ bool DistributedSystem::rebalanceIfNeeded() {
   tree_ = Bisection::build(points, size_);
   ++log_.rebalances;
   migrateAll();
-  rebuild(false);
+  host_states_ = true;  // the owned states are on the host now; the System is rebuilt from them
   return true;
 }
 
@@ -497,7 +498,7 @@ const std::vector<int32_t>& DistributedSystem::ownedIds() const {
 
 // The owned bodies' current states from the local System into state_.
 void DistributedSystem::syncOwned() const {
-  if (!sys_) return;
+  if (!sys_ || host_states_) return;
   std::vector<int32_t> mine;
   for (size_t i = 0; i < local_ids_.size(); ++i)
     if (owner_[size_t(local_ids_[i])] == rank_ || replicated_[size_t(local_ids_[i])]) mine.push_back(int32_t(i));
@@ -518,7 +519,7 @@ MotionState DistributedSystem::stateOf(int32_t id) const {
   if (!replicated_[size_t(id)] && owner_[size_t(id)] != rank_)
     throw InputError("body " + std::to_string(id) + ": owned by another process");
   const int32_t l = local_of_[size_t(id)];
-  if (sys_ && l >= 0) {
+  if (sys_ && l >= 0 && !host_states_) {
     sys_->syncBodiesToHost({l});
     const BodyArrays& b = sys_->bodies();
     return MotionState{b.pos[size_t(l)], b.rot[size_t(l)], b.vel[size_t(l)], b.omega[size_t(l)]};

@@ -157,9 +157,11 @@ class DistributedSystem {
   int64_t owned_count_ = 0;
   mutable std::vector<int32_t> owned_;  // ownedIds(), made on demand
   mutable bool owned_stale_ = true;
-  std::vector<WarmEntry> warm_;  // between readLocal and a rebuild
-  std::vector<int32_t> fresh_;   // copies refreshed by the last step's records (local indices)
-  real width_ = 0;               // the ghost width of the coming step
+  std::vector<WarmEntry> warm_;   // between readLocal and a rebuild
+  std::vector<int32_t> fresh_;    // copies refreshed by the last step's records (local indices)
+  real width_ = 0;                // the ghost width of the coming step
+  bool rebuild_pending_ = false;  // rebuild at the next step's start (the last System stays readable)
+  bool host_states_ = false;      // state_ holds the owned states (a re-balance moved bodies)
   Bisection tree_;
   bool started_ = false;
   std::unique_ptr<MpiGroup> group_;

@@ -16,7 +16,7 @@ namespace dvi {
 struct GroupTraffic {
   double exchange_s = 0, reduce_s = 0;  // exchangeCompact (with setTouchedCopies); sum and max
   int64_t exchanges = 0, reductions = 0;
-  int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours (both rounds), and the touched lists
+  int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours, and the touched lists
   int64_t shared_bodies = 0;   // exchange list lengths, summed over the steps
 };
 
@@ -34,8 +34,8 @@ class MpiGroup final : public ProcessGroup {
   void setTouchedCopies(const std::vector<int32_t>& copies) override;
   const std::vector<int32_t>& exchangeBodies() const override { return list_; }
   bool shared(int32_t body) const override { return pos_[size_t(body)] >= 0; }
-  // Two rounds with the neighbours: each copy's share to its owner, which adds them (in rank order) to its own; then
-  // the owner's sum back to every process that sent a share.
+  // One round with the neighbours: each process that holds a listed body sends its share to the others holding it
+  // (the owner and the processes whose contacts touch it), and each adds the shares in rank order.
   void exchangeCompact(BodyDelta* compact) const override;
 
   // The local bodies after the local System is (re)built: keys ascending (the global ids), owners as
@@ -51,9 +51,12 @@ class MpiGroup final : public ProcessGroup {
   uint64_t version_ = 0;
   std::vector<int32_t> changed_;     // owners changed since the last takeOwnerChanges (may repeat a body)
   std::vector<int32_t> list_, pos_;  // the exchange list; per body its place in it, or -1
-  // Per process q: places in list_ of the copies q owns (q's keys ascending), and of the own bodies q touches (in the
-  // order q sent them). Both processes list a body at the same place of their message.
-  std::vector<std::vector<int32_t>> copies_of_, touched_by_;
+  // Per process q: the places in list_ of the bodies both hold this step (keys ascending: both list a body at the
+  // same place of their message); per listed body, its sum's terms in rank order (term_start_ CSR): the process and
+  // the place in its message, -1 for this process's own share.
+  std::vector<std::vector<int32_t>> pairs_;
+  std::vector<int32_t> term_start_{0}, term_rank_, term_idx_;
+  void setPairs(std::vector<std::vector<int32_t>>& part);
   mutable std::vector<std::vector<BodyDelta>> out_, in_;  // message buffers per process
   mutable std::vector<MPI_Request> requests_;
   mutable GroupTraffic traffic_;
