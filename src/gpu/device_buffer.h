@@ -52,10 +52,17 @@ class DeviceBuffer {
   size_t bytes() const { return size_ * sizeof(T); }
   const char* name() const { return name_; }
 
-  // Ensures capacity >= n; contents are kept only when keep is true.
+  // Ensures capacity >= n; contents are kept only when keep is true. Room to grow: half again, an eighth for arrays
+  // of 256 MiB or more (a pile of 20 million spheres a card then fits 80 GB); an array whose contents go is freed
+  // before the new one is made (cudaFree waits for the device).
   void reserve(size_t n, bool keep = false) {
     if (n <= cap_) return;
-    size_t want = n + n / 2;
+    const size_t want = n + (n * sizeof(T) >= (size_t(256) << 20) ? n / 8 : n / 2);
+    if (!keep && ptr_) {
+      DVI_CUDA(cudaFree(ptr_));
+      ptr_ = nullptr;
+      cap_ = 0;
+    }
     T* p = static_cast<T*>(deviceAlloc(want * sizeof(T), name_));
     if (keep && size_ > 0) {
       DVI_CUDA(cudaDeviceSynchronize());  // work in flight on any stream may still write the old array

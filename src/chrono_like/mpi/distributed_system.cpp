@@ -294,10 +294,12 @@ void DistributedSystem::afterStep() {
   prof_.readback_s += since(t);
   t = Clock::now();
   bool need_rebuild = false;
-  migrate(near, near_locals, need_rebuild);
+  std::vector<int32_t> arrived;
+  migrate(near, near_locals, arrived, need_rebuild);
+  std::sort(arrived.begin(), arrived.end());
   prof_.migrate_s += since(t);
   t = Clock::now();
-  refreshCopies(near, need_rebuild);
+  refreshCopies(near, arrived, need_rebuild);
   prof_.ghosts_s += since(t);
   t = Clock::now();
   const bool rebalanced = rebalanceIfNeeded();
@@ -327,7 +329,7 @@ std::vector<DistributedSystem::Record> DistributedSystem::nearFaceBodies(std::ve
 // it owns (the new owner solves them from the next step on). On return `near` holds this process's near-face bodies
 // after the moves.
 void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int32_t>& near_locals,
-                                bool& need_rebuild) {
+                                std::vector<int32_t>& arrived_ids, bool& need_rebuild) {
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
   std::vector<std::vector<WarmEntry>> out_warm(static_cast<size_t>(size_));
   std::vector<Record> kept;
@@ -360,6 +362,7 @@ void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int
       state_[size_t(r.id)] = r.s;
       ++owned_count_;
       kept.push_back(r);
+      arrived_ids.push_back(r.id);
       const int32_t l = local_of_[size_t(r.id)];
       if (l < 0) {  // not held here: a rebuild adds it
         need_rebuild = true;
@@ -397,13 +400,25 @@ void DistributedSystem::setLocalState(int32_t l, const MotionState& s, bool park
 
 // Each owned near-face body within the ghost width of another process's box goes there: the copy takes its state and
 // owner; a copy that no record refreshes is parked; a record of a body not held here asks for a rebuild.
-void DistributedSystem::refreshCopies(const std::vector<Record>& near, bool& need_rebuild) {
+// A copy that took part in its body's velocity-change exchange this step came out of it with the owner's very state
+// (the same forces, the same summed velocity change, the same integration): its owner sends no record, unless the
+// body changed owner this step (the record names the new one).
+void DistributedSystem::refreshCopies(const std::vector<Record>& near, const std::vector<int32_t>& arrived,
+                                      bool& need_rebuild) {
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
-  for (const Record& r : near)
+  for (const Record& r : near) {
+    const int32_t l = local_of_[size_t(r.id)];
+    const bool moved = std::binary_search(arrived.begin(), arrived.end(), r.id);
     for (int q = 0; q < size_; ++q)
-      if (q != rank_ && tree_.distance(r.s.pos, q) <= width_) out[size_t(q)].push_back(r);
+      if (q != rank_ && tree_.distance(r.s.pos, q) <= width_ && (moved || l < 0 || !group_->exchangedWith(l, q)))
+        out[size_t(q)].push_back(r);
+  }
   const auto in = mpiExchange(comm_, out, &prof_.ghost_bytes);
   std::vector<int32_t> now, dirty;
+  for (int32_t l : group_->exchangeBodies()) {  // exchanged copies: current without a record
+    const int32_t o = group_->bodyOwners()[size_t(l)];
+    if (o >= 0 && o != rank_) now.push_back(l);
+  }
   for (int q = 0; q < size_; ++q)
     for (const Record& r : in[size_t(q)]) {
       const int32_t l = local_of_[size_t(r.id)];
@@ -419,6 +434,7 @@ void DistributedSystem::refreshCopies(const std::vector<Record>& near, bool& nee
       dirty.push_back(l);
     }
   std::sort(now.begin(), now.end());
+  now.erase(std::unique(now.begin(), now.end()), now.end());
   for (int32_t l : fresh_)  // refreshed last step, not now, and not own: parked
     if (!std::binary_search(now.begin(), now.end(), l) && group_->bodyOwners()[size_t(l)] != rank_) {
       group_->setOwner(l, kNoOwner);

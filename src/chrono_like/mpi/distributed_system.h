@@ -130,8 +130,9 @@ class DistributedSystem {
   void rebuild(bool read_local);
   void afterStep();
   std::vector<Record> nearFaceBodies(std::vector<int32_t>& locals);
-  void migrate(std::vector<Record>& near, const std::vector<int32_t>& near_locals, bool& need_rebuild);
-  void refreshCopies(const std::vector<Record>& near, bool& need_rebuild);
+  void migrate(std::vector<Record>& near, const std::vector<int32_t>& near_locals, std::vector<int32_t>& arrived_ids,
+               bool& need_rebuild);
+  void refreshCopies(const std::vector<Record>& near, const std::vector<int32_t>& arrived, bool& need_rebuild);
   void readLocal(bool with_contacts);
   void setLocalWarmStart(const std::vector<WarmEntry>& entries, bool replace);
   std::vector<WarmEntry> warmEntries(const std::vector<ContactImpulse>& contacts) const;

@@ -138,6 +138,14 @@ void MpiGroup::setPairs(std::vector<std::vector<int32_t>>& part) {
   }
 }
 
+bool MpiGroup::exchangedWith(int32_t body, int q) const {
+  const int32_t j = pos_[size_t(body)];
+  if (j < 0) return false;
+  for (int32_t t = term_start_[size_t(j)]; t < term_start_[size_t(j) + 1]; ++t)
+    if (term_rank_[size_t(t)] == q) return true;
+  return false;
+}
+
 void MpiGroup::exchangeCompact(BodyDelta* delta) const {
   const double t0 = MPI_Wtime();
   const int bytes = int(sizeof(BodyDelta));

@@ -41,6 +41,9 @@ class MpiGroup final : public ProcessGroup {
   // The local bodies after the local System is (re)built: keys ascending (the global ids), owners as
   // ProcessGroup::bodyOwners. Clears the exchange list.
   void setBodies(std::vector<int32_t> keys, std::vector<int32_t> owners);
+  // Whether process q took part in body `body`'s exchange this step (it holds the body and its contacts or the
+  // owner's touch it): then q's copy came out of the step with the owner's very state.
+  bool exchangedWith(int32_t body, int q) const;
   void setOwner(int32_t body, int32_t owner);
   const GroupTraffic& traffic() const { return traffic_; }
 
