@@ -328,7 +328,7 @@ DROPIN_INTRO = (
 def scaling_mpi(text):
     r = common(text, device_names=("GPU", "CPU") if field(text, "GPU") not in (None, "none") else ("CPU",))
     for mode in ("weak", "strong"):
-        rows = re.findall(r"^\| " + mode + r" \| (\d+) \| (\d+) \| ([\d.]+) \| ([\d.]+) \|", text, re.M)
+        rows = re.findall(r"^\| " + mode + r" \| (\d+) \| (\d+) \| ([\d.]+) \| ([\d.]+|-) \|", text, re.M)
         many = [x for x in rows if x[0] != "1"]
         one = [x for x in rows if x[0] == "1"]
         r["processes"] = many[0][0] if many else r.get("processes")
@@ -346,9 +346,10 @@ SCALING_MPI_COLS = [("date", "date"), ("device", "device"), ("commit", "commit")
                     ("strong n", "strong spheres"), ("strong ms", "strong ms/step"),
                     ("strong eff", "strong efficiency")]
 SCALING_MPI_INTRO = (
-    "The domain decomposition over MPI (`mpirun -np K dvisim bench scaling --mpi`, CPU backend): the sphere pile on "
-    "process 0 alone and on all K processes in one run, weak (N a process) and strong (the same pile). The record "
-    "has the time per phase and stage and the bytes moved per step."
+    "The domain decomposition over MPI (`mpirun -np K dvisim bench scaling --mpi`; CPU backend, or one GPU a process "
+    "with `--mpi-backend gpu`): the sphere pile on process 0 alone and on all K processes in one run, weak (N a "
+    "process) and strong (the same pile); `--baseline off` runs the K processes alone (efficiency `-`). The record "
+    "has the time per phase and stage, the bytes moved per step and the plain System's time on the one-process pile."
 )
 
 PARSERS = {

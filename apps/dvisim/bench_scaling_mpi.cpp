@@ -174,11 +174,11 @@ std::string tableText(const std::vector<MpiRow>& rows) {
        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
   for (const MpiRow& r : rows)
     m << "| " << r.mode << " | " << r.processes << " | " << r.bodies << " | " << num(r.ms, "%.2f") << " | "
-      << num(r.efficiency, "%.2f") << " | " << num(r.ghosts, "%.2f") << " | " << num(r.build, "%.2f") << " | "
-      << num(r.step, "%.2f") << " | " << num(r.exchange, "%.2f") << ", " << num(r.reduce, "%.2f") << " | "
-      << num(r.readback, "%.2f") << " | " << num(r.migrate, "%.2f") << " | " << num(r.ghost_kb, "%.0f") << ", "
-      << num(r.exchange_kb, "%.0f") << ", " << num(r.migrate_kb, "%.0f") << " | " << num(r.exchanges, "%.0f") << ", "
-      << num(r.reductions, "%.0f") << " |\n";
+      << (r.efficiency > 0 ? num(r.efficiency, "%.2f") : std::string("-")) << " | " << num(r.ghosts, "%.2f") << " | "
+      << num(r.build, "%.2f") << " | " << num(r.step, "%.2f") << " | " << num(r.exchange, "%.2f") << ", "
+      << num(r.reduce, "%.2f") << " | " << num(r.readback, "%.2f") << " | " << num(r.migrate, "%.2f") << " | "
+      << num(r.ghost_kb, "%.0f") << ", " << num(r.exchange_kb, "%.0f") << ", " << num(r.migrate_kb, "%.0f") << " | "
+      << num(r.exchanges, "%.0f") << ", " << num(r.reductions, "%.0f") << " |\n";
   m << "\nThe local step's stages (ms per step, the slowest process), and the local Systems built (the first, in the "
        "warm-up, included; process 0):\n\n";
   for (const MpiRow& r : rows)
