@@ -117,23 +117,13 @@ struct OutsideF {
   }
 };
 
-__device__ bool listed(const int32_t* ids, int64_t n, int32_t x) {
-  int64_t lo = 0, hi = n;
-  while (lo < hi) {
-    const int64_t mid = (lo + hi) / 2;
-    if (ids[mid] < x)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo < n && ids[lo] == x;
-}
-
 struct TouchingF {
   const int32_t *a, *b, *ids;
   int64_t n;
   uint8_t* mark;
-  __device__ void operator()(int64_t k) const { mark[k] = listed(ids, n, a[k]) || listed(ids, n, b[k]) ? 1 : 0; }
+  __device__ void operator()(int64_t k) const {
+    mark[k] = findSorted(ids, n, a[k]) >= 0 || findSorted(ids, n, b[k]) >= 0 ? 1 : 0;
+  }
 };
 
 struct ImpulseRecordF {

@@ -21,6 +21,20 @@ namespace dvi::gpu {
 constexpr int kBlock = 256;
 inline unsigned blocksFor(int64_t n, int block = kBlock) { return unsigned((n + block - 1) / block); }
 
+// The place of x in keys[0 .. n) (ascending), or -1.
+template <class K>
+__device__ int64_t findSorted(const K* keys, int64_t n, K x) {
+  int64_t lo = 0, hi = n;
+  while (lo < hi) {
+    const int64_t mid = (lo + hi) / 2;
+    if (keys[mid] < x)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo < n && keys[lo] == x ? lo : -1;
+}
+
 struct DeviceBodies {
   DeviceBuffer<Vec3> pos{"body pos"}, vel{"body vel"}, omega{"body omega"}, inv_inertia{"body inv_inertia"},
       force{"body force"}, torque{"body torque"}, gravity{"body gravity"}, v_free{"body v_free"}, w_free{"body w_free"},

@@ -351,36 +351,27 @@ void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int
     for (const WarmEntry& e : warmEntries(sys_->contactImpulsesOf(leaving)))
       if (e.owner >= 0 && owner_[size_t(e.owner)] != rank_) out_warm[size_t(owner_[size_t(e.owner)])].push_back(e);
   }
-  const auto in = mpiExchange(comm_, out, &prof_.migrate_bytes);
-  const auto in_warm = mpiExchange(comm_, out_warm, &prof_.migrate_bytes);
+  std::vector<Record> in;
+  const std::vector<WarmEntry> arrived = exchangeMoves(out, out_warm, in);
   std::vector<int32_t> dirty;
-  std::vector<WarmEntry> arrived;
-  for (int q = 0; q < size_; ++q) {
-    log_.received[size_t(q)] += int64_t(in[size_t(q)].size());
-    for (const Record& r : in[size_t(q)]) {
-      owner_[size_t(r.id)] = rank_;
-      state_[size_t(r.id)] = r.s;
-      ++owned_count_;
-      kept.push_back(r);
-      arrived_ids.push_back(r.id);
-      const int32_t l = local_of_[size_t(r.id)];
-      if (l < 0) {  // not held here: a rebuild adds it
-        need_rebuild = true;
-        continue;
-      }
-      group_->setOwner(l, rank_);
-      setLocalState(l, r.s, false);
-      dirty.push_back(l);
+  for (const Record& r : in) {
+    kept.push_back(r);
+    arrived_ids.push_back(r.id);
+    const int32_t l = local_of_[size_t(r.id)];
+    if (l < 0) {  // not held here: a rebuild adds it
+      need_rebuild = true;
+      continue;
     }
-    arrived.insert(arrived.end(), in_warm[size_t(q)].begin(), in_warm[size_t(q)].end());
+    group_->setOwner(l, rank_);
+    setLocalState(l, r.s, false);
+    dirty.push_back(l);
   }
   if (!dirty.empty()) sys_->markBodiesDirty(dirty);
   if (!arrived.empty()) {
     warm_.insert(warm_.end(), arrived.begin(), arrived.end());  // kept for a rebuild this step
     setLocalWarmStart(arrived, false);
   }
-  owned_stale_ = owned_stale_ || !leaving.empty();
-  for (const auto& l : in) owned_stale_ = owned_stale_ || !l.empty();
+  owned_stale_ = owned_stale_ || !leaving.empty() || !in.empty();
   // A body that left is a copy here now: parked by refreshCopies unless its new owner refreshes it.
   fresh_.insert(fresh_.end(), leaving.begin(), leaving.end());
   near = std::move(kept);
@@ -487,19 +478,32 @@ void DistributedSystem::migrateAll() {
     const int q = e.owner >= 0 ? owner_[size_t(e.owner)] : rank_;
     (q != rank_ && q >= 0 ? out_warm[size_t(q)] : kept_warm).push_back(e);
   }
-  const auto in = mpiExchange(comm_, out, &prof_.migrate_bytes);
-  const auto in_warm = mpiExchange(comm_, out_warm, &prof_.migrate_bytes);
+  std::vector<Record> in;
+  const std::vector<WarmEntry> arrived = exchangeMoves(out, out_warm, in);
+  kept_warm.insert(kept_warm.end(), arrived.begin(), arrived.end());
+  warm_ = std::move(kept_warm);
+  owned_stale_ = true;
+}
+
+// The moves' two all-to-alls (bodies, and the impulses of the contacts they own): the bodies that arrive become this
+// process's (their states in state_, in `in`); returns the impulses that arrive.
+std::vector<DistributedSystem::WarmEntry> DistributedSystem::exchangeMoves(
+    const std::vector<std::vector<Record>>& out, const std::vector<std::vector<WarmEntry>>& out_warm,
+    std::vector<Record>& in) {
+  const auto recs = mpiExchange(comm_, out, &prof_.migrate_bytes);
+  const auto warm = mpiExchange(comm_, out_warm, &prof_.migrate_bytes);
+  std::vector<WarmEntry> arrived;
   for (int q = 0; q < size_; ++q) {
-    log_.received[size_t(q)] += int64_t(in[size_t(q)].size());
-    for (const Record& r : in[size_t(q)]) {
+    log_.received[size_t(q)] += int64_t(recs[size_t(q)].size());
+    for (const Record& r : recs[size_t(q)]) {
       owner_[size_t(r.id)] = rank_;
       state_[size_t(r.id)] = r.s;
       ++owned_count_;
+      in.push_back(r);
     }
-    kept_warm.insert(kept_warm.end(), in_warm[size_t(q)].begin(), in_warm[size_t(q)].end());
+    arrived.insert(arrived.end(), warm[size_t(q)].begin(), warm[size_t(q)].end());
   }
-  warm_ = std::move(kept_warm);
-  owned_stale_ = true;
+  return arrived;
 }
 
 const std::vector<int32_t>& DistributedSystem::ownedIds() const {

@@ -138,6 +138,8 @@ class DistributedSystem {
   std::vector<WarmEntry> warmEntries(const std::vector<ContactImpulse>& contacts) const;
   bool rebalanceIfNeeded();
   void migrateAll();
+  std::vector<WarmEntry> exchangeMoves(const std::vector<std::vector<Record>>& out,
+                                       const std::vector<std::vector<WarmEntry>>& out_warm, std::vector<Record>& in);
   int32_t pairOwner(int32_t a, int32_t b) const;
   void setLocalState(int32_t local, const MotionState& s, bool parked);
   void syncOwned() const;

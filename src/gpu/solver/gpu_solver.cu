@@ -153,18 +153,6 @@ ProblemView view(DeviceState& d, real max_diag) {
   return p;
 }
 
-__device__ int64_t findKey(const uint64_t* keys, int64_t n, uint64_t x) {
-  int64_t lo = 0, hi = n;
-  while (lo < hi) {
-    const int64_t mid = (lo + hi) / 2;
-    if (keys[mid] < x)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo < n && keys[lo] == x ? lo : -1;
-}
-
 // Each contact's impulses from the handed-over table (DeviceState::extra_key) where it has the key, else from last
 // step's, else zero.
 struct WarmF {
@@ -178,8 +166,8 @@ struct WarmF {
   real* gamma;
   __device__ void operator()(int64_t k) const {
     const uint64_t x = key[k];
-    const int64_t e = findKey(extra_key, ne, x);
-    const int64_t j = e >= 0 ? -1 : findKey(prev_key, np, x);
+    const int64_t e = findSorted(extra_key, ne, x);
+    const int64_t j = e >= 0 ? -1 : findSorted(prev_key, np, x);
     for (int r = 0; r < 3; ++r)
       gamma[3 * k + r] = e >= 0 ? extra_gamma[3 * e + r] : (j >= 0 ? prev_gamma[3 * j + r] : real(0));
   }
