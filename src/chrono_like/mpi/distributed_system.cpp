@@ -447,7 +447,8 @@ bool DistributedSystem::rebalanceIfNeeded() {
   const double most = group_->max(counts[0]);
   group_->sum(counts + 1, 1);
   const double mean = counts[1] / size_;
-  if (!(mean > 0) || most <= double(settings_.rebalance_ratio) * mean) return false;
+  // No bisection does better than ceil(mean) a process (2 bodies on 3 processes re-balanced every step before).
+  if (!(mean > 0) || most <= double(settings_.rebalance_ratio) * mean || most <= std::ceil(mean)) return false;
   readLocal(true);
   const std::vector<MotionState> all = gatherState();
   std::vector<Vec3> points;

@@ -34,7 +34,7 @@ namespace dvi {
 
 struct DecompositionSettings {
   // Recompute the bisection (re-balance) after a step whose largest owned count exceeds this times the mean
-  // (> 1). Default 1.2.
+  // (> 1), and the mean rounded up. Default 1.2.
   real rebalance_ratio = real(1.2);
   // Factor (>= 1) on the ghost width: 2 x the largest bounding radius + the largest collision envelope + 2 x the
   // largest sweep of a step (the farthest two bodies' centres can be and still touch). Default 1.5.
