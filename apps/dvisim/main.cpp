@@ -128,7 +128,15 @@ int runCes(const Options& o) {
 }
 
 int run(const Options& o) {
-  const bool ces = o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene);
+  bool mpi_resume = false;  // --resume of a scene run under mpirun (mpi_run.h), not of a CES machine
+#ifdef DVISIM_HAVE_MPI
+  mpi_resume = !o.resume.empty() && isMpiCheckpoint(o.resume);
+  if (mpi_resume && (o.scene.empty() || !mpiInitialized()))
+    throw InputError("--resume " + o.resume +
+                     ": an MPI run's checkpoint resumes under mpirun (any -np), with the scene it ran: mpirun -np K "
+                     "dvisim run SCENE --resume DIR");
+#endif
+  const bool ces = !mpi_resume && (o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene));
 #ifdef DVISIM_HAVE_MPI
   if (ces && mpiProcesses() > 1)
     throw InputError("a CES machine does not run over several processes (MPI): run it without mpirun");
@@ -172,7 +180,8 @@ int run(const Options& o) {
   const int64_t steps = st.stepCount();
 #ifdef DVISIM_HAVE_MPI
   // Under `mpirun -np K` (K > 1): the domain decomposition (mpi_run.h).
-  if (mpiProcesses() > 1) return runSceneMpi(scene, cfg, steps, frameSteps(st.frames, steps), o.out, o.backend);
+  if (mpiProcesses() > 1 || mpi_resume)
+    return runSceneMpi(scene, cfg, steps, frameSteps(st.frames, steps), o.out, o.backend, o.resume);
 #endif
 
   // Backend.
@@ -475,7 +484,9 @@ int main(int argc, char** argv) {
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
-  run_cmd->add_option("--resume", o.resume, "CES machine: continue the run checkpointed in DIR (DIR/checkpoint/)");
+  run_cmd->add_option("--resume", o.resume,
+                      "Continue the run checkpointed in DIR (DIR/checkpoint/): a CES machine's, or a scene's run under "
+                      "mpirun (with its scene, on any number of processes, to --steps)");
   const std::function<int()> compare = addCompareCommand(app);
   const std::function<int()> sweep = addSweepCommand(app);
   BenchRegistry bench;  // the `bench` subcommands

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -16,6 +17,9 @@
 #include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/mpi/distributed_system.h"
+#include "chrono_like/base/checksum.h"
+#include "chrono_like/io/input_limits.h"
+#include "chrono_like/mpi/checkpoint.h"
 #include "chrono_like/mpi/mpi_collectives.h"
 #include "gpu/gpu_factory.h"
 #include "progress.h"
@@ -45,6 +49,17 @@ void mpiAbort(int code) {
   std::fflush(stdout);
   std::fflush(stderr);
   MPI_Abort(MPI_COMM_WORLD, code);
+}
+
+bool mpiInitialized() {
+  int init = 0;
+  MPI_Initialized(&init);
+  return init != 0;
+}
+
+bool isMpiCheckpoint(const std::string& dir) {
+  std::error_code ec;
+  return !dir.empty() && std::filesystem::is_regular_file(dir + "/checkpoint/manifest.json", ec);
 }
 
 int mpiProcesses() {
@@ -171,10 +186,106 @@ void writeFramePieces(const dvi::DistributedSystem& sys, const std::vector<dvi::
   series->addFile(time, name, dvi::pvtpFrame(pieces));
 }
 
+// The scene file's checksum (FNV-1a 64 of its bytes), recorded by a checkpoint and compared by its resume.
+std::string sceneChecksum(const dvi::Scene& scene) {
+  if (scene.source.empty() || scene.source[0] == '<') return "none";
+  const std::string bytes = dvi::readRegularFile(scene.source, scene.source, uint64_t(1) << 32);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", (unsigned long long)dvi::fnv1a64(bytes.data(), bytes.size()));
+  return hex;
+}
+
+// checkpoint/ in the results: each process's piece (checkpoint.h), process 0's manifest.json naming them with the
+// step, the clock, dt, the scene and its checksum.
+void writeCheckpoint(const dvi::DistributedSystem& sys, const dvi::Scene& scene, double dt, const std::string& dir) {
+  const std::string cdir = dir + "/checkpoint";
+  if (sys.rank() == 0) std::filesystem::create_directories(cdir);
+  MPI_Barrier(MPI_COMM_WORLD);
+  dvi::writeFileAtomic(cdir + "/piece_p" + std::to_string(sys.rank()) + ".bin",
+                       dvi::encodePiece(sys.checkpointPiece()));
+  if (sys.rank() != 0) return;
+  nlohmann::json m;
+  m["format"] = "dvisim-mpi-checkpoint";
+  m["version"] = 1;
+  m["processes"] = sys.processes();
+  m["step"] = sys.stepCount();
+  m["time"] = sys.time();
+  m["dt"] = dt;
+  m["bodies"] = sys.bodyCount();
+  m["scene"] = scene.source;
+  m["scene_checksum"] = sceneChecksum(scene);
+  dvi::writeFileAtomic(cdir + "/manifest.json", m.dump(2) + "\n");
+}
+
+// A checkpoint written by writeCheckpoint, read whole by every process: InputError naming what does not fit the scene
+// and the run (another scene, scene file or dt, a missing, damaged or inconsistent piece).
+struct Resumed {
+  std::vector<dvi::MotionState> states;
+  std::vector<dvi::ContactImpulse> impulses;
+  double time = 0;
+  int64_t step = 0;
+};
+Resumed readCheckpoint(const std::string& dir, const dvi::Scene& scene, const std::vector<uint8_t>& flags, double dt) {
+  const std::string what = "--resume " + dir;
+  const std::string mpath = dir + "/checkpoint/manifest.json";
+  nlohmann::json m;
+  try {
+    m = nlohmann::json::parse(dvi::readRegularFile(mpath, what + ": checkpoint/manifest.json", 1 << 20));
+  } catch (const nlohmann::json::exception& e) {
+    throw dvi::InputError(what + ": checkpoint/manifest.json: " + e.what());
+  }
+  auto field = [&](const char* key) -> const nlohmann::json& {
+    if (!m.is_object() || !m.contains(key))
+      throw dvi::InputError(what + ": checkpoint/manifest.json: no \"" + std::string(key) + "\"");
+    return m[key];
+  };
+  if (field("format") != "dvisim-mpi-checkpoint" || field("version") != 1)
+    throw dvi::InputError(what + ": checkpoint/manifest.json: not a dvisim MPI checkpoint of version 1");
+  if (!field("bodies").is_number_unsigned() || field("bodies").get<uint64_t>() != flags.size())
+    throw dvi::InputError(what + ": the checkpoint has " + field("bodies").dump() + " bodies, the scene " +
+                          std::to_string(flags.size()));
+  if (!field("dt").is_number() || field("dt").get<double>() != dt)
+    throw dvi::InputError(what + ": the checkpoint ran at dt = " + field("dt").dump() + ", this run at " +
+                          std::to_string(dt) + " (give the same --dt)");
+  if (field("scene_checksum") != sceneChecksum(scene))
+    throw dvi::InputError(what + ": the scene file differs from the one the checkpoint ran (" + field("scene").dump() +
+                          ")");
+  const nlohmann::json& np = field("processes");
+  const nlohmann::json& st = field("step");
+  const nlohmann::json& tm = field("time");
+  if (!np.is_number_unsigned() || np.get<uint64_t>() < 1 || np.get<uint64_t>() > 1000000 || !st.is_number_unsigned() ||
+      !tm.is_number() || !std::isfinite(tm.get<double>()))
+    throw dvi::InputError(what + ": checkpoint/manifest.json: processes, step or time out of range");
+  Resumed r;
+  r.step = st.get<int64_t>();
+  r.time = tm.get<double>();
+  r.states.resize(flags.size());
+  std::vector<char> seen(flags.size(), 0);
+  for (uint64_t q = 0; q < np.get<uint64_t>(); ++q) {
+    const std::string name = "checkpoint/piece_p" + std::to_string(q) + ".bin";
+    const dvi::CheckpointPiece p =
+        dvi::decodePiece(dvi::readRegularFile(dir + "/" + name, what + ": " + name, uint64_t(1) << 40),
+                         what + ": " + name, flags.size());
+    for (size_t i = 0; i < p.ids.size(); ++i) {
+      const int32_t id = p.ids[i];
+      if (seen[size_t(id)] || (flags[size_t(id)] & (dvi::kBodyFixed | dvi::kBodyKinematic)))
+        throw dvi::InputError(what + ": " + name + ": body " + std::to_string(id) + " twice, or not a dynamic body");
+      seen[size_t(id)] = 1;
+      r.states[size_t(id)] = p.states[i];
+    }
+    r.impulses.insert(r.impulses.end(), p.impulses.begin(), p.impulses.end());
+  }
+  for (size_t id = 0; id < flags.size(); ++id)
+    if (!seen[id] && !(flags[id] & (dvi::kBodyFixed | dvi::kBodyKinematic)))
+      throw dvi::InputError(what + ": dynamic body " + std::to_string(id) + " is in no piece");
+  return r;
+}
+
 }  // namespace
 
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
-                const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend) {
+                const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend,
+                const std::string& resume) {
   if (backend != "auto" && backend != "cpu" && backend != "gpu")
     throw dvi::InputError("--backend " + backend + ": not available over several processes (MPI runs cpu or gpu)");
   // gpu: one device a process, host rank i on device i (mod the devices); auto: the CPU.
@@ -187,12 +298,23 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
           : nullptr);
   const std::vector<btRigidBody*>& bodies = scene.bodies();
   std::vector<dvi::real> sizes;
+  std::vector<uint8_t> flags;
   for (size_t i = 0; i < bodies.size(); ++i) {
     const dvi::BodyDesc d = dvi::bodyDescForSystem(bodies[i], i, cfg.step.gravity);
     dvi::real m = dvi::real(1e30);
     for (const auto& sh : d.shapes) m = std::fmin(m, sh.shape.size);
     sizes.push_back(m);
+    flags.push_back(d.flags);
     sys.addBody(d);
+  }
+  int64_t first = 0;  // the step a resumed run starts from
+  if (!resume.empty()) {
+    const Resumed r = readCheckpoint(resume, scene, flags, double(cfg.step.dt));
+    if (steps <= r.step)
+      throw dvi::InputError("--steps " + std::to_string(steps) + ": the checkpoint in " + resume + " is at step " +
+                            std::to_string(r.step) + " already (--steps counts from the start of the run)");
+    sys.restore(r.states, r.impulses, r.time, r.step);
+    first = r.step;
   }
   const bool root = sys.rank() == 0;
   std::unique_ptr<dvi::ResultDir> rd;
@@ -211,7 +333,8 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   dvi::installStopHandlers();
   bool interrupted = false;
   const auto t0 = std::chrono::steady_clock::now();
-  for (int64_t k = 0;; ++k) {
+  while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
+  for (int64_t k = first;; ++k) {
     for (; next_frame < frame_at.size() && frame_at[next_frame] == k; ++next_frame)
       writeFramePieces(sys, sizes, dir, frames++, double(k) * cfg.step.dt, series.get());
     if (k == steps) break;
@@ -235,6 +358,7 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   int64_t moved = 0;
   for (int64_t v : sys.migrations().sent) moved += v;
   moved = dvi::mpiSum(MPI_COMM_WORLD, moved);
+  writeCheckpoint(sys, scene, double(cfg.step.dt), dir);
   MPI_Barrier(MPI_COMM_WORLD);  // every piece written before process 0 puts the directory in place
   const int code = interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
   if (!root) return code;
@@ -257,18 +381,20 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   summary["residual_final"] = relative;
   summary["contacts_mean"] = done > 0 ? double(contacts) / double(done) : 0.0;
   summary["migrations"] = moved;
+  if (first > 0) summary["resumed_from_step"] = first;
+  summary["checkpoint"] = "checkpoint/";
   summary["rebalances"] = sys.migrations().rebalances;
   summary["frames"] = frames;
   summary["status"] = dvi::runStatusName(code);
   summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = done > 0 ? 1000.0 * wall / double(done) : 0.0;
+  summary["ms_per_step"] = done > first ? 1000.0 * wall / double(done - first) : 0.0;
   dvi::writeBodiesCsv(dir + "/bodies.csv", state);
   dvi::writeSummary(dir + "/summary.json", summary);
   series.reset();  // frames.pvd closed before the directory moves
   rd->commit();
   std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", rd->out().c_str(),
               frames ? (", " + std::to_string(frames) + " frames: frame_NNNN.pvtp + pieces, frames.pvd").c_str() : "",
-              wall, done > 0 ? 1000.0 * wall / double(done) : 0.0);
+              wall, done > first ? 1000.0 * wall / double(done - first) : 0.0);
   if (interrupted) {
     std::fflush(stdout);
     std::fprintf(stderr, "dvisim: interrupted by a signal after step %lld of %lld; the results so far are in %s/\n",

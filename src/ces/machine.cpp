@@ -12,7 +12,7 @@
 #include <unordered_map>
 
 #include "chrono_like/base/errors.h"
-#include "chrono_like/io/checksum.h"
+#include "chrono_like/base/checksum.h"
 
 namespace dvi {
 namespace ces {

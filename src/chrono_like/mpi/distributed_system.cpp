@@ -88,8 +88,10 @@ void DistributedSystem::start() {
     const BodyDesc& d = descs_[i];
     const bool fixed = (d.flags & kBodyFixed) != 0;
     state_[i] = MotionState{d.pos, normalized(d.rot), fixed ? Vec3{0, 0, 0} : d.vel, fixed ? Vec3{0, 0, 0} : d.omega};
+    if (!restored_.empty() && !replicated_[i]) state_[i] = restored_[i];
     gmax_ = std::max(gmax_, length(d.has_gravity ? d.gravity : config_.step.gravity));
   }
+  restored_.clear();
   std::vector<Vec3> points;
   for (int32_t id : dynamic_) {
     points.push_back(state_[size_t(id)].pos);
@@ -554,6 +556,40 @@ std::vector<MotionState> DistributedSystem::ownedStates() const {
   syncOwned();
   for (int32_t id : ownedIds()) out.push_back(state_[size_t(id)]);
   return out;
+}
+
+CheckpointPiece DistributedSystem::checkpointPiece() const {
+  CheckpointPiece p;
+  p.ids = ownedIds();
+  p.states = ownedStates();
+  std::vector<WarmEntry> entries = warm_;  // this step's arrivals (or, after a re-balance, every entry)
+  if (sys_ && !host_states_) {
+    std::vector<int32_t> all(local_ids_.size());
+    for (size_t i = 0; i < all.size(); ++i) all[i] = int32_t(i);
+    const std::vector<WarmEntry> mine = warmEntries(sys_->contactImpulsesOf(all));
+    entries.insert(entries.end(), mine.begin(), mine.end());
+  }
+  for (const WarmEntry& e : entries)
+    p.impulses.push_back(ContactImpulse{e.key, e.body_a, e.body_b, {e.gamma[0], e.gamma[1], e.gamma[2]}});
+  return p;
+}
+
+void DistributedSystem::restore(const std::vector<MotionState>& states, const std::vector<ContactImpulse>& impulses,
+                                double time, int64_t steps) {
+  if (started_) throw InputError("restore: only before the first step");
+  if (states.size() != descs_.size())
+    throw InputError("restore: " + std::to_string(states.size()) + " states for " + std::to_string(descs_.size()) +
+                     " bodies");
+  restored_ = states;
+  start();
+  warm_.clear();
+  for (const ContactImpulse& c : impulses) {  // the entries of the contacts whose owning body is this process's
+    const int32_t o = pairOwner(c.body_a, c.body_b);
+    if (o >= 0 ? owner_[size_t(o)] != rank_ : rank_ != 0) continue;
+    warm_.push_back(WarmEntry{c.key, c.body_a, c.body_b, o, {c.gamma[0], c.gamma[1], c.gamma[2]}});
+  }
+  time_ = time;
+  steps_ = steps;
 }
 
 std::vector<MotionState> DistributedSystem::gatherState() const {

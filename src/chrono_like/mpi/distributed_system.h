@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "chrono_like/mpi/bisection.h"
+#include "chrono_like/mpi/checkpoint.h"
 #include "chrono_like/mpi/mpi_group.h"
 #include "chrono_like/system.h"
 
@@ -42,12 +43,6 @@ struct DecompositionSettings {
   // Factor (>= 1) on the ghost width for the copies the local System keeps between rebuilds: the wider, the rarer the
   // rebuilds (a body must come from beyond it) and the more parked copies collide for nothing. Default 2.
   real halo_factor = real(2);
-};
-
-struct MotionState {
-  Vec3 pos;
-  Quat rot;
-  Vec3 vel, omega;
 };
 
 // Where this process's steps went and what it sent, summed since construction (seconds by steady clock, bytes).
@@ -100,6 +95,14 @@ class DistributedSystem {
   std::vector<MotionState> gatherState() const;
   // The states of the bodies this process owns, in ownedIds() order (one copy from the local System).
   std::vector<MotionState> ownedStates() const;
+  // This process's share of a checkpoint (checkpoint.h): its owned bodies' states and the impulses of the contacts it
+  // solved in the last step, under global ids and keys. Not collective.
+  CheckpointPiece checkpointPiece() const;
+  // Before the first step: start from `states` (every body, global order; fixed bodies keep their description's) with
+  // `impulses` (the pieces of every process together) as the warm start, the clock at `time` after `steps` steps. The
+  // bisection is made from these positions, so any number of processes can resume.
+  void restore(const std::vector<MotionState>& states, const std::vector<ContactImpulse>& impulses, double time,
+               int64_t steps);
   // The current state of a body this process owns, or of a fixed or kinematic body (every process's); InputError
   // for another (its state is its owner's).
   MotionState stateOf(int32_t id) const;
@@ -175,6 +178,7 @@ class DistributedSystem {
   DecompositionProfile prof_;
   double time_ = 0;
   int64_t steps_ = 0;
+  std::vector<MotionState> restored_;  // restore(): the states start() takes
 };
 
 }  // namespace dvi

@@ -1,0 +1,37 @@
+// No MPI here (the fuzz target links it alone). A distributed run's checkpoint piece (DistributedSystem::checkpointPiece): one process's owned bodies and the
+// impulses of the contacts it solved, under global ids and keys, so that any number of processes can resume from the
+// pieces together. The file, little-endian as the machine writes it (format DVIMPI01):
+//   "DVIMPI01" | u64 bodies | bodies x (i32 id, 13 reals: pos, rot, vel, omega) | u64 contacts |
+//   contacts x (u64 key, i32 body_a, i32 body_b, 3 reals) | u64 FNV-1a 64 (checksum.h) of every byte before it
+// decodePiece checks the checksum before it reads a field, then every field (ids in range and ascending, finite
+// numbers, unit rotations): InputError naming the problem.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "chrono_like/system.h"
+
+namespace dvi {
+
+// A body's state as the decomposition moves it (DistributedSystem) and a checkpoint stores it.
+struct MotionState {
+  Vec3 pos;
+  Quat rot;
+  Vec3 vel, omega;
+};
+
+constexpr char kMpiCheckpointMagic[9] = "DVIMPI01";
+
+struct CheckpointPiece {
+  std::vector<int32_t> ids;  // ascending
+  std::vector<MotionState> states;
+  std::vector<ContactImpulse> impulses;  // global contact keys and body ids
+};
+
+std::string encodePiece(const CheckpointPiece& p);
+// `what` names the file in messages; bodies: the scene's body count (ids must be below it).
+CheckpointPiece decodePiece(const std::string& bytes, const std::string& what, size_t bodies);
+
+}  // namespace dvi
