@@ -155,7 +155,7 @@ real DistributedSystem::ghostWidth() const {
 void DistributedSystem::rebuild(bool read_local) {
   using Clock = std::chrono::steady_clock;
   const auto t = Clock::now();
-  if (read_local) readLocal(true);
+  if (read_local) readLocal();
   const real halo = settings_.halo_factor * width_;
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
   for (int32_t id : dynamic_) {
@@ -213,9 +213,9 @@ void DistributedSystem::rebuild(bool read_local) {
   prof_.build_s += std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-// The owned bodies' states (and, with_contacts, the impulses of this process's contacts by global key, into warm_)
-// from the local System to the host.
-void DistributedSystem::readLocal(bool with_contacts) {
+// The owned bodies' states and the impulses of this process's contacts by global key (added to warm_) from the local
+// System to the host.
+void DistributedSystem::readLocal() {
   sys_->syncToHost();
   const BodyArrays& b = sys_->bodies();
   for (size_t i = 0; i < local_ids_.size(); ++i) {
@@ -223,7 +223,6 @@ void DistributedSystem::readLocal(bool with_contacts) {
     if (replicated_[size_t(id)] || owner_[size_t(id)] == rank_)
       state_[size_t(id)] = MotionState{b.pos[i], b.rot[i], b.vel[i], b.omega[i]};
   }
-  if (!with_contacts) return;
   std::vector<int32_t> all(local_ids_.size());
   for (size_t i = 0; i < all.size(); ++i) all[i] = int32_t(i);
   const std::vector<WarmEntry> mine = warmEntries(sys_->contactImpulsesOf(all));
@@ -451,7 +450,7 @@ bool DistributedSystem::rebalanceIfNeeded() {
   const double mean = counts[1] / size_;
   // No bisection does better than ceil(mean) a process (2 bodies on 3 processes re-balanced every step before).
   if (!(mean > 0) || most <= double(settings_.rebalance_ratio) * mean || most <= std::ceil(mean)) return false;
-  readLocal(true);
+  readLocal();
   const std::vector<MotionState> all = gatherState();
   std::vector<Vec3> points;
   for (int32_t id : dynamic_) points.push_back(all[size_t(id)].pos);

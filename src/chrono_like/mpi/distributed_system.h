@@ -136,7 +136,7 @@ class DistributedSystem {
   void migrate(std::vector<Record>& near, const std::vector<int32_t>& near_locals, std::vector<int32_t>& arrived_ids,
                bool& need_rebuild);
   void refreshCopies(const std::vector<Record>& near, const std::vector<int32_t>& arrived, bool& need_rebuild);
-  void readLocal(bool with_contacts);
+  void readLocal();
   void setLocalWarmStart(const std::vector<WarmEntry>& entries, bool replace);
   std::vector<WarmEntry> warmEntries(const std::vector<ContactImpulse>& contacts) const;
   bool rebalanceIfNeeded();
