@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Bounded fuzzing under CTest (tests/fuzz/CMakeLists.txt, label fuzz; docs/HARDENING.md).
 #   run_fuzz.sh build SRC TREE                  configure and build an instrumented tree (clang, DVISIM_FUZZ:
-#                                                libFuzzer + ASan + UBSan) with only the four fuzz targets
+#                                                libFuzzer + ASan + UBSan) with only the fuzz targets
 #   run_fuzz.sh run SRC TREE TARGET SECONDS      fuzz one target for SECONDS, starting from corpus/TARGET and
 #                                                regressions/TARGET (new inputs go to a scratch directory); any
 #                                                finding fails, its reproducer is kept in TREE/fuzz-artifacts/TARGET/
@@ -16,7 +16,7 @@ if [ -z "$cxx" ] || ! "$cxx" -fsanitize=fuzzer,address,undefined "$probe/p.cpp" 
   echo "fuzz: no clang++ with libFuzzer: skipped (Debian packages clang libclang-rt-14-dev libomp-dev)"
   exit 77
 fi
-targets=(scene_json ces_config bullet_file ces_checkpoint)
+targets=(scene_json ces_config bullet_file ces_checkpoint mpi_checkpoint)
 case $mode in
 build)
   launcher=()
