@@ -177,19 +177,6 @@ void reserveExchange(DeviceState& d, size_t n) {
   d.ex_host_cap = cap;
 }
 
-// ex_buf (n values) through the host to the group and back.
-void exchangeStaged(DeviceState& d, int64_t n) {
-  if (n > 0) {
-    DVI_CUDA(
-        cudaMemcpyAsync(d.ex_host, d.ex_buf.data(), sizeof(BodyDelta) * size_t(n), cudaMemcpyDeviceToHost, d.stream));
-    DVI_CUDA(cudaStreamSynchronize(d.stream));
-  }
-  d.group->exchangeCompact(d.ex_host);  // with nothing listed: no messages (the neighbours list nothing either)
-  if (n > 0)
-    DVI_CUDA(
-        cudaMemcpyAsync(d.ex_buf.data(), d.ex_host, sizeof(BodyDelta) * size_t(n), cudaMemcpyHostToDevice, d.stream));
-}
-
 }  // namespace
 
 void uploadOwners(DeviceState& d) {
@@ -261,22 +248,30 @@ void sendSharesAsync(DeviceState& d) {
                            d.copy_stream));
 }
 
-void receiveSums(DeviceState& d, BodyDelta* delta) {
+// Waits for the shares' copy alone (d.stream runs on), exchanges them, and queues their sums back into ex_buf ahead
+// of whatever d.stream runs next. Returns the listed count.
+static int64_t receiveSumsIntoBuffer(DeviceState& d) {
   const int64_t n = int64_t(d.ex_count);
-  if (n > 0) DVI_CUDA(cudaStreamSynchronize(d.copy_stream));  // the shares alone; d.stream runs on
+  if (n > 0) DVI_CUDA(cudaStreamSynchronize(d.copy_stream));
   d.group->exchangeCompact(d.ex_host);  // with nothing listed: no messages (the neighbours list nothing either)
-  if (n == 0) return;
+  if (n == 0) return 0;
   DVI_CUDA(cudaMemcpyAsync(d.ex_buf.data(), d.ex_host, sizeof(BodyDelta) * size_t(n), cudaMemcpyHostToDevice,
                            d.copy_stream));
   DVI_CUDA(cudaEventRecord(d.ev_sums, d.copy_stream));
   DVI_CUDA(cudaStreamWaitEvent(d.stream, d.ev_sums, 0));
+  return n;
+}
+
+void receiveSums(DeviceState& d, BodyDelta* delta) {
+  const int64_t n = receiveSumsIntoBuffer(d);
   launchMap(d, n, ScatterByF<BodyDelta>{d.ex_ids.data(), d.ex_buf.data(), delta}, "launch of ScatterByF (sums)");
 }
 
 void exchangeBodyValues(DeviceState& d, real* per_body) {
   const int64_t n = int64_t(d.ex_count);
   launchMap(d, n, PackValueF{d.ex_ids.data(), per_body, d.ex_buf.data()}, "launch of PackValueF");
-  exchangeStaged(d, n);
+  sendSharesAsync(d);
+  receiveSumsIntoBuffer(d);
   launchMap(d, n, UnpackValueF{d.ex_ids.data(), d.ex_buf.data(), per_body}, "launch of UnpackValueF");
 }
 
@@ -322,7 +317,7 @@ std::vector<ContactImpulse> contactImpulsesOf(DeviceState& d, const std::vector<
             "launch of TouchingF");
   const int64_t n = selectFlagged(d, nc, d.mark.data(), "cub::DeviceSelect::Flagged (contacts of bodies)");
   if (n == 0) return out;
-  DeviceBuffer<ContactImpulse> rec{"contact impulse records"};
+  DeviceBuffer<ContactImpulse>& rec = d.impulse_records;
   rec.resize(size_t(n));
   launchMap(
       d, n,

@@ -247,6 +247,7 @@ struct DeviceState {
   DeviceBuffer<real> extra_gamma{"handed-over warm-start impulses"};
   size_t extra_count = 0;
   DeviceContacts contacts_kept;  // the owned contacts while they are compacted (swapped with contacts)
+  DeviceBuffer<ContactImpulse> impulse_records{"contact impulse records"};  // contactImpulsesOf's read-back
 
   // Reads `n` doubles from device memory into host_scalars (one synchronisation).
   const double* readScalars(const double* dev, int n);

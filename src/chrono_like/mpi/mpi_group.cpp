@@ -110,7 +110,6 @@ void MpiGroup::setTouchedCopies(const std::vector<int32_t>& copies) {
       part[size_t(pos_[size_t(it - keys_.begin())])].push_back(l[m + 1]);
     }
   setPairs(part);
-  traffic_.shared_bodies += int64_t(list_.size());
   traffic_.exchange_s += MPI_Wtime() - t0;
 }
 

@@ -17,7 +17,6 @@ struct GroupTraffic {
   double exchange_s = 0, reduce_s = 0;  // exchangeCompact (with setTouchedCopies); sum and max
   int64_t exchanges = 0, reductions = 0;
   int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours, and the touched lists
-  int64_t shared_bodies = 0;   // exchange list lengths, summed over the steps
 };
 
 class MpiGroup final : public ProcessGroup {
