@@ -43,6 +43,7 @@ struct MpiRow {
   double efficiency = 0;                                 // against the one-process row of the mode (set later)
   double rebuilds = 0;                                   // local Systems built, the warm-up's included (process 0)
   double plain_ms = 0;  // the one-process row of the weak mode: the plain System on the same pile, ms per step
+  std::string spread;   // phases and parts of phases, ms per step, "min-max" over the processes
 };
 
 // The local System of a run: the CPU System, or the GPU one on this process's device (runScalingMpi selects it).
@@ -104,6 +105,23 @@ MpiRow runPile(MPI_Comm comm, const std::string& mode, long n, int warmup, int s
   r.reductions = double(p.group.reductions - p0.group.reductions) / steps;
   r.contacts = dvi::mpiSum(comm, contacts) / steps;
   r.rebuilds = double(sys.migrations().rebuilds);
+  const std::pair<const char*, double> parts[] = {
+      {"step", p.step_s - p0.step_s},
+      {"NarrowPhase",
+       p.stages_s[size_t(dvi::StageType::NarrowPhase)] - p0.stages_s[size_t(dvi::StageType::NarrowPhase)]},
+      {"of it touched lists", p.group.touched_s - p0.group.touched_s},
+      {"Solve", p.stages_s[size_t(dvi::StageType::Solve)] - p0.stages_s[size_t(dvi::StageType::Solve)]},
+      {"exchanges", p.group.exchange_s - p0.group.exchange_s - (p.group.touched_s - p0.group.touched_s)},
+      {"reductions", p.group.reduce_s - p0.group.reduce_s},
+      {"read-back", p.readback_s - p0.readback_s},
+      {"of it the ghost width", p.width_s - p0.width_s},
+      {"migration", p.migrate_s - p0.migrate_s},
+      {"of it MPI", p.migrate_mpi_s - p0.migrate_mpi_s},
+      {"ghosts", p.ghosts_s - p0.ghosts_s},
+      {"of it MPI", p.ghosts_mpi_s - p0.ghosts_mpi_s}};
+  for (const auto& [name, seconds] : parts)
+    r.spread += std::string(r.spread.empty() ? "" : ", ") + name + " " + num(dvi::mpiMin(comm, seconds) * per, "%.2f") +
+                "-" + num(dvi::mpiMax(comm, seconds) * per, "%.2f");
   return r;
 }
 
@@ -184,6 +202,9 @@ std::string tableText(const std::vector<MpiRow>& rows) {
   for (const MpiRow& r : rows)
     m << "- " << r.mode << ", " << r.processes << " processes, " << r.bodies << " spheres: " << stagesText(r) << "; "
       << num(r.rebuilds, "%.0f") << " built\n";
+  m << "\nPhases and parts of phases over the processes (ms per step, fastest-slowest process; a collective's time "
+       "includes the wait for the slower process, so a wide spread there is load imbalance):\n\n";
+  for (const MpiRow& r : rows) m << "- " << r.mode << ", " << r.processes << " processes: " << r.spread << "\n";
   return m.str();
 }
 
@@ -243,7 +264,9 @@ int runScalingMpi(const MpiScalingOptions& o) {
                : ", " + std::to_string(size) + " processes of " + std::to_string(cfg.threads) + " thread(s)")
        << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n"
        << "- scene: the sphere pile of `bench scaling` (r = 1 cm, mu = 0.5, in a box); APGD, 50 iterations a step"
-       << (gpu ? " (over the processes APGD iterates on the host: one test reduction a trial crosses them)" : "")
+       << (gpu ? " (over the processes APGD's trials run on the device, their control on the host: one test reduction "
+                 "a trial crosses them)"
+               : "")
        << "\n- steps: " << warmup << " warm-up, then " << steps << " timed; "
        << (baseline ? "each mode's one-process run on process 0 alone, then all processes, in one invocation"
                     : "the K-process runs alone (--baseline off)")

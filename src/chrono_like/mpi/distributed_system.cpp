@@ -290,6 +290,7 @@ void DistributedSystem::afterStep() {
   auto t = Clock::now();
   warm_.clear();  // holds this step's arrivals from here to a rebuild
   width_ = ghostWidth();
+  prof_.width_s += since(t);
   std::vector<int32_t> near_locals;
   std::vector<Record> near = nearFaceBodies(near_locals);
   prof_.readback_s += since(t);
@@ -405,7 +406,9 @@ void DistributedSystem::refreshCopies(const std::vector<Record>& near, const std
       if (q != rank_ && tree_.distance(r.s.pos, q) <= width_ && (moved || l < 0 || !group_->exchangedWith(l, q)))
         out[size_t(q)].push_back(r);
   }
+  const double t0 = MPI_Wtime();
   const auto in = mpiExchange(comm_, out, &prof_.ghost_bytes);
+  prof_.ghosts_mpi_s += MPI_Wtime() - t0;
   std::vector<int32_t> now, dirty;
   for (int32_t l : group_->exchangeBodies()) {  // exchanged copies: current without a record
     const int32_t o = group_->bodyOwners()[size_t(l)];
@@ -445,8 +448,10 @@ void DistributedSystem::refreshCopies(const std::vector<Record>& near, const std
 // moved to its new box, and a new local System.
 bool DistributedSystem::rebalanceIfNeeded() {
   double counts[2] = {double(owned_count_), double(owned_count_)};
+  const double t0 = MPI_Wtime();
   const double most = group_->max(counts[0]);
   group_->sum(counts + 1, 1);
+  prof_.migrate_mpi_s += MPI_Wtime() - t0;
   const double mean = counts[1] / size_;
   // No bisection does better than ceil(mean) a process (2 bodies on 3 processes re-balanced every step before).
   if (!(mean > 0) || most <= double(settings_.rebalance_ratio) * mean || most <= std::ceil(mean)) return false;
@@ -492,8 +497,10 @@ void DistributedSystem::migrateAll() {
 std::vector<DistributedSystem::WarmEntry> DistributedSystem::exchangeMoves(
     const std::vector<std::vector<Record>>& out, const std::vector<std::vector<WarmEntry>>& out_warm,
     std::vector<Record>& in) {
+  const double t0 = MPI_Wtime();
   const auto recs = mpiExchange(comm_, out, &prof_.migrate_bytes);
   const auto warm = mpiExchange(comm_, out_warm, &prof_.migrate_bytes);
+  prof_.migrate_mpi_s += MPI_Wtime() - t0;
   std::vector<WarmEntry> arrived;
   for (int q = 0; q < size_; ++q) {
     log_.received[size_t(q)] += int64_t(recs[size_t(q)].size());

@@ -52,6 +52,10 @@ struct DecompositionProfile {
   double step_s = 0;      // the local System's step: its stages in stages_s, the solver's collectives in group
   double readback_s = 0;  // the ghost width, and the states of the owned bodies near a box face to the host
   double migrate_s = 0;   // bodies to their new owners (with their contacts' impulses), and re-balancing
+  // Parts of the above: the ghost width (of readback_s: a reduction over the local bodies and an MPI_Allreduce), the
+  // refresh's MPI_Alltoallv (of ghosts_s) and the moves' MPI_Alltoallv's with the re-balance test's reductions (of
+  // migrate_s); each collective's time includes the wait for the slower process.
+  double width_s = 0, ghosts_mpi_s = 0, migrate_mpi_s = 0;
   std::array<double, kStageCount> stages_s{};
   int64_t ghost_bytes = 0, migrate_bytes = 0;  // sent to other processes
   GroupTraffic group;                          // the solver's exchanges and reductions (MpiGroup)

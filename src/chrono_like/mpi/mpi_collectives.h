@@ -25,6 +25,11 @@ inline double mpiMax(MPI_Comm comm, double v) {
   MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, comm);
   return out;
 }
+inline double mpiMin(MPI_Comm comm, double v) {
+  double out = v;
+  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MIN, comm);
+  return out;
+}
 
 // Alltoallv of plain records: out[q] to process q; returns what each process sent here, by source. Adds the bytes
 // sent to other processes to *sent.

@@ -111,6 +111,7 @@ void MpiGroup::setTouchedCopies(const std::vector<int32_t>& copies) {
     }
   setPairs(part);
   traffic_.exchange_s += MPI_Wtime() - t0;
+  traffic_.touched_s += MPI_Wtime() - t0;
 }
 
 // From each listed body's processes: per other process q, the listed bodies both hold (ascending key: q lists them

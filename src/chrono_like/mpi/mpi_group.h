@@ -15,6 +15,7 @@ namespace dvi {
 // What the solver's collectives cost on this process since construction: MPI_Wtime seconds and bytes sent.
 struct GroupTraffic {
   double exchange_s = 0, reduce_s = 0;  // exchangeCompact (with setTouchedCopies); sum and max
+  double touched_s = 0;                 // of exchange_s: setTouchedCopies (once a step, at the end of NarrowPhase)
   int64_t exchanges = 0, reductions = 0;
   int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours, and the touched lists
 };

@@ -1,10 +1,12 @@
 // APGD's trials on the device: the driver of a solve (apgdIterateOnDevice: the persistent kernel where the device
-// runs it, else trial by trial), and the trial-by-trial launches: the step kernel, the Schur product through the
+// runs it, else trial by trial; over several processes trial by trial with the control on the host), and the
+// trial-by-trial launches: the step kernel, the Schur product through the
 // slots, and the test reduction whose last block updates the control; one trial captured as a CUDA graph and
 // launched in batches, with one read-back of the control a batch.
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <type_traits>
 
@@ -29,7 +31,9 @@ __global__ void __launch_bounds__(kBlock) apgdStepKernel(int64_t n, ApgdBuffers<
 
 // The test reduction, and in its last block to finish (a counter in st; the partials are then summed in
 // block order, so the result does not depend on which block is last) the control update.
-template <class V>
+// HostControl (a problem shared over processes): the last block stores the sums in st->sums and leaves the control
+// to the host, which adds the other processes' sums first.
+template <class V, bool HostControl>
 __global__ void __launch_bounds__(kBlock)
     apgdTestKernel(int64_t n, ApgdBuffers<V> B, ApgdDeviceState* st, double* partial) {
   const algo::ApgdControl& c = st->c;
@@ -44,6 +48,11 @@ __global__ void __launch_bounds__(kBlock)
   __shared__ double sums[5];
   reducePartials<5>(int(gridDim.x), partial, sums);
   if (threadIdx.x != 0) return;
+  if constexpr (HostControl) {
+    for (int m = 0; m < 5; ++m) st->sums[m] = sums[m];
+    st->blocks_done = 0;
+    return;
+  }
   algo::ApgdControl next = st->c;
   next.afterTest(sums);
   st->c = next;
@@ -52,14 +61,45 @@ __global__ void __launch_bounds__(kBlock)
   st->blocks_done = 0;
 }
 
-template <class V>
+// One trial's launches. HostControl: see apgdTestKernel; a process with no blocks launches the Schur product alone
+// (its gather takes part in the exchange of the shared bodies' shares).
+template <class V, bool HostControl = false>
 void launchApgdTrial(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, ApgdDeviceState* st, int slices) {
   SolverScratch& S = d.solver;
-  apgdStepKernel<V><<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
-  cudaCheck(cudaGetLastError(), "launch of apgdStepKernel", __FILE__, __LINE__);
+  if (n > 0) {
+    apgdStepKernel<V><<<blocksFor(n), kBlock, 0, d.stream>>>(n, B, st);
+    cudaCheck(cudaGetLastError(), "launch of apgdStepKernel", __FILE__, __LINE__);
+  }
   schur<V>(d, nullptr, nullptr, schurXSlot(st), schurYSlot<V>(st), std::is_same_v<V, real> ? nullptr : B.r);
-  apgdTestKernel<V><<<slices, kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
+  if (n == 0) return;
+  apgdTestKernel<V, HostControl><<<slices, kBlock, 0, d.stream>>>(n, B, st, S.partial.data());
   cudaCheck(cudaGetLastError(), "launch of apgdTestKernel", __FILE__, __LINE__);
+}
+
+// The trials of a problem shared over processes (d.group): the same launches as the device loop's, but the control
+// stays on the host: each trial's Schur product exchanges the shared bodies' shares (gather), and its test sums are
+// added over the processes (one collective) before ApgdControl::afterTest runs here and the next trial's control
+// goes up (pinned staging h, written again only after the read-back that ends the trial).
+template <class V>
+void apgdTrialsGroup(DeviceState& d, int64_t n, algo::ApgdControl& c, real* const* X, V* const* NX,
+                     const ApgdBuffers<V>& B, ApgdDeviceState& h, int slices) {
+  SolverScratch& S = d.solver;
+  while (!c.done) {
+    h.c = c;
+    *schurXSlot(&h) = X[c.nw];
+    *schurYSlot<V>(&h) = NX[c.nnw];
+    DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
+    launchApgdTrial<V, true>(d, n, B, S.apgd.data(), slices);
+    double sums[5] = {0, 0, 0, 0, 0};
+    if (n > 0) {
+      const char* sums_on_device = reinterpret_cast<const char*>(S.apgd.data()) + offsetof(ApgdDeviceState, sums);
+      DVI_CUDA(cudaMemcpyAsync(h.sums, sums_on_device, sizeof h.sums, cudaMemcpyDeviceToHost, d.stream));
+      DVI_CUDA(cudaStreamSynchronize(d.stream));
+      for (int m = 0; m < 5; ++m) sums[m] = h.sums[m];
+    }
+    d.group->sum(sums, 5);
+    c.afterTest(sums);
+  }
 }
 
 // The float loop's start: out = float(N x + r) from the real N x.
@@ -91,6 +131,10 @@ void apgdTrialsOnDevice(DeviceState& d, int64_t n, algo::ApgdControl& c, real* c
   *schurXSlot(&h) = X[c.nw];
   *schurYSlot<V>(&h) = NX[c.nnw];
   DVI_CUDA(cudaMemcpyAsync(S.apgd.data(), &h, sizeof h, cudaMemcpyHostToDevice, d.stream));
+  if (d.group) {
+    apgdTrialsGroup<V>(d, n, c, X, NX, B, h, slices);
+    return;
+  }
   const bool cached = launch.register_cache && grids.fitsCache(n);
   if (n <= launch.persistent_max && (cached ? apgdPersistent<V, kCachedBlocks>(d, n, B, grids.cached, slices)
                                             : apgdPersistent<V, 0>(d, n, B, grids.plain, slices))) {

@@ -495,9 +495,8 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   n.nblk = n.ncb + n.nrb;
   d.row_count = rows.size();
   uploadRows(d, rows, n);
-  // The float Jacobians serve the device loop alone (over several processes APGD iterates on the host).
-  n.float_jac =
-      cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) && !std::is_same_v<real, float> && !d.group;
+  // The float Jacobians serve APGD's trials on the device (over several processes too).
+  n.float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) && !std::is_same_v<real, float>;
   n.nent = 2 * n.nc + 6 * n.nrb;
   resizeProblem(d, n);
   assembleBlocks(d, cfg, n);

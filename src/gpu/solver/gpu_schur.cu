@@ -34,6 +34,10 @@ struct ListGatherF {
   __device__ void operator()(int64_t j) const {
     const real* xx = g.input();
     const int32_t i = ids[j];
+    if (!xx) {  // a done device loop's slot: nothing is read
+      out[j] = BodyDelta{};
+      return;
+    }
     Vec3 F{0, 0, 0}, T{0, 0, 0};
     for (int32_t e = g.off[i]; e < g.off[i + 1]; ++e) g.entry(e, xx, F, T);
     out[j] = g.bodyDelta(i, F, T);
@@ -49,9 +53,9 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
     if (!jac) jac = S.jac.data();
   }
   const GatherT<JT> g = gatherOf(d, jac, x, x_slot);
-  // Over several processes (not the device loop, x_slot, which runs alone) the shared bodies' shares go first and
-  // travel to the other processes while every body's gather runs; their sums then replace the gather's values.
-  const bool exchange = d.group && !x_slot;
+  // Over several processes the shared bodies' shares go first and travel to the other processes while every body's
+  // gather runs; their sums then replace the gather's values.
+  const bool exchange = d.group != nullptr;
   if (exchange) {
     launchMap(d, int64_t(d.ex_count), ListGatherF<JT>{g, d.ex_ids.data(), d.ex_buf.data()},
               "launch of ListGatherF (shared bodies' shares)");

@@ -48,7 +48,8 @@ class GpuOps {
  public:
   static constexpr bool kDeviceLoop = true;
   // Over several processes (d.group) every reduction is summed over them, the block count and the largest
-  // diagonal are the whole problem's, and APGD iterates on the host (each trial's test sums cross the processes).
+  // diagonal are the whole problem's, and APGD's trials keep their control on the host (each trial's test sums cross
+  // the processes: apgdIterateOnDevice).
   GpuOps(DeviceState& d, const ProblemView& p, const ApgdLaunch& launch, bool float_storage)
       : d_(d), p_(p), launch_(launch), float_(float_storage), group_(d.group) {
     SolverScratch& S = d.solver;
@@ -64,7 +65,7 @@ class GpuOps {
       p_.max_diag = m > 0 ? real(m) : real(1);
     }
   }
-  bool deviceLoop() const { return group_ == nullptr; }
+  bool deviceLoop() const { return true; }
   int64_t totalBlocks() const { return total_; }
   int64_t blocks() const { return p_.nb; }
   BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, p_.lo, p_.hi}; }
