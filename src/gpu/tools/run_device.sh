@@ -14,6 +14,7 @@
 #   settle     the 100k pile at the default solver stop and at fixed 50 iterations, statistics side by side
 #   accuracy | stability | pruning | cesbench | dropin   the other benches, full mode, --record
 #   mpitests   the domain decomposition's tests on MPI_NP (default 2) processes, one GPU each ([gpu], then the rest)
+#   mpicli     dvisim run MPI_SCENE (default scenes/pile.json) --backend gpu on 1 and MPI_NP processes, bodies compared
 #   mpiscaling `mpirun -np MPI_NP dvisim bench scaling --mpi --mpi-backend gpu --record` with MPI_ARGS
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
@@ -66,6 +67,22 @@ for m in "$@"; do
     mpitests)
       $MPIRUN -np ${MPI_NP:-2} $B/tests/mpi/dvisim_mpi_tests "[gpu]" 2>&1 | tee "$LOGS/mpitests.log" | grep -v "^$" | tail -25
       $MPIRUN -np ${MPI_NP:-2} $B/tests/mpi/dvisim_mpi_tests "[mpi]~[gpu]" 2>&1 | grep -E "passed|failed|FAILED" | tail -4 ;;
+    mpicli)
+      # The CLI under mpirun on the GPU backend (MPI_SCENE, default scenes/pile.json), against one process.
+      for np in 1 ${MPI_NP:-2}; do
+        rm -rf "$LOGS/mpicli_$np"
+        $MPIRUN -np $np $BIN run ${MPI_SCENE:-scenes/pile.json} --backend gpu --out "$LOGS/mpicli_$np" \
+          > "$LOGS/mpicli_$np.log" 2>&1
+        echo "mpicli np=$np rc=$?"; tail -6 "$LOGS/mpicli_$np.log"
+      done
+      python3 - "$LOGS/mpicli_1/bodies.csv" "$LOGS/mpicli_${MPI_NP:-2}/bodies.csv" <<'PY'
+import csv, sys
+a, b = ([r for r in csv.DictReader(open(f))] for f in sys.argv[1:3])
+keys = [k for k in a[0] if k in ("x", "y", "z", "px", "py", "pz", "pos_x", "pos_y", "pos_z")]
+d = max(abs(float(r[k]) - float(s[k])) for r, s in zip(a, b) for k in keys)
+print(f"mpicli: {len(a)} vs {len(b)} bodies, columns {keys}, largest position difference {d:.3g} m")
+PY
+      ;;
     mpiscaling)
       rm -rf "$LOGS/mpiscaling"
       timeout ${BENCH_TIMEOUT:-86400} $MPIRUN -np ${MPI_NP:-2} $BIN bench scaling --mpi --mpi-backend gpu --record \
