@@ -115,10 +115,15 @@ MpiRow runPile(MPI_Comm comm, const std::string& mode, long n, int warmup, int s
       {"reductions", p.group.reduce_s - p0.group.reduce_s},
       {"read-back", p.readback_s - p0.readback_s},
       {"of it the ghost width", p.width_s - p0.width_s},
+      {"selection", p.select_s - p0.select_s},
+      {"states", p.near_sync_s - p0.near_sync_s},
       {"migration", p.migrate_s - p0.migrate_s},
       {"of it MPI", p.migrate_mpi_s - p0.migrate_mpi_s},
       {"ghosts", p.ghosts_s - p0.ghosts_s},
-      {"of it MPI", p.ghosts_mpi_s - p0.ghosts_mpi_s}};
+      {"of it records", p.ghosts_pack_s - p0.ghosts_pack_s},
+      {"MPI", p.ghosts_mpi_s - p0.ghosts_mpi_s},
+      {"applied", p.ghosts_apply_s - p0.ghosts_apply_s},
+      {"parked and uploaded", p.ghosts_park_s - p0.ghosts_park_s}};
   for (const auto& [name, seconds] : parts)
     r.spread += std::string(r.spread.empty() ? "" : ", ") + name + " " + num(dvi::mpiMin(comm, seconds) * per, "%.2f") +
                 "-" + num(dvi::mpiMax(comm, seconds) * per, "%.2f");

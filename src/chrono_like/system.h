@@ -100,6 +100,11 @@ struct GpuTuning {
   // each contact's 44-byte Jacobian at random and the 56-byte inverse mass. false: the contact records (for
   // measuring the difference). Default true.
   bool entry_gather = true;
+  // Over several processes on one host (mpirun, DistributedSystem), the Schur product's velocity-change shares go GPU
+  // to GPU: each process reads its neighbours' shares from their device memory (CUDA IPC, over NVLink or PCIe) and
+  // sums them in rank order on its own GPU, instead of staging them through pinned host memory and MPI messages.
+  // Where some GPU cannot reach another's memory the staging runs. The same sums either way. Default true.
+  bool peer_exchange = true;
 };
 
 struct SystemConfig {

@@ -200,7 +200,7 @@ void uploadOwners(DeviceState& d) {
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // the host vectors may change after we return
 }
 
-void keepOwnedContacts(DeviceState& d) {
+void keepOwnedContacts(DeviceState& d, bool peer_exchange) {
   uploadOwners(d);
   const int rank = d.group->rank();
   DeviceContacts& c = d.contacts;
@@ -236,6 +236,7 @@ void keepOwnedContacts(DeviceState& d) {
   d.ex_ids.upload(list, d.stream);
   reserveExchange(d, list.size());
   d.ex_count = list.size();
+  preparePeerExchange(d, peer_exchange);
   DVI_CUDA(cudaStreamSynchronize(d.stream));  // the group's list may change after we return
 }
 

@@ -186,6 +186,22 @@ struct SolverScratch {
   DeviceBuffer<long long> stamps{"APGD phase stamps"};   // DVISIM_APGD_PHASES only
 };
 
+// The shares of the Schur product's exchange GPU to GPU (GpuTuning::peer_exchange, gpu_peer_exchange.cu): each
+// process writes its listed bodies' shares into its own device buffer (two slots, for even and odd products, so a
+// product's shares are never overwritten while a neighbour may still read them), which the other processes of the
+// host have opened through CUDA IPC; each sums its listed bodies' terms in rank order reading the others' slots.
+struct PeerExchange {
+  int state = 0;             // 0: not decided yet, 1: on, -1: off (pinned host staging)
+  BodyDelta* own = nullptr;  // cudaMalloc'd, 2 x cap shares
+  size_t cap = 0;
+  std::vector<void*> opened;  // per process: its buffer as opened here (null: this process's own, or none)
+  DeviceBuffer<BodyDelta*> slots{"peer exchange slots"};  // [parity * processes + q]: process q's slot
+  DeviceBuffer<int32_t> term_start{"peer exchange term starts"}, term_rank{"peer exchange term processes"},
+      term_index{"peer exchange term places"};
+  int parity = 0;                 // of the next product
+  cudaEvent_t ev_list = nullptr;  // the listed shares written (the host waits for it, then tells the neighbours)
+};
+
 struct DeviceState {
   cudaStream_t stream = nullptr;
   DeviceBodies bodies;
@@ -248,6 +264,7 @@ struct DeviceState {
   size_t extra_count = 0;
   DeviceContacts contacts_kept;  // the owned contacts while they are compacted (swapped with contacts)
   DeviceBuffer<ContactImpulse> impulse_records{"contact impulse records"};  // contactImpulsesOf's read-back
+  PeerExchange peer;
 
   // Reads `n` doubles from device memory into host_scalars (one synchronisation).
   const double* readScalars(const double* dev, int n);
@@ -287,12 +304,21 @@ void applyImpulsesToBodies(DeviceState& d, const real* gamma);
 void uploadOwners(DeviceState& d);
 // Keeps the contacts this process owns (in order), then names the copies they touch to the group (collective) and
 // uploads the step's exchange list.
-void keepOwnedContacts(DeviceState& d);
+void keepOwnedContacts(DeviceState& d, bool peer_exchange);
 // The velocity-change exchange of a gather, overlapped with it: the listed bodies' shares, written to ex_buf on
 // d.stream, start for the host on copy_stream (sendSharesAsync); receiveSums waits for that copy alone while the
 // gather runs on, exchanges over the group, and queues the sums into delta on d.stream after the gather.
 void sendSharesAsync(DeviceState& d);
 void receiveSums(DeviceState& d, BodyDelta* delta);
+// The exchange GPU to GPU (gpu_peer_exchange.cu; PeerExchange). preparePeerExchange (collective, once a step after the
+// exchange list is set): decides once whether it runs (allowed, one host, every GPU reaching the others' memory),
+// grows and shares the buffers where the list outgrew them, and uploads the step's terms. peerSharesSlot: where a
+// product's listed shares go; receivePeerSums: waits for them (the host), meets the neighbours, and queues the sums
+// into delta on d.stream (the next product takes the other slot).
+void preparePeerExchange(DeviceState& d, bool allowed);
+BodyDelta* peerSharesSlot(DeviceState& d);
+void receivePeerSums(DeviceState& d, BodyDelta* delta);
+void closePeerExchange(DeviceState& d);
 // The same for one value per body (Jacobi's column sums).
 void exchangeBodyValues(DeviceState& d, real* per_body);
 // System::motionBounds, ownedBodiesOutside and contactImpulsesOf on the device arrays.

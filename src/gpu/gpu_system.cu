@@ -179,6 +179,7 @@ GpuSystem::~GpuSystem() {
                  static_cast<long long>(d_->phase_trials), c[0] / n, c[1] / n, c[2] / n, c[3] / n, c[4] / n, c[5] / n,
                  (c[0] + c[1] + c[2] + c[3] + c[4] + c[5]) / n);
   }
+  closePeerExchange(*d_);
   for (auto& e : d_->ev)
     if (e) cudaEventDestroy(e);
   if (d_->host_scalars) cudaFreeHost(d_->host_scalars);
@@ -332,7 +333,8 @@ void GpuSystem::detectCollisions() {
   stats_.pairs_reused = broadPhaseStep(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BroadPhase) + 1], d_->stream));
   narrowPhase(*d_, config_);
-  if (group_) keepOwnedContacts(*d_);  // a domain decomposition: the contacts this process owns
+  if (group_)
+    keepOwnedContacts(*d_, config_.gpu.peer_exchange);  // a domain decomposition: the contacts this process owns
   DVI_CUDA(cudaEventRecord(ev[int(StageType::NarrowPhase) + 1], d_->stream));
   stats_.stage_ran[int(StageType::ComputeAabbs)] = stats_.stage_ran[int(StageType::BroadPhase)] =
       stats_.stage_ran[int(StageType::NarrowPhase)] = true;

@@ -204,6 +204,8 @@ void DistributedSystem::rebuild(bool read_local) {
     setLocalState(int32_t(i), state_[size_t(local_ids_[i])], parked);
   }
   sys_->markHostDirty();
+  current_stamp_.assign(nl, 0);
+  stamp_ = 0;
   group_->setBodies(local_ids_, std::move(owners));
   sys_->setProcessGroup(group_.get());
   setLocalWarmStart(warm_, true);
@@ -314,8 +316,12 @@ void DistributedSystem::afterStep() {
 std::vector<DistributedSystem::Record> DistributedSystem::nearFaceBodies(std::vector<int32_t>& locals) {
   const Vec3 lo = tree_.boxLow(rank_), hi = tree_.boxHigh(rank_);
   const Vec3 w{width_, width_, width_};
+  const double t0 = MPI_Wtime();
   locals = sys_->ownedBodiesOutside(lo + w, hi - w);
+  const double t1 = MPI_Wtime();
   sys_->syncBodiesToHost(locals);
+  prof_.select_s += t1 - t0;
+  prof_.near_sync_s += MPI_Wtime() - t1;
   const BodyArrays& b = sys_->bodies();
   std::vector<Record> out;
   out.reserve(locals.size());
@@ -398,6 +404,7 @@ void DistributedSystem::setLocalState(int32_t l, const MotionState& s, bool park
 // body changed owner this step (the record names the new one).
 void DistributedSystem::refreshCopies(const std::vector<Record>& near, const std::vector<int32_t>& arrived,
                                       bool& need_rebuild) {
+  const double t0 = MPI_Wtime();
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
   for (const Record& r : near) {
     const int32_t l = local_of_[size_t(r.id)];
@@ -406,13 +413,20 @@ void DistributedSystem::refreshCopies(const std::vector<Record>& near, const std
       if (q != rank_ && tree_.distance(r.s.pos, q) <= width_ && (moved || l < 0 || !group_->exchangedWith(l, q)))
         out[size_t(q)].push_back(r);
   }
-  const double t0 = MPI_Wtime();
+  const double t1 = MPI_Wtime();
   const auto in = mpiExchange(comm_, out, &prof_.ghost_bytes);
-  prof_.ghosts_mpi_s += MPI_Wtime() - t0;
+  const double t2 = MPI_Wtime();
+  // The copies current after this step: exchanged ones (without a record) and refreshed ones, each stamped once.
+  const uint32_t stamp = ++stamp_;
   std::vector<int32_t> now, dirty;
-  for (int32_t l : group_->exchangeBodies()) {  // exchanged copies: current without a record
+  auto current = [&](int32_t l) {
+    if (current_stamp_[size_t(l)] == stamp) return;
+    current_stamp_[size_t(l)] = stamp;
+    now.push_back(l);
+  };
+  for (int32_t l : group_->exchangeBodies()) {
     const int32_t o = group_->bodyOwners()[size_t(l)];
-    if (o >= 0 && o != rank_) now.push_back(l);
+    if (o >= 0 && o != rank_) current(l);
   }
   for (int q = 0; q < size_; ++q)
     for (const Record& r : in[size_t(q)]) {
@@ -425,23 +439,23 @@ void DistributedSystem::refreshCopies(const std::vector<Record>& near, const std
       }
       group_->setOwner(l, q);
       setLocalState(l, r.s, false);
-      now.push_back(l);
+      current(l);
       dirty.push_back(l);
     }
-  std::sort(now.begin(), now.end());
-  now.erase(std::unique(now.begin(), now.end()), now.end());
+  const double t3 = MPI_Wtime();
   for (int32_t l : fresh_)  // refreshed last step, not now, and not own: parked
-    if (!std::binary_search(now.begin(), now.end(), l) && group_->bodyOwners()[size_t(l)] != rank_) {
+    if (current_stamp_[size_t(l)] != stamp && group_->bodyOwners()[size_t(l)] != rank_) {
+      current_stamp_[size_t(l)] = stamp;  // parked once, however often fresh_ names it
       group_->setOwner(l, kNoOwner);
       setLocalState(l, state_[size_t(local_ids_[size_t(l)])], true);
       dirty.push_back(l);
     }
-  if (!dirty.empty()) {
-    std::sort(dirty.begin(), dirty.end());
-    dirty.erase(std::unique(dirty.begin(), dirty.end()), dirty.end());
-    sys_->markBodiesDirty(dirty);
-  }
+  sys_->markBodiesDirty(dirty);  // every body once (a record per body, parked ones not refreshed)
   fresh_ = std::move(now);
+  prof_.ghosts_pack_s += t1 - t0;
+  prof_.ghosts_mpi_s += t2 - t1;
+  prof_.ghosts_apply_s += t3 - t2;
+  prof_.ghosts_park_s += MPI_Wtime() - t3;
 }
 
 // A new bisection of the current positions when the owned counts drift apart (DecompositionSettings), every body

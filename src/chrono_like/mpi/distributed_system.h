@@ -56,6 +56,9 @@ struct DecompositionProfile {
   // refresh's MPI_Alltoallv (of ghosts_s) and the moves' MPI_Alltoallv's with the re-balance test's reductions (of
   // migrate_s); each collective's time includes the wait for the slower process.
   double width_s = 0, ghosts_mpi_s = 0, migrate_mpi_s = 0;
+  // Finer parts, for tuning: the near-face selection and its states to the host (of readback_s), the refresh records
+  // made, the arrived records applied, and the copies parked with the uploads (of ghosts_s).
+  double select_s = 0, near_sync_s = 0, ghosts_pack_s = 0, ghosts_apply_s = 0, ghosts_park_s = 0;
   std::array<double, kStageCount> stages_s{};
   int64_t ghost_bytes = 0, migrate_bytes = 0;  // sent to other processes
   GroupTraffic group;                          // the solver's exchanges and reductions (MpiGroup)
@@ -167,8 +170,11 @@ class DistributedSystem {
   int64_t owned_count_ = 0;
   mutable std::vector<int32_t> owned_;  // ownedIds(), made on demand
   mutable bool owned_stale_ = true;
-  std::vector<WarmEntry> warm_;   // between readLocal and a rebuild
-  std::vector<int32_t> fresh_;    // copies refreshed by the last step's records (local indices)
+  std::vector<WarmEntry> warm_;  // between readLocal and a rebuild
+  std::vector<int32_t> fresh_;   // copies refreshed by the last step's records (local indices)
+  // Per local body: the refresh that last counted it current (refreshCopies; a stamp, not a sorted list to search).
+  std::vector<uint32_t> current_stamp_;
+  uint32_t stamp_ = 0;
   real width_ = 0;                // the ghost width of the coming step
   bool rebuild_pending_ = false;  // rebuild at the next step's start (the last System stays readable)
   bool host_states_ = false;      // state_ holds the owned states (a re-balance moved bodies)

@@ -6,6 +6,7 @@
 #include <mpi.h>
 
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "chrono_like/solver/process_group.h"
@@ -16,6 +17,7 @@ namespace dvi {
 struct GroupTraffic {
   double exchange_s = 0, reduce_s = 0;  // exchangeCompact (with setTouchedCopies); sum and max
   double touched_s = 0;                 // of exchange_s: setTouchedCopies (once a step, at the end of NarrowPhase)
+  int64_t peer_exchanges = 0;           // of exchanges: device to device (awaitNeighbours), the rest staged by MPI
   int64_t exchanges = 0, reductions = 0;
   int64_t exchange_bytes = 0;  // velocity changes sent to the neighbours, and the touched lists
 };
@@ -37,6 +39,13 @@ class MpiGroup final : public ProcessGroup {
   // One round with the neighbours: each process that holds a listed body sends its share to the others holding it
   // (the owner and the processes whose contacts touch it), and each adds the shares in rank order.
   void exchangeCompact(BodyDelta* compact) const override;
+  // One all-to-all of each process's list places of the bodies it holds with the others (pairs_).
+  void exchangeTerms(std::vector<int32_t>& start, std::vector<int32_t>& rank, std::vector<int32_t>& index) override;
+  // An empty message to and from each neighbour (a process sharing listed bodies).
+  void awaitNeighbours(int64_t bytes) const override;
+  std::vector<std::vector<uint8_t>> allgatherBytes(const std::vector<uint8_t>& mine) const override;
+  int size() const override { return size_; }
+  bool oneHost() const override { return one_host_; }
 
   // The local bodies after the local System is (re)built: keys ascending (the global ids), owners as
   // ProcessGroup::bodyOwners. Clears the exchange list.
@@ -50,6 +59,7 @@ class MpiGroup final : public ProcessGroup {
  private:
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
+  bool one_host_ = false;  // the shared-memory split of comm_ is comm_ itself
   std::vector<int32_t> keys_, owners_;
   uint64_t version_ = 0;
   std::vector<int32_t> changed_;     // owners changed since the last takeOwnerChanges (may repeat a body)
@@ -59,7 +69,9 @@ class MpiGroup final : public ProcessGroup {
   // the place in its message, -1 for this process's own share.
   std::vector<std::vector<int32_t>> pairs_;
   std::vector<int32_t> term_start_{0}, term_rank_, term_idx_;
-  void setPairs(std::vector<std::vector<int32_t>>& part);
+  void groupParticipants(const std::vector<std::pair<int32_t, int32_t>>& touch, std::vector<int32_t>& start,
+                         std::vector<int32_t>& procs) const;
+  void setPairs(const std::vector<int32_t>& start, const std::vector<int32_t>& procs);
   mutable std::vector<std::vector<BodyDelta>> out_, in_;  // message buffers per process
   mutable std::vector<MPI_Request> requests_;
   mutable GroupTraffic traffic_;

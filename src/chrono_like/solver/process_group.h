@@ -71,6 +71,19 @@ class ProcessGroup {
   virtual bool shared(int32_t body) const = 0;
   // compact[j], the share of exchangeBodies()[j] in, the sum over the processes out (every process the same).
   virtual void exchangeCompact(BodyDelta* compact) const = 0;
+  // For a backend that sums the shares itself, reading them from the other processes' memory (the GPU's peer
+  // exchange, gpu/gpu_peer_exchange.cu). Collective, once a step after setTouchedCopies: per listed body j its terms
+  // [start[j], start[j + 1]) in rank order, each the process (rank) and the position of the body in that process's
+  // exchange list (index; this process's own term: j).
+  virtual void exchangeTerms(std::vector<int32_t>& start, std::vector<int32_t>& rank, std::vector<int32_t>& index) = 0;
+  // Per exchange of that kind: returns once every process this one shares listed bodies with has called it as
+  // often (each calls it when its shares are in place); `bytes` (the shares the others read) is counted as sent.
+  virtual void awaitNeighbours(int64_t bytes) const = 0;
+  // Collective: every process's bytes, by rank.
+  virtual std::vector<std::vector<uint8_t>> allgatherBytes(const std::vector<uint8_t>& mine) const = 0;
+  virtual int size() const = 0;
+  // Every process runs on this host (they can share device memory).
+  virtual bool oneHost() const = 0;
   // The same on a full per-body array (delta[i] for every local body i).
   void exchangeDeltas(BodyDelta* delta) const {
     const std::vector<int32_t>& ids = exchangeBodies();

@@ -55,11 +55,15 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
   const GatherT<JT> g = gatherOf(d, jac, x, x_slot);
   // Over several processes the shared bodies' shares go first and travel to the other processes while every body's
   // gather runs; their sums then replace the gather's values.
-  const bool exchange = d.group != nullptr;
+  // GPU to GPU (PeerExchange) the shares go to a slot the neighbours read, else through pinned host memory.
+  const bool exchange = d.group != nullptr, peer = exchange && d.peer.state == 1;
   if (exchange) {
-    launchMap(d, int64_t(d.ex_count), ListGatherF<JT>{g, d.ex_ids.data(), d.ex_buf.data()},
+    launchMap(d, int64_t(d.ex_count), ListGatherF<JT>{g, d.ex_ids.data(), peer ? peerSharesSlot(d) : d.ex_buf.data()},
               "launch of ListGatherF (shared bodies' shares)");
-    sendSharesAsync(d);
+    if (peer)
+      DVI_CUDA(cudaEventRecord(d.peer.ev_list, d.stream));
+    else
+      sendSharesAsync(d);
   }
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {
@@ -67,7 +71,10 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
         S.heavy.data(), g, S.heavy_partial.data(), S.heavy_ticket.data());
     cudaCheck(cudaGetLastError(), "launch of HeavyGatherKernel", __FILE__, __LINE__);
   }
-  if (exchange) receiveSums(d, d.bodies.delta.data());
+  if (peer)
+    receivePeerSums(d, d.bodies.delta.data());
+  else if (exchange)
+    receiveSums(d, d.bodies.delta.data());
 }
 
 template <class V>

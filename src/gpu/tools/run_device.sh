@@ -14,7 +14,8 @@
 #   settle     the 100k pile at the default solver stop and at fixed 50 iterations, statistics side by side
 #   accuracy | stability | pruning | cesbench | dropin   the other benches, full mode, --record
 #   mpitests   the domain decomposition's tests on MPI_NP (default 2) processes, one GPU each ([gpu], then the rest)
-#   mpicli     dvisim run MPI_SCENE (default scenes/pile.json) --backend gpu on 1 and MPI_NP processes, bodies compared
+#   mpicli     dvisim run MPI_SCENE (default scenes/pile.json) --backend gpu MPI_RUN_ARGS on 1 and MPI_NP processes,
+#              the bodies compared
 #   mpiscaling `mpirun -np MPI_NP dvisim bench scaling --mpi --mpi-backend gpu --record` with MPI_ARGS
 # BENCH_ARGS adds options to a bench (e.g. "--scenes pile --engines cpu,gpu"), BENCH_TIMEOUT stops it.
 # Results written with --record land in bench/results/ of this copy; the new ones are copied to $OUT/results.
@@ -71,7 +72,7 @@ for m in "$@"; do
       # The CLI under mpirun on the GPU backend (MPI_SCENE, default scenes/pile.json), against one process.
       for np in 1 ${MPI_NP:-2}; do
         rm -rf "$LOGS/mpicli_$np"
-        $MPIRUN -np $np $BIN run ${MPI_SCENE:-scenes/pile.json} --backend gpu --out "$LOGS/mpicli_$np" \
+        $MPIRUN -np $np $BIN run ${MPI_SCENE:-scenes/pile.json} --backend gpu --out "$LOGS/mpicli_$np" ${MPI_RUN_ARGS:-} \
           > "$LOGS/mpicli_$np.log" 2>&1
         echo "mpicli np=$np rc=$?"; tail -6 "$LOGS/mpicli_$np.log"
       done
