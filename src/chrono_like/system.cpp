@@ -358,7 +358,8 @@ void System::detectCollisions() {
   }
 }
 
-// The copies of other processes' bodies that this process's contacts touch (ProcessGroup::setTouchedCopies).
+// The copies of other processes' bodies that this process's contacts touch, and the current ones in the group's listed
+// region (ProcessGroup::setTouchedCopies).
 std::vector<int32_t> System::touchedCopies() const {
   const std::vector<int32_t>& owner = group_->bodyOwners();
   const int self = group_->rank();
@@ -366,6 +367,11 @@ std::vector<int32_t> System::touchedCopies() const {
   for (size_t k = 0; k < contacts_.count(); ++k)
     for (int32_t b : {contacts_.body_a[k], contacts_.body_b[k]})
       if (owner[size_t(b)] >= 0 && owner[size_t(b)] != self) out.push_back(b);
+  Vec3 lo, hi;
+  if (group_->listedRegion(lo, hi))
+    for (size_t i = 0; i < bodies_.count(); ++i)
+      if (owner[i] >= 0 && owner[i] != self && group_->inListedRegion(bodies_.pos[i], lo, hi))
+        out.push_back(int32_t(i));
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;

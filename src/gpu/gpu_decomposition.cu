@@ -72,6 +72,21 @@ struct TouchF {
   }
 };
 
+// Marks the current copies (owner >= 0, not this process) whose centre lies in [lo, hi] (ProcessGroup::listedRegion).
+struct RegionCopyF {
+  const Vec3* pos;
+  const int32_t* owner;
+  int rank;
+  Vec3 lo, hi;
+  uint8_t* mark;
+  __device__ void operator()(int64_t i) const {
+    const Vec3 p = pos[i];
+    const int32_t o = owner[i];
+    if (o >= 0 && o != rank && p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z)
+      mark[i] = 1;
+  }
+};
+
 __device__ bool mineOf(const int32_t* owner, const uint8_t* flags, int rank, int64_t i) {
   return owner ? owner[i] == rank : (flags[i] & (kBodyFixed | kBodyKinematic)) == 0;
 }
@@ -230,6 +245,10 @@ void keepOwnedContacts(DeviceState& d, bool peer_exchange) {
   d.mark.resize(size_t(std::max<int64_t>(nb, 1)));
   d.mark.fillZero(d.stream);
   launchMap(d, kept, TouchF{c.body_a.data(), c.body_b.data(), d.owner.data(), rank, d.mark.data()}, "launch of TouchF");
+  Vec3 lo, hi;
+  if (d.group->listedRegion(lo, hi))
+    launchMap(d, nb, RegionCopyF{d.bodies.pos.data(), d.owner.data(), rank, lo, hi, d.mark.data()},
+              "launch of RegionCopyF");
   const int64_t nt = selectFlagged(d, nb, d.mark.data(), "cub::DeviceSelect::Flagged (touched copies)");
   d.group->setTouchedCopies(downloadSelection(d, nt));
   const std::vector<int32_t>& list = d.group->exchangeBodies();

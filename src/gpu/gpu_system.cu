@@ -186,6 +186,7 @@ GpuSystem::~GpuSystem() {
   if (d_->host_staging) cudaFreeHost(d_->host_staging);
   if (d_->host_apgd) cudaFreeHost(d_->host_apgd);
   if (d_->ex_host) cudaFreeHost(d_->ex_host);
+  if (sel_state_) cudaFreeHost(sel_state_);
   if (d_->stream) cudaStreamDestroy(d_->stream);
   if (d_->copy_stream) cudaStreamDestroy(d_->copy_stream);
   if (d_->ev_shares) cudaEventDestroy(d_->ev_shares);
@@ -490,10 +491,12 @@ void GpuSystem::syncBodiesToHost(const std::vector<int32_t>& ids) {
   gatherBodiesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.pos.data(), b.rot.data(), b.vel.data(),
                                                      b.omega.data(), b.flags.data(), b.sel_state.data());
   DVI_CUDA_LAUNCH("gatherBodiesKernel");
-  b.sel_state.download(sel_state_, size_t(n), s);  // synchronous
+  BodyRecord* staged = selectedStates(size_t(n));
+  DVI_CUDA(cudaMemcpyAsync(staged, b.sel_state.data(), sizeof(BodyRecord) * size_t(n), cudaMemcpyDeviceToHost, s));
+  DVI_CUDA(cudaStreamSynchronize(s));
   for (int k = 0; k < n; ++k) {
     const size_t i = size_t(ids[size_t(k)]);
-    const BodyRecord& r = sel_state_[size_t(k)];
+    const BodyRecord& r = staged[size_t(k)];
     bodies_.pos[i] = r.pos;
     bodies_.rot[i] = r.rot;
     bodies_.vel[i] = r.vel;
@@ -509,18 +512,29 @@ void GpuSystem::markBodiesDirty(const std::vector<int32_t>& ids) {
   DeviceBodies& b = d_->bodies;
   cudaStream_t s = d_->stream;
   const int n = int(ids.size());
-  sel_state_.resize(size_t(n));
+  BodyRecord* staged = selectedStates(size_t(n));
   for (int k = 0; k < n; ++k) {
     const size_t i = size_t(ids[size_t(k)]);
-    sel_state_[size_t(k)] =
-        BodyRecord{bodies_.pos[i], bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.flags[i]};
+    staged[size_t(k)] = BodyRecord{bodies_.pos[i], bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.flags[i]};
   }
   b.sel_ids.upload(ids, s);
-  b.sel_state.upload(sel_state_, s);
+  b.sel_state.resize(size_t(n));
+  DVI_CUDA(cudaMemcpyAsync(b.sel_state.data(), staged, sizeof(BodyRecord) * size_t(n), cudaMemcpyHostToDevice, s));
   scatterBodiesKernel<<<blocksFor(n), kBlock, 0, s>>>(n, b.sel_ids.data(), b.sel_state.data(), b.pos.data(),
                                                       b.rot.data(), b.vel.data(), b.omega.data(), b.flags.data());
   DVI_CUDA_LAUNCH("scatterBodiesKernel");
-  DVI_CUDA(cudaStreamSynchronize(s));  // sel_state_ may change after we return
+  DVI_CUDA(cudaStreamSynchronize(s));  // the staging may change after we return
+}
+
+BodyRecord* GpuSystem::selectedStates(size_t n) {
+  if (n > sel_state_cap_) {
+    if (sel_state_) DVI_CUDA(cudaFreeHost(sel_state_));
+    sel_state_ = nullptr;
+    const size_t cap = n + n / 2;
+    DVI_CUDA(cudaMallocHost(&sel_state_, cap * sizeof(BodyRecord)));
+    sel_state_cap_ = cap;
+  }
+  return sel_state_;
 }
 
 void GpuSystem::markBodyParamsDirty(const std::vector<int32_t>& ids) {

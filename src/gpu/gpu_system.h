@@ -93,7 +93,11 @@ class GpuSystem : public System {
   bool gyro_bodies_ = false;                      // an uploaded dynamic body has non-spherical inertia
   std::vector<Vec3> field_force_, field_torque_;  // host scratch of the force fields
   std::vector<int32_t> sel_ids_;                  // host scratch of the selected-body copies
-  std::vector<gpu::BodyRecord> sel_state_;
+  // The selected bodies' states between the device and the host arrays (syncBodiesToHost, markBodiesDirty), pinned:
+  // copies at the full bus bandwidth (a pageable copy of 80,000 states took ~2 ms of every step over processes).
+  gpu::BodyRecord* sel_state_ = nullptr;
+  size_t sel_state_cap_ = 0;
+  gpu::BodyRecord* selectedStates(size_t n);
   std::vector<gpu::BodyParamsRecord> sel_params_;
 };
 

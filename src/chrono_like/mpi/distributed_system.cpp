@@ -107,6 +107,14 @@ void DistributedSystem::start() {
   local_of_.assign(n, -1);
   started_ = true;
   width_ = ghostWidth();
+  setListedRegion();
+}
+
+// The next step's exchange holds every current copy within the ghost width of this process's box (listedRegion): its
+// owner then sends no record for it after the step (refreshCopies: exchangedWith).
+void DistributedSystem::setListedRegion() {
+  const Vec3 w{width_, width_, width_};
+  group_->setListedRegion(tree_.boxLow(rank_) - w, tree_.boxHigh(rank_) + w);
 }
 
 void DistributedSystem::step() {
@@ -292,6 +300,7 @@ void DistributedSystem::afterStep() {
   auto t = Clock::now();
   warm_.clear();  // holds this step's arrivals from here to a rebuild
   width_ = ghostWidth();
+  setListedRegion();
   prof_.width_s += since(t);
   std::vector<int32_t> near_locals;
   std::vector<Record> near = nearFaceBodies(near_locals);

@@ -137,6 +137,7 @@ class DistributedSystem {
   };
   void start();
   real ghostWidth() const;
+  void setListedRegion();
   void rebuild(bool read_local);
   void afterStep();
   std::vector<Record> nearFaceBodies(std::vector<int32_t>& locals);

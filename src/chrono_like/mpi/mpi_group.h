@@ -45,6 +45,16 @@ class MpiGroup final : public ProcessGroup {
   void awaitNeighbours(int64_t bytes) const override;
   std::vector<std::vector<uint8_t>> allgatherBytes(const std::vector<uint8_t>& mine) const override;
   int size() const override { return size_; }
+  bool listedRegion(Vec3& lo, Vec3& hi) const override {
+    lo = region_lo_;
+    hi = region_hi_;
+    return has_region_;
+  }
+  void setListedRegion(Vec3 lo, Vec3 hi) {
+    region_lo_ = lo;
+    region_hi_ = hi;
+    has_region_ = true;
+  }
   bool oneHost() const override { return one_host_; }
 
   // The local bodies after the local System is (re)built: keys ascending (the global ids), owners as
@@ -60,6 +70,8 @@ class MpiGroup final : public ProcessGroup {
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
   bool one_host_ = false;  // the shared-memory split of comm_ is comm_ itself
+  bool has_region_ = false;
+  Vec3 region_lo_{0, 0, 0}, region_hi_{0, 0, 0};
   std::vector<int32_t> keys_, owners_;
   uint64_t version_ = 0;
   std::vector<int32_t> changed_;     // owners changed since the last takeOwnerChanges (may repeat a body)

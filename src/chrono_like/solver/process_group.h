@@ -63,8 +63,16 @@ class ProcessGroup {
   bool ownsBody(int32_t body) const { return bodyOwners()[size_t(body)] == rank(); }
 
   // Collective, once a step after the contacts are filtered: the copies of other processes' bodies (local indices,
-  // ascending, owner >= 0 and not this process) that this process's contacts touch. Sets the exchange list.
+  // ascending, owner >= 0 and not this process) that take part in the step's exchange: those this process's contacts
+  // touch and the current ones whose centre lies in listedRegion. Sets the exchange list.
   virtual void setTouchedCopies(const std::vector<int32_t>& copies) = 0;
+  // Where every current copy joins the exchange, touched or not (false: nowhere). A copy in the exchange comes out of
+  // the step with its owner's very state (the same summed velocity change, the same integration), so its owner needs
+  // to send it no state after the step (DistributedSystem: this process's box grown by the ghost width).
+  virtual bool listedRegion(Vec3& lo, Vec3& hi) const = 0;
+  bool inListedRegion(Vec3 p, Vec3 lo, Vec3 hi) const {
+    return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
+  }
   // The bodies (local indices, ascending) whose velocity changes are exchanged this step.
   virtual const std::vector<int32_t>& exchangeBodies() const = 0;
   // Body i takes part in the exchange: pass (a) computes its share even where no local contact touches it.
