@@ -4,7 +4,7 @@
 // Programming Guide, "Interprocess Communication"). Per product: the host waits for its own shares (an event), meets
 // its neighbours (ProcessGroup::awaitNeighbours: an empty message each way, so every neighbour's shares are in place),
 // and queues a kernel that sums each listed body's terms in rank order, reading the neighbours' shares from their
-// memory over NVLink or PCIe, and writes the sums over the gather's values. The host path (gpu_decomposition.cu)
+// memory over NVLink or PCIe, on a second stream while the gather does the other bodies. The host path (gpu_decomposition.cu)
 // copies the shares to pinned memory and sends them with MPI, ~1 ms a product for 46,000 shared bodies on an H100
 // host; here only the two empty messages cross the host.
 //
@@ -46,6 +46,12 @@ struct PeerSumF {
   }
 };
 static_assert(sizeof(BodyDelta) == 6 * sizeof(real), "PeerSumF reads a share as 6 reals");
+
+struct MarkListedF {
+  const int32_t* ids;
+  uint8_t* listed;
+  __device__ void operator()(int64_t j) const { listed[ids[j]] = 1; }
+};
 
 // What a process tells the others about its buffer.
 struct Published {
@@ -142,6 +148,7 @@ void preparePeerExchange(DeviceState& d, bool allowed) {
       return;
     }
     DVI_CUDA(cudaEventCreateWithFlags(&P.ev_list, cudaEventDisableTiming));
+    DVI_CUDA(cudaEventCreateWithFlags(&P.ev_sums, cudaEventDisableTiming));
   }
   const bool grow = P.own == nullptr || d.ex_count > P.cap;
   if (g.any(grow)) {
@@ -157,6 +164,10 @@ void preparePeerExchange(DeviceState& d, bool allowed) {
   P.term_start.upload(start, d.stream);
   P.term_rank.upload(rank, d.stream);
   P.term_index.upload(index, d.stream);
+  const int64_t nb = int64_t(d.bodies.count);
+  P.listed.resize(size_t(std::max<int64_t>(nb, 1)));
+  P.listed.fillZero(d.stream);
+  launchMap(d, int64_t(d.ex_count), MarkListedF{d.ex_ids.data(), P.listed.data()}, "launch of MarkListedF");
 }
 
 BodyDelta* peerSharesSlot(DeviceState& d) { return d.peer.own + size_t(d.peer.parity) * d.peer.cap; }
@@ -166,10 +177,15 @@ void receivePeerSums(DeviceState& d, BodyDelta* delta) {
   const int64_t n = int64_t(d.ex_count);
   DVI_CUDA(cudaEventSynchronize(P.ev_list));
   d.group->awaitNeighbours(int64_t(sizeof(BodyDelta)) * n);
-  launchMap(d, n,
-            PeerSumF{P.term_start.data(), P.term_rank.data(), P.term_index.data(),
-                     P.slots.data() + size_t(P.parity) * size_t(d.group->size()), d.ex_ids.data(), delta},
-            "launch of PeerSumF");
+  if (n > 0) {  // on copy_stream, beside the gather (which skips the listed bodies); pass (b) waits for both
+    DVI_CUDA(cudaStreamWaitEvent(d.copy_stream, P.ev_list, 0));
+    mapKernel<<<blocksFor(n), kBlock, 0, d.copy_stream>>>(
+        n, PeerSumF{P.term_start.data(), P.term_rank.data(), P.term_index.data(),
+                    P.slots.data() + size_t(P.parity) * size_t(d.group->size()), d.ex_ids.data(), delta});
+    DVI_CUDA_LAUNCH("PeerSumF");
+    DVI_CUDA(cudaEventRecord(P.ev_sums, d.copy_stream));
+    DVI_CUDA(cudaStreamWaitEvent(d.stream, P.ev_sums, 0));
+  }
   P.parity ^= 1;
 }
 
@@ -178,7 +194,8 @@ void closePeerExchange(DeviceState& d) {
   closeOpened(P);
   freeOwn(P);
   if (P.ev_list) cudaEventDestroy(P.ev_list);
-  P.ev_list = nullptr;
+  if (P.ev_sums) cudaEventDestroy(P.ev_sums);
+  P.ev_list = P.ev_sums = nullptr;
   P.state = 0;
 }
 

@@ -198,8 +198,12 @@ struct PeerExchange {
   DeviceBuffer<BodyDelta*> slots{"peer exchange slots"};  // [parity * processes + q]: process q's slot
   DeviceBuffer<int32_t> term_start{"peer exchange term starts"}, term_rank{"peer exchange term processes"},
       term_index{"peer exchange term places"};
+  // Per local body: listed this step. The product's gather skips the listed bodies, whose sums the sum kernel writes
+  // on copy_stream meanwhile (ev_sums: pass (b) waits for it).
+  DeviceBuffer<uint8_t> listed{"peer exchange listed bodies"};
   int parity = 0;                 // of the next product
   cudaEvent_t ev_list = nullptr;  // the listed shares written (the host waits for it, then tells the neighbours)
+  cudaEvent_t ev_sums = nullptr;
 };
 
 struct DeviceState {

@@ -334,11 +334,9 @@ std::vector<DistributedSystem::Record> DistributedSystem::nearFaceBodies(std::ve
   const BodyArrays& b = sys_->bodies();
   std::vector<Record> out;
   out.reserve(locals.size());
-  for (int32_t l : locals) {
-    const int32_t id = local_ids_[size_t(l)];
-    state_[size_t(id)] = MotionState{b.pos[size_t(l)], b.rot[size_t(l)], b.vel[size_t(l)], b.omega[size_t(l)]};
-    out.push_back(Record{id, state_[size_t(id)]});
-  }
+  for (int32_t l : locals)  // state_ of an owned body is read only after syncOwned (or of one that leaves: migrate)
+    out.push_back(Record{local_ids_[size_t(l)],
+                         MotionState{b.pos[size_t(l)], b.rot[size_t(l)], b.vel[size_t(l)], b.omega[size_t(l)]}});
   return out;
 }
 
@@ -349,15 +347,17 @@ void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int
                                 std::vector<int32_t>& arrived_ids, bool& need_rebuild) {
   std::vector<std::vector<Record>> out(static_cast<size_t>(size_));
   std::vector<std::vector<WarmEntry>> out_warm(static_cast<size_t>(size_));
-  std::vector<Record> kept;
   std::vector<int32_t> leaving;  // local indices
+  size_t kept = 0;               // near is compacted in place to the bodies that stay
   for (size_t j = 0; j < near.size(); ++j) {
     const int q = tree_.owner(near[j].s.pos);
     if (q == rank_) {
-      kept.push_back(near[j]);
+      if (kept != j) near[kept] = near[j];
+      ++kept;
       continue;
     }
     out[size_t(q)].push_back(near[j]);
+    state_[size_t(near[j].id)] = near[j].s;  // a copy here from now on, parked with this state unless refreshed
     leaving.push_back(near_locals[j]);
     owner_[size_t(near[j].id)] = q;
     group_->setOwner(near_locals[j], q);
@@ -371,8 +371,9 @@ void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int
   std::vector<Record> in;
   const std::vector<WarmEntry> arrived = exchangeMoves(out, out_warm, in);
   std::vector<int32_t> dirty;
+  near.resize(kept);
   for (const Record& r : in) {
-    kept.push_back(r);
+    near.push_back(r);
     arrived_ids.push_back(r.id);
     const int32_t l = local_of_[size_t(r.id)];
     if (l < 0) {  // not held here: a rebuild adds it
@@ -391,7 +392,6 @@ void DistributedSystem::migrate(std::vector<Record>& near, const std::vector<int
   owned_stale_ = owned_stale_ || !leaving.empty() || !in.empty();
   // A body that left is a copy here now: parked by refreshCopies unless its new owner refreshes it.
   fresh_.insert(fresh_.end(), leaving.begin(), leaving.end());
-  near = std::move(kept);
 }
 
 // A local body's state written to the local System's host arrays (markBodiesDirty uploads it): a refreshed or arrived

@@ -81,6 +81,7 @@ class MpiGroup final : public ProcessGroup {
   // the place in its message, -1 for this process's own share.
   std::vector<std::vector<int32_t>> pairs_;
   std::vector<int32_t> term_start_{0}, term_rank_, term_idx_;
+  size_t findKeyFrom(int32_t key, size_t from) const;
   void groupParticipants(const std::vector<std::pair<int32_t, int32_t>>& touch, std::vector<int32_t>& start,
                          std::vector<int32_t>& procs) const;
   void setPairs(const std::vector<int32_t>& start, const std::vector<int32_t>& procs);

@@ -52,7 +52,7 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
   if constexpr (std::is_same_v<JT, ContactJacobian>) {
     if (!jac) jac = S.jac.data();
   }
-  const GatherT<JT> g = gatherOf(d, jac, x, x_slot);
+  GatherT<JT> g = gatherOf(d, jac, x, x_slot);
   // Over several processes the shared bodies' shares go first and travel to the other processes while every body's
   // gather runs; their sums then replace the gather's values.
   // GPU to GPU (PeerExchange) the shares go to a slot the neighbours read, else through pinned host memory.
@@ -60,10 +60,12 @@ void gather(DeviceState& d, const real* x, const char* what, const real* const* 
   if (exchange) {
     launchMap(d, int64_t(d.ex_count), ListGatherF<JT>{g, d.ex_ids.data(), peer ? peerSharesSlot(d) : d.ex_buf.data()},
               "launch of ListGatherF (shared bodies' shares)");
-    if (peer)
+    if (peer) {
       DVI_CUDA(cudaEventRecord(d.peer.ev_list, d.stream));
-    else
+      g.skip = d.peer.listed.data();  // their sums come from receivePeerSums, beside the gather
+    } else {
       sendSharesAsync(d);
+    }
   }
   launchMap(d, int64_t(d.bodies.count), g, what);
   if (S.n_heavy > 0) {

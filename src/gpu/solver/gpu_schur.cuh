@@ -35,6 +35,7 @@ struct GatherT {
   // storage only), and the bodies' 16-byte inverse masses; null: jac and inv
   const EntryJacobianF* ej = nullptr;
   const BodyInverseIso* iso = nullptr;
+  const uint8_t* skip = nullptr;  // set: the bodies whose delta another kernel writes (PeerExchange::listed)
   __device__ const real* input() const { return x_slot ? *x_slot : x; }
   // Adds entry e (of the sorted adjacency) to (F, T).
   __device__ __forceinline__ void entry(int32_t e, const real* xx, Vec3& F, Vec3& T) const {
@@ -54,7 +55,7 @@ struct GatherT {
     const real* xx = input();
     if (!xx) return;
     const int32_t e0 = off[i], e1 = off[i + 1];
-    if (e1 - e0 >= kHeavyDegree) return;  // HeavyGatherKernel
+    if (e1 - e0 >= kHeavyDegree || (skip && skip[i])) return;  // HeavyGatherKernel, or the peer sums
     Vec3 F{0, 0, 0}, T{0, 0, 0};
     for (int32_t e = e0; e < e1; ++e) entry(e, xx, F, T);
     delta[i] = bodyDelta(i, F, T);
@@ -99,7 +100,7 @@ __device__ void heavyGatherChunk(const int32_t* heavy, const GatherT<JT>& g, con
   for (int k = 0; k < kHeavyChunks; ++k)
     for (int j = 0; j < 6; ++j) sum[j] += __ldcg(all + k * 6 + j);  // L2: written by other blocks
   ticket[h] = 0;
-  g.delta[i] = g.bodyDelta(i, Vec3{sum[0], sum[1], sum[2]}, Vec3{sum[3], sum[4], sum[5]});
+  if (!(g.skip && g.skip[i])) g.delta[i] = g.bodyDelta(i, Vec3{sum[0], sum[1], sum[2]}, Vec3{sum[3], sum[4], sum[5]});
 }
 
 // The output of a Schur pass (b): y, or *slot where the device chooses the buffer (null there: skip).
