@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -355,6 +356,52 @@ TEST_CASE("MPI: a contact across the split is solved once with the one-process i
   CHECK(r.many.migrations().rebalances == 0);
 }
 
+// The places a device sums the shares from (ProcessGroup::exchangeTerms, the GPU's peer exchange): every term of a
+// listed body names a process holding it and the place of the same body (the same global key) in that process's list,
+// the terms in rank order with this process's own at its own place.
+TEST_CASE("MPI: each exchange term names the same body in the other process's list", "[mpi]") {
+  Runs r(pile(12, 3, 8));
+  for (int s = 0; s < 30; ++s) r.many.step();
+  MpiGroup& g = r.many.group();
+  std::vector<int32_t> start, rank, index;
+  g.exchangeTerms(start, rank, index);
+  const std::vector<int32_t>& list = g.exchangeBodies();
+  std::vector<uint8_t> mine(list.size() * sizeof(int32_t));
+  for (size_t j = 0; j < list.size(); ++j) {
+    const int32_t key = g.bodyKeys()[size_t(list[j])];
+    std::memcpy(mine.data() + j * sizeof(int32_t), &key, sizeof key);
+  }
+  const std::vector<std::vector<uint8_t>> lists = g.allgatherBytes(mine);
+  auto keyAt = [&](int q, int32_t place) {
+    int32_t key = -1;
+    const std::vector<uint8_t>& l = lists[size_t(q)];
+    if (place >= 0 && size_t(place + 1) * sizeof(int32_t) <= l.size())
+      std::memcpy(&key, l.data() + size_t(place) * sizeof(int32_t), sizeof key);
+    return key;
+  };
+  int64_t terms = 0, wrong = 0, shared_terms = 0;
+  REQUIRE(start.size() == list.size() + 1);
+  for (size_t j = 0; j < list.size(); ++j) {
+    bool own = false;
+    for (int32_t t = start[j]; t < start[j + 1]; ++t) {
+      ++terms;
+      const int q = rank[size_t(t)];
+      own = own || (q == worldRank() && index[size_t(t)] == int32_t(j));
+      if (t > start[j] && rank[size_t(t) - 1] >= q) ++wrong;  // rank order, each process once
+      if (keyAt(q, index[size_t(t)]) != g.bodyKeys()[size_t(list[j])]) ++wrong;
+      shared_terms += q != worldRank() ? 1 : 0;
+    }
+    wrong += own ? 0 : 1;
+  }
+  const int64_t all_wrong = sumOverRanks(wrong), all_shared = sumOverRanks(shared_terms);
+  if (worldRank() == 0)
+    std::printf("exchange terms on %d processes: %lld terms from other processes, %lld wrong\n", worldSize(),
+                (long long)all_shared, (long long)all_wrong);
+  CHECK(all_wrong == 0);
+  if (worldSize() > 1) CHECK(all_shared > 0);  // the split runs through the pile: bodies are shared
+  (void)terms;
+}
+
 TEST_CASE("MPI: what does not run over several processes is refused", "[mpi]") {
   SystemConfig gs = config();
   gs.solver.type = SolverType::GaussSeidel;
@@ -409,8 +456,8 @@ bool everyProcessHasGpu() {
 }  // namespace
 
 // The GPU backend under the decomposition: the owned contacts kept on the device, the shared bodies' velocity
-// changes staged through pinned host memory each Schur product, APGD on the host with the test sums reduced over the
-// processes. Against the CPU System: the pile (tolerance stop and fixed count), the rows crossing the split both ways
+// changes exchanged each Schur product (GPU to GPU where the processes share a host), APGD's trials on the device with
+// their test sums reduced over the processes. Against the CPU System: the pile (tolerance stop and fixed count), the rows crossing the split both ways
 // (migrations with their warm starts), Jacobi (the column sums exchanged) and a frictionless pile (normal rows).
 TEST_CASE("MPI GPU: one GPU a process follows the one-process CPU run", "[mpi][gpu]") {
   if (!everyProcessHasGpu()) return;
@@ -439,6 +486,33 @@ TEST_CASE("MPI GPU: one GPU a process follows the one-process CPU run", "[mpi][g
   CHECK(jacobi_run.worst < real(1e-9));
   CHECK(jacobi_run.contact_mismatch == 0);
   CHECK(smooth_run.worst < real(1e-9));
+}
+
+// The GPU's peer exchange (each process reading its neighbours' shares from their device memory) against the pinned
+// host staging with MPI messages: the same sums in the same order, so bitwise the same trajectory, at the default
+// float storage of APGD's vectors.
+TEST_CASE("MPI GPU: the peer exchange gives the host staging's trajectory bit for bit", "[mpi][gpu]") {
+  if (!everyProcessHasGpu()) return;
+  std::vector<MotionState> end[2];
+  int64_t peer[2] = {0, 0};
+  for (int p = 0; p < 2; ++p) {
+    SystemConfig c = config();
+    c.gpu.peer_exchange = p == 1;
+    DistributedSystem many(MPI_COMM_WORLD, c, {}, [](const SystemConfig& cc) { return makeGpuSystem(cc); });
+    for (const BodyDesc& b : pile(12, 3, 8)) many.addBody(b);
+    for (int s = 0; s < 100; ++s) many.step();
+    end[p] = many.gatherState();
+    peer[p] = sumOverRanks(many.profile().group.peer_exchanges);
+  }
+  const real d = maxPositionDifference(end[0], end[1]);
+  if (worldRank() == 0)
+    std::printf(
+        "peer exchange on %d processes: %lld products device to device (staged run: %lld), trajectories "
+        "differ by %.3e m\n",
+        worldSize(), (long long)peer[1], (long long)peer[0], double(d));
+  CHECK(peer[0] == 0);
+  if (worldSize() > 1) CHECK(peer[1] > 0);  // one host: every GPU reaches the others (NVLink or PCIe)
+  CHECK(d == 0);
 }
 
 // Catch2 inside MPI: every process runs the same tests (they are collective); the exit code is the worst of all.

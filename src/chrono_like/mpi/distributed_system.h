@@ -118,6 +118,8 @@ class DistributedSystem {
   // This process's System (its contacts are the ones it owns; a GPU System's host arrays are current after
   // syncToHost) and the global id of each of its bodies. Null before the first step.
   const System* local() const { return sys_.get(); }
+  // The process group the local System solves with (its exchange list, its traffic).
+  MpiGroup& group() { return *group_; }
   const std::vector<int32_t>& localIds() const { return local_ids_; }
   const MigrationLog& migrations() const { return log_; }
   DecompositionProfile profile() const;
