@@ -370,8 +370,7 @@ std::vector<int32_t> System::touchedCopies() const {
   Vec3 lo, hi;
   if (group_->listedRegion(lo, hi))
     for (size_t i = 0; i < bodies_.count(); ++i)
-      if (owner[i] >= 0 && owner[i] != self && group_->inListedRegion(bodies_.pos[i], lo, hi))
-        out.push_back(int32_t(i));
+      if (owner[i] >= 0 && owner[i] != self && insideBox(bodies_.pos[i], lo, hi)) out.push_back(int32_t(i));
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;
@@ -391,9 +390,7 @@ std::vector<int32_t> System::ownedBodiesOutside(Vec3 lo, Vec3 hi) const {
   std::vector<int32_t> out;
   for (size_t i = 0; i < bodies_.count(); ++i) {
     const bool mine = group_ ? group_->ownsBody(int32_t(i)) : !(bodies_.flags[i] & (kBodyFixed | kBodyKinematic));
-    const Vec3 p = bodies_.pos[i];
-    if (mine && !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
-      out.push_back(int32_t(i));
+    if (mine && !insideBox(bodies_.pos[i], lo, hi)) out.push_back(int32_t(i));
   }
   return out;
 }

@@ -80,10 +80,8 @@ struct RegionCopyF {
   Vec3 lo, hi;
   uint8_t* mark;
   __device__ void operator()(int64_t i) const {
-    const Vec3 p = pos[i];
     const int32_t o = owner[i];
-    if (o >= 0 && o != rank && p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z)
-      mark[i] = 1;
+    if (o >= 0 && o != rank && insideBox(pos[i], lo, hi)) mark[i] = 1;
   }
 };
 
@@ -126,9 +124,7 @@ struct OutsideF {
   Vec3 lo, hi;
   uint8_t* mark;
   __device__ void operator()(int64_t i) const {
-    const Vec3 p = pos[i];
-    const bool inside = p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
-    mark[i] = mineOf(owner, flags, rank, i) && !inside ? 1 : 0;
+    mark[i] = mineOf(owner, flags, rank, i) && !insideBox(pos[i], lo, hi) ? 1 : 0;
   }
 };
 

@@ -10,26 +10,19 @@
 
 namespace dvi {
 
-inline double mpiSum(MPI_Comm comm, double v) {
+inline double mpiReduce(MPI_Comm comm, double v, MPI_Op op) {
   double out = v;
-  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_SUM, comm);
+  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, op, comm);
   return out;
 }
+inline double mpiSum(MPI_Comm comm, double v) { return mpiReduce(comm, v, MPI_SUM); }
 inline int64_t mpiSum(MPI_Comm comm, int64_t v) {
   int64_t out = v;
   MPI_Allreduce(&v, &out, 1, MPI_INT64_T, MPI_SUM, comm);
   return out;
 }
-inline double mpiMax(MPI_Comm comm, double v) {
-  double out = v;
-  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, comm);
-  return out;
-}
-inline double mpiMin(MPI_Comm comm, double v) {
-  double out = v;
-  MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MIN, comm);
-  return out;
-}
+inline double mpiMax(MPI_Comm comm, double v) { return mpiReduce(comm, v, MPI_MAX); }
+inline double mpiMin(MPI_Comm comm, double v) { return mpiReduce(comm, v, MPI_MIN); }
 
 // Alltoallv of plain records: out[q] to process q; returns what each process sent here, by source. Adds the bytes
 // sent to other processes to *sent.

@@ -70,9 +70,6 @@ class ProcessGroup {
   // the step with its owner's very state (the same summed velocity change, the same integration), so its owner needs
   // to send it no state after the step (DistributedSystem: this process's box grown by the ghost width).
   virtual bool listedRegion(Vec3& lo, Vec3& hi) const = 0;
-  bool inListedRegion(Vec3 p, Vec3 lo, Vec3 hi) const {
-    return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
-  }
   // The bodies (local indices, ascending) whose velocity changes are exchanged this step.
   virtual const std::vector<int32_t>& exchangeBodies() const = 0;
   // Body i takes part in the exchange: pass (a) computes its share even where no local contact touches it.
