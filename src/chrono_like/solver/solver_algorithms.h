@@ -21,8 +21,8 @@
 //   int64_t totalBlocks() const;                 optional: the blocks of every process sharing the problem
 //                                                (process_group.h); blocks() where absent (totalBlocks below)
 //   static constexpr bool kDeviceLoop;           true: p.apgdIterate(...) runs the APGD iterations itself
-//                                                (same signature as algo::apgdIterate, same ApgdControl) where
-//                                                p.deviceLoop() says so, else the host loop below runs
+//                                                (same signature as algo::apgdIterate, same ApgdControl), else
+//                                                the host loop below runs
 #pragma once
 
 #include <algorithm>
@@ -417,10 +417,8 @@ SolverStats apgd(Ops& p, real* gamma, const SolverSettings& s) {
     c.setSpeculation(specs, both);
     c.pick();
     c.speculate();
-    bool device = false;  // the backend's own loop (the GPU's, unless its problem is shared over processes)
-    if constexpr (Ops::kDeviceLoop) device = p.deviceLoop();
-    if (device) {
-      if constexpr (Ops::kDeviceLoop) p.apgdIterate(c, X, NX, a, inv_a, s, st);
+    if constexpr (Ops::kDeviceLoop) {  // the backend's own trials (the GPU's, over several processes too)
+      p.apgdIterate(c, X, NX, a, inv_a, s, st);
     } else {
       // VectorStorage: the GPU (the backend with a device loop) rounds the gradients to float by default.
       const bool round = floatStorage(s, Ops::kDeviceLoop) && !std::is_same_v<real, float>;

@@ -65,7 +65,6 @@ class GpuOps {
       p_.max_diag = m > 0 ? real(m) : real(1);
     }
   }
-  bool deviceLoop() const { return true; }
   int64_t totalBlocks() const { return total_; }
   int64_t blocks() const { return p_.nb; }
   BlockSet blockSet() const { return BlockSet{p_.nc, p_.mu, p_.lo, p_.hi}; }
