@@ -8,10 +8,11 @@
 //
 // The product N x = D^T M^-1 D x (docs/MODEL.md §4) is a gather over each body's contacts (pass (a)) and a pass over
 // the contacts (pass (b)). A body whose contacts lie on several processes gets each process's share of M^-1 D x in
-// pass (a). After the contacts are known, each process names the copies of other processes' bodies its contacts touch
-// (setTouchedCopies, one collective a step); from then on the exchange list holds those copies and the own bodies
-// that other processes touch, and exchangeCompact sums their shares over the processes holding them (every one the
-// same sum), so pass (b) reads the same velocity change everywhere. Every scalar reduction of the solvers (dot products, norms, step tests)
+// pass (a). After the contacts are known, each process names the copies of other processes' bodies its contacts touch,
+// and its current copies in listedRegion (setTouchedCopies, one collective a step); from then on the exchange list
+// holds those copies and the own bodies that other processes hold so, and exchangeCompact (or a backend reading the
+// others' shares itself: exchangeTerms) sums their shares over the processes holding them (every one the same sum), so
+// pass (b) reads the same velocity change everywhere. Every scalar reduction of the solvers (dot products, norms, step tests)
 // is summed over the processes (sum). The iterates then equal one process's up to the order of summation.
 #pragma once
 
