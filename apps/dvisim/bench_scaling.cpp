@@ -92,6 +92,8 @@ struct ScalingOptions : BenchBasics {
   double pair_margin = dvi::BroadPhaseSettings{}.pair_margin;
   bool mpr_manifold = dvi::SystemConfig{}.collision.mpr_manifold;
   bool gpu_entry_gather = dvi::SystemConfig{}.gpu.entry_gather;
+  bool gpu_narrow_classes = dvi::SystemConfig{}.gpu.narrow_classes;
+  std::string gjk = "auto";
   std::string storage = "auto";
   std::string speculation = "auto";
   std::string stop_compare = "on";  // run ours again at the solver's default stop (ratio to the fixed 50)
@@ -575,6 +577,64 @@ std::string makePlot(const std::string& dir) {
 
 // ---------- the benchmark ----------
 
+// The newest record of the device whose records start with `prefix` ("scaling_<device slug>_") in dir, or "".
+std::string newestRecord(const std::string& dir, const std::string& prefix) {
+  std::string best;
+  std::error_code ec;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(prefix, 0) == 0 && name.size() > 4 && name.compare(name.size() - 4, 4, ".csv") == 0 &&
+        name > best)
+      best = name;
+  }
+  return best.empty() ? best : dir + "/" + best;
+}
+
+// Each stage of each row against the same (engine, scene, N) row of the newest earlier record of the same device:
+// one line per row with the ratios (this run / the record), and a line starting "REGRESSION" for every stage that
+// got more than 10% slower (stages under 0.05 ms are left out: launch noise). Empty when there is no record.
+std::string regressionText(const std::vector<Row>& rows, const std::string& record) {
+  if (record.empty()) return "";
+  std::ifstream in(record);
+  std::string line;
+  std::getline(in, line);  // the header (kCsvHeader's columns: ms_per_step is the 10th)
+  std::map<std::string, std::array<double, 5>> old;
+  while (std::getline(in, line)) {
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    if (f.size() < 15 || f[9].empty()) continue;
+    std::array<double, 5> v{};
+    for (int k = 0; k < 5; ++k) v[size_t(k)] = std::atof(f[size_t(9 + k)].c_str());
+    old[f[0] + "," + f[1] + "," + f[2]] = v;
+  }
+  const char* names[5] = {"step", "BroadPhase", "NarrowPhase", "Solve", "Integrate"};
+  std::ostringstream o, bad;
+  o << "against the newest record of this device (" << fs::path(record).filename().string()
+    << "), this run / record:\n";
+  for (const Row& r : rows) {
+    auto it = old.find(r.engine + "," + r.scene + "," + std::to_string(r.n));
+    if (!r.ok() || it == old.end()) continue;
+    const double now[5] = {r.ms, r.broad, r.narrow, r.solve, r.integrate};
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "  %-6s %-4s %6s:", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str());
+    o << buf;
+    for (int k = 0; k < 5; ++k) {
+      const double was = it->second[size_t(k)];
+      if (!(was > 0)) continue;
+      std::snprintf(buf, sizeof buf, " %s %.2f", names[k], now[k] / was);
+      o << buf;
+      if (now[k] > 1.1 * was && std::max(now[k], was) >= 0.05) {
+        std::snprintf(buf, sizeof buf, "REGRESSION %s %s %s %s: %.3f ms against %.3f ms (%.2fx)\n", r.engine.c_str(),
+                      r.scene.c_str(), countLabel(r.n).c_str(), names[k], now[k], was, now[k] / was);
+        bad << buf;
+      }
+    }
+    o << "\n";
+  }
+  return o.str() + bad.str();
+}
+
 int runScaling(const ScalingOptions& o) {
   if (o.mpi) {
 #ifdef DVISIM_HAVE_MPI
@@ -646,6 +706,11 @@ int runScaling(const ScalingOptions& o) {
   cfg.collision.broadphase.pair_margin = dvi::real(o.pair_margin);
   cfg.collision.mpr_manifold = o.mpr_manifold;
   cfg.gpu.entry_gather = o.gpu_entry_gather;
+  cfg.gpu.narrow_classes = o.gpu_narrow_classes;
+  cfg.collision.gjk = o.gjk == "all"         ? dvi::GjkUse::All
+                      : o.gjk == "polytopes" ? dvi::GjkUse::Polytopes
+                      : o.gjk == "off"       ? dvi::GjkUse::Off
+                                             : dvi::GjkUse::Auto;
   cfg.solver.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                        : o.storage == "float" ? dvi::VectorStorage::Float
                                               : dvi::VectorStorage::Auto;
@@ -656,6 +721,15 @@ int runScaling(const ScalingOptions& o) {
 
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
+  // Every GPU record carries the mixed pile at 1M bodies: the narrow phase's cost there (MPR pairs) is what a
+  // sphere-only record cannot show, and a record without it once let a 2x slower narrow phase go unseen.
+  if (o.record && have_gpu && !o.quick) {
+    if (std::find(scenes.begin(), scenes.end(), "mix") == scenes.end()) scenes.push_back("mix");
+    if (std::find(sizes.begin(), sizes.end(), 1000000L) == sizes.end()) {
+      sizes.push_back(1000000);
+      std::sort(sizes.begin(), sizes.end());
+    }
+  }
   const std::string gpu_status =
       has("gpu")
           ? (have_gpu ? "" : "skipped: no GPU (" + (gpu_name.empty() ? std::string("no CUDA device") : gpu_name) + ")")
@@ -814,11 +888,15 @@ int runScaling(const ScalingOptions& o) {
                 stop_lines.c_str());
   std::printf("results: %s/scaling.csv\n", dir.c_str());
   std::printf("%s\n", makePlot(dir).c_str());
+  const std::string device_prefix = "scaling_" + slug(have_gpu ? gpu_name : "cpu-" + cpu_model) + "_";
+  const std::string records =
+      !results_dir.empty() ? results_dir : !sourceDir().empty() ? sourceDir() + "/bench/results" : "bench/results";
+  const std::string regressions = regressionText(rows, newestRecord(records, device_prefix));
+  std::printf("%s", regressions.c_str());
 
   if (o.record) {
     const std::string device = have_gpu ? gpu_name : cpu_name;
-    const std::string base =
-        "scaling_" + slug(have_gpu ? gpu_name : "cpu-" + cpu_model) + "_" + utcNow("%Y%m%d-%H%M%S");
+    const std::string base = device_prefix + utcNow("%Y%m%d-%H%M%S");
     std::ostringstream md;
     md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
        << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
@@ -841,6 +919,8 @@ int runScaling(const ScalingOptions& o) {
        << (cfg.collision.mpr_manifold
                ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)"
                : "MPR's one point per pair (--mpr-manifold false)")
+       << "; GJK before MPR (--gjk): " << o.gjk << "; GPU pairs by shape-pair class (--gpu-narrow-classes): "
+       << (cfg.gpu.narrow_classes ? "true" : "false")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device "
@@ -855,6 +935,7 @@ int runScaling(const ScalingOptions& o) {
                : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
                  "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
                      stop_lines + "```\n")
+       << (regressions.empty() ? std::string() : "\n```\n" + regressions + "```\n")
        << "\nThe rows: " << base << ".csv\n";
     for (const std::string& d : {results_dir, dir}) {
       writeFile(d + "/" + base + ".md", md.str());
@@ -915,6 +996,12 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
   cmd->add_option("--bullet3-device", o->bullet3_device,
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
       ->check(CLI::IsMember({"gpu", "cpu", "any"}));
+  cmd->add_option("--gjk", o->gjk,
+                  "Which MPR pairs try GJK first: auto (the backend's choice), all, polytopes, off "
+                  "(CollisionSettings::gjk)")
+      ->check(CLI::IsMember({"auto", "all", "polytopes", "off"}));
+  cmd->add_option("--gpu-narrow-classes", o->gpu_narrow_classes,
+                  "GPU narrow phase by shape-pair class (GpuTuning::narrow_classes; default true)");
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");
   cmd->add_flag("--mpi", o->mpi,
                 "The domain decomposition instead, under `mpirun -np K`: the sphere pile's weak and strong scaling on "

@@ -105,6 +105,11 @@ struct GpuTuning {
   // sums them in rank order on its own GPU, instead of staging them through pinned host memory and MPI messages.
   // Where some GPU cannot reach another's memory the staging runs. The same sums either way. Default true.
   bool peer_exchange = true;
+  // The narrow phase sorts the pairs its first pass cannot settle (not two spheres, boxes not apart) by shape-pair
+  // class and runs the closed-form classes in a kernel without MPR's code, the MPR classes in another, each warp on
+  // pairs of one class (gpu_collision.cu). false: one list in pair order through the general kernel (for measuring
+  // the difference; the same contacts). Default true.
+  bool narrow_classes = true;
 };
 
 struct SystemConfig {

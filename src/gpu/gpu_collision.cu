@@ -372,6 +372,8 @@ struct NarrowArgs {
   real h;
   int shift;      // of the pair keys (packPair)
   bool manifold;  // CollisionSettings::mpr_manifold
+  GjkUse gjk;     // CollisionSettings::gjk, resolved for the GPU (resolvedGjk)
+  const Aabb* aabb;  // the shapes' boxes of this step (ComputeAabbs): pairs whose boxes are apart are skipped
 };
 
 struct PairPoses {
@@ -413,7 +415,8 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
   const PairPoses P = pairPoses(A, i);
   a = P.a;
   b = P.b;
-  return keepPoints(A, P, pts, collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold));
+  return keepPoints(A, P, pts,
+                    collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold, A.gjk));
 }
 
 // Count pass: contacts per pair, keeping the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left
@@ -438,28 +441,102 @@ struct FirstPoints {
   int64_t cap;
 };
 
-// Count pass, sphere pairs: collideSphereSphere (collideShapes' first case) in a kernel of few registers; every
-// other pair goes to the general list for narrowCountKernel. (collideShapes in one kernel takes 255 registers,
-// one block of 256 per SM: the 100k-sphere pile's count pass took 91 us on an H200, ncu.)
-__global__ void narrowSphereKernel(NarrowArgs A, int64_t np, int64_t* count, FirstPoints first, int64_t* general,
-                                   unsigned long long* general_count) {
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i > np) return;
-  if (i == np) {
-    count[np] = 0;
-    return;
-  }
+// Shape-pair classes: (ta, tb) with ta <= tb, the closed-form classes (pairUsesMpr false) first, then MPR's. The
+// first pass gives each pair it cannot settle its class; the pairs are then placed class by class in the general
+// list (narrowScatterKernel), so that a warp collides pairs of one class (one branch of the support mappings and of
+// the dispatch instead of all of them in turn), and the closed-form classes run in a kernel without MPR's code.
+constexpr int kTypes = int(ShapeType::Count);
+constexpr int kClosedClasses = kTypes * kTypes;
+constexpr int kClasses = 2 * kClosedClasses;
+constexpr uint8_t kNoClass = 0xFF;
+static_assert(kClasses < kNoClass, "a class fits in a byte");
+// list_count's entries: [0] general pairs, [1] pairs of several contacts (write pass), [2] and [3] the MPR and
+// multi kernels' work counters, [4] the closed-form pairs at the general list's head, [5] the closed kernel's counter
+constexpr int kListCounts = 6;
+
+__device__ __forceinline__ int pairClass(ShapeType a, ShapeType b) {
+  const int ta = int(a) < int(b) ? int(a) : int(b), tb = int(a) < int(b) ? int(b) : int(a);
+  return (pairUsesMpr(a, b) ? kClosedClasses : 0) + ta * kTypes + tb;
+}
+
+// The first pass's answer for pair i: the sphere pairs are collided here (collideSphereSphere, collideShapes' first
+// case, in a kernel of few registers), pairs whose boxes are apart (boxesApart) get no contact; -1 for both. Any
+// other pair's class is returned, for the general kernels.
+__device__ int settleOrClassify(const NarrowArgs& A, int64_t i, int64_t* count, FirstPoints first) {
   int32_t a, b;
   unpackPair(A.pairs[i], A.shift, a, b);
-  if (A.shapes[a].type != ShapeType::Sphere || A.shapes[b].type != ShapeType::Sphere) {
-    appendIndex(i, general, general_count);
-    return;
+  if (boxesApart(A.aabb[a], A.aabb[b])) {
+    count[i] = 0;
+    return -1;
   }
+  const ShapeType ta = A.shapes[a].type, tb = A.shapes[b].type;
+  if (ta != ShapeType::Sphere || tb != ShapeType::Sphere) return pairClass(ta, tb);
   const PairPoses P = pairPoses(A, i);
   ContactPoint pts[kMaxContactsPerPair];
   const int n = keepPoints(A, P, pts, np::collideSphereSphere(P.sa, P.wa, P.sb, P.wb, P.envelope, pts));
   count[i] = n;
   if (n >= 1) first.slot[i] = kSphereAgain;
+  return -1;
+}
+
+// First pass over every pair (settleOrClassify). With classes (cls set): each other pair's class goes to cls[i]
+// and the classes' counts to class_count (a block's histogram in shared memory, then one atomic per class);
+// without: the pair is appended to the general list in any order. (collideShapes in one kernel takes 255
+// registers, one block of 256 per SM: the 100k-sphere pile's count pass took 91 us on an H200, ncu.)
+__global__ void narrowClassifyKernel(NarrowArgs A, int64_t np, int64_t* count, FirstPoints first, int64_t* general,
+                                     unsigned long long* general_count, uint8_t* cls,
+                                     unsigned long long* class_count) {
+  __shared__ unsigned int hist[kClasses];
+  const bool classes = cls != nullptr;  // the same in every thread: the barriers below are reached by all
+  if (classes) {
+    for (int k = int(threadIdx.x); k < kClasses; k += int(blockDim.x)) hist[k] = 0;
+    __syncthreads();
+  }
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  int c = -1;
+  if (i < np)
+    c = settleOrClassify(A, i, count, first);
+  else if (i == np)
+    count[np] = 0;
+  if (!classes) {
+    if (c >= 0) appendIndex(i, general, general_count);
+    return;
+  }
+  if (i < np) cls[i] = c >= 0 ? uint8_t(c) : kNoClass;
+  if (c >= 0) atomicAdd(&hist[c], 1u);
+  __syncthreads();
+  for (int k = int(threadIdx.x); k < kClasses; k += int(blockDim.x))
+    if (hist[k] != 0) atomicAdd(&class_count[k], static_cast<unsigned long long>(hist[k]));
+}
+
+// The classes' start places in the general list (class_count[kClasses + k]; the fill cursors after them zeroed),
+// the general list's length and its closed-form head (list_count[0] and [4]). One thread: kClasses entries.
+__global__ void narrowClassScanKernel(unsigned long long* class_count, unsigned long long* list_count) {
+  if (threadIdx.x != 0 || blockIdx.x != 0) return;
+  unsigned long long sum = 0;
+  for (int k = 0; k < kClasses; ++k) {
+    if (k == kClosedClasses) list_count[4] = sum;
+    class_count[kClasses + k] = sum;
+    class_count[2 * kClasses + k] = 0;
+    sum += class_count[k];
+  }
+  list_count[0] = sum;
+}
+
+// Places every classified pair in its class's part of the general list: the lanes of a warp with the same class
+// take their places with one atomic (the order inside a class is free: every result goes to index i).
+__global__ void narrowScatterKernel(const uint8_t* cls, int64_t np, unsigned long long* class_count, int64_t* list) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= np) return;
+  const int c = cls[i];
+  if (c == kNoClass) return;
+  const unsigned lane = threadIdx.x & 31u;
+  const unsigned peers = __match_any_sync(__activemask(), c);
+  const int leader = __ffs(int(peers)) - 1;
+  unsigned long long base = 0;
+  if (int(lane) == leader) base = atomicAdd(&class_count[2 * kClasses + c], static_cast<unsigned long long>(__popc(peers)));
+  base = __shfl_sync(peers, base, leader);
+  list[class_count[kClasses + c] + base + __popc(peers & ((1u << lane) - 1u))] = int64_t(i);
 }
 
 // The next 32 items of a list for the calling warp (all its lanes call it together): a fixed grid takes work
@@ -471,18 +548,41 @@ __device__ __forceinline__ int64_t warpTake(unsigned long long* next) {
   return int64_t(__shfl_sync(0xffffffffu, base, 0)) + lane;
 }
 
+// Count pass, the closed-form classes at the general list's head (list_count[4] of them, a fixed grid taking them
+// by warps): collideShapesClosedForm, the same points as collideShapes without MPR's code in the kernel.
+__global__ void narrowClosedKernel(NarrowArgs A, const int64_t* general, const unsigned long long* list_count,
+                                   unsigned long long* next, int64_t* count, FirstPoints first) {
+  const int64_t m = int64_t(list_count[4]);
+  for (;;) {
+    const int64_t j = warpTake(next);
+    if (j - int64_t(threadIdx.x & 31u) >= m) break;
+    if (j >= m) continue;
+    const int64_t i = general[j];
+    const PairPoses P = pairPoses(A, i);
+    ContactPoint pts[kMaxContactsPerPair];
+    const int n = keepPoints(A, P, pts, collideShapesClosedForm(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts));
+    count[i] = n;
+    if (n >= 1) {
+      if (j < first.cap) first.pts[j] = pts[0];
+      first.slot[i] = j < first.cap ? int32_t(j) : -1;
+    }
+  }
+}
+
 // Count pass, the general list (its length and the work counter are on the device): contacts per pair, keeping
 // the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left to narrowDeepKernel: its state and index
 // go to slot k of the deferred and deep lists, k < deep_cap (the lists' room, last step's count and more); past
 // that, the thread finishes it itself (finishDeferredMpr, the same arithmetic). The restarts of such a pair cost
 // up to ~25 MPR passes in one thread; one such thread set the length of the whole pass (3.7 ms of the CES
 // industrial feed's step on an H200, with 1.7 of 32 lanes active on average).
-__global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const unsigned long long* general_count,
-                                  unsigned long long* next, int64_t* count, FirstPoints first,
+// With classes, the list's closed-form head (list_count[4] pairs, narrowClosedKernel's) is skipped.
+__global__ void narrowCountKernel(NarrowArgs A, const int64_t* general, const unsigned long long* list_count,
+                                  bool classes, unsigned long long* next, int64_t* count, FirstPoints first,
                                   np::MprDeferred* deferred, int32_t* deep, int32_t* deep_count, int32_t deep_cap) {
-  const int64_t m = int64_t(*general_count);
+  const int64_t m = int64_t(list_count[0]);
+  const int64_t head = classes ? int64_t(list_count[4]) : 0;
   for (;;) {
-    const int64_t j = warpTake(next);
+    const int64_t j = head + warpTake(next);
     if (j - int64_t(threadIdx.x & 31u) >= m) break;  // the warp's whole batch is past the end
     if (j >= m) continue;
     const int64_t i = general[j];
@@ -931,7 +1031,8 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   NarrowArgs A{
       d.broad.pair_key_sorted.data(), d.shapes.shape.data(),  d.bodies.pos.data(),  d.bodies.rot.data(),
       d.bodies.v_free.data(),         d.bodies.w_free.data(), d.shapes.hull.data(), d.shapes.sweep.data(),
-      cfg.collision.envelope_rel,     real(cfg.step.dt),      d.pair_shift,         cfg.collision.mpr_manifold};
+      cfg.collision.envelope_rel,     real(cfg.step.dt),      d.pair_shift,         cfg.collision.mpr_manifold,
+      resolvedGjk(cfg.collision.gjk, true), d.shapes.aabb.data()};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
@@ -939,22 +1040,39 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   N.deep.resize(size_t(deep_cap));
   N.deep_count.resize(1);
   N.list.resize(np);
-  // [0]: general pairs of the count pass, [1]: pairs of several contacts (write pass), [2], [3]: the two lists'
-  // work counters (warpTake)
-  N.list_count.resize(4);
+  N.list_count.resize(kListCounts);
   DVI_CUDA(cudaMemsetAsync(N.deep_count.data(), 0, sizeof(int32_t), st));
-  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, 4 * sizeof(unsigned long long), st));
+  DVI_CUDA(cudaMemsetAsync(N.list_count.data(), 0, kListCounts * sizeof(unsigned long long), st));
+  const bool classes = cfg.gpu.narrow_classes;
+  if (classes) {
+    N.cls.resize(np);
+    N.class_count.resize(3 * kClasses);
+    DVI_CUDA(cudaMemsetAsync(N.class_count.data(), 0, kClasses * sizeof(unsigned long long), st));
+  }
   const FirstPoints first{N.first.data(), N.first_slot.data(), first_cap};
-  narrowSphereKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), first, N.list.data(),
-                                                           N.list_count.data());
-  DVI_CUDA_LAUNCH("narrowSphereKernel");
+  narrowClassifyKernel<<<blocksFor(np + 1), kBlock, 0, st>>>(A, np, N.count.data(), first, N.list.data(),
+                                                             N.list_count.data(), classes ? N.cls.data() : nullptr,
+                                                             classes ? N.class_count.data() : nullptr);
+  DVI_CUDA_LAUNCH("narrowClassifyKernel");
+  if (classes) {
+    narrowClassScanKernel<<<1, 32, 0, st>>>(N.class_count.data(), N.list_count.data());
+    DVI_CUDA_LAUNCH("narrowClassScanKernel");
+    narrowScatterKernel<<<blocksFor(np), kBlock, 0, st>>>(N.cls.data(), np, N.class_count.data(), N.list.data());
+    DVI_CUDA_LAUNCH("narrowScatterKernel");
+    const int64_t closed_resident =
+        int64_t(d.multiprocessors) * residentBlocks(narrowClosedKernel, &N.closed_blocks_per_sm);
+    narrowClosedKernel<<<unsigned(std::min<int64_t>(blocksFor(np), closed_resident)), kBlock, 0, st>>>(
+        A, N.list.data(), N.list_count.data(), N.list_count.data() + 5, N.count.data(), first);
+    DVI_CUDA_LAUNCH("narrowClosedKernel");
+  }
   // the general kernel's grid: what fits on the device at once, striding over the list (its length is on the device)
   const int64_t general_resident =
       int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel, &N.count_blocks_per_sm);
   const unsigned general_grid = unsigned(std::min<int64_t>(blocksFor(np), general_resident));
-  narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), N.list_count.data() + 2,
-                                                     N.count.data(), first, N.deferred.data(), N.deep.data(),
-                                                     N.deep_count.data(), int32_t(deep_cap));
+  narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), classes,
+                                                     N.list_count.data() + 2, N.count.data(), first,
+                                                     N.deferred.data(), N.deep.data(), N.deep_count.data(),
+                                                     int32_t(deep_cap));
   DVI_CUDA_LAUNCH("narrowCountKernel");
   // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
   narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(deep_cap * kDeepLanes, 128), 4 * d.multiprocessors)), 128, 0,

@@ -136,8 +136,12 @@ struct NarrowScratch {
   // pairs left by the sphere kernel to the general count kernel, then pairs of several contacts (write pass)
   DeviceBuffer<int64_t> list{"narrow pair list"};
   DeviceBuffer<unsigned long long> list_count{"narrow pair list counts"};
+  // the pairs' shape-pair classes (gpu_collision.cu: pairClass; kNoClass for pairs settled by the first pass) and
+  // the classes' counts, start places and fill cursors
+  DeviceBuffer<uint8_t> cls{"narrow pair classes"};
+  DeviceBuffer<unsigned long long> class_count{"narrow class counts"};
   // resident blocks per SM of narrowCountKernel and narrowMultiKernel (their grids), 0 until first asked
-  int count_blocks_per_sm = 0, multi_blocks_per_sm = 0;
+  int count_blocks_per_sm = 0, multi_blocks_per_sm = 0, closed_blocks_per_sm = 0;
 };
 
 // The APGD control of the device loop (gpu/solver/gpu_apgd_trials.cu: apgdIterateOnDevice), in device memory.

@@ -126,6 +126,7 @@ class NativeCollision final : public CollisionDetector {
     const Vec3* hull = shapes.hull_points.data();
     const int64_t np = int64_t(pairs_.size());
     const int64_t nblocks = (np + kPairsPerBlock - 1) / kPairsPerBlock;
+    const GjkUse gjk = resolvedGjk(config.gjk, false);
     if (int64_t(blocks_.size()) < nblocks) blocks_.resize(size_t(nblocks));
 #pragma omp parallel for schedule(dynamic, 1)
     for (int64_t blk = 0; blk < nblocks; ++blk) {
@@ -134,6 +135,7 @@ class NativeCollision final : public CollisionDetector {
       const int64_t end = std::min(np, (blk + 1) * kPairsPerBlock);
       ContactPoint pts[kMaxContactsPerPair];
       for (int64_t p = blk * kPairsPerBlock; p < end; ++p) {
+        if (boxesApart(shapes.aabb[pairs_[p].a], shapes.aabb[pairs_[p].b])) continue;
         const Shape& a = sh[pairs_[p].a];
         const Shape& b = sh[pairs_[p].b];
         Pose wa = shapeWorldPose(Pose{bodies.pos[a.body], bodies.rot[a.body]}, a);
@@ -142,7 +144,7 @@ class NativeCollision final : public CollisionDetector {
                            bodies.pos[b.body], vel[b.body], omega[b.body]};
         const real envelope =
             pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b], step.dt, m);
-        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold);
+        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold, gjk);
         n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), step.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }

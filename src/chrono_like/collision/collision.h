@@ -9,6 +9,7 @@
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/step_context.h"
 #include "chrono_like/collision/broadphase.h"
+#include "chrono_like/collision/gjk.h"
 
 namespace dvi {
 
@@ -30,9 +31,19 @@ struct CollisionSettings {
   // MPR pairs of two flat features (cylinder caps, hull faces, a box face on a cap) get up to 4 more points of
   // their overlap (mpr.h: mprManifold): without them such stacks tip about MPR's one point and sink. Default true.
   bool mpr_manifold = true;
+  // Which MPR pairs try GJK on their cores first (gjk.h: GjkUse). Auto: All on the CPU backend, Polytopes on the
+  // GPU (docs/GPU_PERFORMANCE.md, narrow phase: GJK on curved cores cost the GPU's mixed pile twice its narrow
+  // phase). The GPU and CPU give the same contacts only under the same resolved choice (resolvedGjk).
+  GjkUse gjk = GjkUse::Auto;
   FrictionCombine friction_combine = FrictionCombine::Product;  // default: Product (Bullet's rule)
   BroadPhaseSettings broadphase;  // the native broad phase's grid and its pair reuse (broadphase.h)
 };
+
+// The GjkUse a backend runs for `use` (Auto resolved: the GPU's choice where `gpu`, else the CPU's).
+inline GjkUse resolvedGjk(GjkUse use, bool gpu) {
+  if (use != GjkUse::Auto) return use;
+  return gpu ? GjkUse::Polytopes : GjkUse::All;
+}
 
 struct CollisionTimes {
   double aabbs = 0, broad = 0, narrow = 0;  // seconds

@@ -19,7 +19,26 @@
 #include "chrono_like/base/math.h"
 
 namespace dvi {
+
+// Which pairs of the MPR path try GJK on their cores first (CollisionSettings::gjk; narrowphase.h gjkTries):
+//  - All: every pair (the CPU backend's default: on the drop-in's hulls and terrain it cut the whole step by ~30%);
+//  - Polytopes: only pairs whose two cores are polytopes (a sphere's point, a capsule's segment, a box, a hull,
+//    a triangle), where GJK ends in a few supports; pairs with a curved core (ellipsoid, cylinder, cone) go
+//    straight to MPR, since GJK converges on them slowly, and when they overlap it pays its supports for nothing;
+//  - Off: MPR alone. Auto is resolved by the backend (docs/GPU_PERFORMANCE.md gives the measurements).
+enum class GjkUse : uint8_t { Auto = 0, All, Polytopes, Off };
+
+// Support-mapping counts of the narrow phase's iterative algorithms on the host (the GPU build leaves them out):
+// what the CI work-count test bounds (tests/test_narrow_work.cpp), per pair or per class of pairs.
+struct NarrowWork {
+  int64_t gjk = 0;       // supports of GJK (each one of A and one of B)
+  int64_t mpr = 0;       // supports of M = A' - B' in MPR's passes
+  int64_t manifold = 0;  // supports of the flat-feature manifold's samples (mprManifold)
+  int64_t total() const { return gjk + mpr + manifold; }
+};
+
 namespace np {
+
 
 constexpr int kGjkMaxIterations = 64;
 // Convergence: the gap between the upper bound |v| and the lower bound v.w / |v| of the distance, relative to |v|.

@@ -66,7 +66,22 @@ struct MprShape {
   Vec3 center;  // world interior point
   real sweep;   // the shape's own sweep radius (sphere, capsule, a hull's margin) added to the core support
   real env;     // the envelope sweep (A only): A' = A + ball(env)
+#ifndef __CUDA_ARCH__
+  NarrowWork* work = nullptr;  // host only (never copied to the device): the supports counted, where set
+#endif
 };
+
+// Counts n supports of kind `field` where the host's work counter is set (A's); nothing on the device.
+#ifndef __CUDA_ARCH__
+#define DVI_NARROW_WORK(shape, field, n) \
+  do {                                   \
+    if ((shape).work) (shape).work->field += (n); \
+  } while (0)
+#else
+#define DVI_NARROW_WORK(shape, field, n) \
+  do {                                   \
+  } while (0)
+#endif
 
 DVI_HD MprShape makeMprShape(const Shape& s, const Pose& w, const Vec3* hull_points, real extra_sweep) {
   MprShape m;
@@ -108,6 +123,7 @@ struct MprVert {
 
 DVI_HD_CALL void mprSupportM(const MprShape& A, const MprShape& B, Vec3 d, const Vec3* hull_points, MprVert& o) {
   const real l = length(d);  // |d| = |-d|: one square root for both sweeps and the envelope
+  DVI_NARROW_WORK(A, mpr, 1);
   o.a = mprSupportL(A, d, l, hull_points);
   o.b = mprSupportL(B, -d, l, hull_points);
   o.v = o.a - o.b;
@@ -130,6 +146,7 @@ DVI_HD Vec3 mprCoreSupport(const MprShape& m, Vec3 d, const Vec3* hull_points) {
 DVI_HD_CALL int mprCoresApart(const MprShape& A, const MprShape& B, const Vec3* hull_points, MprResult& best) {
   const real reach = A.sweep + B.sweep + A.env;  // swept shapes within the envelope: cores closer than this
   auto support = [&](Vec3 d, Vec3& a, Vec3& b) {
+    DVI_NARROW_WORK(A, gjk, 1);
     a = mprCoreSupport(A, d, hull_points);
     b = mprCoreSupport(B, -d, hull_points);
   };
@@ -422,11 +439,22 @@ DVI_HD_CALL int mprBeginOverlap(const MprShape& A, const MprShape& B, const Shap
   return 2;
 }
 
+// Whether a pair of these shape types tries GJK on its cores before MPR (GjkUse, gjk.h).
+DVI_HD bool polytopeCore(ShapeType t) {
+  return t == ShapeType::Sphere || t == ShapeType::Capsule || t == ShapeType::Box || t == ShapeType::ConvexHull ||
+         t == ShapeType::Triangle;
+}
+DVI_HD bool gjkTries(GjkUse use, ShapeType a, ShapeType b) {
+  if (use == GjkUse::Off) return false;
+  if (use == GjkUse::Polytopes) return polytopeCore(a) && polytopeCore(b);
+  return true;  // All (and an unresolved Auto)
+}
+
 // The first stage of a pair: with the cores apart (resting shapes with a margin, speculative contacts) their closest
 // points answer exactly (mprCoresApart); overlapping cores go through MPR (mprBeginOverlap). Returns as above.
 DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
-                         MprResult& best, MprRound& round) {
-  const int g = mprCoresApart(A, B, hull_points, best);
+                         MprResult& best, MprRound& round, GjkUse gjk = GjkUse::All) {
+  const int g = gjkTries(gjk, a.type, b.type) ? mprCoresApart(A, B, hull_points, best) : int(kGjkOverlap);
   if (g == kGjkOverlap) return mprBeginOverlap(A, B, a, b, hull_points, best, round);
   round.n = 0;
   return g == kGjkClose ? 1 : 0;
@@ -476,12 +504,14 @@ DVI_HD bool manifoldSamples(const MprShape& S, Vec3 d0, Vec3 t1, Vec3 t2, const 
   if (S.s->type == ShapeType::Sphere || S.s->type == ShapeType::Ellipsoid) return false;
   const real ck[kManifoldDirs] = {1, kSqrtHalf, 0, -kSqrtHalf, -1, -kSqrtHalf, 0, kSqrtHalf};
   const real sk[kManifoldDirs] = {0, kSqrtHalf, 1, kSqrtHalf, 0, -kSqrtHalf, -1, -kSqrtHalf};
+  DVI_NARROW_WORK(S, manifold, kManifoldDirs);
   for (int k = 0; k < kManifoldDirs; ++k)
     p[k] = mprSupport(S, d0 * kManifoldCosTilt + (t1 * ck[k] + t2 * sk[k]) * kManifoldSinTilt, hull_points);
   spread = 0;
   for (int k = 0; k < kManifoldDirs / 2; ++k) spread = fmax(spread, length(p[k] - p[k + kManifoldDirs / 2]));
   if (!(spread > kManifoldFlat * S.s->size)) return false;
   real small = 0;
+  DVI_NARROW_WORK(S, manifold, kManifoldDirs / 2);
   for (int k = 0; k < kManifoldDirs / 2; k += 2) {
     const Vec3 dc = d0 * kManifoldCosSmall, es = (t1 * ck[k] + t2 * sk[k]) * kManifoldSinSmall;
     small = fmax(small, length(mprSupport(S, dc + es, hull_points) - mprSupport(S, dc - es, hull_points)));
@@ -593,12 +623,18 @@ constexpr int kMprDeferred = -1;  // collideShapes' answer for a pair left in *d
 // four more of two flat features (mprManifold). With `defer`,
 // a deep pair is not finished: its state goes to *defer and the answer is kMprDeferred.
 DVI_HD_CALL int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                           real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true) {
+                           real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true,
+                           GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr) {
   MprShape A = makeMprShape(a, wa, hull_points, envelope);
   MprShape B = makeMprShape(b, wb, hull_points, real(0));
+#ifndef __CUDA_ARCH__
+  A.work = B.work = work;
+#else
+  (void)work;
+#endif
   MprResult best;
   MprRound round;
-  const int stage = mprBegin(A, B, a, b, hull_points, best, round);
+  const int stage = mprBegin(A, B, a, b, hull_points, best, round, gjk);
   if (stage == 0) return 0;
   if (stage == 2) {
     if (defer) {

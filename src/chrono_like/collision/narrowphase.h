@@ -10,6 +10,7 @@
 #include "chrono_like/base/math.h"
 #include "chrono_like/base/shape.h"
 #include "chrono_like/collision/contact.h"
+#include "chrono_like/collision/gjk.h"
 
 namespace dvi {
 
@@ -114,9 +115,22 @@ struct MprDeferred;
 // deep MPR pair is left unfinished: its state goes to *defer, the answer is np::kMprDeferred (-1), and
 // finishDeferredMpr completes it (the GPU narrow phase runs those apart, a lane per restart: mpr.h).
 // `manifold`: MPR pairs of two flat features get up to 4 more points (mpr.h: mprManifold;
-// CollisionSettings::mpr_manifold).
+// CollisionSettings::mpr_manifold). `gjk`: which MPR pairs try GJK first (gjk.h: GjkUse; Auto counts as All).
+// `work` (host only): the support mappings the pair cost are added to it (gjk.h: NarrowWork).
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                         real envelope, ContactPoint* out, np::MprDeferred* defer = nullptr, bool manifold = true);
+                         real envelope, ContactPoint* out, np::MprDeferred* defer = nullptr, bool manifold = true,
+                         GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr);
+
+// A pair whose current boxes (shapeAabb grown by shapeMargin: ComputeAabbs) are apart makes no contact: each box
+// holds its shape grown by its margin, and a pair's envelope is never more than the two margins together
+// (pairEnvelope), so shapes whose grown boxes are apart are farther apart than their envelope. The broad phase keeps
+// pairs between steps while the boxes stay inside boxes grown by pair_margin (broadphase.h), so many of the pairs it
+// hands on are apart by this test; both backends skip them before any narrow-phase work. Planes have unbounded
+// boxes and are never skipped.
+DVI_HD bool boxesApart(const Aabb& a, const Aabb& b) {
+  return a.hi.x < b.lo.x || b.hi.x < a.lo.x || a.hi.y < b.lo.y || b.hi.y < a.lo.y || a.hi.z < b.lo.z ||
+         b.hi.z < a.lo.z;
+}
 
 }  // namespace dvi
 

@@ -440,12 +440,16 @@ DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const S
   return m;
 }
 
-// Canonical order: a.type <= b.type.
+// Canonical order: a.type <= b.type. kMpr = false leaves MPR (and the triangle pairs, which use it) out of the
+// code: the GPU's kernel for the closed-form classes (pairUsesMpr false) takes far fewer registers without it.
+template <bool kMpr = true>
 DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                          real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true) {
+                          real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true,
+                          GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr) {
   if (b.type == ShapeType::Triangle) {  // static geometry: never against a plane or another triangle
     if (a.type == ShapeType::Plane || a.type == ShapeType::Triangle) return 0;
-    return collideConvexTriangle(a, wa, b, wb, hull_points, envelope, out);
+    if constexpr (kMpr) return collideConvexTriangle(a, wa, b, wb, hull_points, envelope, out);
+    return 0;
   }
   if (b.type == ShapeType::Plane) {
     if (a.type == ShapeType::Plane) return 0;
@@ -477,7 +481,8 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
       break;
     default: break;
   }
-  return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer, manifold);
+  if constexpr (kMpr) return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer, manifold, gjk, work);
+  return 0;
 }
 
 }  // namespace np
@@ -509,21 +514,32 @@ DVI_HD void markFlippedMpr(ContactPoint* out, int m) {
 }
 
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
-                         real envelope, ContactPoint* out, np::MprDeferred* defer, bool manifold) {
+                         real envelope, ContactPoint* out, np::MprDeferred* defer, bool manifold, GjkUse gjk,
+                         NarrowWork* work) {
   if (a.type == ShapeType::Sphere && b.type == ShapeType::Sphere)  // the hot path
     return np::collideSphereSphere(a, wa, b, wb, envelope, out);
   if (int(a.type) <= int(b.type)) {
-    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer, manifold);
+    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer, manifold, gjk, work);
     if (m == np::kMprDeferred) defer->swapped = 0;
     return m;
   }
-  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer, manifold);
+  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer, manifold, gjk, work);
   if (m == np::kMprDeferred) {
     defer->swapped = 1;
     return m;
   }
   np::flipContacts(out, m);
   markFlippedMpr(out, m);
+  return m;
+}
+
+// collideShapes for a pair with a closed form (pairUsesMpr false; the caller makes sure), without MPR's code: the
+// same arithmetic and the same points as collideShapes.
+DVI_HD int collideShapesClosedForm(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb,
+                                   const Vec3* hull_points, real envelope, ContactPoint* out) {
+  if (int(a.type) <= int(b.type)) return np::collideOrdered<false>(a, wa, b, wb, hull_points, envelope, out);
+  const int m = np::collideOrdered<false>(b, wb, a, wa, hull_points, envelope, out);
+  np::flipContacts(out, m);
   return m;
 }
 
