@@ -709,6 +709,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.gpu.narrow_classes = o.gpu_narrow_classes;
   cfg.collision.gjk = o.gjk == "all"         ? dvi::GjkUse::All
                       : o.gjk == "polytopes" ? dvi::GjkUse::Polytopes
+                      : o.gjk == "nocylinders" ? dvi::GjkUse::NoCylinders
                       : o.gjk == "off"       ? dvi::GjkUse::Off
                                              : dvi::GjkUse::Auto;
   cfg.solver.storage = o.storage == "real"    ? dvi::VectorStorage::Real
@@ -997,9 +998,9 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
                   "OpenCL device type of the Bullet 3 peer: gpu (the default), cpu (pocl, for tests) or any")
       ->check(CLI::IsMember({"gpu", "cpu", "any"}));
   cmd->add_option("--gjk", o->gjk,
-                  "Which MPR pairs try GJK first: auto (the backend's choice), all, polytopes, off "
+                  "Which MPR pairs try GJK first: auto (the backend's choice), all, polytopes, nocylinders, off "
                   "(CollisionSettings::gjk)")
-      ->check(CLI::IsMember({"auto", "all", "polytopes", "off"}));
+      ->check(CLI::IsMember({"auto", "all", "polytopes", "nocylinders", "off"}));
   cmd->add_option("--gpu-narrow-classes", o->gpu_narrow_classes,
                   "GPU narrow phase by shape-pair class (GpuTuning::narrow_classes; default true)");
   cmd->add_option("--results-dir", o->results_dir, "Where --record writes (default bench/results of the source tree)");

@@ -25,8 +25,12 @@ namespace dvi {
 //  - Polytopes: only pairs whose two cores are polytopes (a sphere's point, a capsule's segment, a box, a hull,
 //    a triangle), where GJK ends in a few supports; pairs with a curved core (ellipsoid, cylinder, cone) go
 //    straight to MPR, since GJK converges on them slowly, and when they overlap it pays its supports for nothing;
+//  - NoCylinders: every pair but those with a cylinder or cone core: those cores have no sweep, so resting contacts
+//    touch or overlap them, GJK rarely settles the pair and MPR runs after it anyway (the work-count test: GJK adds
+//    10-20 supports to such a pair and saves none), while a sphere or ellipsoid pair with a gap is settled by GJK
+//    at a tenth of MPR's supports;
 //  - Off: MPR alone. Auto is resolved by the backend (docs/GPU_PERFORMANCE.md gives the measurements).
-enum class GjkUse : uint8_t { Auto = 0, All, Polytopes, Off };
+enum class GjkUse : uint8_t { Auto = 0, All, Polytopes, NoCylinders, Off };
 
 // Support-mapping counts of the narrow phase's iterative algorithms on the host (the GPU build leaves them out):
 // what the CI work-count test bounds (tests/test_narrow_work.cpp), per pair or per class of pairs.

@@ -447,6 +447,8 @@ DVI_HD bool polytopeCore(ShapeType t) {
 DVI_HD bool gjkTries(GjkUse use, ShapeType a, ShapeType b) {
   if (use == GjkUse::Off) return false;
   if (use == GjkUse::Polytopes) return polytopeCore(a) && polytopeCore(b);
+  if (use == GjkUse::NoCylinders)
+    return a != ShapeType::Cylinder && a != ShapeType::Cone && b != ShapeType::Cylinder && b != ShapeType::Cone;
   return true;  // All (and an unresolved Auto)
 }
 
