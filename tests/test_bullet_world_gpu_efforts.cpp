@@ -32,9 +32,8 @@ double basicDemoLowest(TestWorld& w, int steps) {
   for (int k = 0; k < 5; ++k)
     for (int i = 0; i < 5; ++i)
       for (int j = 0; j < 5; ++j)
-        boxes.push_back(w.make(box, 1,
-                               btVector3(btScalar(0.2 * i - 0.4), btScalar(0.2 + 0.2 * k + 0.1),
-                                         btScalar(0.2 * j - 0.4))));
+        boxes.push_back(
+            w.make(box, 1, btVector3(btScalar(0.2 * i - 0.4), btScalar(0.2 + 0.2 * k + 0.1), btScalar(0.2 * j - 0.4))));
   btRigidBody* bob = w.make(box, 1, btVector3(3, 2, 0));
   w.joint(new btHingeConstraint(*bob, btVector3(0, btScalar(0.5), 0), btVector3(0, 0, 1)));
   for (int s = 0; s < steps; ++s) w.world->stepSimulation(btScalar(1.0 / 60), 1, btScalar(1.0 / 60));

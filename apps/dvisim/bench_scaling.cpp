@@ -583,8 +583,7 @@ std::string newestRecord(const std::string& dir, const std::string& prefix) {
   std::error_code ec;
   for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
-    if (name.rfind(prefix, 0) == 0 && name.size() > 4 && name.compare(name.size() - 4, 4, ".csv") == 0 &&
-        name > best)
+    if (name.rfind(prefix, 0) == 0 && name.size() > 4 && name.compare(name.size() - 4, 4, ".csv") == 0 && name > best)
       best = name;
   }
   return best.empty() ? best : dir + "/" + best;
@@ -707,11 +706,11 @@ int runScaling(const ScalingOptions& o) {
   cfg.collision.mpr_manifold = o.mpr_manifold;
   cfg.gpu.entry_gather = o.gpu_entry_gather;
   cfg.gpu.narrow_classes = o.gpu_narrow_classes;
-  cfg.collision.gjk = o.gjk == "all"         ? dvi::GjkUse::All
-                      : o.gjk == "polytopes" ? dvi::GjkUse::Polytopes
+  cfg.collision.gjk = o.gjk == "all"           ? dvi::GjkUse::All
+                      : o.gjk == "polytopes"   ? dvi::GjkUse::Polytopes
                       : o.gjk == "nocylinders" ? dvi::GjkUse::NoCylinders
-                      : o.gjk == "off"       ? dvi::GjkUse::Off
-                                             : dvi::GjkUse::Auto;
+                      : o.gjk == "off"         ? dvi::GjkUse::Off
+                                               : dvi::GjkUse::Auto;
   cfg.solver.storage = o.storage == "real"    ? dvi::VectorStorage::Real
                        : o.storage == "float" ? dvi::VectorStorage::Float
                                               : dvi::VectorStorage::Auto;
@@ -890,8 +889,9 @@ int runScaling(const ScalingOptions& o) {
   std::printf("results: %s/scaling.csv\n", dir.c_str());
   std::printf("%s\n", makePlot(dir).c_str());
   const std::string device_prefix = "scaling_" + slug(have_gpu ? gpu_name : "cpu-" + cpu_model) + "_";
-  const std::string records =
-      !results_dir.empty() ? results_dir : !sourceDir().empty() ? sourceDir() + "/bench/results" : "bench/results";
+  const std::string records = !results_dir.empty()   ? results_dir
+                              : !sourceDir().empty() ? sourceDir() + "/bench/results"
+                                                     : "bench/results";
   const std::string regressions = regressionText(rows, newestRecord(records, device_prefix));
   std::printf("%s", regressions.c_str());
 
@@ -920,8 +920,8 @@ int runScaling(const ScalingOptions& o) {
        << (cfg.collision.mpr_manifold
                ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)"
                : "MPR's one point per pair (--mpr-manifold false)")
-       << "; GJK before MPR (--gjk): " << o.gjk << "; GPU pairs by shape-pair class (--gpu-narrow-classes): "
-       << (cfg.gpu.narrow_classes ? "true" : "false")
+       << "; GJK before MPR (--gjk): " << o.gjk
+       << "; GPU pairs by shape-pair class (--gpu-narrow-classes): " << (cfg.gpu.narrow_classes ? "true" : "false")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
        << "- copy bandwidth (read + write): device "
@@ -936,8 +936,8 @@ int runScaling(const ScalingOptions& o) {
                : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
                  "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
                      stop_lines + "```\n")
-       << (regressions.empty() ? std::string() : "\n```\n" + regressions + "```\n")
-       << "\nThe rows: " << base << ".csv\n";
+       << (regressions.empty() ? std::string() : "\n```\n" + regressions + "```\n") << "\nThe rows: " << base
+       << ".csv\n";
     for (const std::string& d : {results_dir, dir}) {
       writeFile(d + "/" + base + ".md", md.str());
       writeFile(d + "/" + base + ".csv", csvText(rows));

@@ -370,9 +370,9 @@ struct NarrowArgs {
   const real* sweep;
   real envelope_rel;
   real h;
-  int shift;      // of the pair keys (packPair)
-  bool manifold;  // CollisionSettings::mpr_manifold
-  GjkUse gjk;     // CollisionSettings::gjk, resolved for the GPU (resolvedGjk)
+  int shift;         // of the pair keys (packPair)
+  bool manifold;     // CollisionSettings::mpr_manifold
+  GjkUse gjk;        // CollisionSettings::gjk, resolved for the GPU (resolvedGjk)
   const Aabb* aabb;  // the shapes' boxes of this step (ComputeAabbs): pairs whose boxes are apart are skipped
 };
 
@@ -484,8 +484,7 @@ __device__ int settleOrClassify(const NarrowArgs& A, int64_t i, int64_t* count, 
 // without: the pair is appended to the general list in any order. (collideShapes in one kernel takes 255
 // registers, one block of 256 per SM: the 100k-sphere pile's count pass took 91 us on an H200, ncu.)
 __global__ void narrowClassifyKernel(NarrowArgs A, int64_t np, int64_t* count, FirstPoints first, int64_t* general,
-                                     unsigned long long* general_count, uint8_t* cls,
-                                     unsigned long long* class_count) {
+                                     unsigned long long* general_count, uint8_t* cls, unsigned long long* class_count) {
   __shared__ unsigned int hist[kClasses];
   const bool classes = cls != nullptr;  // the same in every thread: the barriers below are reached by all
   if (classes) {
@@ -534,7 +533,8 @@ __global__ void narrowScatterKernel(const uint8_t* cls, int64_t np, unsigned lon
   const unsigned peers = __match_any_sync(__activemask(), c);
   const int leader = __ffs(int(peers)) - 1;
   unsigned long long base = 0;
-  if (int(lane) == leader) base = atomicAdd(&class_count[2 * kClasses + c], static_cast<unsigned long long>(__popc(peers)));
+  if (int(lane) == leader)
+    base = atomicAdd(&class_count[2 * kClasses + c], static_cast<unsigned long long>(__popc(peers)));
   base = __shfl_sync(peers, base, leader);
   list[class_count[kClasses + c] + base + __popc(peers & ((1u << lane) - 1u))] = int64_t(i);
 }
@@ -1028,11 +1028,20 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       std::min<int64_t>({np, std::max<int64_t>(1024, N.general_last + N.general_last / 2), int64_t(INT32_MAX)});
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
-  NarrowArgs A{
-      d.broad.pair_key_sorted.data(), d.shapes.shape.data(),  d.bodies.pos.data(),  d.bodies.rot.data(),
-      d.bodies.v_free.data(),         d.bodies.w_free.data(), d.shapes.hull.data(), d.shapes.sweep.data(),
-      cfg.collision.envelope_rel,     real(cfg.step.dt),      d.pair_shift,         cfg.collision.mpr_manifold,
-      resolvedGjk(cfg.collision.gjk, true), d.shapes.aabb.data()};
+  NarrowArgs A{d.broad.pair_key_sorted.data(),
+               d.shapes.shape.data(),
+               d.bodies.pos.data(),
+               d.bodies.rot.data(),
+               d.bodies.v_free.data(),
+               d.bodies.w_free.data(),
+               d.shapes.hull.data(),
+               d.shapes.sweep.data(),
+               cfg.collision.envelope_rel,
+               real(cfg.step.dt),
+               d.pair_shift,
+               cfg.collision.mpr_manifold,
+               resolvedGjk(cfg.collision.gjk, true),
+               d.shapes.aabb.data()};
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
@@ -1070,9 +1079,8 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel, &N.count_blocks_per_sm);
   const unsigned general_grid = unsigned(std::min<int64_t>(blocksFor(np), general_resident));
   narrowCountKernel<<<general_grid, kBlock, 0, st>>>(A, N.list.data(), N.list_count.data(), classes,
-                                                     N.list_count.data() + 2, N.count.data(), first,
-                                                     N.deferred.data(), N.deep.data(), N.deep_count.data(),
-                                                     int32_t(deep_cap));
+                                                     N.list_count.data() + 2, N.count.data(), first, N.deferred.data(),
+                                                     N.deep.data(), N.deep_count.data(), int32_t(deep_cap));
   DVI_CUDA_LAUNCH("narrowCountKernel");
   // A fixed grid (the deep count stays on the device): up to 4 blocks of 128 threads per multiprocessor.
   narrowDeepKernel<<<unsigned(std::min<int64_t>(blocksFor(deep_cap * kDeepLanes, 128), 4 * d.multiprocessors)), 128, 0,

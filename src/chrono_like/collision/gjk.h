@@ -43,7 +43,6 @@ struct NarrowWork {
 
 namespace np {
 
-
 constexpr int kGjkMaxIterations = 64;
 // Convergence: the gap between the upper bound |v| and the lower bound v.w / |v| of the distance, relative to |v|.
 constexpr real kGjkRelTol = sizeof(real) == 8 ? real(1e-8) : real(1e-5);

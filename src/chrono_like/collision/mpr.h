@@ -73,8 +73,8 @@ struct MprShape {
 
 // Counts n supports of kind `field` where the host's work counter is set (A's); nothing on the device.
 #ifndef __CUDA_ARCH__
-#define DVI_NARROW_WORK(shape, field, n) \
-  do {                                   \
+#define DVI_NARROW_WORK(shape, field, n)          \
+  do {                                            \
     if ((shape).work) (shape).work->field += (n); \
   } while (0)
 #else

@@ -128,8 +128,7 @@ DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const P
 // hands on are apart by this test; both backends skip them before any narrow-phase work. Planes have unbounded
 // boxes and are never skipped.
 DVI_HD bool boxesApart(const Aabb& a, const Aabb& b) {
-  return a.hi.x < b.lo.x || b.hi.x < a.lo.x || a.hi.y < b.lo.y || b.hi.y < a.lo.y || a.hi.z < b.lo.z ||
-         b.hi.z < a.lo.z;
+  return a.hi.x < b.lo.x || b.hi.x < a.lo.x || a.hi.y < b.lo.y || b.hi.y < a.lo.y || a.hi.z < b.lo.z || b.hi.z < a.lo.z;
 }
 
 }  // namespace dvi
