@@ -460,16 +460,16 @@ __device__ __forceinline__ int pairClass(ShapeType a, ShapeType b) {
 }
 
 // The first pass's answer for pair i: the sphere pairs are collided here (collideSphereSphere, collideShapes' first
-// case, in a kernel of few registers), pairs whose boxes are apart (boxesApart) get no contact; -1 for both. Any
+// case, in a kernel of few registers), pairs whose boxes are apart (skipByBoxes) get no contact; -1 for both. Any
 // other pair's class is returned, for the general kernels.
 __device__ int settleOrClassify(const NarrowArgs& A, int64_t i, int64_t* count, FirstPoints first) {
   int32_t a, b;
   unpackPair(A.pairs[i], A.shift, a, b);
-  if (boxesApart(A.aabb[a], A.aabb[b])) {
+  const ShapeType ta = A.shapes[a].type, tb = A.shapes[b].type;
+  if (skipByBoxes(ta, tb, A.aabb[a], A.aabb[b])) {
     count[i] = 0;
     return -1;
   }
-  const ShapeType ta = A.shapes[a].type, tb = A.shapes[b].type;
   if (ta != ShapeType::Sphere || tb != ShapeType::Sphere) return pairClass(ta, tb);
   const PairPoses P = pairPoses(A, i);
   ContactPoint pts[kMaxContactsPerPair];

@@ -397,7 +397,9 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   cfg.solver.min_bounce_speed = real(getSolverInfo().m_restitutionVelocityThreshold);
   if (config_.effort == SolverEffort::BulletIterations) {
     const btContactSolverInfo& info = getSolverInfo();
-    cfg.solver.type = SolverType::GaussSeidel;
+    // Gauss-Seidel is sequential: the GPU backend runs APGD for the same fixed iteration count instead (it read
+    // BuildRows' APGD buffers that a Gauss-Seidel step does not build: cudaErrorIllegalAddress on the first step).
+    cfg.solver.type = system_->backendName() == "gpu" ? SolverType::APGD : SolverType::GaussSeidel;
     cfg.solver.max_iterations = std::max(1, info.m_numIterations);
     cfg.solver.min_iterations = 0;
     cfg.solver.tolerance = 0;  // a fixed count, judged against the default tolerance in the stats

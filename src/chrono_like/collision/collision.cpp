@@ -135,9 +135,9 @@ class NativeCollision final : public CollisionDetector {
       const int64_t end = std::min(np, (blk + 1) * kPairsPerBlock);
       ContactPoint pts[kMaxContactsPerPair];
       for (int64_t p = blk * kPairsPerBlock; p < end; ++p) {
-        if (boxesApart(shapes.aabb[pairs_[p].a], shapes.aabb[pairs_[p].b])) continue;
         const Shape& a = sh[pairs_[p].a];
         const Shape& b = sh[pairs_[p].b];
+        if (skipByBoxes(a.type, b.type, shapes.aabb[pairs_[p].a], shapes.aabb[pairs_[p].b])) continue;
         Pose wa = shapeWorldPose(Pose{bodies.pos[a.body], bodies.rot[a.body]}, a);
         Pose wb = shapeWorldPose(Pose{bodies.pos[b.body], bodies.rot[b.body]}, b);
         const PairMotion m{bodies.pos[a.body], vel[a.body], omega[a.body],

@@ -130,6 +130,11 @@ DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const P
 DVI_HD bool boxesApart(const Aabb& a, const Aabb& b) {
   return a.hi.x < b.lo.x || b.hi.x < a.lo.x || a.hi.y < b.lo.y || b.hi.y < a.lo.y || a.hi.z < b.lo.z || b.hi.z < a.lo.z;
 }
+// The skip both backends make: sphere pairs are not tested (their closed form costs less than reading two boxes:
+// the GPU's 1M-sphere pile lost 0.7 ms of NarrowPhase to the boxes' reads), every other pair is.
+DVI_HD bool skipByBoxes(ShapeType ta, ShapeType tb, const Aabb& a, const Aabb& b) {
+  return !(ta == ShapeType::Sphere && tb == ShapeType::Sphere) && boxesApart(a, b);
+}
 
 }  // namespace dvi
 

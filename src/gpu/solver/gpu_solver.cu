@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "chrono_like/base/errors.h"
 #include "chrono_like/solver/solver.h"
 #include "chrono_like/solver/solver_algorithms.h"
 #include "gpu/cub_call.cuh"
@@ -241,7 +242,8 @@ SolverStats solveCcp(DeviceState& d, const SystemConfig& cfg) {
   switch (cfg.solver.type) {
     case SolverType::Jacobi: st = algo::jacobi(ops, gamma, cfg.solver); break;
     case SolverType::BB: st = algo::bb(ops, gamma, cfg.solver); break;
-    case SolverType::GaussSeidel:  // refused by GpuSystem's constructor
+    case SolverType::GaussSeidel:  // refused by GpuSystem's constructor, and here when a config edit asks for it
+      throw InputError("GPU backend: Gauss-Seidel is sequential; use jacobi, apgd or bb on the GPU");
     case SolverType::APGD:
     default: st = algo::apgd(ops, gamma, cfg.solver); break;
   }
