@@ -62,7 +62,10 @@ TEST_CASE("drop-in world on the GPU backend: every solver effort steps BasicDemo
     REQUIRE_NOTHROW(lg = basicDemoLowest(gpu, frames));
     lc = basicDemoLowest(cpu, frames);
     CHECK(gpu.dvi().backendName() == "gpu");
-    // The lowest layer rests on the ground (centre 0.1 above it) on both backends, to the envelope.
+    // The lowest layer rests on the ground (centre 0.1 above it) on both backends, to the envelope (not under
+    // compute-sanitizer: its 5 frames test the device code, and Bullet's 10 iterations on the GPU's APGD have not
+    // yet lifted the bottom layer back from the first frames' 7 mm).
+    if (std::getenv("DVISIM_SANITIZER_RUN")) continue;
     CHECK(lg == Approx(0.1).margin(5e-3));
     CHECK(lc == Approx(0.1).margin(5e-3));
   }
