@@ -658,6 +658,7 @@ std::unique_ptr<System> cesSystem(const CesConfig& cfg, bool gpu) {
   sc.solver.max_iterations = cfg.solver.max_iterations;
   sc.solver.storage = VectorStorage::Real;  // both backends alike, to rounding
   sc.collision.broadphase.max_bins = int64_t(1) << 20;
+  sc.collision.gjk = resolvedGjk(GjkUse::Auto, true);  // the GPU's GJK choice on both: the same contacts
   if (gpu) return makeGpuSystem(sc);
   return std::make_unique<System>(sc);
 }
