@@ -495,3 +495,129 @@ TEST_CASE("hinge2: a wheel on its suspension, drive and steering motors, as on B
   CHECK(std::fabs(steer[1]) == Approx(std::fabs(steer[0])).margin(0.02));
   CHECK(withinStock(worst[1], worst[0], 5e-3));
 }
+
+namespace {
+
+// Our violation measure (joints.h: jointViolation) of a constraint at its bodies' Bullet poses: it reads only the
+// btRigidBody transforms, so it measures stock Bullet's joints and ours alike.
+JointViolation violationAt(const btTypedConstraint& c) {
+  const JointSpec j = jointSpecFromBullet(c);
+  auto side = [](const btRigidBody& b) {
+    JointBody s;
+    const btTransform& t = b.getCenterOfMassTransform();
+    s.x = Vec3{real(t.getOrigin().x()), real(t.getOrigin().y()), real(t.getOrigin().z())};
+    const btQuaternion q = t.getRotation();
+    s.q = Quat{real(q.w()), real(q.x()), real(q.y()), real(q.z())};
+    return s;
+  };
+  return jointViolation(j, side(c.getRigidBodyA()), side(c.getRigidBodyB()));
+}
+
+}  // namespace
+
+TEST_CASE("ConstraintDemo's constraints together: each joint held as stock Bullet holds it",
+          "[world][joints][bullet]") {
+  // After bullet3's examples/Constraints/ConstraintDemo: a gear between two spinning discs (one tilted, its linear
+  // factor 0), a breakable point-to-point, a ball socket, a slider with linear limits and an angular range of
+  // +-pi/3, a 6-DoF slider driven by its linear motor with the rotation about x limited to [-pi, 1.5], a door hinge
+  // limited to +-pi/4 and pushed, a 6-DoF spring, a cone-twist and a hinge with a motor; 300 frames at 60 Hz.
+  const char* names[9] = {"gear hinge", "breakable p2p", "ball socket", "slider",     "6-DoF slider",
+                          "door hinge", "6-DoF spring",  "cone-twist",  "motor hinge"};
+  double worst_lin[2][9] = {}, worst_ang[2][9] = {};
+  for (int dvi = 0; dvi < 2; ++dvi) {
+    Scene s(dvi);
+    btRigidBody& fixed = btTypedConstraint::getFixedBody();
+    btCollisionShape* cube = s.own(new btBoxShape(btVector3(1, 1, 1)));
+    btCollisionShape* disc = s.own(new btCylinderShape(btVector3(0.5, 0.2, 0.5)));
+    std::vector<btTypedConstraint*> c;
+    // The gear: disc A spins about y, disc B tilted by 0.3 about z, both held in place.
+    const double theta = 0.3;
+    btRigidBody* da = s.make(disc, btScalar(3.14), btVector3(-10, 2, -8));
+    btRigidBody* db = s.make(disc, btScalar(6.28),
+                             btTransform(btQuaternion(btVector3(0, 0, 1), btScalar(-theta)), btVector3(-10, 2, -6)));
+    da->setLinearFactor(btVector3(0, 0, 0));
+    db->setLinearFactor(btVector3(0, 0, 0));
+    c.push_back(s.joint(new btHingeConstraint(*da, btVector3(0, 0, 0), btVector3(0, 1, 0), true)));
+    s.joint(new btHingeConstraint(*db, btVector3(0, 0, 0), btVector3(0, 1, 0), true));
+    db->setAngularVelocity(btTransform(db->getWorldTransform()).getBasis() * btVector3(0, 3, 0));
+    const btVector3 axisB = btMatrix3x3(btQuaternion(btVector3(0, 0, 1), btScalar(-theta))).getRow(1);
+    s.joint(new btGearConstraint(*da, *db, btVector3(0, 1, 0), axisB, 4), true);
+    // Breakable point-to-point (threshold 10.2) and a ball socket, each on a hanging cube.
+    btRigidBody* b0 = s.make(cube, 1, btVector3(0, 0, -5));
+    auto* breakable = s.joint(new btPoint2PointConstraint(*b0, btVector3(1, 1, 0)));
+    breakable->setBreakingImpulseThreshold(btScalar(10.2));
+    c.push_back(breakable);
+    btRigidBody* b1 = s.make(cube, 1, btVector3(2, 20, 0));
+    c.push_back(s.joint(new btPoint2PointConstraint(*b1, btVector3(1, -1, -1))));
+    // Slider between two cubes, linear [-15, -5], angular +-pi/3.
+    btRigidBody* sa = s.make(cube, 1, btVector3(-20, 0, 30));
+    btRigidBody* sb = s.make(cube, 1, btVector3(-30, 0, 30));
+    auto* slider =
+        s.joint(new btSliderConstraint(*sa, *sb, btTransform::getIdentity(), btTransform::getIdentity(), true), true);
+    slider->setLowerLinLimit(-15);
+    slider->setUpperLinLimit(-5);
+    slider->setLowerAngLimit(btScalar(-kPi / 3));
+    slider->setUpperAngLimit(btScalar(kPi / 3));
+    c.push_back(slider);
+    // 6-DoF slider on the fixed body with its linear motor.
+    btRigidBody* d6 = s.make(cube, 1, btVector3(0, 10, 0));
+    auto* slider6 =
+        s.joint(new btGeneric6DofConstraint(fixed, *d6, frame(btVector3(0, 15, 0)), frame(btVector3(0, 5, 0)), true));
+    slider6->setLinearLowerLimit(btVector3(-10, 0, 0));
+    slider6->setLinearUpperLimit(btVector3(10, 0, 0));
+    slider6->setAngularLowerLimit(btVector3(btScalar(-kPi), 0, 0));
+    slider6->setAngularUpperLimit(btVector3(1.5, 0, 0));
+    slider6->getTranslationalLimitMotor()->m_enableMotor[0] = true;
+    slider6->getTranslationalLimitMotor()->m_targetVelocity[0] = -5;
+    slider6->getTranslationalLimitMotor()->m_maxMotorForce[0] = 6;
+    c.push_back(slider6);
+    // A door on a hinge limited to +-pi/4, pushed.
+    btRigidBody* door = s.make(s.own(new btBoxShape(btVector3(2, 5, 0.1))), 1, btVector3(-5, 4, 0));
+    auto* hinge = s.joint(new btHingeConstraint(*door, btVector3(-2.1, 0, 0), btVector3(0, 1, 0), true));
+    hinge->setLimit(btScalar(-kPi / 4), btScalar(kPi / 4));
+    door->applyImpulse(btVector3(0, 0, 5), btVector3(2, 0, 0));
+    c.push_back(hinge);
+    // A 6-DoF spring between the fixed body and a cube: x within +-5 with a spring, z rotation within +-1.5 with one.
+    btRigidBody* sp = s.make(cube, 1, btVector3(0, 10, 10));
+    auto* spring = s.joint(
+        new btGeneric6DofSpringConstraint(fixed, *sp, frame(btVector3(0, 10, 10)), frame(btVector3(0, 0, 0)), true));
+    spring->setLinearLowerLimit(btVector3(-5, 0, 0));
+    spring->setLinearUpperLimit(btVector3(5, 0, 0));
+    spring->setAngularLowerLimit(btVector3(0, 0, -1.5));
+    spring->setAngularUpperLimit(btVector3(0, 0, 1.5));
+    spring->enableSpring(0, true);
+    spring->setStiffness(0, btScalar(39.478));
+    spring->enableSpring(5, true);
+    spring->setStiffness(5, btScalar(39.478));
+    sp->applyCentralImpulse(btVector3(3, 0, 0));
+    c.push_back(spring);
+    // A cone-twist pendulum, and a hinge driven by its motor.
+    btRigidBody* ct = s.make(cube, 1, btVector3(10, 5, 0));
+    const btQuaternion down(btVector3(0, 0, 1), btScalar(kPi / 2));  // the cone's axis (frame x) along y
+    auto* cone = s.joint(
+        new btConeTwistConstraint(fixed, *ct, frame(btVector3(10, 8, 0), down), frame(btVector3(0, 3, 0), down)));
+    cone->setLimit(btScalar(kPi / 4 * 0.6), btScalar(kPi / 4), btScalar(kPi * 0.8), btScalar(0.5));
+    ct->applyCentralImpulse(btVector3(2, 0, 3));
+    c.push_back(cone);
+    btRigidBody* mh = s.make(cube, 1, btVector3(20, 5, 0));
+    auto* motor = s.joint(new btHingeConstraint(*mh, btVector3(0, 3, 0), btVector3(0, 0, 1), true));
+    motor->enableAngularMotor(true, 1, 1);
+    c.push_back(motor);
+    REQUIRE(c.size() == 9);
+    for (int i = 0; i < 300; ++i) {
+      s.frames(1);
+      for (size_t k = 0; k < c.size(); ++k) {
+        if (!c[k]->isEnabled()) continue;
+        const JointViolation v = violationAt(*c[k]);
+        worst_lin[dvi][k] = std::max(worst_lin[dvi][k], double(v.linear));
+        worst_ang[dvi][k] = std::max(worst_ang[dvi][k], double(v.angular));
+      }
+    }
+  }
+  for (int k = 0; k < 9; ++k) {
+    INFO(names[k] << ": worst linear error Bullet " << worst_lin[0][k] << " m, ours " << worst_lin[1][k]
+                  << " m; worst angular error Bullet " << worst_ang[0][k] << " rad, ours " << worst_ang[1][k]);
+    CHECK(withinStock(worst_lin[1][k], worst_lin[0][k], 5e-3));
+    CHECK(withinStock(worst_ang[1][k], worst_ang[0][k], 5e-3));
+  }
+}

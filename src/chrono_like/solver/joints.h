@@ -3,10 +3,11 @@
 //
 // A JointSpec holds two joint frames (one per body, in the body's centre-of-mass frame), a mode per linear axis of
 // frame A (free / locked at a value / limited to [lo, hi]) and an angular mode (orientation locked, a hinge about one
-// axis of frame A, free, a cone-twist, or three Euler angles), plus the hinge's limit and motor, the slider's linear
-// motor and springs. The spec gives the rows:
+// axis of frame A, free, a cone-twist, or three Euler angles), plus limits, motors, servos and springs per axis and a
+// gear row. The spec gives the rows:
 //   linear axis e of frame A, d = pB - pA (frame origins), s = e.d:
 //       J v = e.(vB + wB x rB) - e.(vA + wA x (pB - xA)) = ds/dt      (A-fixed axis: exact derivative)
+//   or, with world_axes (Bullet's point-to-point), e a world axis: J v = e.(vB + wB x rB) - e.(vA + wA x rA)
 //   locked orientation: qe = qFB conj(qFA), theta = rotation vector of qe;
 //       rows along world x, y, z: J v = (wB - wA).e = d(theta.e)/dt
 //   hinge about axis a (frame A) with b = the same axis of frame B: rows along the two other axes e of A,
