@@ -443,10 +443,12 @@ void BulletJoints::rows(const BodyArrays& bodies, const StepContext& step, std::
     const JointSpec j = jointSpecFromBullet(*c);
     const size_t before = out.size();
     jointRows(j, side(bodies, j.a), side(bodies, j.b), step.dt, settings_, out);
-    const real limit = real(c->getBreakingImpulseThreshold());
-    for (size_t r = before; r < out.size(); ++r) {
-      out[r].lo = std::max(out[r].lo, -limit);
-      out[r].hi = std::min(out[r].hi, limit);
+    if (c->getBreakingImpulseThreshold() < SIMD_INFINITY) {  // Bullet's default: unbreakable, rows unbounded
+      const real limit = real(c->getBreakingImpulseThreshold());
+      for (size_t r = before; r < out.size(); ++r) {
+        out[r].lo = std::max(out[r].lo, -limit);
+        out[r].hi = std::min(out[r].hi, limit);
+      }
     }
     row_joint_.resize(out.size() - before + row_joint_.size(), int(k));
     rows_.insert(rows_.end(), out.begin() + std::ptrdiff_t(before), out.end());
