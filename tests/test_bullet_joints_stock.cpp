@@ -28,7 +28,7 @@ constexpr double kPi = 3.14159265358979323846;
 
 // Stock Bullet or ours, gravity -9.81 along y, one sub-step per frame (1/60 s) unless asked otherwise.
 struct Scene : TestWorld {
-  explicit Scene(bool dvi) : TestWorld(dvi) {}
+  explicit Scene(bool dvi, WorldBackend backend = WorldBackend::Cpu) : TestWorld(dvi, backend) {}
   btRigidBody* box(btVector3 half, btScalar mass, const btTransform& t) {
     return make(own(new btBoxShape(half)), mass, t);
   }
@@ -513,19 +513,19 @@ JointViolation violationAt(const btTypedConstraint& c) {
   return jointViolation(j, side(c.getRigidBodyA()), side(c.getRigidBodyB()));
 }
 
-}  // namespace
-
-TEST_CASE("ConstraintDemo's constraints together: each joint held as stock Bullet holds it",
-          "[world][joints][bullet]") {
-  // After bullet3's examples/Constraints/ConstraintDemo: a gear between two spinning discs (one tilted, its linear
-  // factor 0), a breakable point-to-point, a ball socket, a slider with linear limits and an angular range of
-  // +-pi/3, a 6-DoF slider driven by its linear motor with the rotation about x limited to [-pi, 1.5], a door hinge
-  // limited to +-pi/4 and pushed, a 6-DoF spring, a cone-twist and a hinge with a motor; 300 frames at 60 Hz.
-  const char* names[9] = {"gear hinge", "breakable p2p", "ball socket", "slider",     "6-DoF slider",
-                          "door hinge", "6-DoF spring",  "cone-twist",  "motor hinge"};
-  double worst_lin[2][9] = {}, worst_ang[2][9] = {};
-  for (int dvi = 0; dvi < 2; ++dvi) {
-    Scene s(dvi);
+// After bullet3's examples/Constraints/ConstraintDemo: a gear between two spinning discs (one tilted, its linear
+// factor 0), a breakable point-to-point, a ball socket, a slider with linear limits and an angular range of
+// +-pi/3, a 6-DoF slider driven by its linear motor with the rotation about x limited to [-pi, 1.5], a door hinge
+// limited to +-pi/4 and pushed, a 6-DoF spring, a cone-twist and a hinge with a motor; 300 frames at 60 Hz.
+// Each joint's worst linear and angular error over the run, by our measure at the bodies' Bullet poses, on stock
+// Bullet (dvi false) or ours on `backend`.
+struct DemoErrors {
+  double linear[9] = {}, angular[9] = {};
+};
+DemoErrors constraintDemoErrors(bool dvi, WorldBackend backend) {
+  DemoErrors e;
+  {
+    Scene s(dvi, backend);
     btRigidBody& fixed = btTypedConstraint::getFixedBody();
     btCollisionShape* cube = s.own(new btBoxShape(btVector3(1, 1, 1)));
     btCollisionShape* disc = s.own(new btCylinderShape(btVector3(0.5, 0.2, 0.5)));
@@ -609,15 +609,40 @@ TEST_CASE("ConstraintDemo's constraints together: each joint held as stock Bulle
       for (size_t k = 0; k < c.size(); ++k) {
         if (!c[k]->isEnabled()) continue;
         const JointViolation v = violationAt(*c[k]);
-        worst_lin[dvi][k] = std::max(worst_lin[dvi][k], double(v.linear));
-        worst_ang[dvi][k] = std::max(worst_ang[dvi][k], double(v.angular));
+        e.linear[k] = std::max(e.linear[k], double(v.linear));
+        e.angular[k] = std::max(e.angular[k], double(v.angular));
       }
     }
   }
+  return e;
+}
+
+const char* const kDemoJoints[9] = {"gear hinge", "breakable p2p", "ball socket", "slider",     "6-DoF slider",
+                                    "door hinge", "6-DoF spring",  "cone-twist",  "motor hinge"};
+
+void checkDemoAgainstStock(WorldBackend backend) {
+  const DemoErrors bullet = constraintDemoErrors(false, backend), ours = constraintDemoErrors(true, backend);
   for (int k = 0; k < 9; ++k) {
-    INFO(names[k] << ": worst linear error Bullet " << worst_lin[0][k] << " m, ours " << worst_lin[1][k]
-                  << " m; worst angular error Bullet " << worst_ang[0][k] << " rad, ours " << worst_ang[1][k]);
-    CHECK(withinStock(worst_lin[1][k], worst_lin[0][k], 5e-3));
-    CHECK(withinStock(worst_ang[1][k], worst_ang[0][k], 5e-3));
+    INFO(kDemoJoints[k] << ": worst linear error Bullet " << bullet.linear[k] << " m, ours " << ours.linear[k]
+                        << " m; worst angular error Bullet " << bullet.angular[k] << " rad, ours " << ours.angular[k]);
+    CHECK(withinStock(ours.linear[k], bullet.linear[k], 5e-3));
+    CHECK(withinStock(ours.angular[k], bullet.angular[k], 5e-3));
   }
+}
+
+}  // namespace
+
+TEST_CASE("ConstraintDemo's constraints together: each joint held as stock Bullet holds it",
+          "[world][joints][bullet]") {
+  checkDemoAgainstStock(WorldBackend::Cpu);
+}
+
+TEST_CASE("ConstraintDemo's constraints on the GPU backend: each joint held as stock Bullet holds it",
+          "[world][joints][bullet][gpu]") {
+  std::string why;
+  if (!gpuAvailable(&why)) {
+    WARN("no CUDA device: skipping (" << why << ")");
+    return;
+  }
+  checkDemoAgainstStock(WorldBackend::Gpu);
 }
