@@ -193,6 +193,10 @@ void sliderSpec(btSliderConstraint& s, JointSpec& j) {
   j.lin_lo[0] = lo;
   j.lin_hi[0] = hi;
   j.lin[1] = j.lin[2] = JointSpec::Axis::Locked;
+  // Bullet: the linear limit row corrects with softnessLimLin (as ERP, where set). Its code also bounces
+  // |1 - dampingLimLin| of the incoming speed, but stock Bullet's slider does not (tests/test_bullet_joints_stock.cpp):
+  // no bounce here either.
+  if (s.getFlags() & BT_SLIDER_FLAGS_ERP_LIMLIN) j.lin_stop_erp[0] = real(s.getSoftnessLimLin());
   const real alo = s.getLowerAngLimit(), ahi = s.getUpperAngLimit();
   if (alo == ahi && alo == 0) {
     j.ang = JointSpec::Angular::Locked;

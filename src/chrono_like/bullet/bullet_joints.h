@@ -3,12 +3,12 @@
 //
 // Supported (anything else is refused by jointSpecFromBullet with an InputError naming the type): point-to-point
 // (rows along world x, y, z, as Bullet's); hinge with limit (lo == hi locks it; past the limit the row recovers at
-// ERP x bias factor and bounces relaxation x bias factor of the incoming speed, as Bullet's), angular motor; hinge2
+// ERP x bias factor, as Bullet's; no bounce, as stock Bullet's hinges hardly bounce), angular motor; hinge2
 // (a Spring2); cone-twist (btConeTwistConstraint: the pivot, the elliptic swing cone of swingSpan1/swingSpan2 and
 // the twist span as unilateral rows, in Bullet's definitions of swing and twist; limits at span x softness as in
 // Bullet; a span below Bullet's fix threshold locks that swing; angular-only; the motor towards setMotorTarget as
 // Bullet's servo row); slider with linear limits and motor, the rotation about its axis free, limited, locked at
-// any angle or driven by its angular motor; gear (btGearConstraint: one velocity row); fixed; generic 6-DoF
+// any angle (its limit bouncing |1 - dampingLimAng|) or driven by its angular motor; gear (btGearConstraint: one velocity row); fixed; generic 6-DoF
 // (btGeneric6DofConstraint, btGeneric6DofSpringConstraint, btGeneric6DofSpring2Constraint) with locked, free or
 // limited linear axes and, per rotational axis, locked (at any angle), free or limited to [lo, hi] in Bullet's Euler
 // angles (XYZ, or the rotate order of Spring2), velocity motors and Spring2 servo motors on every axis, limit bounce
