@@ -574,7 +574,8 @@ TEST_CASE("a .bullet scene with each shape and joint type round-trips through th
   dyn.push_back(src.make(src.own(new btCapsuleShapeX(0.1, 0.4)), 1, btVector3(3, 1, 0)));
   dyn.push_back(src.make(src.own(new btConeShape(0.2, 0.5)), 1, btVector3(4, 1, 0)));
   const btScalar pts[] = {0, 0, 0, 0.4f, 0, 0, 0, 0.4f, 0, 0, 0, 0.4f, 0.3f, 0.3f, 0.3f};
-  dyn.push_back(src.make(src.own(new btConvexHullShape(pts, 5)), 1, btVector3(5, 1, 0)));
+  // Packed points: three scalars each (the constructor's default stride is a btVector3's, 4 scalars).
+  dyn.push_back(src.make(src.own(new btConvexHullShape(pts, 5, 3 * sizeof(btScalar))), 1, btVector3(5, 1, 0)));
   const btVector3 centers[] = {{0, 0, 0}, {0, 0.3f, 0}};
   const btScalar radii[] = {0.2f, 0.15f};
   dyn.push_back(src.make(src.own(new btMultiSphereShape(centers, radii, 2)), 1, btVector3(6, 1, 0)));
