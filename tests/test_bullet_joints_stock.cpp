@@ -5,6 +5,7 @@
 // breaking thresholds, hinge limit bounce (relaxation x bias factor), hinge2, and a joint re-added with a large gap
 // (Bullet's ERP).
 #include <btBulletDynamicsCommon.h>
+#include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
 #include <BulletDynamics/ConstraintSolver/btGearConstraint.h>
 #include <BulletDynamics/ConstraintSolver/btGeneric6DofSpring2Constraint.h>
 #include <BulletDynamics/ConstraintSolver/btHinge2Constraint.h>
@@ -374,7 +375,7 @@ TEST_CASE("btJointFeedback and getAppliedImpulse are filled as Bullet fills them
   // TestHingeTorque's use: a 0.53 kg link hanging from a fixed 6-DoF and a hinge, feedback read each frame; gravity
   // -z (force on the link from the joint +m g along z, Bullet's (0, 0, 5.19)).
   struct Out {
-    btJointFeedback fb_fixed, fb_hinge, fb_p2p;
+    btJointFeedback fb_fixed, fb_hinge, fb_p2p, fb_weld;
     double p2p_impulse = 0;
   };
   Out out[2];
@@ -400,8 +401,15 @@ TEST_CASE("btJointFeedback and getAppliedImpulse are filled as Bullet fills them
     auto* p = s.joint(new btPoint2PointConstraint(*ball, btVector3(0, 0, 0.2)));
     p->setJointFeedback(&fb3);
     p->enableFeedback(true);
+    // A btFixedConstraint holding a 1.5 kg box 0.4 m out from its pivot: a force m g, and about the box's centre of
+    // mass no torque (the pivot force's moment and the angular rows' cancel).
+    btRigidBody* welded = s.box(btVector3(0.2, 0.05, 0.05), btScalar(1.5), frame(btVector3(4.4, 0, 1)));
+    btJointFeedback fb4;
+    auto* weld =
+        s.joint(new btFixedConstraint(fixed, *welded, frame(btVector3(4, 0, 1)), frame(btVector3(-0.4, 0, 0))));
+    weld->setJointFeedback(&fb4);
     s.frames(60);
-    out[dvi] = Out{fb1, fb2, fb3, double(p->getAppliedImpulse())};
+    out[dvi] = Out{fb1, fb2, fb3, fb4, double(p->getAppliedImpulse())};
   }
   auto near = [](const btVector3& a, const btVector3& b, double tol) { return (a - b).length() <= tol; };
   auto str = [](const btVector3& v) {
@@ -423,6 +431,13 @@ TEST_CASE("btJointFeedback and getAppliedImpulse are filled as Bullet fills them
   CHECK(near(o.fb_p2p.m_appliedForceBodyA, b.fb_p2p.m_appliedForceBodyA, 0.01));
   CHECK(o.p2p_impulse == Approx(b.p2p_impulse).epsilon(0.01));
   CHECK(o.p2p_impulse == Approx(2 * 9.8 / 60).epsilon(0.01));
+  INFO("btFixedConstraint: force on B Bullet " << str(b.fb_weld.m_appliedForceBodyB) << ", ours "
+                                               << str(o.fb_weld.m_appliedForceBodyB) << "; torque on B Bullet "
+                                               << str(b.fb_weld.m_appliedTorqueBodyB) << ", ours "
+                                               << str(o.fb_weld.m_appliedTorqueBodyB));
+  CHECK(near(o.fb_weld.m_appliedForceBodyB, btVector3(0, 0, btScalar(1.5 * 9.8)), 0.02));
+  CHECK(near(o.fb_weld.m_appliedForceBodyB, b.fb_weld.m_appliedForceBodyB, 0.02));
+  CHECK(near(o.fb_weld.m_appliedTorqueBodyB, b.fb_weld.m_appliedTorqueBodyB, 0.02));
 }
 
 TEST_CASE("breaking thresholds: a joint breaks on the frame Bullet's breaks, and holds below",
