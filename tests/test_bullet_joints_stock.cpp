@@ -2,8 +2,8 @@
 // and in the drop-in world (bullet_world.h), the joint's error, angles, speeds and feedback of ours against Bullet's
 // (a joint error at most 3x stock or 5 mm / 5 mrad). Locked hinges (setLimit(lo, lo)), slider angular limits, locked
 // angles and motors, gears, Spring2 servos and bounce, linear 6-DoF motors, btJointFeedback and getAppliedImpulse,
-// breaking thresholds, hinge limit bounce (relaxation x bias factor), hinge2, and a joint re-added with a large gap
-// (Bullet's ERP).
+// breaking thresholds, a hinge falling onto its limit, hinge2, a joint re-added with a large gap (Bullet's ERP), and
+// ConstraintDemo's constraints in one scene (also on the GPU backend).
 #include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
 #include <BulletDynamics/ConstraintSolver/btGearConstraint.h>
