@@ -18,8 +18,6 @@ namespace dvi {
 
 namespace {
 
-std::string axisName(int i) { return i < 3 ? std::string(1, "xyz"[i]) : std::string("rotation ") + "xyz"[i - 3]; }
-
 // Six degrees of freedom of a 6-DoF constraint (Bullet's order: linear x y z, angular x y z).
 struct Dof6 {
   real lo[6], hi[6];

@@ -60,8 +60,6 @@ ConstraintRow negated(ConstraintRow r) {
   return r;
 }
 
-real clampr(real x, real lo, real hi) { return std::min(std::max(x, lo), hi); }
-
 struct Frames {
   Pose fa, fb;  // world joint frames
   Vec3 rA, rB;  // joint origins relative to the centres of mass, world
