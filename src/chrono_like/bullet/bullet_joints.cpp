@@ -4,6 +4,7 @@
 
 #include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/ConstraintSolver/btFixedConstraint.h>
+#include <BulletDynamics/ConstraintSolver/btGearConstraint.h>
 #include <BulletDynamics/ConstraintSolver/btGeneric6DofSpring2Constraint.h>
 
 #include <algorithm>
@@ -17,16 +18,20 @@ namespace dvi {
 
 namespace {
 
-std::string axisName(int i) { return i < 3 ? std::string(1, "xyz"[i]) : std::string("rotation ") + "xyz"[i - 3]; }
-
 // Six degrees of freedom of a 6-DoF constraint (Bullet's order: linear x y z, angular x y z).
 struct Dof6 {
   real lo[6], hi[6];
   bool motor[6] = {false, false, false, false, false, false};
   bool servo[6] = {false, false, false, false, false, false};
   real motor_velocity[6] = {0, 0, 0, 0, 0, 0}, motor_force[6] = {0, 0, 0, 0, 0, 0};
+  real servo_target[6] = {0, 0, 0, 0, 0, 0};
+  real motor_erp[6] = {-1, -1, -1, -1, -1, -1};  // < 0: the world's ERP
+  real stop_erp[6] = {-1, -1, -1, -1, -1, -1};
+  real bounce[6] = {0, 0, 0, 0, 0, 0};
   bool spring[6] = {false, false, false, false, false, false};
   real k[6] = {0, 0, 0, 0, 0, 0}, c[6] = {0, 0, 0, 0, 0, 0}, eq[6] = {0, 0, 0, 0, 0, 0};
+  bool k_limited[6] = {false, false, false, false, false, false},
+       c_limited[6] = {false, false, false, false, false, false};
   int order[3] = {0, 1, 2};  // rotate order of the angles (btGeneric6DofSpring2Constraint's RotateOrder)
 };
 
@@ -57,12 +62,17 @@ void angularFromDof6(const Dof6& d, JointSpec& j) {
       j.hinge_lo = -d.hi[i];
       j.hinge_hi = -d.lo[i];
     }
+    j.hinge_bounce = d.bounce[i];
+    j.hinge_stop_erp = d.stop_erp[i];
     if (d.motor[i] && !d.spring[i]) {
       j.hinge_motor = true;
       j.hinge_motor_velocity = -d.motor_velocity[i];
       j.hinge_motor_max_force = d.motor_force[i];
+      j.hinge_servo = d.servo[i];
+      j.hinge_servo_target = -d.servo_target[i];
+      j.hinge_motor_erp = d.motor_erp[i];
     }
-    if (d.spring[i]) j.springs.push_back({i, d.k[i], d.c[i], -d.eq[i]});
+    if (d.spring[i]) j.springs.push_back({i, d.k[i], d.c[i], -d.eq[i], d.k_limited[i], d.c_limited[i]});
   } else if (active == 0) {
     j.ang = JointSpec::Angular::Free;
   } else {
@@ -74,30 +84,41 @@ void angularFromDof6(const Dof6& d, JointSpec& j) {
       x.mode = axisMode(d.lo[i], d.hi[i]);
       x.lo = d.lo[i];
       x.hi = d.hi[i];
+      x.stop_erp = d.stop_erp[i];
       if (x.mode == JointSpec::Axis::Locked) continue;
+      x.bounce = d.bounce[i];
       x.motor = d.motor[i] && !d.spring[i];
       x.motor_velocity = d.motor_velocity[i];
       x.motor_max_force = d.motor_force[i];
-      if (d.spring[i]) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
+      x.servo = d.servo[i];
+      x.servo_target = d.servo_target[i];
+      x.motor_erp = d.motor_erp[i];
+      if (d.spring[i]) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i], d.k_limited[i], d.c_limited[i]});
     }
   }
 }
 
+// A 6-DoF's linear axes (limits, motors, springs), then its angular part. A motor on an axis with a spring is not
+// used (the spring's force and the motor's row would fight).
 void fromDof6(const Dof6& d, const char* kind, JointSpec& j) {
-  auto refuse = [&](const std::string& what) {
-    throw InputError(std::string(kind) + ": " + what + " is not supported");
-  };
+  j.kind = kind;
   for (int i = 0; i < 3; ++i) {
     j.lin[i] = axisMode(d.lo[i], d.hi[i]);
     j.lin_lo[i] = d.lo[i];
     j.lin_hi[i] = d.hi[i];
+    j.lin_stop_erp[i] = d.stop_erp[i];
+    j.lin_bounce[i] = d.bounce[i];
+    if (d.spring[i] && j.lin[i] != JointSpec::Axis::Locked)
+      j.springs.push_back({i, d.k[i], d.c[i], d.eq[i], d.k_limited[i], d.c_limited[i]});
+    JointSpec::LinearMotor& m = j.lin_motor[i];
+    m.on = d.motor[i] && !d.spring[i];
+    // Bullet's linear motor rows ask (vA - vB).axis = target: d s/dt = -target (s: B's offset along A's axis).
+    m.velocity = -d.motor_velocity[i];
+    m.max_force = d.motor_force[i];
+    m.servo = d.servo[i];
+    m.servo_target = d.servo_target[i];
+    m.motor_erp = d.motor_erp[i];
   }
-  for (int i = 0; i < 6; ++i) {
-    if (d.servo[i]) refuse("a servo motor on " + axisName(i));
-    if (i < 3 && d.motor[i] && !d.spring[i]) refuse("a linear motor on " + axisName(i));
-  }
-  for (int i = 0; i < 3; ++i)
-    if (d.spring[i] && j.lin[i] != JointSpec::Axis::Locked) j.springs.push_back({i, d.k[i], d.c[i], d.eq[i]});
   angularFromDof6(d, j);
 }
 
@@ -122,6 +143,25 @@ std::string constraintTypeName(int type) {
 namespace {
 
 // The joint specification of each Bullet constraint type (j holds the two bodies already).
+// Bullet's hinge limit (btHingeConstraint::getInfo2InternalUsingFrameOffset): active while lo <= hi (lo == hi locks
+// the hinge, and the motor is then ineffective); past it the row corrects fps x ERP x bias factor of the error per
+// step. Bullet's code also asks for relaxation x bias factor of the incoming speed back, but stock Bullet's hinges
+// hardly bounce (a bar falling 0.6 rad onto its limit rises 0.01 rad with the default relaxation 1, where that
+// restitution would give 0.06; tests/test_bullet_joints_stock.cpp): ours do not bounce.
+void hingeLimit(btHingeConstraint& h, real s, JointSpec& j) {
+  const real lo = s * real(h.getLowerLimit()), hi = s * real(h.getUpperLimit());
+  if (!(h.getLowerLimit() <= h.getUpperLimit())) return;
+  j.hinge_limit = true;
+  j.hinge_lo = std::min(lo, hi);
+  j.hinge_hi = std::max(lo, hi);
+  const int flags = h.getFlags();
+  const real global = (flags & BT_HINGE_FLAGS_ERP_NORM) ? real(h.getParam(BT_CONSTRAINT_ERP)) : real(-1);
+  const real stop = (flags & BT_HINGE_FLAGS_ERP_STOP) ? real(h.getParam(BT_CONSTRAINT_STOP_ERP)) : global;
+  const real bias = real(h.getLimitBiasFactor());
+  j.hinge_stop_erp = stop;  // < 0: the world's
+  j.hinge_limit_bias = bias;
+}
+
 void hingeSpec(btHingeConstraint& h, JointSpec& j) {
   j.kind = "hinge";
   j.frame_a = fromBt(h.getAFrame());
@@ -129,21 +169,19 @@ void hingeSpec(btHingeConstraint& h, JointSpec& j) {
   for (auto& a : j.lin) a = JointSpec::Axis::Locked;
   j.ang = JointSpec::Angular::Hinge;
   j.hinge_axis = 2;
+  if (h.getFlags() & BT_HINGE_FLAGS_ERP_NORM) j.erp = real(h.getParam(BT_CONSTRAINT_ERP));
   // Bullet's hinge angle is s * theta with s = -referenceSign (referenceSign = -1 with reference frame A).
   const real s = h.getUseReferenceFrameA() ? real(1) : real(-1);
-  if (h.hasLimit()) {
-    j.hinge_limit = true;
-    const real lo = s * real(h.getLowerLimit()), hi = s * real(h.getUpperLimit());
-    j.hinge_lo = std::min(lo, hi);
-    j.hinge_hi = std::max(lo, hi);
-  }
-  if (h.getEnableAngularMotor()) {
+  hingeLimit(h, s, j);
+  if (h.getEnableAngularMotor() && !(j.hinge_limit && j.hinge_lo == j.hinge_hi)) {
     j.hinge_motor = true;
     j.hinge_motor_velocity = s * real(h.getMotorTargetVelocity());
     j.hinge_motor_max_impulse = real(h.getMaxMotorImpulse());
   }
 }
 
+// btSliderConstraint: the linear axis is frame A's x; the rotation about it is Bullet's angle (testAngLimits:
+// B relative to A, right-handed), our hinge theta about axis 0, free, limited, or locked at any angle.
 void sliderSpec(btSliderConstraint& s, JointSpec& j) {
   j.kind = "slider";
   j.frame_a = fromBt(s.getFrameOffsetA());
@@ -153,20 +191,33 @@ void sliderSpec(btSliderConstraint& s, JointSpec& j) {
   j.lin_lo[0] = lo;
   j.lin_hi[0] = hi;
   j.lin[1] = j.lin[2] = JointSpec::Axis::Locked;
+  // Bullet: the linear limit row corrects with softnessLimLin (as ERP, where set). Its code also bounces
+  // |1 - dampingLimLin| of the incoming speed, but stock Bullet's slider does not (tests/test_bullet_joints_stock.cpp):
+  // no bounce here either.
+  if (s.getFlags() & BT_SLIDER_FLAGS_ERP_LIMLIN) j.lin_stop_erp[0] = real(s.getSoftnessLimLin());
   const real alo = s.getLowerAngLimit(), ahi = s.getUpperAngLimit();
   if (alo == ahi && alo == 0) {
     j.ang = JointSpec::Angular::Locked;
-  } else if (alo > ahi) {
+  } else {
     j.ang = JointSpec::Angular::Hinge;
     j.hinge_axis = 0;
-  } else {
-    throw InputError("slider: an angular limit range or a non-zero locked angle is not supported");
+    j.hinge_limit = alo <= ahi;
+    j.hinge_lo = alo;
+    j.hinge_hi = ahi;
+    // Bullet: the limit row corrects with softnessLimAng (as ERP, where set) and bounces |1 - dampingLimAng|.
+    if (s.getFlags() & BT_SLIDER_FLAGS_ERP_LIMANG) j.hinge_stop_erp = real(s.getSoftnessLimAng());
+    j.hinge_bounce = std::fabs(1 - real(s.getDampingLimAng()));
   }
-  if (s.getPoweredAngMotor()) throw InputError("slider: an angular motor is not supported");
+  // Bullet's angular motor row asks (wA - wB).x = target: d theta/dt = -target, |impulse| <= force / fps.
+  if (s.getPoweredAngMotor() && j.ang == JointSpec::Angular::Hinge && !(j.hinge_limit && alo == ahi)) {
+    j.hinge_motor = true;
+    j.hinge_motor_velocity = -real(s.getTargetAngMotorVelocity());
+    j.hinge_motor_max_force = real(s.getMaxAngMotorForce());
+  }
   if (s.getPoweredLinMotor()) {
-    j.lin_motor = true;
-    j.lin_motor_velocity = s.getTargetLinMotorVelocity();
-    j.lin_motor_max_force = s.getMaxLinMotorForce();
+    j.lin_motor[0].on = true;
+    j.lin_motor[0].velocity = s.getTargetLinMotorVelocity();
+    j.lin_motor[0].max_force = s.getMaxLinMotorForce();
   }
 }
 
@@ -181,6 +232,7 @@ void coneTwistSpec(btConeTwistConstraint& c, JointSpec& j) {
   j.frame_b = fromBt(c.getBFrame());
   if (!c.getAngularOnly())
     for (auto& a : j.lin) a = JointSpec::Axis::Locked;
+  if (c.getFlags() & BT_CONETWIST_FLAGS_LIN_ERP) j.erp = real(c.getParam(BT_CONSTRAINT_ERP, 0));
   j.ang = JointSpec::Angular::ConeTwist;
   const real soft = real(c.getLimitSoftness()), fix = real(c.getFixThresh());
   const real s1 = real(c.getSwingSpan1()), s2 = real(c.getSwingSpan2()), tw = real(c.getTwistSpan());
@@ -219,11 +271,19 @@ void dof6Spec(btGeneric6DofConstraint& g, bool spring, JointSpec& j) {
     d.hi[i] = lhi[i];
     d.lo[3 + i] = alo[i];
     d.hi[3 + i] = ahi[i];
-    d.motor[i] = g.getTranslationalLimitMotor()->m_enableMotor[i];
+    const btTranslationalLimitMotor* t = g.getTranslationalLimitMotor();
+    d.motor[i] = t->m_enableMotor[i];
+    d.motor_velocity[i] = t->m_targetVelocity[i];
+    d.motor_force[i] = t->m_maxMotorForce[i];
     const btRotationalLimitMotor* r = g.getRotationalLimitMotor(i);
     d.motor[3 + i] = r->m_enableMotor;
     d.motor_velocity[3 + i] = r->m_targetVelocity;  // Bullet: d(getAngle)/dt
     d.motor_force[3 + i] = r->m_maxMotorForce;      // Bullet bounds the row's impulse by force / fps
+    d.bounce[3 + i] = r->m_bounce;
+    // setParam(BT_CONSTRAINT_STOP_ERP) per axis (btGeneric6DofConstraint::setLinearLimits, setAngularLimits).
+    if (g.getFlags() & (BT_6DOF_FLAGS_ERP_STOP << (i * BT_6DOF_FLAGS_AXIS_SHIFT))) d.stop_erp[i] = t->m_stopERP[i];
+    if (g.getFlags() & (BT_6DOF_FLAGS_ERP_STOP << ((3 + i) * BT_6DOF_FLAGS_AXIS_SHIFT)))
+      d.stop_erp[3 + i] = r->m_stopERP;
   }
   if (spring) {
     auto& sp = static_cast<btGeneric6DofSpringConstraint&>(g);
@@ -236,6 +296,11 @@ void dof6Spec(btGeneric6DofConstraint& g, bool spring, JointSpec& j) {
   }
   fromDof6(d, j.kind, j);
 }
+
+// btGeneric6DofSpring2Constraint keeps its setParam flags protected (no getter): read through a derived class.
+struct Spring2Flags : btGeneric6DofSpring2Constraint {
+  static int of(const btGeneric6DofSpring2Constraint& g) { return g.*(&Spring2Flags::m_flags); }
+};
 
 // btGeneric6DofSpring2Constraint, and btFixedConstraint (one of them with every axis locked).
 void dof6Spring2Spec(btGeneric6DofSpring2Constraint& g, bool fixed, JointSpec& j) {
@@ -258,12 +323,32 @@ void dof6Spring2Spec(btGeneric6DofSpring2Constraint& g, bool fixed, JointSpec& j
     d.motor[3 + i] = r->m_enableMotor;
     d.servo[3 + i] = r->m_enableMotor && r->m_servoMotor;
     d.servo[i] = t->m_enableMotor[i] && t->m_servoMotor[i];
+    d.motor_velocity[i] = t->m_targetVelocity[i];
+    d.motor_force[i] = t->m_maxMotorForce[i];
+    d.servo_target[i] = t->m_servoTarget[i];
+    d.bounce[i] = t->m_bounce[i];
     d.motor_velocity[3 + i] = r->m_targetVelocity;
     d.motor_force[3 + i] = r->m_maxMotorForce;
+    d.servo_target[3 + i] = r->m_servoTarget;
+    d.bounce[3 + i] = r->m_bounce;
     d.spring[3 + i] = r->m_enableSpring;
     d.k[3 + i] = r->m_springStiffness;
     d.c[3 + i] = r->m_springDamping;
     d.eq[3 + i] = r->m_equilibriumPoint;
+    d.k_limited[i] = t->m_springStiffnessLimited[i];
+    d.c_limited[i] = t->m_springDampingLimited[i];
+    d.k_limited[3 + i] = r->m_springStiffnessLimited;
+    d.c_limited[3 + i] = r->m_springDampingLimited;
+  }
+  // Stop and motor ERP per axis where setParam set them (the flags of getInfo2's setLinearLimits and
+  // setAngularLimits); else the world's ERP, as there.
+  const int flags = Spring2Flags::of(g);
+  for (int i = 0; i < 6; ++i) {
+    const int f = flags >> (i * BT_6DOF_FLAGS_AXIS_SHIFT2);
+    const btScalar stop = i < 3 ? t->m_stopERP[i] : g.getRotationalLimitMotor(i - 3)->m_stopERP;
+    const btScalar motor = i < 3 ? t->m_motorERP[i] : g.getRotationalLimitMotor(i - 3)->m_motorERP;
+    if (f & BT_6DOF_FLAGS_ERP_STOP2) d.stop_erp[i] = real(stop);
+    if (f & BT_6DOF_FLAGS_ERP_MOTO2) d.motor_erp[i] = real(motor);
   }
   static const int kOrders[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};  // RotateOrder
   const int o = int(g.getRotationOrder());
@@ -285,7 +370,18 @@ JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
       j.frame_a = Pose{fromBt(p.getPivotInA()), {1, 0, 0, 0}};
       j.frame_b = Pose{fromBt(p.getPivotInB()), {1, 0, 0, 0}};
       for (auto& a : j.lin) a = JointSpec::Axis::Locked;
+      j.world_axes = true;  // Bullet's rows: world x, y, z
+      if (p.getFlags() & BT_P2P_FLAGS_ERP) j.erp = real(p.getParam(BT_CONSTRAINT_ERP));
       j.ang = JointSpec::Angular::Free;
+      return j;
+    }
+    case GEAR_CONSTRAINT_TYPE: {
+      const auto& g = static_cast<const btGearConstraint&>(c);
+      j.kind = "gear";
+      j.gear = true;
+      j.gear_axis_a = fromBt(g.getAxisA());
+      j.gear_axis_b = fromBt(g.getAxisB());
+      j.gear_ratio = real(g.getRatio());
       return j;
     }
     case HINGE_CONSTRAINT_TYPE: hingeSpec(static_cast<btHingeConstraint&>(mc), j); return j;
@@ -301,9 +397,9 @@ JointSpec jointSpecFromBullet(const btTypedConstraint& c) {
                       j);
       return j;
     default:
-      throw InputError(
-          "unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
-          " (supported: point-to-point, hinge, cone-twist, slider, fixed, generic 6-DoF [spring, spring 2])");
+      throw InputError("unsupported Bullet constraint: " + constraintTypeName(c.getConstraintType()) +
+                       " (supported: point-to-point, hinge, hinge2, cone-twist, slider, gear, fixed, generic 6-DoF "
+                       "[spring, spring 2])");
   }
 }
 
@@ -337,40 +433,98 @@ JointBody BulletJoints::side(const BodyArrays& bodies, const btRigidBody* body) 
   return s;
 }
 
+// Each enabled joint's rows; Bullet bounds every row of a constraint by its breaking threshold
+// (btSequentialImpulseConstraintSolver::convertJoint), so a joint that breaks gives at most that impulse.
 void BulletJoints::rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) {
   row_joint_.clear();
+  rows_.clear();
+  dt_ = step.dt;
   for (size_t k = 0; k < joints_.size(); ++k) {
     btTypedConstraint* c = joints_[k];
     if (!c->isEnabled()) continue;
     const JointSpec j = jointSpecFromBullet(*c);
     const size_t before = out.size();
     jointRows(j, side(bodies, j.a), side(bodies, j.b), step.dt, settings_, out);
-    row_joint_.resize(out.size(), int(k));
-    (void)before;
+    if (c->getBreakingImpulseThreshold() < SIMD_INFINITY) {  // Bullet's default: unbreakable, rows unbounded
+      const real limit = real(c->getBreakingImpulseThreshold());
+      for (size_t r = before; r < out.size(); ++r) {
+        out[r].lo = std::max(out[r].lo, -limit);
+        out[r].hi = std::min(out[r].hi, limit);
+      }
+    }
+    row_joint_.resize(out.size() - before + row_joint_.size(), int(k));
+    rows_.insert(rows_.end(), out.begin() + std::ptrdiff_t(before), out.end());
   }
 }
 
+// Bullet's write-back (btSequentialImpulseConstraintSolver::writeBackJoints): each constraint's btJointFeedback
+// holds the forces and torques of its rows over the step (J^T lambda / h, scaled by the bodies' linear and angular
+// factors), getAppliedImpulse the impulse of its last row, and a row at or above the breaking threshold breaks it.
+// Every constraint's feedback is cleared first, as in convertJoints, and a disabled one reports zero.
 void BulletJoints::impulses(const real* lambda, size_t count) {
+  for (btTypedConstraint* c : joints_) {
+    if (btJointFeedback* fb = c->getJointFeedback()) {
+      fb->m_appliedForceBodyA.setZero();
+      fb->m_appliedTorqueBodyA.setZero();
+      fb->m_appliedForceBodyB.setZero();
+      fb->m_appliedTorqueBodyB.setZero();
+    }
+    c->internalSetAppliedImpulse(0);
+  }
   const size_t n = std::min(count, row_joint_.size());
-  std::vector<real> peak(joints_.size(), 0);
+  std::vector<char> broken(joints_.size(), 0);
+  const btScalar inv_h = dt_ > 0 ? btScalar(1 / dt_) : btScalar(0);
   for (size_t r = 0; r < n; ++r) {
-    real& p = peak[size_t(row_joint_[r])];
-    p = std::max(p, std::fabs(lambda[r]));
+    btTypedConstraint* c = joints_[size_t(row_joint_[r])];
+    const ConstraintRow& row = rows_[r];
+    const btScalar l = btScalar(lambda[r]);
+    if (btJointFeedback* fb = c->getJointFeedback()) {
+      const btRigidBody &a = c->getRigidBodyA(), &b = c->getRigidBodyB();
+      fb->m_appliedForceBodyA += btVector3(row.Ja[0], row.Ja[1], row.Ja[2]) * a.getLinearFactor() * l * inv_h;
+      fb->m_appliedTorqueBodyA += btVector3(row.Ja[3], row.Ja[4], row.Ja[5]) * a.getAngularFactor() * l * inv_h;
+      fb->m_appliedForceBodyB += btVector3(row.Jb[0], row.Jb[1], row.Jb[2]) * b.getLinearFactor() * l * inv_h;
+      fb->m_appliedTorqueBodyB += btVector3(row.Jb[3], row.Jb[4], row.Jb[5]) * b.getAngularFactor() * l * inv_h;
+    }
+    c->internalSetAppliedImpulse(-l);  // Bullet orients its rows A minus B, ours B minus A
+    if (std::fabs(l) >= c->getBreakingImpulseThreshold()) broken[size_t(row_joint_[r])] = 1;
   }
-  for (size_t k = 0; k < joints_.size(); ++k) {
-    btTypedConstraint* c = joints_[k];
-    if (!c->isEnabled()) continue;
-    c->internalSetAppliedImpulse(btScalar(peak[k]));
-    // Bullet's rule: a row impulse at or above the threshold breaks the constraint.
-    if (peak[k] >= real(c->getBreakingImpulseThreshold())) c->setEnabled(false);
-  }
+  for (size_t k = 0; k < joints_.size(); ++k)
+    if (broken[k]) joints_[k]->setEnabled(false);
 }
 
-void BulletJoints::springForces(const BodyArrays& bodies, Vec3* force, Vec3* torque) const {
+namespace {
+
+// Bullet's effective mass of a Spring2 spring (btGeneric6DofSpring2Constraint::get_limit_motor_info2): the dynamic
+// body's, or mA mB / (mA + mB); on a rotational axis each side's m r^2 + 1 / |I^-1 axis| (r: its frame's offset).
+real springMass(const JointSpec& j, const JointSpec::Spring& sp, const btRigidBody& a, const btRigidBody& b) {
+  auto side = [&](const btRigidBody& body, const Pose& f) {
+    if (body.getInvMass() == 0) return real(0);
+    real m = real(1 / body.getInvMass());
+    if (sp.dof < 3) return m;
+    const Pose frame = compose(fromBt(body.getCenterOfMassTransform()), f);
+    const real rr = length2(frame.p - fromBt(body.getCenterOfMassPosition()));
+    const Vec3 ax = rotate(compose(fromBt(a.getCenterOfMassTransform()), j.frame_a).q,
+                           Vec3{real(sp.dof == 3), real(sp.dof == 4), real(sp.dof == 5)});
+    return m * rr + real(1) / length(fromBt(body.getInvInertiaTensorWorld() * toBt(ax)));
+  };
+  const real ma = side(a, j.frame_a), mb = side(b, j.frame_b);
+  return ma == 0 ? mb : (mb == 0 ? ma : ma * mb / (ma + mb));
+}
+
+}  // namespace
+
+void BulletJoints::springForces(const BodyArrays& bodies, real h, Vec3* force, Vec3* torque) const {
   for (btTypedConstraint* c : joints_) {
     if (!c->isEnabled()) continue;
-    const JointSpec j = jointSpecFromBullet(*c);
+    JointSpec j = jointSpecFromBullet(*c);
     if (j.springs.empty()) continue;
+    for (JointSpec::Spring& sp : j.springs) {
+      if (!(sp.limit_stiffness || sp.limit_damping) || !(h > 0)) continue;
+      const real m = springMass(j, sp, c->getRigidBodyA(), c->getRigidBodyB());
+      if (!(m > 0)) continue;
+      if (sp.limit_stiffness) sp.stiffness = std::min(sp.stiffness, m / (16 * h * h));
+      if (sp.limit_damping) sp.damping = std::min(sp.damping, m / h);
+    }
     jointSpringForces(j, side(bodies, j.a), side(bodies, j.b), force, torque);
   }
 }

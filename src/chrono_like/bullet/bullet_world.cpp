@@ -395,6 +395,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   SystemConfig& cfg = system_->mutableConfig();
   cfg.step.dt = real(h);
   cfg.solver.min_bounce_speed = real(getSolverInfo().m_restitutionVelocityThreshold);
+  joints_->setErp(real(getSolverInfo().m_erp));  // the joints' recovery of large errors, as Bullet's ERP
   if (config_.effort == SolverEffort::BulletIterations) {
     const btContactSolverInfo& info = getSolverInfo();
     // Gauss-Seidel is sequential: the GPU backend runs APGD for the same fixed iteration count instead (it read
@@ -415,7 +416,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   for (int64_t i = 0; i < n; ++i) changes[i] = syncBody(size_t(i), h, B);
   for (int64_t i = 0; i < n; ++i)
     if (changes[i] & kHasFactors) syncFactors(size_t(i), B);
-  joints_->springForces(B, B.force.data(), B.torque.data());
+  joints_->springForces(B, real(h), B.force.data(), B.torque.data());
   for (btTypedConstraint* j : joints_->constraints())  // a spring's force is a parameter change of its bodies
     for (const btRigidBody* body : {&j->getRigidBodyA(), &j->getRigidBodyB()}) {
       const int k = bodyIndex(body);

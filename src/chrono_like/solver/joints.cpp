@@ -60,8 +60,6 @@ ConstraintRow negated(ConstraintRow r) {
   return r;
 }
 
-real clampr(real x, real lo, real hi) { return std::min(std::max(x, lo), hi); }
-
 struct Frames {
   Pose fa, fb;  // world joint frames
   Vec3 rA, rB;  // joint origins relative to the centres of mass, world
@@ -76,7 +74,7 @@ Frames frames(const JointSpec& j, const JointBody& A, const JointBody& B) {
   f.rA = f.fa.p - A.x;
   f.rB = f.fb.p - B.x;
   f.d = f.fb.p - f.fa.p;
-  for (int k = 0; k < 3; ++k) f.ea[k] = rotate(f.fa.q, unitAxis(k));
+  for (int k = 0; k < 3; ++k) f.ea[k] = j.world_axes ? unitAxis(k) : rotate(f.fa.q, unitAxis(k));
   return f;
 }
 
@@ -97,17 +95,43 @@ real coneViolation(const JointSpec& j, const Frames& f) {
   return v;
 }
 
-// Appends rows with their bias: bilateral C = 0 (bias C / h clamped to a recovery speed), unilateral C >= 0 (any
-// approach speed, recovery clamped), and motors J v = target within +-max impulse.
+// The relative velocity a row measures at the start of the step: J v0.
+real rowVelocity(const ConstraintRow& r, const JointBody& A, const JointBody& B) {
+  const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z}, vb[6] = {B.v.x, B.v.y, B.v.z, B.w.x, B.w.y, B.w.z};
+  real s = 0;
+  for (int i = 0; i < 6; ++i) s += r.Ja[i] * va[i] + r.Jb[i] * vb[i];
+  return s;
+}
+
+// An angle difference in (-pi, pi].
+real wrapAngle(real a) {
+  const real kPi = real(3.14159265358979323846);
+  a = std::remainder(a, 2 * kPi);
+  return a <= -kPi ? a + 2 * kPi : a;
+}
+
+// Appends rows with their bias: bilateral C = 0, unilateral C >= 0 (any approach speed), and motors J v = target
+// within +-max impulse. An error is corrected in one step while that is slower than the recovery speed lim, and at
+// least by the fraction erp per step beyond (Bullet's ERP, joints.h).
 struct RowSink {
   std::vector<ConstraintRow>& out;
-  real dt, vmax, wmax;
-  void bilateral(ConstraintRow r, real C, real lim) {
-    r.bias = clampr(C / dt, -lim, lim);
+  const JointBody &A, &B;
+  real dt, vmax, wmax, erp;
+  real recover(real C, real lim, real e) const {
+    const real full = std::fabs(C) / dt;
+    return std::copysign(std::max(std::min(full, lim), (e < 0 ? erp : e) * full), C);
+  }
+  void bilateral(ConstraintRow r, real C, real lim, real e = -1) {
+    r.bias = recover(C, lim, e);
     out.push_back(r);
   }
-  void unilateral(ConstraintRow r, real C, real lim) {  // C >= 0 wanted
-    r.bias = C >= 0 ? C / dt : std::max(C / dt, -lim);
+  // bounce: Bullet's limit restitution, where the row would be crossed within the step (Bullet: "bounce").
+  void unilateral(ConstraintRow r, real C, real lim, real e = -1, real bounce = 0) {  // C >= 0 wanted
+    r.bias = C >= 0 ? C / dt : recover(C, lim, e);
+    if (bounce > 0) {
+      const real v0 = rowVelocity(r, A, B);
+      if (v0 < 0 && C + dt * v0 < 0) r.bias = std::min(r.bias, bounce * v0);
+    }
     r.lo = 0;
     r.hi = kInf;
     out.push_back(r);
@@ -118,6 +142,12 @@ struct RowSink {
     r.hi = max_impulse;
     out.push_back(r);
   }
+  // Bullet's servo (btGeneric6DofSpring2Constraint::get_limit_motor_info2 with getMotorFactor): toward the target at
+  // speed |v|, slowed to motor_erp x error / h within reach of it.
+  void servo(ConstraintRow r, real error, real speed, real motor_erp, real max_impulse) {
+    const real v = std::min(std::fabs(speed), (motor_erp < 0 ? erp : motor_erp) * std::fabs(error) / dt);
+    motor(r, error > 0 ? v : (error < 0 ? -v : real(0)), max_impulse);
+  }
 };
 
 void hingeRows(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, RowSink& sink) {
@@ -125,15 +155,26 @@ void hingeRows(const JointSpec& j, const JointBody& A, const JointBody& B, const
   const Vec3 a = f.ea[k], b = rotate(f.fb.q, unitAxis(k));
   const Vec3 c = cross(a, b);
   for (int m = 0; m < 3; ++m)
-    if (m != k) sink.bilateral(angularRow(A, B, f.ea[m]), dot(f.ea[m], c), sink.wmax);
+    if (m != k) sink.bilateral(angularRow(A, B, f.ea[m]), dot(f.ea[m], c), sink.wmax, j.erp);
   const ConstraintRow ra = angularRow(A, B, a);  // J v = d theta / dt
+  const real theta = hingeTheta(j, f);
   if (j.hinge_limit) {
-    const real theta = hingeTheta(j, f);
-    sink.unilateral(ra, theta - j.hinge_lo, sink.wmax);
-    sink.unilateral(negated(ra), j.hinge_hi - theta, sink.wmax);
+    // Deviation from the range's centre, wrapped (Bullet's btAngularLimit::test): a range may contain +-pi.
+    const real half = (j.hinge_hi - j.hinge_lo) / 2, dev = wrapAngle(theta - (j.hinge_lo + j.hinge_hi) / 2);
+    const real erp = (j.hinge_stop_erp < 0 ? sink.erp : j.hinge_stop_erp) * j.hinge_limit_bias;
+    if (half == 0) {  // lo == hi: locked (Bullet: one row with unbounded impulse)
+      sink.bilateral(ra, dev, sink.wmax, erp);
+    } else {
+      sink.unilateral(ra, dev + half, sink.wmax, erp, j.hinge_bounce);
+      sink.unilateral(negated(ra), half - dev, sink.wmax, erp, j.hinge_bounce);
+    }
   }
-  if (j.hinge_motor)
-    sink.motor(ra, j.hinge_motor_velocity, j.hinge_motor_max_impulse + j.hinge_motor_max_force * sink.dt);
+  if (!j.hinge_motor) return;
+  const real bound = j.hinge_motor_max_impulse + j.hinge_motor_max_force * sink.dt;
+  if (j.hinge_servo)
+    sink.servo(ra, wrapAngle(j.hinge_servo_target - theta), j.hinge_motor_velocity, j.hinge_motor_erp, bound);
+  else
+    sink.motor(ra, j.hinge_motor_velocity, bound);
 }
 
 // Bullet's cone-twist motor (btConeTwistConstraint::calcAngleInfo2 with the motor on): the rotation
@@ -177,14 +218,74 @@ void eulerRows(const JointSpec& j, const JointBody& A, const JointBody& B, const
     const JointSpec::EulerAxis& x = j.euler[m];
     const ConstraintRow r = angularRow(A, B, e.g[m]);  // J v = d phi / dt
     if (x.mode == JointSpec::Axis::Locked) {
-      sink.bilateral(r, e.angle[m] - x.lo, sink.wmax);
+      sink.bilateral(r, e.angle[m] - x.lo, sink.wmax, x.stop_erp);
       continue;  // a motor on a locked axis does nothing (as in Bullet)
     }
     if (x.mode == JointSpec::Axis::Limited) {
-      sink.unilateral(r, e.angle[m] - x.lo, sink.wmax);
-      sink.unilateral(negated(r), x.hi - e.angle[m], sink.wmax);
+      if (std::isfinite(x.lo)) sink.unilateral(r, e.angle[m] - x.lo, sink.wmax, x.stop_erp, x.bounce);
+      if (std::isfinite(x.hi)) sink.unilateral(negated(r), x.hi - e.angle[m], sink.wmax, x.stop_erp, x.bounce);
     }
-    if (x.motor) sink.motor(r, x.motor_velocity, x.motor_max_force * sink.dt);
+    if (x.motor && x.servo)
+      sink.servo(r, wrapAngle(x.servo_target - e.angle[m]), x.motor_velocity, x.motor_erp, x.motor_max_force * sink.dt);
+    else if (x.motor)
+      sink.motor(r, x.motor_velocity, x.motor_max_force * sink.dt);
+  }
+}
+
+// Bullet's gear (btGearConstraint::getInfo2): the two bodies' spins about their axes in the ratio, no position error.
+void gearRow(const JointSpec& j, const JointBody& A, const JointBody& B, std::vector<ConstraintRow>& out) {
+  ConstraintRow r;
+  r.a = A.index;
+  r.b = B.index;
+  const Vec3 ga = rotate(A.q, j.gear_axis_a), gb = rotate(B.q, j.gear_axis_b) * j.gear_ratio;
+  const real ja[3] = {ga.x, ga.y, ga.z}, jb[3] = {gb.x, gb.y, gb.z};
+  for (int i = 0; i < 3; ++i) {
+    r.Ja[3 + i] = ja[i];
+    r.Jb[3 + i] = jb[i];
+  }
+  out.push_back(r);
+}
+
+// The linear rows: locked, limited and motor axes of frame A (or the world's axes, Bullet's point-to-point).
+void linearRows(const JointSpec& j, const JointBody& A, const JointBody& B, const Frames& f, bool feedforward,
+                RowSink& sink) {
+  const real dt = sink.dt;
+  // An axis fixed in A has the exact rate e.(vB + wB x rB) - e.(vA + wA x (pB - xA)); a world axis
+  // e.(vB + wB x rB) - e.(vA + wA x rA).
+  const Vec3 rAB = j.world_axes ? f.rA : f.fb.p - A.x;
+  // Second-order drift of a linear row over one step: the velocity-level row makes C' = C + h J v+ vanish
+  // to first order, but the exponential-map rotation of the lever arms (and of e, fixed in A) adds
+  //   h^2/2 C'' = h^2/2 [ e.(wB x (wB x rB) - wA x (wA x rAB)) + 2 (wA x e).v_rel + (wA x (wA x e)).d ]
+  // from the velocities at the start of the step (the last two terms vanish for a world axis). Feeding it forward
+  // in the bias leaves an O(h^3) error instead of O(h^2 w^2 L) per step (a swinging pendulum otherwise drifts by
+  // ~(w h)^2 L / 2; Hairer, Lubich & Wanner, Geometric Numerical Integration, ch. VII, on drift of index-reduced
+  // DAEs).
+  const Vec3 v_rel = (B.v + cross(B.w, f.rB)) - (A.v + cross(A.w, rAB));
+  const Vec3 acc_rel = cross(B.w, cross(B.w, f.rB)) - cross(A.w, cross(A.w, rAB));
+  const Vec3 wA = j.world_axes ? Vec3{0, 0, 0} : A.w;
+  auto drift = [&](Vec3 e) {
+    if (!feedforward) return real(0);
+    const Vec3 de = cross(wA, e);
+    return real(0.5) * dt * dt * (dot(e, acc_rel) + 2 * dot(de, v_rel) + dot(cross(wA, de), f.d));
+  };
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 e = f.ea[i];
+    const ConstraintRow r = linearRow(A, B, e, rAB, f.rB);
+    const real si = dot(e, f.d);
+    if (j.lin[i] == JointSpec::Axis::Locked) {
+      sink.bilateral(r, si - j.lin_lo[i] + drift(e), sink.vmax, j.lin_stop_erp[i]);
+    } else if (j.lin[i] == JointSpec::Axis::Limited) {  // an infinite end (Bullet's setLimit(i, -inf, hi)): no row
+      if (std::isfinite(j.lin_lo[i]))
+        sink.unilateral(r, si - j.lin_lo[i], sink.vmax, j.lin_stop_erp[i], j.lin_bounce[i]);
+      if (std::isfinite(j.lin_hi[i]))
+        sink.unilateral(negated(r), j.lin_hi[i] - si, sink.vmax, j.lin_stop_erp[i], j.lin_bounce[i]);
+    }
+    const JointSpec::LinearMotor& m = j.lin_motor[i];
+    if (!m.on || j.lin[i] == JointSpec::Axis::Locked) continue;
+    if (m.servo)
+      sink.servo(r, m.servo_target - si, m.velocity, m.motor_erp, m.max_force * dt);
+    else
+      sink.motor(r, m.velocity, m.max_force * dt);
   }
 }
 
@@ -194,34 +295,8 @@ void jointRows(const JointSpec& j, const JointBody& A, const JointBody& B, real 
                std::vector<ConstraintRow>& out) {
   const Frames f = frames(j, A, B);
   const real size = std::min(A.size, B.size);
-  RowSink sink{out, dt, s.recovery_rel * size, s.max_recovery_angular};
-  const Vec3 rAB = f.fb.p - A.x;
-  // Second-order drift of a linear row over one step: the velocity-level row makes C' = C + h J v+ vanish
-  // to first order, but the exponential-map rotation of the lever arms (and of e, fixed in A) adds
-  //   h^2/2 C'' = h^2/2 [ e.(wB x (wB x rB) - wA x (wA x rAB)) + 2 (wA x e).v_rel + (wA x (wA x e)).d ]
-  // from the velocities at the start of the step. Feeding it forward in the bias leaves an O(h^3) error
-  // instead of O(h^2 w^2 L) per step (a swinging pendulum otherwise drifts by ~(w h)^2 L / 2;
-  // Hairer, Lubich & Wanner, Geometric Numerical Integration, ch. VII, on drift of index-reduced DAEs).
-  const Vec3 v_rel = (B.v + cross(B.w, f.rB)) - (A.v + cross(A.w, rAB));
-  const Vec3 acc_rel = cross(B.w, cross(B.w, f.rB)) - cross(A.w, cross(A.w, rAB));
-  auto drift = [&](Vec3 e) {
-    if (!s.drift_feedforward) return real(0);
-    const Vec3 de = cross(A.w, e);
-    return real(0.5) * dt * dt * (dot(e, acc_rel) + 2 * dot(de, v_rel) + dot(cross(A.w, de), f.d));
-  };
-  for (int i = 0; i < 3; ++i) {
-    if (j.lin[i] == JointSpec::Axis::Free) continue;
-    const Vec3 e = f.ea[i];
-    const ConstraintRow r = linearRow(A, B, e, rAB, f.rB);
-    const real si = dot(e, f.d);
-    if (j.lin[i] == JointSpec::Axis::Locked) {
-      sink.bilateral(r, si - j.lin_lo[i] + drift(e), sink.vmax);
-    } else {
-      sink.unilateral(r, si - j.lin_lo[i], sink.vmax);
-      sink.unilateral(negated(r), j.lin_hi[i] - si, sink.vmax);
-    }
-  }
-  if (j.lin_motor) sink.motor(linearRow(A, B, f.ea[0], rAB, f.rB), j.lin_motor_velocity, j.lin_motor_max_force * dt);
+  RowSink sink{out, A, B, dt, s.recovery_rel * size, s.max_recovery_angular, j.erp >= 0 ? j.erp : s.erp};
+  linearRows(j, A, B, f, s.drift_feedforward, sink);
   switch (j.ang) {
     case JointSpec::Angular::Locked: {
       const Vec3 theta = rotationVector(f.fb.q * conj(f.fa.q));
@@ -233,6 +308,7 @@ void jointRows(const JointSpec& j, const JointBody& A, const JointBody& B, real 
     case JointSpec::Angular::Euler: eulerRows(j, A, B, f, sink); break;
     case JointSpec::Angular::Free: break;
   }
+  if (j.gear) gearRow(j, A, B, out);
 }
 
 real jointHingeAngle(const JointSpec& j, const JointBody& A, const JointBody& B) {
@@ -253,9 +329,10 @@ JointViolation jointViolation(const JointSpec& j, const JointBody& A, const Join
   } else if (j.ang == JointSpec::Angular::Hinge) {
     const Vec3 a = f.ea[j.hinge_axis], b = rotate(f.fb.q, unitAxis(j.hinge_axis));
     v.angular = std::atan2(length(cross(a, b)), dot(a, b));
-    if (j.hinge_limit) {
-      const real th = hingeTheta(j, f);
-      v.angular = std::max(v.angular, std::max(j.hinge_lo - th, th - j.hinge_hi));
+    if (j.hinge_limit) {  // past the range, wrapped about its centre as the rows see it
+      const real half = (j.hinge_hi - j.hinge_lo) / 2;
+      const real dev = wrapAngle(hingeTheta(j, f) - (j.hinge_lo + j.hinge_hi) / 2);
+      v.angular = std::max(v.angular, std::fabs(dev) - half);
     }
   } else if (j.ang == JointSpec::Angular::ConeTwist) {
     v.angular = coneViolation(j, f);
