@@ -5,6 +5,7 @@
 
 #include <BulletCollision/CollisionShapes/btBox2dShape.h>
 #include <BulletCollision/CollisionShapes/btConvex2dShape.h>
+#include <BulletCollision/CollisionShapes/btConvexTriangleMeshShape.h>
 #include <BulletCollision/CollisionShapes/btEmptyShape.h>
 #include <BulletCollision/CollisionShapes/btMinkowskiSumShape.h>
 #include <BulletCollision/CollisionShapes/btUniformScalingShape.h>
@@ -165,6 +166,42 @@ TEST_CASE("drop-in world: btUniformScalingShape scales its child as in Bullet", 
   CHECK(std::fabs(ours[0] - stock[0]) < 0.01);
   CHECK(std::fabs(ours[1] - 1.0) < 0.01);  // the box stands on its 1 x 0.5 end: half-height 2 x 0.5
   CHECK(std::fabs(ours[1] - stock[1]) < 0.01);
+}
+
+// btConvexTriangleMeshShape: the hull of its mesh's vertices with Bullet's margin outside (0.04): a unit cube of 12
+// triangles rests with its centre 0.54 above the ground in both worlds, and tipped by 30 degrees it falls flat as
+// Bullet's does.
+TEST_CASE("drop-in world: btConvexTriangleMeshShape collides as Bullet's convex hull of its vertices",
+          "[world][examples]") {
+  auto run = [](bool dvi) {
+    ExampleWorld w(dvi);
+    w.createRigidBody(0, at(0, -50, 0), w.own(new btBoxShape(btVector3(50, 50, 50))));
+    auto mesh = std::make_unique<btTriangleMesh>();
+    const btVector3 c[8] = {{-0.5f, -0.5f, -0.5f}, {0.5f, -0.5f, -0.5f}, {0.5f, 0.5f, -0.5f}, {-0.5f, 0.5f, -0.5f},
+                            {-0.5f, -0.5f, 0.5f},  {0.5f, -0.5f, 0.5f},  {0.5f, 0.5f, 0.5f},  {-0.5f, 0.5f, 0.5f}};
+    const int faces[12][3] = {{0, 1, 2}, {0, 2, 3}, {4, 6, 5}, {4, 7, 6}, {0, 4, 5}, {0, 5, 1},
+                              {3, 2, 6}, {3, 6, 7}, {0, 3, 7}, {0, 7, 4}, {1, 5, 6}, {1, 6, 2}};
+    for (const auto& f : faces) mesh->addTriangle(c[f[0]], c[f[1]], c[f[2]]);
+    btCollisionShape* shape = w.own(new btConvexTriangleMeshShape(mesh.get()));
+    btRigidBody* flat = w.createRigidBody(1, at(0, 1, 0), shape);
+    btTransform tipped = at(3, 1.2f, 0);
+    tipped.setRotation(btQuaternion(btVector3(0, 0, 1), btScalar(0.52)));
+    btRigidBody* tip = w.createRigidBody(1, tipped, shape);
+    w.steps(180);
+    std::vector<btScalar> out{flat->getCenterOfMassPosition().y(), tip->getCenterOfMassPosition().y()};
+    for (btRigidBody* b : {flat, tip}) {  // removed before the mesh goes
+      w.world->removeRigidBody(b);
+      delete b->getMotionState();
+      delete b;
+    }
+    w.bodies.resize(1);
+    return out;
+  };
+  const std::vector<btScalar> stock = run(false), ours = run(true);
+  INFO("resting heights: ours " << ours[0] << ", " << ours[1] << "; stock " << stock[0] << ", " << stock[1]);
+  CHECK(std::fabs(stock[0] - 0.54) < 0.01);
+  CHECK(std::fabs(ours[0] - stock[0]) < 0.005);
+  CHECK(std::fabs(ours[1] - stock[1]) < 0.005);
 }
 
 namespace {

@@ -17,10 +17,12 @@
 #include <BulletCollision/CollisionShapes/btBox2dShape.h>
 #include <BulletCollision/CollisionShapes/btConvex2dShape.h>
 #include <BulletCollision/CollisionShapes/btConvexPointCloudShape.h>
+#include <BulletCollision/CollisionShapes/btConvexTriangleMeshShape.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
 #include <BulletCollision/CollisionShapes/btTriangleShape.h>
 #include <BulletCollision/CollisionShapes/btUniformScalingShape.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -67,6 +69,25 @@ ShapeDesc hullFromBullet(const btConvexHullShape& s, const Pose& local) {
   return pointsFromBullet(std::move(pts), s.getMargin(), local);
 }
 
+// btConvexTriangleMeshShape: the convex hull of its mesh's vertices (scaled by the mesh interface, as Bullet's support
+// reads them), swept by its margin.
+ShapeDesc trimeshHullFromBullet(const btConvexTriangleMeshShape& s, const Pose& local) {
+  struct Collect final : btInternalTriangleIndexCallback {
+    std::vector<Vec3> pts;
+    void internalProcessTriangleIndex(btVector3* t, int, int) override {
+      for (int i = 0; i < 3; ++i) pts.push_back(fromBt(t[i]));
+    }
+  } collect;
+  const btScalar big = btScalar(BT_LARGE_FLOAT);
+  s.getMeshInterface()->InternalProcessAllTriangles(&collect, btVector3(-big, -big, -big), btVector3(big, big, big));
+  std::vector<Vec3>& p = collect.pts;
+  std::sort(p.begin(), p.end(), [](Vec3 a, Vec3 b) {
+    return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+  });
+  p.erase(std::unique(p.begin(), p.end(), [](Vec3 a, Vec3 b) { return sameVec(a, b); }), p.end());
+  return pointsFromBullet(std::move(p), s.getMargin(), local);
+}
+
 // btUniformScalingShape: the child's support times the factor (btUniformScalingShape::localGetSupportingVertex), so
 // every length of the child's records (dimensions, offsets, hull points, margins) is scaled by it.
 void appendScaled(const btUniformScalingShape& s, const Pose& local, std::vector<ShapeDesc>& out) {
@@ -86,8 +107,8 @@ void appendScaled(const btUniformScalingShape& s, const Pose& local, std::vector
   }
 }
 
-// The convex wrappers and point sets of Bullet's examples (Planar2D's btConvex2dShape and btBox2dShape, ...); false
-// for any other type.
+// The convex wrappers and point sets of Bullet's examples (Planar2D's btConvex2dShape and btBox2dShape, ...) and the
+// other convex shapes of Bullet's set (btConvexTriangleMeshShape); false for any other type.
 bool appendOtherConvex(const btCollisionShape& shape, const Pose& local, std::vector<ShapeDesc>& out) {
   switch (shape.getShapeType()) {
     case BOX_2D_SHAPE_PROXYTYPE: {  // its support is the whole box, z included (btBox2dShape::localGetSupportingVertex)
@@ -110,6 +131,10 @@ bool appendOtherConvex(const btCollisionShape& shape, const Pose& local, std::ve
       std::vector<Vec3> pts;
       for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
       out.push_back(pointsFromBullet(std::move(pts), s.getMargin(), local));
+      return true;
+    }
+    case CONVEX_TRIANGLEMESH_SHAPE_PROXYTYPE: {
+      out.push_back(trimeshHullFromBullet(static_cast<const btConvexTriangleMeshShape&>(shape), local));
       return true;
     }
     case TRIANGLE_SHAPE_PROXYTYPE: {  // a convex triangle (btTriangleShape), e.g. a child of a compound

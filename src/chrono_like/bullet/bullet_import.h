@@ -2,7 +2,8 @@
 // Supported shapes: sphere, box, cylinder X/Y/Z, capsule X/Y/Z, cone X/Y/Z, convex hull, multi-sphere
 // (a single non-uniformly scaled sphere becomes an ellipsoid), compound of convex children, static
 // plane, and the convex wrappers and point sets of Bullet's examples: btConvex2dShape (its child), btBox2dShape,
-// btUniformScalingShape (its child scaled), btConvexPointCloudShape and btTriangleShape (hulls). Anything else is
+// btUniformScalingShape (its child scaled), btConvexPointCloudShape, btConvexTriangleMeshShape and btTriangleShape
+// (hulls). Anything else is
 // refused with an InputError naming the shape type.
 #pragma once
 
