@@ -186,6 +186,9 @@ class FilteredCpuSystem final : public System {
     ContactArrays& c = contacts_;
     stats_.contacts = int64_t(c.keepIf([&](size_t k) { return keep_(c.body_a[k], c.body_b[k]); }));
   }
+  // Bullet's rule for the rows of a contact (btSequentialImpulseConstraintSolver::convertContact): spinning friction
+  // only where the combined rolling friction is > 0 (a ball with spinning friction alone keeps spinning), and the
+  // rolling coefficient scaled by the anisotropic gain.
   bool combineRolling(int64_t nc) override {
     const bool any = System::combineRolling(nc);
     const std::vector<Vec3>& s = *aniso_;
@@ -193,10 +196,13 @@ class FilteredCpuSystem final : public System {
     auto isotropic = [&](int32_t i) { return s[size_t(i)].x == 1 && s[size_t(i)].y == 1 && s[size_t(i)].z == 1; };
 #pragma omp parallel for schedule(static)
     for (int64_t k = 0; k < nc; ++k) {
+      real& spin = roll_coef_[size_t(2 * k)];
+      real& roll = roll_coef_[size_t(2 * k + 1)];
+      if (!(roll > 0)) spin = 0;
       const int32_t a = contacts_.body_a[size_t(k)], b = contacts_.body_b[size_t(k)];
-      if (isotropic(a) && isotropic(b)) continue;
-      roll_coef_[size_t(2 * k + 1)] *= anisotropicGain(contacts_.normal[size_t(k)], bodies_.rot[size_t(a)],
-                                                       s[size_t(a)], bodies_.rot[size_t(b)], s[size_t(b)]);
+      if (roll > 0 && !(isotropic(a) && isotropic(b)))
+        roll *= anisotropicGain(contacts_.normal[size_t(k)], bodies_.rot[size_t(a)], s[size_t(a)],
+                                bodies_.rot[size_t(b)], s[size_t(b)]);
     }
     return any;
   }
