@@ -366,8 +366,9 @@ class System {
   bool planParts();
   // Does any body have rolling or spinning friction? (host arrays)
   bool hasRollingBodies() const;
-  // Each contact's (mu_s, mu_r) into roll_coef_ (friction_combine); returns whether any is > 0.
-  bool combineRolling(int64_t nc);
+  // Each contact's (mu_s, mu_r) into roll_coef_ (friction_combine); returns whether any is > 0. Virtual: the Bullet
+  // drop-in world scales mu_r by Bullet's anisotropic rolling friction (bullet_world.cpp).
+  virtual bool combineRolling(int64_t nc);
   // Does any dynamic body have non-spherical inertia (needsGyroscopic)? Scans the host arrays (they may have
   // been edited through mutableBodies()); the GPU system answers from its last upload instead.
   virtual bool hasGyroscopicBodies() const;

@@ -14,8 +14,15 @@
 #include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
+#include <BulletCollision/CollisionShapes/btBox2dShape.h>
+#include <BulletCollision/CollisionShapes/btConvex2dShape.h>
+#include <BulletCollision/CollisionShapes/btConvexPointCloudShape.h>
+#include <BulletCollision/CollisionShapes/btConvexTriangleMeshShape.h>
 #include <BulletCollision/CollisionShapes/btMultiSphereShape.h>
+#include <BulletCollision/CollisionShapes/btTriangleShape.h>
+#include <BulletCollision/CollisionShapes/btUniformScalingShape.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -40,6 +47,15 @@ bool uniform(const btVector3& s) {
   return std::fabs(std::fabs(s.y()) - m) <= 1e-6f * m && std::fabs(std::fabs(s.z()) - m) <= 1e-6f * m;
 }
 
+// A convex set of points swept by Bullet's margin (btConvexPointCloudShape, btTriangleShape): a hull record. The
+// System's hulls take at least 4 points; fewer (a triangle, Planar2D's flat hull) repeat the first point (the support
+// is the same set). A margin that is not a positive finite number is taken as 0.
+ShapeDesc pointsFromBullet(std::vector<Vec3> pts, btScalar margin, const Pose& local) {
+  if (pts.empty()) throw InputError("convex point set without points");
+  while (pts.size() < 4) pts.push_back(pts.front());
+  return makeConvexHull(std::move(pts), local, margin > 0 && std::isfinite(double(margin)) ? real(margin) : real(0));
+}
+
 // A btConvexHullShape collides as its points swept by a sphere of radius getMargin() (0.04 by default): Bullet's
 // support adds margin * d/|d| to the points' support (btConvexInternalShape::localGetSupportingVertex). The System's
 // hull is the same shape: the bare (scaled) points and Shape::margin = that margin, which the support functions carry
@@ -50,8 +66,86 @@ ShapeDesc hullFromBullet(const btConvexHullShape& s, const Pose& local) {
   std::vector<Vec3> pts;
   pts.reserve(size_t(s.getNumPoints()));
   for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
-  const btScalar m = s.getMargin();
-  return makeConvexHull(std::move(pts), local, m > 0 && std::isfinite(double(m)) ? real(m) : real(0));
+  return pointsFromBullet(std::move(pts), s.getMargin(), local);
+}
+
+// btConvexTriangleMeshShape: the convex hull of its mesh's vertices (scaled by the mesh interface, as Bullet's support
+// reads them), swept by its margin.
+ShapeDesc trimeshHullFromBullet(const btConvexTriangleMeshShape& s, const Pose& local) {
+  struct Collect final : btInternalTriangleIndexCallback {
+    std::vector<Vec3> pts;
+    void internalProcessTriangleIndex(btVector3* t, int, int) override {
+      for (int i = 0; i < 3; ++i) pts.push_back(fromBt(t[i]));
+    }
+  } collect;
+  const btScalar big = btScalar(BT_LARGE_FLOAT);
+  s.getMeshInterface()->InternalProcessAllTriangles(&collect, btVector3(-big, -big, -big), btVector3(big, big, big));
+  std::vector<Vec3>& p = collect.pts;
+  std::sort(p.begin(), p.end(), [](Vec3 a, Vec3 b) {
+    return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+  });
+  p.erase(std::unique(p.begin(), p.end(), [](Vec3 a, Vec3 b) { return sameVec(a, b); }), p.end());
+  return pointsFromBullet(std::move(p), s.getMargin(), local);
+}
+
+// btUniformScalingShape: the child's support times the factor (btUniformScalingShape::localGetSupportingVertex), so
+// every length of the child's records (dimensions, offsets, hull points, margins) is scaled by it.
+void appendScaled(const btUniformScalingShape& s, const Pose& local, std::vector<ShapeDesc>& out) {
+  const real f = real(s.getUniformScalingFactor());
+  if (!(f > 0) || !std::isfinite(f)) throw InputError("UniformScalingShape: scaling factor must be > 0");
+  std::vector<ShapeDesc> child;
+  appendShapesFromBullet(*s.getChildShape(), Pose{{0, 0, 0}, {1, 0, 0, 0}}, child);
+  for (ShapeDesc& d : child) {
+    Shape& c = d.shape;
+    c.dims = c.type == ShapeType::Plane ? c.dims : c.dims * f;
+    c.plane_d *= f;
+    c.margin *= float(f);
+    c.size *= f;
+    for (Vec3& p : d.hull) p = p * f;
+    c.local = compose(local, Pose{c.local.p * f, c.local.q});
+    out.push_back(std::move(d));
+  }
+}
+
+// The convex wrappers and point sets of Bullet's examples (Planar2D's btConvex2dShape and btBox2dShape, ...) and the
+// other convex shapes of Bullet's set (btConvexTriangleMeshShape); false for any other type.
+bool appendOtherConvex(const btCollisionShape& shape, const Pose& local, std::vector<ShapeDesc>& out) {
+  switch (shape.getShapeType()) {
+    case BOX_2D_SHAPE_PROXYTYPE: {  // its support is the whole box, z included (btBox2dShape::localGetSupportingVertex)
+      const auto& s = static_cast<const btBox2dShape&>(shape);
+      out.push_back(makeBox(fromBt(s.getHalfExtentsWithMargin()), local));
+      return true;
+    }
+    case CONVEX_2D_SHAPE_PROXYTYPE: {  // the child's support (btConvex2dShape); the plane is the bodies' factors
+      const auto& s = static_cast<const btConvex2dShape&>(shape);
+      if (!s.getChildShape()) throw InputError("Convex2dShape without a child shape");
+      appendShapesFromBullet(*s.getChildShape(), local, out);
+      return true;
+    }
+    case UNIFORM_SCALING_SHAPE_PROXYTYPE: {
+      appendScaled(static_cast<const btUniformScalingShape&>(shape), local, out);
+      return true;
+    }
+    case CONVEX_POINT_CLOUD_SHAPE_PROXYTYPE: {
+      const auto& s = static_cast<const btConvexPointCloudShape&>(shape);
+      std::vector<Vec3> pts;
+      for (int i = 0; i < s.getNumPoints(); ++i) pts.push_back(fromBt(s.getScaledPoint(i)));
+      out.push_back(pointsFromBullet(std::move(pts), s.getMargin(), local));
+      return true;
+    }
+    case CONVEX_TRIANGLEMESH_SHAPE_PROXYTYPE: {
+      out.push_back(trimeshHullFromBullet(static_cast<const btConvexTriangleMeshShape&>(shape), local));
+      return true;
+    }
+    case TRIANGLE_SHAPE_PROXYTYPE: {  // a convex triangle (btTriangleShape), e.g. a child of a compound
+      const auto& s = static_cast<const btTriangleShape&>(shape);
+      std::vector<Vec3> pts;
+      for (int i = 0; i < 3; ++i) pts.push_back(fromBt(s.m_vertices1[i]));
+      out.push_back(pointsFromBullet(std::move(pts), s.getMargin(), local));
+      return true;
+    }
+    default: return false;
+  }
 }
 
 }  // namespace
@@ -126,7 +220,9 @@ void appendShapesFromBullet(const btCollisionShape& shape, const Pose& local, st
       out.push_back(makePlane(nw, real(s.getPlaneConstant()) + dot(nw, local.p)));
       return;
     }
-    default: throw InputError(std::string("unsupported collision shape: ") + shape.getName());
+    default:
+      if (!appendOtherConvex(shape, local, out))
+        throw InputError(std::string("unsupported collision shape: ") + shape.getName());
   }
 }
 

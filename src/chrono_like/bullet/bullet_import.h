@@ -1,7 +1,10 @@
 // The Bullet bridge: btRigidBody + btCollisionShape -> System bodies, and results written back.
 // Supported shapes: sphere, box, cylinder X/Y/Z, capsule X/Y/Z, cone X/Y/Z, convex hull, multi-sphere
 // (a single non-uniformly scaled sphere becomes an ellipsoid), compound of convex children, static
-// plane. Anything else is refused with an InputError naming the shape type.
+// plane, and the convex wrappers and point sets of Bullet's examples: btConvex2dShape (its child), btBox2dShape,
+// btUniformScalingShape (its child scaled), btConvexPointCloudShape, btConvexTriangleMeshShape and btTriangleShape
+// (hulls). Anything else is
+// refused with an InputError naming the shape type.
 #pragma once
 
 #include <vector>

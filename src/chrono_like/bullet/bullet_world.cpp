@@ -16,6 +16,7 @@
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/triangle_mesh.h"
+#include "chrono_like/integrate.h"
 
 namespace dvi {
 
@@ -81,7 +82,7 @@ BodyDesc describe(const btCollisionObject& obj) {
 
 BodyDesc describeUnclamped(const btCollisionObject& obj) {
   const btCollisionShape* shape = obj.getCollisionShape();
-  if (!shape) throw InputError("collision object without a collision shape");
+  if (!shape) throw InputError("collision object without a collision shape (Bullet's collision world needs one)");
   const btRigidBody* body = btRigidBody::upcast(&obj);
   const int kind = objectKind(obj);
   if (body && !hasTriangles(*shape)) {
@@ -133,6 +134,7 @@ class FactorRows final : public RowProvider {
     int8_t angular;  // 0 linear, 1 angular
     int8_t axis;     // world x, y, z
     real target;     // the velocity component kept [m/s or rad/s]
+    Pose before;     // the body's pose before the sub-step (holdLockedAxes)
   };
   std::vector<Lock> locks;
 
@@ -149,12 +151,34 @@ class FactorRows final : public RowProvider {
 
 namespace {
 
+// Bullet's anisotropic rolling friction (btCollisionObject::setAnisotropicFriction with CF_ANISOTROPIC_ROLLING_FRICTION;
+// RollingFrictionDemo passes btCollisionShape::getAnisotropicRollingFrictionDirection, a round shape's axis): Bullet's
+// solver maps each rolling axis t of a contact through each body's factors s in that body's frame, t -> R (s * R^T t),
+// body a's then body b's (btSequentialImpulseConstraintSolver::applyAnisotropicFriction), drops a mapped axis shorter
+// than 0.001 and bounds the angular impulse about it by mu_r times the normal impulse. Our rolling cone is round in
+// the tangent plane, so the contact's mu_r is scaled by the largest gain of that map over the unit tangents (the
+// largest singular value of P_b P_a on the tangent plane): a cylinder lying on its side keeps mu_r, one standing on
+// its end has none, as in Bullet.
+real anisotropicGain(Vec3 n, Quat qa, Vec3 sa, Quat qb, Vec3 sb) {
+  const Vec3 helper = std::fabs(n.x) < real(0.6) ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+  const Vec3 u = normalized(cross(n, helper)), w = cross(n, u);
+  auto map = [](Vec3 t, Quat q, Vec3 s) {
+    const Vec3 l = rotateInv(q, t);
+    return rotate(q, Vec3{l.x * s.x, l.y * s.y, l.z * s.z});
+  };
+  const Vec3 mu = map(map(u, qa, sa), qb, sb), mw = map(map(w, qa, sa), qb, sb);
+  const real a = dot(mu, mu), b = dot(mu, mw), d = dot(mw, mw);
+  const real gain = std::sqrt(real(0.5) * (a + d + std::sqrt((a - d) * (a - d) + 4 * b * b)));
+  return gain < real(0.001) ? real(0) : gain;
+}
+
 // The CPU System with pair exclusions: contacts between bodies that Bullet would not collide (a constraint
-// with disableCollisionsBetweenLinkedBodies, CF_NO_CONTACT_RESPONSE) are dropped after the narrow phase.
+// with disableCollisionsBetweenLinkedBodies, CF_NO_CONTACT_RESPONSE) are dropped after the narrow phase; and with
+// Bullet's anisotropic rolling friction (anisotropicGain; `aniso` holds each body's factors, (1, 1, 1) for none).
 class FilteredCpuSystem final : public System {
  public:
-  FilteredCpuSystem(const SystemConfig& c, std::function<bool(int, int)> keep)
-      : System(c, makeBulletCollision), keep_(std::move(keep)) {}
+  FilteredCpuSystem(const SystemConfig& c, std::function<bool(int, int)> keep, const std::vector<Vec3>* aniso)
+      : System(c, makeBulletCollision), keep_(std::move(keep)), aniso_(aniso) {}
 
  protected:
   void detectCollisions() override {
@@ -162,9 +186,30 @@ class FilteredCpuSystem final : public System {
     ContactArrays& c = contacts_;
     stats_.contacts = int64_t(c.keepIf([&](size_t k) { return keep_(c.body_a[k], c.body_b[k]); }));
   }
+  // Bullet's rule for the rows of a contact (btSequentialImpulseConstraintSolver::convertContact): spinning friction
+  // only where the combined rolling friction is > 0 (a ball with spinning friction alone keeps spinning), and the
+  // rolling coefficient scaled by the anisotropic gain.
+  bool combineRolling(int64_t nc) override {
+    const bool any = System::combineRolling(nc);
+    const std::vector<Vec3>& s = *aniso_;
+    if (!any || s.size() != bodies_.count()) return any;
+    auto isotropic = [&](int32_t i) { return s[size_t(i)].x == 1 && s[size_t(i)].y == 1 && s[size_t(i)].z == 1; };
+#pragma omp parallel for schedule(static)
+    for (int64_t k = 0; k < nc; ++k) {
+      real& spin = roll_coef_[size_t(2 * k)];
+      real& roll = roll_coef_[size_t(2 * k + 1)];
+      if (!(roll > 0)) spin = 0;
+      const int32_t a = contacts_.body_a[size_t(k)], b = contacts_.body_b[size_t(k)];
+      if (roll > 0 && !(isotropic(a) && isotropic(b)))
+        roll *= anisotropicGain(contacts_.normal[size_t(k)], bodies_.rot[size_t(a)], s[size_t(a)],
+                                bodies_.rot[size_t(b)], s[size_t(b)]);
+    }
+    return any;
+  }
 
  private:
   std::function<bool(int, int)> keep_;
+  const std::vector<Vec3>* aniso_;
 };
 
 }  // namespace
@@ -197,7 +242,8 @@ std::unique_ptr<System> DviDynamicsWorld::makeSystem() const {
           "WorldBackend::Gpu: DviWorldConfig::make_gpu_system is not set (gpu/gpu_factory.h: makeGpuSystem)");
     s = config_.make_gpu_system(c, makeBulletCollision);  // throws InputError naming why when no device is usable
   } else {
-    s = std::make_unique<FilteredCpuSystem>(c, [this](int a, int b) { return keepPair(a, b); });
+    s = std::make_unique<FilteredCpuSystem>(
+        c, [this](int a, int b) { return keepPair(a, b); }, &rolling_aniso_);
   }
   s->addRowProvider(joints_);
   s->addRowProvider(factors_);
@@ -246,18 +292,34 @@ int DviDynamicsWorld::objectIndex(const btCollisionObject* obj) const {
   return it == object_index_.end() ? -1 : it->second;
 }
 
+// Refuses, before Bullet takes the object, what the System cannot simulate: the InputError names the API (`api`) and
+// the reason (the shape type, ...). On a device backend, rolling and spinning friction are refused here too (the
+// device solver has no rolling blocks), not at the first step.
+void DviDynamicsWorld::refuseUnsupported(const char* api, const btCollisionObject& obj) const {
+  try {
+    (void)describe(obj);
+  } catch (const InputError& e) { throw InputError(std::string(api) + ": " + e.what()); }
+  const btScalar roll = obj.getRollingFriction(), spin = obj.getSpinningFriction();
+  if (system_->backendName() != "cpu" && (roll > 0 || spin > 0))
+    throw InputError(std::string(api) + ": rolling or spinning friction (setRollingFriction, setSpinningFriction) on " +
+                     "the GPU backend; only the CPU backend solves it");
+}
+
+// A body without a collision shape (Bullet's createRigidBody(0, transform, 0)) is not part of Bullet's world either:
+// btDiscreteDynamicsWorld::addRigidBody sets its gravity and skips it. It never moves there, so a joint to it holds it
+// as the ground at its pose (bullet_joints.h: a body outside the System), as Bullet's solver does.
 void DviDynamicsWorld::addRigidBody(btRigidBody* body) {
   if (!body) throw InputError("addRigidBody: null body");
-  (void)describe(*body);  // refuse what we cannot simulate before Bullet takes the body
+  if (body->getCollisionShape()) refuseUnsupported("addRigidBody", *body);
   btDiscreteDynamicsWorld::addRigidBody(body);
-  pending_.push_back(body);
+  if (body->getCollisionShape()) pending_.push_back(body);
 }
 
 void DviDynamicsWorld::addRigidBody(btRigidBody* body, int group, int mask) {
   if (!body) throw InputError("addRigidBody: null body");
-  (void)describe(*body);
+  if (body->getCollisionShape()) refuseUnsupported("addRigidBody", *body);
   btDiscreteDynamicsWorld::addRigidBody(body, group, mask);
-  pending_.push_back(body);
+  if (body->getCollisionShape()) pending_.push_back(body);
 }
 
 void DviDynamicsWorld::addCollisionObject(btCollisionObject* object, int group, int mask) {
@@ -275,7 +337,7 @@ void DviDynamicsWorld::addCollisionObject(btCollisionObject* object, int group, 
   if (type != btCollisionObject::CO_COLLISION_OBJECT && type != btCollisionObject::CO_USER_TYPE)
     throw InputError("addCollisionObject: collision object type " + std::to_string(type) +
                      " (soft body, fluid or multibody link) is not supported by the drop-in world");
-  (void)describe(*object);
+  refuseUnsupported("addCollisionObject", *object);
   btDiscreteDynamicsWorld::addCollisionObject(object, group, mask);
   pending_.push_back(object);
 }
@@ -411,6 +473,7 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   factors_->locks.clear();
   const int64_t n = int64_t(tracked_.size());
   changes_.assign(size_t(n), 0);
+  rolling_aniso_.resize(size_t(n));
   uint8_t* changes = changes_.data();
 #pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) changes[i] = syncBody(size_t(i), h, B);
@@ -482,6 +545,9 @@ uint8_t DviDynamicsWorld::syncBody(size_t i, btScalar h, BodyArrays& B) {
   const real roll = real(t.obj->getRollingFriction()), spin = real(t.obj->getSpinningFriction());
   params |= put(B.rolling_friction[i], roll > 0 && std::isfinite(roll) ? roll : real(0));
   params |= put(B.spinning_friction[i], spin > 0 && std::isfinite(spin) ? spin : real(0));
+  rolling_aniso_[i] = t.obj->hasAnisotropicFriction(btCollisionObject::CF_ANISOTROPIC_ROLLING_FRICTION)
+                          ? fromBt(t.obj->getAnisotropicFriction())
+                          : Vec3{1, 1, 1};
   if (t.kind == kBodyFixed) return uint8_t((state ? kChangedState : 0) | (params ? kChangedParams : 0));
   const btRigidBody& b = *t.body;
   if (kinematic || !(b.getLinearVelocity() == t.v)) state |= put(B.vel[i], fromBt(b.getLinearVelocity()));
@@ -527,7 +593,8 @@ void DviDynamicsWorld::syncFactors(size_t i, BodyArrays& B) {
         throw InputError("drop-in world: body " + std::to_string(i) + " has " + (ang ? "angular" : "linear") +
                          " factor " + std::to_string(double(f)) +
                          " on a world axis; only 0 (locked) and 1 (free) are supported");
-      factors_->locks.push_back({int32_t(i), ang, k, component(ang ? B.omega[i] : B.vel[i], k)});
+      factors_->locks.push_back(
+          {int32_t(i), ang, k, component(ang ? B.omega[i] : B.vel[i], k), Pose{B.pos[i], B.rot[i]}});
     }
   }
 }
@@ -549,6 +616,31 @@ void DviDynamicsWorld::uploadChanges() {
   }
   system_->markBodiesDirty(state);
   system_->markBodyParamsDirty(params);
+}
+
+// The factor rows hold a locked velocity component to the solver's tolerance; Bullet's factors hold it exactly (the
+// component never changes). After the step each locked component is set to its target, and the body's pose is
+// integrated again from its pose before the sub-step with those velocities (integrate.h: the System's own rule), so a
+// body held to a plane (Planar2D) stays in it exactly.
+void DviDynamicsWorld::holdLockedAxes(btScalar h) {
+  if (factors_->locks.empty()) return;
+  BodyArrays& B = system_->mutableBodies();
+  std::vector<int32_t>& held = dirty_state_;  // uploadChanges' list, free until the next syncIn
+  held.clear();
+  for (const FactorRows::Lock& l : factors_->locks) {
+    const size_t i = size_t(l.body);
+    component(l.angular ? B.omega[i] : B.vel[i], l.axis) = l.target;
+    if (held.empty() || held.back() != l.body) held.push_back(l.body);
+  }
+  for (const FactorRows::Lock& l : factors_->locks) {  // the locks of a body are consecutive
+    const size_t i = size_t(l.body);
+    Vec3 x = l.before.p;
+    Quat q = l.before.q;
+    integrateBodyPosition(x, q, B.vel[i], B.omega[i], B.flags[i], real(h));
+    B.pos[i] = x;
+    B.rot[i] = q;
+  }
+  system_->markBodiesDirty(held);
 }
 
 void DviDynamicsWorld::syncOut() {
@@ -627,30 +719,13 @@ void uniteRoots(std::vector<std::atomic<int>>& root, int a, int b) {
 
 }  // namespace
 
-// Bullet's deactivation (btDiscreteDynamicsWorld::updateActivationState and btSimulationIslandManager): each
-// dynamic body counts the time its speeds stay below its sleeping thresholds; an island (bodies joined by this
-// sub-step's contacts and by enabled constraints; static, kinematic and no-response objects join none) whose bodies
-// all want to sleep falls asleep (velocities zeroed), any other island is awake. While no body wants to sleep and
-// none sleeps, every island is awake and the islands are not built.
-void DviDynamicsWorld::updateSleeping(btScalar h) {
+// The islands of updateSleeping into island_of_ (each body's union-find root), as Bullet's
+// btSimulationIslandManager::findUnions builds them: objects whose broad-phase boxes overlap (Bullet's pair cache,
+// computed here from the boxes of the sub-step's start) and that both merge islands, plus this sub-step's contacts
+// and the enabled constraints. Sleeping bodies make no contacts with each other (they are fixed), but their boxes
+// still overlap: a sleeping island stays one island, and wakes whole when an awake body's box reaches it.
+void DviDynamicsWorld::buildIslands(int team) {
   const int64_t n = int64_t(tracked_.size());
-  const int team = hostThreads();
-  int64_t resting = 0, kinematic = 0;  // bodies asleep or ready to sleep; kinematic bodies
-#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : resting, kinematic) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {  // per body, as updateActivationState
-    kinematic += tracked_[size_t(i)].kind == kBodyKinematic;
-    if (tracked_[size_t(i)].kind != 0) continue;
-    btRigidBody* b = tracked_[size_t(i)].body;
-    b->updateDeactivation(h);
-    if (!b->wantsSleeping())
-      b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
-    else if (b->getActivationState() == ACTIVE_TAG)
-      b->setActivationState(WANTS_DEACTIVATION);
-    const int state = b->getActivationState();
-    resting += state == ISLAND_SLEEPING || state == WANTS_DEACTIVATION;
-  }
-  if (kinematic > 0) wakeTouchedByKinematic();  // its loop over the bodies is serial
-  if (resting == 0) return;
   std::vector<std::atomic<int>>& root = island_root_;  // members: no allocation per sub-step once grown
   std::vector<char>& merges = island_merges_;
   if (root.size() != size_t(n)) root = std::vector<std::atomic<int>>(size_t(n));
@@ -660,6 +735,7 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
     root[size_t(i)].store(int(i), std::memory_order_relaxed);
     const Tracked& t = tracked_[size_t(i)];
     merges[size_t(i)] = t.kind == 0 && t.obj->mergesSimulationIslands();
+    if (t.obj) t.obj->setIslandTag(int(i));  // the System index, to find a pair's bodies (ghosts are not tracked)
   }
   const ContactArrays& c = system_->contacts();
   const int64_t nc = int64_t(c.count());
@@ -668,16 +744,76 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
     const int a = c.body_a[size_t(k)], b = c.body_b[size_t(k)];
     if (a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) uniteRoots(root, a, b);
   }
+  if (ghosts_ == 0) computeOverlappingPairs();  // with ghost objects, the last sub-step's pairs are current
+  const btOverlappingPairCache* cache = m_broadphasePairCache->getOverlappingPairCache();
+  const int np = cache->getNumOverlappingPairs();
+  const btBroadphasePair* pairs =
+      np > 0 ? const_cast<btOverlappingPairCache*>(cache)->getOverlappingPairArrayPtr() : nullptr;
+  auto trackedIndex = [&](const btBroadphaseProxy* p) {
+    const auto* o = static_cast<const btCollisionObject*>(p->m_clientObject);
+    const int i = o ? o->getIslandTag() : -1;
+    return i >= 0 && i < n && tracked_[size_t(i)].obj == o ? i : -1;
+  };
+  for (int p = 0; p < np; ++p) {
+    const int a = trackedIndex(pairs[p].m_pProxy0), b = trackedIndex(pairs[p].m_pProxy1);
+    if (a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) uniteRoots(root, a, b);
+  }
   for (btTypedConstraint* j : joints_->constraints()) {
     const int a = bodyIndex(&j->getRigidBodyA()), b = bodyIndex(&j->getRigidBodyB());
     if (j->isEnabled() && a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) uniteRoots(root, a, b);
   }
   std::vector<int>& island = island_of_;
   island.resize(size_t(n));
-  std::vector<char>& awake = island_awake_;  // per island root: some body is not ready to sleep
-  awake.assign(size_t(n), 0);
 #pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
   for (int64_t i = 0; i < n; ++i) island[size_t(i)] = findRoot(root, int(i));
+}
+
+// Bullet's deactivation (btDiscreteDynamicsWorld::updateActivationState and btSimulationIslandManager): each
+// dynamic body counts the time its speeds stay below its sleeping thresholds; an island (bodies joined by this
+// sub-step's broad-phase pairs and contacts and by enabled constraints, buildIslands; static, kinematic and
+// no-response objects join none) whose bodies all want to sleep falls asleep (velocities zeroed), any other island
+// is awake. While no body wants to sleep and none sleeps, every island is awake and the islands are not built.
+void DviDynamicsWorld::updateSleeping(btScalar h) {
+  const int64_t n = int64_t(tracked_.size());
+  const int team = hostThreads();
+  int64_t resting = 0, kinematic = 0;  // bodies asleep or ready to sleep (as the last sub-step left them); kinematic
+#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : resting, kinematic) if (n >= config_.parallel_min)
+  for (int64_t i = 0; i < n; ++i) {
+    kinematic += tracked_[size_t(i)].kind == kBodyKinematic;
+    if (tracked_[size_t(i)].kind != 0) continue;
+    const int state = tracked_[size_t(i)].body->getActivationState();
+    resting += state == ISLAND_SLEEPING || state == WANTS_DEACTIVATION;
+  }
+  if (kinematic > 0) wakeTouchedByKinematic();  // its loop over the bodies is serial
+  if (resting > 0) sleepOrWakeIslands(team);
+#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
+  for (int64_t i = 0; i < n; ++i) {  // per body, as updateActivationState
+    Tracked& t = tracked_[size_t(i)];
+    if (t.kind != 0) continue;
+    btRigidBody* b = t.body;
+    b->updateDeactivation(h);
+    if (!b->wantsSleeping()) {
+      b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
+    } else if (b->getActivationState() == ACTIVE_TAG) {
+      b->setActivationState(WANTS_DEACTIVATION);
+    } else if (b->getActivationState() == ISLAND_SLEEPING) {
+      b->setLinearVelocity(btVector3(0, 0, 0));
+      b->setAngularVelocity(btVector3(0, 0, 0));
+      t.v = t.w = btVector3(0, 0, 0);
+    }
+  }
+}
+
+// btSimulationIslandManager::buildIslands' decision, on the states the last sub-step's updateActivationState left
+// (Bullet decides before its solve, then updates each body's deactivation): an island whose bodies all rest
+// (ISLAND_SLEEPING or WANTS_DEACTIVATION) falls asleep; in any other island a sleeping body wakes
+// (WANTS_DEACTIVATION, its deactivation time restarted).
+void DviDynamicsWorld::sleepOrWakeIslands(int team) {
+  const int64_t n = int64_t(tracked_.size());
+  buildIslands(team);
+  const std::vector<int>& island = island_of_;
+  std::vector<char>& awake = island_awake_;  // per island root: some body is not ready to sleep
+  awake.assign(size_t(n), 0);
   for (int64_t i = 0; i < n; ++i) {
     if (tracked_[size_t(i)].kind != 0) continue;
     const int state = tracked_[size_t(i)].body->getActivationState();
@@ -695,9 +831,6 @@ void DviDynamicsWorld::updateSleeping(btScalar h) {
       }
     } else if (b->getActivationState() != ISLAND_SLEEPING) {
       b->setActivationState(ISLAND_SLEEPING);
-      b->setLinearVelocity(btVector3(0, 0, 0));
-      b->setAngularVelocity(btVector3(0, 0, 0));
-      t.v = t.w = btVector3(0, 0, 0);
     }
   }
 }
@@ -970,6 +1103,7 @@ void DviDynamicsWorld::internalSingleStepSimulation(btScalar timeStep) {
   system_->step();
   convergence_.add(system_->lastStats(), substeps_);
   system_->syncToHost();
+  holdLockedAxes(timeStep);
   phase_times_.step += since(t);
   for (int s = 0; s < kStageCount; ++s) phase_times_.stages[size_t(s)] += system_->lastStats().stage_seconds[size_t(s)];
   t = Clock::now();

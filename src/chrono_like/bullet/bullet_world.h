@@ -28,8 +28,9 @@
 // Bullet's gravity force is not added to the bodies' total force (applyGravity is a no-op): the System
 // applies each body's gravity itself. A body whose activation state is DISABLE_SIMULATION is held as a fixed
 // body. Sleeping follows Bullet: each body's own thresholds and deactivation time (btRigidBody::updateDeactivation,
-// wantsSleeping), islands of bodies joined by contacts and constraints fall asleep together and wake together; a
-// sleeping body stays in the System, held still (no mass, no gravity) until its island wakes.
+// wantsSleeping), islands of bodies joined by broad-phase pairs (Bullet's rule), contacts and constraints fall asleep
+// together and wake together; a sleeping body stays in the System, held still (no mass, no gravity) until its island
+// wakes.
 // docs/DROP_IN.md lists what works and what does not.
 #pragma once
 
@@ -169,6 +170,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::unique_ptr<System> makeSystem() const;
   void rebuild();
   void addToSystem(btCollisionObject* obj);
+  void refuseUnsupported(const char* api, const btCollisionObject& obj) const;
   void forget(btCollisionObject* obj);
   bool structureChanged() const;
   // syncBody's answer: what it changed in the System's arrays, and whether the body has factors other than 1.
@@ -187,8 +189,11 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   void syncFactors(size_t i, BodyArrays& B);
   void uploadChanges();
   int hostThreads() const;
+  void holdLockedAxes(btScalar h);
   void syncOut();
   void updateSleeping(btScalar h);
+  void buildIslands(int team);
+  void sleepOrWakeIslands(int team);
   void wakeTouchedByKinematic();
   void collectContacts();
   void buildWorldContacts() const;
@@ -228,6 +233,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   std::vector<char> island_merges_;  // whether a body joins islands (btCollisionObject::mergesSimulationIslands)
   std::vector<char> island_awake_;   // and its islands that stay awake
   std::vector<uint8_t> changes_;     // syncIn: syncBody's answer per body
+  std::vector<Vec3> rolling_aniso_;  // per body: Bullet's anisotropic rolling friction factors, (1, 1, 1) for none
   std::vector<int32_t> dirty_state_, dirty_params_;  // uploadChanges' lists
   std::vector<btVector3> aabb_lo_, aabb_hi_;         // updateAabbs' boxes
   std::vector<char> object_flags_;                   // per Bullet object: scratch of the loops over m_collisionObjects
