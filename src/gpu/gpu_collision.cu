@@ -1012,6 +1012,39 @@ __global__ void excludePairsKernel(const uint64_t* pairs, int shift, int64_t np,
   if (contactExcluded(shapes[a].body, shapes[b].body, keys, n_keys, no_contact, n_flags)) count[i] = 0;
 }
 
+// The classified pairs in class order in the general list (its closed-form head first), then that head collided.
+void closedFormsInClassOrder(DeviceState& d, const NarrowArgs& A, int64_t np, const FirstPoints& first) {
+  NarrowScratch& N = d.narrow;
+  cudaStream_t st = d.stream;
+  narrowClassScanKernel<<<1, 32, 0, st>>>(N.class_count.data(), N.list_count.data());
+  DVI_CUDA_LAUNCH("narrowClassScanKernel");
+  narrowScatterKernel<<<blocksFor(np), kBlock, 0, st>>>(N.cls.data(), np, N.class_count.data(), N.list.data());
+  DVI_CUDA_LAUNCH("narrowScatterKernel");
+  const int64_t closed_resident =
+      int64_t(d.multiprocessors) * residentBlocks(narrowClosedKernel, &N.closed_blocks_per_sm);
+  narrowClosedKernel<<<unsigned(std::min<int64_t>(blocksFor(np), closed_resident)), kBlock, 0, st>>>(
+      A, N.list.data(), N.list_count.data(), N.list_count.data() + 5, N.count.data(), first);
+  DVI_CUDA_LAUNCH("narrowClosedKernel");
+}
+
+// The narrow-phase kernels' view of this step's pairs, shapes and bodies.
+NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg) {
+  return NarrowArgs{d.broad.pair_key_sorted.data(),
+                    d.shapes.shape.data(),
+                    d.bodies.pos.data(),
+                    d.bodies.rot.data(),
+                    d.bodies.v_free.data(),
+                    d.bodies.w_free.data(),
+                    d.shapes.hull.data(),
+                    d.shapes.sweep.data(),
+                    cfg.collision.envelope_rel,
+                    real(cfg.step.dt),
+                    d.pair_shift,
+                    cfg.collision.mpr_manifold,
+                    resolvedGjk(cfg.collision.gjk, true),
+                    d.shapes.aabb.data()};
+}
+
 void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
   const int64_t np = d.pairs;
   cudaStream_t st = d.stream;
@@ -1028,20 +1061,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       std::min<int64_t>({np, std::max<int64_t>(1024, N.general_last + N.general_last / 2), int64_t(INT32_MAX)});
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
-  NarrowArgs A{d.broad.pair_key_sorted.data(),
-               d.shapes.shape.data(),
-               d.bodies.pos.data(),
-               d.bodies.rot.data(),
-               d.bodies.v_free.data(),
-               d.bodies.w_free.data(),
-               d.shapes.hull.data(),
-               d.shapes.sweep.data(),
-               cfg.collision.envelope_rel,
-               real(cfg.step.dt),
-               d.pair_shift,
-               cfg.collision.mpr_manifold,
-               resolvedGjk(cfg.collision.gjk, true),
-               d.shapes.aabb.data()};
+  const NarrowArgs A = narrowArgs(d, cfg);
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));
@@ -1063,17 +1083,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
                                                              N.list_count.data(), classes ? N.cls.data() : nullptr,
                                                              classes ? N.class_count.data() : nullptr);
   DVI_CUDA_LAUNCH("narrowClassifyKernel");
-  if (classes) {
-    narrowClassScanKernel<<<1, 32, 0, st>>>(N.class_count.data(), N.list_count.data());
-    DVI_CUDA_LAUNCH("narrowClassScanKernel");
-    narrowScatterKernel<<<blocksFor(np), kBlock, 0, st>>>(N.cls.data(), np, N.class_count.data(), N.list.data());
-    DVI_CUDA_LAUNCH("narrowScatterKernel");
-    const int64_t closed_resident =
-        int64_t(d.multiprocessors) * residentBlocks(narrowClosedKernel, &N.closed_blocks_per_sm);
-    narrowClosedKernel<<<unsigned(std::min<int64_t>(blocksFor(np), closed_resident)), kBlock, 0, st>>>(
-        A, N.list.data(), N.list_count.data(), N.list_count.data() + 5, N.count.data(), first);
-    DVI_CUDA_LAUNCH("narrowClosedKernel");
-  }
+  if (classes) closedFormsInClassOrder(d, A, np, first);
   // the general kernel's grid: what fits on the device at once, striding over the list (its length is on the device)
   const int64_t general_resident =
       int64_t(d.multiprocessors) * residentBlocks(narrowCountKernel, &N.count_blocks_per_sm);
