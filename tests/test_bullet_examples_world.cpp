@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "bullet_test_world.h"
 #include "chrono_like/bullet/bullet_world.h"
 #include "gpu/gpu_factory.h"
 
@@ -270,7 +271,10 @@ TEST_CASE("drop-in world: Planar2D's btConvex2dShape bodies stay in their plane 
   CHECK(dz < 1e-5);  // linear factor z = 0 and angular factors x = y = 0 hold exactly
   CHECK(tilt < 1e-5);
   CHECK(rate < 1e-5);
-  CHECK(std::fabs(mean_ours - mean_stock) < 0.05);
+  // Fifteen 2 m bodies tumbling off a pyramid: where each ends depends on the order of their impacts, so the mean
+  // height is compared to a twentieth of a body (measured: 4.3 cm with box-box points numbered in clipping order,
+  // 6.5 cm with their persistent features).
+  CHECK(std::fabs(mean_ours - mean_stock) < 0.1);
   CHECK(mean_ours < 9);  // the pyramid came down from y = 8..16 onto the ground at y = 7
 }
 
@@ -469,6 +473,30 @@ TEST_CASE("drop-in world: a kinematic platform carries what lies on it, as in Bu
   // Carried: 1 m along x, then 1 rad about the platform's centre.
   CHECK(std::fabs(ours.box.x() - (1 + 0.5 * std::cos(1.0))) < 0.02);
   CHECK(std::fabs(ours.box.z() + 0.5 * std::sin(1.0)) < 0.02);
+}
+
+}  // namespace dvi
+
+namespace dvi {
+
+// A tower of four 0.2 m boxes, each set 1 cm beside the one under it (its centre of mass well inside the base): it
+// stands in Bullet, and in ours at the default effort. With box-box points numbered in the order the clipping made
+// them, the numbers changed between sub-steps, the warm start gave last step's impulses to other points, and the
+// tower fell after about 8 s (collide_box.h now numbers each point by the features that made it).
+TEST_CASE("drop-in world: a leaning tower of boxes stands as in Bullet", "[world][examples]") {
+  auto tower = [](TestWorld& w) {
+    w.ground();
+    btCollisionShape* box = w.own(new btBoxShape(btVector3(btScalar(0.1), btScalar(0.1), btScalar(0.1))));
+    btRigidBody* top = nullptr;
+    for (int k = 0; k < 4; ++k) top = w.make(box, 1, btVector3(btScalar(0.01 * k), btScalar(0.1 + 0.2 * k), 0));
+    for (int f = 0; f < 900; ++f) w.world->stepSimulation(btScalar(1.0 / 60), 1, btScalar(1.0 / 60));
+    return top->getCenterOfMassPosition();
+  };
+  TestWorld stock(false), ours(true);
+  const btVector3 s = tower(stock), o = tower(ours);
+  INFO("top box after 15 s: stock (" << s.x() << ", " << s.y() << "), ours (" << o.x() << ", " << o.y() << ")");
+  REQUIRE(double(s.y()) > 0.69);  // Bullet's tower stands
+  CHECK(double(o.y()) == Approx(double(s.y())).margin(0.01));
 }
 
 }  // namespace dvi

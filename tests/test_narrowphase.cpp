@@ -80,7 +80,8 @@ void checkConsistent(const ContactPoint* c, int n, double envelope) {
     REQUIRE(std::fabs(dot(c[i].pb - c[i].pa, c[i].normal) - c[i].dist) < 1e-9);
     REQUIRE(c[i].dist < envelope);
     REQUIRE(c[i].feature >= 0);
-    REQUIRE(c[i].feature < kMaxContactsPerPair);
+    REQUIRE(c[i].feature < kMaxFeature);
+    if (i > 0) REQUIRE(c[i].feature > c[i - 1].feature);  // distinct, in order: the warm start's keys are sorted
   }
 }
 

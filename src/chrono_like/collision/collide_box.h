@@ -48,18 +48,42 @@ DVI_HD void closestSegmentSegment(Vec3 p1, Vec3 d1, Vec3 p2, Vec3 d2, real& s, r
   }
 }
 
-// Sutherland-Hodgman: clips polygon in[0..n) to {x : dot(x, pn) <= po}. Returns the new count (<= cap).
-DVI_HD int clipPolygon(const Vec3* in, int n, Vec3 pn, real po, Vec3* outp, int cap) {
+// A vertex of the clipped incident face with its feature: which incident corner it is, or which clipping plane
+// crossed which incident edge, or which reference-face corner it is (the two side planes that made it), and the
+// tag of the polygon edge that ends at it (an incident edge 0-3, or a clipping plane 4 + c).
+struct ClipVertex {
+  Vec3 p;
+  int id;
+  int edge;
+};
+
+// The feature of the point where clipping plane c (0, 1: +-u, 2, 3: +-v of the reference face) crosses the polygon
+// edge tagged `edge`: an incident edge e gives 4 + 4c + e (4-19); a segment along another clipping plane c' gives
+// the reference face's corner of the two planes, 20 + 2 (u plane) + (v plane) (20-23). Persistent while the boxes
+// rest (Box2D's contact feature ids work the same way), so the warm start finds last step's impulse of each point
+// whatever the order the clipping produced them in.
+DVI_HD int clipFeature(int c, int edge) {
+  if (edge < 4) return 4 + 4 * c + edge;
+  const int c2 = edge - 4;
+  const int uplane = c < 2 ? c : c2, vplane = c < 2 ? c2 : c;
+  return 20 + 2 * (uplane & 1) + (vplane & 1);
+}
+
+// Sutherland-Hodgman: clips polygon in[0..n) to {x : dot(x, pn) <= po}, plane c of the reference face's sides.
+// Returns the new count (<= cap).
+DVI_HD int clipPolygon(const ClipVertex* in, int n, Vec3 pn, real po, int c, ClipVertex* outp, int cap) {
   int m = 0;
   if (n <= 0) return 0;
-  Vec3 prev = in[n - 1];
-  real dprev = dot(prev, pn) - po;
+  ClipVertex prev = in[n - 1];
+  real dprev = dot(prev.p, pn) - po;
   for (int i = 0; i < n; ++i) {
-    Vec3 cur = in[i];
-    real dcur = dot(cur, pn) - po;
+    const ClipVertex& cur = in[i];
+    real dcur = dot(cur.p, pn) - po;
     if ((dprev <= 0) != (dcur <= 0)) {  // edge crosses the plane
       real t = dprev / (dprev - dcur);
-      if (m < cap) outp[m++] = prev + (cur - prev) * t;
+      // leaving (prev inside): the edge up to the crossing is part of cur's edge; entering: it runs along plane c
+      if (m < cap)
+        outp[m++] = ClipVertex{prev.p + (cur.p - prev.p) * t, clipFeature(c, cur.edge), dprev <= 0 ? cur.edge : 4 + c};
     }
     if (dcur <= 0 && m < cap) outp[m++] = cur;
     prev = cur;
@@ -171,29 +195,35 @@ DVI_HD int boxBoxFaceContacts(const BoxBoxAxes& g, const Pose& wa, const Pose& w
   Vec3 q = ix[(j + 2) % 3] * ei[(j + 2) % 3];
   // Each clipping plane adds at most one vertex: the 4-gon becomes at most an 8-gon, so the manifold never
   // exceeds kMaxContactsPerPair = 8 points and needs no reduction.
-  Vec3 polyA[8], polyB[8];
-  polyA[0] = fc + p + q;
-  polyA[1] = fc - p + q;
-  polyA[2] = fc - p - q;
-  polyA[3] = fc + p - q;
+  // The incident corners are features 0-3; edge e runs from corner e-1 to corner e.
+  ClipVertex polyA[8], polyB[8];
+  polyA[0] = ClipVertex{fc + p + q, 0, 0};
+  polyA[1] = ClipVertex{fc - p + q, 1, 1};
+  polyA[2] = ClipVertex{fc - p - q, 2, 2};
+  polyA[3] = ClipVertex{fc + p - q, 3, 3};
   int n = 4;
   const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
   Vec3 u = rx[k1], v = rx[k2];
-  n = clipPolygon(polyA, n, u, dot(u, cr) + er[k1], polyB, 8);
-  n = clipPolygon(polyB, n, -u, -dot(u, cr) + er[k1], polyA, 8);
-  n = clipPolygon(polyA, n, v, dot(v, cr) + er[k2], polyB, 8);
-  n = clipPolygon(polyB, n, -v, -dot(v, cr) + er[k2], polyA, 8);
+  n = clipPolygon(polyA, n, u, dot(u, cr) + er[k1], 0, polyB, 8);
+  n = clipPolygon(polyB, n, -u, -dot(u, cr) + er[k1], 1, polyA, 8);
+  n = clipPolygon(polyA, n, v, dot(v, cr) + er[k2], 2, polyB, 8);
+  n = clipPolygon(polyB, n, -v, -dot(v, cr) + er[k2], 3, polyA, 8);
   int m = 0;
   for (int i = 0; i < n; ++i) {
-    real s = dot(polyA[i] - refc, nr);
-    if (s < envelope) {
-      Vec3 onRef = polyA[i] - nr * s;
-      if (refIsA)
-        setContact(out[m], nr, onRef, polyA[i], s, m);
-      else
-        setContact(out[m], -nr, polyA[i], onRef, s, m);
-      ++m;
+    real s = dot(polyA[i].p - refc, nr);
+    if (!(s < envelope)) continue;
+    // in feature order (the warm start's keys are sorted within a pair): insertion by feature
+    int at = m;
+    while (at > 0 && out[at - 1].feature > polyA[i].id) {
+      out[at] = out[at - 1];
+      --at;
     }
+    Vec3 onRef = polyA[i].p - nr * s;
+    if (refIsA)
+      setContact(out[at], nr, onRef, polyA[i].p, s, polyA[i].id);
+    else
+      setContact(out[at], -nr, polyA[i].p, onRef, s, polyA[i].id);
+    ++m;
   }
   return m;
 }

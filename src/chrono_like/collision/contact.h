@@ -12,10 +12,14 @@ struct ContactPoint {  // 80 bytes in double
   Vec3 pa;             // world point on the surface of A
   Vec3 pb;             // world point on the surface of B
   real dist;           // signed distance along normal: dot(pb - pa, normal); negative = penetration
-  int32_t feature;     // index of the point within its pair's manifold (0..kMaxContactsPerPair-1), part of the
+  int32_t feature;     // which point of its pair's manifold (0..kMaxFeature-1, distinct and increasing within the
+                       // pair; collide_box.h numbers box-box points by the features that made them), part of the
                        // persistent key that warm starts the solver
   int32_t pad_;
 };
+
+// Features fit the key's 8 bits.
+constexpr int32_t kMaxFeature = 256;
 
 // Persistent key of a contact: the shape pair and the point's feature index. Shape indices are stable
 // between steps while no body is added or removed, so the key finds last step's impulse.
