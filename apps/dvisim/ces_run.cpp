@@ -43,16 +43,11 @@ std::string readText(const std::string& path, const std::string& what) {
   return readRegularFile(path, what, inputLimits().max_json_bytes, ", not a file");
 }
 
+// The size and the nesting are checked before and while the DOM is built (input_limits.h: parseJsonChecked): a
+// document nested a million levels deep is refused as the parser meets its 65th level.
 json parseJson(const std::string& text, const std::string& origin) {
   if (text.find_first_not_of(" \t\r\n") == std::string::npos) throw InputError(origin + ": file is empty");
-  try {
-    return json::parse(text);
-  } catch (const json::exception& e) {
-    std::string what = e.what();
-    const size_t p = what.find("] ");
-    if (p != std::string::npos) what = what.substr(p + 2);
-    throw InputError(origin + ": malformed JSON: " + what);
-  }
+  return parseJsonChecked(text, origin);
 }
 
 std::string fmt(double x) {
@@ -346,8 +341,8 @@ bool isCesScene(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   std::ostringstream ss;
   ss << f.rdbuf();
-  try {
-    return isCesDocument(json::parse(ss.str()));
+  try {  // too deep: InputError (the file's name and the key path); malformed: the scene loader reports it
+    return isCesDocument(parseJsonGated(ss.str(), path));
   } catch (const json::exception&) { return false; }
 }
 
@@ -372,7 +367,7 @@ int runCesMachine(const CesRunOptions& o) {
     const std::string meta_text = cesCheckpointMeta(state_bytes);
     json meta;
     try {
-      meta = json::parse(meta_text);
+      meta = parseJsonGated(meta_text, "--resume " + o.resume + ": checkpoint/state.bin");
       doc = meta.at("document");
       collision_before = meta.at("collision").get<std::string>();
     } catch (const json::exception&) {
@@ -414,6 +409,7 @@ int runCesMachine(const CesRunOptions& o) {
   if (resume) checkResumable(doc_before, doc, collision_before, collision);
   const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
   const int64_t total = checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
+  checkFrameCount(cfg.frames, total, o.frames.empty() ? origin + ": ces.output.frames" : "--frames");
 
   const std::string backend = resolveCesBackend(o.backend);
   // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).

@@ -41,6 +41,7 @@
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
+#include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
@@ -178,6 +179,7 @@ int run(const Options& o) {
   if (!o.collision.empty())
     cfg.collision.backend = o.collision == "bullet" ? dvi::CollisionBackend::Bullet : dvi::CollisionBackend::Native;
   const int64_t steps = st.stepCount();
+  dvi::checkFrameCount(st.frames, steps, o.frames.empty() ? scene.source + ": settings.frames" : "--frames");
 #ifdef DVISIM_HAVE_MPI
   // Under `mpirun -np K` (K > 1): the domain decomposition (mpi_run.h).
   if (mpiProcesses() > 1 || mpi_resume)
