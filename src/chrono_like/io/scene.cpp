@@ -160,6 +160,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
           "collision",
           "threads",
           "frames",
+          "checkpoint_every",
           "warm_start",
           "speculative",
           "mpr_manifold",
@@ -198,6 +199,8 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
         j["collision"], at("collision"), {{"native", CollisionBackend::Native}, {"bullet", CollisionBackend::Bullet}});
   if (j.contains("threads")) s.system.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
   if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
+  if (j.contains("checkpoint_every"))
+    s.checkpoint_every = c.integer(j["checkpoint_every"], at("checkpoint_every"), 0, int64_t(1) << 40);
   if (j.contains("warm_start")) sol.warm_start = c.boolean(j["warm_start"], at("warm_start"));
   if (j.contains("speculative")) col.speculative = c.boolean(j["speculative"], at("speculative"));
   if (j.contains("mpr_manifold")) col.mpr_manifold = c.boolean(j["mpr_manifold"], at("mpr_manifold"));
