@@ -151,6 +151,28 @@ void checkResumable(const json& before, const json& now, const std::string& coll
                      " (a resume may change only duration_s, output.* and splitters.*)");
 }
 
+// The folder `--resume dir` reads a CES checkpoint from: `dir`, or the temporary folder of a run killed while it
+// wrote `dir` (.NAME.tmp-PID-K beside it, whose checkpoint/state.bin is its last periodic checkpoint), whichever
+// wrote checkpoint/state.bin last. `label` names it for messages ("" for dir itself).
+std::string cesResumeFolder(const std::string& dir, std::string& label) {
+  std::error_code ec;
+  std::string best = dir;
+  label.clear();
+  fs::file_time_type newest = fs::last_write_time(dir + "/checkpoint/state.bin", ec);
+  if (ec) newest = fs::file_time_type::min();
+  fs::path target = fs::absolute(fs::path(dir), ec).lexically_normal();
+  if (!target.has_filename()) target = target.parent_path();
+  const std::string prefix = "." + target.filename().string() + ".tmp-";
+  for (fs::directory_iterator it(target.parent_path(), ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    std::error_code e2;
+    const fs::file_time_type t = fs::last_write_time(it->path() / "checkpoint" / "state.bin", e2);
+    if (name.rfind(prefix, 0) != 0 || e2 || t <= newest) continue;
+    newest = t, best = it->path().string(), label = name + "/";
+  }
+  return best;
+}
+
 }  // namespace
 
 json loadCesDocument(const std::string& scene, std::string& origin) {
@@ -359,22 +381,28 @@ int runCesMachine(const CesRunOptions& o) {
   std::string origin;
   const bool resume = !o.resume.empty();
   std::string state_bytes, collision_before;
+  std::string rdir, rlabel;  // the folder resumed from, and its name when it is a killed run's (cesResumeFolder)
   if (resume) {
     if (!o.scene.empty()) throw InputError("--resume " + o.resume + ": give either a scene or --resume, not both");
+    rdir = cesResumeFolder(o.resume, rlabel);
+    if (!rlabel.empty())
+      std::printf("resuming from %s (a run killed while it wrote %s)\n", rlabel.c_str(), o.resume.c_str());
     // The configuration comes from state.bin (checksummed); checkpoint/ces_config.json must be its copy.
-    state_bytes = readRegularFile(o.resume + "/checkpoint/state.bin", "--resume " + o.resume + ": checkpoint/state.bin",
-                                  inputLimits().max_binary_bytes);
+    state_bytes =
+        readRegularFile(rdir + "/checkpoint/state.bin", "--resume " + o.resume + ": " + rlabel + "checkpoint/state.bin",
+                        inputLimits().max_binary_bytes);
     const std::string meta_text = cesCheckpointMeta(state_bytes);
     json meta;
     try {
-      meta = parseJsonGated(meta_text, "--resume " + o.resume + ": checkpoint/state.bin");
+      meta = parseJsonGated(meta_text, "--resume " + o.resume + ": " + rlabel + "checkpoint/state.bin");
       doc = meta.at("document");
       collision_before = meta.at("collision").get<std::string>();
     } catch (const json::exception&) {
-      throw InputError("--resume " + o.resume + ": checkpoint/state.bin: corrupt configuration record");
+      throw InputError("--resume " + o.resume + ": " + rlabel + "checkpoint/state.bin: corrupt configuration record");
     }
-    origin = o.resume + "/checkpoint/ces_config.json";
-    if (parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin) != doc)
+    origin = rdir + "/checkpoint/ces_config.json";
+    if (parseJson(readText(origin, "--resume " + o.resume + ": " + rlabel + "checkpoint/ces_config.json"), origin) !=
+        doc)
       throw InputError("--resume " + o.resume +
                        ": checkpoint/ces_config.json was edited (it differs from the configuration "
                        "recorded in checkpoint/state.bin; change settings with --set)");
@@ -514,7 +542,7 @@ int runCesMachine(const CesRunOptions& o) {
     const int code = exitCodeFor(failure);
     try {
       std::error_code ec;
-      if (!checkpointed && resume) fs::copy(o.resume + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
+      if (!checkpointed && resume) fs::copy(rdir + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
       json summary;
       summary["status"] = runStatusName(code);
       summary["error"] = exceptionMessage(failure);
@@ -653,6 +681,8 @@ int runCesMachine(const CesRunOptions& o) {
         cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic, best.recovery_plastic,
         best.middling_fraction);
     rd.commit();
+    std::error_code ec;  // a killed run that wrote this --out is superseded: its folder goes
+    if (!rlabel.empty() && fs::equivalent(rd.out(), fs::absolute(o.resume, ec), ec)) fs::remove_all(rdir, ec);
     std::printf(
         "results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n",
         rd.out().c_str(),
