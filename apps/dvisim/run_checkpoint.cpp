@@ -181,11 +181,11 @@ std::string locate(const std::string& dir, const std::string& checksum, std::str
   const std::string prefix = "." + target.filename().string() + ".tmp-";
   for (fs::directory_iterator it(target.parent_path(), ec), end; !ec && it != end; it.increment(ec)) {
     const std::string run = it->path().filename().string();
-    if (run.rfind(prefix, 0) != 0 || !fs::is_directory(it->path() / "checkpoints", ec)) continue;
-    for (fs::directory_iterator c(it->path() / "checkpoints", ec), e2; !ec && c != e2; c.increment(ec))
+    std::error_code e2;  // a folder that vanishes or does not read is skipped, the search goes on
+    if (run.rfind(prefix, 0) != 0 || !fs::is_directory(it->path() / "checkpoints", e2)) continue;
+    for (fs::directory_iterator c(it->path() / "checkpoints", e2), cend; !e2 && c != cend; c.increment(e2))
       if (c->path().filename().string().rfind("step_", 0) == 0)
         consider(c->path(), (fs::path(run) / "checkpoints" / c->path().filename()).string() + "/");
-    ec.clear();
   }
   if (label) *label = best_label;
   return best;
