@@ -212,6 +212,110 @@ TEST_CASE("Hardening: deeply nested JSON is refused with the key path and the li
   fs::remove_all(d);
 }
 
+namespace {
+
+// Every entry of `dir` (the input files the test wrote are listed in `inputs`): a refused run leaves nothing else,
+// neither --out nor a temporary directory beside it.
+std::vector<std::string> leftovers(const fs::path& dir, const std::vector<std::string>& inputs) {
+  std::vector<std::string> extra;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (std::find(inputs.begin(), inputs.end(), e.path().filename().string()) == inputs.end())
+      extra.push_back(e.path().filename().string());
+  return extra;
+}
+
+// expectRefused, and within 10 s, with nothing on stdout and nothing written beside the inputs.
+void expectRefusedQuietly(const std::string& args, const std::vector<std::string>& needles, const fs::path& dir,
+                          const std::vector<std::string>& inputs) {
+  INFO("dvisim " << args.substr(0, 300));
+  const Bounded r = runBounded(args);
+  INFO("exit " << r.code << " after " << r.seconds << " s\nstdout: " << r.out.substr(0, 2000)
+               << "\nstderr: " << r.err.substr(0, 2000));
+  CHECK(r.code == 2);
+  CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+  CHECK(r.err.rfind("dvisim: error: ", 0) == 0);
+  for (const std::string& n : needles) CHECK(r.err.find(n) != std::string::npos);
+  CHECK(r.out.empty());
+  CHECK(r.seconds < 10);
+  CHECK(leftovers(dir, inputs).empty());
+}
+
+}  // namespace
+
+TEST_CASE("Hardening: JSON is refused at the nesting limit while it is parsed, before a DOM exists (was SIGSEGV)",
+          "[hardening][cli]") {
+  const fs::path d = tempDir("gate");
+  const std::string dir = d.string(), out = " --out " + quote(dir + "/o");
+  // a CES document whose time step is an array nested 1,000,000 deep (the run copied the document before checking)
+  spit(d / "deep_dt.json", R"({ "ces": { "duration_s": 0.01, "time_step_s": )" + nested("[", "]", 1000000) + " } }");
+  // an unknown top-level key holding objects 100,000 deep
+  spit(d / "deep_key.json",
+       R"({ "ces": { "duration_s": 0.01 }, "extra": )" + nested(R"({"a":)", "}", 100000, "1") + " }");
+  const std::vector<std::string> inputs = {"deep_dt.json", "deep_key.json"};
+  expectRefusedQuietly("run " + quote(dir + "/deep_dt.json") + out,
+                       {"deep_dt.json: ces.time_step_s[0][0]", "nested deeper than 64 levels"}, d, inputs);
+  expectRefusedQuietly("run " + quote(dir + "/deep_key.json") + out,
+                       {"deep_key.json: extra.a.a.a", "nested deeper than 64 levels"}, d, inputs);
+  // the same through a --set value and a --set key of the CES machine (an argument holds at most 128 KiB)
+  expectRefusedQuietly("run --set " + quote("time_step_s=" + nested("[", "]", 60000)) + out,
+                       {"--set time_step_s: [0][0]", "nested deeper than 64 levels"}, d, inputs);
+  std::string key = "output";
+  for (int i = 0; i < 100; ++i) key += ".a";
+  expectRefusedQuietly("run --set " + quote(key + "=1") + out, {"components (the nesting limit)"}, d, inputs);
+  fs::remove_all(d);
+}
+
+TEST_CASE("Hardening: the gated parser builds the DOM json::parse builds and stops at the limit", "[hardening]") {
+  // the shipped scenes and the default CES machine: the same document as nlohmann's own parser makes
+  for (const char* name : {"pile.json", "ces_default.json"}) {
+    const std::string text = slurp(fs::path(DVISIM_SOURCE_DIR) / "scenes" / name);
+    REQUIRE(!text.empty());
+    CHECK(parseJsonGated(text, name) == nlohmann::json::parse(text));
+  }
+  // 64 levels pass, 65 do not
+  CHECK(parseJsonGated(nested("[", "]", 64), "t").is_array());
+  CHECK_THROWS_WITH(parseJsonGated(nested("[", "]", 65), "t"), Catch::Contains("nested deeper than 64 levels"));
+  // the path names the first value beyond the limit (here 5 levels: the root, a, a[1], b, b[0] pass; b[0][0] not)
+  const std::string six = R"({"a": [1, {"b": [[[]]]}], "c": 2})";
+  CHECK(parseJsonGated(six, "t.json", 6) == nlohmann::json::parse(six));
+  CHECK_THROWS_WITH(parseJsonGated(six, "t.json", 5),
+                    "t.json: a[1].b[0][0]: nested deeper than 5 levels of arrays and objects (the limit)");
+  // a million levels are refused at once, without building them (well under a second; the limit leaves 2 s)
+  const auto t0 = std::chrono::steady_clock::now();
+  CHECK_THROWS_AS(parseJsonGated(nested("[", "]", 1000000), "t"), InputError);
+  CHECK_THROWS_AS(parseJsonGated(nested(R"({"k":)", "}", 1000000, "0"), "t"), InputError);
+  CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 2);
+  // malformed text stays nlohmann's parse_error; the size limit is checked before parsing
+  CHECK_THROWS_AS(parseJsonGated("[1, 2", "t"), nlohmann::json::parse_error);
+  CHECK_THROWS_WITH(parseJsonGated("[1, 2, 3]", "t", 64, 5), Catch::Contains("9 bytes, more than the limit of 5"));
+  CHECK_THROWS_WITH(parseJsonChecked("[1, 2", "t"), Catch::StartsWith("t: malformed JSON: "));
+}
+
+TEST_CASE("Hardening: more frames than steps are refused before anything is written (was a file per frame)",
+          "[hardening][cli]") {
+  const fs::path d = tempDir("frames");
+  const std::string dir = d.string(), out = " --out " + quote(dir + "/o");
+  const std::string sphere = std::string(kPlane) + R"(, { "shape": { "type": "sphere", "radius": 0.1 } })";
+  spit(d / "many.json", sceneWith(sphere, R"({ "steps": 50, "frames": 1000000 })"));
+  spit(d / "ok.json", sceneWith(sphere, R"({ "steps": 50 })"));
+  const std::vector<std::string> inputs = {"many.json", "ok.json"};
+  expectRefusedQuietly("run " + quote(dir + "/many.json") + " --backend cpu" + out,
+                       {"many.json: settings.frames: 1000000 frames for a run of 50 steps; at most 51"}, d, inputs);
+  expectRefusedQuietly("run " + quote(dir + "/ok.json") + " --backend cpu --frames 52" + out,
+                       {"--frames: 52 frames for a run of 50 steps; at most 51"}, d, inputs);
+  // the CES machine: 50 steps of its default time step
+  expectRefusedQuietly("run --backend cpu --steps 50 --set output.frames=1000000" + out,
+                       {"ces.output.frames: 1000000 frames for a run of 50 steps; at most 51"}, d, inputs);
+  // one frame a step is the most: 51 frames of 50 steps, each a distinct step
+  const Bounded r = runBounded("run " + quote(dir + "/ok.json") + " --backend cpu --frames 51" + out);
+  INFO(r.out << r.err);
+  REQUIRE(r.code == 0);
+  int vtp = 0;
+  for (const auto& e : fs::directory_iterator(d / "o")) vtp += e.path().extension() == ".vtp" ? 1 : 0;
+  CHECK(vtp == 51);
+  fs::remove_all(d);
+}
+
 TEST_CASE("Hardening: the largest scenes are refused before allocating (was a segfault after a failed allocation)",
           "[hardening][cli]") {
   const fs::path d = tempDir("big");

@@ -165,6 +165,35 @@ TEST_CASE("Exit code 4: SIGTERM and SIGINT checkpoint the last state, write stat
   fs::remove_all(d);
 }
 
+TEST_CASE("CES checkpoints: a run killed by SIGKILL resumes from its last periodic checkpoint, bitwise",
+          "[results][cli]") {
+  const fs::path d = tempDir("ces_kill");
+  const fs::path out = d / "k";
+  const std::string so = (d / "stdout").string(), se = (d / "stderr").string();
+  // a checkpoint every 250 steps (50 ms at the default 0.2 ms step); SIGKILL once the first is there
+  const int code =
+      bash(quote(DVISIM_CLI_PATH) + " run" + kCes + " --set output.checkpoint_every_s=0.05 --time 30" + " --out " +
+           quote(out.string()) + " >" + quote(so) + " 2>" + quote(se) + " & p=$!; for i in $(seq 1 900); do ls " +
+           quote(d.string()) + "/.k.tmp-*/checkpoint/state.bin >/dev/null 2>&1 && break; sleep 0.05; done; " +
+           "kill -KILL $p; { wait $p; } 2>/dev/null");
+  INFO(slurp(so) << slurp(se));
+  REQUIRE(code == 128 + 9);
+  REQUIRE_FALSE(fs::exists(out));
+  // --resume with the killed run's --out finds its checkpoint beside it (at 50 or 100 ms) and runs to 150 ms
+  const CliResult r = runCli("run --backend cpu --resume " + quote(out.string()) + " --set duration_s=0.15 --out " +
+                             quote(out.string()));
+  INFO(r.out << r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.out.find("resuming from .k.tmp-") != std::string::npos);
+  CHECK(tempLeftovers(d) == 0);  // the killed run's folder is gone
+  const fs::path whole = d / "whole";
+  const CliResult w = runCli("run" + kCes + " --time 0.15 --out " + quote(whole.string()));
+  INFO(w.out << w.err);
+  REQUIRE(w.code == 0);
+  CHECK(slurp(out / "bodies.csv") == slurp(whole / "bodies.csv"));  // bitwise: 17 significant digits
+  fs::remove_all(d);
+}
+
 TEST_CASE("Atomic results: a rerun replaces the whole directory, a refused run leaves it as it was", "[results][cli]") {
   const fs::path d = tempDir("atomic");
   spit(d / "ball.json", kBall);

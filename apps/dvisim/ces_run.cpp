@@ -43,16 +43,11 @@ std::string readText(const std::string& path, const std::string& what) {
   return readRegularFile(path, what, inputLimits().max_json_bytes, ", not a file");
 }
 
+// The size and the nesting are checked before and while the DOM is built (input_limits.h: parseJsonChecked): a
+// document nested a million levels deep is refused as the parser meets its 65th level.
 json parseJson(const std::string& text, const std::string& origin) {
   if (text.find_first_not_of(" \t\r\n") == std::string::npos) throw InputError(origin + ": file is empty");
-  try {
-    return json::parse(text);
-  } catch (const json::exception& e) {
-    std::string what = e.what();
-    const size_t p = what.find("] ");
-    if (p != std::string::npos) what = what.substr(p + 2);
-    throw InputError(origin + ": malformed JSON: " + what);
-  }
+  return parseJsonChecked(text, origin);
 }
 
 std::string fmt(double x) {
@@ -154,6 +149,28 @@ void checkResumable(const json& before, const json& now, const std::string& coll
     throw InputError("--resume: the configuration differs from the checkpoint's in " + std::to_string(n) +
                      " setting(s) that change the physics: " + diff + (n > 4 ? ", ..." : "") +
                      " (a resume may change only duration_s, output.* and splitters.*)");
+}
+
+// The folder `--resume dir` reads a CES checkpoint from: `dir`, or the temporary folder of a run killed while it
+// wrote `dir` (.NAME.tmp-PID-K beside it, whose checkpoint/state.bin is its last periodic checkpoint), whichever
+// wrote checkpoint/state.bin last. `label` names it for messages ("" for dir itself).
+std::string cesResumeFolder(const std::string& dir, std::string& label) {
+  std::error_code ec;
+  std::string best = dir;
+  label.clear();
+  fs::file_time_type newest = fs::last_write_time(dir + "/checkpoint/state.bin", ec);
+  if (ec) newest = fs::file_time_type::min();
+  fs::path target = fs::absolute(fs::path(dir), ec).lexically_normal();
+  if (!target.has_filename()) target = target.parent_path();
+  const std::string prefix = "." + target.filename().string() + ".tmp-";
+  for (fs::directory_iterator it(target.parent_path(), ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    std::error_code e2;
+    const fs::file_time_type t = fs::last_write_time(it->path() / "checkpoint" / "state.bin", e2);
+    if (name.rfind(prefix, 0) != 0 || e2 || t <= newest) continue;
+    newest = t, best = it->path().string(), label = name + "/";
+  }
+  return best;
 }
 
 }  // namespace
@@ -346,8 +363,8 @@ bool isCesScene(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   std::ostringstream ss;
   ss << f.rdbuf();
-  try {
-    return isCesDocument(json::parse(ss.str()));
+  try {  // too deep: InputError (the file's name and the key path); malformed: the scene loader reports it
+    return isCesDocument(parseJsonGated(ss.str(), path));
   } catch (const json::exception&) { return false; }
 }
 
@@ -364,22 +381,28 @@ int runCesMachine(const CesRunOptions& o) {
   std::string origin;
   const bool resume = !o.resume.empty();
   std::string state_bytes, collision_before;
+  std::string rdir, rlabel;  // the folder resumed from, and its name when it is a killed run's (cesResumeFolder)
   if (resume) {
     if (!o.scene.empty()) throw InputError("--resume " + o.resume + ": give either a scene or --resume, not both");
+    rdir = cesResumeFolder(o.resume, rlabel);
+    if (!rlabel.empty())
+      std::printf("resuming from %s (a run killed while it wrote %s)\n", rlabel.c_str(), o.resume.c_str());
     // The configuration comes from state.bin (checksummed); checkpoint/ces_config.json must be its copy.
-    state_bytes = readRegularFile(o.resume + "/checkpoint/state.bin", "--resume " + o.resume + ": checkpoint/state.bin",
-                                  inputLimits().max_binary_bytes);
+    state_bytes =
+        readRegularFile(rdir + "/checkpoint/state.bin", "--resume " + o.resume + ": " + rlabel + "checkpoint/state.bin",
+                        inputLimits().max_binary_bytes);
     const std::string meta_text = cesCheckpointMeta(state_bytes);
     json meta;
     try {
-      meta = json::parse(meta_text);
+      meta = parseJsonGated(meta_text, "--resume " + o.resume + ": " + rlabel + "checkpoint/state.bin");
       doc = meta.at("document");
       collision_before = meta.at("collision").get<std::string>();
     } catch (const json::exception&) {
-      throw InputError("--resume " + o.resume + ": checkpoint/state.bin: corrupt configuration record");
+      throw InputError("--resume " + o.resume + ": " + rlabel + "checkpoint/state.bin: corrupt configuration record");
     }
-    origin = o.resume + "/checkpoint/ces_config.json";
-    if (parseJson(readText(origin, "--resume " + o.resume + ": checkpoint/ces_config.json"), origin) != doc)
+    origin = rdir + "/checkpoint/ces_config.json";
+    if (parseJson(readText(origin, "--resume " + o.resume + ": " + rlabel + "checkpoint/ces_config.json"), origin) !=
+        doc)
       throw InputError("--resume " + o.resume +
                        ": checkpoint/ces_config.json was edited (it differs from the configuration "
                        "recorded in checkpoint/state.bin; change settings with --set)");
@@ -414,6 +437,7 @@ int runCesMachine(const CesRunOptions& o) {
   if (resume) checkResumable(doc_before, doc, collision_before, collision);
   const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
   const int64_t total = checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
+  checkFrameCount(cfg.frames, total, o.frames.empty() ? origin + ": ces.output.frames" : "--frames");
 
   const std::string backend = resolveCesBackend(o.backend);
   // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
@@ -518,7 +542,7 @@ int runCesMachine(const CesRunOptions& o) {
     const int code = exitCodeFor(failure);
     try {
       std::error_code ec;
-      if (!checkpointed && resume) fs::copy(o.resume + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
+      if (!checkpointed && resume) fs::copy(rdir + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
       json summary;
       summary["status"] = runStatusName(code);
       summary["error"] = exceptionMessage(failure);
@@ -657,6 +681,8 @@ int runCesMachine(const CesRunOptions& o) {
         cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic, best.recovery_plastic,
         best.middling_fraction);
     rd.commit();
+    std::error_code ec;  // a killed run that wrote this --out is superseded: its folder goes
+    if (!rlabel.empty() && fs::equivalent(rd.out(), fs::absolute(o.resume, ec), ec)) fs::remove_all(rdir, ec);
     std::printf(
         "results: %s/ (summary.json, ces_*.csv, bodies.csv%s%s, checkpoint/), %.1f s wall, %.2f ms/step\n",
         rd.out().c_str(),

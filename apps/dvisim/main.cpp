@@ -41,12 +41,14 @@
 #include "chrono_like/bullet/bullet_collision_backend.h"
 #include "chrono_like/bullet/bullet_import.h"
 #include "chrono_like/bullet/bullet_peer.h"
+#include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
 #include "parse.h"
+#include "run_checkpoint.h"
 #ifdef DVISIM_HAVE_MPI
 #include "mpi_run.h"
 #include "progress.h"
@@ -65,10 +67,10 @@ struct Options {
   std::string backend = "auto";
   std::string collision;
   std::string solver;
-  std::string iterations, tolerance, max_iterations, dt, time, steps, threads, frames;
+  std::string iterations, tolerance, max_iterations, dt, time, steps, threads, frames, checkpoint_every;
   std::vector<std::string> sets;
   std::string out = "dvisim-out";
-  std::string resume;  // CES machine: continue the run whose checkpoint is in this directory
+  std::string resume;  // continue the run whose checkpoint is in (or, killed, was written beside) this directory
 };
 
 std::string oneLine(std::string s) {
@@ -128,15 +130,12 @@ int runCes(const Options& o) {
 }
 
 int run(const Options& o) {
-  bool mpi_resume = false;  // --resume of a scene run under mpirun (mpi_run.h), not of a CES machine
-#ifdef DVISIM_HAVE_MPI
-  mpi_resume = !o.resume.empty() && isMpiCheckpoint(o.resume);
-  if (mpi_resume && (o.scene.empty() || !mpiInitialized()))
+  // --resume DIR of a scene run (run_checkpoint.h: one process or under mpirun) needs the scene it ran; without a
+  // scene, DIR is a CES machine's.
+  if (o.scene.empty() && !o.resume.empty() && runckpt::isSceneCheckpoint(o.resume))
     throw InputError("--resume " + o.resume +
-                     ": an MPI run's checkpoint resumes under mpirun (any -np), with the scene it ran: mpirun -np K "
-                     "dvisim run SCENE --resume DIR");
-#endif
-  const bool ces = !mpi_resume && (o.scene.empty() || !o.resume.empty() || dvi::ces::isCesScene(o.scene));
+                     ": a scene run's checkpoint resumes with the scene it ran: dvisim run SCENE --resume DIR");
+  const bool ces = o.scene.empty() || dvi::ces::isCesScene(o.scene);
 #ifdef DVISIM_HAVE_MPI
   if (ces && mpiProcesses() > 1)
     throw InputError("a CES machine does not run over several processes (MPI): run it without mpirun");
@@ -174,14 +173,18 @@ int run(const Options& o) {
   }
   if (!o.threads.empty()) cfg.threads = int(parseInt("--threads", o.threads, 0, 4096));
   if (!o.frames.empty()) st.frames = int(parseInt("--frames", o.frames, 0, 1000000));
+  if (!o.checkpoint_every.empty())
+    st.checkpoint_every = parseInt("--checkpoint-every", o.checkpoint_every, 0, 1LL << 40);
   if (!o.solver.empty()) dvi::parseSolver(o.solver, cfg.solver.type);  // validated above
   if (!o.collision.empty())
     cfg.collision.backend = o.collision == "bullet" ? dvi::CollisionBackend::Bullet : dvi::CollisionBackend::Native;
   const int64_t steps = st.stepCount();
+  dvi::checkFrameCount(st.frames, steps, o.frames.empty() ? scene.source + ": settings.frames" : "--frames");
 #ifdef DVISIM_HAVE_MPI
   // Under `mpirun -np K` (K > 1): the domain decomposition (mpi_run.h).
-  if (mpiProcesses() > 1 || mpi_resume)
-    return runSceneMpi(scene, cfg, steps, frameSteps(st.frames, steps), o.out, o.backend, o.resume);
+  if (mpiProcesses() > 1 || (mpiInitialized() && !o.resume.empty()))
+    return runSceneMpi(scene, cfg, steps, frameSteps(st.frames, steps), o.out, o.backend, o.resume,
+                       st.checkpoint_every);
 #endif
 
   // Backend.
@@ -195,14 +198,24 @@ int run(const Options& o) {
     throw InputError("--backend gpu: no usable GPU device" +
                      (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
 
+  // --resume: the checkpoint read and checked before anything is written (run_checkpoint.h).
+  std::optional<runckpt::Resumed> resumed;
+  std::string resumed_from;  // its folder
+  if (!o.resume.empty()) {
+    if (backend == "bullet")
+      throw InputError("--resume: the bullet backend (Bullet's own world) has no checkpoints; resume on cpu or gpu");
+    resumed = runckpt::readResume(o.resume, scene, cfg, steps, resumed_from);
+  }
+  const int64_t first = resumed ? resumed->step : 0;  // the step the run starts from
+
   // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
   dvi::ResultDir rd(o.out);
   const std::string out = rd.path();
 
   const std::vector<btRigidBody*>& bodies = scene.bodies();
   const std::vector<dvi::real> sizes = bodySizes(bodies);
-  std::printf("scene: %s (%zu bodies), %lld steps of %g s\n", scene.name.c_str(), bodies.size(), (long long)steps,
-              cfg.step.dt);
+  std::printf("scene: %s (%zu bodies), %lld steps of %g s%s\n", scene.name.c_str(), bodies.size(), (long long)steps,
+              cfg.step.dt, first > 0 ? (" (resumed at step " + std::to_string(first) + ")").c_str() : "");
   std::fflush(stdout);
 
 #ifdef _OPENMP
@@ -225,6 +238,7 @@ int run(const Options& o) {
   dvi::FrameWriter frames(out);
   const std::vector<int64_t> frame_at = frameSteps(st.frames, steps);
   size_t next_frame = 0;
+  while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
   Progress progress(steps);
   double wall = 0;
 
@@ -232,13 +246,13 @@ int run(const Options& o) {
   // `afterStep` gather its statistics. One loop for both, so frames and timing cannot differ.
   // A step that diverges (SimulationDiverged, SolverError), fails, or SIGINT/SIGTERM ends the loop early: `done`
   // counts the steps that completed, `failure` holds the exception.
-  int64_t done = 0;
+  int64_t done = first;
   bool interrupted = false;
   std::exception_ptr failure;
   dvi::installStopHandlers();
   auto runSteps = [&](auto&& collect, auto&& stepOnce, auto&& afterStep) {
     try {
-      for (int64_t k = 0;; ++k) {
+      for (int64_t k = first;; ++k) {
         while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
           collect();
           frames.write(double(k) * cfg.step.dt, state);
@@ -305,10 +319,14 @@ int run(const Options& o) {
     summary["stages"] = {"bullet"};
     summary["stage_seconds"] = {{"bullet", wall}};
     summary["threads"] = 1;
+    summary["checkpoint"] = nullptr;  // Bullet's world has none
   } else {
     std::unique_ptr<dvi::System> sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
                                                         : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
     const std::vector<int> ids = dvi::importBullet(*sys, bodies);
+    if (resumed) runckpt::restore(*sys, *resumed);
+    // a checkpoint every checkpoint_every steps (the newest two kept) into the run's folder, and one at the end
+    runckpt::Periodic periodic(out, st.checkpoint_every);
     auto collect = [&] {
       sys->syncToHost();  // a device backend copies its state into the host arrays
       const dvi::BodyArrays& b = sys->bodies();
@@ -319,6 +337,7 @@ int run(const Options& o) {
     };
     int64_t contacts = 0, iterations = 0;
     dvi::real max_pen = 0, residual = 0, relative = 0;
+    double checkpoint_s = 0;
     dvi::StageLog stage_log;
     const bool host_state = sys->backendName() == "cpu";  // the bodies are checked for divergence every step
     runSteps(
@@ -341,7 +360,19 @@ int run(const Options& o) {
           residual = s.residual;
           relative = s.relative_residual;
           stage_log.add(s);
+          if (!periodic.due(done)) return;
+          const auto c0 = Clock::now();
+          sys->syncToHost();
+          runckpt::writeSingle(*sys, scene, periodic.begin(done));
+          periodic.commit(done);
+          checkpoint_s += std::chrono::duration<double>(Clock::now() - c0).count();
         });
+    const auto c0 = Clock::now();
+    const bool saved =
+        runckpt::finalCheckpoint(*sys, scene, periodic, out + "/checkpoint", bool(failure), resumed_from);
+    checkpoint_s += std::chrono::duration<double>(Clock::now() - c0).count();
+    summary["checkpoint"] = saved ? nlohmann::json("checkpoint/") : nlohmann::json(nullptr);
+    summary["checkpoint_seconds"] = checkpoint_s;  // writing them (periodic and final), not in wall_time_s
     summary["backend"] = sys->backendName();
     summary["device"] = sys->deviceName();
     summary["solver"] = dvi::solverName(cfg.solver.type);
@@ -370,15 +401,17 @@ int run(const Options& o) {
   }
   summary["steps"] = done;
   summary["steps_planned"] = steps;
+  if (first > 0) summary["resumed_from_step"] = first;
   summary["sim_time"] = double(done) * cfg.step.dt;
   summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = done > 0 ? 1000.0 * wall / double(done) : 0.0;
+  summary["ms_per_step"] = done > first ? 1000.0 * wall / double(done - first) : 0.0;
   summary["frames"] = frames.count();
 
   try {
     dvi::writeBodiesCsv(out + "/bodies.csv", state);
     dvi::writeSummary(out + "/summary.json", summary);
     rd.commit();
+    runckpt::forgetKilledRun(resumed_from, rd.out());
   } catch (...) {
     if (!failure) throw;  // the failure of the run is the one to report
   }
@@ -387,9 +420,10 @@ int run(const Options& o) {
                 dvi::runStatusName(code), (long long)done);
     std::rethrow_exception(failure);
   }
-  std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", rd.out().c_str(),
-              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "", wall,
-              done > 0 ? 1000.0 * wall / double(done) : 0.0);
+  std::printf("results: %s/ (summary.json, bodies.csv%s%s), %.3f s wall, %.2f ms/step\n", rd.out().c_str(),
+              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "",
+              summary["checkpoint"].is_null() ? "" : ", checkpoint/", wall,
+              done > first ? 1000.0 * wall / double(done - first) : 0.0);
   if (!not_converged.empty()) {
     std::fflush(stdout);
     std::fprintf(stderr, "%s\n", not_converged.c_str());
@@ -485,8 +519,11 @@ int main(int argc, char** argv) {
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
   run_cmd->add_option("--resume", o.resume,
-                      "Continue the run checkpointed in DIR (DIR/checkpoint/): a CES machine's, or a scene's run under "
-                      "mpirun (with its scene, on any number of processes, to --steps)");
+                      "Continue the run checkpointed in DIR (DIR/checkpoint/, or the last periodic checkpoint of a run "
+                      "killed while writing DIR): a CES machine's, or a scene's (with its scene, on one process or any "
+                      "number under mpirun, to --steps)");
+  run_cmd->add_option("--checkpoint-every", o.checkpoint_every,
+                      "A scene run's checkpoint every N steps while it runs, the last two kept (0: at its end only)");
   const std::function<int()> compare = addCompareCommand(app);
   const std::function<int()> sweep = addSweepCommand(app);
   BenchRegistry bench;  // the `bench` subcommands

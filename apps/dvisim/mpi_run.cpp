@@ -19,10 +19,11 @@
 #include "chrono_like/mpi/distributed_system.h"
 #include "chrono_like/base/checksum.h"
 #include "chrono_like/io/input_limits.h"
-#include "chrono_like/mpi/checkpoint.h"
+#include "chrono_like/checkpoint_piece.h"
 #include "chrono_like/mpi/mpi_collectives.h"
 #include "gpu/gpu_factory.h"
 #include "progress.h"
+#include "run_checkpoint.h"
 
 namespace {
 
@@ -55,11 +56,6 @@ bool mpiInitialized() {
   int init = 0;
   MPI_Initialized(&init);
   return init != 0;
-}
-
-bool isMpiCheckpoint(const std::string& dir) {
-  std::error_code ec;
-  return !dir.empty() && std::filesystem::is_regular_file(dir + "/checkpoint/manifest.json", ec);
 }
 
 int mpiProcesses() {
@@ -186,106 +182,33 @@ void writeFramePieces(const dvi::DistributedSystem& sys, const std::vector<dvi::
   series->addFile(time, name, dvi::pvtpFrame(pieces));
 }
 
-// The scene file's checksum (FNV-1a 64 of its bytes), recorded by a checkpoint and compared by its resume.
-std::string sceneChecksum(const dvi::Scene& scene) {
-  if (scene.source.empty() || scene.source[0] == '<') return "none";
-  const std::string bytes = dvi::readRegularFile(scene.source, scene.source, uint64_t(1) << 32);
-  char hex[17];
-  std::snprintf(hex, sizeof hex, "%016llx", (unsigned long long)dvi::fnv1a64(bytes.data(), bytes.size()));
-  return hex;
-}
-
-// checkpoint/ in the results: each process's piece (checkpoint.h), process 0's manifest.json naming them with the
-// step, the clock, dt, the scene and its checksum.
-void writeCheckpoint(const dvi::DistributedSystem& sys, const dvi::Scene& scene, double dt, const std::string& dir) {
-  const std::string cdir = dir + "/checkpoint";
+// A checkpoint of the run into the folder `cdir` (run_checkpoint.h): each process its piece, then process 0 the
+// manifest naming them (the step, the clock, dt, the scene and its checksum).
+void writeCheckpoint(const dvi::DistributedSystem& sys, const dvi::Scene& scene, double dt, const std::string& cdir) {
   if (sys.rank() == 0) std::filesystem::create_directories(cdir);
   MPI_Barrier(MPI_COMM_WORLD);
   dvi::writeFileAtomic(cdir + "/piece_p" + std::to_string(sys.rank()) + ".bin",
                        dvi::encodePiece(sys.checkpointPiece()));
-  if (sys.rank() != 0) return;
-  nlohmann::json m;
-  m["format"] = "dvisim-mpi-checkpoint";
-  m["version"] = 1;
-  m["processes"] = sys.processes();
-  m["step"] = sys.stepCount();
-  m["time"] = sys.time();
-  m["dt"] = dt;
-  m["bodies"] = sys.bodyCount();
-  m["scene"] = scene.source;
-  m["scene_checksum"] = sceneChecksum(scene);
-  dvi::writeFileAtomic(cdir + "/manifest.json", m.dump(2) + "\n");
+  MPI_Barrier(MPI_COMM_WORLD);  // every piece in place before the manifest names them
+  if (sys.rank() == 0)
+    dvi::writeFileAtomic(cdir + "/manifest.json", runckpt::manifestText(sys.processes(), sys.stepCount(), sys.time(),
+                                                                        dt, sys.bodyCount(), scene));
 }
 
-// A checkpoint written by writeCheckpoint, read whole by every process: InputError naming what does not fit the scene
-// and the run (another scene, scene file or dt, a missing, damaged or inconsistent piece).
-struct Resumed {
-  std::vector<dvi::MotionState> states;
-  std::vector<dvi::ContactImpulse> impulses;
-  double time = 0;
-  int64_t step = 0;
-};
-Resumed readCheckpoint(const std::string& dir, const dvi::Scene& scene, const std::vector<uint8_t>& flags, double dt) {
-  const std::string what = "--resume " + dir;
-  const std::string mpath = dir + "/checkpoint/manifest.json";
-  nlohmann::json m;
-  try {
-    m = nlohmann::json::parse(dvi::readRegularFile(mpath, what + ": checkpoint/manifest.json", 1 << 20));
-  } catch (const nlohmann::json::exception& e) {
-    throw dvi::InputError(what + ": checkpoint/manifest.json: " + e.what());
-  }
-  auto field = [&](const char* key) -> const nlohmann::json& {
-    if (!m.is_object() || !m.contains(key))
-      throw dvi::InputError(what + ": checkpoint/manifest.json: no \"" + std::string(key) + "\"");
-    return m[key];
-  };
-  if (field("format") != "dvisim-mpi-checkpoint" || field("version") != 1)
-    throw dvi::InputError(what + ": checkpoint/manifest.json: not a dvisim MPI checkpoint of version 1");
-  if (!field("bodies").is_number_unsigned() || field("bodies").get<uint64_t>() != flags.size())
-    throw dvi::InputError(what + ": the checkpoint has " + field("bodies").dump() + " bodies, the scene " +
-                          std::to_string(flags.size()));
-  if (!field("dt").is_number() || field("dt").get<double>() != dt)
-    throw dvi::InputError(what + ": the checkpoint ran at dt = " + field("dt").dump() + ", this run at " +
-                          std::to_string(dt) + " (give the same --dt)");
-  if (field("scene_checksum") != sceneChecksum(scene))
-    throw dvi::InputError(what + ": the scene file differs from the one the checkpoint ran (" + field("scene").dump() +
-                          ")");
-  const nlohmann::json& np = field("processes");
-  const nlohmann::json& st = field("step");
-  const nlohmann::json& tm = field("time");
-  if (!np.is_number_unsigned() || np.get<uint64_t>() < 1 || np.get<uint64_t>() > 1000000 || !st.is_number_unsigned() ||
-      !tm.is_number() || !std::isfinite(tm.get<double>()))
-    throw dvi::InputError(what + ": checkpoint/manifest.json: processes, step or time out of range");
-  Resumed r;
-  r.step = st.get<int64_t>();
-  r.time = tm.get<double>();
-  r.states.resize(flags.size());
-  std::vector<char> seen(flags.size(), 0);
-  for (uint64_t q = 0; q < np.get<uint64_t>(); ++q) {
-    const std::string name = "checkpoint/piece_p" + std::to_string(q) + ".bin";
-    const dvi::CheckpointPiece p =
-        dvi::decodePiece(dvi::readRegularFile(dir + "/" + name, what + ": " + name, uint64_t(1) << 40),
-                         what + ": " + name, flags.size());
-    for (size_t i = 0; i < p.ids.size(); ++i) {
-      const int32_t id = p.ids[i];
-      if (seen[size_t(id)] || (flags[size_t(id)] & (dvi::kBodyFixed | dvi::kBodyKinematic)))
-        throw dvi::InputError(what + ": " + name + ": body " + std::to_string(id) + " twice, or not a dynamic body");
-      seen[size_t(id)] = 1;
-      r.states[size_t(id)] = p.states[i];
-    }
-    r.impulses.insert(r.impulses.end(), p.impulses.begin(), p.impulses.end());
-  }
-  for (size_t id = 0; id < flags.size(); ++id)
-    if (!seen[id] && !(flags[id] & (dvi::kBodyFixed | dvi::kBodyKinematic)))
-      throw dvi::InputError(what + ": dynamic body " + std::to_string(id) + " is in no piece");
-  return r;
+// A periodic checkpoint (every process calls it at the same step): the pieces and manifest into a temporary folder,
+// which process 0 then renames into place (Periodic::commit keeps the newest two).
+void writePeriodic(const dvi::DistributedSystem& sys, const dvi::Scene& scene, double dt, runckpt::Periodic& periodic,
+                   int64_t step) {
+  const std::string tmp = periodic.begin(step, sys.rank() == 0);
+  writeCheckpoint(sys, scene, dt, tmp);
+  if (sys.rank() == 0) periodic.commit(step);
 }
 
 }  // namespace
 
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
                 const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend,
-                const std::string& resume) {
+                const std::string& resume, int64_t checkpoint_every) {
   if (backend != "auto" && backend != "cpu" && backend != "gpu")
     throw dvi::InputError("--backend " + backend + ": not available over several processes (MPI runs cpu or gpu)");
   // gpu: one device a process, host rank i on device i (mod the devices); auto: the CPU.
@@ -308,11 +231,9 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     sys.addBody(d);
   }
   int64_t first = 0;  // the step a resumed run starts from
+  std::string resumed_from;
   if (!resume.empty()) {
-    const Resumed r = readCheckpoint(resume, scene, flags, double(cfg.step.dt));
-    if (steps <= r.step)
-      throw dvi::InputError("--steps " + std::to_string(steps) + ": the checkpoint in " + resume + " is at step " +
-                            std::to_string(r.step) + " already (--steps counts from the start of the run)");
+    const runckpt::Resumed r = runckpt::readResume(resume, scene, cfg, steps, resumed_from, mpiRank() == 0);
     sys.restore(r.states, r.impulses, r.time, r.step);
     first = r.step;
   }
@@ -324,7 +245,8 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     std::printf("scene: %s (%zu bodies), %lld steps of %g s on %d processes (MPI)\n", scene.name.c_str(), bodies.size(),
                 (long long)steps, cfg.step.dt, sys.processes());
   Progress progress(steps, root);  // process 0: a bar on a terminal, else a line every 10 %
-  int64_t contacts = 0, iterations = 0, done = 0;
+  int64_t contacts = 0, iterations = 0, done = first;
+  runckpt::Periodic periodic(dir, checkpoint_every);  // every process names the same folders (process 0's)
   int frames = 0;
   size_t next_frame = 0;
   double relative = 0;
@@ -350,6 +272,7 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
     iterations += sys.local()->lastStats().iterations;  // the same on every process (collective solve)
     relative = double(sys.local()->lastStats().relative_residual);
     if (root) progress.update(k + 1);
+    if (periodic.due(done)) writePeriodic(sys, scene, double(cfg.step.dt), periodic, done);
   }
   if (root) progress.finish();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -358,8 +281,9 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   int64_t moved = 0;
   for (int64_t v : sys.migrations().sent) moved += v;
   moved = dvi::mpiSum(MPI_COMM_WORLD, moved);
-  writeCheckpoint(sys, scene, double(cfg.step.dt), dir);
+  writeCheckpoint(sys, scene, double(cfg.step.dt), dir + "/checkpoint");
   MPI_Barrier(MPI_COMM_WORLD);  // every piece written before process 0 puts the directory in place
+  if (root) periodic.clear();
   const int code = interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
   if (!root) return code;
   std::vector<dvi::BodyState> state(all.size());
@@ -392,6 +316,7 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   dvi::writeSummary(dir + "/summary.json", summary);
   series.reset();  // frames.pvd closed before the directory moves
   rd->commit();
+  runckpt::forgetKilledRun(resumed_from, rd->out());
   std::printf("results: %s/ (summary.json, bodies.csv%s), %.3f s wall, %.2f ms/step\n", rd->out().c_str(),
               frames ? (", " + std::to_string(frames) + " frames: frame_NNNN.pvtp + pieces, frames.pvd").c_str() : "",
               wall, done > first ? 1000.0 * wall / double(done - first) : 0.0);

@@ -44,11 +44,11 @@ std::vector<long long> mpiGatherToRoot(const std::vector<long long>& mine);
 // parallel VTK frame (frame_NNNN.pvtp, one frame_NNNN_pR.vtp piece a process, in frames.pvd) before each step
 // listed in frame_at (ascending; `steps` for after the last). `backend`: auto or cpu, or gpu (one device a process:
 // host rank i on device i mod the devices); the Bullet backend does not run over several processes (InputError).
-// Process 0 also writes checkpoint/ (each process's piece of the last state, checkpoint.h, and manifest.json);
+// Process 0 also writes checkpoint/ (each process's piece of the last state, run_checkpoint.h, and manifest.json);
 // `resume` (a results directory with one) starts from it instead, on any number of processes, and runs on to step
 // `steps` (InputError where it does not fit: another scene file, dt or body count, a damaged piece).
+// With `checkpoint_every` > 0 every process also writes its piece every that many steps, and process 0 puts each
+// complete set in place (run_checkpoint.h: Periodic), so that a run killed outright resumes from the newest.
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
                 const std::vector<int64_t>& frame_at, const std::string& out, const std::string& backend,
-                const std::string& resume = {});
-// Whether `dir` holds a checkpoint of an MPI run (checkpoint/manifest.json), not a CES machine's.
-bool isMpiCheckpoint(const std::string& dir);
+                const std::string& resume = {}, int64_t checkpoint_every = 0);

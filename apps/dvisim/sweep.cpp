@@ -214,7 +214,7 @@ void recordDesign(const SweepOptions& o, const Design& d, const std::vector<Case
   if (fs::exists(path)) {
     json old;
     try {
-      old = json::parse(readText(path)).at("arguments");
+      old = dvi::parseJsonGated(readText(path), path.string()).at("arguments");
     } catch (const std::exception&) {
       throw InputError("--out " + o.out + ": sweep.json is unreadable; use another --out");
     }
@@ -463,8 +463,8 @@ std::vector<Row> collectRows(const std::vector<Case>& cases, const std::map<size
     if (codes.count(i)) r.exit_code = codes.at(i);
     if (!finished(cases[i])) continue;
     try {
-      r.wall = json::parse(readText(cases[i].dir / kMarker)).at("wall_s").get<double>();
-      r.metrics = runMetrics(json::parse(readText(cases[i].dir / "summary.json")));
+      r.wall = dvi::parseJsonGated(readText(cases[i].dir / kMarker), kMarker).at("wall_s").get<double>();
+      r.metrics = runMetrics(dvi::parseJsonGated(readText(cases[i].dir / "summary.json"), "summary.json"));
       r.ok = true, r.exit_code = 0;
     } catch (const std::exception&) { r.ok = false; }
   }

@@ -194,7 +194,7 @@ void applyCesOverride(json& doc, const std::string& assignment) {
     throw InputError("--set " + shown + ": the scene has no ces object");
   // A missing intermediate object is created (its keys are then checked by the parser); a missing leaf
   // is added and checked the same way, so an unknown key is still an error.
-  jsoncheck::setByPath(doc["ces"], key, shown, jsoncheck::parseSetValue(text),
+  jsoncheck::setByPath(doc["ces"], key, shown, jsoncheck::parseSetValue(text, "--set " + shown),
                        [](size_t, const std::string&) { return true; });
 }
 

@@ -286,6 +286,12 @@ class System {
   // The context of the step running now, or of the last one between steps (StepContext).
   const StepContext& stepContext() const { return ctx_; }
   int64_t stepCount() const { return steps_; }
+  // The clock of a checkpoint a run resumes from (apps/dvisim/run_checkpoint.h): the next step starts at `time`,
+  // after `steps` steps. Before the first step, with the bodies and warm start (setWarmStart) of the same checkpoint.
+  void setClock(double time, int64_t steps) {
+    time_ = time;
+    steps_ = steps;
+  }
   virtual std::string backendName() const { return "cpu"; }
   virtual std::string deviceName() const;
   // Threads the CPU stages use for the current scene: config().threads, reduced for small scenes.

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "ces/ces_config.h"
+#include "chrono_like/io/input_limits.h"
 #include "fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -22,13 +23,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     sets.push_back(text.substr(5, nl == std::string::npos ? std::string::npos : nl - 5));
     text = nl == std::string::npos ? std::string() : text.substr(nl + 1);
   }
-  nlohmann::json doc;
-  try {
-    doc = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::exception&) {
-    return 0;  // the CLI reports "malformed JSON" (an InputError)
-  }
   return fuzz::run("fuzz_ces_config", [&] {
+    nlohmann::json doc;
+    try {  // as the CLI parses it: the size and nesting limits before the DOM is built (an InputError)
+      doc = dvi::parseJsonGated(text, "fuzz.json");
+    } catch (const nlohmann::json::exception&) {
+      return;  // the CLI reports "malformed JSON" (an InputError)
+    }
     const dvi::ces::CesConfig cfg = dvi::ces::parseCesDocument(doc, sets, "fuzz.json");
     // what the machine relies on
     if (!(cfg.step.dt > 0 && std::isfinite(cfg.duration) && cfg.duration >= 0 && !cfg.materials.empty()))

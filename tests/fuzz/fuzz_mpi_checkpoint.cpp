@@ -1,5 +1,5 @@
 // Fuzz target: the bytes of a distributed run's checkpoint piece (checkpoint/piece_pR.bin) -> dvi::decodePiece
-// (src/chrono_like/mpi/checkpoint.cpp, compiled in here: no MPI needed). A piece carries a checksum (format
+// (src/chrono_like/checkpoint_piece.cpp, part of the core library: no MPI). A piece carries a checksum (format
 // DVIMPI01), so each input is decoded as it is and then resealed (the checksum recomputed) to reach the field
 // checks. Oracle: a piece the reader accepts encodes back to the very same bytes. Seeds: corpus/mpi_checkpoint/ (a
 // piece of `mpirun -np 2 dvisim run scenes/pile.json --steps 60`).
@@ -9,7 +9,7 @@
 #include <string>
 
 #include "chrono_like/base/checksum.h"
-#include "chrono_like/mpi/checkpoint.h"
+#include "chrono_like/checkpoint_piece.h"
 #include "fuzz_support.h"
 
 namespace {

@@ -19,6 +19,7 @@
 #include <fstream>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -117,6 +118,15 @@ inline int64_t checkedStepCount(double time, double dt, const std::string& what)
   return int64_t(n);
 }
 
+// A run's frame count: at most one frame a step, the start included (steps + 1); each frame is a file (a file a
+// process under MPI), so a million frames of a 50-step run would be a million files of 51 distinct states. Refused
+// with both numbers before anything is written.
+inline void checkFrameCount(int64_t frames, int64_t steps, const std::string& what) {
+  if (frames <= steps + 1) return;
+  throw InputError(what + ": " + std::to_string(frames) + " frames for a run of " + std::to_string(steps) +
+                   " steps; at most " + std::to_string(steps + 1) + " (one a step, from step 0)");
+}
+
 // Bytes this process can still use: the smallest of the physical memory, the address-space and data limits
 // (ulimit -v / -d) and the cgroup's memory.max.
 inline double availableMemoryBytes() {
@@ -180,6 +190,107 @@ inline void checkJsonDepth(const nlohmann::json& doc, const std::string& origin,
                            int max_depth = inputLimits().max_json_depth) {
   std::string path;
   inputcheck::depthWalk(doc, 1, max_depth, path, origin);
+}
+
+namespace inputcheck {
+
+// nlohmann's own DOM builder (what json::parse uses) behind a depth gate: the parser reports each value as it reads
+// it (the SAX interface), and the gate refuses the first array or object that would open a level beyond max_depth
+// before it is built, with the key path of that value. So no DOM deeper than the limit ever exists: copying,
+// comparing or printing a document cannot recurse further than max_depth levels. The path keeps one entry a level
+// (at most max_depth of them), its keys cut to 40 characters.
+class DepthGateSax {
+ public:
+  using json = nlohmann::json;
+  DepthGateSax(json& root, int max_depth, const std::string& origin)
+      : dom_(root, true), max_depth_(max_depth), origin_(origin) {}
+  bool null() { return value() && dom_.null(); }
+  bool boolean(bool v) { return value() && dom_.boolean(v); }
+  bool number_integer(json::number_integer_t v) { return value() && dom_.number_integer(v); }
+  bool number_unsigned(json::number_unsigned_t v) { return value() && dom_.number_unsigned(v); }
+  bool number_float(json::number_float_t v, const json::string_t& s) { return value() && dom_.number_float(v, s); }
+  bool string(json::string_t& v) { return value() && dom_.string(v); }
+  bool binary(json::binary_t& v) { return value() && dom_.binary(v); }
+  bool start_object(std::size_t n) { return open(false) && dom_.start_object(n); }
+  bool key(json::string_t& k) {
+    levels_.back().key = k.size() <= 40 ? k : k.substr(0, 37) + "...";
+    return dom_.key(k);
+  }
+  bool end_object() {
+    levels_.pop_back();
+    return dom_.end_object();
+  }
+  bool start_array(std::size_t n) { return open(true) && dom_.start_array(n); }
+  bool end_array() {
+    levels_.pop_back();
+    return dom_.end_array();
+  }
+  template <class Exception>
+  bool parse_error(std::size_t position, const std::string& token, const Exception& e) {
+    return dom_.parse_error(position, token, e);
+  }
+
+ private:
+  struct Level {
+    bool array;
+    int64_t index;    // the element being read (arrays)
+    std::string key;  // the member being read (objects)
+  };
+  bool value() {
+    if (!levels_.empty() && levels_.back().array) ++levels_.back().index;
+    return true;
+  }
+  // A new array or object, at level levels_.size() + 1 (the root is level 1).
+  bool open(bool array) {
+    value();
+    if (int(levels_.size()) >= max_depth_) {
+      std::string path;
+      for (const Level& l : levels_)
+        path += l.array ? "[" + std::to_string(l.index) + "]" : (path.empty() ? "" : ".") + l.key;
+      throw InputError(origin_ + ": " + shortPath(path.empty() ? "(document)" : path) + ": nested deeper than " +
+                       std::to_string(max_depth_) + " levels of arrays and objects (the limit)");
+    }
+    levels_.push_back(Level{array, -1, {}});
+    return true;
+  }
+
+  nlohmann::detail::json_sax_dom_parser<json> dom_;
+  int max_depth_;
+  const std::string& origin_;
+  std::vector<Level> levels_;
+};
+
+}  // namespace inputcheck
+
+// JSON text into a DOM, every limit checked before the DOM is built: the size first, the nesting while the parser
+// reads (DepthGateSax: nothing deeper than max_depth is built). Malformed text throws nlohmann's parse_error; a
+// limit, InputError "<origin>: ..." naming it. The one way every JSON input of the program is parsed (scenes, CES
+// documents, --set values, checkpoint manifests and records, a sweep's own files).
+inline nlohmann::json parseJsonGated(const std::string& text, const std::string& origin,
+                                     int max_depth = inputLimits().max_json_depth,
+                                     uint64_t max_bytes = inputLimits().max_json_bytes) {
+  if (text.size() > max_bytes)
+    throw InputError(origin + ": the document is " + std::to_string(text.size()) + " bytes, more than the limit of " +
+                     std::to_string(max_bytes) + " bytes");
+  nlohmann::json doc;
+  inputcheck::DepthGateSax sax(doc, max_depth, origin);
+  nlohmann::json::sax_parse(text, &sax);
+  return doc;
+}
+
+// parseJsonGated with malformed text as InputError "<origin>: malformed JSON: <what the parser says>".
+inline nlohmann::json parseJsonChecked(const std::string& text, const std::string& origin,
+                                       int max_depth = inputLimits().max_json_depth,
+                                       uint64_t max_bytes = inputLimits().max_json_bytes) {
+  try {
+    return parseJsonGated(text, origin, max_depth, max_bytes);
+  } catch (const nlohmann::json::exception& e) {
+    std::string what = e.what();
+    const size_t p = what.find("] ");
+    if (p != std::string::npos) what = what.substr(p + 2);
+    if (what.find("overflow") != std::string::npos) what += " (non-finite numbers are not allowed)";
+    throw InputError(origin + ": malformed JSON: " + what);
+  }
 }
 
 }  // namespace dvi

@@ -16,6 +16,7 @@
 
 #include "chrono_like/base/errors.h"
 #include "chrono_like/base/math.h"
+#include "chrono_like/io/input_limits.h"
 
 namespace dvi {
 namespace jsoncheck {
@@ -285,9 +286,11 @@ inline void requireUtf8(const std::string& s, const std::string& what) {
   throw InputError(what + ": not valid UTF-8 (" + b + ")");
 }
 
-inline json parseSetValue(const std::string& text) {
+// `what` names the value in a refusal ("--set KEY"): a value nested deeper than the JSON limit is refused as the
+// parser meets it (parseJsonGated), never built.
+inline json parseSetValue(const std::string& text, const std::string& what) {
   try {
-    return json::parse(text);
+    return parseJsonGated(text, what);
   } catch (const json::exception&) { return json(text); }
 }
 
@@ -305,6 +308,11 @@ void setByPath(json& root, const std::string& key, const std::string& shown, jso
   for (std::string p; std::getline(ss, p, '.');) {
     if (p.empty()) throw InputError("--set " + shown + ": empty key component");
     parts.push_back(p);
+    // each component may create an object level: as many as a document may nest
+    if (parts.size() > size_t(inputLimits().max_json_depth))
+      throw InputError("--set " + (key_ok && shown.size() <= 80 ? shown : std::string("KEY")) +
+                       ": the key has more than " + std::to_string(inputLimits().max_json_depth) +
+                       " components (the nesting limit)");
   }
   json* cur = &root;
   for (size_t i = 0; i < parts.size(); ++i) {

@@ -160,6 +160,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
           "collision",
           "threads",
           "frames",
+          "checkpoint_every",
           "warm_start",
           "speculative",
           "mpr_manifold",
@@ -198,6 +199,8 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
         j["collision"], at("collision"), {{"native", CollisionBackend::Native}, {"bullet", CollisionBackend::Bullet}});
   if (j.contains("threads")) s.system.threads = int(c.integer(j["threads"], at("threads"), 0, 4096));
   if (j.contains("frames")) s.frames = int(c.integer(j["frames"], at("frames"), 0, 1000000));
+  if (j.contains("checkpoint_every"))
+    s.checkpoint_every = c.integer(j["checkpoint_every"], at("checkpoint_every"), 0, int64_t(1) << 40);
   if (j.contains("warm_start")) sol.warm_start = c.boolean(j["warm_start"], at("warm_start"));
   if (j.contains("speculative")) col.speculative = c.boolean(j["speculative"], at("speculative"));
   if (j.contains("mpr_manifold")) col.mpr_manifold = c.boolean(j["mpr_manifold"], at("mpr_manifold"));
@@ -220,7 +223,7 @@ void applyOverride(json& doc, const std::string& assignment) {
     throw InputError("--set " + assignment + ": expected KEY=VALUE (e.g. settings.dt=1e-4)");
   const std::string key = assignment.substr(0, eq), text = assignment.substr(eq + 1);
   // only the settings object may be created (a .bullet scene's overrides start from an empty document)
-  jsoncheck::setByPath(doc, key, key, jsoncheck::parseSetValue(text),
+  jsoncheck::setByPath(doc, key, key, jsoncheck::parseSetValue(text, "--set " + key),
                        [](size_t depth, const std::string& name) { return depth == 0 && name == "settings"; });
   // steps and time are alternatives: setting one drops the other.
   if (key == "settings.steps" && doc["settings"].contains("time")) doc["settings"].erase("time");
@@ -888,20 +891,8 @@ Scene Scene::fromJsonText(const std::string& text, const std::string& origin,
                           const std::vector<std::string>& overrides) {
   const Check c = checkFor<btScalar>(origin);
   if (text.find_first_not_of(" \t\r\n") == std::string::npos) c.fail("", "file is empty");
-  if (text.size() > inputLimits().max_json_bytes)
-    c.fail("", "the document is " + std::to_string(text.size()) + " bytes, more than the limit of " +
-                   std::to_string(inputLimits().max_json_bytes) + " bytes");
-  json doc;
-  try {
-    doc = json::parse(text);
-  } catch (const json::exception& e) {
-    std::string what = e.what();
-    const size_t p = what.find("] ");
-    if (p != std::string::npos) what = what.substr(p + 2);
-    if (what.find("overflow") != std::string::npos) what += " (non-finite numbers are not allowed)";
-    c.fail("", "malformed JSON: " + what);
-  }
-  checkJsonDepth(doc, origin);
+  // the size and the nesting checked before and while the DOM is built (input_limits.h)
+  json doc = parseJsonChecked(text, origin);
   c.object(doc, "(document)");
   for (const std::string& o : overrides) applyOverride(doc, o);
   if (!overrides.empty()) checkJsonDepth(doc, origin);

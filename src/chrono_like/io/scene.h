@@ -38,6 +38,7 @@ struct SceneSettings {
   int64_t steps = -1;            // [steps] number of steps; -1: from `time`
   real time = real(1);           // [s] simulated time when steps < 0
   int frames = 0;                // VTK frames to write
+  int64_t checkpoint_every = 0;  // [steps] a checkpoint every N steps while the run goes (0: at its end only)
   real bullet_length_scale = 0;  // [m per Bullet unit] Bullet peer unit scale; 0: automatic from the body sizes
   int bullet_iterations = 10;    // Bullet peer sequential-impulse iterations
 

@@ -27,7 +27,7 @@
 #include <vector>
 
 #include "chrono_like/mpi/bisection.h"
-#include "chrono_like/mpi/checkpoint.h"
+#include "chrono_like/checkpoint_piece.h"
 #include "chrono_like/mpi/mpi_group.h"
 #include "chrono_like/system.h"
 

@@ -1,4 +1,4 @@
-#include "chrono_like/mpi/checkpoint.h"
+#include "chrono_like/checkpoint_piece.h"
 
 #include <cmath>
 #include <cstring>

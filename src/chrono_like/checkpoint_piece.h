@@ -1,6 +1,7 @@
-// No MPI here (the fuzz target links it alone). A distributed run's checkpoint piece (DistributedSystem::checkpointPiece): one process's owned bodies and the
-// impulses of the contacts it solved, under global ids and keys, so that any number of processes can resume from the
-// pieces together. The file, little-endian as the machine writes it (format DVIMPI01):
+// A scene run's checkpoint piece: one process's bodies and the impulses of the contacts it solved, under global (scene)
+// ids and keys, so that any number of processes can resume from the pieces together. An MPI run writes one a process
+// (DistributedSystem::checkpointPiece), a single process one for all its bodies (apps/dvisim/run_checkpoint.h); no MPI
+// here, so it is part of the core library. The file, little-endian as the machine writes it (format DVIMPI01):
 //   "DVIMPI01" | u64 bodies | bodies x (i32 id, 13 reals: pos, rot, vel, omega) | u64 contacts |
 //   contacts x (u64 key, i32 body_a, i32 body_b, 3 reals) | u64 FNV-1a 64 (checksum.h) of every byte before it
 // decodePiece checks the checksum before it reads a field, then every field (ids in range and ascending, finite
