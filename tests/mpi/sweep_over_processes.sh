@@ -16,7 +16,7 @@ args=("$src/scenes/pile.json" --grid settings.dt=0.001,0.002 --seeds 2 --seed-ke
 python3 - "$work" <<'PY'
 import csv, re, sys
 work = sys.argv[1]
-timing = re.compile(r"^(wall_s|wall_time_s|ms_per_step|stage_seconds)\b")
+timing = re.compile(r"^(wall_s|wall_time_s|ms_per_step|stage_seconds|checkpoint_seconds)\b")
 def table(name, d):
     with open("%s/%s/%s" % (work, d, name)) as f:
         rows = list(csv.DictReader(f))
