@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "device_check.h"
 #include "../demos/bullet_drop_in/demo_scene.h"
 #include "bullet_test_world.h"
 #include "chrono_like/bullet/bullet_joints.h"
@@ -27,12 +28,7 @@ using namespace dvi;
 
 namespace {
 
-bool haveDevice() {
-  std::string why;
-  if (gpuAvailable(&why)) return true;
-  WARN("no CUDA device: skipping (" << why << ")");
-  return false;
-}
+using dvi::testing::haveDevice;
 
 // The solver side of the constraint rows (System::rowImpulses) is present in this build.
 bool rowsSolved(DviDynamicsWorld& w) {

@@ -9,18 +9,14 @@
 #include <vector>
 #include <string>
 
+#include "device_check.h"
 #include "bullet_test_world.h"
 
 using namespace dvi;
 
 namespace {
 
-bool haveDevice() {
-  std::string why;
-  if (gpuAvailable(&why)) return true;
-  WARN("no CUDA device: skipping (" << why << ")");
-  return false;
-}
+using dvi::testing::haveDevice;
 
 // BasicDemo's pile: 125 boxes of half-extent 0.1 in a 5 x 5 x 5 lattice (spacing 0.2), stacked at rest (0.5 mm
 // apart) on a ground box, mass 1, so the check below holds after any number of frames, plus a hinge pendulum (a box on a hinge to the world) so that joint rows run too. Returns the

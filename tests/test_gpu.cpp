@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "device_check.h"
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
@@ -28,12 +29,7 @@ namespace {
 
 constexpr bool kDouble = sizeof(real) == 8;
 
-bool haveDevice() {
-  std::string why;
-  if (gpuAvailable(&why)) return true;
-  WARN("no CUDA device: skipping (" << why << ")");
-  return false;
-}
+using dvi::testing::haveDevice;
 
 Quat randomRotation(std::mt19937& rng) {
   std::normal_distribution<double> n(0, 1);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "device_check.h"
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
@@ -139,12 +140,7 @@ void checkFixedBodyMoved() {
   CHECK(boxesCurrent());
 }
 
-bool haveDevice() {
-  std::string why;
-  if (gpuAvailable(&why)) return true;
-  WARN("no CUDA device: skipping (" << why << ")");
-  return false;
-}
+using dvi::testing::haveDevice;
 
 }  // namespace
 
