@@ -593,8 +593,9 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   // A fixed count (no tolerance, no history: Bullet's effort) needs no residual before the sweeps; the one after
   // them comes from the maintained deltas too (each saved a pass of the ~12 a 10-sweep solve made).
   const bool fixed_count = !(s.tolerance > 0) && !s.record_history;
-  // Before min_iterations sweeps the tolerance cannot stop the solve: no residual is needed yet (gsCheckDue).
-  real res = fixed_count || (s.min_iterations > 0 && !s.record_history) ? real(INFINITY) : residualFromDeltas();
+  // With a tolerance the warm start's residual is checked (a start at the solution stops at once); after it, only
+  // where the tolerance can stop the solve (gsCheckDue).
+  real res = fixed_count ? real(INFINITY) : residualFromDeltas();
   bool res_fresh = false;  // res is that of the current gamma
   if (s.record_history) st.history.push_back(res);
   const bool plain = !full && !normal_only_ && nroll_ == 0;  // every contact a plain cone: gsContactSweep
