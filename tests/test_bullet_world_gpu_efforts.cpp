@@ -45,7 +45,8 @@ TEST_CASE("drop-in world on the GPU backend: every solver effort steps BasicDemo
           "[world][gpu]") {
   if (!haveDevice()) return;
   const int frames = std::getenv("DVISIM_SANITIZER_RUN") ? 5 : 60;
-  for (SolverEffort effort : {SolverEffort::Converged, SolverEffort::BulletIterations}) {
+  for (SolverEffort effort :
+       {SolverEffort::BulletThenConverged, SolverEffort::Converged, SolverEffort::BulletIterations}) {
     INFO("effort " << int(effort));
     DviWorldConfig gc;
     gc.backend = WorldBackend::Gpu;

@@ -238,6 +238,7 @@ TEST_CASE("the drop-in world counts the sub-steps that missed the tolerance", "[
     btDbvtBroadphase broadphase;
     btSequentialImpulseConstraintSolver solver;
     DviWorldConfig c;
+    c.effort = SolverEffort::Converged;  // the System's solver as configured (APGD), its cap as given
     c.system.solver.max_iterations = cap;
     DviDynamicsWorld world(&dispatcher, &broadphase, &solver, &config, c);
     world.setGravity(btVector3(0, btScalar(-9.81), 0));

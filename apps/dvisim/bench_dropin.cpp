@@ -13,6 +13,8 @@
 //             shoulders) and hinges with limits (spine, knees, elbows), falling onto the ground
 //   hulls     1000 convex hulls of 14 vertices falling in a 10 x 10 x 10 block
 //   terrain   500 boxes and hulls falling onto a static triangle-mesh terrain of 2 x 40 x 40 triangles
+//   hinge     two bodies on a hinge (a box swinging under a fixed one, as Bullet's TestHingeTorque): the per-step
+//             fixed cost of a tiny scene (not in the default list: --scenes hinge)
 //   boxes100k 100,000 boxes (1 m) in 50 x 50 columns of 40 resting on the ground (not in the default list:
 //             --scenes boxes100k; at most 10 timed steps, Bullet needs seconds a step), the GPU drop-in's scale
 //
@@ -118,6 +120,8 @@ std::unique_ptr<World> makeWorld(const std::string& engine, int threads) {
     dvi::DviWorldConfig c;
     c.backend = engine == "gpu" ? dvi::WorldBackend::Gpu : dvi::WorldBackend::Cpu;
     if (engine == "cpu-si") c.effort = dvi::SolverEffort::BulletIterations;
+    if (engine == "cpu-apgd") c.effort = dvi::SolverEffort::Converged;
+    if (engine == "cpu-btc") c.effort = dvi::SolverEffort::BulletThenConverged;
     c.make_gpu_system = dvi::makeGpuSystem;
     c.gpu_available = dvi::gpuAvailable;
     c.system.threads = threads;
@@ -282,6 +286,16 @@ void sceneTerrain(World& w, int scale) {
 
 // 100,000 boxes of 1 m in 50 x 50 columns of 40, each column resting on the ground from the first step (every
 // box touches the ones above and below), 0.05 m between columns (--quick: 4 layers).
+// Two bodies on a hinge: a fixed box and a 1 kg box hanging from it by a hinge about z, released at 90 degrees.
+void sceneHinge(World& w, int) {
+  btCollisionShape* box = w.keep(new btBoxShape(btVector3(0.5f, 0.1f, 0.1f)));
+  btRigidBody* base = w.add(box, 0, btVector3(0, 5, 0));
+  btRigidBody* link = w.add(box, 1, btVector3(1.2f, 5, 0));
+  link->setActivationState(DISABLE_DEACTIVATION);
+  w.join(new btHingeConstraint(*base, *link, btVector3(0.6f, 0, 0), btVector3(-0.6f, 0, 0), btVector3(0, 0, 1),
+                               btVector3(0, 0, 1)));
+}
+
 void sceneBoxes100k(World& w, int scale) {
   groundBox(w, 500);
   btCollisionShape* box = w.keep(new btBoxShape(btVector3(0.5f, 0.5f, 0.5f)));
@@ -294,9 +308,9 @@ void sceneBoxes100k(World& w, int scale) {
 
 using SceneBuilder = std::function<void(World&, int)>;
 const std::map<std::string, SceneBuilder>& sceneBuilders() {
-  static const std::map<std::string, SceneBuilder> m{{"boxes", sceneBoxes},       {"pyramid", scenePyramid},
-                                                     {"ragdolls", sceneRagdolls}, {"hulls", sceneHulls},
-                                                     {"terrain", sceneTerrain},   {"boxes100k", sceneBoxes100k}};
+  static const std::map<std::string, SceneBuilder> m{
+      {"boxes", sceneBoxes},     {"pyramid", scenePyramid},     {"ragdolls", sceneRagdolls}, {"hulls", sceneHulls},
+      {"terrain", sceneTerrain}, {"boxes100k", sceneBoxes100k}, {"hinge", sceneHinge}};
   return m;
 }
 
@@ -327,6 +341,9 @@ struct Result {
   double drift = 0;     // see the header
   double msPerStep() const { return steps > 0 ? 1e3 * wall / double(steps) : 0; }
   std::string phases;  // ours: where a sub-step's time goes (phaseLine)
+  double sweeps = 0;   // ours: solver iterations per timed step, mean
+  int64_t missed = 0;  // ours: timed sub-steps whose solve ended above the tolerance (0.15)
+  double worst = 0;    // ours: the worst relative residual of a timed sub-step
 };
 
 // Manifold points at negative distance and the deepest one (the same read for every engine: the drop-in world
@@ -389,11 +406,11 @@ class Loader {
 int runDropin(const DropinOptions& o) {
   const std::vector<std::string> engines = selectNames(
       "--engines", o.engines.empty() ? std::vector<std::string>{"bullet", "cpu", "cpu-si", "gpu"} : o.engines,
-      {"bullet", "cpu", "cpu-si", "gpu"});
+      {"bullet", "cpu", "cpu-si", "cpu-btc", "cpu-apgd", "gpu"});
   const std::vector<std::string> scenes =
-      o.scenes.empty()
-          ? std::vector<std::string>{"boxes", "pyramid", "ragdolls", "hulls", "terrain"}
-          : selectNames("--scenes", o.scenes, {"boxes", "pyramid", "ragdolls", "hulls", "terrain", "boxes100k"});
+      o.scenes.empty() ? std::vector<std::string>{"boxes", "pyramid", "ragdolls", "hulls", "terrain"}
+                       : selectNames("--scenes", o.scenes,
+                                     {"boxes", "pyramid", "ragdolls", "hulls", "terrain", "boxes100k", "hinge"});
   char* end = nullptr;
   const long threads = std::strtol(o.threads.c_str(), &end, 10);
   if (o.threads.empty() || *end || threads < 0 || threads > 4096)
@@ -439,8 +456,7 @@ int runDropin(const DropinOptions& o) {
         r.bodies = w->bodies.size();
         r.constraints = w->constraints.size();
         for (int s = 0; s < scene_warmup; ++s) w->world->stepSimulation(btScalar(1.0 / 60), 1, btScalar(1.0 / 60));
-        if (w->ours && cpu_device.empty() && (engine == "cpu" || engine == "cpu-si"))
-          cpu_device = w->ours->system().deviceName();
+        if (w->ours && cpu_device.empty() && engine.rfind("cpu", 0) == 0) cpu_device = w->ours->system().deviceName();
         if (w->ours) w->ours->resetPhaseTimes();
         worlds.push_back(std::move(w));
       } catch (const std::exception& e) {
@@ -468,16 +484,23 @@ int runDropin(const DropinOptions& o) {
           rs[i].contacts += pts;
           rs[i].max_pen = std::max(rs[i].max_pen, deep);
           ++rs[i].steps;
+          if (worlds[i]->ours) {
+            const dvi::StepStats& st = worlds[i]->ours->system().lastStats();
+            rs[i].sweeps += st.iterations;
+            rs[i].missed += st.converged ? 0 : 1;
+            rs[i].worst = std::max(rs[i].worst, double(st.relative_residual));
+          }
         }
       }
     for (size_t i = 0; i < worlds.size(); ++i) {
       if (!worlds[i]) continue;
       rs[i].contacts /= double(std::max(1L, rs[i].steps));
+      rs[i].sweeps /= double(std::max(1L, rs[i].steps));
       if (worlds[i]->ours) rs[i].phases = phaseLine(worlds[i]->ours->phaseTimes());
-      if (scene == "ragdolls" && worlds[i]->ours) {
+      if ((scene == "ragdolls" || scene == "hinge") && worlds[i]->ours) {
         const dvi::JointViolation v = worlds[i]->ours->maxJointViolation();
         rs[i].drift = std::max(double(v.linear), double(v.angular));
-      } else if (scene == "ragdolls") {
+      } else if (scene == "ragdolls" || scene == "hinge") {
         rs[i].drift = std::nan("");  // Bullet does not expose its joint error
       } else if (scene == "pyramid" && worlds[i]->reference) {
         rs[i].drift = worlds[i]->reference->getCenterOfMassPosition().y() - h0[i];
@@ -492,7 +515,11 @@ int runDropin(const DropinOptions& o) {
         std::printf(" %9.2f ms/step, %7.0f contact points, deepest %.4f m, drift %s", r.msPerStep(), r.contacts,
                     r.max_pen, std::isnan(r.drift) ? "-" : num(r.drift, "%+.4f").c_str());
       std::printf("\n");
-      if (r.status == "ok" && !r.phases.empty()) std::printf("    %s\n", r.phases.c_str());
+      if (r.status == "ok" && !r.phases.empty())
+        std::printf(
+            "    solver: %.1f iterations a step, %lld steps above the tolerance, worst relative residual %.3f\n"
+            "    %s\n",
+            r.sweeps, (long long)r.missed, r.worst, r.phases.c_str());
       std::fflush(stdout);
       results.push_back(r);
     }
@@ -507,8 +534,9 @@ int runDropin(const DropinOptions& o) {
   std::ostringstream csv, md;
   csv << "scene,engine,bodies,constraints,steps,ms_per_step,ratio_to_bullet,contact_points,max_penetration_m,drift,"
          "status\n";
-  md << "| scene | engine | bodies | joints | ms/step | ours / Bullet | contact points | deepest (m) | drift |\n"
-     << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
+  md << "| scene | engine | bodies | joints | ms/step | ours / Bullet | contact points | deepest (m) | drift | "
+        "iterations/step | steps above tol. |\n"
+     << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
   std::map<std::string, std::pair<int, int>> met;  // engine -> (scenes at <= 1.0x Bullet, scenes)
   for (const Result& r : results) {
     const double b = bulletMs(r.scene);
@@ -520,12 +548,14 @@ int runDropin(const DropinOptions& o) {
         << csvField(r.status) << "\n";
     char line[512];
     if (r.status == "ok")
-      std::snprintf(line, sizeof line, "| %s | %s | %zu | %zu | %.2f | %s | %.0f | %.4f | %s |\n", r.scene.c_str(),
-                    r.engine.c_str(), r.bodies, r.constraints, r.msPerStep(),
+      std::snprintf(line, sizeof line, "| %s | %s | %zu | %zu | %.3f | %s | %.0f | %.4f | %s | %s | %s |\n",
+                    r.scene.c_str(), r.engine.c_str(), r.bodies, r.constraints, r.msPerStep(),
                     ratio > 0 ? num(ratio, "%.2fx").c_str() : "-", r.contacts, r.max_pen,
-                    std::isnan(r.drift) ? "-" : num(r.drift, "%+.4f").c_str());
+                    std::isnan(r.drift) ? "-" : num(r.drift, "%+.4f").c_str(),
+                    r.engine == "bullet" ? "-" : num(r.sweeps, "%.1f").c_str(),
+                    r.engine == "bullet" ? "-" : std::to_string(r.missed).c_str());
     else
-      std::snprintf(line, sizeof line, "| %s | %s | | | %s | | | | |\n", r.scene.c_str(), r.engine.c_str(),
+      std::snprintf(line, sizeof line, "| %s | %s | | | %s | | | | | | |\n", r.scene.c_str(), r.engine.c_str(),
                     r.status.c_str());
     md << line;
   }
@@ -561,8 +591,9 @@ int runDropin(const DropinOptions& o) {
        << "\n- Bullet: " << btGetVersion() << ", btDiscreteDynamicsWorld, sequential impulses (10 iterations), 1 thread"
        << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- steps: " << warmup
        << " warm-up, then " << steps << " timed per engine in " << rounds
-       << " alternating rounds, stepSimulation(1/60, 1, 1/60); cpu and gpu: ours at its defaults; cpu-si: ours with "
-          "SolverEffort::BulletIterations (Bullet's 10 Gauss-Seidel sweeps)\n"
+       << " alternating rounds, stepSimulation(1/60, 1, 1/60); cpu and gpu: ours at its defaults; cpu-si: "
+          "SolverEffort::BulletIterations (Bullet's 10 Gauss-Seidel sweeps); cpu-btc: BulletThenConverged (10 "
+          "sweeps, then to the tolerance, at most 30); cpu-apgd: Converged (APGD, at least 50 iterations)\n"
        << "- load: " << load << " other runs of our CPU drop-in (pyramid) sharing the cores (--load)\n"
        << "- deepest: the deepest manifold point over the timed steps; drift: pyramid top box height change, ragdolls "
           "the largest joint violation (ours), else the mean height change over the timed steps (m)\n\n";
@@ -589,8 +620,9 @@ void registerBenchDropin(CLI::App& app, BenchRegistry& reg) {
                  "md,csv", "OpenMP threads of our CPU drop-in (0: the default)");
   cmd->add_option(
       "--engines", o->engines,
-      "bullet,cpu,cpu-si,gpu (default all; gpu is skipped without a device; cpu-si: Bullet's solver effort)");
-  cmd->add_option("--scenes", o->scenes, "boxes,pyramid,ragdolls,hulls,terrain (the default) and boxes100k");
+      "bullet,cpu,cpu-si,cpu-btc,cpu-apgd,gpu (default bullet,cpu,cpu-si,gpu; gpu is skipped without a device; "
+      "cpu-si: SolverEffort::BulletIterations; cpu-btc: BulletThenConverged; cpu-apgd: Converged)");
+  cmd->add_option("--scenes", o->scenes, "boxes,pyramid,ragdolls,hulls,terrain (the default), boxes100k and hinge");
   cmd->add_option("--steps", o->steps, "Timed steps per engine (default 150; --quick 10)");
   cmd->add_option("--load", o->load,
                   "Runs of our CPU drop-in (pyramid) to start beside the benchmark, sharing the cores (default 0)");

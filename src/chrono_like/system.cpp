@@ -1,4 +1,5 @@
 #include "chrono_like/system.h"
+#include "chrono_like/base/parallel_for.h"
 
 #include <omp.h>
 
@@ -277,6 +278,7 @@ bool System::combineRolling(int64_t nc) {
   const FrictionCombine rule = config_.collision.friction_combine;
   const BodyArrays& B = bodies_;
   bool any = false;
+  if (nc == 0) return false;
 #pragma omp parallel for schedule(static) reduction(|| : any)
   for (int64_t k = 0; k < nc; ++k) {
     const int32_t a = contacts_.body_a[k], b = contacts_.body_b[k];
@@ -324,11 +326,11 @@ void System::integrateForces() {
   const bool gyro = stats_.part_ran[int(StagePart::Gyroscopic)];
   const bool skip_spherical = config_.prune;
   for (const auto& f : fields_) f->apply(bodies_, ctx_, bodies_.force.data(), bodies_.torque.data());
-#pragma omp parallel for schedule(static)
-  for (int64_t i = 0; i < n; ++i)
+  parallelFor(int64_t(n), ompTeam(), [&](int64_t i) {
     integrateBodyForces(bodies_.vel[i], bodies_.omega[i], bodies_.rot[i], bodies_.inv_mass[i], bodies_.inv_inertia[i],
                         bodies_.force[i], bodies_.torque[i], bodies_.gravity[i], bodies_.flags[i], gyro, skip_spherical,
                         h, v_free_[i], w_free_[i]);
+  });
 }
 
 void System::detectCollisions() {
@@ -542,18 +544,26 @@ void System::buildAndSolve() {
 // BuildRows after the row collection: each contact's friction, size and rolling coefficients, the step's parts, and
 // the contact problem.
 void System::buildProblem(int64_t nc) {
-  real max_pen = 0, max_mu = 0;
   const FrictionCombine rule = config_.collision.friction_combine;
-#pragma omp parallel for schedule(static) reduction(max : max_pen, max_mu)
-  for (int64_t k = 0; k < nc; ++k) {
-    real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
-    contacts_.mu[k] = rule == FrictionCombine::Product ? fa * fb
-                      : rule == FrictionCombine::Min   ? fmin(fa, fb)
-                                                       : real(0.5) * (fa + fb);
-    contacts_.size[k] = fmin(shapes_.shape[contacts_.shape_a[k]].size, shapes_.shape[contacts_.shape_b[k]].size);
-    max_pen = fmax(max_pen, -contacts_.dist[k]);
-    max_mu = fmax(max_mu, contacts_.mu[k]);
-  }
+  struct Max {
+    real pen = 0, mu = 0;
+  };
+  const Max mx = parallelReduce(
+      nc, ompTeam(), Max{},
+      [&](int64_t k, Max& m) {
+        real fa = bodies_.friction[contacts_.body_a[k]], fb = bodies_.friction[contacts_.body_b[k]];
+        contacts_.mu[k] = rule == FrictionCombine::Product ? fa * fb
+                          : rule == FrictionCombine::Min   ? fmin(fa, fb)
+                                                           : real(0.5) * (fa + fb);
+        contacts_.size[k] = fmin(shapes_.shape[contacts_.shape_a[k]].size, shapes_.shape[contacts_.shape_b[k]].size);
+        m.pen = fmax(m.pen, -contacts_.dist[k]);
+        m.mu = fmax(m.mu, contacts_.mu[k]);
+      },
+      [](Max& t, const Max& m) {
+        t.pen = fmax(t.pen, m.pen);
+        t.mu = fmax(t.mu, m.mu);
+      });
+  const real max_pen = mx.pen, max_mu = mx.mu;
   stats_.max_penetration = max_pen;
   // Rolling blocks only for contacts with rolling or spinning friction (docs/MODEL.md §6).
   if (group_ && hasRollingBodies())
@@ -596,6 +606,7 @@ void System::buildProblem(int64_t nc) {
 // step's order), then by binary search.
 void System::warmStartContacts(int64_t nc, int64_t nroll) {
   const size_t np = prev_keys_.size();
+  if (nc == 0) return;
 #pragma omp parallel
   {
     size_t next = np;  // per thread: where the previous contact's key matched, plus one
@@ -652,22 +663,20 @@ Vec3 System::rollingImpulse(size_t k) const {
 void System::integrate() {
   const int64_t n = int64_t(bodies_.count());
   timed(stats_, StageType::IntegrateVelocities, [&] {
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
+    parallelFor(int64_t(n), ompTeam(), [&](int64_t i) {
       bodies_.vel[i] = v_free_[i];
       bodies_.omega[i] = w_free_[i];
-    }
+    });
     // Over several processes every process applies (and exchanges) its share, with or without contacts.
     if ((gamma_.empty() || !solution_) && !group_) return;
     problem_->applyImpulses(solution_, bodies_.vel.data(), bodies_.omega.data());
   });
   timed(stats_, StageType::IntegratePositions, [&] {
     const real h = ctx_.dt;
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
+    parallelFor(int64_t(n), ompTeam(), [&](int64_t i) {
       integrateBodyPosition(bodies_.pos[i], bodies_.rot[i], bodies_.vel[i], bodies_.omega[i], bodies_.flags[i], h);
       bodies_.force[i] = bodies_.torque[i] = Vec3{0, 0, 0};
-    }
+    });
   });
 }
 

@@ -1,5 +1,6 @@
 // The Bullet drop-in world (bullet_world.h).
 #include "chrono_like/bullet/bullet_world.h"
+#include "chrono_like/base/parallel_for.h"
 #include "chrono_like/bullet/bullet_convert.h"
 
 #include <btBulletDynamicsCommon.h>
@@ -194,8 +195,7 @@ class FilteredCpuSystem final : public System {
     const std::vector<Vec3>& s = *aniso_;
     if (!any || s.size() != bodies_.count()) return any;
     auto isotropic = [&](int32_t i) { return s[size_t(i)].x == 1 && s[size_t(i)].y == 1 && s[size_t(i)].z == 1; };
-#pragma omp parallel for schedule(static)
-    for (int64_t k = 0; k < nc; ++k) {
+    parallelFor(int64_t(nc), ompTeam(), [&](int64_t k) {
       real& spin = roll_coef_[size_t(2 * k)];
       real& roll = roll_coef_[size_t(2 * k + 1)];
       if (!(roll > 0)) spin = 0;
@@ -203,7 +203,7 @@ class FilteredCpuSystem final : public System {
       if (roll > 0 && !(isotropic(a) && isotropic(b)))
         roll *= anisotropicGain(contacts_.normal[size_t(k)], bodies_.rot[size_t(a)], s[size_t(a)],
                                 bodies_.rot[size_t(b)], s[size_t(b)]);
-    }
+    });
     return any;
   }
 
@@ -429,18 +429,32 @@ void DviDynamicsWorld::rebuild() {
 // A new shape, filter or kind needs the System rebuilt; new group bits do too (noteFilter).
 bool DviDynamicsWorld::structureChanged() const {
   const int64_t n = int64_t(tracked_.size());
-  int changed = 0;
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) \
-    reduction(|                                                      \
-              : changed) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {
-    const Tracked& t = tracked_[size_t(i)];
-    if (!t.obj) continue;
-    if (t.obj->getCollisionShape() != t.shape || proxyGroup(*t.obj) != t.group || proxyMask(*t.obj) != t.mask ||
-        objectKind(*t.obj) != t.kind)
-      changed = 1;
+  return parallelSum(n, n >= config_.parallel_min ? hostThreads() : 1, [&](int64_t i) {
+           const Tracked& t = tracked_[size_t(i)];
+           return t.obj && (t.obj->getCollisionShape() != t.shape || proxyGroup(*t.obj) != t.group ||
+                            proxyMask(*t.obj) != t.mask || objectKind(*t.obj) != t.kind);
+         }) > 0;
+}
+
+// Bullet's effort (SolverEffort::BulletIterations) or Bullet's effort as the minimum (BulletThenConverged), read
+// from btContactSolverInfo each sub-step.
+void DviDynamicsWorld::applyBulletEffort(SolverSettings& s) const {
+  const btContactSolverInfo& info = getSolverInfo();
+  const int sweeps = std::max(1, info.m_numIterations);
+  // Gauss-Seidel is sequential: the GPU backend runs APGD for the same iteration counts instead (it read
+  // BuildRows' APGD buffers that a Gauss-Seidel step does not build: cudaErrorIllegalAddress on the first step).
+  s.type = system_->backendName() == "gpu" ? SolverType::APGD : SolverType::GaussSeidel;
+  s.gs_omega = real(info.m_sor);
+  s.warm_start = info.m_warmstartingFactor > 0;
+  if (config_.effort == SolverEffort::BulletIterations) {
+    s.max_iterations = sweeps;
+    s.min_iterations = 0;
+    s.tolerance = 0;  // a fixed count, judged against the default tolerance in the stats
+    return;
   }
-  return changed != 0;
+  s.min_iterations = sweeps;
+  s.max_iterations = std::max(sweeps, config_.bullet_max_sweeps > 0 ? config_.bullet_max_sweeps : 3 * sweeps);
+  s.tolerance = config_.system.solver.tolerance > 0 ? config_.system.solver.tolerance : kDefaultTolerance;
 }
 
 void DviDynamicsWorld::syncIn(btScalar h) {
@@ -458,25 +472,15 @@ void DviDynamicsWorld::syncIn(btScalar h) {
   cfg.step.dt = real(h);
   cfg.solver.min_bounce_speed = real(getSolverInfo().m_restitutionVelocityThreshold);
   joints_->setErp(real(getSolverInfo().m_erp));  // the joints' recovery of large errors, as Bullet's ERP
-  if (config_.effort == SolverEffort::BulletIterations) {
-    const btContactSolverInfo& info = getSolverInfo();
-    // Gauss-Seidel is sequential: the GPU backend runs APGD for the same fixed iteration count instead (it read
-    // BuildRows' APGD buffers that a Gauss-Seidel step does not build: cudaErrorIllegalAddress on the first step).
-    cfg.solver.type = system_->backendName() == "gpu" ? SolverType::APGD : SolverType::GaussSeidel;
-    cfg.solver.max_iterations = std::max(1, info.m_numIterations);
-    cfg.solver.min_iterations = 0;
-    cfg.solver.tolerance = 0;  // a fixed count, judged against the default tolerance in the stats
-    cfg.solver.gs_omega = real(info.m_sor);
-    cfg.solver.warm_start = info.m_warmstartingFactor > 0;
-  }
+  if (config_.effort != SolverEffort::Converged) applyBulletEffort(cfg.solver);
   BodyArrays& B = system_->mutableBodies();
   factors_->locks.clear();
   const int64_t n = int64_t(tracked_.size());
   changes_.assign(size_t(n), 0);
   rolling_aniso_.resize(size_t(n));
   uint8_t* changes = changes_.data();
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) changes[i] = syncBody(size_t(i), h, B);
+  parallelFor(int64_t(n), (n >= config_.parallel_min) ? hostThreads() : 1,
+              [&](int64_t i) { changes[i] = syncBody(size_t(i), h, B); });
   for (int64_t i = 0; i < n; ++i)
     if (changes[i] & kHasFactors) syncFactors(size_t(i), B);
   joints_->springForces(B, real(h), B.force.data(), B.torque.data());
@@ -496,15 +500,11 @@ void DviDynamicsWorld::updateExclusions() {
   pairs.clear();
   const int64_t n = int64_t(tracked_.size());
   flags.resize(size_t(n));
-  int any_flag = 0;
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) \
-    reduction(|                                                      \
-              : any_flag) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {
-    const btCollisionObject* o = tracked_[size_t(i)].obj;
-    flags[size_t(i)] = o && !o->hasContactResponse();
-    any_flag |= flags[size_t(i)];
-  }
+  const bool any_flag = parallelSum(n, n >= config_.parallel_min ? hostThreads() : 1, [&](int64_t i) {
+                          const btCollisionObject* o = tracked_[size_t(i)].obj;
+                          flags[size_t(i)] = o && !o->hasContactResponse();
+                          return flags[size_t(i)];
+                        }) > 0;
   for (int64_t i = 0; i < n && has_exclusions_; ++i) {
     btCollisionObject* o = tracked_[size_t(i)].obj;
     if (!o) continue;
@@ -646,21 +646,21 @@ void DviDynamicsWorld::holdLockedAxes(btScalar h) {
 void DviDynamicsWorld::syncOut() {
   const BodyArrays& B = system_->bodies();
   const int64_t n = int64_t(tracked_.size());
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {  // each body's own Bullet object only
-    Tracked& t = tracked_[size_t(i)];
-    if (t.kind != 0) continue;  // static and kinematic bodies keep Bullet's pose
-    btRigidBody* b = t.body;
-    b->setLinearVelocity(toBt(B.vel[size_t(i)]));
-    b->setAngularVelocity(toBt(B.omega[size_t(i)]));
-    btTransform tf;
-    tf.setOrigin(toBt(B.pos[size_t(i)]));
-    tf.setRotation(toBt(B.rot[size_t(i)]));
-    b->setCenterOfMassTransform(tf);  // also the interpolation transform and velocities
-    t.tf = b->getCenterOfMassTransform();
-    t.v = b->getLinearVelocity();
-    t.w = b->getAngularVelocity();
-  }
+  parallelFor(int64_t(n), (n >= config_.parallel_min) ? hostThreads() : 1,
+              [&](int64_t i) {  // each body's own Bullet object only
+                Tracked& t = tracked_[size_t(i)];
+                if (t.kind != 0) return;  // static and kinematic bodies keep Bullet's pose
+                btRigidBody* b = t.body;
+                b->setLinearVelocity(toBt(B.vel[size_t(i)]));
+                b->setAngularVelocity(toBt(B.omega[size_t(i)]));
+                btTransform tf;
+                tf.setOrigin(toBt(B.pos[size_t(i)]));
+                tf.setRotation(toBt(B.rot[size_t(i)]));
+                b->setCenterOfMassTransform(tf);  // also the interpolation transform and velocities
+                t.tf = b->getCenterOfMassTransform();
+                t.v = b->getLinearVelocity();
+                t.w = b->getAngularVelocity();
+              });
 }
 
 // The host loops' team: DviWorldConfig::host_threads, else an explicit SystemConfig::threads, else the CPU backend's team of its last step (its
@@ -730,20 +730,18 @@ void DviDynamicsWorld::buildIslands(int team) {
   std::vector<char>& merges = island_merges_;
   if (root.size() != size_t(n)) root = std::vector<std::atomic<int>>(size_t(n));
   merges.resize(size_t(n));
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {
+  parallelFor(int64_t(n), (n >= config_.parallel_min) ? team : 1, [&](int64_t i) {
     root[size_t(i)].store(int(i), std::memory_order_relaxed);
     const Tracked& t = tracked_[size_t(i)];
     merges[size_t(i)] = t.kind == 0 && t.obj->mergesSimulationIslands();
     if (t.obj) t.obj->setIslandTag(int(i));  // the System index, to find a pair's bodies (ghosts are not tracked)
-  }
+  });
   const ContactArrays& c = system_->contacts();
   const int64_t nc = int64_t(c.count());
-#pragma omp parallel for schedule(static) num_threads(team) if (nc >= config_.parallel_min)
-  for (int64_t k = 0; k < nc; ++k) {
+  parallelFor(int64_t(nc), (nc >= config_.parallel_min) ? team : 1, [&](int64_t k) {
     const int a = c.body_a[size_t(k)], b = c.body_b[size_t(k)];
     if (a >= 0 && b >= 0 && merges[size_t(a)] && merges[size_t(b)]) uniteRoots(root, a, b);
-  }
+  });
   if (ghosts_ == 0) computeOverlappingPairs();  // with ghost objects, the last sub-step's pairs are current
   const btOverlappingPairCache* cache = m_broadphasePairCache->getOverlappingPairCache();
   const int np = cache->getNumOverlappingPairs();
@@ -764,8 +762,8 @@ void DviDynamicsWorld::buildIslands(int team) {
   }
   std::vector<int>& island = island_of_;
   island.resize(size_t(n));
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) island[size_t(i)] = findRoot(root, int(i));
+  parallelFor(int64_t(n), (n >= config_.parallel_min) ? team : 1,
+              [&](int64_t i) { island[size_t(i)] = findRoot(root, int(i)); });
 }
 
 // Bullet's deactivation (btDiscreteDynamicsWorld::updateActivationState and btSimulationIslandManager): each
@@ -776,32 +774,32 @@ void DviDynamicsWorld::buildIslands(int team) {
 void DviDynamicsWorld::updateSleeping(btScalar h) {
   const int64_t n = int64_t(tracked_.size());
   const int team = hostThreads();
-  int64_t resting = 0, kinematic = 0;  // bodies asleep or ready to sleep (as the last sub-step left them); kinematic
-#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : resting, kinematic) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {
-    kinematic += tracked_[size_t(i)].kind == kBodyKinematic;
-    if (tracked_[size_t(i)].kind != 0) continue;
+  // Bodies asleep or ready to sleep (as the last sub-step left them), counted as 1 each; kinematic bodies as 2^32.
+  const long long counts = parallelSum(n, n >= config_.parallel_min ? team : 1, [&](int64_t i) -> long long {
+    if (tracked_[size_t(i)].kind == kBodyKinematic) return 1LL << 32;
+    if (tracked_[size_t(i)].kind != 0) return 0;
     const int state = tracked_[size_t(i)].body->getActivationState();
-    resting += state == ISLAND_SLEEPING || state == WANTS_DEACTIVATION;
-  }
+    return state == ISLAND_SLEEPING || state == WANTS_DEACTIVATION;
+  });
+  const long long resting = counts & 0xffffffffLL, kinematic = counts >> 32;
   if (kinematic > 0) wakeTouchedByKinematic();  // its loop over the bodies is serial
   if (resting > 0) sleepOrWakeIslands(team);
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {  // per body, as updateActivationState
-    Tracked& t = tracked_[size_t(i)];
-    if (t.kind != 0) continue;
-    btRigidBody* b = t.body;
-    b->updateDeactivation(h);
-    if (!b->wantsSleeping()) {
-      b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
-    } else if (b->getActivationState() == ACTIVE_TAG) {
-      b->setActivationState(WANTS_DEACTIVATION);
-    } else if (b->getActivationState() == ISLAND_SLEEPING) {
-      b->setLinearVelocity(btVector3(0, 0, 0));
-      b->setAngularVelocity(btVector3(0, 0, 0));
-      t.v = t.w = btVector3(0, 0, 0);
-    }
-  }
+  parallelFor(int64_t(n), (n >= config_.parallel_min) ? team : 1,
+              [&](int64_t i) {  // per body, as updateActivationState
+                Tracked& t = tracked_[size_t(i)];
+                if (t.kind != 0) return;
+                btRigidBody* b = t.body;
+                b->updateDeactivation(h);
+                if (!b->wantsSleeping()) {
+                  b->setActivationState(ACTIVE_TAG);  // leaves DISABLE_DEACTIVATION alone
+                } else if (b->getActivationState() == ACTIVE_TAG) {
+                  b->setActivationState(WANTS_DEACTIVATION);
+                } else if (b->getActivationState() == ISLAND_SLEEPING) {
+                  b->setLinearVelocity(btVector3(0, 0, 0));
+                  b->setAngularVelocity(btVector3(0, 0, 0));
+                  t.v = t.w = btVector3(0, 0, 0);
+                }
+              });
 }
 
 // btSimulationIslandManager::buildIslands' decision, on the states the last sub-step's updateActivationState left
@@ -819,20 +817,20 @@ void DviDynamicsWorld::sleepOrWakeIslands(int team) {
     const int state = tracked_[size_t(i)].body->getActivationState();
     if (state != ISLAND_SLEEPING && state != WANTS_DEACTIVATION) awake[size_t(island[size_t(i)])] = 1;
   }
-#pragma omp parallel for schedule(static) num_threads(team) if (n >= config_.parallel_min)
-  for (int64_t i = 0; i < n; ++i) {  // per island, as btSimulationIslandManager
-    Tracked& t = tracked_[size_t(i)];
-    if (t.kind != 0) continue;
-    btRigidBody* b = t.body;
-    if (awake[size_t(island[size_t(i)])]) {
-      if (b->getActivationState() == ISLAND_SLEEPING) {
-        b->setActivationState(WANTS_DEACTIVATION);
-        b->setDeactivationTime(0);
-      }
-    } else if (b->getActivationState() != ISLAND_SLEEPING) {
-      b->setActivationState(ISLAND_SLEEPING);
-    }
-  }
+  parallelFor(int64_t(n), (n >= config_.parallel_min) ? team : 1,
+              [&](int64_t i) {  // per island, as btSimulationIslandManager
+                Tracked& t = tracked_[size_t(i)];
+                if (t.kind != 0) return;
+                btRigidBody* b = t.body;
+                if (awake[size_t(island[size_t(i)])]) {
+                  if (b->getActivationState() == ISLAND_SLEEPING) {
+                    b->setActivationState(WANTS_DEACTIVATION);
+                    b->setDeactivationTime(0);
+                  }
+                } else if (b->getActivationState() != ISLAND_SLEEPING) {
+                  b->setActivationState(ISLAND_SLEEPING);
+                }
+              });
 }
 
 // Bullet's AABB update (btCollisionWorld::updateAabbs: every object when m_forceUpdateAllAabbs, else the active
@@ -851,11 +849,10 @@ void DviDynamicsWorld::updateAabbs() {
   const btVector3 grow(gContactBreakingThreshold, gContactBreakingThreshold, gContactBreakingThreshold);
   const bool continuous = getDispatchInfo().m_useContinuous;
   const bool dbvt = ghosts_ == 0 && dynamic_cast<btDbvtBroadphase*>(m_broadphasePairCache) != nullptr;
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
-  for (int i = 0; i < n; ++i) {
+  parallelFor(int(n), (n >= config_.parallel_min) ? hostThreads() : 1, [&](int i) {
     btCollisionObject* o = m_collisionObjects[i];
     object_flags_[size_t(i)] = (m_forceUpdateAllAabbs || o->isActive()) && o->getBroadphaseHandle();
-    if (!object_flags_[size_t(i)]) continue;
+    if (!object_flags_[size_t(i)]) return;
     btVector3 lo, hi;
     o->getCollisionShape()->getAabb(o->getWorldTransform(), lo, hi);
     if (continuous && o->getInternalType() == btCollisionObject::CO_RIGID_BODY && !o->isStaticOrKinematicObject()) {
@@ -872,12 +869,12 @@ void DviDynamicsWorld::updateAabbs() {
         p->m_aabbMin = lo;
         p->m_aabbMax = hi;
         object_flags_[size_t(i)] = 0;
-        continue;
+        return;
       }
     }
     aabb_lo_[size_t(i)] = lo;
     aabb_hi_[size_t(i)] = hi;
-  }
+  });
   for (int i = 0; i < n; ++i) {
     if (!object_flags_[size_t(i)]) continue;
     btCollisionObject* o = m_collisionObjects[i];
@@ -897,18 +894,17 @@ void DviDynamicsWorld::synchronizeMotionStates() {
   const int n = all ? m_collisionObjects.size() : m_nonStaticRigidBodies.size();
   object_flags_.resize(size_t(n));  // scratch: 1 for an app's motion state
   auto bodyAt = [&](int i) { return all ? btRigidBody::upcast(m_collisionObjects[i]) : m_nonStaticRigidBodies[i]; };
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
-  for (int i = 0; i < n; ++i) {
+  parallelFor(int(n), (n >= config_.parallel_min) ? hostThreads() : 1, [&](int i) {
     btRigidBody* b = bodyAt(i);
     object_flags_[size_t(i)] = 0;
-    if (!b || (!all && !b->isActive())) continue;
+    if (!b || (!all && !b->isActive())) return;
     const btMotionState* ms = b->getMotionState();
     if (ms && typeid(*ms) != typeid(btDefaultMotionState)) {
       object_flags_[size_t(i)] = 1;
-      continue;
+      return;
     }
     synchronizeSingleMotionState(b);
-  }
+  });
   for (int i = 0; i < n; ++i)
     if (object_flags_[size_t(i)]) synchronizeSingleMotionState(bodyAt(i));
 }
@@ -919,11 +915,10 @@ void DviDynamicsWorld::synchronizeMotionStates() {
 void DviDynamicsWorld::saveKinematicState(btScalar timeStep) {
   const int n = m_collisionObjects.size();
   object_flags_.resize(size_t(n));  // scratch: 1 for a kinematic body to update
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
-  for (int i = 0; i < n; ++i) {
+  parallelFor(int(n), (n >= config_.parallel_min) ? hostThreads() : 1, [&](int i) {
     const btRigidBody* b = btRigidBody::upcast(m_collisionObjects[i]);
     object_flags_[size_t(i)] = b && b->getActivationState() != ISLAND_SLEEPING && b->isKinematicObject();
-  }
+  });
   for (int i = 0; i < n; ++i)
     if (object_flags_[size_t(i)]) btRigidBody::upcast(m_collisionObjects[i])->saveKinematicState(timeStep);
 }
@@ -931,8 +926,8 @@ void DviDynamicsWorld::saveKinematicState(btScalar timeStep) {
 // Bullet's force reset (btDiscreteDynamicsWorld::clearForces, every non-static rigid body), in parallel.
 void DviDynamicsWorld::clearForces() {
   const int n = m_nonStaticRigidBodies.size();
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) if (n >= config_.parallel_min)
-  for (int i = 0; i < n; ++i) m_nonStaticRigidBodies[i]->clearForces();
+  parallelFor(int(n), (n >= config_.parallel_min) ? hostThreads() : 1,
+              [&](int i) { m_nonStaticRigidBodies[i]->clearForces(); });
 }
 
 void DviDynamicsWorld::releaseManifolds() {
@@ -991,15 +986,12 @@ void DviDynamicsWorld::buildWorldContacts() const {
   const ContactArrays& c = system_->contacts();
   const int64_t nc = int64_t(c.count());
   contacts_.resize(size_t(nc));
-  int64_t untracked = 0;
-#pragma omp parallel for schedule(static) num_threads(hostThreads()) reduction(+ : untracked) if (nc >= config_.parallel_min)
-  for (int64_t k = 0; k < nc; ++k) {
+  const int64_t untracked = parallelSum(nc, nc >= config_.parallel_min ? hostThreads() : 1, [&](int64_t k) {
     const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
     WorldContact& w = contacts_[size_t(k)];
     if (!tracksPair(ia, ib)) {
       w.a = w.b = nullptr;
-      ++untracked;
-      continue;
+      return 1;
     }
     w.a = tracked_[size_t(ia)].obj;
     w.b = tracked_[size_t(ib)].obj;
@@ -1008,7 +1000,8 @@ void DviDynamicsWorld::buildWorldContacts() const {
     w.normal = toBt(c.normal[size_t(k)]);
     w.distance = btScalar(c.dist[size_t(k)]);
     w.normal_impulse = normalImpulse(k);
-  }
+    return 0;
+  });
   if (untracked > 0)
     contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [](const WorldContact& w) { return !w.a; }),
                     contacts_.end());
@@ -1043,14 +1036,13 @@ void DviDynamicsWorld::fillManifolds() {
   const int team = callbacks ? 1 : hostThreads();
   const int64_t nr = int64_t(runs_.size());
   auto single = [&](int i) { return B.shape_count[size_t(i)] == 1; };
-#pragma omp parallel for schedule(static) num_threads(team) if (nr >= config_.parallel_min)
-  for (int64_t r = 0; r < nr; ++r) {  // read-only look-ups
+  parallelFor(int64_t(nr), (nr >= config_.parallel_min) ? team : 1, [&](int64_t r) {  // read-only look-ups
     const int64_t k = runs_[size_t(r)].begin;
     const int ia = c.body_a[size_t(k)], ib = c.body_b[size_t(k)];
-    if (!single(ia) || !single(ib)) continue;
+    if (!single(ia) || !single(ib)) return;
     auto it = manifolds_.find(pairKey(ia, ib));
     if (it != manifolds_.end()) runs_[size_t(r)].slot = &it->second;
-  }
+  });
   int64_t used = 0;         // manifolds filled this sub-step
   for (Run& run : runs_) {  // serial: new manifolds, and the runs of bodies with several shapes
     const int ia = c.body_a[size_t(run.begin)], ib = c.body_b[size_t(run.begin)];
@@ -1061,12 +1053,13 @@ void DviDynamicsWorld::fillManifolds() {
     }
     for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(manifoldSlot(ia, ib), k);
   }
-#pragma omp parallel for schedule(static) num_threads(team) reduction(+ : used) if (nr >= config_.parallel_min)
-  for (int64_t r = 0; r < nr; ++r) {
+  used += parallelSum(nr, nr >= config_.parallel_min ? team : 1, [&](int64_t r) {
     const Run& run = runs_[size_t(r)];
-    if (!run.slot) continue;  // filled above
-    for (int64_t k = run.begin; k < run.end; ++k) used += fillManifold(*run.slot, k);
-  }
+    int64_t u = 0;
+    if (run.slot)  // else filled above
+      for (int64_t k = run.begin; k < run.end; ++k) u += fillManifold(*run.slot, k);
+    return u;
+  });
   if (size_t(used) == manifolds_.size()) return;  // every manifold filled: none to release
   // A body asleep is held fixed, so a pair of resting bodies (asleep, or asleep and static) makes no contacts; its
   // manifold keeps its last points while both rest, as Bullet's does (its dispatcher skips such pairs).

@@ -57,8 +57,15 @@ enum class WorldBackend { Cpu, Gpu, Auto };
 
 // How much work each sub-step's solve does (docs/DROP_IN.md, "Solver effort", measures both on Bullet's scenes).
 enum class SolverEffort {
-  // SystemConfig::solver as given (default: APGD to the relative tolerance, at least 50 iterations): every step
-  // converged; Bullet's iteration count is not used.
+  // Bullet's effort as the minimum, then on to the tolerance: projected Gauss-Seidel (as
+  // BulletIterations below) for at least m_numIterations sweeps, continued while the relative residual is above
+  // SystemConfig::solver.tolerance (0.15), checked every few sweeps, up to DviWorldConfig::bullet_max_sweeps. Costs
+  // Bullet's effort where Bullet's sweeps already converge and more only where they do not; a sub-step stopped by
+  // the cap is reported as not converged (convergence(), system().lastStats()). The GPU backend runs APGD with the
+  // same minimum, tolerance and cap.
+  BulletThenConverged,
+  // The default. SystemConfig::solver as given (default: APGD to the relative tolerance, at least 50 iterations):
+  // every step converged; Bullet's iteration count is not used.
   Converged,
   // Bullet's effort, read from the world's btContactSolverInfo (getSolverInfo()) each sub-step: projected
   // Gauss-Seidel (the method of Bullet's sequential impulses, on our cone-complementarity problem) for
@@ -70,6 +77,8 @@ enum class SolverEffort {
 struct DviWorldConfig {
   WorldBackend backend = WorldBackend::Cpu;
   SolverEffort effort = SolverEffort::Converged;
+  // BulletThenConverged: at most this many sweeps a sub-step (0: 3 x btContactSolverInfo::m_numIterations).
+  int bullet_max_sweeps = 0;
   SystemConfig system;  // solver, threads, collision...; step.dt and step.gravity come from Bullet
   JointSettings joints;
   bool fill_manifolds = true;  // mirror the contacts into Bullet's persistent manifolds (dispatcher)
@@ -185,6 +194,7 @@ class DviDynamicsWorld : public btDiscreteDynamicsWorld {
   };
   static uint64_t pairKey(int a, int b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); }
   void syncIn(btScalar h);
+  void applyBulletEffort(SolverSettings& s) const;  // SolverEffort::BulletIterations and BulletThenConverged
   uint8_t syncBody(size_t i, btScalar h, BodyArrays& B);
   void syncFactors(size_t i, BodyArrays& B);
   void uploadChanges();

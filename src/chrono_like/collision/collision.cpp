@@ -2,6 +2,7 @@
 // OpenMP. The per-element work is the DVI_HD code the GPU backend runs (narrowphase.h,
 // broadphase_kernels.h).
 #include "chrono_like/collision/collision.h"
+#include "chrono_like/base/parallel_for.h"
 
 #include <omp.h>
 
@@ -63,25 +64,23 @@ class NativeCollision final : public CollisionDetector {
     box_keep_.resize(size_t(nb));
     box_env_ = config.envelope_rel;
     uint8_t* keep = box_keep_.data();
-#pragma omp parallel for schedule(static)
-    for (int64_t b = 0; b < nb; ++b) {
+    parallelFor(int64_t(nb), ompTeam(), [&](int64_t b) {
       const Pose now{bodies.pos[b], bodies.rot[b]};
       const Pose& last = box_pose_[size_t(b)];
       const Vec3 zero{0, 0, 0};
       keep[b] = reuse && (bodies.flags[b] & kBodyFixed) && samePose(now, last) && sameVec(vel[b], zero) &&
                 sameVec(omega[b], zero);
       box_pose_[size_t(b)] = now;
-    }
+    });
     const real h_sweep = config.speculative ? step.dt : real(0);
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < ns; ++i) {
+    parallelFor(int64_t(ns), ompTeam(), [&](int64_t i) {
       const Shape& s = sh[i];
-      if (keep[s.body]) continue;
+      if (keep[s.body]) return;
       Pose body{bodies.pos[s.body], bodies.rot[s.body]};
       const real sweep = shapeSweep(s, hull, vel[s.body], omega[s.body], h_sweep);
       shapes.sweep[i] = sweep;
       shapes.aabb[i] = shapeAabb(s, shapeWorldPose(body, s), hull, shapeMargin(s, config.envelope_rel, sweep));
-    }
+    });
   }
 
   // BroadPhase: reads shapes.aabb, shapes.shape, bodies.flags, fat_, fat_flags_; writes pairs_ (and fat_,
@@ -95,21 +94,18 @@ class NativeCollision final : public CollisionDetector {
     const uint8_t* flags = bodies.flags.data();
     bool keep = f > real(0) && built_ && int64_t(fat_.size()) == ns;
     if (keep) {
-      int moved = 0;
-#pragma omp parallel for schedule(static) reduction(| : moved)
-      for (int64_t i = 0; i < ns; ++i)
-        moved |= pairsStillHold(shapes.aabb[i], fat_[i], flags[sh[i].body], fat_flags_[i]) ? 0 : 1;
-      keep = moved == 0;
+      keep = parallelSum(ns, ompTeam(), [&](int64_t i) {
+               return pairsStillHold(shapes.aabb[i], fat_[i], flags[sh[i].body], fat_flags_[i]) ? 0 : 1;
+             }) == 0;
     }
     if (!keep) {
       const real m = f > real(0) ? f * last_edge_ : real(0);
       fat_.resize(size_t(ns));
       fat_flags_.resize(size_t(ns));
-#pragma omp parallel for schedule(static)
-      for (int64_t i = 0; i < ns; ++i) {
+      parallelFor(int64_t(ns), ompTeam(), [&](int64_t i) {
         fat_[i] = fatAabb(shapes.aabb[i], m);
         fat_flags_[i] = flags[sh[i].body];
-      }
+      });
       broad_.run(shapes, fat_.data(), bodies, pairs_, &last_stats_);
       last_edge_ = last_stats_.bin_edge;
       built_ = true;
@@ -128,8 +124,7 @@ class NativeCollision final : public CollisionDetector {
     const int64_t nblocks = (np + kPairsPerBlock - 1) / kPairsPerBlock;
     const GjkUse gjk = resolvedGjk(config.gjk, false);
     if (int64_t(blocks_.size()) < nblocks) blocks_.resize(size_t(nblocks));
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int64_t blk = 0; blk < nblocks; ++blk) {
+    auto block = [&](int64_t blk) {
       std::vector<PairContact>& buf = blocks_[blk];
       buf.clear();
       const int64_t end = std::min(np, (blk + 1) * kPairsPerBlock);
@@ -148,6 +143,12 @@ class NativeCollision final : public CollisionDetector {
         n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), step.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }
+    };
+    if (nblocks > 1 && ompTeam() > 1) {
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int64_t blk = 0; blk < nblocks; ++blk) block(blk);
+    } else {
+      for (int64_t blk = 0; blk < nblocks; ++blk) block(blk);
     }
     writeContacts(sh, nblocks, out);
   }
@@ -157,8 +158,7 @@ class NativeCollision final : public CollisionDetector {
     offsets_.assign(size_t(nblocks) + 1, 0);
     for (int64_t blk = 0; blk < nblocks; ++blk) offsets_[blk + 1] = offsets_[blk] + int64_t(blocks_[blk].size());
     out.resize(size_t(offsets_[nblocks]));
-#pragma omp parallel for schedule(static)
-    for (int64_t blk = 0; blk < nblocks; ++blk) {
+    parallelFor(int64_t(nblocks), ompTeam(), [&](int64_t blk) {
       int64_t k = offsets_[blk];
       for (const PairContact& c : blocks_[blk]) {
         const ShapePair& pr = pairs_[c.pair];
@@ -173,7 +173,7 @@ class NativeCollision final : public CollisionDetector {
         out.key[k] = contactKey(pr.a, pr.b, c.point.feature);
         ++k;
       }
-    }
+    });
   }
 
   // box reuse of fixed bodies at rest: each body's pose at the last ComputeAabbs, whether its boxes were kept, and

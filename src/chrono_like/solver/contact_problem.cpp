@@ -1,6 +1,7 @@
 // Assembly of the contact CCP and its matrix-free operators (docs/MODEL.md §3; layout in contact_problem.h and
 // jacobian.h). The per-element work is in jacobian.h and cone.h, shared with the CUDA kernels.
 #include "chrono_like/solver/contact_problem.h"
+#include "chrono_like/base/parallel_for.h"
 
 #include <omp.h>
 
@@ -16,6 +17,9 @@
 #include "chrono_like/solver/solver_kernels.h"
 
 namespace dvi {
+
+// parallelReduce's merge for a maximum (exact, so the result does not depend on the team).
+static void maxInto(real& total, const real& part) { total = std::max(total, part); }
 
 namespace {
 bool movable(const BodyInverseMass& B) {
@@ -80,11 +84,10 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   delta_.assign(size_t(nb), BodyDelta{{0, 0, 0}, {0, 0, 0}});
 
   const bool have_flags = bodies.flags.size() == size_t(nb);
-#pragma omp parallel for schedule(static) num_threads(T)
-  for (int64_t i = 0; i < nb; ++i) {
+  parallelFor(int64_t(nb), T, [&](int64_t i) {
     const bool fixed = have_flags && (bodies.flags[i] & (kBodyFixed | kBodyKinematic));
     inv_[i] = fixed ? kNoBody : makeBodyInverseMass(bodies.inv_mass[i], bodies.inv_inertia[i], bodies.rot[i]);
-  }
+  });
 
   real max_diag = assembleContacts(bodies, contacts, v_free, w_free, settings);
   max_diag = assembleBoxesAndRows(rows, nb, v_free, w_free, max_diag);
@@ -121,8 +124,7 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
                                   v_free,
                                   w_free};
   real max_diag = 0;
-#pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
-  for (int64_t k = 0; k < nc; ++k) {
+  auto contact = [&](int64_t k, real& max_diag) {
     const int32_t a = contacts.body_a[k], b = contacts.body_b[k];
     ContactJacobian J =
         makeContactJacobian(contacts.normal[k], contacts.pa[k], contacts.pb[k], bodies.pos[a], bodies.pos[b], a, b);
@@ -132,7 +134,7 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
     if (normal_only_) {  // block data per block of three contacts, below
       rhs_[k] = contactNormalVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b]) +
                 contactNormalBias(J, contacts.dist[k], contacts.size[k], bias_in);
-      continue;
+      return;
     }
     real* rk = rhs_.data() + 3 * k;
     contactRelativeVelocity(J, v_free[a], w_free[a], v_free[b], w_free[b], rk);
@@ -146,7 +148,8 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
       blockRowSums(N, rowsum_.data() + 3 * k);  // absolute row sums of N_kk itself
     }
     max_diag = std::max(max_diag, std::max(N[0], std::max(N[1], N[2])));  // max is exact: deterministic
-  }
+  };
+  max_diag = std::max(max_diag, parallelReduce(nc, T, real(0), contact, maxInto));
 
   return max_diag;
 }
@@ -162,15 +165,15 @@ real ContactProblem::assembleBoxesAndRows(const std::vector<ConstraintRow>* rows
   lo_.assign(size_t(nbox + 3 * nrb_), real(0));
   hi_.assign(size_t(nbox + 3 * nrb_), real(0));
   if (normal_only_) {  // blocks of three normal rows, each in [0, inf); padding rows in [0, 0]
-#pragma omp parallel for schedule(static) num_threads(T) reduction(max : max_diag)
-    for (int64_t q = 0; q < ncb; ++q) {
+    auto block = [&](int64_t q, real& max_diag) {
       const int cnt = int(std::min<int64_t>(3, nc - 3 * q));
       for (int j = cnt; j < 3; ++j) rhs_[size_t(3 * q + j)] = 0;
       for (int j = 0; j < cnt; ++j) hi_[size_t(3 * q + j)] = std::numeric_limits<real>::infinity();
       const real d = assembleNormalBlock(jac_.data() + 3 * q, cnt, inv_.data(), binv_.data() + 6 * q, eta_.data() + q,
                                          colnorm_.data() + 6 * q, rowsum_.data() + 3 * q);
       max_diag = std::max(max_diag, d);
-    }
+    };
+    max_diag = std::max(max_diag, parallelReduce(ncb, T, real(0), block, maxInto));
   }
 
   // Constraint rows, three per block after the contacts; the last block is padded with empty rows.
@@ -303,12 +306,11 @@ void ContactProblem::computeJacobiSteps(int64_t nb) {
   bodyq_.assign(size_t(nb), real(0));
   const int64_t na = int64_t(active_.size());
   const EntryLayout L = layout();
-#pragma omp parallel for schedule(static) num_threads(T)
-  for (int64_t j = 0; j < na; ++j) {
+  parallelFor(int64_t(na), T, [&](int64_t j) {
     real q = 0;
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e) q += entryColumnSum(adj_[e], L, colnorm_.data());
     bodyq_[size_t(active_[j])] = q;
-  }
+  });
   if (group_) shareBodySums(bodyq_);  // Q_c over every process's contacts of a shared body
   if (normal_only_) {
 #pragma omp parallel for schedule(static) num_threads(T)
@@ -371,14 +373,13 @@ void ContactProblem::gatherBodyDeltas(const real* x) const {
   gs_deltas_of_ = nullptr;
   const int64_t na = int64_t(active_.size());
   const EntryLayout L = layout();
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-  for (int64_t j = 0; j < na; ++j) {
+  parallelFor(int64_t(na), (threads_ > 1) ? threads_ : 1, [&](int64_t j) {
     const int32_t i = active_[j];
     Vec3 F{0, 0, 0}, Tq{0, 0, 0};
     for (int32_t e = adj_start_[j]; e < adj_start_[j + 1]; ++e)
       accumulateEntryImpulse(adj_[e], L, jac_.data(), rows_.data(), x, F, Tq);
     delta_[i] = bodyDeltaFromImpulse(inv_[i], F, Tq);
-  }
+  });
   if (group_) group_->exchangeDeltas(delta_.data());  // shares summed over the processes
 }
 
@@ -387,20 +388,18 @@ void ContactProblem::schur(const real* x, real* y) const {
   const int64_t nc = nc_;
   const BodyDelta* dl = delta_.data();
   if (normal_only_) {
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-    for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact, the normal row
+    parallelFor(int64_t(nc), (threads_ > 1) ? threads_ : 1, [&](int64_t k) {  // pass (b): per contact, the normal row
       const ContactJacobian& J = jac_[k];
       y[k] = contactNormalVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w);
-    }
+    });
     for (int64_t k = nc; k < 3 * ncb_; ++k) y[k] = 0;  // padding rows
   } else {
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-    for (int64_t k = 0; k < nc; ++k) {  // pass (b): per contact
+    parallelFor(int64_t(nc), (threads_ > 1) ? threads_ : 1, [&](int64_t k) {  // pass (b): per contact
       const ContactJacobian& J = jac_[k];
       const BodyDelta& A = dl[J.a];
       const BodyDelta& B = dl[J.b];
       contactRelativeVelocity(J, A.v, A.w, B.v, B.w, y + 3 * k);
-    }
+    });
   }
   for (int64_t i = 0; i < int64_t(rows_.size()); ++i) y[3 * ncb_ + i] = rowFromDeltas(rows_[size_t(i)], dl);
 }
@@ -408,12 +407,11 @@ void ContactProblem::schur(const real* x, real* y) const {
 void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {
   if (gamma != gs_deltas_of_ || !gamma) gatherBodyDeltas(gamma);
   const int64_t na = int64_t(active_.size());
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1)
-  for (int64_t j = 0; j < na; ++j) {
+  parallelFor(int64_t(na), (threads_ > 1) ? threads_ : 1, [&](int64_t j) {
     const int32_t i = active_[j];
     dv[i] += delta_[i].v;
     dw[i] += delta_[i].w;
-  }
+  });
 }
 
 // Gauss-Seidel's block gradient y = (N gamma + r)_k from the maintained body velocity changes delta_.
@@ -523,6 +521,16 @@ void ContactProblem::gsContactSweep(real* gamma, real w) const {
   }
 }
 
+// Whether Gauss-Seidel computes the residual after sweep `iterations` (no history kept): only where the tolerance
+// can stop the solve, i.e. from min_iterations on, and then every few sweeps (min_iterations / 2, at most 5), since
+// the residual's pass costs about half a sweep: a solve with Bullet's 10 sweeps as its minimum checks after sweeps
+// 10, 15, 20, ... and overshoots the tolerance by at most 4 sweeps.
+static bool gsCheckDue(const SolverSettings& s, int iterations) {
+  if (!(s.tolerance > 0) || iterations < s.min_iterations) return false;
+  const int every = std::min(5, std::max(1, s.min_iterations / 2));
+  return (iterations - s.min_iterations) % every == 0;
+}
+
 // Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
 // CMAME 200 (2011)): sweep the contacts in order; for contact k
 //   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
@@ -585,7 +593,10 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   // A fixed count (no tolerance, no history: Bullet's effort) needs no residual before the sweeps; the one after
   // them comes from the maintained deltas too (each saved a pass of the ~12 a 10-sweep solve made).
   const bool fixed_count = !(s.tolerance > 0) && !s.record_history;
+  // With a tolerance the warm start's residual is checked (a start at the solution stops at once); after it, only
+  // where the tolerance can stop the solve (gsCheckDue).
   real res = fixed_count ? real(INFINITY) : residualFromDeltas();
+  bool res_fresh = false;  // res is that of the current gamma
   if (s.record_history) st.history.push_back(res);
   const bool plain = !full && !normal_only_ && nroll_ == 0;  // every contact a plain cone: gsContactSweep
   if (!reachedStop(res, thr, 0, s.min_iterations)) {
@@ -612,20 +623,16 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
         commit(p, gp);
       }
       ++st.iterations;
-      const bool need = s.record_history || s.tolerance > 0;
-      if (need) {
+      res_fresh = s.record_history || gsCheckDue(s, st.iterations);
+      if (res_fresh) {
         res = residualFromDeltas();
         if (s.record_history) st.history.push_back(res);
         if (reachedStop(res, thr, st.iterations, s.min_iterations)) break;
       }
     }
   }
-  if (fixed_count) {
-    st.residual = residualFromDeltas();
-  } else {
-    std::vector<real> scratch;
-    st.residual = ccpResidual(*this, gamma, a, scratch);  // its Schur product recomputes delta_ from gamma
-  }
+  std::vector<real> scratch;  // with a history, a fresh Schur product (which recomputes delta_ from gamma)
+  st.residual = s.record_history ? ccpResidual(*this, gamma, a, scratch) : res_fresh ? res : residualFromDeltas();
   gs_deltas_of_ = gamma;  // delta_ = M^-1 D gamma: applyImpulses(gamma) needs no gather
   finishStats(st, s);
   return st;
