@@ -529,8 +529,16 @@ TEST_CASE(
   std::vector<Sub> ours, effort;
   const double y_bullet = run(0, nullptr), y_ours = run(1, &ours), y_effort = run(2, &effort);
   int beyond = 0, capped = 0, effort_above = 0;
+  int exact = 0;
   for (const Sub& s : ours) {
     INFO("sub-step: " << s.iterations << " sweeps, relative residual " << s.relative);
+    // A problem its warm start solves exactly (residual 0, reachedStop) needs no sweep: Bullet's minimum applies to
+    // the others.
+    if (s.iterations == 0 && s.relative == 0) {
+      CHECK(s.converged);
+      ++exact;
+      continue;
+    }
     CHECK(s.iterations >= 10);
     CHECK(s.iterations <= 30);
     CHECK(s.converged == (s.relative <= double(kDefaultTolerance)));
@@ -541,7 +549,8 @@ TEST_CASE(
   for (const Sub& s : effort) effort_above += s.relative > kDefaultTolerance;
   INFO("top box y: Bullet " << y_bullet << ", ours " << y_ours << ", Bullet's effort " << y_effort << "; sub-steps "
                             << ours.size() << ", beyond 10 sweeps " << beyond << ", at the cap " << capped
-                            << "; Bullet's effort above the tolerance in " << effort_above);
+                            << "; Bullet's effort above the tolerance in " << effort_above
+                            << "; solved exactly at the start " << exact);
   REQUIRE(ours.size() == 480);
   CHECK(effort_above > 0);  // Bullet's 10 sweeps are not enough here ...
   CHECK(beyond > 0);        // ... and the default went on
