@@ -75,3 +75,19 @@ void broadPhaseOnDevice(const ShapeArrays& shapes, const BodyArrays& bodies, con
 }
 
 }  // namespace dvi::gpu
+
+namespace dvi::gpu {
+
+DeviceMemoryHold::DeviceMemoryHold(size_t leave_free) {
+  size_t free_bytes = 0, total = 0;
+  DVI_CUDA(cudaMemGetInfo(&free_bytes, &total));
+  if (free_bytes <= leave_free) return;
+  held_ = free_bytes - leave_free;
+  DVI_CUDA(cudaMalloc(&ptr_, held_));
+}
+
+DeviceMemoryHold::~DeviceMemoryHold() {
+  if (ptr_) cudaFree(ptr_);
+}
+
+}  // namespace dvi::gpu

@@ -24,3 +24,22 @@ void broadPhaseOnDevice(const ShapeArrays& shapes, const BodyArrays& bodies, con
                         int steps, std::vector<ShapePair>& pairs, BroadPhaseStats& stats, bool& sorted);
 
 }  // namespace dvi::gpu
+
+namespace dvi::gpu {
+
+// Takes the device's free memory but `leave_free` bytes (cudaMemGetInfo, one cudaMalloc) for as long as it lives,
+// so that another process started meanwhile runs out of device memory for real. held() is what it took.
+class DeviceMemoryHold {
+ public:
+  explicit DeviceMemoryHold(size_t leave_free);
+  ~DeviceMemoryHold();
+  DeviceMemoryHold(const DeviceMemoryHold&) = delete;
+  DeviceMemoryHold& operator=(const DeviceMemoryHold&) = delete;
+  size_t held() const { return held_; }
+
+ private:
+  void* ptr_ = nullptr;
+  size_t held_ = 0;
+};
+
+}  // namespace dvi::gpu
