@@ -564,6 +564,83 @@ TEST_CASE("small shapes on the side of a large cylinder: a point per vertex, exa
   checkConsistent(c, m, env);
 }
 
+namespace {
+// The ellipsoid's point nearest the axis of a cylinder (axis z through the origin), found by search over the
+// surface: a 400 x 200 grid of (theta, phi), then five finer 21 x 21 grids around the best, each 1/5 the step.
+double oracleNearestRho(Vec3 semi, const Pose& w, Vec3& best_x) {
+  auto at = [&](double th, double ph) {
+    const Vec3 l{real(semi.x * std::cos(th) * std::cos(ph)), real(semi.y * std::sin(ph)),
+                 real(semi.z * std::sin(th) * std::cos(ph))};
+    return transformPoint(w, l);
+  };
+  auto rho = [](Vec3 x) { return std::sqrt(double(x.x) * x.x + double(x.y) * x.y); };
+  double bt = 0, bp = 0, br = 1e30;
+  for (int i = 0; i < 400; ++i)
+    for (int j = 0; j <= 200; ++j) {
+      const double th = 2 * kPi * i / 400, ph = -kPi / 2 + kPi * j / 200;
+      const double r = rho(at(th, ph));
+      if (r < br) br = r, bt = th, bp = ph;
+    }
+  double step = 2 * kPi / 400;
+  for (int level = 0; level < 8; ++level) {
+    const double ct = bt, cp = bp;
+    for (int i = -10; i <= 10; ++i)
+      for (int j = -10; j <= 10; ++j) {
+        const double th = ct + i * step / 10, ph = cp + j * step / 10;
+        const double r = rho(at(th, ph));
+        if (r < br) br = r, bt = th, bp = ph;
+      }
+    step /= 5;
+  }
+  best_x = at(bt, bp);
+  return br;
+}
+}  // namespace
+
+TEST_CASE("an ellipsoid on the side of a large cylinder: the point nearest the axis, its exact radial depth",
+          "[narrowphase]") {
+  // The CES drum (R = 160 mm, axis z) against a 1 mm ellipsoid (semi-axes 0.5, 0.25, 0.35 mm) at random
+  // orientations, resting (15 um in, 5 um off) and deep (0.1 mm in), in both orders. Oracle: the search above.
+  const real R = 0.16;
+  const Shape drum = cylinder(R, 0.15);
+  const Pose wd = pose(Vec3{0, 0, 0}, quatFromAxisAngle(Vec3{1, 0, 0}, real(kPi / 2)));
+  const Vec3 semi{real(0.5e-3), real(0.25e-3), real(0.35e-3)};
+  const Shape ell = ellipsoid(semi.x, semi.y, semi.z);
+  const double env = 2e-5;
+  std::mt19937 g(11);
+  std::normal_distribution<double> nd(0, 1);
+  ContactPoint c[kMaxContactsPerPair];
+  int checked = 0;
+  for (int k = 0; k < 24; ++k) {
+    const double th = 2 * kPi * k / 24 + 0.1;
+    const Vec3 radial{real(std::cos(th)), real(std::sin(th)), 0};
+    const Quat q = normalized(Quat{real(nd(g)), real(nd(g)), real(nd(g)), real(nd(g))});
+    // its extent along -radial puts it `pen` into the drum (approximately: the oracle gives the exact depth)
+    const double reach = double(dot(supportLocal(ell, rotateInv(q, -radial), nullptr), rotateInv(q, -radial)));
+    for (double pen : {1.5e-5, -5e-6, 1e-4}) {
+      const Pose we = pose(radial * real(R + reach - pen) + Vec3{0, 0, real(0.02 * std::sin(3.0 * k))}, q);
+      Vec3 xo;
+      const double dist_o = oracleNearestRho(semi, we, xo) - double(R);
+      for (int order = 0; order < 2; ++order) {
+        INFO("k " << k << " pen " << pen << " order " << order);
+        const int m = order == 0 ? collideShapes(ell, we, drum, wd, nullptr, real(env), c)
+                                 : collideShapes(drum, wd, ell, we, nullptr, real(env), c);
+        REQUIRE(m == 1);
+        checkConsistent(c, m, env);
+        const Vec3 x = order == 0 ? c[0].pa : c[0].pb;  // on the ellipsoid
+        CHECK(double(c[0].dist) == Approx(dist_o).margin(1e-11));
+        CHECK(length(x - xo) < 2e-7);              // the same point (the oracle's grid places it to ~1e-7 m)
+        const Vec3 l = rotateInv(we.q, x - we.p);  // on the surface: (x/a)^2 + (y/b)^2 + (z/c)^2 = 1
+        const double ex = l.x / semi.x, ey = l.y / semi.y, ez = l.z / semi.z;
+        CHECK(ex * ex + ey * ey + ez * ez == Approx(1).margin(1e-9));
+        CHECK(angleDeg(order == 0 ? -c[0].normal : c[0].normal, normalized(Vec3{x.x, x.y, 0})) < 1e-6);
+        ++checked;
+      }
+    }
+  }
+  CHECK(checked == 24 * 3 * 2);
+}
+
 TEST_CASE("box-box: resting face contact, edge-edge, rotated", "[narrowphase]") {
   Rng rng(8);
   ContactPoint c[kMaxContactsPerPair];

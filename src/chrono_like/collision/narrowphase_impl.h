@@ -386,7 +386,8 @@ DVI_HD int collideConvexPlane(const Shape& a, const Pose& wa, const Shape& b, co
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// A small polyhedral shape (a: box, convex hull, cylinder or cone, its points of radius 0, or a hull's margin)
+// A small polyhedral shape (a: box, convex hull, cylinder or cone, its points of radius 0, or a hull's margin; an
+// ellipsoid goes to collideSmoothBigCylinder below)
 // against the side of a large cylinder (b): the CES drum and brush against 0.5-1 mm flakes, wires and
 // fragments. MPR gives one point per pair, and a flat face resting on the drum then tips and sinks (1.2 mm
 // into the drum for a 0.1 mm-thick flake in bench accuracy's CES scene); this gives the face's vertices
@@ -407,7 +408,7 @@ DVI_HD bool polyhedralPoints(ShapeType t) {
 }
 
 DVI_HD bool bigCylinderSide(const Shape& a, const Pose& wa, const Shape& cyl, const Pose& wc, const Vec3* hull_points) {
-  if (cyl.type != ShapeType::Cylinder || !polyhedralPoints(a.type)) return false;
+  if (cyl.type != ShapeType::Cylinder || !(polyhedralPoints(a.type) || a.type == ShapeType::Ellipsoid)) return false;
   const real R = cyl.dims.x, ra = boundingRadius(a, hull_points);
   if (!(R >= kBigCylinderRatio * ra)) return false;
   const Vec3 ax = rotate(wc.q, Vec3{0, 1, 0}), d = wa.p - wc.p;
@@ -416,8 +417,41 @@ DVI_HD bool bigCylinderSide(const Shape& a, const Pose& wa, const Shape& cyl, co
   return length(d - ax * axial) > real(0.5) * R;  // a radial direction well defined, a near the side
 }
 
+// An ellipsoid (a smooth particle) against the side of a large cylinder: its point nearest the axis is where its
+// surface normal is radial (the gradient of the distance from the axis). The fixed point x = support_a(-radial(x)),
+// started from the radial direction through a's centre, contracts its error by about a's radius / R per
+// iteration (<= 1 / kBigCylinderRatio: the radial direction turns by |x - x*| / R when x moves), so
+// kSmoothBigCylinderIterations leave ~20^-4 of a's size; the depth is then measured exactly at x, dist = rho - R.
+// One point (curved against curved); MPR's restarts for "deep" pairs (mpr.h) are not needed: the side is
+// nearly flat over the particle, so the nearest face is the radial one.
+constexpr int kSmoothBigCylinderIterations = 4;
+
+DVI_HD_CALL int collideSmoothBigCylinder(const Shape& a, const Pose& wa, const Shape& cyl, const Pose& wc,
+                                         const Vec3* hull_points, real envelope, ContactPoint* out) {
+  const real R = cyl.dims.x;
+  const Vec3 ax = rotate(wc.q, Vec3{0, 1, 0});
+  Vec3 d = wa.p - wc.p, x = wa.p;
+  real axial = dot(d, ax);
+  Vec3 dr = d - ax * axial;
+  real rho = length(dr);
+  Vec3 nr = dr / rho;  // rho > R / 2 (bigCylinderSide)
+  for (int it = 0; it < kSmoothBigCylinderIterations; ++it) {
+    x = transformPoint(wa, supportLocal(a, rotateInv(wa.q, -nr), hull_points));
+    d = x - wc.p;
+    axial = dot(d, ax);
+    dr = d - ax * axial;
+    rho = length(dr);
+    nr = dr / rho;
+  }
+  const real dist = rho - R;
+  if (!(dist < envelope)) return 0;
+  setContact(out[0], -nr, x, wc.p + ax * axial + nr * R, dist, 0);
+  return 1;
+}
+
 DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const Shape& cyl, const Pose& wc,
                                          const Vec3* hull_points, real envelope, ContactPoint* out) {
+  if (a.type == ShapeType::Ellipsoid) return collideSmoothBigCylinder(a, wa, cyl, wc, hull_points, envelope, out);
   const real R = cyl.dims.x;
   const Vec3 ax = rotate(wc.q, Vec3{0, 1, 0});
   const Vec3 d0 = wa.p - wc.p;
