@@ -98,8 +98,8 @@ void writeCheckpoint(const CesMachine& m, const json& doc, const std::string& co
   if (ec) throw std::runtime_error("cannot create " + dir + ": " + ec.message());
   std::ostringstream bin(std::ios::binary);
   m.save(bin, checkpointMeta(doc, collision));
-  writeFileAtomic(dir + "/ces_config.json", doc.dump(2) + "\n");
-  writeFileAtomic(dir + "/state.bin", bin.str());
+  writeFileAtomic(dir + "/ces_config.json", doc.dump(2) + "\n", Durability::Synced);
+  writeFileAtomic(dir + "/state.bin", bin.str(), Durability::Synced);
 }
 
 // Leaves of a JSON value by dotted key ("feed.mass_flow_g_s"; array elements by index).

@@ -60,9 +60,10 @@ void writeSingle(const dvi::System& sys, const dvi::Scene& scene, const std::str
   }
   p.impulses = sys.contactImpulsesOf(all);
   fs::create_directories(cdir);
-  dvi::writeFileAtomic(cdir + "/piece_p0.bin", dvi::encodePiece(p));
+  dvi::writeFileAtomic(cdir + "/piece_p0.bin", dvi::encodePiece(p), dvi::Durability::Synced);
   dvi::writeFileAtomic(cdir + "/manifest.json",
-                       manifestText(1, sys.stepCount(), sys.time(), double(sys.config().step.dt), b.count(), scene));
+                       manifestText(1, sys.stepCount(), sys.time(), double(sys.config().step.dt), b.count(), scene),
+                       dvi::Durability::Synced);
 }
 
 namespace {
@@ -313,6 +314,7 @@ void Periodic::commit(int64_t step) {
     fs::remove_all(*it, ec);  // older ones, and temporary folders a killed writer left
   }
   fs::rename(tmp, final_dir);  // throws filesystem_error (exit code 1) on failure
+  dvi::syncDirectory(dir_);    // the rename on the disk too (the files in it were synced when written)
 }
 
 std::string Periodic::newest() const {

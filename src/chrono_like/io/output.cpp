@@ -53,12 +53,13 @@ std::string pythonWithMatplotlib() {
   return "";
 }
 
-void writeFileAtomic(const std::string& path, const std::string& content) {
+void writeFileAtomic(const std::string& path, const std::string& content, Durability d) {
   const std::string tmp = path + ".tmp." + std::to_string(::getpid());
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f) throw std::runtime_error("cannot write " + tmp + ": " + std::strerror(errno));
   const size_t n = std::fwrite(content.data(), 1, content.size(), f);
-  const bool ok = n == content.size() && std::fflush(f) == 0;
+  bool ok = n == content.size() && std::fflush(f) == 0;
+  if (ok && d == Durability::Synced) ok = ::fsync(::fileno(f)) == 0;
   const int err = errno;
   if (std::fclose(f) != 0 || !ok) {
     std::remove(tmp.c_str());
@@ -69,6 +70,19 @@ void writeFileAtomic(const std::string& path, const std::string& content) {
     std::remove(tmp.c_str());
     throw std::runtime_error("cannot rename " + tmp + " to " + path + ": " + std::strerror(e));
   }
+  if (d == Durability::Synced) {
+    const std::string parent = std::filesystem::path(path).parent_path().string();
+    syncDirectory(parent.empty() ? "." : parent);
+  }
+}
+
+void syncDirectory(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0) throw std::runtime_error("cannot open " + dir + ": " + std::strerror(errno));
+  const int r = ::fsync(fd);
+  const int e = errno;
+  ::close(fd);
+  if (r != 0) throw std::runtime_error("cannot sync " + dir + ": " + std::strerror(e));
 }
 
 std::string bodiesCsv(const std::vector<BodyState>& bodies) {

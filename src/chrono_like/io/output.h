@@ -26,7 +26,13 @@ struct BodyState {
 };
 
 // Writes `content` to `path` atomically (temporary file + rename). Throws std::runtime_error on failure.
-void writeFileAtomic(const std::string& path, const std::string& content);
+// Durability::Synced (checkpoints) also flushes the file to the disk (fsync) before the rename and the directory
+// after it, so that a power cut after the call returns cannot lose the file or leave a name without its content.
+enum class Durability { Renamed, Synced };
+void writeFileAtomic(const std::string& path, const std::string& content, Durability d = Durability::Renamed);
+
+// fsync of a directory (its entries: a rename into it made durable). Throws std::runtime_error on failure.
+void syncDirectory(const std::string& dir);
 
 // `s` single-quoted for /bin/sh.
 std::string shellQuote(const std::string& s);
