@@ -133,14 +133,16 @@ def sweep(grid, seeds=1, overrides=None, duration=None, backend="auto", steps=No
             sets = _override_list(fixed) + [f"{k}={v}" for k, v in values.items()]
             r = run(sets, duration=duration, backend=backend, seed=seed, scene=scene, steps=steps, dt=dt,
                     threads=threads, out=case_out)
-            cases.append({"id": cid, "setting": i, "values": values, "seed": seed, "metrics": r.metrics})
+            cases.append({"id": cid, "setting": i, "values": values, "seed": seed, "metrics": r.metrics,
+                          "_numbers": _dvisim._run_metrics(json.dumps(r.summary))})
     summary = []
     for i, values in enumerate(settings):
-        rows = [c["metrics"] for c in cases if c["setting"] == i]
+        rows = [c["_numbers"] for c in cases if c["setting"] == i]  # sweep.h: runMetrics, numbers only
         entry = {"setting": i, "values": values, "n": len(rows)}
-        for name in sorted({k for r in rows for k in r}):
-            vals = [r[name] for r in rows if isinstance(r.get(name), (int, float)) and not isinstance(r.get(name), bool)]
-            _, mean, half = mean_ci(vals)
+        for name in sorted({k for r in cases for k in r["_numbers"]}):
+            _, mean, half = mean_ci([r[name] for r in rows if name in r])
             entry[name] = (mean, half)
         summary.append(entry)
+    for c in cases:
+        del c["_numbers"]
     return {"cases": cases, "summary": summary}
