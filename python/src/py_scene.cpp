@@ -19,7 +19,7 @@ namespace {
 
 std::unique_ptr<PySystem> loadScene(const std::string& path, const std::vector<std::string>& overrides,
                                     const std::string& backend_in) {
-  dvi::requireOneOf("backend", backend_in, {"auto", "cpu", "gpu"});
+  dvi::requireOneOf("--backend", backend_in, {"auto", "cpu", "gpu"});
   if (path.empty()) throw dvi::InputError("load_scene: empty path (a .json or .bullet scene)");
   dvi::Scene scene = dvi::Scene::load(path, overrides);
   auto s = std::make_unique<PySystem>();

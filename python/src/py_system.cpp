@@ -67,7 +67,7 @@ py::array realView(PySystem& s, py::handle owner, real* data, size_t count, size
 }
 
 std::unique_ptr<PySystem> makeSystem(const std::string& settings_json, const std::string& backend_in) {
-  dvi::requireOneOf("backend", backend_in, {"auto", "cpu", "gpu"});
+  dvi::requireOneOf("--backend", backend_in, {"auto", "cpu", "gpu"});
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(settings_json);
