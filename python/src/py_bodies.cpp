@@ -98,8 +98,9 @@ py::array_t<int32_t> addSpheres(PySystem& s, const F64& pos, const F64& radii, c
 
 // A fixed body of triangles: vertices (V, 3) in the body frame, triangles (T, 3) of vertex indices. Degenerate
 // triangles are left out (makeTriangle); none left: InputError.
-int addMesh(PySystem& s, const F64& vertices, const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& tri,
-            const F64& pos, const F64& rot, const F64& material) {
+int addMesh(PySystem& s, const F64& vertices,
+            const py::array_t<int64_t, py::array::c_style | py::array::forcecast>& tri, const F64& pos, const F64& rot,
+            const F64& material) {
   if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw dvi::InputError("add_mesh: vertices must be (V, 3)");
   if (tri.ndim() != 2 || tri.shape(1) != 3) throw dvi::InputError("add_mesh: triangles must be (T, 3)");
   need(pos, 3, "position"), need(rot, 4, "rotation"), need(material, 4, "material");

@@ -15,7 +15,8 @@ namespace {
 // runCesMachine with the GIL released. It installs the CLI's SIGINT/SIGTERM handlers (an interrupted run ends
 // with exit code 4 and its results so far); Python's are put back afterwards, the stop request cleared.
 int runCes(const dvi::ces::CesRunOptions& o) {
-  struct sigaction old_int {}, old_term {};
+  struct sigaction old_int {
+  }, old_term{};
   sigaction(SIGINT, nullptr, &old_int);
   sigaction(SIGTERM, nullptr, &old_term);
   int code = 0;
@@ -69,9 +70,8 @@ void bindCes(py::module_& m) {
     return py::make_tuple(f.key, f.values);
   });
   m.def("_case_id", &dvi::sweep::caseId);
-  m.def("_run_metrics", [](const std::string& summary_text) {
-    return dvi::sweep::runMetrics(nlohmann::json::parse(summary_text));
-  });
+  m.def("_run_metrics",
+        [](const std::string& summary_text) { return dvi::sweep::runMetrics(nlohmann::json::parse(summary_text)); });
 }
 
 }  // namespace dvipy

@@ -122,8 +122,7 @@ class PyField : public dvi::ForceField {
     py::array_t<real, py::array::c_style | py::array::forcecast> a;
     try {
       a = py::array_t<real, py::array::c_style | py::array::forcecast>::ensure(o);
-    } catch (py::error_already_set&) {
-    }
+    } catch (py::error_already_set&) {}
     if (!a || a.ndim() != 2 || size_t(a.shape(0)) != n || a.shape(1) != 3)
       throw dvi::InputError(std::string("force field: the callback must return ") + what + " of shape (" +
                             std::to_string(n) + ", 3)");
@@ -175,14 +174,13 @@ namespace {
 
 // The (N, k) array `o` as reals, checked: shape, finite.
 py::array_t<real, py::array::c_style | py::array::forcecast> bodyArray(const py::object& o, size_t n, int cols,
-                                                                    const std::string& what) {
+                                                                       const std::string& what) {
   py::array_t<real, py::array::c_style | py::array::forcecast> a;
   if (py::isinstance<py::array>(o) && py::array(o.cast<py::array>()).dtype().kind() == 'O')
     throw dvi::InputError(what + ": expected numbers, got an array of objects");
   try {
     a = py::array_t<real, py::array::c_style | py::array::forcecast>::ensure(o);
-  } catch (py::error_already_set&) {
-  }
+  } catch (py::error_already_set&) {}
   if (!a) throw dvi::InputError(what + ": expected an array of numbers");
   if (a.ndim() != 2 || size_t(a.shape(0)) != n || a.shape(1) != cols)
     throw dvi::InputError(what + ": expected shape (" + std::to_string(n) + ", " + std::to_string(cols) + ")");

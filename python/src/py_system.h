@@ -43,10 +43,10 @@ struct PySystem {
 py::array realView(PySystem& s, py::handle owner, real* data, size_t count, size_t cols, bool writeable);
 
 void bindSystem(py::module_& m);
-void bindBodies(py::class_<PySystem>& c);  // py_bodies.cpp: add_body, add_spheres, add_mesh, ...
+void bindBodies(py::class_<PySystem>& c);        // py_bodies.cpp: add_body, add_spheres, add_mesh, ...
 void bindSceneMethods(py::class_<PySystem>& c);  // py_scene.cpp: run(), summary()
-void bindScene(py::module_& m);                   // py_scene.cpp: scenes
-void bindCes(py::module_& m);              // py_ces.cpp: the CES machine and the sweep statistics
+void bindScene(py::module_& m);                  // py_scene.cpp: scenes
+void bindCes(py::module_& m);                    // py_ces.cpp: the CES machine and the sweep statistics
 
 // n steps with the GIL released; the run totals updated; a Python force field's exception raised again.
 void stepSystem(PySystem& s, long long n);
