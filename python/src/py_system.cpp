@@ -143,8 +143,10 @@ void stepSystem(PySystem& s, long long n) {
   if (n < 0) throw dvi::InputError("step: the number of steps must be >= 0, got " + std::to_string(n));
   if (s.stepping.exchange(true)) throw std::runtime_error("dvisim.System: a step is running in another thread");
   std::exception_ptr failure;
+  bool interrupted = false;
   {
     py::gil_scoped_release nogil;
+    auto last_check = std::chrono::steady_clock::now();
     const bool host_state = s.sys->backendName() == "cpu";
     try {
       for (long long k = 0; k < n; ++k) {
@@ -157,6 +159,16 @@ void stepSystem(PySystem& s, long long n) {
         s.iterations_sum += st.iterations;
         s.max_penetration = std::fmax(s.max_penetration, st.max_penetration);
         if (host_state) dvi::checkFiniteState(s.sys->stepCount(), s.sys->time(), s.sys->bodies());
+        // Ctrl-C: Python's handler only sets a flag; look at it every 0.2 s (taking the GIL each step could wait
+        // on another thread's turn) and end step() with KeyboardInterrupt after the step that completed.
+        if (std::chrono::steady_clock::now() - last_check > std::chrono::milliseconds(200)) {
+          last_check = std::chrono::steady_clock::now();
+          py::gil_scoped_acquire gil;
+          if (PyErr_CheckSignals() != 0) {
+            interrupted = true;
+            break;
+          }
+        }
       }
     } catch (...) { failure = std::current_exception(); }
   }
@@ -168,6 +180,7 @@ void stepSystem(PySystem& s, long long n) {
     throw py::error_already_set();
   }
   if (failure) std::rethrow_exception(failure);
+  if (interrupted) throw py::error_already_set();  // the signal handler's exception (KeyboardInterrupt)
 }
 
 namespace {

@@ -206,3 +206,26 @@ def test_scene_overrides_as_dict_and_list(source):
     a = dvisim.load_scene(source / "scenes" / "stack.json", {"settings.dt": 5e-4}, backend="cpu")
     b = dvisim.load_scene(source / "scenes" / "stack.json", ["settings.dt=5e-4"], backend="cpu")
     assert a.dt == b.dt == 5e-4
+
+
+def test_ctrl_c_ends_a_long_step_call_with_keyboard_interrupt():
+    import os
+    import signal
+    import subprocess
+    import sys
+    code = ("import dvisim, numpy as np, sys\n"
+            "s = dvisim.System(backend='cpu', threads=1)\n"
+            "s.add_spheres(np.random.default_rng(0).random((2000, 3)), 0.01, density=1000)\n"
+            "print('ready', flush=True)\n"
+            "try:\n    s.step(10**7)\nexcept KeyboardInterrupt:\n"
+            "    print('interrupted after', s.step_count, flush=True)\n"
+            "s.step(1)\nprint('usable', s.step_count)\n")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=dict(os.environ))
+    assert p.stdout.readline().strip() == "ready"
+    import time
+    time.sleep(0.5)
+    p.send_signal(signal.SIGINT)
+    out, _ = p.communicate(timeout=30)
+    assert p.returncode == 0 and "interrupted after" in out and "usable" in out
+    n = int(out.split("interrupted after")[1].split()[0])
+    assert 0 < n < 10**7 and f"usable {n + 1}" in out
