@@ -144,3 +144,11 @@ CES_CASES = [
 def test_bad_ces_input_raises(kwargs, fragment):
     with pytest.raises(dvisim.InputError, match=fragment):
         dvisim.ces.run(**kwargs)
+
+
+@pytest.mark.skipif(dvisim.gpu_available()[0], reason="a GPU device is present")
+def test_gpu_backend_without_a_device_is_input_error():
+    with pytest.raises(dvisim.InputError, match="no usable GPU device"):
+        dvisim.System(backend="gpu")
+    with pytest.raises(dvisim.InputError, match="gpu"):
+        dvisim.ces.run(backend="gpu", duration=0.01)
