@@ -103,7 +103,8 @@ class PyField : public dvi::ForceField {
     try {
       const size_t n = b.count();
       auto view = [&](const dvi::Vec3* p) {
-        py::array a(py::dtype::of<real>(), {py::ssize_t(n), py::ssize_t(3)}, {}, reinterpret_cast<const real*>(p));
+        py::array a(py::dtype::of<real>(), {py::ssize_t(n), py::ssize_t(3)},
+                    {py::ssize_t(3 * sizeof(real)), py::ssize_t(sizeof(real))}, reinterpret_cast<const real*>(p));
         return a;  // a copy: the callback may keep it
       };
       py::object r = fn_(double(step.t), view(b.pos.data()), view(b.vel.data()));
