@@ -114,6 +114,8 @@ def sweep(grid, seeds=1, overrides=None, duration=None, backend="auto", steps=No
     grid: {key: [levels]} (or {key: "lo:hi:n"}); the first key varies slowest. Returns a dict:
       "cases":   [{"id", "setting" (index), "values" ({key: level}), "seed", "metrics" (dict)}] in run order
       "summary": [{"setting", "values", "n", "<metric>": (mean, ci95) ...}] per setting, as summary.csv
+      "paired":  [{"setting", "values", "n", "<metric>": (mean difference, ci95) ...}] per setting after the
+                 first, its difference from setting 0 seed by seed (common random numbers), as paired.csv
     out: keep each run in out/runs/<case id> (default: temporary)."""
     if not isinstance(grid, dict) or not grid:
         raise InputError("sweep: grid must be a non-empty dict {key: [levels]}")
@@ -143,6 +145,17 @@ def sweep(grid, seeds=1, overrides=None, duration=None, backend="auto", steps=No
             _, mean, half = mean_ci([r[name] for r in rows if name in r])
             entry[name] = (mean, half)
         summary.append(entry)
+    # against setting 0, seed by seed (common random numbers; sweep.h: pairedDifference), as paired.csv
+    names = sorted({k for c in cases for k in c["_numbers"]})
+    by = [{n: {c["seed"]: c["_numbers"][n] for c in cases if c["setting"] == i and n in c["_numbers"]}
+           for n in names} for i in range(len(settings))]
+    paired = []
+    for i in range(1, len(settings)):
+        entry = {"setting": i, "values": settings[i]}
+        diffs = {n: _dvisim._paired_difference(by[0][n], by[i][n]) for n in names}
+        entry["n"] = max((d[0] for d in diffs.values()), default=0)
+        entry.update({n: (d[1], d[2]) for n, d in diffs.items()})
+        paired.append(entry)
     for c in cases:
         del c["_numbers"]
-    return {"cases": cases, "summary": summary}
+    return {"cases": cases, "summary": summary, "paired": paired}

@@ -62,6 +62,21 @@ def test_sweep_confidence_intervals_are_the_clis(both):
     assert compared > 20
 
 
+def test_sweep_paired_differences_are_the_clis(both):
+    d, py = both
+    with open(d / "cli" / "paired.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(py["paired"]) == 1
+    row, mine = rows[0], py["paired"][0]
+    assert int(row["n"]) == mine["n"] == 2
+    compared = 0
+    for name, value in mine.items():
+        if isinstance(value, tuple):
+            assert row[name + ".diff"] == fmt10(value[0]) and row[name + ".ci95"] == fmt10(value[1]), name
+            compared += 1
+    assert compared > 20 and mine["voltage_kV"][0] == -20  # -40 kV against -20 kV, the same in both seeds
+
+
 def test_mean_ci_is_students_t():
     # n = 3, s = 1: half-width t_{0.975,2} / sqrt(3) with t_{0.975,2} = 4.302652729 (tables)
     n, mean, half = dvisim.ces.mean_ci([1.0, 2.0, 3.0])
