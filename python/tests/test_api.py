@@ -229,3 +229,22 @@ def test_ctrl_c_ends_a_long_step_call_with_keyboard_interrupt():
     assert p.returncode == 0 and "interrupted after" in out and "usable" in out
     n = int(out.split("interrupted after")[1].split()[0])
     assert 0 < n < 10**7 and f"usable {n + 1}" in out
+
+
+def test_another_thread_may_not_touch_a_stepping_system():
+    s = dvisim.System(backend="cpu")
+    s.add_spheres(np.random.default_rng(2).random((2000, 3)) * 2, 0.01, density=1000)
+    started = threading.Event()
+
+    def field(t, pos, vel):
+        started.set()
+        return np.zeros_like(pos)
+
+    s.add_force_field(field)
+    t = threading.Thread(target=lambda: s.step(60))
+    t.start()
+    assert started.wait(30)
+    with pytest.raises(RuntimeError, match="another thread"):
+        s.add_spheres([[9, 9, 9]], 0.01, density=1000)
+    t.join()
+    assert s.step_count == 60 and s.body_count == 2000
