@@ -332,7 +332,7 @@ def dropincorpus(text):
         r["geomean"], r["ran"], r["largest"] = m.group(1), m.group(2), m.group(3)
     r["examples"] = str(len(re.findall(r"^\| [A-Za-z0-9]+ \| (?:runs|\*\*refused\*\*) \|", text, re.M)))
     r["failing"] = str(len(re.findall(r"^- \S+ (?:FAILS|fails) ", text, re.M)))
-    m = re.search(r"^Goal \(issue 37\)[^:]*: (MET|NOT MET)", text, re.M)
+    m = re.search(r"^Goal \(issue 37\).*: (MET|NOT MET)\.$", text, re.M)
     r["goal"] = m.group(1) if m else None
     return r
 

@@ -44,6 +44,7 @@ struct RunResult {
   double joint_lin_settled = 0, joint_ang_settled = 0;  // the same over the frames after the first second
   int locked_hinges = 0;      // hinges with setLimit(lo, lo)
   double locked_hinge = 0;    // largest |hinge angle - lo| of those over all frames (rad)
+  double deepest = 0;         // deepest contact point of the world's manifolds over the last 60 frames (m)
   std::vector<JointStats> joint_stats;  // per constraint, in the order the example created them
   std::vector<BodyState> bodies;
 };

@@ -67,6 +67,7 @@ struct Options {
   std::string threads = "1";
   bool check = false, record = false, bodies = false;
   std::string out;
+  std::string load;  // the load average when the run began
 };
 
 std::vector<std::string> split(const std::string& s) {
@@ -257,6 +258,13 @@ std::string cpuName() {
   return "unknown CPU";
 }
 
+std::string loadAverage() {
+  std::ifstream f("/proc/loadavg");
+  std::string one, five, fifteen;
+  f >> one >> five >> fifteen;
+  return one.empty() ? "unknown" : one + " " + five + " " + fifteen + " (1, 5, 15 min)";
+}
+
 std::string shellLine(const std::string& cmd) {
   std::string out;
   if (FILE* p = popen(cmd.c_str(), "r")) {
@@ -304,7 +312,7 @@ std::string tableRow(const Comparison& c) {
       << " | " << fmt(c.body_mean) << " / " << fmt(c.body_max) << " | " << fmt(c.height, "%+.4f") << " | "
       << (isVehicle(c.example) ? fmt(c.chassis_pos) + " m, " + fmt(c.chassis_yaw) + " deg" : "-") << " | "
       << c.sleeping_stock << " / " << (o.ran ? std::to_string(c.sleeping_ours) : "-") << " of " << c.dynamic
-      << " | " << fmt(s.ms_per_frame, "%.4f") << " | " << (o.ran ? fmt(o.ms_per_frame, "%.4f") : "-") << " | "
+      << " | " << fmt(s.deepest * 1e3) << " / " << (o.ran ? fmt(o.deepest * 1e3) : "-") << " | " << fmt(s.ms_per_frame, "%.4f") << " | " << (o.ran ? fmt(o.ms_per_frame, "%.4f") : "-") << " | "
       << (o.ran ? fmt(c.ratio, "%.2fx") : "-") << " |";
   return row.str();
 }
@@ -334,7 +342,7 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
   std::ostringstream md;
   md << "# Bullet's example programs on the drop-in world (`dvisim_dropin_corpus`)\n\n"
      << "- device: " << cpuName() << " (" << o.threads << " thread each), no GPU used\n"
-     << "- host CPU: " << cpuName() << "\n- commit: " << commitId() << "\n- date: " << utc("%Y-%m-%dT%H:%M:%SZ")
+     << "- host CPU: " << cpuName() << "\n- load average at the start: " << o.load << "\n- commit: " << commitId() << "\n- date: " << utc("%Y-%m-%dT%H:%M:%SZ")
      << "\n- examples: bullet3 6c888f4 (bench/dropin_corpus/bullet3_examples), unchanged but for the world line\n"
      << "- frames: " << o.frames << " calls of each example's stepSimulation(1/60); drop-in at the default "
      << "DviWorldConfig; time: the lowest mean ms per frame of " << o.repeat << " alternating runs\n\n"
@@ -343,10 +351,11 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
      << "|angle - lo| of hinges with setLimit(lo, lo) (mrad); bodies: distance of each dynamic body from its stock "
      << "position at the end, mean / largest (m); height: mean height of the dynamic bodies along the example's up "
      << "axis, ours - stock (m); chassis: the heaviest body's position and yaw against stock's; asleep: stock / ours"
-     << "; ms per frame: mean wall time of the example's stepSimulation.\n\n"
+     << "; deepest: the deepest contact point of the manifolds over the last 60 frames, stock / ours (mm); ms per "
+     << "frame: mean wall time of the example's stepSimulation.\n\n"
      << "| example | drop-in | joints | joint error mm | joint error mrad | locked hinge mrad | bodies m | height m"
-     << " | chassis | asleep | stock ms | ours ms | ratio |\n"
-     << "| --- | --- | ---: | --- | --- | --- | --- | ---: | --- | --- | ---: | ---: | ---: |\n";
+     << " | chassis | asleep | deepest mm | stock ms | ours ms | ratio |\n"
+     << "| --- | --- | ---: | --- | --- | --- | --- | ---: | --- | --- | --- | ---: | ---: | ---: |\n";
   double logsum = 0, worst = 0;
   int n = 0;
   for (const auto& c : all) {
@@ -398,7 +407,8 @@ void printBodies(const Comparison& c) {
   }
 }
 
-int run(const Options& o) {
+int run(Options o) {
+  o.load = loadAverage();
   setenv("OMP_NUM_THREADS", o.threads.c_str(), 1);  // before the drop-in module loads libgomp
   const Module stock = load(exeDir() + "/dropin_corpus_stock.so");
   const Module ours = load(exeDir() + "/dropin_corpus_dvi.so");
