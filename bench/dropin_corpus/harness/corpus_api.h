@@ -31,20 +31,20 @@ struct RunRequest {
 };
 
 struct RunResult {
-  bool ran = false;       // initPhysics and every frame completed
-  std::string error;      // the exception's message when not (a refusal of the drop-in world)
-  std::string stage;      // where it stopped: "initPhysics" or "frame N"
-  int up_axis = 1;        // from the example's setUpAxis
+  bool ran = false;   // initPhysics and every frame completed
+  std::string error;  // the exception's message when not (a refusal of the drop-in world)
+  std::string stage;  // where it stopped: "initPhysics" or "frame N"
+  int up_axis = 1;    // from the example's setUpAxis
   int frames_done = 0;
-  double ms_per_frame = 0;    // mean wall time of the example's stepSimulation over the frames
-  double ms_median = 0;       // median frame
-  int joints = 0;             // constraints in the world after initPhysics
-  double joint_lin = 0;       // largest violation of a locked linear axis over all frames (m)
-  double joint_ang = 0;       // largest violation of a locked angular axis over all frames (rad)
+  double ms_per_frame = 0;  // mean wall time of the example's stepSimulation over the frames
+  double ms_median = 0;     // median frame
+  int joints = 0;           // constraints in the world after initPhysics
+  double joint_lin = 0;     // largest violation of a locked linear axis over all frames (m)
+  double joint_ang = 0;     // largest violation of a locked angular axis over all frames (rad)
   double joint_lin_settled = 0, joint_ang_settled = 0;  // the same over the frames after the first second
-  int locked_hinges = 0;      // hinges with setLimit(lo, lo)
-  double locked_hinge = 0;    // largest |hinge angle - lo| of those over all frames (rad)
-  double deepest = 0;         // deepest contact point of the world's manifolds over the last 60 frames (m)
+  int locked_hinges = 0;                                // hinges with setLimit(lo, lo)
+  double locked_hinge = 0;                              // largest |hinge angle - lo| of those over all frames (rad)
+  double deepest = 0;                   // deepest contact point of the world's manifolds over the last 60 frames (m)
   std::vector<JointStats> joint_stats;  // per constraint, in the order the example created them
   std::vector<BodyState> bodies;
 };

@@ -93,15 +93,24 @@ Options parse(int argc, char** argv) {
       if (i + 1 >= argc) throw UsageError(a + ": a value is required");
       return argv[++i];
     };
-    if (a == "--examples") o.examples = split(value());
-    else if (a == "--frames") o.frames = positiveInt(a, value());
-    else if (a == "--threads") o.threads = std::to_string(positiveInt(a, value()));
-    else if (a == "--repeat") o.repeat = positiveInt(a, value());
-    else if (a == "--check") o.check = true;
-    else if (a == "--record") o.record = true;
-    else if (a == "--bodies") o.bodies = true;
-    else if (a == "--out") o.out = value();
-    else throw UsageError("unknown option " + a + " (see the head of bench/dropin_corpus/harness/corpus_main.cpp)");
+    if (a == "--examples")
+      o.examples = split(value());
+    else if (a == "--frames")
+      o.frames = positiveInt(a, value());
+    else if (a == "--threads")
+      o.threads = std::to_string(positiveInt(a, value()));
+    else if (a == "--repeat")
+      o.repeat = positiveInt(a, value());
+    else if (a == "--check")
+      o.check = true;
+    else if (a == "--record")
+      o.record = true;
+    else if (a == "--bodies")
+      o.bodies = true;
+    else if (a == "--out")
+      o.out = value();
+    else
+      throw UsageError("unknown option " + a + " (see the head of bench/dropin_corpus/harness/corpus_main.cpp)");
   }
   return o;
 }
@@ -201,9 +210,12 @@ std::string fmt(double v, const char* f = "%.3g") {
 void judge(Comparison& c, const std::string& check, bool ok, const std::string& numbers) {
   const std::string key = c.example + ": " + check;
   const bool expected = kExpectedFailures.count(key) > 0;
-  if (!ok && expected) c.xfailed.push_back(check + " (" + numbers + ")");
-  else if (!ok) c.failed.push_back(check + " (" + numbers + ")");
-  else if (expected) c.xpassed.push_back(check + " (" + numbers + ")");
+  if (!ok && expected)
+    c.xfailed.push_back(check + " (" + numbers + ")");
+  else if (!ok)
+    c.failed.push_back(check + " (" + numbers + ")");
+  else if (expected)
+    c.xpassed.push_back(check + " (" + numbers + ")");
 }
 
 // Each constraint against the same constraint of stock's run (creation order), over the frames after the first 60
@@ -220,15 +232,16 @@ void judgeJoints(Comparison& c) {
     ok = ok && share <= 1;
     if (share > worst)
       worst = share, numbers = "#" + std::to_string(i) + " " + s[i].type + ": " + fmt(o[i].lin_settled * 1e3) +
-                                " mm (stock " + fmt(s[i].lin_settled * 1e3) + ", bound " + fmt(lb * 1e3) + "), " +
-                                fmt(o[i].ang_settled * 1e3) + " mrad (stock " + fmt(s[i].ang_settled * 1e3) +
-                                ", bound " + fmt(ab * 1e3) + ")";
+                               " mm (stock " + fmt(s[i].lin_settled * 1e3) + ", bound " + fmt(lb * 1e3) + "), " +
+                               fmt(o[i].ang_settled * 1e3) + " mrad (stock " + fmt(s[i].ang_settled * 1e3) +
+                               ", bound " + fmt(ab * 1e3) + ")";
   }
   int over = 0;
   for (size_t i = 0; i < std::min(s.size(), o.size()); ++i)
     over += o[i].lin_settled > std::max(3 * s[i].lin_settled, 5e-3) ||
             o[i].ang_settled > std::max(3 * s[i].ang_settled, 5e-3);
-  judge(c, "joints", ok, std::to_string(over) + " of " + std::to_string(s.size()) + " over the bound; worst " + numbers);
+  judge(c, "joints", ok,
+        std::to_string(over) + " of " + std::to_string(s.size()) + " over the bound; worst " + numbers);
 }
 
 void runChecks(Comparison& c) {
@@ -311,9 +324,9 @@ std::string tableRow(const Comparison& c) {
       << (s.locked_hinges ? fmt(s.locked_hinge * 1e3) + " / " + (o.ran ? fmt(o.locked_hinge * 1e3) : "-") : "-")
       << " | " << fmt(c.body_mean) << " / " << fmt(c.body_max) << " | " << fmt(c.height, "%+.4f") << " | "
       << (isVehicle(c.example) ? fmt(c.chassis_pos) + " m, " + fmt(c.chassis_yaw) + " deg" : "-") << " | "
-      << c.sleeping_stock << " / " << (o.ran ? std::to_string(c.sleeping_ours) : "-") << " of " << c.dynamic
-      << " | " << fmt(s.deepest * 1e3) << " / " << (o.ran ? fmt(o.deepest * 1e3) : "-") << " | " << fmt(s.ms_per_frame, "%.4f") << " | " << (o.ran ? fmt(o.ms_per_frame, "%.4f") : "-") << " | "
-      << (o.ran ? fmt(c.ratio, "%.2fx") : "-") << " |";
+      << c.sleeping_stock << " / " << (o.ran ? std::to_string(c.sleeping_ours) : "-") << " of " << c.dynamic << " | "
+      << fmt(s.deepest * 1e3) << " / " << (o.ran ? fmt(o.deepest * 1e3) : "-") << " | " << fmt(s.ms_per_frame, "%.4f")
+      << " | " << (o.ran ? fmt(o.ms_per_frame, "%.4f") : "-") << " | " << (o.ran ? fmt(c.ratio, "%.2fx") : "-") << " |";
   return row.str();
 }
 
@@ -329,10 +342,10 @@ std::string jointDetails(const std::vector<Comparison>& all) {
     for (size_t i = 0; i < s.size(); ++i) {
       const corpus::JointStats none;
       const corpus::JointStats& q = i < o.size() ? o[i] : none;
-      md << "| " << c.example << " | " << i << " | " << s[i].type << " | " << s[i].frames << " / " << q.frames
-         << " | " << fmt(s[i].lin_settled * 1e3) << " / " << fmt(q.lin_settled * 1e3) << " (" << fmt(s[i].lin * 1e3)
-         << " / " << fmt(q.lin * 1e3) << ") | " << fmt(s[i].ang_settled * 1e3) << " / " << fmt(q.ang_settled * 1e3)
-         << " (" << fmt(s[i].ang * 1e3) << " / " << fmt(q.ang * 1e3) << ") |\n";
+      md << "| " << c.example << " | " << i << " | " << s[i].type << " | " << s[i].frames << " / " << q.frames << " | "
+         << fmt(s[i].lin_settled * 1e3) << " / " << fmt(q.lin_settled * 1e3) << " (" << fmt(s[i].lin * 1e3) << " / "
+         << fmt(q.lin * 1e3) << ") | " << fmt(s[i].ang_settled * 1e3) << " / " << fmt(q.ang_settled * 1e3) << " ("
+         << fmt(s[i].ang * 1e3) << " / " << fmt(q.ang * 1e3) << ") |\n";
     }
   }
   return md.str();
@@ -342,7 +355,8 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
   std::ostringstream md;
   md << "# Bullet's example programs on the drop-in world (`dvisim_dropin_corpus`)\n\n"
      << "- device: " << cpuName() << " (" << o.threads << " thread each), no GPU used\n"
-     << "- host CPU: " << cpuName() << "\n- load average at the start: " << o.load << "\n- commit: " << commitId() << "\n- date: " << utc("%Y-%m-%dT%H:%M:%SZ")
+     << "- host CPU: " << cpuName() << "\n- load average at the start: " << o.load << "\n- commit: " << commitId()
+     << "\n- date: " << utc("%Y-%m-%dT%H:%M:%SZ")
      << "\n- examples: bullet3 6c888f4 (bench/dropin_corpus/bullet3_examples), unchanged but for the world line\n"
      << "- frames: " << o.frames << " calls of each example's stepSimulation(1/60); drop-in at the default "
      << "DviWorldConfig; time: the lowest mean ms per frame of " << o.repeat << " alternating runs\n\n"
@@ -370,11 +384,11 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
   for (const auto& c : all) {
     if (!c.ours.ran) md << "- " << c.example << ": " << outcome(c.ours) << "\n";
     for (const auto& f : c.xfailed)
-      md << "- " << c.example << " fails " << f << "; a known failure: "
-         << kExpectedFailures.at(c.example + ": " + f.substr(0, f.find(" ("))) << "\n";
+      md << "- " << c.example << " fails " << f
+         << "; a known failure: " << kExpectedFailures.at(c.example + ": " + f.substr(0, f.find(" ("))) << "\n";
     for (const auto& f : c.failed) md << "- " << c.example << " FAILS " << f << "\n";
-    for (const auto& f : c.xpassed) md << "- " << c.example << " passes a check listed as expected to fail: " << f
-                                       << "\n";
+    for (const auto& f : c.xpassed)
+      md << "- " << c.example << " passes a check listed as expected to fail: " << f << "\n";
   }
   md << jointDetails(all);
   return md.str();
@@ -383,8 +397,10 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
 std::string slug(const std::string& s) {
   std::string o;
   for (char ch : s) {
-    if (std::isalnum((unsigned char)ch)) o += char(std::tolower((unsigned char)ch));
-    else if (!o.empty() && o.back() != '-') o += '-';
+    if (std::isalnum((unsigned char)ch))
+      o += char(std::tolower((unsigned char)ch));
+    else if (!o.empty() && o.back() != '-')
+      o += '-';
   }
   while (!o.empty() && o.back() == '-') o.pop_back();
   return o.substr(0, 48);
@@ -449,8 +465,8 @@ int run(Options o) {
   std::fputs(md.c_str(), stdout);
   if (!o.out.empty()) writeFile(o.out, md);
   if (o.record) {
-    const std::string path = std::string(DVISIM_SOURCE_DIR) + "/bench/results/dropincorpus_" + slug(cpuName()) +
-                             "-" + o.threads + "-threads_" + utc("%Y%m%d-%H%M%S") + ".md";
+    const std::string path = std::string(DVISIM_SOURCE_DIR) + "/bench/results/dropincorpus_" + slug(cpuName()) + "-" +
+                             o.threads + "-threads_" + utc("%Y%m%d-%H%M%S") + ".md";
     writeFile(path, md);
     std::fprintf(stderr, "recorded %s\n", path.c_str());
   }

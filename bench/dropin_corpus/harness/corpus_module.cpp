@@ -84,7 +84,9 @@ struct NullRenderer : CommonRenderInterface {
   int getTotalNumInstances() const override { return 0; }
   void writeTransforms() override {}
   void clearZBuffer() override {}
-  struct GLInstanceRendererInternalData* getInternalData() override { return nullptr; }
+  struct GLInstanceRendererInternalData* getInternalData() override {
+    return nullptr;
+  }
 };
 
 // The browser gives each world a debug drawer (TestHingeTorque sets its mode); this one draws nothing.
@@ -324,15 +326,13 @@ void runExample(const Entry& ex, const corpus::RunRequest& q, corpus::RunResult&
 }  // namespace
 
 extern "C" __attribute__((visibility("default"))) void dvisim_corpus_run(const corpus::RunRequest* q,
-                                                                          corpus::RunResult* r) {
+                                                                         corpus::RunResult* r) {
   *r = corpus::RunResult{};
   for (const Entry& ex : kExamples) {
     if (q->example != ex.name) continue;
     try {
       runExample(ex, *q, *r);
-    } catch (const std::exception& e) {
-      r->error = e.what();
-    } catch (...) {
+    } catch (const std::exception& e) { r->error = e.what(); } catch (...) {
       r->error = "unknown exception";
     }
     return;
