@@ -390,6 +390,13 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
     for (const auto& f : c.xpassed)
       md << "- " << c.example << " passes a check listed as expected to fail: " << f << "\n";
   }
+  md << "\n## The drop-in's solver\n\nIterations of the last sub-step of each frame (mean, largest) and the "
+     << "sub-steps that ended above the solver's tolerance.\n\n| example | iterations mean | largest | sub-steps "
+     << "not converged |\n| --- | ---: | ---: | --- |\n";
+  for (const auto& c : all)
+    if (c.ours.ran)
+      md << "| " << c.example << " | " << fmt(c.ours.iterations_mean, "%.1f") << " | " << c.ours.iterations_max << " | "
+         << c.ours.substeps_not_converged << " of " << c.ours.substeps << " |\n";
   md << jointDetails(all);
   return md.str();
 }

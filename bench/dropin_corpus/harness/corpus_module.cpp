@@ -16,6 +16,9 @@
 #include <vector>
 
 #include "corpus_api.h"
+#ifdef DVISIM_CORPUS_DVI
+#include "chrono_like/bullet/bullet_world.h"
+#endif
 #include "CommonInterfaces/CommonExampleInterface.h"
 #include "CommonInterfaces/CommonGUIHelperInterface.h"
 #include "CommonInterfaces/CommonRenderInterface.h"
@@ -289,6 +292,26 @@ void readBodies(btDiscreteDynamicsWorld* w, corpus::RunResult& r) {
   }
 }
 
+// The drop-in's solver statistics after a frame (the drop-in module only).
+struct SolverTally {
+  double sum = 0;
+  int frames = 0;
+  void add(btDiscreteDynamicsWorld* w, corpus::RunResult& r) {
+#ifdef DVISIM_CORPUS_DVI
+    const auto* ours = dynamic_cast<dvi::DviDynamicsWorld*>(w);
+    if (!ours) return;
+    const int it = ours->system().lastStats().iterations;
+    sum += it, ++frames;
+    r.iterations_mean = sum / frames;
+    r.iterations_max = std::max(r.iterations_max, it);
+    r.substeps = ours->convergence().steps;
+    r.substeps_not_converged = ours->convergence().steps_not_converged;
+#else
+    (void)w, (void)r;
+#endif
+  }
+};
+
 void runExample(const Entry& ex, const corpus::RunRequest& q, corpus::RunResult& r) {
   using Clock = std::chrono::steady_clock;
   corpus::silencePrintf();
@@ -302,12 +325,14 @@ void runExample(const Entry& ex, const corpus::RunRequest& q, corpus::RunResult&
   countLockedHinges(gui.world, r);
   std::vector<double> ms;
   JointTracker joints;
+  SolverTally solver;
   for (int f = 0; f < q.frames; ++f) {
     r.stage = "frame " + std::to_string(f + 1);
     const auto t0 = Clock::now();
     example->stepSimulation(1.f / 60.f);
     ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
     joints.measure(gui.world, f >= 60, r);  // settled: after the first 60 frames
+    solver.add(gui.world, r);
     if (f >= q.frames - 60) r.deepest = std::max(r.deepest, deepestContact(gui.world));
     r.frames_done = f + 1;
   }
