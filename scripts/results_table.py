@@ -18,7 +18,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS_DIR = os.path.join(ROOT, "bench", "results")
 RESULTS_MD = os.path.join(ROOT, "bench", "RESULTS.md")
 
-KINDS = ["scaling", "scaling_mpi", "ces", "accuracy", "pruning", "stability", "dropin"]
+KINDS = ["scaling", "scaling_mpi", "ces", "accuracy", "pruning", "stability", "dropin", "dropincorpus"]
 DASH = "-"
 
 
@@ -324,6 +324,30 @@ DROPIN_INTRO = (
     "contact points, the deepest penetration and each scene's drift."
 )
 
+# --- dropincorpus ----------------------------------------------------------------------------
+def dropincorpus(text):
+    r = common(text, device_names=("device",))
+    m = re.search(r"^Geometric mean of the ratios: ([\d.]+x) over (\d+) examples that ran \(largest ([\d.]+x)\)", text, re.M)
+    if m:
+        r["geomean"], r["ran"], r["largest"] = m.group(1), m.group(2), m.group(3)
+    r["examples"] = str(len(re.findall(r"^\| [A-Za-z0-9]+ \| (?:runs|\*\*refused\*\*) \|", text, re.M)))
+    r["failing"] = str(len(re.findall(r"^- \S+ (?:FAILS|fails) ", text, re.M)))
+    m = re.search(r"^Goal \(issue 37\).*: (MET|NOT MET)\.$", text, re.M)
+    r["goal"] = m.group(1) if m else None
+    return r
+
+
+DROPINCORPUS_COLS = [("date", "date"), ("device", "device"), ("commit", "commit"), ("examples", "examples"),
+                     ("ran", "ran on the drop-in"), ("geomean", "ms/frame ratio, geomean"),
+                     ("largest", "largest ratio"), ("failing", "checks failed (known and new)"),
+                     ("goal", "speed goal")]
+DROPINCORPUS_INTRO = (
+    "Bullet's own example programs (bullet3 6c888f4, unchanged but for the world line) on stock Bullet and on the "
+    "drop-in world at its default configuration, one thread each, 300 frames: our ms per frame over stock's in the "
+    "same run. The record has every example's joint errors, body differences, pile heights, vehicle chassis and "
+    "the checks of issue 37 it fails."
+)
+
 # --- scaling --mpi ---------------------------------------------------------------------------
 def scaling_mpi(text):
     r = common(text, device_names=("GPU", "CPU") if field(text, "GPU") not in (None, "none") else ("CPU",))
@@ -361,6 +385,8 @@ PARSERS = {
     "pruning": (pruning, PRUNING_COLS, PRUNING_INTRO, "Pruning (`dvisim bench pruning`)"),
     "stability": (stability, STABILITY_COLS, STABILITY_INTRO, "Stability (`dvisim bench stability`)"),
     "dropin": (dropin, DROPIN_COLS, DROPIN_INTRO, "Drop-in world on Bullet's scenes (`dvisim bench dropin`)"),
+    "dropincorpus": (dropincorpus, DROPINCORPUS_COLS, DROPINCORPUS_INTRO,
+                     "Bullet's example programs on the drop-in world (`dvisim_dropin_corpus`)"),
 }
 
 

@@ -433,7 +433,23 @@ JointBody BulletJoints::side(const BodyArrays& bodies, const btRigidBody* body) 
   return s;
 }
 
-// Each enabled joint's rows; Bullet bounds every row of a constraint by its breaking threshold
+namespace {
+
+// A side of a joint that cannot move in this sub-step: Bullet's fixed body or a body outside the System, a static or
+// kinematic body, or a sleeping one (fixed until its island wakes).
+bool immovable(const BodyArrays& bodies, const JointBody& s) {
+  if (s.index < 0) return true;
+  const size_t i = size_t(s.index);
+  return i < bodies.flags.size() && (bodies.flags[i] & (kBodyFixed | kBodyKinematic)) != 0;
+}
+
+}  // namespace
+
+// Each enabled joint's rows, except those of a joint neither of whose bodies can move: its rows could change no
+// velocity (a zero diagonal), and an error they carry would hold the solve's residual up to its iteration cap every
+// sub-step (a hinge whose only dynamic body has fallen asleep). Bullet solves no sleeping island either
+// (btSimulationIslandManager::buildAndProcessIslands), and its rows between two static bodies apply nothing.
+// Bullet bounds every row of a constraint by its breaking threshold
 // (btSequentialImpulseConstraintSolver::convertJoint), so a joint that breaks gives at most that impulse.
 void BulletJoints::rows(const BodyArrays& bodies, const StepContext& step, std::vector<ConstraintRow>& out) {
   row_joint_.clear();
@@ -443,8 +459,10 @@ void BulletJoints::rows(const BodyArrays& bodies, const StepContext& step, std::
     btTypedConstraint* c = joints_[k];
     if (!c->isEnabled()) continue;
     const JointSpec j = jointSpecFromBullet(*c);
+    const JointBody A = side(bodies, j.a), B = side(bodies, j.b);
+    if (immovable(bodies, A) && immovable(bodies, B)) continue;
     const size_t before = out.size();
-    jointRows(j, side(bodies, j.a), side(bodies, j.b), step.dt, settings_, out);
+    jointRows(j, A, B, step.dt, settings_, out);
     if (c->getBreakingImpulseThreshold() < SIMD_INFINITY) {  // Bullet's default: unbreakable, rows unbounded
       const real limit = real(c->getBreakingImpulseThreshold());
       for (size_t r = before; r < out.size(); ++r) {

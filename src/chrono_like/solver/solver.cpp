@@ -94,8 +94,12 @@ class CpuOps {
   template <class F>
   void map(const F& f) {
     const int64_t nb = nb_;
-#pragma omp parallel for schedule(static) num_threads(T_) if (T_ > 1)
-    for (int64_t k = 0; k < nb; ++k) f(k);
+    if (T_ > 1) {  // one thread: a plain loop, no OpenMP region (detail::blockReduce)
+#pragma omp parallel for schedule(static) num_threads(T_)
+      for (int64_t k = 0; k < nb; ++k) f(k);
+    } else {
+      for (int64_t k = 0; k < nb; ++k) f(k);
+    }
   }
   template <int M, class F>
   void reduce(const F& f, double* out) {

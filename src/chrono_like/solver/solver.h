@@ -232,8 +232,7 @@ void blockReduce(int64_t nc, int threads, std::vector<double>& part, double* out
   const int64_t nblk = (nc + kReduceBlock - 1) / kReduceBlock;
   if (int64_t(part.size()) < nblk * M) part.resize(size_t(nblk * M));
   double* pp = part.data();
-#pragma omp parallel for schedule(static) num_threads(threads) if (threads > 1)
-  for (int64_t bl = 0; bl < nblk; ++bl) {
+  auto block = [&](int64_t bl) {
     double acc[M];
     for (int m = 0; m < M; ++m) acc[m] = 0;
     const int64_t k1 = (bl + 1) * kReduceBlock < nc ? (bl + 1) * kReduceBlock : nc;
@@ -244,6 +243,14 @@ void blockReduce(int64_t nc, int threads, std::vector<double>& part, double* out
       for (int m = 0; m < M; ++m) acc[m] += c[m];
     }
     for (int m = 0; m < M; ++m) pp[bl * M + m] = acc[m];
+  };
+  // One thread: a plain loop. An OpenMP region costs a GOMP_parallel call even under if (false) (base/parallel_for.h),
+  // and the solver enters this once or more per iteration.
+  if (threads > 1) {
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (int64_t bl = 0; bl < nblk; ++bl) block(bl);
+  } else {
+    for (int64_t bl = 0; bl < nblk; ++bl) block(bl);
   }
   for (int m = 0; m < M; ++m) out[m] = 0;
   for (int64_t bl = 0; bl < nblk; ++bl)
