@@ -81,6 +81,13 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
     }
   };
   walk(file, schema, "");
+  // The crushed-PCB preset keeps to the schema too and parses, with its composites.
+  const json pcb = json::parse(slurp(std::string(DVISIM_SOURCE_DIR) + "/scenes/ces_pcb.json"));
+  walk(pcb, schema, "");
+  const CesConfig pc = parseCesDocument(pcb, {}, "ces_pcb.json");
+  REQUIRE(pc.materials.size() == 3);
+  CHECK(pc.materials[2].kind == MaterialKind::Composite);
+  CHECK(pc.materials[2].metal_fraction_max == 0.7);
   // The parsed defaults: the composite machine of docs/CES.md (corona wire + static tube on one supply).
   const CesConfig c = configWith({});
   CHECK(c.drum_diameter == Approx(0.320));

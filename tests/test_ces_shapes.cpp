@@ -36,7 +36,8 @@ double osbornAxial(double m) {
 
 }  // namespace
 
-TEST_CASE("Depolarisation factors: sphere, Osborn's spheroids, sum rule, plate and needle limits", "[ces][ces_shapes]") {
+TEST_CASE("Depolarisation factors: sphere, Osborn's spheroids, sum rule, plate and needle limits",
+          "[ces][ces_shapes]") {
   CHECK(double(depolarizationFactor(1, 1, 1)) == Approx(1.0 / 3.0).epsilon(1e-12));
   for (double m : {0.05, 0.25, 0.5, 0.9, 1.5, 2.0, 4.0, 20.0}) {
     INFO("aspect " << m);
@@ -48,7 +49,7 @@ TEST_CASE("Depolarisation factors: sphere, Osborn's spheroids, sum rule, plate a
     CHECK(double(n.x + n.y + n.z) == Approx(1.0).epsilon(1e-10));
   }
   CHECK(double(depolarizationFactor(real(1e-4), 1, 1)) > 0.9998);  // across a thin plate: 1
-  CHECK(double(depolarizationFactor(100, 1, 1)) < 1e-3);             // along a needle: 0
+  CHECK(double(depolarizationFactor(100, 1, 1)) < 1e-3);           // along a needle: 0
 }
 
 TEST_CASE("Pauthenier charge of an ellipsoid: the sphere's law and the maximum over its surface", "[ces][ces_shapes]") {
@@ -154,8 +155,8 @@ TEST_CASE("Shape support: the largest extent along a direction, against sampled 
           for (int sy = -1; sy <= 1; sy += 2)
             sb = std::max(sb, sx * 0.5 * d.x + sy * 0.125 * d.y + (2 * t - 1) * 0.5 * d.z);
         sc = std::max(sc, 0.2 * std::cos(ph) * d.x + (2 * t - 1) * 0.8 * d.y + 0.2 * std::sin(ph) * d.z);
-        se = std::max(se, std::sin(th) * std::cos(ph) * d.x + 0.5 * std::sin(th) * std::sin(ph) * d.y +
-                              0.7 * std::cos(th) * d.z);
+        se = std::max(
+            se, std::sin(th) * std::cos(ph) * d.x + 0.5 * std::sin(th) * std::sin(ph) * d.y + 0.7 * std::cos(th) * d.z);
       }
     CHECK(double(shapeSupport(box, d)) == Approx(sb).epsilon(1e-9));
     CHECK(double(shapeSupport(cyl, d)) == Approx(sc).epsilon(1e-4));
@@ -203,8 +204,8 @@ TEST_CASE("A copper flake and wire on the drum: induced charge, lift and contact
   const double q = cesChargeUpdate(h.m, flake, top, flat, real(-1e-12), fs.radius, fs.bound, real(2e-4), f);
   CHECK(q == Approx(kE0 * En * double(flake.qcoef.y)).epsilon(1e-5));
   // Its lift is the slab's k_L q E (< the sphere's 0.832), straight up.
-  const Vec3 F = cesParticleForce(h.m, flake, top, flat, Vec3{0, 0, 0}, real(q), fs.radius, fs.bound, real(1e-6),
-                                  real(2e-4));
+  const Vec3 F =
+      cesParticleForce(h.m, flake, top, flat, Vec3{0, 0, 0}, real(q), fs.radius, fs.bound, real(1e-6), real(2e-4));
   CHECK(double(F.y) == Approx(double(flake.lift.y) * q * En).epsilon(1e-5));
   CHECK(flake.lift.y < kFeliciLiftFactor);
   // 0.6 bounding radii off the drum a flat flake no longer touches (the old 1.1 x bound test said it did), and
@@ -231,7 +232,8 @@ TEST_CASE("A copper flake and wire on the drum: induced charge, lift and contact
                                f)) == Approx(double(feliciCharge(ss.radius, real(En)))).epsilon(1e-6));
 }
 
-TEST_CASE("Image force of a flat contact: the point image at the true distance, at most a sheet's", "[ces][ces_shapes]") {
+TEST_CASE("Image force of a flat contact: the point image at the true distance, at most a sheet's",
+          "[ces][ces_shapes]") {
   const double q = 1e-12, r = 0.4e-3;
   // A sphere keeps the point image at d >= r.
   CHECK(double(imageForceShape(real(q), real(r), real(r), real(M_PI * r * r))) ==
@@ -267,7 +269,8 @@ TEST_CASE("Composite conductivity: GEM's limits are the percolation laws, relaxa
   CHECK(prev < 1e-15);
 }
 
-TEST_CASE("Composite particles: metal fraction, exact mass split, accounting as metal and plastic", "[ces][ces_shapes]") {
+TEST_CASE("Composite particles: metal fraction, exact mass split, accounting as metal and plastic",
+          "[ces][ces_shapes]") {
   CesConfig cfg = parseCesDocument(nlohmann::json::parse(defaultCesJson()), {}, "default");
   size_t ic = 0;
   while (cfg.materials[ic].kind != MaterialKind::Composite) ++ic;
@@ -293,8 +296,8 @@ TEST_CASE("Composite particles: metal fraction, exact mass split, accounting as 
     // The metal's mass share phi rho_m / rho with rho = phi rho_m + (1 - phi) rho_p, in whole femtograms.
     const double rho = s.metal_fraction * 8900 + (1 - s.metal_fraction) * 1850;
     CHECK(double(s.metal_fg) == Approx(double(s.mass_fg) * s.metal_fraction * 8900 / rho).epsilon(1e-5));
-    CollectedParticle c{0, int32_t(s.material), kind, float(double(s.metal_fg) / double(s.mass_fg)), s.mass_fg,
-                        0.3, 0, 0};
+    CollectedParticle c{0, int32_t(s.material), kind, float(double(s.metal_fg) / double(s.mass_fg)), s.mass_fg, 0.3, 0,
+                        0};
     metal += metalFg(c);
     plastic += s.mass_fg - metalFg(c);
     col.push_back(c);
@@ -326,4 +329,26 @@ TEST_CASE("Composite configuration: bad metal fractions and keys are input error
   bad("feed.materials.2.relaxation_time_s=1", "relaxation_time_s");
   bad("feed.materials.1.metal_fraction=0.3", "only a composite");
   CHECK(parseCesDocument(doc, {"feed.materials.2.metal_fraction=0.3"}, "t").materials[2].metal_fraction_max == 0.3);
+}
+
+TEST_CASE("Surface conductivity: O'Konski's 2 sigma_s / r adds to the bulk's rate; the key is checked",
+          "[ces][ces_shapes]") {
+  const double r = 0.4e-3, eps = 2.5, ss = 1e-14;
+  // No bulk conduction: tau = eps0 eps_r r / (2 sigma_s) = 0.4427 s.
+  CHECK(double(surfaceRelaxationTime(real(INFINITY), real(ss), real(r), real(eps))) ==
+        Approx(kE0 * eps * r / (2 * ss)).epsilon(1e-9));
+  // With bulk conduction the rates add; sigma_s = 0 and a conductor keep the bulk's time.
+  CHECK(double(surfaceRelaxationTime(real(2), real(ss), real(r), real(eps))) ==
+        Approx(1 / (0.5 + 2 * ss / (r * kE0 * eps))).epsilon(1e-9));
+  CHECK(surfaceRelaxationTime(real(2), 0, real(r), real(eps)) == real(2));
+  CHECK(surfaceRelaxationTime(0, real(ss), real(r), real(INFINITY)) == 0);
+  // Through the configuration to a fed plastic sphere.
+  const nlohmann::json doc = nlohmann::json::parse(defaultCesJson());
+  const CesConfig cfg = parseCesDocument(doc, {"feed.materials.1.surface_conductivity_S=1e-14"}, "t");
+  SplitMix64 rng{1};
+  const ParticleSpec s = makeParticleSpec(1, ParticleShape::Sphere, 2 * r, 946, rng);
+  const double tau_bulk = cfg.materials[1].relaxation_time;  // 2214 s (1e-14 S/m)
+  CHECK(double(makeParticleElectro(s, cfg.materials[1]).tau) ==
+        Approx(1 / (1 / tau_bulk + 2 * ss / (r * kE0 * eps))).epsilon(1e-6));
+  CHECK_THROWS_AS(parseCesDocument(doc, {"feed.materials.1.surface_conductivity_S=-1"}, "t"), InputError);
 }

@@ -140,6 +140,13 @@ void parseShapes(const Checker& c, const json& shapes, const std::string& p, Mat
   if (!(sum > 0)) c.fail(p + ".shapes", "needs at least one shape with a positive weight");
 }
 
+// A material's surface_conductivity_S (S, >= 0, at most 1; 0 when not given).
+double parseSurfaceConductivity(const Checker& c, const json& m, const std::string& p) {
+  return m.contains("surface_conductivity_S")
+             ? c.range(m["surface_conductivity_S"], p + ".surface_conductivity_S", 0, 1)
+             : 0.0;
+}
+
 // A composite (non-liberated) material: metal at a volume fraction uniform over metal_fraction [min, max] in a
 // matrix of density_kg_m3 (one number), eps_r and conductivity_S_m (FR-4 glass-epoxy by default: 1850 kg/m^3,
 // eps_r 4.4, 1e-14 S/m); the metal of metal_density_kg_m3 (copper, 8900). Its relaxation time follows from the
@@ -186,7 +193,7 @@ MaterialConfig parseComposite(const Checker& c, const json& m, const std::string
 MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string& p) {
   c.object(m, p,
            {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "conductivity_S_m",
-            "shapes", "metal_fraction", "metal_density_kg_m3"});
+            "shapes", "metal_fraction", "metal_density_kg_m3", "surface_conductivity_S"});
   MaterialConfig out;
   if (!m.contains("kind")) c.fail(p + ".kind", "missing (metal|plastic|middling|composite)");
   const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling", "composite"});
@@ -194,7 +201,12 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
              : kind == "plastic"   ? MaterialKind::Plastic
              : kind == "composite" ? MaterialKind::Composite
                                    : MaterialKind::Middling;
-  if (out.kind == MaterialKind::Composite) return parseComposite(c, m, p, kind);
+  if (out.kind == MaterialKind::Composite) {
+    out = parseComposite(c, m, p, kind);
+    out.surface_conductivity = parseSurfaceConductivity(c, m, p);
+    return out;
+  }
+  out.surface_conductivity = parseSurfaceConductivity(c, m, p);
   out.name = m.contains("name") ? c.string(m["name"], p + ".name") : kind;
   // Defaults by kind (docs/CES.md, Charges): tau = 0 for metals, infinite for plastics, 0.5 s middlings [assumed].
   const CesMachineParams d;

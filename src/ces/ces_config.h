@@ -53,6 +53,9 @@ struct MaterialConfig {
   // mixture's at the two fractions. conductivity (or 1e-14 S/m) is the matrix's, eps_r the matrix's.
   double metal_fraction_min = 0, metal_fraction_max = 0;
   double metal_density = 8900, matrix_density = 1850;  // kg/m^3 (copper; FR-4 glass-epoxy)
+  // S, surface conductivity of an insulating particle (surface_conductivity_S, 0: none): the charge also leaks
+  // along the surface to the drum, 1/tau = 1/tau_bulk + 2 sigma_s / (r eps0 eps_r) (charging.h).
+  double surface_conductivity = 0;
 };
 
 // A cylindrical electrode (axis along z): the corona wire, the static tube, or a further electrode of the

@@ -150,5 +150,18 @@ DVI_HD real compositeRelaxationTime(real phi, real eps_matrix, real sigma_metal,
 // resistivity of pure metals": 1.68e-8 Ohm m): the metal of the composites.
 constexpr real kCopperConductivity = real(5.96e7);
 
+// Relaxation time of a particle of radius r whose charge leaks through its bulk (relaxation time tau_bulk) and
+// along its surface (surface conductivity sigma_s, S): the surface conduction adds 2 sigma_s / r to the
+// particle's effective conductivity (C. T. O'Konski, "Electric properties of macromolecules. V. Theory of ionic
+// polarization in polyelectrolytes", J. Phys. Chem. 64 (1960) 605-619, eq. 13: K = K_bulk + 2 K_s / a), so the
+// rates add: 1/tau = 1/tau_bulk + 2 sigma_s / (r eps0 eps_r). sigma_s = 0 leaves tau_bulk; a conductor
+// (eps_r = inf) keeps its tau_bulk.
+DVI_HD real surfaceRelaxationTime(real tau_bulk, real sigma_s, real r, real eps_r) {
+  if (!(sigma_s > real(0)) || std::isinf(eps_r) || !(r > real(0))) return tau_bulk;
+  const real rate =
+      real(2) * sigma_s / (r * kEps0 * eps_r) + (tau_bulk > real(0) ? real(1) / tau_bulk : real(INFINITY));
+  return real(1) / rate;
+}
+
 }  // namespace ces
 }  // namespace dvi

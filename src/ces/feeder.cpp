@@ -197,6 +197,7 @@ ParticleElectro makeParticleElectro(const ParticleSpec& s, const MaterialConfig&
     }
     default: pe.eps_r = real(mat.eps_r), pe.tau = real(mat.relaxation_time), pe.conductor = 0; break;
   }
+  pe.tau = surfaceRelaxationTime(pe.tau, real(mat.surface_conductivity), r, pe.eps_r);
   return pe;
 }
 

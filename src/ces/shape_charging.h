@@ -39,8 +39,8 @@ DVI_HD real carlsonRD(real x, real y, real z) {
     X = 0.25 * (X + l), Y = 0.25 * (Y + l), Z = 0.25 * (Z + l);
   }
   const double A = (X + Y + 3 * Z) / 5, dx = (A - X) / A, dy = (A - Y) / A, dz = (A - Z) / A;
-  const double e2 = dx * dy - 6 * dz * dz, e3 = (3 * dx * dy - 8 * dz * dz) * dz, e4 = 3 * (dx * dy - dz * dz) * dz * dz,
-               e5 = dx * dy * dz * dz * dz;
+  const double e2 = dx * dy - 6 * dz * dz, e3 = (3 * dx * dy - 8 * dz * dz) * dz,
+               e4 = 3 * (dx * dy - dz * dz) * dz * dz, e5 = dx * dy * dz * dz * dz;
   const double series = 1 - 3 * e2 / 14 + e3 / 6 + 9 * e2 * e2 / 88 - 3 * e4 / 22 - 9 * e2 * e3 / 52 + 3 * e5 / 26;
   return real(sum + fac * series / (A * std::sqrt(A)));
 }
@@ -89,13 +89,13 @@ DVI_HD real pauthenierSaturationChargeEllipsoid(Vec3 e, Vec3 n, Vec3 Eb, real ep
 // P. Moon, D. E. Spencer, "Field Theory Handbook", Springer 1961, tangent-cylinder coordinates; N. N. Lebedev,
 // I. P. Skal'skaya, Sov. Phys. Tech. Phys. 7 (1962) 268 for the sphere). tests/test_ces_shapes.cpp checks both
 // by quadrature of the field of Omega on the cylinder.
-constexpr real kCylinderChargeFactor = real(2) * kPi;                                 // lambda / (eps0 a En)
-constexpr real kCylinderForceFactor = kPi * (kPi * kPi + real(3)) / real(9);          // (F/L) / (eps0 a En^2)
+constexpr real kCylinderChargeFactor = real(2) * kPi;                               // lambda / (eps0 a En)
+constexpr real kCylinderForceFactor = kPi * (kPi * kPi + real(3)) / real(9);        // (F/L) / (eps0 a En^2)
 constexpr real kCylinderLiftFactor = kCylinderForceFactor / kCylinderChargeFactor;  // (pi^2 + 3)/18
 
 // The sphere on the plane (charging.h, Lebedev & Skal'skaya 1962): q = (2 pi^3/3) eps0 r^2 En,
 // F = 4 pi (zeta(3) + 1/6) eps0 r^2 En^2.
-constexpr real kSphereChargeFactor = real(2) / real(3) * kPi * kPi * kPi;                 // q / (eps0 r^2 En)
+constexpr real kSphereChargeFactor = real(2) / real(3) * kPi * kPi * kPi;          // q / (eps0 r^2 En)
 constexpr real kSphereForceFactor = real(4) * kPi * (kZeta3 + real(1) / real(6));  // F / (eps0 r^2 En^2)
 
 // Per-particle electrostatic constants (makeParticleElectro): index i = the body's principal axis i along the
@@ -152,7 +152,6 @@ DVI_HD real bossCharge(real p, real s, real h) {
   const real scale = kSphereChargeFactor * n_sphere / kPi;                // 1.142
   return scale * kPi * p * s / depolarizationFactor(real(2) * h, p, s);
 }
-
 
 // The shape's constants (everything of ParticleElectro but the material's): shape kShape*, half its
 // dimensions as ParticleElectro::half. Per principal axis i along the normal (j, k the others):
