@@ -352,3 +352,34 @@ TEST_CASE("Surface conductivity: O'Konski's 2 sigma_s / r adds to the bulk's rat
         Approx(1 / (1 / tau_bulk + 2 * ss / (r * kE0 * eps))).epsilon(1e-6));
   CHECK_THROWS_AS(parseCesDocument(doc, {"feed.materials.1.surface_conductivity_S=-1"}, "t"), InputError);
 }
+
+TEST_CASE("A metal with a contact time on the drum in the corona keeps ion charge: the steady state of the two rates",
+          "[ces][ces_shapes]") {
+  // Ions everywhere (tau_c = 1 ms) in the upward 8 kV/cm field, negative corona; a copper sphere on top of the
+  // drum with a contact relaxation time tau = 1 ms. Counted in the ions' polarity (Q = -q), Pauthenier's charging
+  // (Q_s/tau_c)(1 - Q/Q_s)^2 balances the relaxation (Q - Q_ind)/tau toward the induced charge (Q_ind = -q_F):
+  // a quadratic for Q, solved here by hand; the stepped charge must settle there (to the splitting's O(h)).
+  Hand h;
+  const double tau_c = 1e-3, tau = 1e-3, mu = 2.1e-4, En = 8e5, r = 0.4e-3;
+  const double N = 4 * kE0 / (tau_c * 1.602176634e-19 * mu);
+  std::fill(h.n.begin(), h.n.end(), float(N));
+  ParticleElectro pe;
+  shapeElectro(kShapeSphere, Vec3{real(r), real(r), real(r)}, pe);
+  pe.eps_r = real(INFINITY), pe.tau = real(tau), pe.conductor = 1;
+  const double qs = 4 * M_PI * kE0 * r * r * En * 3, Qi = -double(feliciCharge(real(r), real(En)));
+  // (qs/tau_c)(1 - Q/qs)^2 = (Q - Qi)/tau  ->  A Q^2 + B Q + C = 0
+  const double A = tau / (tau_c * qs), B = -2 * tau / tau_c - 1, C = tau * qs / tau_c + Qi;
+  const double Q = (-B - std::sqrt(B * B - 4 * A * C)) / (2 * A);
+  REQUIRE(Q > Qi);
+  REQUIRE(Q < qs);
+  uint8_t f = 0;
+  real q = 0;
+  const Vec3 top{0, real(0.16 + r), 0};
+  for (int k = 0; k < 20000; ++k)
+    q = cesChargeUpdate(h.m, pe, top, Quat{1, 0, 0, 0}, q, real(r), real(r), real(1e-6), f);
+  CHECK(-double(q) == Approx(Q).epsilon(5e-3));
+  // With tau = 0 (the default metal) the ion charge goes to earth every step: the induced charge.
+  pe.tau = 0;
+  CHECK(double(cesChargeUpdate(h.m, pe, top, Quat{1, 0, 0, 0}, q, real(r), real(r), real(1e-6), f)) ==
+        Approx(-Qi).epsilon(1e-9));
+}
