@@ -4,7 +4,7 @@
 // discharge) and the particle's status (in flight / collected / lost). The CPU calls them from OpenMP loops (machine.cpp),
 // the CUDA kernels (ces_device.cu) on a device copy of CesModel whose field arrays point to device memory.
 //
-// Every formula lives in forces.h / charging.h / field_*.h with its reference; this file only decides
+// Every formula lives in forces.h / charging.h / shape_charging.h / field_*.h with its reference; this file only decides
 // where each applies (docs/CES.md, "Charges" and "Forces").
 #pragma once
 
@@ -70,7 +70,8 @@ struct CesModel {
   int32_t n_electrodes;
   CylinderXY electrodes[kMaxElectrodes];
   real air_density, air_viscosity;
-  real contact_tol;   // a particle touches a surface when its centre is within contact_tol x its bounding radius
+  real contact_tol;   // touching the drum: the centre within the shape's support + (contact_tol - 1) r (touchesDrum);
+                      // the brush's bristles or an electrode: within contact_tol x the bounding radius
   real rolling_drum;  // mu_r of the particles on the drum (forces.h drumRollingTorque; 0: none)
   int32_t drum_body;  // the drum's body index (its angular velocity, for the rolling resistance)
   Vec3 gravity;       // m/s^2 (the rolling resistance's normal force)
