@@ -81,6 +81,13 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
     }
   };
   walk(file, schema, "");
+  // The crushed-PCB preset keeps to the schema too and parses, with its composites.
+  const json pcb = json::parse(slurp(std::string(DVISIM_SOURCE_DIR) + "/scenes/ces_pcb.json"));
+  walk(pcb, schema, "");
+  const CesConfig pc = parseCesDocument(pcb, {}, "ces_pcb.json");
+  REQUIRE(pc.materials.size() == 3);
+  CHECK(pc.materials[2].kind == MaterialKind::Composite);
+  CHECK(pc.materials[2].metal_fraction_max == 0.7);
   // The parsed defaults: the composite machine of docs/CES.md (corona wire + static tube on one supply).
   const CesConfig c = configWith({});
   CHECK(c.drum_diameter == Approx(0.320));
@@ -481,7 +488,7 @@ TEST_CASE("CES feeder: the expected particle mass matches a large sample drawn b
 TEST_CASE("CES splitters: direct binning and cumulative sums agree, grade and recovery by hand", "[ces][ces_machine]") {
   // By hand: metal 3 ug at 150 mm, 1 ug at 50 mm; plastic 2 ug at 20 mm, 1 ug at 120 mm; middling 5 ug at 100 mm.
   auto P = [](MaterialKind k, double x_mm, int64_t ug) {
-    return CollectedParticle{0, 0, k, ug * 1000000000, x_mm * 1e-3, 0, 0};
+    return CollectedParticle{0, 0, k, 0.0f, ug * 1000000000, x_mm * 1e-3, 0, 0};
   };
   std::vector<CollectedParticle> c{P(MaterialKind::Metal, 150, 3), P(MaterialKind::Metal, 50, 1),
                                    P(MaterialKind::Plastic, 20, 2), P(MaterialKind::Plastic, 120, 1),
@@ -553,7 +560,8 @@ TEST_CASE("CES splitters: direct binning and cumulative sums agree, grade and re
     std::vector<CollectedParticle> r;
     for (int i = 0; i < 2000; ++i) {
       const double x = i % 10 == 0 ? 0.2 * double(rng.next() % 60) / 59.0 : rng.uniform(-0.05, 0.25);
-      r.push_back(CollectedParticle{i, 0, MaterialKind(rng.next() % 3), int64_t(1 + rng.next() % 2000000000), x, 0, 0});
+      r.push_back(
+          CollectedParticle{i, 0, MaterialKind(rng.next() % 3), 0.0f, int64_t(1 + rng.next() % 2000000000), x, 0, 0});
     }
     const SplitterTable a = splittersDirect(r, 0, 0.2, 60), b = splittersCumulative(r, 0, 0.2, 60);
     REQUIRE(a.cells.size() == 60 * 61 / 2);

@@ -274,8 +274,16 @@ std::string massBalanceLine(const MassBalance& bal) {
 SplitterBasis splitterBasis(const CesMachine& m) {
   SplitterBasis basis;
   const CesParticles& p = m.particles();
-  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i)
-    basis.fed_fg[size_t(m.config().materials[size_t(p.material[i])].kind)] += p.mass_fg[i];
+  for (size_t i = size_t(m.firstParticleBody()); i < p.count(); ++i) {  // a composite as its metal and plastic
+    CollectedParticle c{};
+    c.kind = m.config().materials[size_t(p.material[i])].kind;
+    c.mass_fg = p.mass_fg[i];
+    c.metal_mass_fraction = m.compositeMassFraction(i);
+    const int64_t metal = c.kind == MaterialKind::Composite ? metalFg(c) : 0;
+    basis.fed_fg[size_t(c.kind == MaterialKind::Composite ? MaterialKind::Metal : c.kind)] +=
+        c.kind == MaterialKind::Composite ? metal : c.mass_fg;
+    if (c.kind == MaterialKind::Composite) basis.fed_fg[size_t(MaterialKind::Plastic)] += c.mass_fg - metal;
+  }
   basis.target_conductor = m.config().grade_target_conductor;
   basis.target_nonconductor = m.config().grade_target_nonconductor;
   return basis;
@@ -293,7 +301,7 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
     fed[k] += p.mass_fg[i];
     if (p.flags[i] & kFlagPinned) pinned[k] += p.mass_fg[i];
   }
-  // The bin each kind belongs in: metal -> conductor, plastic -> nonconductor, middling -> middling.
+  // The bin each kind belongs in: metal -> conductor, plastic -> nonconductor, middling and composite -> middling.
   auto ownBin = [](MaterialKind kind) {
     return kind == MaterialKind::Metal     ? kBinConductor
            : kind == MaterialKind::Plastic ? kBinNonconductor

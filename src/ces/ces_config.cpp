@@ -22,6 +22,7 @@ const char* materialKindName(MaterialKind k) {
     case MaterialKind::Metal: return "metal";
     case MaterialKind::Plastic: return "plastic";
     case MaterialKind::Middling: return "middling";
+    case MaterialKind::Composite: return "composite";
   }
   return "?";
 }
@@ -45,7 +46,7 @@ const char* defaultCesJson() {
   return R"JSON({
   "$schema": "schema/ces.schema.json",
   "name": "ces-default",
-  "description": "Roll-type corona-electrostatic separator (docs/CES.md): corona wire and static tube on one supply; copper, plastic and middlings of 0.5-1 mm",
+  "description": "Roll-type corona-electrostatic separator (docs/CES.md): corona wire and static tube on one supply; copper, plastic and non-liberated copper-plastic composites of 0.5-1 mm",
   "ces": {
     "duration_s": 2.0,
     "time_step_s": 0.0002,
@@ -80,9 +81,9 @@ const char* defaultCesJson() {
         { "name": "plastic", "kind": "plastic", "mass_fraction": 0.5, "density_kg_m3": [946, 946],
           "eps_r": 2.5, "conductivity_S_m": 1e-14,
           "shapes": { "sphere": 0.3, "flake": 0.2, "ellipsoid": 0.3, "fragment": 0.2 } },
-        { "name": "middling", "kind": "middling", "mass_fraction": 0.1, "density_kg_m3": [2500, 4500],
-          "eps_r": 10, "relaxation_time_s": 0.5,
-          "shapes": { "sphere": 0.5, "fragment": 0.5 } }
+        { "name": "composite", "kind": "composite", "mass_fraction": 0.1, "metal_fraction": [0.05, 0.6],
+          "density_kg_m3": 1850, "metal_density_kg_m3": 8900, "eps_r": 4.4, "conductivity_S_m": 1e-14,
+          "shapes": { "fragment": 0.5, "flake": 0.5 } }
       ]
     },
     "collection": { "y_mm": -350, "x0_mm": 0 },
@@ -127,14 +128,85 @@ ElectrodeConfig parseSupplied(const Checker& c, const json& e, const std::string
   return out;
 }
 
-MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string& p) {
-  c.object(
-      m, p,
-      {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "conductivity_S_m", "shapes"});
+// A material's shapes: {name: weight}, at least one weight positive.
+void parseShapes(const Checker& c, const json& shapes, const std::string& p, MaterialConfig& out) {
+  const json& s = c.object(shapes, p + ".shapes", {"sphere", "flake", "wire", "ellipsoid", "fragment"});
+  double sum = 0;
+  for (int k = 0; k < kParticleShapes; ++k) {
+    const char* name = particleShapeName(ParticleShape(k));
+    out.shape_weight[k] = s.contains(name) ? c.nonNegative(s[name], p + ".shapes." + name) : 0.0;
+    sum += out.shape_weight[k];
+  }
+  if (!(sum > 0)) c.fail(p + ".shapes", "needs at least one shape with a positive weight");
+}
+
+// A material's surface_conductivity_S (S, >= 0, at most 1; 0 when not given).
+double parseSurfaceConductivity(const Checker& c, const json& m, const std::string& p) {
+  return m.contains("surface_conductivity_S")
+             ? c.range(m["surface_conductivity_S"], p + ".surface_conductivity_S", 0, 1)
+             : 0.0;
+}
+
+// A composite (non-liberated) material: metal at a volume fraction uniform over metal_fraction [min, max] in a
+// matrix of density_kg_m3 (one number), eps_r and conductivity_S_m (FR-4 glass-epoxy by default: 1850 kg/m^3,
+// eps_r 4.4, 1e-14 S/m); the metal of metal_density_kg_m3 (copper, 8900). Its relaxation time follows from the
+// fraction (charging.h: compositeRelaxationTime), so relaxation_time_s is refused.
+MaterialConfig parseComposite(const Checker& c, const json& m, const std::string& p, const std::string& kind) {
   MaterialConfig out;
-  if (!m.contains("kind")) c.fail(p + ".kind", "missing (metal|plastic|middling)");
-  const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling"});
-  out.kind = kind == "metal" ? MaterialKind::Metal : kind == "plastic" ? MaterialKind::Plastic : MaterialKind::Middling;
+  out.kind = MaterialKind::Composite;
+  out.name = m.contains("name") ? c.string(m["name"], p + ".name") : kind;
+  out.eps_r = 4.4;
+  out.conductivity = 1e-14;
+  out.metal_fraction_min = 0.05, out.metal_fraction_max = 0.6;
+  if (!m.contains("mass_fraction")) c.fail(p + ".mass_fraction", "missing");
+  out.mass_fraction = c.range(m["mass_fraction"], p + ".mass_fraction", 0, 1);
+  if (m.contains("relaxation_time_s"))
+    c.fail(p + ".relaxation_time_s",
+           "a composite's relaxation time follows from its metal fraction; give the "
+           "matrix's conductivity_S_m instead");
+  if (m.contains("metal_fraction")) {
+    const json& f = m["metal_fraction"];
+    if (f.is_number())
+      out.metal_fraction_min = out.metal_fraction_max = c.range(f, p + ".metal_fraction", 0, 1);
+    else
+      c.interval(f, p + ".metal_fraction", out.metal_fraction_min, out.metal_fraction_max, true);
+    if (!(out.metal_fraction_max <= 1))
+      c.fail(p + ".metal_fraction", "must be <= 1, got " + num(out.metal_fraction_max));
+  }
+  if (m.contains("density_kg_m3")) out.matrix_density = c.positive(m["density_kg_m3"], p + ".density_kg_m3");
+  if (m.contains("metal_density_kg_m3"))
+    out.metal_density = c.positive(m["metal_density_kg_m3"], p + ".metal_density_kg_m3");
+  if (!(out.metal_density > out.matrix_density))
+    c.fail(p + ".metal_density_kg_m3", "must exceed the matrix's density_kg_m3 (" + num(out.matrix_density) + ")");
+  if (m.contains("eps_r")) { out.eps_r = c.range(m["eps_r"], p + ".eps_r", 1, 1e6); }
+  if (m.contains("conductivity_S_m"))
+    out.conductivity = c.range(m["conductivity_S_m"], p + ".conductivity_S_m", 0, 1e3);
+  out.relaxation_time = double(relaxationTime(real(out.eps_r), real(out.conductivity)));  // the matrix's
+  // The mixture's density at the two fractions: the feeder draws it uniformly, i.e. the fraction uniformly.
+  out.density_min = out.matrix_density + out.metal_fraction_min * (out.metal_density - out.matrix_density);
+  out.density_max = out.matrix_density + out.metal_fraction_max * (out.metal_density - out.matrix_density);
+  out.shape_weight[int(ParticleShape::Fragment)] = 1, out.shape_weight[0] = 0;
+  if (m.contains("shapes")) parseShapes(c, m["shapes"], p, out);
+  return out;
+}
+
+MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string& p) {
+  c.object(m, p,
+           {"name", "kind", "mass_fraction", "density_kg_m3", "eps_r", "relaxation_time_s", "conductivity_S_m",
+            "shapes", "metal_fraction", "metal_density_kg_m3", "surface_conductivity_S"});
+  MaterialConfig out;
+  if (!m.contains("kind")) c.fail(p + ".kind", "missing (metal|plastic|middling|composite)");
+  const std::string kind = c.oneOf(m["kind"], p + ".kind", {"metal", "plastic", "middling", "composite"});
+  out.kind = kind == "metal"       ? MaterialKind::Metal
+             : kind == "plastic"   ? MaterialKind::Plastic
+             : kind == "composite" ? MaterialKind::Composite
+                                   : MaterialKind::Middling;
+  if (out.kind == MaterialKind::Composite) {
+    out = parseComposite(c, m, p, kind);
+    out.surface_conductivity = parseSurfaceConductivity(c, m, p);
+    return out;
+  }
+  out.surface_conductivity = parseSurfaceConductivity(c, m, p);
   out.name = m.contains("name") ? c.string(m["name"], p + ".name") : kind;
   // Defaults by kind (docs/CES.md, Charges): tau = 0 for metals, infinite for plastics, 0.5 s middlings [assumed].
   const CesMachineParams d;
@@ -143,6 +215,8 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
                                                             : double(d.middling_relaxation_time);
   out.eps_r = out.kind == MaterialKind::Metal ? std::numeric_limits<double>::infinity() : double(d.plastic_eps_r);
   if (out.kind == MaterialKind::Metal) out.density_min = d.metal_density_min, out.density_max = d.metal_density_max;
+  for (const char* k : {"metal_fraction", "metal_density_kg_m3"})
+    if (m.contains(k)) c.fail(p + "." + k, "only a composite material has it (kind \"composite\")");
   if (!m.contains("mass_fraction")) c.fail(p + ".mass_fraction", "missing");
   out.mass_fraction = c.range(m["mass_fraction"], p + ".mass_fraction", 0, 1);
   if (m.contains("density_kg_m3")) {
@@ -167,16 +241,7 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
         std::isinf(out.conductivity) ? 0.0 : double(relaxationTime(real(out.eps_r), real(out.conductivity)));
     if (std::isinf(out.eps_r) && !std::isinf(out.conductivity)) out.relaxation_time = 0.0;  // a metal
   }
-  if (m.contains("shapes")) {
-    const json& s = c.object(m["shapes"], p + ".shapes", {"sphere", "flake", "wire", "ellipsoid", "fragment"});
-    double sum = 0;
-    for (int k = 0; k < kParticleShapes; ++k) {
-      const char* name = particleShapeName(ParticleShape(k));
-      out.shape_weight[k] = s.contains(name) ? c.nonNegative(s[name], p + ".shapes." + name) : 0.0;
-      sum += out.shape_weight[k];
-    }
-    if (!(sum > 0)) c.fail(p + ".shapes", "needs at least one shape with a positive weight");
-  }
+  if (m.contains("shapes")) parseShapes(c, m["shapes"], p, out);
   return out;
 }
 

@@ -26,9 +26,12 @@
 namespace dvi {
 namespace ces {
 
-enum class MaterialKind : int32_t { Metal = 0, Plastic = 1, Middling = 2 };
-constexpr int kMaterialKinds = 3;
-const char* materialKindName(MaterialKind k);  // "metal" | "plastic" | "middling"
+// Composite: non-liberated metal in a plastic matrix, a metal fraction per particle (feeder.h compositeParts).
+// The mass accounting (splitters.h) has the first three kinds; a composite's mass counts as metal and plastic
+// in proportion to its parts.
+enum class MaterialKind : int32_t { Metal = 0, Plastic = 1, Middling = 2, Composite = 3 };
+constexpr int kMaterialKinds = 3;              // metal, plastic, middling: the kinds the mass is accounted in
+const char* materialKindName(MaterialKind k);  // "metal" | "plastic" | "middling" | "composite"
 
 enum class ParticleShape : int32_t { Sphere = 0, Flake, Wire, Ellipsoid, Fragment, Count };
 constexpr int kParticleShapes = int(ParticleShape::Count);
@@ -45,6 +48,14 @@ struct MaterialConfig {
   double relaxation_time = 0;
   double conductivity = -1;                                // S/m as given (-1: not given)
   double shape_weight[kParticleShapes] = {1, 0, 0, 0, 0};  // relative frequency of each shape (by count)
+  // Composites: the metal's volume fraction, uniform over [metal_fraction_min, metal_fraction_max]
+  // (ces.feed.materials[].metal_fraction), the metal's and the matrix's densities; density_min/max are then the
+  // mixture's at the two fractions. conductivity (or 1e-14 S/m) is the matrix's, eps_r the matrix's.
+  double metal_fraction_min = 0, metal_fraction_max = 0;
+  double metal_density = 8900, matrix_density = 1850;  // kg/m^3 (copper; FR-4 glass-epoxy)
+  // S, surface conductivity of an insulating particle (surface_conductivity_S, 0: none): the charge also leaks
+  // along the surface to the drum, 1/tau = 1/tau_bulk + 2 sigma_s / (r eps0 eps_r) (charging.h).
+  double surface_conductivity = 0;
 };
 
 // A cylindrical electrode (axis along z): the corona wire, the static tube, or a further electrode of the

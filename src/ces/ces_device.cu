@@ -17,26 +17,26 @@ constexpr int kThreads = 256;
 
 int blocks(int64_t n) { return int((n + kThreads - 1) / kThreads); }
 
-__global__ void forceKernel(int64_t n, const CesModel* m, real h, const uint8_t* status, const int32_t* material,
+__global__ void forceKernel(int64_t n, const CesModel* m, real h, const uint8_t* status, const ParticleElectro* electro,
                             const real* charge, const real* radius, const real* bound, const real* mass,
-                            const real* moment, const Vec3* pos, const Vec3* vel, const Vec3* omega,
+                            const real* moment, const Vec3* pos, const Quat* rot, const Vec3* vel, const Vec3* omega,
                             const uint8_t* flags, Vec3* force, Vec3* torque) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n || status[i] != kStatusInFlight || (flags[i] & kBodyFixed)) return;
-  const Vec3 F = cesParticleForce(*m, material[i], pos[i], vel[i], charge[i], radius[i], bound[i], mass[i], h);
+  const Vec3 F = cesParticleForce(*m, electro[i], pos[i], rot[i], vel[i], charge[i], radius[i], bound[i], mass[i], h);
   force[i] += F;
-  torque[i] += cesParticleTorque(*m, pos[i], vel[i], omega[i], omega[m->drum_body], F, radius[i], bound[i], mass[i],
-                                 moment[i], h);
+  torque[i] += cesParticleTorque(*m, electro[i], pos[i], rot[i], vel[i], omega[i], omega[m->drum_body], F, radius[i],
+                                 mass[i], moment[i], h);
 }
 
 // Charge update and classification (CesMachine::postStep's loop); a changed status is appended to the list.
-__global__ void postStepKernel(int64_t n, const CesModel* m, real h, uint8_t* status, const int32_t* material,
+__global__ void postStepKernel(int64_t n, const CesModel* m, real h, uint8_t* status, const ParticleElectro* electro,
                                real* charge, uint8_t* pflags, const real* radius, const real* bound, const Vec3* pos,
-                               int32_t* changed, uint8_t* changed_status, int32_t* n_changed) {
+                               const Quat* rot, int32_t* changed, uint8_t* changed_status, int32_t* n_changed) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n || status[i] != kStatusInFlight) return;
   uint8_t f = pflags[i];
-  charge[i] = cesChargeUpdate(*m, material[i], pos[i], charge[i], radius[i], bound[i], h, f);
+  charge[i] = cesChargeUpdate(*m, electro[i], pos[i], rot[i], charge[i], radius[i], bound[i], h, f);
   pflags[i] = f;
   const uint8_t next = cesClassify(*m, pos[i]);
   if (next != status[i]) {
@@ -78,7 +78,7 @@ class CudaCesDevice final : public CesDevice {
 
   void append(const CesParticles& p, size_t first) override {
     status_.uploadTail(p.status, first);
-    material_.uploadTail(p.material, first);
+    electro_.uploadTail(p.electro, first);
     charge_.uploadTail(p.charge, first);
     pflags_.uploadTail(p.flags, first);
     radius_.uploadTail(p.radius, first);
@@ -92,9 +92,9 @@ class CudaCesDevice final : public CesDevice {
   void forces(const DeviceBodyRefs& b, real h, Vec3* force, Vec3* torque) override {
     const int64_t n = std::min<int64_t>(int64_t(count_), b.count);
     if (n == 0) return;
-    forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(n, model_.data(), h, status_.data(), material_.data(),
-                                                       charge_.data(), radius_.data(), bound_.data(), mass_.data(),
-                                                       moment_.data(), b.pos, b.vel, b.omega, b.flags, force, torque);
+    forceKernel<<<blocks(n), kThreads, 0, stream(b)>>>(
+        n, model_.data(), h, status_.data(), electro_.data(), charge_.data(), radius_.data(), bound_.data(),
+        mass_.data(), moment_.data(), b.pos, b.rot, b.vel, b.omega, b.flags, force, torque);
     DVI_CUDA_LAUNCH("CES forceKernel");
   }
 
@@ -106,9 +106,9 @@ class CudaCesDevice final : public CesDevice {
     changed_.resize(size_t(n));
     changed_status_.resize(size_t(n));
     DVI_CUDA(cudaMemsetAsync(n_changed_.data(), 0, sizeof(int32_t), s));
-    postStepKernel<<<blocks(n), kThreads, 0, s>>>(n, model_.data(), h, status_.data(), material_.data(), charge_.data(),
-                                                  pflags_.data(), radius_.data(), bound_.data(), b.pos, changed_.data(),
-                                                  changed_status_.data(), n_changed_.data());
+    postStepKernel<<<blocks(n), kThreads, 0, s>>>(n, model_.data(), h, status_.data(), electro_.data(), charge_.data(),
+                                                  pflags_.data(), radius_.data(), bound_.data(), b.pos, b.rot,
+                                                  changed_.data(), changed_status_.data(), n_changed_.data());
     DVI_CUDA_LAUNCH("CES postStepKernel");
     std::vector<int32_t> count;
     n_changed_.download(count, 1, s);  // synchronous
@@ -139,7 +139,7 @@ class CudaCesDevice final : public CesDevice {
   gpu::DeviceBuffer<float> grid_ex_{"CES corona grid Ex"}, grid_ey_{"CES corona grid Ey"};
   gpu::DeviceBuffer<float> grid_phi_{"CES corona grid phi"}, grid_ions_{"CES corona grid ion density"};
   gpu::DeviceBuffer<uint8_t> status_{"CES particle status"}, pflags_{"CES particle flags"};
-  gpu::DeviceBuffer<int32_t> material_{"CES particle material"};
+  gpu::DeviceBuffer<ParticleElectro> electro_{"CES particle electrostatics"};
   gpu::DeviceBuffer<real> charge_{"CES particle charge"}, radius_{"CES particle radius"}, bound_{"CES particle bound"};
   gpu::DeviceBuffer<real> mass_{"CES particle mass"}, moment_{"CES particle moment"};
   gpu::DeviceBuffer<int32_t> changed_{"CES changed particles"}, n_changed_{"CES changed count"};

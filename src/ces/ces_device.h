@@ -21,7 +21,8 @@ struct CesParticles;  // machine.h
 class CesDevice {
  public:
   virtual ~CesDevice() = default;
-  // Uploads particles [first, p.count()): status, material, charge, flags, radius, bounding radius, mass.
+  // Uploads particles [first, p.count()): status, electrostatics (ParticleElectro), charge, flags, radius, bounding
+  // radius, mass, moment.
   virtual void append(const CesParticles& p, size_t first) = 0;
   // Adds the CES force of every in-flight, movable particle for a step h to force (a device array, one per body).
   virtual void forces(const DeviceBodyRefs& b, real h, Vec3* force, Vec3* torque) = 0;

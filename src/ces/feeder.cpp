@@ -154,6 +154,53 @@ ShapeDesc particleShapeDesc(const ParticleSpec& s) {
   }
 }
 
+void compositeParts(ParticleSpec& s, const MaterialConfig& mat) {
+  s.metal_fraction = mat.kind == MaterialKind::Metal ? 1.0 : 0.0;
+  s.metal_fg = mat.kind == MaterialKind::Metal ? s.mass_fg : 0;
+  if (mat.kind != MaterialKind::Composite) return;
+  const double r = double(s.radius), V = 4.0 / 3.0 * kPiD * r * r * r;
+  const double rho = double(s.mass_fg) * kFemtogram / V;
+  const double phi = (rho - mat.matrix_density) / (mat.metal_density - mat.matrix_density);
+  s.metal_fraction = std::min(1.0, std::max(0.0, phi));
+  const int64_t metal = int64_t(std::llround(double(s.mass_fg) * s.metal_fraction * mat.metal_density / rho));
+  s.metal_fg = std::min(s.mass_fg, std::max<int64_t>(0, metal));
+}
+
+ParticleElectro makeParticleElectro(const ParticleSpec& s, const MaterialConfig& mat) {
+  ParticleElectro pe;
+  const real r = s.radius;
+  Vec3 half{r, r, r};
+  switch (s.shape) {
+    case ParticleShape::Flake:
+    case ParticleShape::Ellipsoid: half = s.dims; break;
+    case ParticleShape::Wire: half = Vec3{s.dims.x, s.dims.y, s.dims.x}; break;
+    case ParticleShape::Fragment: {  // solid ellipsoid: I_x = m (b^2 + c^2)/5, so a^2 ~ I_y + I_z - I_x
+      const double I[3] = {s.inertia.x, s.inertia.y, s.inertia.z};
+      double e[3];
+      for (int i = 0; i < 3; ++i) e[i] = std::sqrt(std::max(I[(i + 1) % 3] + I[(i + 2) % 3] - I[i], 1e-30));
+      const double k = double(r) / std::cbrt(e[0] * e[1] * e[2]);  // the ellipsoid of the body's volume
+      half = Vec3{real(k * e[0]), real(k * e[1]), real(k * e[2])};
+      break;
+    }
+    default: break;
+  }
+  shapeElectro(int32_t(s.shape), half, pe);
+  pe.metal_fraction = real(s.metal_fraction);
+  switch (mat.kind) {
+    case MaterialKind::Metal: pe.eps_r = real(INFINITY), pe.tau = real(mat.relaxation_time), pe.conductor = 1; break;
+    case MaterialKind::Composite: {
+      const real phi = real(s.metal_fraction), sm = real(mat.conductivity >= 0 ? mat.conductivity : 1e-14);
+      pe.eps_r = compositePermittivity(phi, real(mat.eps_r), kPercolationThreshold);
+      pe.tau = compositeRelaxationTime(phi, real(mat.eps_r), kCopperConductivity, sm);
+      pe.conductor = phi >= kPercolationThreshold ? 1 : 0;
+      break;
+    }
+    default: pe.eps_r = real(mat.eps_r), pe.tau = real(mat.relaxation_time), pe.conductor = 0; break;
+  }
+  pe.tau = surfaceRelaxationTime(pe.tau, real(mat.surface_conductivity), r, pe.eps_r);
+  return pe;
+}
+
 double expectedParticleMass(const CesConfig& cfg) {
   const double a = cfg.diameter_min, b = cfg.diameter_max;
   const double d3 = b > a ? (b * b * b * b - a * a * a * a) / (4 * (b - a)) : a * a * a;  // E[d^3], d ~ U[a, b]

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "ces/ces_config.h"
+#include "ces/shape_charging.h"
 #include "chrono_like/base/random.h"
 #include "chrono_like/system.h"
 
@@ -39,7 +40,26 @@ struct ParticleSpec {
   Vec3 inertia{0, 0, 0};   // principal moments, kg m^2
   real radius = 0;         // volume-equivalent radius (charge, drag)
   real bound = 0;          // bounding radius about the centre of mass
+  // Set from the rest by compositeParts (not stored in a checkpoint: a composite's metal fraction follows from its
+  // density). Volume fraction of metal (1 for a metal, 0 for plastics and middlings) and the metal's mass.
+  double metal_fraction = 0;
+  int64_t metal_fg = 0;
 };
+
+// A composite (non-liberated) particle is metal of density rho_m at volume fraction phi in a matrix of density
+// rho_p, rho = phi rho_m + (1 - phi) rho_p (the mixture's volume average): the feeder draws rho uniform over
+// [rho(phi_min), rho(phi_max)] (MaterialConfig), i.e. phi uniform over [phi_min, phi_max], and phi is read back
+// from the particle's mass and volume, phi = (rho - rho_p) / (rho_m - rho_p). Its metal mass is
+// metal_fg = round(mass_fg phi rho_m / rho), its plastic mass the rest (exact integers: the balance still closes).
+// Metals: phi = 1, all metal; plastics and middlings: 0.
+void compositeParts(ParticleSpec& s, const MaterialConfig& mat);
+
+// The particle's electrostatic constants (shape_charging.h): its shape's (in the principal frame; a fragment by
+// the ellipsoid of its moments of inertia, of its volume) and its material's: a metal conducts (tau of the
+// material); plastics and middlings have their eps_r and tau; a composite its Maxwell Garnett permittivity and
+// GEM relaxation time at its metal fraction (charging.h), and conducts (lifted like a metal) from the
+// percolation threshold up.
+ParticleElectro makeParticleElectro(const ParticleSpec& s, const MaterialConfig& mat);
 
 // Emission: the owed mass grows by mass_flow x h each step; while it is >= 0 a particle is emitted and
 // its mass subtracted, so the fed mass tracks mass_flow x t within one particle mass.

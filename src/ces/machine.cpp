@@ -175,11 +175,11 @@ void CesForceField::apply(const BodyArrays& b, const StepContext& step, Vec3* fo
   for (int64_t i = 0; i < n; ++i) {
     const size_t k = size_t(i);
     if (p.status[k] != kStatusInFlight || (b.flags[k] & kBodyFixed)) continue;
-    const Vec3 F =
-        cesParticleForce(model, p.material[k], b.pos[k], b.vel[k], p.charge[k], p.radius[k], p.bound[k], p.mass[k], dt);
+    const Vec3 F = cesParticleForce(model, p.electro[k], b.pos[k], b.rot[k], b.vel[k], p.charge[k], p.radius[k],
+                                    p.bound[k], p.mass[k], dt);
     force[i] += F;
-    torque[i] += cesParticleTorque(model, b.pos[k], b.vel[k], b.omega[k], w_drum, F, p.radius[k], p.bound[k], p.mass[k],
-                                   p.moment[k], dt);
+    torque[i] += cesParticleTorque(model, p.electro[k], b.pos[k], b.rot[k], b.vel[k], b.omega[k], w_drum, F,
+                                   p.radius[k], p.mass[k], p.moment[k], dt);
   }
 }
 
@@ -346,7 +346,7 @@ void CesMachine::setupModel(const std::vector<ElectrodeConfig>& supplied) {
   for (const ElectrodeConfig& x : cfg_.extra_electrodes) addElectrode(x);
   model_.air_density = real(cfg_.air_density);
   model_.air_viscosity = real(cfg_.air_viscosity);
-  model_.contact_tol = real(1.1);
+  model_.contact_tol = real(1.1);  // a sphere within 1.1 r of the drum's surface touches it (true distance + 0.1 r)
   model_.rolling_drum = real(cfg_.mu_rolling_drum);
   model_.gravity = sys_.config().step.gravity;
   model_.collect_y = real(cfg_.collection_y);
@@ -447,7 +447,14 @@ int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spe
   p_.mass_fg.push_back(spec ? spec->mass_fg : 0);
   p_.mass.push_back(spec ? real(double(spec->mass_fg) * kFemtogram) : real(0));
   p_.moment.push_back(spec ? std::min(spec->inertia.x, std::min(spec->inertia.y, spec->inertia.z)) : real(0));
-  if (spec) specs_.push_back(*spec);
+  if (spec) {
+    ParticleSpec s = *spec;
+    compositeParts(s, cfg_.materials[size_t(material)]);
+    p_.electro.push_back(makeParticleElectro(s, cfg_.materials[size_t(material)]));
+    specs_.push_back(std::move(s));
+  } else {
+    p_.electro.push_back(ParticleElectro{});
+  }
   return id;
 }
 
@@ -602,7 +609,7 @@ void CesMachine::postStep() {
     next[k] = p_.status[k];
     if (p_.status[k] != kStatusInFlight) continue;
     p_.charge[k] =
-        cesChargeUpdate(m, p_.material[k], b.pos[k], p_.charge[k], p_.radius[k], p_.bound[k], h, p_.flags[k]);
+        cesChargeUpdate(m, p_.electro[k], b.pos[k], b.rot[k], p_.charge[k], p_.radius[k], p_.bound[k], h, p_.flags[k]);
     next[k] = cesClassify(m, b.pos[k]);
   }
   for (int64_t i = n_machine_; i < n; ++i)
@@ -624,6 +631,7 @@ void CesMachine::settle(size_t k, uint8_t next) {
     c.material = p_.material[k];
     c.kind = cfg_.materials[size_t(c.material)].kind;
     c.mass_fg = p_.mass_fg[k];
+    c.metal_mass_fraction = compositeMassFraction(k);
     c.x = double(x0.x) + fc * double(x1.x - x0.x) - cfg_.collection_x0;
     c.z = double(x0.z) + fc * double(x1.z - x0.z);
     c.t = time() - cfg_.step.dt + fc * cfg_.step.dt;
@@ -634,11 +642,18 @@ void CesMachine::settle(size_t k, uint8_t next) {
   b.vel[k] = b.omega[k] = Vec3{0, 0, 0};
 }
 
+float CesMachine::compositeMassFraction(size_t k) const {
+  const ParticleSpec& s = specs_[k - size_t(n_machine_)];
+  return s.mass_fg > 0 ? float(double(s.metal_fg) / double(s.mass_fg)) : 0.0f;
+}
+
 bool CesMachine::heldUp(size_t k) const {
   if (p_.status[k] != kStatusInFlight) return false;
   const Vec3 p = sys_.bodies().pos[k];
   if (amongBristles(model_, p, p_.bound[k])) return true;
-  return (p_.flags[k] & kFlagPinned) && touchesDrum(model_, p, p_.bound[k]);
+  const Quat rot = sys_.bodies().rot[k];
+  return (p_.flags[k] & kFlagPinned) &&
+         touchesDrum(model_, p, drumSupport(model_, p_.electro[k], p, rot), p_.radius[k]);
 }
 
 MassBalance CesMachine::balance() const {
@@ -948,9 +963,10 @@ void CesMachine::loadParticleState(std::istream& in) {
   const int64_t nbodies = int64_t(p_.count());
   for (const CollectedParticle& c : collected_)
     if (c.body < n_machine_ || c.body >= nbodies || c.material != p_.material[size_t(c.body)] || int(c.kind) < 0 ||
-        int(c.kind) >= kMaterialKinds || c.mass_fg != p_.mass_fg[size_t(c.body)] || !std::isfinite(c.x) ||
+        int(c.kind) > int(MaterialKind::Composite) || c.mass_fg != p_.mass_fg[size_t(c.body)] || !std::isfinite(c.x) ||
         !std::isfinite(c.z) || !std::isfinite(c.t))
       throw InputError("checkpoint: corrupt collected-particle record");
+  for (CollectedParticle& c : collected_) c.metal_mass_fraction = compositeMassFraction(size_t(c.body));
   for (const RecentSpawn& r : recent_)
     if (r.body < n_machine_ || r.body >= nbodies || r.step < 0 || r.step > steps_)
       throw InputError("checkpoint: corrupt recent-spawn record");

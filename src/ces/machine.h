@@ -49,15 +49,16 @@ namespace ces {
 
 // Per-body state of the plug-in (structure of arrays, index = body).
 struct CesParticles {
-  std::vector<uint8_t> status;    // ParticleStatus
-  std::vector<int32_t> material;  // index into CesConfig::materials (-1 for machine parts)
-  std::vector<real> charge;       // C
-  std::vector<uint8_t> flags;     // ParticleFlag bits (kFlagPinned)
-  std::vector<real> radius;       // volume-equivalent radius, m
-  std::vector<real> bound;        // bounding radius, m
-  std::vector<int64_t> mass_fg;   // femtograms
-  std::vector<real> mass;         // kg, the same mass (the brush's sweep force)
-  std::vector<real> moment;       // kg m^2, the smallest principal moment of inertia (the rolling resistance)
+  std::vector<uint8_t> status;           // ParticleStatus
+  std::vector<int32_t> material;         // index into CesConfig::materials (-1 for machine parts)
+  std::vector<real> charge;              // C
+  std::vector<uint8_t> flags;            // ParticleFlag bits (kFlagPinned)
+  std::vector<real> radius;              // volume-equivalent radius, m
+  std::vector<real> bound;               // bounding radius, m
+  std::vector<int64_t> mass_fg;          // femtograms
+  std::vector<real> mass;                // kg, the same mass (the brush's sweep force)
+  std::vector<real> moment;              // kg m^2, the smallest principal moment of inertia (the rolling resistance)
+  std::vector<ParticleElectro> electro;  // shape and material electrostatics (shape_charging.h; zero for parts)
   size_t count() const { return status.size(); }
 };
 
@@ -66,9 +67,21 @@ struct CollectedParticle {
   int32_t body;
   int32_t material;
   MaterialKind kind;
+  float metal_mass_fraction;  // a composite's metal share of its mass (set from its spec; unused for the others)
   int64_t mass_fg;
   double x, z, t;
 };
+static_assert(sizeof(CollectedParticle) == 48, "the checkpoint stores CollectedParticle as it is (DVICES03)");
+
+// The metal part of a collected particle's mass, in whole femtograms: a metal's whole mass, a composite's share
+// (rounded: its plastic part is the rest, so the two add up to its mass exactly), none of the others'.
+inline int64_t metalFg(const CollectedParticle& c) {
+  if (c.kind == MaterialKind::Metal) return c.mass_fg;
+  if (c.kind != MaterialKind::Composite) return 0;
+  const double w = double(c.metal_mass_fraction);
+  const int64_t m = int64_t(std::llround(double(c.mass_fg) * (w > 0 ? (w < 1 ? w : 1.0) : 0.0)));
+  return m;
+}
 
 // Where every fed particle is: collected (crossed the collection plane), lost (left the machine's domain
 // otherwise; must be 0), held up (neither, and at this moment among the brush's bristles, or in contact
@@ -157,6 +170,8 @@ class CesMachine {
   MassBalance balance() const;
   // Particle body k is held up (MassBalance) at the host's positions.
   bool heldUp(size_t k) const;
+  // Particle body k's metal share of its mass (its spec's metal_fg / mass_fg; CollectedParticle).
+  float compositeMassFraction(size_t k) const;
   // Particles in the machine now (in flight or held up), in O(1) (balance() walks every particle):
   // fed - collected - lost.
   int64_t particlesInFlight() const { return int64_t(p_.count()) - n_machine_ - int64_t(collected_.size()) - lost_; }

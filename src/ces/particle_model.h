@@ -4,7 +4,7 @@
 // discharge) and the particle's status (in flight / collected / lost). The CPU calls them from OpenMP loops (machine.cpp),
 // the CUDA kernels (ces_device.cu) on a device copy of CesModel whose field arrays point to device memory.
 //
-// Every formula lives in forces.h / charging.h / field_*.h with its reference; this file only decides
+// Every formula lives in forces.h / charging.h / shape_charging.h / field_*.h with its reference; this file only decides
 // where each applies (docs/CES.md, "Charges" and "Forces").
 #pragma once
 
@@ -16,6 +16,7 @@
 #include "ces/field/field_csm.h"
 #include "ces/field/field_two_cylinder.h"
 #include "ces/forces.h"
+#include "ces/shape_charging.h"
 
 namespace dvi {
 namespace ces {
@@ -69,7 +70,8 @@ struct CesModel {
   int32_t n_electrodes;
   CylinderXY electrodes[kMaxElectrodes];
   real air_density, air_viscosity;
-  real contact_tol;   // a particle touches a surface when its centre is within contact_tol x its bounding radius
+  real contact_tol;   // touching the drum: the centre within the shape's support + (contact_tol - 1) r (touchesDrum);
+                      // the brush's bristles or an electrode: within contact_tol x the bounding radius
   real rolling_drum;  // mu_r of the particles on the drum (forces.h drumRollingTorque; 0: none)
   int32_t drum_body;  // the drum's body index (its angular velocity, for the rolling resistance)
   Vec3 gravity;       // m/s^2 (the rolling resistance's normal force)
@@ -88,10 +90,22 @@ constexpr int32_t kKindMetal = 0;  // MaterialKind::Metal (ces_config.h), as a p
 // Particle status (per body; machine parts have kStatusMachine).
 enum ParticleStatus : uint8_t { kStatusMachine = 0, kStatusInFlight = 1, kStatusCollected = 2, kStatusLost = 3 };
 
-// True when a particle with bounding radius `bound` at p touches the drum (centre within the contact
-// tolerance of the surface, inside the drum's width).
-DVI_HD bool touchesDrum(const CesModel& m, Vec3 p, real bound) {
-  return insideDrumWidth(m.drum, p) && distanceToDrumSurface(m.drum, p) <= m.contact_tol * bound;
+// The drum's outward normal at p (radial in the cross-section; +x on the axis).
+DVI_HD Vec3 drumNormal(const DrumGeometry& g, Vec3 p) {
+  const real dx = p.x - g.cx, dy = p.y - g.cy, rho = std::hypot(dx, dy);
+  return rho > real(0) ? Vec3{dx / rho, dy / rho, real(0)} : Vec3{1, 0, 0};
+}
+
+// True when a particle touches the drum: inside the drum's width, its centre no further from the surface than
+// its true distance in contact, the support h of its shape along the drum's normal (shapeSupport), plus
+// (contact_tol - 1) x its volume-equivalent radius r (a sphere: within contact_tol x r, as it always was).
+DVI_HD bool touchesDrum(const CesModel& m, Vec3 p, real h, real r) {
+  return insideDrumWidth(m.drum, p) && distanceToDrumSurface(m.drum, p) <= h + (m.contact_tol - real(1)) * r;
+}
+
+// The support of particle pe (orientation rot) along the drum's normal at p.
+DVI_HD real drumSupport(const CesModel& m, const ParticleElectro& pe, Vec3 p, Quat rot) {
+  return shapeSupport(pe, rotateInv(rot, drumNormal(m.drum, p)));
 }
 
 // True when a particle with bounding radius `bound` at p is among the brush's bristles: its centre within the
@@ -105,68 +119,79 @@ DVI_HD Vec3 bristleVelocity(const CesModel& m, Vec3 p) {
   return Vec3{-m.brush_omega * (p.y - m.brush.cy), m.brush_omega * (p.x - m.brush.cx), real(0)};
 }
 
-// Force on a particle of material mat, mass `mass`, volume-equivalent radius r, bounding radius bound, charge
-// q, at p with velocity v, for a step h: Schiller-Naumann drag of the volume-equivalent sphere in still air;
-// among the brush's bristles their sweep (forces.h: bristleSweepForce); inside the drum width the electric
-// force:
-//  - a conductor (metal) touching the drum: the Lebedev-Skal'skaya lift k_L q E (k_L = 0.832), which
-//    already holds the sphere's image in the drum (charging.h: kFeliciLiftFactor); no image term;
+// Force on particle pe (shape_charging.h: its shape's and material's constants) of mass `mass`,
+// volume-equivalent radius r, bounding radius bound, charge q, at p with orientation rot and velocity v, for a
+// step h: Schiller-Naumann drag of the volume-equivalent sphere in still air; among the brush's bristles their
+// sweep (forces.h: bristleSweepForce); inside the drum width the electric force, with u the drum's normal in the
+// body frame:
+//  - a conductor (pe.conductor: metal, or a composite above percolation) touching the drum: the lift k_L(u) q E
+//    of its shape lying in that orientation (shape_charging.h: the sphere's Lebedev-Skal'skaya k_L = 0.832, a
+//    plate's 1/2, a lying wire's (pi^2 + 3)/18 = 0.715 ...), which already holds its image in the drum;
 //  - a conductor in flight: q E (its image in the drum is below 0.1 q E a diameter away and is left out,
 //    so the force does not drop below the contact value as it lifts off);
-//  - insulators and middlings: q E plus the image force of their charge toward the drum (forces.h).
-DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound, real mass,
-                             real h) {
+//  - insulators: q E plus the image force of their charge toward the drum at the shape's true distance, no more
+//    than a flat sheet's on its footprint (imageForceShape).
+DVI_HD Vec3 cesParticleForce(const CesModel& m, const ParticleElectro& pe, Vec3 p, Quat rot, Vec3 v, real q, real r,
+                             real bound, real mass, real h) {
   Vec3 F = dragForceSphere(Vec3{0, 0, 0}, v, real(2) * r, m.air_density, m.air_viscosity);
   if (amongBristles(m, p, bound)) F += bristleSweepForce(mass, v, bristleVelocity(m, p), h, m.brush_sweep_tau);
   if (q == real(0) || !insideDrumWidth(m.drum, p)) return F;
   const FieldSample s = evalField(m.field, p);
-  if (m.kind[mat] == kKindMetal) {
-    F += (touchesDrum(m, p, bound) ? kFeliciLiftFactor : real(1)) * coulombForce(q, s.E);
-  } else {
-    F += electricForce(m.drum, p, q, r, s.E);
+  const Vec3 n = drumNormal(m.drum, p), u = rotateInv(rot, n);
+  const real support = shapeSupport(pe, u), d = distanceToDrumSurface(m.drum, p);
+  if (pe.conductor) {
+    const bool touching = d <= support + (m.contact_tol - real(1)) * r;
+    return F + (touching ? weighted(pe.lift, u) : real(1)) * coulombForce(q, s.E);
   }
+  F += coulombForce(q, s.E);
+  if (d <= m.drum.imageCutoff) F += (-imageForceShape(q, d, support, weighted(pe.foot, u))) * n;
   return F;
 }
 
 // Torque on a particle touching the drum: its rolling resistance (forces.h: drumRollingTorque), with F the
 // particle's other forces (cesParticleForce) and w_drum the drum's angular velocity. moment: the particle's
 // smallest principal moment of inertia.
-DVI_HD Vec3 cesParticleTorque(const CesModel& m, Vec3 p, Vec3 v, Vec3 w, Vec3 w_drum, Vec3 F, real r, real bound,
-                              real mass, real moment, real h) {
-  if (!(m.rolling_drum > real(0)) || !touchesDrum(m, p, bound)) return Vec3{0, 0, 0};
+DVI_HD Vec3 cesParticleTorque(const CesModel& m, const ParticleElectro& pe, Vec3 p, Quat rot, Vec3 v, Vec3 w,
+                              Vec3 w_drum, Vec3 F, real r, real mass, real moment, real h) {
+  if (!(m.rolling_drum > real(0)) || !touchesDrum(m, p, drumSupport(m, pe, p, rot), r)) return Vec3{0, 0, 0};
   return drumRollingTorque(m.drum, p, v, w, w_drum, F, m.gravity, mass, r, moment, m.rolling_drum, h);
 }
 
-// One step h of a particle's charge q (material mat, volume-equivalent radius r, bounding radius bound);
+// Induced charge of particle pe (orientation rot) resting on an earthed conductor whose outward normal is n, in
+// the field E there: eps0 (E.n) qcoef(u), u = R^T n (shape_charging.h; a sphere's is the Félici charge).
+DVI_HD real inducedCharge(const ParticleElectro& pe, Quat rot, Vec3 E, Vec3 n) {
+  return kEps0 * dot(E, n) * weighted(pe.qcoef, rotateInv(rot, n));
+}
+
+// One step h of a particle's charge q (pe, orientation rot, volume-equivalent radius r, bounding radius bound);
 // flags gains kFlagPinned when the particle touches the drum near its lowest point. In this order:
 //  1. ion (field) charging wherever the corona's ions are (ion density N > 0, inside the drum width):
-//     Pauthenier's law with the LOCAL field |E| and the LOCAL ion density, q_s = 4 pi eps0 r^2 |E| p,
-//     tau_c = 4 eps0 / (N e mu), in the ions' polarity, for every material (conductors with p = 3);
-//  2. drum contact: relaxation with the material's tau = eps0 eps_r / sigma toward the induced (Félici)
-//     charge in the local field: a metal (tau = 0) takes it at once, so it leaves the drum with the sign
-//     of E.n (opposite to the electrode's) and any ion charge goes to earth; an insulator (tau ~ hours)
-//     keeps its ion charge; a middling moves toward the induced charge in its own time;
+//     Pauthenier's law with the LOCAL field and ion density, the saturation charge of the particle's equivalent
+//     ellipsoid in its orientation (shape_charging.h; a sphere's 4 pi eps0 r^2 |E| p), tau_c = 4 eps0/(N e mu),
+//     in the ions' polarity, for every material;
+//  2. drum contact (true distance, touchesDrum): relaxation with the particle's tau = eps0 eps_r / sigma toward
+//     its induced charge in the local field (inducedCharge): a metal (tau = 0) takes it at once, so it leaves
+//     the drum with the sign of E.n (opposite to the electrode's) and any ion charge goes to earth; an insulator
+//     (tau ~ hours) keeps its ion charge; a middling or composite moves toward the induced charge in its time;
 //  3. contact with an electrode: the same relaxation toward the induced charge of that electrode
 //     (outward normal of the electrode: a conductor touching it is recharged and repelled);
 //  4. among the brush's bristles: discharge with the brush time constant.
 // Away from ions and contacts the charge does not change.
-DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, real bound, real h, uint8_t& flags) {
-  const real eps = m.eps_r[mat], tau = m.tau[mat];
+DVI_HD real cesChargeUpdate(const CesModel& m, const ParticleElectro& pe, Vec3 p, Quat rot, real q, real r, real bound,
+                            real h, uint8_t& flags) {
   const bool inside = insideDrumWidth(m.drum, p);
-  const bool drum = touchesDrum(m, p, bound);
+  const bool drum = touchesDrum(m, p, drumSupport(m, pe, p, rot), r);
   const real N = inside && m.polarity != real(0) ? ionDensity(m.field, p) : real(0);
   if (N > real(0) || drum) {
     const FieldSample s = evalField(m.field, p);
     if (N > real(0) && s.region == 0) {
-      const real qs = pauthenierSaturationCharge(r, length(s.E), eps);
+      const real qs = pauthenierSaturationChargeEllipsoid(pe.semi, pe.depol, rotateInv(rot, s.E), pe.eps_r);
       const real tc = pauthenierTimeConstant(N, m.ion_mobility);
       q = m.polarity * pauthenierChargeUpdate(q * m.polarity, qs, h, tc);
     }
     if (drum) {
-      const real dx = p.x - m.drum.cx, dy = p.y - m.drum.cy, rho = std::hypot(dx, dy);
-      const Vec3 n{dx / rho, dy / rho, real(0)};
-      q = relaxCharge(q, feliciCharge(r, s.E, n), h, tau);
-      if (dy < m.pin_dy) flags = uint8_t(flags | kFlagPinned);
+      q = relaxCharge(q, inducedCharge(pe, rot, s.E, drumNormal(m.drum, p)), h, pe.tau);
+      if (p.y - m.drum.cy < m.pin_dy) flags = uint8_t(flags | kFlagPinned);
     }
   }
   for (int k = 0; k < m.n_electrodes; ++k) {
@@ -177,10 +202,31 @@ DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, 
     const Vec3 n{dx / rho, dy / rho, real(0)};
     // The field just outside the electrode, at the particle centre (region 0 there).
     const FieldSample s = evalField(m.field, p);
-    q = relaxCharge(q, feliciCharge(r, s.E, n), h, tau);
+    q = relaxCharge(q, inducedCharge(pe, rot, s.E, n), h, pe.tau);
   }
   if (amongBristles(m, p, bound)) q = brushDischarge(q, h, m.brush_tau);
   return q;
+}
+
+// A sphere of radius r of material mat (the model's per-material eps_r, tau and kind): the particle the
+// material-indexed forms below take.
+DVI_HD ParticleElectro sphereElectro(const CesModel& m, int mat, real r) {
+  ParticleElectro pe;
+  shapeElectro(kShapeSphere, Vec3{r, r, r}, pe);
+  pe.eps_r = m.eps_r[mat];
+  pe.tau = m.tau[mat];
+  pe.conductor = m.kind[mat] == kKindMetal ? 1 : 0;
+  pe.metal_fraction = m.kind[mat] == kKindMetal ? real(1) : real(0);
+  return pe;
+}
+
+// The same for a sphere of material mat and radius r (any orientation), as the model had it before the shapes.
+DVI_HD Vec3 cesParticleForce(const CesModel& m, int mat, Vec3 p, Vec3 v, real q, real r, real bound, real mass,
+                             real h) {
+  return cesParticleForce(m, sphereElectro(m, mat, r), p, Quat{1, 0, 0, 0}, v, q, r, bound, mass, h);
+}
+DVI_HD real cesChargeUpdate(const CesModel& m, int mat, Vec3 p, real q, real r, real bound, real h, uint8_t& flags) {
+  return cesChargeUpdate(m, sphereElectro(m, mat, r), p, Quat{1, 0, 0, 0}, q, r, bound, h, flags);
 }
 
 // Status after a step: collected once the centre is below the collection plane, lost when it leaves

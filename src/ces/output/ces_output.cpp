@@ -139,7 +139,7 @@ std::string cesParticlesCsv(const CesMachine& m) {
   const BodyArrays& b = m.system().bodies();
   const CesParticles& p = m.particles();
   const size_t first = size_t(m.firstParticleBody());
-  std::string o = "body,material,kind,shape,mass_kg,radius_m,status,charge_C,x,y,z\n";
+  std::string o = "body,material,kind,shape,mass_kg,radius_m,status,charge_C,x,y,z,metal_fraction\n";
   for (size_t k = first; k < p.count(); ++k) {
     const MaterialConfig& mat = m.config().materials[size_t(p.material[k])];
     o += std::to_string(k) + "," + mat.name + "," + materialKindName(mat.kind) + "," +
@@ -157,6 +157,8 @@ std::string cesParticlesCsv(const CesMachine& m) {
       o += ",";
       num(o, c);
     }
+    o += ",";
+    num(o, m.specs()[k - first].metal_fraction);  // volume fraction (a composite's; 1 metal, 0 the others)
     o += "\n";
   }
   return o;

@@ -31,7 +31,8 @@ class CesFrameWriter {
   PvdSeries series_;
 };
 
-// One row per particle: body, material, kind, shape, mass_kg, radius_m, status, charge_C, x, y, z.
+// One row per particle: body, material, kind, shape, mass_kg, radius_m, status, charge_C, x, y, z, metal_fraction
+// (the metal's volume fraction: a composite's, 1 for a metal, 0 for the others; columns are only ever appended).
 std::string cesParticlesCsv(const CesMachine& m);
 // One row per collected particle: body, material, kind, mass_kg, x_mm (from collection.x0), z_mm, t_s.
 std::string cesCollectedCsv(const CesMachine& m);

@@ -28,6 +28,17 @@ std::vector<double> gridPositions(double lo, double hi, int n) {
   return p;
 }
 
+// Adds a collected particle's mass to a row per kind: a composite's metal part as metal, the rest as plastic.
+void addMass(std::array<int64_t, kMaterialKinds>& row, const CollectedParticle& p) {
+  if (p.kind == MaterialKind::Composite) {
+    const int64_t metal = metalFg(p);
+    row[size_t(MaterialKind::Metal)] += metal;
+    row[size_t(MaterialKind::Plastic)] += p.mass_fg - metal;
+  } else {
+    row[size_t(p.kind)] += p.mass_fg;
+  }
+}
+
 double ratio(int64_t a, int64_t b) { return b > 0 ? double(a) / double(b) : 0.0; }
 
 // Grade, recovery and score of a cell from its masses.
@@ -77,7 +88,7 @@ void pickBest(SplitterTable& t, const SplitterBasis& basis) {
 
 BinMasses binDirect(const std::vector<CollectedParticle>& c, double s1, double s2) {
   BinMasses m;
-  for (const CollectedParticle& p : c) m.fg[size_t(binOf(p.x, s1, s2))][size_t(p.kind)] += p.mass_fg;
+  for (const CollectedParticle& p : c) addMass(m.fg[size_t(binOf(p.x, s1, s2))], p);
   return m;
 }
 
@@ -114,7 +125,7 @@ SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, doubl
   std::vector<std::array<int64_t, kMaterialKinds>> prefix(sorted.size() + 1);
   for (size_t k = 0; k < sorted.size(); ++k) {
     prefix[k + 1] = prefix[k];
-    prefix[k + 1][size_t(sorted[k]->kind)] += sorted[k]->mass_fg;
+    addMass(prefix[k + 1], *sorted[k]);
   }
   // below[i] = prefix at the first particle with x >= positions[i] (mass with x < s).
   std::vector<std::array<int64_t, kMaterialKinds>> below(static_cast<size_t>(n));
@@ -168,7 +179,7 @@ Distribution massDistribution(const std::vector<CollectedParticle>& c, double bi
   d.fg.assign(nb, {0, 0, 0});
   for (const CollectedParticle& p : c) {
     const size_t k = std::min(nb - 1, size_t(std::max(0.0, std::floor((p.x - d.lo) / bin))));
-    d.fg[k][size_t(p.kind)] += p.mass_fg;
+    addMass(d.fg[k], p);
   }
   return d;
 }

@@ -6,6 +6,9 @@
 //   * direct binning: every particle assigned to its bin for every pair;
 //   * cumulative sums: particles sorted by x', prefix sums of mass per kind, the bins as differences of
 //     the prefix sum at s1 and s2 (binary search).
+// A composite particle (MaterialKind::Composite) counts in every table as its two parts: its metal part
+// (metalFg, machine.h) as metal, the rest as plastic, so grades and recoveries are of the metal and the plastic
+// wherever they are, liberated or not.
 // Grade and recovery (B. A. Wills, T. Napier-Munn, "Mineral Processing Technology", 7th ed., 2006, §1.7),
 // recovery relative to the FED mass of the kind (so material held up on the drum or in the brush, or still in
 // flight, counts as not recovered):
