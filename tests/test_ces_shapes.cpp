@@ -331,7 +331,7 @@ TEST_CASE("Composite configuration: bad metal fractions and keys are input error
   CHECK(parseCesDocument(doc, {"feed.materials.2.metal_fraction=0.3"}, "t").materials[2].metal_fraction_max == 0.3);
 }
 
-TEST_CASE("Surface conductivity: O'Konski's 2 sigma_s / r adds to the bulk's rate; the key is checked",
+TEST_CASE("Surface conductivity: O'Konski's 2 sigma_s / r adds to the bulk's rate, and the key is checked",
           "[ces][ces_shapes]") {
   const double r = 0.4e-3, eps = 2.5, ss = 1e-14;
   // No bulk conduction: tau = eps0 eps_r r / (2 sigma_s) = 0.4427 s.
