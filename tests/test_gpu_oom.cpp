@@ -60,8 +60,8 @@ TEST_CASE("GPU out of memory: exit code 5, one line, the earlier results kept, n
   CHECK(beside == 0);
 
   // The same scene fits once the memory is back: the failure was the memory, not the scene.
-  const CliResult ok = runCli("run " + quote(scene.string()) + " --backend gpu --steps 1 --out " +
-                              quote((d / "fits").string()));
+  const CliResult ok =
+      runCli("run " + quote(scene.string()) + " --backend gpu --steps 1 --out " + quote((d / "fits").string()));
   INFO("with the memory back: " << ok.err);
   CHECK(ok.code == 0);
   fs::remove_all(d);

@@ -187,13 +187,14 @@ void writeFramePieces(const dvi::DistributedSystem& sys, const std::vector<dvi::
 void writeCheckpoint(const dvi::DistributedSystem& sys, const dvi::Scene& scene, double dt, const std::string& cdir) {
   if (sys.rank() == 0) std::filesystem::create_directories(cdir);
   MPI_Barrier(MPI_COMM_WORLD);
-  dvi::writeFileAtomic(cdir + "/piece_p" + std::to_string(sys.rank()) + ".bin",
-                       dvi::encodePiece(sys.checkpointPiece()), dvi::Durability::Synced);
+  dvi::writeFileAtomic(cdir + "/piece_p" + std::to_string(sys.rank()) + ".bin", dvi::encodePiece(sys.checkpointPiece()),
+                       dvi::Durability::Synced);
   MPI_Barrier(MPI_COMM_WORLD);  // every piece in place before the manifest names them
   if (sys.rank() == 0)
-    dvi::writeFileAtomic(cdir + "/manifest.json", runckpt::manifestText(sys.processes(), sys.stepCount(), sys.time(),
-                                                                        dt, sys.bodyCount(), scene),
-                         dvi::Durability::Synced);
+    dvi::writeFileAtomic(
+        cdir + "/manifest.json",
+        runckpt::manifestText(sys.processes(), sys.stepCount(), sys.time(), dt, sys.bodyCount(), scene),
+        dvi::Durability::Synced);
 }
 
 // A periodic checkpoint (every process calls it at the same step): the pieces and manifest into a temporary folder,
