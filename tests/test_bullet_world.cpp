@@ -667,7 +667,7 @@ TEST_CASE("drop-in world on the GPU backend: the demo's stack rests as on Bullet
   TestWorld w(true, WorldBackend::Gpu);
   drop_in::Scene scene;
   scene.build(*w.world, 0);
-  // Under compute-sanitizer (DVISIM_SANITIZER_RUN, src/gpu/tools/run_device.sh) one frame (4 substeps, every
+  // Under compute-sanitizer (DVISIM_SANITIZER_RUN, scripts/device/run_device.sh) one frame (4 substeps, every
   // kernel of a step with joints and MPR pairs): the stack starts at rest, so the check holds at any time, and
   // racecheck did not finish 0.25 s (60 substeps) within 150 s.
   w.run(std::getenv("DVISIM_SANITIZER_RUN") ? 1.0 / 60 : 1.5);

@@ -1,7 +1,7 @@
 // The drop-in world on the GPU backend at every SolverEffort, on scenes shaped like Bullet's examples (BasicDemo's
 // 5 x 5 x 5 boxes on a ground box; a hinge pendulum beside them): each runs without a device error and its boxes
 // come to rest on the ground as they do on the CPU backend. Run under compute-sanitizer on the device machine
-// (src/gpu/tools/run_device.sh sanitize).
+// (scripts/device/run_device.sh sanitize).
 #include <catch2/catch.hpp>
 
 #include <algorithm>

@@ -744,7 +744,7 @@ TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's, th
     auto cpu_sys = cesSystem(cfg, false);
     auto gpu_sys = cesSystem(cfg, true);
     CesMachine cpu(cfg, *cpu_sys), gpu(cfg, *gpu_sys);
-    // Under compute-sanitizer (DVISIM_SANITIZER_RUN, src/gpu/tools/run_device.sh) 0.05 s: the kernels all run
+    // Under compute-sanitizer (DVISIM_SANITIZER_RUN, scripts/device/run_device.sh) 0.05 s: the kernels all run
     // (the first part above ran them against the CPU), and no particle reaches the bins that soon.
     const bool sanitizer_run = std::getenv("DVISIM_SANITIZER_RUN") != nullptr;
     int64_t closes = 0, steps = 0;

@@ -451,7 +451,7 @@ TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree 
   const int n = 10000;  // the one-step test's pile; 2,000 bodies (one realisation of a chaotic flow) differed by 2.1%
   buildPile(cpu, n, 7, true, 1.7);
   buildPile(*gpu, n, 7, true, 1.7);
-  // Under compute-sanitizer (src/gpu/tools/run_device.sh sanitize sets DVISIM_SANITIZER_RUN=1) the kernels run
+  // Under compute-sanitizer (scripts/device/run_device.sh sanitize sets DVISIM_SANITIZER_RUN=1) the kernels run
   // 10-1000x slower (racecheck): the run is cut to 30 steps, which execute every kernel of the step, and the
   // statistics, which need the whole second, are not judged (the sanitizer's report is that run's verdict).
   const bool sanitizer_run = std::getenv("DVISIM_SANITIZER_RUN") != nullptr;

@@ -1,6 +1,6 @@
 // The GPU scaling benchmark is `dvisim bench scaling` (apps/dvisim/bench_scaling.cpp, scenes in
 // bench/scaling/). This hidden test only runs that command, so device scripts that ask for "[gpu_bench]"
-// (src/gpu/tools/run_device.sh bench) keep working:
+// (scripts/device/run_device.sh bench) keep working:
 //   dvisim_tests "[gpu_bench]"   (env DVISIM_BENCH_OUT=DIR, DVISIM_BENCH_SIZES=10k,100k,1M,4M)
 // It writes DIR/scaling.csv, scaling.png and, as --record, the dated result under bench/results/ (a copy in DIR).
 // The CTest smoke test of the same command is bench_scaling_quick (tests/CMakeLists.txt).

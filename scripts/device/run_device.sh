@@ -1,7 +1,7 @@
 #!/bin/bash
 # One device-machine session for the GPU backend. Run from the repository root on the device machine
 # (carry .deps); logs and bench outputs go to $LOGS, plots and recorded results to $OUT (default ./out-device):
-#   DVISIM_COMMIT=<sha> bash src/gpu/tools/run_device.sh build tests sanitize ces scaling ...
+#   DVISIM_COMMIT=<sha> bash scripts/device/run_device.sh build tests sanitize ces scaling ...
 # Modes:
 #   build      configure + build dvisim_cli and dvisim_tests in build-dev (sm_90, Release; ~5 min, 16 cores)
 #   tests      every [gpu] test
@@ -145,7 +145,7 @@ PY
         $BIN bench scaling --out "$LOGS/ncu" --scenes ${PROBE_SCENES:-pile} --engines gpu --sizes ${PROBE_SIZES:-100k} \
         --budget 0.01 > "$LOGS/ncu.csv" 2> "$LOGS/ncu.err"
       echo "ncu rc=$?"; tail -3 "$LOGS/ncu.err"
-      python3 src/gpu/tools/ncu_summary.py "$LOGS/ncu.csv" ${NCU_STEPS:-1} ;;
+      python3 scripts/device/ncu_summary.py "$LOGS/ncu.csv" ${NCU_STEPS:-1} ;;
     settle)  # scenes/pile_100k.json on the GPU at the solver's default stop and at fixed 50 iterations, side by side
              # (SETTLE_TIME s of machine time, default 1); the table goes to $OUT/settle.md
       for v in fixed50 default; do

@@ -2,7 +2,7 @@
 # The default CES machine's trend points on the CPU, seeds 1-3, one thread per run, in parallel (the device
 # machine's 16 cores): -20 / -45 kV at 44.8 rpm and 30 / 60 rpm at -35 kV, printed beside each other to compare
 # with the table in docs/CES.md ("Trends of the default machine").
-#   bash src/gpu/tools/ces_trend_check.sh BUILD_DIR [JOBS]
+#   bash scripts/device/ces_trend_check.sh BUILD_DIR [JOBS]
 set -u
 B=$1
 J=${2:-16}
