@@ -25,14 +25,7 @@ std::unique_ptr<PySystem> loadScene(const std::string& path, const std::vector<s
   auto s = std::make_unique<PySystem>();
   s->settings = scene.settings;
   s->scene_source = scene.source;
-  std::string name;
-  const bool have_gpu = dvi::gpuAvailable(&name);
-  const std::string backend = backend_in == "auto" ? (have_gpu ? "gpu" : "cpu") : backend_in;
-  if (backend == "gpu" && !have_gpu)
-    throw dvi::InputError("backend gpu: no usable GPU device" + (name.empty() ? std::string() : " (" + name + ")"));
-  const dvi::SystemConfig& cfg = s->settings.system;
-  s->sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
-                            : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
+  makeEngine(*s, backend_in);
   dvi::importBullet(*s->sys, scene.bodies());
   return s;
 }

@@ -66,6 +66,17 @@ py::array realView(PySystem& s, py::handle owner, real* data, size_t count, size
   return a;
 }
 
+void makeEngine(PySystem& s, const std::string& backend_in) {
+  std::string name;
+  const bool have_gpu = dvi::gpuAvailable(&name);
+  const std::string backend = backend_in == "auto" ? (have_gpu ? "gpu" : "cpu") : backend_in;
+  if (backend == "gpu" && !have_gpu)
+    throw dvi::InputError("backend gpu: no usable GPU device" + (name.empty() ? std::string() : " (" + name + ")"));
+  const dvi::SystemConfig& cfg = s.settings.system;
+  s.sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
+                           : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
+}
+
 std::unique_ptr<PySystem> makeSystem(const std::string& settings_json, const std::string& backend_in) {
   dvi::requireOneOf("--backend", backend_in, {"auto", "cpu", "gpu"});
   nlohmann::json j;
@@ -76,14 +87,7 @@ std::unique_ptr<PySystem> makeSystem(const std::string& settings_json, const std
   }
   auto s = std::make_unique<PySystem>();
   s->settings = dvi::parseSceneSettings(j, "dvisim.System", "settings");
-  std::string name;
-  const bool have_gpu = dvi::gpuAvailable(&name);
-  const std::string backend = backend_in == "auto" ? (have_gpu ? "gpu" : "cpu") : backend_in;
-  if (backend == "gpu" && !have_gpu)
-    throw dvi::InputError("backend gpu: no usable GPU device" + (name.empty() ? std::string() : " (" + name + ")"));
-  const dvi::SystemConfig& cfg = s->settings.system;
-  s->sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
-                            : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
+  makeEngine(*s, backend_in);
   return s;
 }
 

@@ -53,6 +53,8 @@ void stepSystem(PySystem& s, long long n);
 
 // A System from a configuration (the scene "settings" object as JSON text, validated by parseSceneSettings) on
 // `backend` (auto|cpu|gpu). InputError for a bad key or value.
+// s.sys for s.settings on `backend` ("auto", "cpu", "gpu": checked by the caller); InputError for gpu without a device.
+void makeEngine(PySystem& s, const std::string& backend);
 std::unique_ptr<PySystem> makeSystem(const std::string& settings_json, const std::string& backend);
 
 }  // namespace dvipy
