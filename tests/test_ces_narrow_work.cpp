@@ -10,10 +10,12 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <map>
 #include <set>
 #include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -60,6 +62,71 @@ std::map<std::pair<ShapeType, ShapeType>, ClassCensus> census(const System& sys)
     k.deep += deep ? 1 : 0;
     k.supports += double(w.total());
     k.max_supports = std::max(k.max_supports, int(w.total()));
+  }
+  return out;
+}
+
+// Last step's contacts of sys as the narrow phase's LastNormals (sorted keys and their normals), kept in *keys and
+// *normals.
+LastNormals snapshotNormals(const System& sys, std::vector<uint64_t>& keys, std::vector<Vec3>& normals) {
+  const ContactArrays& c = sys.contacts();
+  std::vector<size_t> order(c.count());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](size_t x, size_t y) { return c.key[x] < c.key[y]; });
+  keys.clear();
+  normals.clear();
+  for (size_t k : order) {
+    keys.push_back(c.key[k]);
+    normals.push_back(c.normal[k]);
+  }
+  return LastNormals{keys.data(), normals.data(), int64_t(keys.size())};
+}
+
+// MPR's temporal coherence (mpr.h: mprBeginOverlap) on the touching pairs of sys's last step, against the full
+// search (the candidates every time) as the oracle: how many deep pairs kept last step's face, how their contact
+// differs from the full search's (normal angle, signed distance), and the supports they saved.
+struct CoherenceCheck {
+  int deep = 0, coherent = 0, differ = 0;
+  double max_angle = 0, max_ddist_rel = 0, supports_full = 0, supports_coherent = 0;
+};
+
+CoherenceCheck checkCoherence(const System& sys, const LastNormals& last) {
+  const ShapeArrays& sh = sys.shapes();
+  const BodyArrays& bodies = sys.bodies();
+  const ContactArrays& c = sys.contacts();
+  const CollisionSettings& cs = sys.config().collision;
+  std::set<std::pair<int32_t, int32_t>> touching;
+  for (size_t k = 0; k < c.count(); ++k) touching.insert({c.shape_a[k], c.shape_b[k]});
+  CoherenceCheck out;
+  ContactPoint full[kMaxContactsPerPair], kept[kMaxContactsPerPair];
+  for (const auto& [ia, ib] : touching) {
+    const Shape &a = sh.shape[size_t(ia)], &b = sh.shape[size_t(ib)];
+    if (!pairUsesMpr(a.type, b.type)) continue;
+    const Pose wa = shapeWorldPose(Pose{bodies.pos[size_t(a.body)], bodies.rot[size_t(a.body)]}, a);
+    const Pose wb = shapeWorldPose(Pose{bodies.pos[size_t(b.body)], bodies.rot[size_t(b.body)]}, b);
+    const real env = plainEnvelope(a, b, cs.envelope_rel);
+    np::MprDeferred d;
+    if (collideShapes(a, wa, b, wb, sh.hull_points.data(), env, full, &d, cs.mpr_manifold, cs.gjk) != np::kMprDeferred)
+      continue;  // not deep: coherence does not apply
+    ++out.deep;
+    NarrowWork wf, wk;
+    const int nf = collideShapes(a, wa, b, wb, sh.hull_points.data(), env, full, nullptr, cs.mpr_manifold, cs.gjk, &wf);
+    const PairHistory h{last, ia, ib, real(1)};
+    const int nk =
+        collideShapes(a, wa, b, wb, sh.hull_points.data(), env, kept, nullptr, cs.mpr_manifold, cs.gjk, &wk, &h);
+    if (wk.coherent == 0) continue;
+    ++out.coherent;
+    out.supports_full += double(wf.total());
+    out.supports_coherent += double(wk.total());
+    if (nf == 0 || nk == 0) {
+      out.differ += nf != nk ? 1 : 0;
+      continue;
+    }
+    const double angle = std::acos(std::min(1.0, double(dot(full[0].normal, kept[0].normal))));
+    const double ddist = std::fabs(double(full[0].dist - kept[0].dist)) / double(std::fmin(a.size, b.size));
+    out.max_angle = std::max(out.max_angle, angle);
+    out.max_ddist_rel = std::max(out.max_ddist_rel, ddist);
+    if (angle > 1e-3 || ddist > 1e-3) ++out.differ;
   }
   return out;
 }
@@ -127,4 +194,25 @@ TEST_CASE("narrow phase work on the CES feed: supports per pair and deep pairs p
   CHECK(pairs > 2000);        // the feed is on the drum
   CHECK(on_cylinder > 1000);  // particles resting on the drum
   CHECK(mpr_pairs > 100);
+
+  // Temporal coherence against the full search, over 20 more steps (each step's deep pairs with the step before's
+  // normals).
+  CoherenceCheck k;
+  for (int s = 0; s < 20; ++s) {
+    std::vector<uint64_t> keys;
+    std::vector<Vec3> normals;
+    const LastNormals last = snapshotNormals(sys, keys, normals);
+    machine.step();
+    const CoherenceCheck one = checkCoherence(sys, last);
+    k.deep += one.deep, k.coherent += one.coherent, k.differ += one.differ;
+    k.supports_full += one.supports_full, k.supports_coherent += one.supports_coherent;
+    k.max_angle = std::max(k.max_angle, one.max_angle);
+    k.max_ddist_rel = std::max(k.max_ddist_rel, one.max_ddist_rel);
+  }
+  std::printf(
+      "ces coherence: %d deep MPR pairs, %d kept last step's face (supports %.0f -> %.0f), %d differ from the full "
+      "search (largest angle %.2e rad, distance %.2e of the smaller size)\n",
+      k.deep, k.coherent, k.supports_full, k.supports_coherent, k.differ, k.max_angle, k.max_ddist_rel);
+  CHECK(k.coherent > 0);
+  CHECK(k.differ <= k.coherent / 100);
 }

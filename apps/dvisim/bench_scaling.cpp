@@ -91,6 +91,7 @@ struct ScalingOptions : BenchBasics {
   bool gpu_register_cache = true;
   double pair_margin = dvi::BroadPhaseSettings{}.pair_margin;
   bool mpr_manifold = dvi::SystemConfig{}.collision.mpr_manifold;
+  bool mpr_coherence = dvi::SystemConfig{}.collision.mpr_coherence;
   bool gpu_entry_gather = dvi::SystemConfig{}.gpu.entry_gather;
   bool gpu_narrow_classes = dvi::SystemConfig{}.gpu.narrow_classes;
   std::string gjk = "auto";
@@ -704,6 +705,7 @@ int runScaling(const ScalingOptions& o) {
   cfg.gpu.apgd_register_cache = o.gpu_register_cache;
   cfg.collision.broadphase.pair_margin = dvi::real(o.pair_margin);
   cfg.collision.mpr_manifold = o.mpr_manifold;
+  cfg.collision.mpr_coherence = o.mpr_coherence;
   cfg.gpu.entry_gather = o.gpu_entry_gather;
   cfg.gpu.narrow_classes = o.gpu_narrow_classes;
   cfg.collision.gjk = o.gjk == "all"           ? dvi::GjkUse::All
@@ -920,7 +922,8 @@ int runScaling(const ScalingOptions& o) {
        << (cfg.collision.mpr_manifold
                ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)"
                : "MPR's one point per pair (--mpr-manifold false)")
-       << "; GJK before MPR (--gjk): " << o.gjk
+       << "; deep MPR pairs on last step's face keep it (--mpr-coherence): "
+       << (cfg.collision.mpr_coherence ? "true" : "false") << "; GJK before MPR (--gjk): " << o.gjk
        << "; GPU pairs by shape-pair class (--gpu-narrow-classes): " << (cfg.gpu.narrow_classes ? "true" : "false")
        << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
           "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
@@ -978,6 +981,9 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
       "--mpr-manifold", o->mpr_manifold,
       "MPR pairs of two flat features get up to 4 more points of their overlap (CollisionSettings::mpr_manifold; "
       "true, the default, or false: MPR's one point)");
+  cmd->add_option("--mpr-coherence", o->mpr_coherence,
+                  "A deep MPR pair whose first pass ends on the face of its last step's contact keeps that point "
+                  "(CollisionSettings::mpr_coherence; true, the default, or false: the candidates every step)");
   cmd->add_option("--gpu-entry-gather", o->gpu_entry_gather,
                   "GPU float storage: the Schur product's gather reads each adjacency entry's side of the Jacobian in "
                   "entry order and isotropic inverse masses as 16 bytes (GpuTuning::entry_gather; true, the "

@@ -207,11 +207,13 @@ void restore(dvi::System& sys, const Resumed& r) {
   sys.markHostDirty();
   std::vector<uint64_t> keys;
   std::vector<dvi::real> gamma;
+  std::vector<dvi::Vec3> normals;
   for (const dvi::ContactImpulse& c : r.impulses) {
     keys.push_back(c.key);
     gamma.insert(gamma.end(), c.gamma, c.gamma + 3);
+    normals.push_back(c.normal);
   }
-  if (sys.config().solver.warm_start) sys.setWarmStart(std::move(keys), std::move(gamma));
+  if (sys.config().solver.warm_start) sys.setWarmStart(std::move(keys), std::move(gamma), std::move(normals));
   sys.setClock(r.time, r.step);
 }
 

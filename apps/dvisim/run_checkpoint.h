@@ -1,6 +1,6 @@
 // Checkpoints of scene runs (`dvisim run SCENE`, on one process or under mpirun): one format for both. A checkpoint is
-// a folder of pieces (chrono_like/checkpoint_piece.h, format DVIMPI01: bodies' states and the last step's contact
-// impulses under scene ids and contact keys, checksummed) and manifest.json naming how many there are, the step, the
+// a folder of pieces (chrono_like/checkpoint_piece.h, format DVIMPI02: bodies' states and the last step's contact
+// impulses and normals under scene ids and contact keys, checksummed) and manifest.json naming how many there are, the step, the
 // clock, dt, the body count and the scene file's checksum. Under mpirun each process writes its piece; a single
 // process writes one piece with all its bodies (the case K = 1), so either resumes on any number of processes.
 //

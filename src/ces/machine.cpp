@@ -729,20 +729,27 @@ void CheckpointSystem::saveCore(std::ostream& o) const {
   putVec(o, prev_gamma_);
   putVec(o, rows_);
   putVec(o, row_lambda_);
+  putVec(o, prev_normal_);
 }
 
-void CheckpointSystem::loadCore(std::istream& i) {
+void CheckpointSystem::loadCore(std::istream& i, bool with_normals) {
   double time = 0;
   int64_t steps = 0;
   std::vector<uint64_t> keys;
   std::vector<real> gamma, lambda;
   std::vector<ConstraintRow> rows;
+  std::vector<Vec3> normals;
   get(i, time);
   get(i, steps);
   getVec(i, keys);
   getVec(i, gamma);
   getVec(i, rows);
   getVec(i, lambda);
+  if (with_normals) getVec(i, normals);
+  if (with_normals && normals.size() != keys.size()) throw InputError("checkpoint: corrupt warm-start normals");
+  for (const Vec3& v : normals)
+    if (!(std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z)))
+      throw InputError("checkpoint: corrupt warm-start normal");
   // The warm-start cache is looked up by binary search and read 3 impulses a contact; rows name bodies.
   if (!(time >= 0 && time <= double(int64_t(1) << 40) * double(real(config().step.dt))) || steps < 0 ||
       steps > (int64_t(1) << 40))
@@ -766,6 +773,7 @@ void CheckpointSystem::loadCore(std::istream& i) {
   steps_ = steps;
   prev_keys_ = std::move(keys);
   prev_gamma_ = std::move(gamma);
+  prev_normal_ = std::move(normals);
   rows_ = std::move(rows);
   row_lambda_ = std::move(lambda);
 }
@@ -807,7 +815,7 @@ void CesMachine::save(std::ostream& file, const std::string& meta) const {
   putVec(o, b.omega);
   putVec(o, b.flags);
   const auto* cs = dynamic_cast<const CheckpointSystem*>(&sys_);
-  put(o, uint8_t(cs ? 1 : 0));
+  put(o, uint8_t(cs ? 2 : 0));  // 2: the core with its contacts' normals (1: without, an earlier file)
   if (cs) cs->saveCore(o);
   std::string f = o.str();
   f.append(kTrailerBytes, '\0');
@@ -1014,9 +1022,9 @@ void CesMachine::loadBodyArrays(std::istream& in) {
 void CesMachine::loadCoreAndEnd(std::istream& in) {
   uint8_t has_core = 0;
   get(in, has_core);
-  if (has_core > 1) throw InputError("checkpoint: corrupt core marker");
+  if (has_core > 2) throw InputError("checkpoint: corrupt core marker");
   auto* cs = dynamic_cast<CheckpointSystem*>(&sys_);
-  if (has_core && cs) cs->loadCore(in);
+  if (has_core && cs) cs->loadCore(in, has_core == 2);
   if (!(has_core && !cs) && in.peek() != std::char_traits<char>::eof())  // a GPU run's file may carry a core it ignores
     throw InputError("checkpoint: " + std::to_string(bytesLeft(in)) + " bytes of garbage after the end");
 }

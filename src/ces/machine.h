@@ -193,7 +193,9 @@ class CesMachine {
 
   // Checkpoint: the machine state, the feeder, every particle's spec and the body arrays; with a
   // CheckpointSystem also the core's warm-start cache and clock, so that a resumed CPU run ends bitwise
-  // where an uninterrupted one does. load() expects a freshly built machine of the same configuration.
+  // where an uninterrupted one does (the core: clock, warm-start keys, impulses, constraint rows and impulses, and,
+  // after the core marker 2, the contacts' normals; a file with marker 1, from before the normals, still loads).
+  // load() expects a freshly built machine of the same configuration.
   // The file (format DVICES03, kCesCheckpointMagic):
   //   "DVICES03" | u64 n | n bytes `meta` (the CLI: the configuration the run was made with) | the state |
   //   u64 FNV-1a 64 (checksum.h) of every byte before it
@@ -269,7 +271,7 @@ class CheckpointSystem : public System {
  public:
   using System::System;
   void saveCore(std::ostream& out) const;
-  void loadCore(std::istream& in);
+  void loadCore(std::istream& in, bool with_normals);  // with_normals: the core marker 2 (the normals follow)
 };
 
 }  // namespace ces

@@ -60,7 +60,8 @@ void readBodies(Reader& r, CheckpointPiece& p, size_t bodies) {
 
 void readImpulses(Reader& r, CheckpointPiece& p, size_t bodies) {
   const uint64_t n = r.get<uint64_t>();
-  const size_t rec = sizeof(uint64_t) + 2 * sizeof(int32_t) + 3 * sizeof(real);
+  const bool normals = p.format >= 2;
+  const size_t rec = sizeof(uint64_t) + 2 * sizeof(int32_t) + (normals ? 6 : 3) * sizeof(real);
   if (n > (r.end - r.at) / rec) throw InputError(r.what + ": " + std::to_string(n) + " contacts do not fit the file");
   for (uint64_t i = 0; i < n; ++i) {
     ContactImpulse c;
@@ -68,6 +69,14 @@ void readImpulses(Reader& r, CheckpointPiece& p, size_t bodies) {
     c.body_a = r.get<int32_t>();
     c.body_b = r.get<int32_t>();
     for (real& g : c.gamma) g = r.get<real>();
+    c.normal = Vec3{0, 0, 0};
+    if (normals) {
+      c.normal.x = r.get<real>();
+      c.normal.y = r.get<real>();
+      c.normal.z = r.get<real>();
+      if (!std::isfinite(c.normal.x) || !std::isfinite(c.normal.y) || !std::isfinite(c.normal.z))
+        throw InputError(r.what + ": contact " + std::to_string(i) + ": non-finite normal");
+    }
     if (c.body_a < 0 || c.body_b < 0 || size_t(c.body_a) >= bodies || size_t(c.body_b) >= bodies)
       throw InputError(r.what + ": contact " + std::to_string(i) + ": body out of range");
     if (!std::isfinite(c.gamma[0]) || !std::isfinite(c.gamma[1]) || !std::isfinite(c.gamma[2]))
@@ -79,7 +88,7 @@ void readImpulses(Reader& r, CheckpointPiece& p, size_t bodies) {
 }  // namespace
 
 std::string encodePiece(const CheckpointPiece& p) {
-  std::string out(kMpiCheckpointMagic, 8);
+  std::string out(p.format >= 2 ? kMpiCheckpointMagic : kMpiCheckpointMagicV1, 8);
   put(out, uint64_t(p.ids.size()));
   for (size_t i = 0; i < p.ids.size(); ++i) {
     const MotionState& s = p.states[i];
@@ -94,20 +103,26 @@ std::string encodePiece(const CheckpointPiece& p) {
     put(out, c.body_a);
     put(out, c.body_b);
     for (real g : c.gamma) put(out, g);
+    if (p.format >= 2)
+      for (real v : {c.normal.x, c.normal.y, c.normal.z}) put(out, v);
   }
   put(out, fnv1a64(out.data(), out.size()));
   return out;
 }
 
 CheckpointPiece decodePiece(const std::string& bytes, const std::string& what, size_t bodies) {
-  if (bytes.size() < 8 + 3 * sizeof(uint64_t) || bytes.compare(0, 8, kMpiCheckpointMagic, 8) != 0)
-    throw InputError(what + ": not a dvisim MPI checkpoint piece (" + kMpiCheckpointMagic + ")");
+  const bool v2 = bytes.size() >= 8 && bytes.compare(0, 8, kMpiCheckpointMagic, 8) == 0;
+  const bool v1 = bytes.size() >= 8 && bytes.compare(0, 8, kMpiCheckpointMagicV1, 8) == 0;
+  if (bytes.size() < 8 + 3 * sizeof(uint64_t) || !(v1 || v2))
+    throw InputError(what + ": not a dvisim MPI checkpoint piece (" + kMpiCheckpointMagic + " or " +
+                     kMpiCheckpointMagicV1 + ")");
   const size_t body_end = bytes.size() - sizeof(uint64_t);
   uint64_t stored = 0;
   std::memcpy(&stored, bytes.data() + body_end, sizeof stored);
   if (stored != fnv1a64(bytes.data(), body_end)) throw InputError(what + ": checksum mismatch (damaged or edited)");
   Reader r{bytes, 8, body_end, what};
   CheckpointPiece p;
+  p.format = v2 ? 2 : 1;
   readBodies(r, p, bodies);
   readImpulses(r, p, bodies);
   if (r.at != r.end) throw InputError(what + ": " + std::to_string(r.end - r.at) + " bytes after the contacts");

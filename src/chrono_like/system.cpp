@@ -336,6 +336,9 @@ void System::integrateForces() {
 void System::detectCollisions() {
   CollisionTimes t;
   collision_->setFreeVelocities(v_free_.data(), w_free_.data());
+  const bool last = config_.solver.warm_start && prev_normal_.size() == prev_keys_.size();
+  collision_->setLastNormals(
+      LastNormals{prev_keys_.data(), prev_normal_.data(), last ? int64_t(prev_keys_.size()) : int64_t(0)});
   collision_->detect(bodies_, shapes_, config_.collision, ctx_, contacts_, t);
   stats_.stage_seconds[int(StageType::ComputeAabbs)] = t.aabbs;
   stats_.stage_seconds[int(StageType::BroadPhase)] = t.broad;
@@ -404,7 +407,8 @@ std::vector<ContactImpulse> System::contactImpulsesOf(const std::vector<int32_t>
     const int32_t a = contacts_.body_a[k], b = contacts_.body_b[k];
     if (!std::binary_search(bodies.begin(), bodies.end(), a) && !std::binary_search(bodies.begin(), bodies.end(), b))
       continue;
-    out.push_back(ContactImpulse{contacts_.key[k], a, b, {gamma_[3 * k], gamma_[3 * k + 1], gamma_[3 * k + 2]}});
+    out.push_back(ContactImpulse{
+        contacts_.key[k], a, b, {gamma_[3 * k], gamma_[3 * k + 1], gamma_[3 * k + 2]}, contacts_.normal[k]});
   }
   std::sort(out.begin(), out.end(), [](const ContactImpulse& x, const ContactImpulse& y) { return x.key < y.key; });
   return out;
@@ -438,20 +442,31 @@ void System::setProcessGroup(ProcessGroup* group) {
   problem_->setProcessGroup(group);
 }
 
-void System::setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses) {
+void System::setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses, std::vector<Vec3> normals) {
   if (impulses.size() != 3 * sorted_keys.size() || !std::is_sorted(sorted_keys.begin(), sorted_keys.end()))
     throw InputError("warm start: keys must be sorted, with 3 impulses each");
+  if (!normals.empty() && normals.size() != sorted_keys.size())
+    throw InputError("warm start: " + std::to_string(normals.size()) + " normals for " +
+                     std::to_string(sorted_keys.size()) + " keys");
   prev_keys_ = std::move(sorted_keys);
   prev_gamma_ = std::move(impulses);
   prev_roll_.clear();
+  prev_normal_ = std::move(normals);
 }
 
-void System::addWarmStart(const std::vector<uint64_t>& keys, const std::vector<real>& impulses) {
+void System::addWarmStart(const std::vector<uint64_t>& keys, const std::vector<real>& impulses,
+                          const std::vector<Vec3>& normals) {
   if (impulses.size() != 3 * keys.size() || !std::is_sorted(keys.begin(), keys.end()))
     throw InputError("warm start: keys must be sorted, with 3 impulses each");
+  if (!normals.empty() && normals.size() != keys.size())
+    throw InputError("warm start: " + std::to_string(normals.size()) + " normals for " + std::to_string(keys.size()) +
+                     " keys");
   if (keys.empty()) return;
+  // The normals stay where the table had them (or was empty) and the added entries bring theirs.
+  const bool with_normals = !normals.empty() && prev_normal_.size() == prev_keys_.size();
   std::vector<uint64_t> k;
   std::vector<real> g;
+  std::vector<Vec3> nr;
   size_t i = 0, j = 0;
   while (i < prev_keys_.size() || j < keys.size()) {  // a merge; the added entry wins a tie
     const bool add = j < keys.size() && (i == prev_keys_.size() || keys[j] <= prev_keys_[i]);
@@ -460,11 +475,13 @@ void System::addWarmStart(const std::vector<uint64_t>& keys, const std::vector<r
     const real* src = add ? &impulses[3 * j] : &prev_gamma_[3 * i];
     k.push_back(key);
     g.insert(g.end(), src, src + 3);
+    if (with_normals) nr.push_back(add ? normals[j] : prev_normal_[i]);
     (add ? j : i)++;
   }
   prev_keys_ = std::move(k);
   prev_gamma_ = std::move(g);
   prev_roll_.clear();
+  prev_normal_ = std::move(nr);
 }
 
 void System::collectRows() {
@@ -495,6 +512,7 @@ void System::buildAndSolve() {
     prev_keys_.clear();
     prev_gamma_.clear();
     prev_roll_.clear();
+    prev_normal_.clear();
     row_lambda_.clear();
     stats_.part_ran[int(StagePart::FrictionRows)] = false;
     stats_.part_reason[int(StagePart::FrictionRows)] = "no contacts";
@@ -635,10 +653,12 @@ void System::cacheImpulsesByKey(int64_t nc) {
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return contacts_.key[a] < contacts_.key[b]; });
   prev_keys_.resize(size_t(nc));
   prev_gamma_.resize(size_t(3 * nc));
+  prev_normal_.resize(size_t(nc));
   const bool rolling = problem_->rollingBlocks() > 0;
   prev_roll_.assign(rolling ? size_t(3 * nc) : size_t(0), real(0));
   for (size_t i = 0; i < size_t(nc); ++i) {
     prev_keys_[i] = contacts_.key[order[i]];
+    prev_normal_[i] = contacts_.normal[order[i]];
     for (int r = 0; r < 3; ++r) prev_gamma_[3 * i + r] = gamma_[3 * order[i] + r];
     const int32_t q = rolling ? problem_->rollingIndex(int64_t(order[i])) : -1;
     if (q >= 0)

@@ -237,11 +237,12 @@ struct ConvergenceLog {
 class ContactProblem;
 
 // A contact of the last step with its impulses (System::contactImpulsesOf): its persistent key (contact.h: contactKey),
-// its bodies, and 3 impulses (normal, then the two tangents).
+// its bodies, 3 impulses (normal, then the two tangents) and its normal.
 struct ContactImpulse {
   uint64_t key;
   int32_t body_a, body_b;
   real gamma[3];
+  Vec3 normal;  // from shape a to shape b (the next narrow phase's last normal: setWarmStart)
 };
 
 class System {
@@ -329,11 +330,15 @@ class System {
   // friction or Bullet collision: InputError). null: this System alone (the default). The group outlives the System's steps.
   void setProcessGroup(ProcessGroup* group);
   // The next step's warm start (WarmStart stage): impulses (3 per key) of the contacts with these keys, sorted
-  // ascending, in place of the last step's. For a driver that rebuilds the System between steps.
-  void setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses);
+  // ascending, in place of the last step's. For a driver that rebuilds the System between steps. `normals` (one per
+  // key, or empty): the contacts' normals, which the next narrow phase reads as last step's
+  // (CollisionSettings::mpr_coherence); without them it has none, and a deep pair tests its candidates again.
+  void setWarmStart(std::vector<uint64_t> sorted_keys, std::vector<real> impulses, std::vector<Vec3> normals = {});
   // Adds to the next step's warm start (an entry of a key already there replaces it): a driver hands over the impulses
-  // of the contacts another process solved in the last step. Keys sorted ascending, 3 impulses each.
-  virtual void addWarmStart(const std::vector<uint64_t>& sorted_keys, const std::vector<real>& impulses);
+  // of the contacts another process solved in the last step. Keys sorted ascending, 3 impulses each; normals as in
+  // setWarmStart (kept only where both the table and the added entries have them).
+  virtual void addWarmStart(const std::vector<uint64_t>& sorted_keys, const std::vector<real>& impulses,
+                            const std::vector<Vec3>& normals = {});
 
   // For a domain decomposition (chrono_like/mpi/distributed_system.h), on the current state without copying it:
   // the largest |v| and |w| of the dynamic bodies this process owns (all dynamic bodies without a process group),
@@ -397,11 +402,12 @@ class System {
   BodyArrays bodies_;
   ShapeArrays shapes_;
   ContactArrays contacts_;
-  std::vector<real> gamma_;            // impulses of this step, 3 per contact, then the rolling blocks', then rows'
-  std::vector<real> roll_coef_;        // 2 per contact: (mu_s, mu_r) this step, when some body has rolling friction
-  std::vector<real> prev_roll_;        // last step's rolling impulses, 3 per key of prev_keys_ (empty: none)
-  std::vector<uint64_t> prev_keys_;    // sorted keys of last step's contacts
-  std::vector<real> prev_gamma_;       // their impulses
+  std::vector<real> gamma_;          // impulses of this step, 3 per contact, then the rolling blocks', then rows'
+  std::vector<real> roll_coef_;      // 2 per contact: (mu_s, mu_r) this step, when some body has rolling friction
+  std::vector<real> prev_roll_;      // last step's rolling impulses, 3 per key of prev_keys_ (empty: none)
+  std::vector<uint64_t> prev_keys_;  // sorted keys of last step's contacts
+  std::vector<real> prev_gamma_;     // their impulses
+  std::vector<Vec3> prev_normal_;    // their normals (the narrow phase's LastNormals; empty after a handed-over start)
   std::vector<Vec3> v_free_, w_free_;  // velocities after forces
   std::vector<std::shared_ptr<ForceField>> fields_;
   std::vector<std::shared_ptr<RowProvider>> row_providers_;

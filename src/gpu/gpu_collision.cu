@@ -374,6 +374,7 @@ struct NarrowArgs {
   bool manifold;     // CollisionSettings::mpr_manifold
   GjkUse gjk;        // CollisionSettings::gjk, resolved for the GPU (resolvedGjk)
   const Aabb* aabb;  // the shapes' boxes of this step (ComputeAabbs): pairs whose boxes are apart are skipped
+  LastNormals last;  // last step's contacts for MPR's temporal coherence (CollisionSettings::mpr_coherence); n = 0: off
 };
 
 struct PairPoses {
@@ -415,8 +416,10 @@ __device__ int collidePair(const NarrowArgs& A, int64_t i, int32_t& a, int32_t& 
   const PairPoses P = pairPoses(A, i);
   a = P.a;
   b = P.b;
+  const PairHistory H{A.last, P.a, P.b, real(1)};
   return keepPoints(A, P, pts,
-                    collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold, A.gjk));
+                    collideShapes(P.sa, P.wa, P.sb, P.wb, A.hull, P.envelope, pts, defer, A.manifold, A.gjk, nullptr,
+                                  A.last.n > 0 ? &H : nullptr));
 }
 
 // Count pass: contacts per pair, keeping the first point. A deep MPR pair (mpr.h: mprBegin's answer 2) is left
@@ -1027,6 +1030,17 @@ void closedFormsInClassOrder(DeviceState& d, const NarrowArgs& A, int64_t np, co
   DVI_CUDA_LAUNCH("narrowClosedKernel");
 }
 
+// Last step's contacts as the narrow phase's LastNormals: those the warm start keeps (keepImpulsesForWarmStart),
+// or those handed over with normals (GpuSystem::setWarmStart: a resumed checkpoint) where there are none; none
+// without warm start or with CollisionSettings::mpr_coherence off (the CPU backend's rule, System::detectCollisions).
+LastNormals lastNormals(const DeviceState& d, const SystemConfig& cfg) {
+  if (!cfg.collision.mpr_coherence || !cfg.solver.warm_start) return LastNormals{};
+  if (d.prev_count > 0)
+    return LastNormals{d.solver.prev_key.data(), d.solver.prev_normal.data(), int64_t(d.prev_count)};
+  if (d.extra_normals) return LastNormals{d.extra_key.data(), d.extra_normal.data(), int64_t(d.extra_count)};
+  return LastNormals{};
+}
+
 // The narrow-phase kernels' view of this step's pairs, shapes and bodies.
 NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg) {
   return NarrowArgs{d.broad.pair_key_sorted.data(),
@@ -1042,7 +1056,8 @@ NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg) {
                     d.pair_shift,
                     cfg.collision.mpr_manifold,
                     resolvedGjk(cfg.collision.gjk, true),
-                    d.shapes.aabb.data()};
+                    d.shapes.aabb.data(),
+                    lastNormals(d, cfg)};
 }
 
 void narrowPhase(DeviceState& d, const SystemConfig& cfg) {

@@ -142,10 +142,11 @@ struct ImpulseRecordF {
   const uint64_t* key;
   const int32_t *a, *b;
   const real* gamma;
+  const Vec3* normal;
   ContactImpulse* out;
   __device__ void operator()(int64_t i) const {
     const int64_t k = sel[i];
-    out[i] = ContactImpulse{key[k], a[k], b[k], {gamma[3 * k], gamma[3 * k + 1], gamma[3 * k + 2]}};
+    out[i] = ContactImpulse{key[k], a[k], b[k], {gamma[3 * k], gamma[3 * k + 1], gamma[3 * k + 2]}, normal[k]};
   }
 };
 
@@ -335,10 +336,10 @@ std::vector<ContactImpulse> contactImpulsesOf(DeviceState& d, const std::vector<
   if (n == 0) return out;
   DeviceBuffer<ContactImpulse>& rec = d.impulse_records;
   rec.resize(size_t(n));
-  launchMap(
-      d, n,
-      ImpulseRecordF{d.sel.data(), c.key.data(), c.body_a.data(), c.body_b.data(), d.solver.gamma.data(), rec.data()},
-      "launch of ImpulseRecordF");
+  launchMap(d, n,
+            ImpulseRecordF{d.sel.data(), c.key.data(), c.body_a.data(), c.body_b.data(), d.solver.gamma.data(),
+                           c.normal.data(), rec.data()},
+            "launch of ImpulseRecordF");
   rec.download(out, size_t(n), d.stream);
   std::sort(out.begin(), out.end(), [](const ContactImpulse& x, const ContactImpulse& y) { return x.key < y.key; });
   return out;

@@ -165,6 +165,7 @@ struct SolverScratch {
   DeviceBuffer<real> gamma{"ccp gamma"}, prev_gamma{"ccp previous gamma"};
   DeviceBuffer<real> x{"ccp normal-only solution"};  // the solution in a normal-only problem's layout
   DeviceBuffer<uint64_t> prev_key{"ccp previous keys"};
+  DeviceBuffer<Vec3> prev_normal{"ccp previous normals"};  // by prev_key's order: the narrow phase's LastNormals
   // body -> contact adjacency (CSR): entries (2k + side) sorted by body, offsets per body
   DeviceBuffer<uint32_t> adj_key{"adjacency keys"}, adj_key_sorted{"adjacency sorted keys"};
   DeviceBuffer<int32_t> adj_val{"adjacency values"}, adj_val_sorted{"adjacency sorted values"};
@@ -269,7 +270,9 @@ struct DeviceState {
   DeviceBuffer<int32_t> sel{"selected indices"}, sel_count{"selected count"}, ex_scatter{"changed owners"};
   DeviceBuffer<uint64_t> extra_key{"handed-over warm-start keys"};
   DeviceBuffer<real> extra_gamma{"handed-over warm-start impulses"};
+  DeviceBuffer<Vec3> extra_normal{"handed-over warm-start normals"};
   size_t extra_count = 0;
+  bool extra_normals = false;    // extra_normal holds one normal per handed-over key
   DeviceContacts contacts_kept;  // the owned contacts while they are compacted (swapped with contacts)
   DeviceBuffer<ContactImpulse> impulse_records{"contact impulse records"};  // contactImpulsesOf's read-back
   PeerExchange peer;

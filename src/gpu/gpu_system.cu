@@ -320,6 +320,22 @@ void GpuSystem::integrateForces() {
   DVI_CUDA_LAUNCH("integrateForcesKernel");
 }
 
+// Impulses handed over (setWarmStart: a resumed checkpoint; addWarmStart: a distributed driver) go up for this step's
+// WarmStart alone, with their normals where they came with them (the narrow phase's LastNormals when the device has
+// no last step of its own: gpu_collision.cu, lastNormals).
+void GpuSystem::uploadHandedOverWarmStart() {
+  if (prev_keys_.empty()) return;
+  d_->extra_count = prev_keys_.size();
+  d_->extra_key.upload(prev_keys_, d_->stream);
+  d_->extra_gamma.upload(prev_gamma_, d_->stream);
+  d_->extra_normals = prev_normal_.size() == prev_keys_.size();
+  if (d_->extra_normals) d_->extra_normal.upload(prev_normal_, d_->stream);
+  DVI_CUDA(cudaStreamSynchronize(d_->stream));
+  prev_keys_.clear();
+  prev_gamma_.clear();
+  prev_normal_.clear();
+}
+
 void GpuSystem::detectCollisions() {
   cudaEvent_t* ev = d_->ev;
   if (d_->exclusions_version != exclusions_version_) {
@@ -329,6 +345,7 @@ void GpuSystem::detectCollisions() {
     d_->no_contact_count = int64_t(no_contact_.size());
     d_->exclusions_version = exclusions_version_;
   }
+  uploadHandedOverWarmStart();  // its normals are the narrow phase's last ones where the device has none
   computeAabbs(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::ComputeAabbs) + 1], d_->stream));
   stats_.pairs_reused = broadPhaseStep(*d_, config_);
@@ -392,18 +409,11 @@ void GpuSystem::buildAndSolve() {
                                                      : d_->normal_only ? "no contact with mu > 0 this step"
                                                                        : nullptr;
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BuildRows) + 1], d_->stream));
-  // Impulses handed over (setWarmStart, addWarmStart: a distributed driver) go up for this WarmStart alone.
-  d_->extra_count = prev_keys_.size();
-  if (!prev_keys_.empty()) {
-    d_->extra_key.upload(prev_keys_, d_->stream);
-    d_->extra_gamma.upload(prev_gamma_, d_->stream);
-    DVI_CUDA(cudaStreamSynchronize(d_->stream));
-    prev_keys_.clear();
-    prev_gamma_.clear();
-  }
+  uploadHandedOverWarmStart();  // entries handed over after this step's narrow phase
   const bool warm = config_.solver.warm_start && (d_->prev_count > 0 || d_->extra_count > 0);
   warmStart(*d_, config_.solver.warm_start, config_.solver.warm_start ? row_lambda_ : std::vector<real>{});
   d_->extra_count = 0;
+  d_->extra_normals = false;
   stats_.stage_ran[int(StageType::WarmStart)] = warm;
   if (!config_.solver.warm_start)
     leaveOut(StageType::WarmStart, "switched off (SystemConfig::solver.warm_start)");

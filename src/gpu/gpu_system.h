@@ -78,6 +78,7 @@ class GpuSystem : public System {
  protected:
   void integrateForces() override;
   void detectCollisions() override;
+  void uploadHandedOverWarmStart();
   void buildAndSolve() override;
   void integrate() override;
   // From the bodies uploaded so far (kept up to date by uploadIfNeeded), not a scan of the host arrays every

@@ -1,6 +1,6 @@
 // Fuzz target: the bytes of a distributed run's checkpoint piece (checkpoint/piece_pR.bin) -> dvi::decodePiece
 // (src/chrono_like/checkpoint_piece.cpp, part of the core library: no MPI). A piece carries a checksum (format
-// DVIMPI01), so each input is decoded as it is and then resealed (the checksum recomputed) to reach the field
+// DVIMPI02, DVIMPI01 still read), so each input is decoded as it is and then resealed (the checksum recomputed) to reach the field
 // checks. Oracle: a piece the reader accepts encodes back to the very same bytes. Seeds: corpus/mpi_checkpoint/ (a
 // piece of `mpirun -np 2 dvisim run scenes/pile.json --steps 60`).
 #include <cstddef>

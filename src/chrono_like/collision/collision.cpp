@@ -139,7 +139,9 @@ class NativeCollision final : public CollisionDetector {
                            bodies.pos[b.body], vel[b.body], omega[b.body]};
         const real envelope =
             pairEnvelope(a, b, config.envelope_rel, shapes.sweep[pairs_[p].a], shapes.sweep[pairs_[p].b], step.dt, m);
-        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold, gjk);
+        const PairHistory history{last_, pairs_[p].a, pairs_[p].b, real(1)};
+        int n = collideShapes(a, wa, b, wb, hull, envelope, pts, nullptr, config.mpr_manifold, gjk, nullptr,
+                              config.mpr_coherence && last_.n > 0 ? &history : nullptr);
         n = keepSpeculativePoints(pts, n, plainEnvelope(a, b, config.envelope_rel), step.dt, m);
         for (int k = 0; k < n; ++k) buf.push_back(PairContact{pts[k], int32_t(p)});
       }

@@ -9,6 +9,7 @@
 #include "chrono_like/base/data.h"
 #include "chrono_like/base/step_context.h"
 #include "chrono_like/collision/broadphase.h"
+#include "chrono_like/collision/contact.h"
 #include "chrono_like/collision/gjk.h"
 
 namespace dvi {
@@ -35,6 +36,11 @@ struct CollisionSettings {
   // GPU (docs/GPU_PERFORMANCE.md, narrow phase: GJK on curved cores cost the GPU's mixed pile twice its narrow
   // phase). The GPU and CPU give the same contacts only under the same resolved choice (resolvedGjk).
   GjkUse gjk = GjkUse::Auto;
+  // Temporal coherence of MPR: a deep pair (pressed in by more than 2% of the smaller shape) whose first pass ends
+  // on the face of its last step's contact (normals within ~2.6 degrees) keeps that point instead of testing the
+  // candidate directions again (mpr.h: mprBeginOverlap). Both backends read last step's normals from the warm
+  // start's store; without warm start there are none. Default true.
+  bool mpr_coherence = true;
   FrictionCombine friction_combine = FrictionCombine::Product;  // default: Product (Bullet's rule)
   BroadPhaseSettings broadphase;  // the native broad phase's grid and its pair reuse (broadphase.h)
 };
@@ -69,10 +75,14 @@ class CollisionDetector {
     v_free_ = v;
     w_free_ = w;
   }
+  // Last step's contacts (sorted keys and normals, valid during the next detect) for the narrow phase's temporal
+  // coherence (CollisionSettings::mpr_coherence); n = 0: none.
+  void setLastNormals(LastNormals last) { last_ = last; }
 
  protected:
   const Vec3* v_free_ = nullptr;
   const Vec3* w_free_ = nullptr;
+  LastNormals last_;
 };
 
 std::unique_ptr<CollisionDetector> makeNativeCollision(const BroadPhaseSettings& settings);

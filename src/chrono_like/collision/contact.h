@@ -28,6 +28,43 @@ DVI_HD uint64_t contactKey(int32_t shape_a, int32_t shape_b, int32_t feature) {
          uint64_t(feature & 0xFF);
 }
 
+// ---- last step's normal of a pair (temporal coherence of the narrow phase) ----
+
+// Last step's contacts as the narrow phase may consult them: their keys, sorted, and their normals (from shape_a to
+// shape_b), n entries; empty (n = 0) where there was no last step or the shapes changed since. Both backends keep
+// these beside the warm start's impulses (System::cacheImpulsesByKey, the GPU's keepImpulsesForWarmStart).
+struct LastNormals {
+  const uint64_t* key = nullptr;
+  const Vec3* normal = nullptr;
+  int64_t n = 0;
+};
+
+// One pair's view of LastNormals: the pair's shapes in the order of its contacts' keys, and the sign that turns
+// their normal into the order the narrow phase collides the pair in (-1 where collideShapes swapped them).
+struct PairHistory {
+  LastNormals last;
+  int32_t a = 0, b = 0;
+  real sign = 1;
+};
+
+// Last step's normal of the pair (its first point's: all points of an MPR pair share it), in the collided order.
+// False when the pair had no contact. A binary search over the sorted keys (the pair's keys share their high bits).
+DVI_HD bool lastPairNormal(const PairHistory& h, Vec3& n) {
+  if (h.last.n <= 0) return false;
+  const uint64_t first = contactKey(h.a, h.b, 0);
+  int64_t lo = 0, hi = h.last.n;
+  while (lo < hi) {
+    const int64_t mid = lo + (hi - lo) / 2;
+    if (h.last.key[mid] < first)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (lo >= h.last.n || (h.last.key[lo] >> 8) != (first >> 8)) return false;
+  n = h.last.normal[lo] * h.sign;
+  return true;
+}
+
 // ---- contacts a scene excludes (System::setContactExclusions; Bullet's disableCollisionsBetweenLinkedBodies and
 // CF_NO_CONTACT_RESPONSE) ----
 

@@ -38,6 +38,7 @@ struct NarrowWork {
   int64_t gjk = 0;       // supports of GJK (each one of A and one of B)
   int64_t mpr = 0;       // supports of M = A' - B' in MPR's passes
   int64_t manifold = 0;  // supports of the flat-feature manifold's samples (mprManifold)
+  int64_t coherent = 0;  // deep pairs that kept their fixed point by last step's normal (mprBeginOverlap)
   int64_t total() const { return gjk + mpr + manifold; }
 };
 

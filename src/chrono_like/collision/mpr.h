@@ -54,6 +54,11 @@ constexpr int kMprMaxIterations = 64;  // per phase, per pass
 #ifndef DVI_MPR_DEEP
 #define DVI_MPR_DEEP 0.02
 #endif
+// A deep pair whose first pass ends within this cosine of last step's normal of the pair keeps that fixed point
+// (mprBeginOverlap: temporal coherence). ~2.6 degrees.
+#ifndef DVI_MPR_COHERENT_COS
+#define DVI_MPR_COHERENT_COS 0.999
+#endif
 #ifndef DVI_MPR_TAU
 #define DVI_MPR_TAU 0.25
 #endif
@@ -329,6 +334,22 @@ DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, cons
   return true;
 }
 
+// Temporal coherence: a deep pair whose fixed point lies on the face its last step's contact was on (the normals
+// within DVI_MPR_COHERENT_COS) keeps it. Last step's normal was either a shallow fixed point or the winner of the
+// candidates below, and a pair that moves onto another face of M moves MPR's fixed point with it, which breaks the
+// agreement. A resting deep pair (a thin flake pressed in by more than 2% of its thickness) thus costs one pass.
+DVI_HD bool mprKeepsLastFace(const MprShape& A, const MprResult& best, const PairHistory* history) {
+  Vec3 last_n;
+  if (!history || !lastPairNormal(*history, last_n) || !(dot(last_n, best.n) > real(DVI_MPR_COHERENT_COS)))
+    return false;
+#ifndef __CUDA_ARCH__
+  if (A.work) ++A.work->coherent;
+#else
+  (void)A;
+#endif
+  return true;
+}
+
 // The first stage of collideMpr (mprBegin below) for overlapping cores: the first pass and its refinement and, for a
 // deep pair, the global candidates. Returns 0 (no contact), 1 (best is final) or 2 (deep: run `round`, then
 // mprTiltRound's, then mprFinish).
@@ -340,7 +361,8 @@ DVI_HD bool mprTiltRound(const MprShape& A, const Shape& a, const Shape& b, cons
 // the normal tilted four ways.
 // mprBegin's MPR, for overlapping cores.
 DVI_HD_CALL int mprBeginOverlap(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b,
-                                const Vec3* hull_points, MprResult& best, MprRound& round) {
+                                const Vec3* hull_points, MprResult& best, MprRound& round,
+                                const PairHistory* history = nullptr) {
   round.n = 0;
   Vec3 v0 = A.center - B.center;
   if (length2(v0) < real(1e-30)) v0 = Vec3{real(1e-10) * (real(1) + boundingRadius(a, hull_points)), 0, 0};
@@ -349,7 +371,7 @@ DVI_HD_CALL int mprBeginOverlap(const MprShape& A, const MprShape& B, const Shap
   // Shallow contacts (penetration of the true shapes below DVI_MPR_DEEP x the smaller size) keep MPR's fixed
   // point: it is the nearest face of M there, and the candidate restarts below cost ~10x the first pass.
   const bool deep = best.depth - A.env > real(DVI_MPR_DEEP) * std::fmin(a.size, b.size);
-  if (!deep) return 1;
+  if (!deep || mprKeepsLastFace(A, best, history)) return 1;
   Vec3 cand[40];
   int nc = 0, nface = 0;
   Vec3 ax[2][3];
@@ -455,9 +477,10 @@ DVI_HD bool gjkTries(GjkUse use, ShapeType a, ShapeType b) {
 // The first stage of a pair: with the cores apart (resting shapes with a margin, speculative contacts) their closest
 // points answer exactly (mprCoresApart); overlapping cores go through MPR (mprBeginOverlap). Returns as above.
 DVI_HD_CALL int mprBegin(const MprShape& A, const MprShape& B, const Shape& a, const Shape& b, const Vec3* hull_points,
-                         MprResult& best, MprRound& round, GjkUse gjk = GjkUse::All) {
+                         MprResult& best, MprRound& round, GjkUse gjk = GjkUse::All,
+                         const PairHistory* history = nullptr) {
   const int g = gjkTries(gjk, a.type, b.type) ? mprCoresApart(A, B, hull_points, best) : int(kGjkOverlap);
-  if (g == kGjkOverlap) return mprBeginOverlap(A, B, a, b, hull_points, best, round);
+  if (g == kGjkOverlap) return mprBeginOverlap(A, B, a, b, hull_points, best, round, history);
   round.n = 0;
   return g == kGjkClose ? 1 : 0;
 }
@@ -626,7 +649,7 @@ constexpr int kMprDeferred = -1;  // collideShapes' answer for a pair left in *d
 // a deep pair is not finished: its state goes to *defer and the answer is kMprDeferred.
 DVI_HD_CALL int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                            real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true,
-                           GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr) {
+                           GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr, const PairHistory* history = nullptr) {
   MprShape A = makeMprShape(a, wa, hull_points, envelope);
   MprShape B = makeMprShape(b, wb, hull_points, real(0));
 #ifndef __CUDA_ARCH__
@@ -636,7 +659,7 @@ DVI_HD_CALL int collideMpr(const Shape& a, const Pose& wa, const Shape& b, const
 #endif
   MprResult best;
   MprRound round;
-  const int stage = mprBegin(A, B, a, b, hull_points, best, round, gjk);
+  const int stage = mprBegin(A, B, a, b, hull_points, best, round, gjk, history);
   if (stage == 0) return 0;
   if (stage == 2) {
     if (defer) {

@@ -116,10 +116,12 @@ struct MprDeferred;
 // finishDeferredMpr completes it (the GPU narrow phase runs those apart, a lane per restart: mpr.h).
 // `manifold`: MPR pairs of two flat features get up to 4 more points (mpr.h: mprManifold;
 // CollisionSettings::mpr_manifold). `gjk`: which MPR pairs try GJK first (gjk.h: GjkUse; Auto counts as All).
-// `work` (host only): the support mappings the pair cost are added to it (gjk.h: NarrowWork).
+// `work` (host only): the support mappings the pair cost are added to it (gjk.h: NarrowWork). `history`: last
+// step's normal of the pair (contact.h: PairHistory; CollisionSettings::mpr_coherence), which lets a deep MPR pair
+// that stays on its face skip the candidate restarts (mpr.h: mprBeginOverlap); null: none.
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                          real envelope, ContactPoint* out, np::MprDeferred* defer = nullptr, bool manifold = true,
-                         GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr);
+                         GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr, const PairHistory* history = nullptr);
 
 // A pair whose current boxes (shapeAabb grown by shapeMargin: ComputeAabbs) are apart makes no contact: each box
 // holds its shape grown by its margin, and a pair's envelope is never more than the two margins together

@@ -479,7 +479,7 @@ DVI_HD_CALL int collideConvexBigCylinder(const Shape& a, const Pose& wa, const S
 template <bool kMpr = true>
 DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                           real envelope, ContactPoint* out, MprDeferred* defer = nullptr, bool manifold = true,
-                          GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr) {
+                          GjkUse gjk = GjkUse::All, NarrowWork* work = nullptr, const PairHistory* history = nullptr) {
   if (b.type == ShapeType::Triangle) {  // static geometry: never against a plane or another triangle
     if (a.type == ShapeType::Plane || a.type == ShapeType::Triangle) return 0;
     if constexpr (kMpr) return collideConvexTriangle(a, wa, b, wb, hull_points, envelope, out);
@@ -515,7 +515,7 @@ DVI_HD int collideOrdered(const Shape& a, const Pose& wa, const Shape& b, const 
       break;
     default: break;
   }
-  if constexpr (kMpr) return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer, manifold, gjk, work);
+  if constexpr (kMpr) return collideMpr(a, wa, b, wb, hull_points, envelope, out, defer, manifold, gjk, work, history);
   return 0;
 }
 
@@ -549,15 +549,21 @@ DVI_HD void markFlippedMpr(ContactPoint* out, int m) {
 
 DVI_HD int collideShapes(const Shape& a, const Pose& wa, const Shape& b, const Pose& wb, const Vec3* hull_points,
                          real envelope, ContactPoint* out, np::MprDeferred* defer, bool manifold, GjkUse gjk,
-                         NarrowWork* work) {
+                         NarrowWork* work, const PairHistory* history) {
   if (a.type == ShapeType::Sphere && b.type == ShapeType::Sphere)  // the hot path
     return np::collideSphereSphere(a, wa, b, wb, envelope, out);
   if (int(a.type) <= int(b.type)) {
-    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer, manifold, gjk, work);
+    const int m = np::collideOrdered(a, wa, b, wb, hull_points, envelope, out, defer, manifold, gjk, work, history);
     if (m == np::kMprDeferred) defer->swapped = 0;
     return m;
   }
-  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer, manifold, gjk, work);
+  PairHistory swapped_history;  // the normal of b to a
+  if (history) {
+    swapped_history = *history;
+    swapped_history.sign = -history->sign;
+  }
+  int m = np::collideOrdered(b, wb, a, wa, hull_points, envelope, out, defer, manifold, gjk, work,
+                             history ? &swapped_history : nullptr);
   if (m == np::kMprDeferred) {
     defer->swapped = 1;
     return m;

@@ -164,6 +164,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
           "warm_start",
           "speculative",
           "mpr_manifold",
+          "mpr_coherence",
           "bullet_length_scale",
           "bullet_iterations"});
   auto at = [&](const char* k) { return path + "." + k; };
@@ -204,6 +205,7 @@ SceneSettings parseSceneSettings(const json& j, const std::string& origin, const
   if (j.contains("warm_start")) sol.warm_start = c.boolean(j["warm_start"], at("warm_start"));
   if (j.contains("speculative")) col.speculative = c.boolean(j["speculative"], at("speculative"));
   if (j.contains("mpr_manifold")) col.mpr_manifold = c.boolean(j["mpr_manifold"], at("mpr_manifold"));
+  if (j.contains("mpr_coherence")) col.mpr_coherence = c.boolean(j["mpr_coherence"], at("mpr_coherence"));
   if (j.contains("bullet_length_scale"))
     s.bullet_length_scale = real(c.nonNegative(j["bullet_length_scale"], at("bullet_length_scale")));
   if (j.contains("bullet_iterations"))

@@ -250,8 +250,12 @@ std::vector<DistributedSystem::WarmEntry> DistributedSystem::warmEntries(
     const int32_t la_shape = int32_t(c.key >> 36), lb_shape = int32_t((c.key >> 8) & 0xFFFFFFFu);
     const int32_t sa = shape_start_[size_t(ga)] + (la_shape - b.shape_start[size_t(c.body_a)]);
     const int32_t sb = shape_start_[size_t(gb)] + (lb_shape - b.shape_start[size_t(c.body_b)]);
-    out.push_back(WarmEntry{
-        contactKey(sa, sb, int32_t(c.key & 0xFF)), ga, gb, pairOwner(ga, gb), {c.gamma[0], c.gamma[1], c.gamma[2]}});
+    out.push_back(WarmEntry{contactKey(sa, sb, int32_t(c.key & 0xFF)),
+                            ga,
+                            gb,
+                            pairOwner(ga, gb),
+                            {c.gamma[0], c.gamma[1], c.gamma[2]},
+                            c.normal});
   }
   return out;
 }
@@ -281,14 +285,16 @@ void DistributedSystem::setLocalWarmStart(const std::vector<WarmEntry>& entries,
   std::sort(keyed.begin(), keyed.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
   std::vector<uint64_t> keys(keyed.size());
   std::vector<real> gamma(3 * keyed.size());
+  std::vector<Vec3> normals(keyed.size());
   for (size_t i = 0; i < keyed.size(); ++i) {
     keys[i] = keyed[i].first;
     for (int r = 0; r < 3; ++r) gamma[3 * i + size_t(r)] = keyed[i].second->gamma[r];
+    normals[i] = keyed[i].second->normal;
   }
   if (replace)
-    sys_->setWarmStart(std::move(keys), std::move(gamma));
+    sys_->setWarmStart(std::move(keys), std::move(gamma), std::move(normals));
   else
-    sys_->addWarmStart(keys, gamma);
+    sys_->addWarmStart(keys, gamma, normals);
 }
 
 // After the local step (collective): the next step's ghost width; the owned bodies near a face of this process's box
@@ -599,7 +605,7 @@ CheckpointPiece DistributedSystem::checkpointPiece() const {
     entries.insert(entries.end(), mine.begin(), mine.end());
   }
   for (const WarmEntry& e : entries)
-    p.impulses.push_back(ContactImpulse{e.key, e.body_a, e.body_b, {e.gamma[0], e.gamma[1], e.gamma[2]}});
+    p.impulses.push_back(ContactImpulse{e.key, e.body_a, e.body_b, {e.gamma[0], e.gamma[1], e.gamma[2]}, e.normal});
   return p;
 }
 
@@ -615,7 +621,7 @@ void DistributedSystem::restore(const std::vector<MotionState>& states, const st
   for (const ContactImpulse& c : impulses) {  // the entries of the contacts whose owning body is this process's
     const int32_t o = pairOwner(c.body_a, c.body_b);
     if (o >= 0 ? owner_[size_t(o)] != rank_ : rank_ != 0) continue;
-    warm_.push_back(WarmEntry{c.key, c.body_a, c.body_b, o, {c.gamma[0], c.gamma[1], c.gamma[2]}});
+    warm_.push_back(WarmEntry{c.key, c.body_a, c.body_b, o, {c.gamma[0], c.gamma[1], c.gamma[2]}, c.normal});
   }
   time_ = time;
   steps_ = steps;

@@ -132,6 +132,7 @@ class DistributedSystem {
     uint64_t key;
     int32_t body_a, body_b, owner;  // global ids; owner: the pair's owning body (pairOwner; -1: none)
     real gamma[3];
+    Vec3 normal;  // the next narrow phase's last normal (System::setWarmStart)
   };
   struct Record {  // a body's state on the wire
     int32_t id;

@@ -183,6 +183,13 @@ struct GatherByIndexF {
   }
 };
 
+struct GatherVec3F {
+  const int32_t* idx;
+  const Vec3* in;
+  Vec3* out;
+  __device__ void operator()(int64_t i) const { out[i] = in[idx[i]]; }
+};
+
 struct IotaF {
   int32_t* x;
   __device__ void operator()(int64_t i) const { x[i] = int32_t(i); }
@@ -258,6 +265,7 @@ void keepImpulsesForWarmStart(DeviceState& d) {
   SolverScratch& S = d.solver;
   S.prev_key.resize(nc);
   S.prev_gamma.resize(3 * nc);
+  S.prev_normal.resize(nc);
   d.prev_count = size_t(nc);
   if (nc == 0) return;
   if (!d.keys_unsorted) {  // the narrow phase emits contacts in key order: a copy
@@ -265,6 +273,8 @@ void keepImpulsesForWarmStart(DeviceState& d) {
                              d.stream));
     DVI_CUDA(cudaMemcpyAsync(S.prev_gamma.data(), S.gamma.data(), sizeof(real) * 3 * nc, cudaMemcpyDeviceToDevice,
                              d.stream));
+    DVI_CUDA(cudaMemcpyAsync(S.prev_normal.data(), d.contacts.normal.data(), sizeof(Vec3) * nc,
+                             cudaMemcpyDeviceToDevice, d.stream));
     return;
   }
   S.order.resize(nc);
@@ -276,6 +286,8 @@ void keepImpulsesForWarmStart(DeviceState& d) {
   });
   launchMap(d, nc, GatherByIndexF{S.order_sorted.data(), S.gamma.data(), S.prev_gamma.data()},
             "launch of GatherByIndexF");
+  launchMap(d, nc, GatherVec3F{S.order_sorted.data(), d.contacts.normal.data(), S.prev_normal.data()},
+            "launch of GatherVec3F");
 }
 
 void applyImpulsesToBodies(DeviceState& d, const real* gamma) {
