@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "ces/ces_config.h"
+#include "ces/feeder.h"
 #include "ces/machine.h"
 #include "ces/output/ces_output.h"
 #include "ces/output/splitters.h"
@@ -359,6 +360,9 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
   o["voltage_kV"] = cfg.voltage * 1e-3;
   o["drum_rpm"] = cfg.drum_rpm;
   o["feed_g_s"] = cfg.feed_mass_flow * 1e3;
+  o["feed.monolayer_g_s"] = monolayerMassFlow(cfg) * 1e3;  // feeder.h: the feed that covers the drum once
+  o["feed.coverage"] = cfg.feed_mass_flow / monolayerMassFlow(cfg);
+  o["sparkover.margin"] = sparkoverMargin(cfg);  // |U| / the uniform-field breakdown voltage of the nearest gap
   return o;
 }
 
