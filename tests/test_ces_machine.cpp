@@ -90,6 +90,10 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
   REQUIRE(pc.materials.size() == 3);
   CHECK(pc.materials[2].kind == MaterialKind::Composite);
   CHECK(pc.materials[2].metal_fraction_max == 0.7);
+  // The validation feed (docs/CES.md, "Published experiments reproduced") keeps to the schema and parses.
+  const json val = json::parse(slurp(std::string(DVISIM_SOURCE_DIR) + "/scenes/ces_validation_pcb.json"));
+  walk(val, schema, "");
+  CHECK(parseCesDocument(val, {}, "ces_validation_pcb.json").materials.size() == 3);
   // The parsed defaults: the composite machine of docs/CES.md (corona wire + static tube on one supply).
   const CesConfig c = configWith({});
   CHECK(c.drum_diameter == Approx(0.320));
