@@ -97,7 +97,8 @@ def main():
     settings = {}
     for case in sweep["cases"]:
         p = os.path.join(d, "runs", case["id"], "summary.json")
-        if not os.path.exists(p):
+        # Only finished runs (the sweep's marker): an interrupted run also writes a summary.
+        if not os.path.exists(p) or not os.path.exists(os.path.join(d, "runs", case["id"], "sweep_done.json")):
             continue
         settings.setdefault(case["setting"], []).append(run_row(json.load(open(p)), os.path.dirname(p)))
     keys = sweep["keys"]
