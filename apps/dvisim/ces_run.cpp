@@ -17,6 +17,8 @@
 #include <nlohmann/json.hpp>
 
 #include "ces/ces_config.h"
+#include "ces/feeder.h"
+#include "ces/field/field_corona.h"
 #include "ces/machine.h"
 #include "ces/output/ces_output.h"
 #include "ces/output/splitters.h"
@@ -83,6 +85,14 @@ json cellJson(const SplitterCell& c) {
 
 // A number, or null when undefined (no particle to average over, no corona model).
 json numberOrNull(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+
+// Peek's onset field of the static tube (a smooth cylinder of its radius, field_corona.h), and the tube's largest
+// surface field over it: >= 1 flags a static electrode that would ionise (docs/CES.md, "Spark-over").
+double tubeOnsetField(const CesConfig& cfg) {
+  return cfg.tube.enabled ? double(peekOnsetField(real(cfg.tube.diameter / 2), real(cfg.rel_air_density)))
+                          : std::nan("");
+}
+double tubeFieldRatio(const CesMachine& m) { return m.tubeSurfaceField() / tubeOnsetField(m.config()); }
 
 // The metadata a checkpoint records (CesMachine::save): the document as run and the collision backend, the
 // configuration a resumed run is compared with (checkResumable).
@@ -359,6 +369,10 @@ json cesMetrics(const CesMachine& m, const SplitterTable& table, const MassBalan
   o["voltage_kV"] = cfg.voltage * 1e-3;
   o["drum_rpm"] = cfg.drum_rpm;
   o["feed_g_s"] = cfg.feed_mass_flow * 1e3;
+  o["feed.monolayer_g_s"] = monolayerMassFlow(cfg) * 1e3;  // feeder.h: the feed that covers the drum once
+  o["feed.coverage"] = cfg.feed_mass_flow / monolayerMassFlow(cfg);
+  o["sparkover.margin"] = sparkoverMargin(cfg);  // |U| / the uniform-field breakdown voltage of the nearest gap
+  o["sparkover.tube_field_ratio"] = numberOrNull(tubeFieldRatio(m));  // tube surface field / its Peek onset field
   return o;
 }
 
@@ -470,6 +484,11 @@ int runCesMachine(const CesRunOptions& o) {
     std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
                 m.system().backendName().c_str());
   std::fflush(stdout);
+  if (tubeFieldRatio(m) >= 1)
+    std::fprintf(stderr,
+                 "dvisim: warning: the static tube's surface field %.1f kV/cm reaches Peek's onset field %.1f kV/cm of "
+                 "its radius: it would ionise (spark-over risk, docs/CES.md \"Spark-over\")\n",
+                 m.tubeSurfaceField() * 1e-5, tubeOnsetField(cfg) * 1e-5);
 
   // Frames at N evenly spaced steps over [0, total]; checkpoints every checkpoint_every_s.
   std::vector<int64_t> frame_at;
@@ -621,6 +640,10 @@ int runCesMachine(const CesRunOptions& o) {
                      {"wire_field_on_kV_cm", numberOrNull(ci.wire_field_on * 1e-5)},
                      {"current_uA_per_m", numberOrNull(ci.current_per_m * 1e6)}};
     }
+    c["sparkover"] = {{"margin", sparkoverMargin(cfg)},
+                      {"tube_surface_field_kV_cm", numberOrNull(m.tubeSurfaceField() * 1e-5)},
+                      {"tube_onset_field_kV_cm", numberOrNull(tubeOnsetField(cfg) * 1e-5)},
+                      {"tube_in_corona", tubeFieldRatio(m) >= 1}};
     c["voltage_kV"] = cfg.voltage * 1e-3;
     c["splitter_positions"] = cfg.splitter_positions;
     c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};

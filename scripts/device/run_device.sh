@@ -7,6 +7,7 @@
 #   tests      every [gpu] test
 #   sanitize   compute-sanitizer memcheck and racecheck on every [gpu] test (one process per test)
 #   ces        the default CES machine on the GPU (dvisim run --backend gpu), outputs under $LOGS/ces_default
+#   cesfeed    the CES feed-rate sweep (scripts/ces_validation/feed_sweep.sh on the GPU), its tables to $OUT/ces_feed
 #   scaling    dvisim bench scaling --record (pile and mix, 10k..4M)
 #   ncu        per-kernel device time of a GPU pile run (NCU_COUNT launches, NCU_STEPS divides)
 #   probe      unrecorded GPU pile timings, float and double APGD storage (PROBE_SIZES, PROBE_SCENES)
@@ -113,6 +114,13 @@ PY
         done < "$LOGS/gpu_tests.txt"
       done ;;
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
+    cesfeed)  # the feed-rate sweep of docs/CES.md (scripts/ces_validation/feed_sweep.sh; CES_FEED_RATES, CES_FEED_JOBS,
+              # SEEDS) in $LOGS/ces_feed, stopped after CES_FEED_TIMEOUT s (default 420; the same call again resumes
+              # it on a warm machine); its tables (feed_table.md, summary.csv, runs.csv, sweep.json) to $OUT/ces_feed
+      mkdir -p "$OUT/ces_feed"
+      TIMEOUT_S=${CES_FEED_TIMEOUT:-420} scripts/ces_validation/feed_sweep.sh $BIN gpu "$LOGS/ces_feed" \
+        "${CES_FEED_RATES:-}" "${CES_FEED_JOBS:-4}" 2>&1 | tail -40
+      cp "$LOGS"/ces_feed/{feed_table.md,summary.csv,runs.csv,sweep.json} "$OUT/ces_feed/" ;;
     scaling) bench scaling --budget 5 ;;
     probe)  # unrecorded GPU timings (PROBE_SIZES, default 10k,100k,1M; PROBE_SCENES, default pile) for each APGD
             # storage in PROBE_STORAGE (default "float real") and --gpu-persistent-max in PROBE_PERSISTENT

@@ -4,12 +4,14 @@
 #include "chrono_like/io/input_limits.h"
 #include "chrono_like/io/json_check.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
 
 #include "ces/ces_constants.h"
 #include "ces/charging.h"
+#include "ces/field/breakdown.h"
 #include "chrono_like/base/errors.h"
 
 namespace dvi {
@@ -494,7 +496,40 @@ void checkCesElectrodeGeometry(const Checker& c, const CesConfig& cfg) {
   }
 }
 
+// Spark-over: a supply at or above the uniform-field breakdown voltage of an electrode's gap to the drum
+// certainly sparks over (field/breakdown.h) and is refused, naming the voltage and the gap.
+void checkCesSparkover(const Checker& c, const CesConfig& cfg) {
+  auto gapOk = [&](const ElectrodeConfig& e, double voltage, const std::string& vkey, const std::string& name) {
+    const double gap = electrodeDrumGap(cfg.drumRadius(), e.distance, e.diameter);
+    const double vb = uniformBreakdownVoltage(gap, cfg.rel_air_density);
+    if (std::abs(voltage) >= vb) {
+      std::ostringstream m;
+      m << std::abs(voltage) / 1e3 << " kV across the " << gap / kMm << " mm gap from the " << name
+        << " to the drum is beyond the air's breakdown voltage " << vb / 1e3
+        << " kV (uniform field, Paschen/Dakin; a real gap sparks over lower): lower the voltage or widen the gap";
+      c.fail(vkey, m.str());
+    }
+  };
+  if (cfg.wire.enabled) gapOk(cfg.wire, cfg.voltage, "ces.electrode.voltage_kV", "corona wire");
+  if (cfg.tube.enabled) gapOk(cfg.tube, cfg.voltage, "ces.electrode.voltage_kV", "tube");
+  for (size_t i = 0; i < cfg.extra_electrodes.size(); ++i) {
+    const std::string p = "ces.field.extra_electrodes[" + std::to_string(i) + "]";
+    gapOk(cfg.extra_electrodes[i], cfg.extra_electrodes[i].voltage, p + ".voltage_kV", "electrode " + p);
+  }
+}
+
 }  // namespace
+
+double sparkoverMargin(const CesConfig& cfg) {
+  double margin = 0;
+  for (const ElectrodeConfig* e : {&cfg.wire, &cfg.tube}) {
+    if (!e->enabled) continue;
+    const double vb =
+        uniformBreakdownVoltage(electrodeDrumGap(cfg.drumRadius(), e->distance, e->diameter), cfg.rel_air_density);
+    margin = std::max(margin, vb > 0 ? std::abs(cfg.voltage) / vb : std::numeric_limits<double>::infinity());
+  }
+  return margin;
+}
 
 CesConfig parseCesDocument(const json& document, const std::vector<std::string>& overrides, const std::string& origin) {
   Checker c{origin};
@@ -524,6 +559,7 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   parseCesSplitters(c, j, cfg);
   parseCesOutput(c, j, cfg);
   checkCesElectrodeGeometry(c, cfg);
+  checkCesSparkover(c, cfg);
   return cfg;
 }
 

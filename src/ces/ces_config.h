@@ -183,6 +183,10 @@ bool isCesDocument(const nlohmann::json& doc);
 CesConfig parseCesDocument(const nlohmann::json& document, const std::vector<std::string>& overrides,
                            const std::string& origin);
 
+// |U| / V_b of the supplied electrode (wire or tube) nearest to breakdown: V_b the uniform-field breakdown voltage
+// of its gap to the drum (field/breakdown.h). parseCesDocument refuses >= 1; real gaps spark over lower.
+double sparkoverMargin(const CesConfig& cfg);
+
 // Applies one override to the document (exposed for the checkpoint, which stores the final document).
 void applyCesOverride(nlohmann::json& doc, const std::string& assignment);
 

@@ -216,6 +216,32 @@ double expectedParticleMass(const CesConfig& cfg) {
   return fsum / per_mass;
 }
 
+double expectedFootprintArea(const CesConfig& cfg) {
+  const double a = cfg.diameter_min, b = cfg.diameter_max;
+  const double d2 = b > a ? (b * b * b - a * a * a) / (3 * (b - a)) : a * a;  // E[d^2], d ~ U[a, b]
+  const double d3 = b > a ? (b * b * b * b - a * a * a * a) / (4 * (b - a)) : a * a * a;
+  // Footprint / d^2 of each shape lying on its largest face (feeder.h).
+  const double flake = 4 * std::pow(kPiD / 12, 2.0 / 3.0), wire = 16 * std::pow(1.0 / 48, 2.0 / 3.0);
+  const double ellipsoid = 0.7 * kPiD * std::pow(1 / 2.8, 2.0 / 3.0);
+  const double coef[kParticleShapes] = {kPiD / 4, flake, wire, ellipsoid, ellipsoid};
+  double count = 0, area = 0;
+  for (const MaterialConfig& m : cfg.materials) {
+    if (!(m.mass_fraction > 0)) continue;
+    const double n = m.mass_fraction / (0.5 * (m.density_min + m.density_max) * kPiD / 6 * d3);  // count share
+    double wsum = 0, c = 0;
+    for (int s = 0; s < kParticleShapes; ++s) wsum += m.shape_weight[s], c += m.shape_weight[s] * coef[s];
+    count += n;
+    area += n * c / wsum;
+  }
+  if (!(count > 0)) throw InputError("CES feeder: no material with a positive mass fraction");
+  return d2 * area / count;
+}
+
+double monolayerMassFlow(const CesConfig& cfg) {
+  return std::abs(cfg.omegaDrum()) * cfg.drumRadius() * cfg.feed_width * expectedParticleMass(cfg) /
+         expectedFootprintArea(cfg);
+}
+
 Feeder::Feeder(const CesConfig& cfg) : cfg_(cfg), fed_fg_(cfg.materials.size(), 0) {
   rng_.s = cfg.seed * 0x9e3779b97f4a7c15ull + 0x632be59bd9b4e019ull;
   double sum = 0;

@@ -80,6 +80,19 @@ ShapeDesc particleShapeDesc(const ParticleSpec& s);
 // of a particle rate; tested against a large sample drawn through Feeder::emit.
 double expectedParticleMass(const CesConfig& cfg);
 
+// The feed rate (kg/s) that covers the drum with one layer: the particles, each resting on its largest face,
+// cover in total the area the drum's surface carries through the feed line per second,
+//     mdot_mono = v W m / E[A],  v = |omega| R the drum's surface speed, W = feed.width, m = expectedParticleMass,
+// E[A] = E[d^2] sum_k n_k sum_s w_ks c_s the mean footprint (n_k the count share of material k, w_ks its shape
+// weights), with the footprint c_s d^2 of each shape of volume-equivalent diameter d lying flat: sphere pi/4,
+// flake (box 2a x a/2 x 2a) 4a^2 = 4 (pi/12)^(2/3) = 1.638, wire (cylinder r, length 8r) 16 r^2 = 1.212,
+// ellipsoid (a, 0.5a, 0.7a) on its smallest axis 0.7 pi a^2 = 1.107; a fragment (the hull of points on a random
+// ellipsoid) as the ellipsoid. Coverage = feed / mdot_mono is the layer's area fraction at the drum's speed;
+// a random layer of discs jams at ~0.82 of the area (docs/CES.md, "Crowding"). Where particles are fed, slower
+// than the drum (feed.speed_m_s), the layer is denser by up to v / feed speed.
+double expectedFootprintArea(const CesConfig& cfg);  // m^2
+double monolayerMassFlow(const CesConfig& cfg);      // kg/s
+
 class Feeder {
  public:
   explicit Feeder(const CesConfig& cfg);

@@ -458,6 +458,19 @@ int CesMachine::addBody(const BodyDesc& d, int material, const ParticleSpec* spe
   return id;
 }
 
+double CesMachine::tubeSurfaceField() const {
+  if (!cfg_.tube.enabled) return std::nan("");
+  const double cx = cfg_.tube.distance * std::cos(cfg_.tube.angle), cy = cfg_.tube.distance * std::sin(cfg_.tube.angle);
+  const double rs = cfg_.tube.diameter / 2 * (1 + 1e-4);  // just outside: region 0
+  double emax = 0;
+  for (int k = 0; k < 360; ++k) {
+    const double a = 2 * 3.14159265358979323846 * k / 360;
+    const FieldSample f = field(Vec3{real(cx + rs * std::cos(a)), real(cy + rs * std::sin(a)), real(0)});
+    emax = std::max(emax, double(length(f.E)));
+  }
+  return emax;
+}
+
 int CesMachine::addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 vel, Vec3 omega, real charge) {
   if (spec.material < 0 || size_t(spec.material) >= cfg_.materials.size())
     throw InputError("CES machine: particle material " + std::to_string(spec.material) + " out of range");

@@ -186,6 +186,10 @@ class CesMachine {
   const CoronaInfo& coronaInfo() const { return corona_; }
   // Exact field at a point (region 0 in the gas).
   FieldSample field(Vec3 p) const { return evalField(model_.field, p); }
+  // The largest field on the static tube's surface (V/m; NaN without a tube), sampled at 360 points just outside
+  // it: a static electrode whose surface field passes Peek's onset field of its radius (peekOnsetField) would
+  // ionise, the precursor of spark-over on it (field/breakdown.h; docs/CES.md, "Spark-over").
+  double tubeSurfaceField() const;
 
   // Adds one particle (tests, or a custom feed). Returns its body index.
   int addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 vel, Vec3 omega, real charge = 0);
