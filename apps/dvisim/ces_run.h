@@ -37,7 +37,7 @@ bool isCesScene(const std::string& path);
 // Runs the machine; writes the results under o.out. Throws InputError on bad input. Returns the exit code.
 int runCesMachine(const CesRunOptions& o);
 
-// ---- Pieces of the run, shared with `dvisim bench ces` (apps/dvisim/bench_ces.cpp) ----
+// ---- Pieces of the run, shared with `dvisim bench ces` (bench/ces/bench_ces.cpp) ----
 
 // The machine document: the embedded default (empty scene) or a scene file. `origin` names it in errors.
 nlohmann::json loadCesDocument(const std::string& scene, std::string& origin);

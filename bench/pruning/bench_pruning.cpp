@@ -173,7 +173,7 @@ int runPruning(const PruneOptions& o) {
 
   std::ostringstream head;
   head << "# Pruning: the stages a scene does not need" << (o.quick ? " (--quick)" : "") << "\n\n"
-       << "Written by the benchmark (`dvisim bench pruning`, apps/dvisim/bench_pruning.cpp); do not edit by hand.\n\n"
+       << "Written by the benchmark (`dvisim bench pruning`, bench/pruning/bench_pruning.cpp); do not edit by hand.\n\n"
        << "- device: " << device << "\n- backend: " << (gpu ? "gpu" : "cpu")
        << (gpu ? "" : ", threads " + std::to_string(used_threads)) << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scene: pile of " << n

@@ -586,7 +586,7 @@ int runDropin(const DropinOptions& o) {
   std::ostringstream head;
   head << "# Drop-in: Bullet's benchmark scenes on stock Bullet and on the drop-in world"
        << (o.quick ? " (--quick)" : "")
-       << "\n\nWritten by the benchmark (`dvisim bench dropin`, apps/dvisim/bench_dropin.cpp); do not edit by hand.\n\n"
+       << "\n\nWritten by the benchmark (`dvisim bench dropin`, bench/dropin/bench_dropin.cpp); do not edit by hand.\n\n"
        << "- CPU: " << (cpu_device.empty() ? "-" : cpu_device) << "\n- GPU: " << (have_gpu ? gpu_name : "none")
        << "\n- Bullet: " << btGetVersion() << ", btDiscreteDynamicsWorld, sequential impulses (10 iterations), 1 thread"
        << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- steps: " << warmup

@@ -801,7 +801,7 @@ int runStability(const StabOptions& o) {
   const std::string device = have_gpu ? gpu_name : cpu_device;
   std::ostringstream md;
   md << "# Stability on stiff and extreme cases" << (o.quick ? " (--quick)" : "") << "\n\n"
-     << "Written by `dvisim bench stability` (apps/dvisim/bench_stability.cpp).\n\n"
+     << "Written by `dvisim bench stability` (bench/stability/bench_stability.cpp).\n\n"
      << "- device: " << device << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ")
      << "\n- engines: cpu/gpu = ours, APGD at the solver's default stop (relative tolerance, iteration cap) unless the "
         "row's note says why not; bullet = btDiscreteDynamicsWorld at its default 10 "

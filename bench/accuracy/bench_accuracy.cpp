@@ -576,13 +576,13 @@ int runAccuracy(const AccOptions& o) {
     const std::string base = "accuracy_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
     std::ostringstream md;
     md << "# Accuracy against run time" << (o.quick ? " (--quick)" : "") << "\n\n"
-       << "Written by `dvisim bench accuracy --record` (apps/dvisim/bench_accuracy.cpp).\n\n- device: " << device
+       << "Written by `dvisim bench accuracy --record` (bench/accuracy/bench_accuracy.cpp).\n\n- device: " << device
        << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scenes: pile "
        << (o.quick ? "400" : "100k") << " spheres r 1 cm; mix " << (o.quick ? "250" : "20k")
        << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2; the default CES machine fed for "
        << (o.quick ? "0.05 s, 0.8 s" : "0.15 s, 1 s") << " of machine time, h0 = 2e-4\n- this run: --scenes "
        << joined(scene_sel) << " --engines " << joined(engine_sel) << (have_gpu ? "" : " (no GPU)") << "\n\n"
-       << goal_text << "\nRows: " << base << ".csv (columns in apps/dvisim/bench_accuracy.cpp's header).\n";
+       << goal_text << "\nRows: " << base << ".csv (columns in bench/accuracy/bench_accuracy.cpp's header).\n";
     writeBenchRecord({results_dir, o.out}, base, {{"md", md.str()}, {"csv", csvText(rows, ref_obs, ref_scene)}},
                      writeFile);
   }

@@ -326,7 +326,7 @@ int runCesBench(const CesBenchOptions& o) {
   std::ostringstream md;
   md << "# CES industrial-feed benchmark" << (o.quick ? " (--quick)" : "") << "\n\n"
      << "Written by `dvisim bench ces" << (o.record ? " --record" : "")
-     << "` (apps/dvisim/bench_ces.cpp); do not edit by hand.\n\n"
+     << "` (bench/ces/bench_ces.cpp); do not edit by hand.\n\n"
      << "- command: `" << command << "`\n- device: " << device << "\n- backend: " << j["backend"].get<std::string>()
      << " (" << where << ")\n- commit: " << commit << "\n- date: " << date << "\n- machine: " << origin
      << (o.sets.empty() ? "" : " with --set") << "; dt " << fmt(cfg.step.dt, "%g") << " s, "

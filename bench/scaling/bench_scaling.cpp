@@ -48,9 +48,9 @@
 #endif
 
 #include "bench_common.h"
-#include "bench_scaling_bullet3.h"
+#include "scaling/bench_scaling_bullet3.h"
 #ifdef DVISIM_HAVE_MPI
-#include "bench_scaling_mpi.h"
+#include "scaling/bench_scaling_mpi.h"
 #endif
 #include "bench_util.h"
 #include "chrono_like/bullet/bullet_peer.h"
@@ -900,7 +900,7 @@ int runScaling(const ScalingOptions& o) {
     const std::string base = device_prefix + utcNow("%Y%m%d-%H%M%S");
     std::ostringstream md;
     md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
-       << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
+       << "Written by `dvisim bench scaling --record` (bench/scaling/bench_scaling.cpp); do not edit by hand.\n\n"
        << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- Bullet 3 OpenCL: "
        << (!has("bullet3_opencl") ? std::string("not in --engines")
            : b3_status.empty()    ? b3_what
