@@ -42,7 +42,7 @@ bool sphereRests() {
 }
 
 // The drop-in world: a body in free fall for n fixed sub-steps of h has v = -g n h (semi-implicit Euler is exact
-// for the velocity under constant gravity).
+// for the velocity under constant gravity), to the rounding of Bullet's float velocities.
 bool dropInFreeFall() {
   btDefaultCollisionConfiguration config;
   btCollisionDispatcher dispatcher(&config);
@@ -60,7 +60,7 @@ bool dropInFreeFall() {
   double v = body.getLinearVelocity().y(), expect = -9.81 * n / 60;
   std::printf("drop-in world: v = %.6f after %d steps (expected %.6f)\n", v, n, expect);
   world.removeRigidBody(&body);
-  return std::fabs(v - expect) < 1e-9 * n;
+  return std::fabs(v - expect) < 1e-5 * std::fabs(expect);  // btScalar: float in Debian's Bullet
 }
 
 // The GPU entry points link in every build; without a device, makeGpuSystem refuses with an InputError.
