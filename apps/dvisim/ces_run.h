@@ -45,6 +45,9 @@ nlohmann::json loadCesDocument(const std::string& scene, std::string& origin);
 // Checks `requested` (auto|cpu|gpu; bullet is refused) and resolves auto to gpu when a device is usable
 // (printed), else cpu. gpu without a device is an InputError.
 std::string resolveCesBackend(const std::string& requested);
+// The backend a run uses for --backend (`dvisim run` of a scene, and the CES machine above): auto picks the GPU where
+// there is one (and prints which), gpu without a usable device is an InputError; any other name is returned as given.
+std::string resolveBackend(const std::string& requested);
 
 // The System the machine runs on: cfg's step and solver, `threads` (0: OpenMP default), collision
 // native|bullet, the product friction rule, a sparse broad-phase grid; a CheckpointSystem on the CPU.
