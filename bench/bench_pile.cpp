@@ -87,15 +87,13 @@ Pile makePile(long n, double r, double mu) {
 
 double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  Args a;
+// The command line into a; false (with the message printed) on bad input.
+bool parseArgs(int argc, char** argv, Args& a) {
   if (argc < 2 || std::strcmp(argv[1], "pile") != 0) {
     std::fprintf(stderr,
                  "usage: dvisim_bench pile [--n N] [--steps S] [--warmup W] [--iterations I] [--solver S] "
                  "[--threads T] [--bullet-iterations I] [--no-bullet] [--csv FILE]\n");
-    return 2;
+    return false;
   }
   for (int i = 2; i < argc; ++i) {
     std::string k = argv[i];
@@ -126,9 +124,17 @@ int main(int argc, char** argv) {
       a.csv = next();
     else {
       std::fprintf(stderr, "dvisim_bench: error: unknown option %s\n", k.c_str());
-      return 2;
+      return false;
     }
   }
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args a;
+  if (!parseArgs(argc, argv, a)) return 2;
   const double r = 0.01, mu = 0.5, h = 1e-3;
   Pile pile = makePile(a.n, r, mu);
   std::printf("pile: %ld spheres r = %.3f m, mu = %.2f, h = %.0e s, %d warm-up + %d timed steps\n", a.n, r, mu, h,

@@ -1,5 +1,5 @@
 // Small helpers shared by the benches `dvisim bench scaling`, `bench accuracy` and `bench stability`
-// (apps/dvisim/bench_*.cpp): output directory checks, CSV/record naming (device slug, commit, date), the
+// (bench/*/bench_*.cpp): output directory checks, CSV/record naming (device slug, commit, date), the
 // optional matplotlib plot, and a body list built as Bullet bodies (the one description both our engine, through
 // importBullet, and the Bullet peer step).
 #pragma once

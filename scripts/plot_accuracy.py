@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Work-precision plots of `dvisim bench accuracy` (apps/dvisim/bench_accuracy.cpp), run by it after the benchmark.
+"""Work-precision plots of `dvisim bench accuracy` (bench/accuracy/bench_accuracy.cpp), run by it after the benchmark.
 
     python3 plot_accuracy.py DIR        reads DIR/accuracy.csv, writes DIR/accuracy.png
     python3 plot_accuracy.py --out PNG A.csv B.csv ...

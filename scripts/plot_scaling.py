@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Plots of `dvisim bench scaling` (apps/dvisim/bench_scaling.cpp), run by it after the benchmark.
+"""Plots of `dvisim bench scaling` (bench/scaling/bench_scaling.cpp), run by it after the benchmark.
 
     python3 plot_scaling.py DIR        reads DIR/scaling.csv, writes DIR/scaling.png
 

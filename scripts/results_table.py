@@ -5,7 +5,7 @@
     python3 scripts/results_table.py --check                exit 1 when bench/RESULTS.md is stale
 
 Every bench/results/<kind>_<device>_<date>.md is written by `dvisim bench <kind> --record`
-(apps/dvisim/bench_<kind>.cpp). This script reads those .md files only (device, commit, date and
+(bench/<kind>/bench_<kind>.cpp). This script reads those .md files only (device, commit, date and
 the headline numbers each one prints) and writes one markdown table per kind, newest run first.
 A number a record does not carry (a scene that did not run, an older record's format) prints "-".
 Nothing here is typed by hand: to change bench/RESULTS.md, record a run and regenerate.

@@ -39,6 +39,13 @@ struct TestWorld {
     makeDvi(c);
     world->setGravity(btVector3(0, btScalar(-9.81), 0));
   }
+  TestWorld(bool dvi, btVector3 gravity, DviWorldConfig c) {  // ours with these settings, or stock Bullet
+    if (dvi)
+      makeDvi(c);
+    else
+      world = std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &broadphase, &solver, &config);
+    world->setGravity(gravity);
+  }
   void makeDvi(DviWorldConfig& c) {
     c.make_gpu_system = makeGpuSystem;
     c.gpu_available = gpuAvailable;

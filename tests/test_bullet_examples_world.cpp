@@ -24,34 +24,9 @@ namespace dvi {
 namespace {
 
 // One example's world: stock Bullet or ours, built as the examples build theirs.
-struct ExampleWorld {
-  btDefaultCollisionConfiguration config;
-  btCollisionDispatcher dispatcher{&config};
-  btDbvtBroadphase broadphase;
-  btSequentialImpulseConstraintSolver solver;
-  std::unique_ptr<btDiscreteDynamicsWorld> world;
-  std::vector<std::unique_ptr<btCollisionShape>> shapes;
-  std::vector<btRigidBody*> bodies;  // every body made, added or not
-  std::vector<std::unique_ptr<btTypedConstraint>> constraints;
-
-  explicit ExampleWorld(bool dvi, btVector3 gravity = btVector3(0, -10, 0), DviWorldConfig c = {}) {
-    if (dvi) {
-      c.make_gpu_system = makeGpuSystem;
-      c.gpu_available = gpuAvailable;
-      world = std::make_unique<DviDynamicsWorld>(&dispatcher, &broadphase, &solver, &config, c);
-    } else {
-      world = std::make_unique<btDiscreteDynamicsWorld>(&dispatcher, &broadphase, &solver, &config);
-    }
-    world->setGravity(gravity);
-  }
-  ~ExampleWorld() {
-    for (auto& c : constraints) world->removeConstraint(c.get());
-    for (btRigidBody* b : bodies) {
-      world->removeRigidBody(b);
-      delete b->getMotionState();
-      delete b;
-    }
-  }
+struct ExampleWorld : TestWorld {
+  explicit ExampleWorld(bool dvi, btVector3 gravity = btVector3(0, -10, 0), DviWorldConfig c = {})
+      : TestWorld(dvi, gravity, c) {}
   template <class S>
   S* own(S* s) {
     shapes.emplace_back(s);

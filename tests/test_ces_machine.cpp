@@ -35,13 +35,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using clitest::CliResult;
-using clitest::expectInputError;
-using clitest::quote;
-using clitest::runCli;
-using clitest::slurp;
-using clitest::spit;
-using clitest::tempDir;
+using namespace clitest;  // runCli, tempDir, slurp, spit, quote, expectInputError (cli_test_util.h)
 
 CesConfig configWith(const std::vector<std::string>& sets) {
   return parseCesDocument(json::parse(defaultCesJson()), sets, "<test>");

@@ -574,25 +574,7 @@ int build(const Scene& sc, StudySystem& s) {
           s.addBody(cube(a, i == 9 ? real(sc.ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
     return top;
   }
-  const double r = 0.01, w = 4 * r * 1.001, t = 0.01, h = 4 * r;
-  for (int k = 0; k < 4; ++k) {
-    const bool xw = k < 2;
-    const double c0 = (k % 2 == 0) ? -t : w + t;
-    BodyDesc b;
-    b.mass = 0;
-    b.flags = kBodyFixed;
-    b.friction = real(0.7);
-    b.pos = xw ? Vec3{real(c0), real(h), real(w / 2)} : Vec3{real(w / 2), real(h), real(c0)};
-    b.shapes.push_back(makeBox(xw ? Vec3{real(t), real(h), real(w)} : Vec3{real(w), real(h), real(t)}));
-    s.addBody(b);
-  }
-  const double m = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r;
-  for (int i = 0; i < 4; ++i)
-    s.addBody(ball(real(r), real(m),
-                   Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))},
-                   real(0.7)));
-  return s.addBody(ball(real(r), real(m * sc.ratio),
-                        Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)}, real(0.7)));
+  return testbodies::addParticleBox(s, sc.ratio);
 }
 
 SystemConfig configOf(const Scene& sc) {

@@ -77,28 +77,10 @@ RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig 
 
 // bench stability's particle case: 2x2 spheres (r 1 cm) in a tight box, a fifth `ratio` times heavier on top.
 RunResult runParticles(double ratio, int steps, SystemConfig cfg, bool gpu = false) {
-  const double r = 0.01, w = 4 * r * 1.001, t = 0.01, h = 4 * r;
   cfg.step.dt = real(1e-3);
   auto sys = makeSystem(cfg, gpu);
   sys->addBody(groundPlane(real(0.7)));
-  for (int k = 0; k < 4; ++k) {
-    const bool xw = k < 2;
-    const double c0 = (k % 2 == 0) ? -t : w + t;
-    BodyDesc b;
-    b.mass = 0;
-    b.flags = kBodyFixed;
-    b.friction = real(0.7);
-    b.pos = xw ? Vec3{real(c0), real(h), real(w / 2)} : Vec3{real(w / 2), real(h), real(c0)};
-    b.shapes.push_back(makeBox(xw ? Vec3{real(t), real(h), real(w)} : Vec3{real(w), real(h), real(t)}));
-    sys->addBody(b);
-  }
-  const double m = 1000 * 4.0 / 3.0 * 3.14159265358979 * r * r * r;
-  for (int i = 0; i < 4; ++i)
-    sys->addBody(ball(
-        real(r), real(m),
-        Vec3{real(r * (1.0005 + 2.001 * (i % 2))), real(r * 1.0005), real(r * (1.0005 + 2.001 * (i / 2)))}, real(0.7)));
-  const int top = sys->addBody(ball(
-      real(r), real(m * ratio), Vec3{real(w / 2), real(r * (1.001 + std::sqrt(2.0) * 1.001)), real(w / 2)}, real(0.7)));
+  const int top = testbodies::addParticleBox(*sys, ratio);
   RunResult res;
   res.top_y0 = double(sys->bodies().pos[size_t(top)].y);
   int64_t iters = 0;

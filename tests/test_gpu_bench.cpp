@@ -1,4 +1,4 @@
-// The GPU scaling benchmark is `dvisim bench scaling` (apps/dvisim/bench_scaling.cpp, scenes in
+// The GPU scaling benchmark is `dvisim bench scaling` (bench/scaling/bench_scaling.cpp, scenes in
 // bench/scaling/). This hidden test only runs that command, so device scripts that ask for "[gpu_bench]"
 // (scripts/device/run_device.sh bench) keep working:
 //   dvisim_tests "[gpu_bench]"   (env DVISIM_BENCH_OUT=DIR, DVISIM_BENCH_SIZES=10k,100k,1M,4M)

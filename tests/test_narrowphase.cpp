@@ -847,6 +847,18 @@ BtResult bulletDistance(const btConvexShape* a, const Pose& pa, const btConvexSh
   return BtResult{double(pc.m_distance), Vec3{-n.x(), -n.y(), -n.z()}, pc.m_hasResult};
 }
 
+// The offset t at which B, posed at c0 + t u with orientation qb, just touches A at pa: bisection on Bullet's
+// distance (the independent reference; float, ~1e-6) between 0 and the sum of the bounding radii (+0.1), 30 halvings.
+double touchingOffset(const Pair& A, const Pose& pa, const Pair& B, Vec3 c0, Vec3 u, Quat qb,
+                      const std::vector<Vec3>& pts) {
+  double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
+  for (int k = 0; k < 30; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (bulletDistance(A.bt.get(), pa, B.bt.get(), pose(c0 + u * mid, qb)).dist < 0 ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 }  // namespace
 
 TEST_CASE("Bullet GJK/EPA sign conventions (sanity)", "[narrowphase][bullet]") {
@@ -962,16 +974,9 @@ TEST_CASE("every convex pair agrees with Bullet's GJK/EPA and a brute-force orac
         Vec3 c0{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)};
         auto at = [&](double t) { return pose(c0 + u * t, qb); };
         Pose pa = pose(c0, qa);
-        double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
-        for (int k = 0; k < 30; ++k) {
-          double mid = 0.5 * (lo + hi);
-          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0)
-            lo = mid;
-          else
-            hi = mid;
-        }
+        const double touch = touchingOffset(A, pa, B, c0, u, qb, pts);
         double size = std::min(A.s.size, B.s.size);
-        double t = 0.5 * (lo + hi) + rng.uni(-0.08, 0.08) * size;
+        double t = touch + rng.uni(-0.08, 0.08) * size;
         Pose pb = at(t);
         BtResult ref = bulletDistance(A.bt.get(), pa, B.bt.get(), pb);
         REQUIRE(ref.ok);
@@ -1053,14 +1058,10 @@ TEST_CASE("cores apart: GJK's closest points give the oracle's distance and norm
         auto at = [&](double t) { return pose(c0 + u * t, qb); };
         const Pose pa = pose(c0, qa);
         Vec3 nor;
-        double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
-        for (int k = 0; k < 30; ++k) {  // touching by Bullet's distance (float: ~1e-6)
-          const double mid = 0.5 * (lo + hi);
-          (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0 ? lo : hi) = mid;
-        }
+        const double touch = touchingOffset(A, pa, B, c0, u, qb, pts);
         const double sweeps = np::sweepRadius(A.s) + np::sweepRadius(B.s);
         const double size = std::min(A.s.size, B.s.size);
-        const Pose pb = at(0.5 * (lo + hi) + rng.uni(-0.5 * sweeps, 0.08 * size));
+        const Pose pb = at(touch + rng.uni(-0.5 * sweeps, 0.08 * size));
         const double env = 0.1 * size;
         // the cores' own answer, as the narrow phase asks it
         const np::MprShape MA = np::makeMprShape(A.s, pa, pts.data(), env),
@@ -1247,13 +1248,9 @@ TEST_CASE("convex hull margin: every pair with a swept hull agrees with Bullet's
       const Vec3 u = rng.dir(), c0{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)};
       auto at = [&](double t) { return pose(c0 + u * t, qb); };
       const Pose pa = pose(c0, qa);
-      double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
-      for (int k = 0; k < 30; ++k) {
-        const double mid = 0.5 * (lo + hi);
-        (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0 ? lo : hi) = mid;
-      }
+      const double touch = touchingOffset(A, pa, B, c0, u, qb, pts);
       const double size = std::min(A.s.size, B.s.size);
-      const Pose pb = at(0.5 * (lo + hi) + rng.uni(-0.08, 0.08) * size);
+      const Pose pb = at(touch + rng.uni(-0.08, 0.08) * size);
       const BtResult ref = bulletDistance(A.bt.get(), pa, B.bt.get(), pb);
       REQUIRE(ref.ok);
       const double env = 0.1 * size;
@@ -1392,16 +1389,9 @@ TEST_CASE("MPR pairs: contact points lie on both surfaces (deep penetrations inc
         Vec3 c0{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)};
         Pose pa = pose(c0, qa);
         auto at = [&](double t) { return pose(c0 + u * t, qb); };
-        double lo = 0, hi = boundingRadius(A.s, pts.data()) + boundingRadius(B.s, pts.data()) + 0.1;
-        for (int k = 0; k < 30; ++k) {
-          double mid = 0.5 * (lo + hi);
-          if (bulletDistance(A.bt.get(), pa, B.bt.get(), at(mid)).dist < 0)
-            lo = mid;
-          else
-            hi = mid;
-        }
+        const double touch = touchingOffset(A, pa, B, c0, u, qb, pts);
         double size = std::min(A.s.size, B.s.size);
-        Pose pb = at(0.5 * (lo + hi) - rng.uni(0.0, 0.5) * size);
+        Pose pb = at(touch - rng.uni(0.0, 0.5) * size);
         double env = 0.1 * size;
         ContactPoint c[kMaxContactsPerPair];
         bool swap = it % 2 == 1;

@@ -19,6 +19,7 @@
 #include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
+#include "scene_text.h"
 
 using namespace dvi;
 
@@ -307,14 +308,7 @@ TEST_CASE("restitution: a Bullet app's setRestitution bounces as in stock Bullet
 // Scene files: `restitution` on a body and a generator reaches the body (through Bullet's btRigidBody, as friction
 // does); values outside [0, 1] and NaN are refused with the key named.
 TEST_CASE("restitution: the scene key, and its validation", "[restitution][cli]") {
-  auto scene = [](const std::string& body_extra, const std::string& gen_extra) {
-    return R"({ "name": "r", "bodies": [
-      { "name": "ground", "shape": { "type": "plane", "normal": [0, 1, 0] }, "mass": 0)" +
-           body_extra + R"( },
-      { "generator": { "type": "grid", "counts": [2, 1, 1], "shape": { "type": "sphere", "radius": 0.1 },
-        "origin": [0, 1, 0])" +
-           gen_extra + R"( } } ] })";
-  };
+  auto* scene = &testscenes::groundAndPair;
   Scene s = Scene::fromJsonText(scene(R"(, "restitution": 0.5)", R"(, "restitution": 0.25)"), "test");
   REQUIRE(s.bodyCount() == 3);
   CHECK(bodyDescFromBullet(*s.bodies()[0]).restitution == Approx(0.5));

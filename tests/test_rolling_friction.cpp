@@ -25,6 +25,7 @@
 #include "chrono_like/solver/contact_problem.h"
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
+#include "scene_text.h"
 
 using namespace dvi;
 
@@ -307,14 +308,7 @@ TEST_CASE("rolling friction: Jacobi, Gauss-Seidel, APGD and BB reach the same op
 }
 
 TEST_CASE("rolling friction: scene keys, validation, pruning and the GPU backend's refusal", "[rolling][cli]") {
-  auto scene = [](const std::string& body_extra, const std::string& gen_extra) {
-    return R"({ "name": "r", "bodies": [
-      { "name": "ground", "shape": { "type": "plane", "normal": [0, 1, 0] }, "mass": 0)" +
-           body_extra + R"( },
-      { "generator": { "type": "grid", "counts": [2, 1, 1], "shape": { "type": "sphere", "radius": 0.1 },
-        "origin": [0, 1, 0])" +
-           gen_extra + R"( } } ] })";
-  };
+  auto* scene = &testscenes::groundAndPair;
   Scene s = Scene::fromJsonText(
       scene(R"(, "rolling_friction": 0.01, "spinning_friction": 0.002)", R"(, "rolling_friction": 0.03)"), "test");
   REQUIRE(s.bodyCount() == 3);

@@ -198,6 +198,10 @@ std::string resolveCesBackend(const std::string& requested) {
   if (requested == "bullet")
     throw InputError("--backend bullet: the CES machine runs on the DVI engine only (auto|cpu|gpu)");
   requireOneOf("--backend", requested, {"auto", "cpu", "gpu"});
+  return resolveBackend(requested);
+}
+
+std::string resolveBackend(const std::string& requested) {
   std::string backend = requested, gpu_name;
   const bool have_gpu = gpuAvailable(&gpu_name);
   if (backend == "auto") {
@@ -390,20 +394,21 @@ bool isCesScene(const std::string& path) {
   } catch (const json::exception&) { return false; }
 }
 
-int runCesMachine(const CesRunOptions& o) {
-  if (o.backend == "bullet")
-    throw InputError("--backend bullet: the CES machine runs on the DVI engine only (auto|cpu|gpu)");
-  requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu"});
-  if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
-  if (!o.solver.empty()) requireOneOf("--solver", o.solver, {"jacobi", "gs", "apgd", "bb"});
-  if (!o.time.empty() && !o.steps.empty()) throw InputError("--time and --steps are mutually exclusive");
-
-  // The machine document: a scene file, the embedded default, or the one a checkpoint was written with.
+// The machine document of a run and where it came from: a scene file, the embedded default, or (--resume) the one
+// the checkpoint was written with (state_bytes: the checkpoint; collision_before: the collision backend it ran with;
+// rdir: the folder resumed from; rlabel: its name when it is a killed run's, cesResumeFolder).
+struct CesRunInput {
   json doc;
-  std::string origin;
+  std::string origin, state_bytes, collision_before, rdir, rlabel;
+};
+
+CesRunInput loadCesRunInput(const CesRunOptions& o) {
+  CesRunInput in;
+  json& doc = in.doc;
+  std::string& origin = in.origin;
+  std::string &state_bytes = in.state_bytes, &collision_before = in.collision_before;
+  std::string &rdir = in.rdir, &rlabel = in.rlabel;
   const bool resume = !o.resume.empty();
-  std::string state_bytes, collision_before;
-  std::string rdir, rlabel;  // the folder resumed from, and its name when it is a killed run's (cesResumeFolder)
   if (resume) {
     if (!o.scene.empty()) throw InputError("--resume " + o.resume + ": give either a scene or --resume, not both");
     rdir = cesResumeFolder(o.resume, rlabel);
@@ -431,7 +436,11 @@ int runCesMachine(const CesRunOptions& o) {
   } else {
     doc = loadCesDocument(o.scene, origin);
   }
-  // Command-line options are overrides of the document too, so a checkpoint records them.
+  return in;
+}
+
+// The command line's options as overrides of the document (so that a checkpoint records them).
+std::vector<std::string> commandLineSets(const CesRunOptions& o) {
   std::vector<std::string> sets = o.sets;
   if (!o.dt.empty()) {
     const double dt = parseReal("--dt", o.dt);
@@ -447,50 +456,28 @@ int runCesMachine(const CesRunOptions& o) {
   if (!o.iterations.empty())
     sets.push_back("solver.iterations=" + std::to_string(parseInt("--iterations", o.iterations, 1, 1000000)));
   if (!o.frames.empty()) sets.push_back("output.frames=" + std::to_string(parseInt("--frames", o.frames, 0, 1000000)));
-  const json doc_before = doc;
-  CesConfig cfg = parseCesDocument(doc, sets, origin);
-  if (!o.steps.empty()) {
-    const long long n = parseInt("--steps", o.steps, 0, 1LL << 40);
-    cfg.duration = double(n) * cfg.step.dt;
-    sets.push_back("duration_s=" + fmt(cfg.duration));
-  }
-  for (const std::string& s : sets) applyCesOverride(doc, s);  // the document as run
-  const std::string collision = o.collision.empty() ? "native" : o.collision;
-  if (resume) checkResumable(doc_before, doc, collision_before, collision);
-  const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
-  const int64_t total = checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
-  checkFrameCount(cfg.frames, total, o.frames.empty() ? origin + ": ces.output.frames" : "--frames");
+  return sets;
+}
 
-  const std::string backend = resolveCesBackend(o.backend);
-  // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
-  ResultDir rd(o.out);
-  const std::string out = rd.path();
+// What the steps left: the totals, the stepping time, and how the loop ended.
+struct CesLoop {
+  CesRunTotals tot;
+  double wall = 0;
+  std::exception_ptr failure;
+  bool interrupted = false, checkpointed = false;
+};
 
-  std::unique_ptr<System> sys = makeCesSystem(cfg, backend, threads, collision);
-  CesMachine m(cfg, *sys);
-  if (resume) {
-    std::istringstream in(std::move(state_bytes), std::ios::binary);
-    m.load(in);
-    if (m.steps() > total)
-      throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) +
-                       " s, beyond duration_s = " + fmt(cfg.duration));
-  }
+// Steps the machine from its step to total: frames at N evenly spaced steps over [0, total], a checkpoint every
+// checkpoint_every_s and one at the end, a progress line on a terminal. A step that diverges or fails, or
+// SIGINT/SIGTERM, ends the loop (L.failure, L.interrupted).
+CesLoop stepCesMachine(CesMachine& m, const CesConfig& cfg, const json& doc, const std::string& collision,
+                       const std::string& out, int64_t total, CesFrameWriter& frames) {
   const int64_t first = m.steps();
-  std::printf("ces machine: %s, %s field, drum %s at %g rpm, U = %g kV, feed %g g/s for %g s; %lld steps of %g s%s\n",
-              origin.c_str(), cfg.field_model.c_str(), m.rheonomicDrive() ? "rheonomic" : "kinematic", cfg.drum_rpm,
-              cfg.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.step.dt,
-              resume ? (" (resumed at t = " + fmt(m.time()) + " s)").c_str() : "");
-  if (m.system().backendName() != "cpu" && !m.deviceParticles())
-    std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
-                m.system().backendName().c_str());
-  std::fflush(stdout);
-  if (tubeFieldRatio(m) >= 1)
-    std::fprintf(stderr,
-                 "dvisim: warning: the static tube's surface field %.1f kV/cm reaches Peek's onset field %.1f kV/cm of "
-                 "its radius: it would ionise (spark-over risk, docs/CES.md \"Spark-over\")\n",
-                 m.tubeSurfaceField() * 1e-5, tubeOnsetField(cfg) * 1e-5);
-
-  // Frames at N evenly spaced steps over [0, total]; checkpoints every checkpoint_every_s.
+  CesLoop L;
+  CesRunTotals& tot = L.tot;
+  double& wall = L.wall;
+  std::exception_ptr& failure = L.failure;
+  bool &interrupted = L.interrupted, &checkpointed = L.checkpointed;
   std::vector<int64_t> frame_at;
   if (cfg.frames == 1) frame_at.push_back(total);
   for (int k = 0; cfg.frames > 1 && k < cfg.frames; ++k)
@@ -501,19 +488,12 @@ int runCesMachine(const CesRunOptions& o) {
                              : ckpt_steps > double(total) ? total + 1
                                                           : std::max<int64_t>(1, int64_t(ckpt_steps));
   const std::string ckpt_dir = out + "/checkpoint";
-  bool checkpointed = false;
-  CesFrameWriter frames(out);
-  if (cfg.frames > 0) writeFileAtomic(out + "/machine.vtp", cesMachineVtp(m));
   size_t next_frame = 0;
   while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
   const bool tty = ::isatty(2);
   const bool host_state = m.system().backendName() == "cpu";  // the bodies are checked for divergence every step
-  CesRunTotals tot;
-  double wall = 0;
   const auto t0 = Clock::now();
   auto last = t0;
-  std::exception_ptr failure;
-  bool interrupted = false;
   installStopHandlers();
   try {
     for (int64_t k = first;; ++k) {
@@ -561,34 +541,229 @@ int runCesMachine(const CesRunOptions& o) {
     writeCheckpoint(m, doc, collision, ckpt_dir);
     checkpointed = true;
   } catch (...) { failure = std::current_exception(); }
-  // Diverged or failed after simulating: what there is (a summary with the status and the error, the last
-  // checkpoint; that of the run resumed from when this one wrote none) in place of the previous results, then the
-  // exception again (main() turns it into the exit code).
+  return L;
+}
+
+// Diverged or failed after simulating: what there is (a summary with the status and the error, the last checkpoint;
+// that of the run resumed from when this one wrote none) in place of the previous results, then the exception again
+// (main() turns it into the exit code).
+[[noreturn]] void writeCesFailure(std::exception_ptr failure, const CesRunOptions& o, const CesConfig& cfg,
+                                  const CesMachine& m, int64_t first, const CesFrameWriter& frames, bool checkpointed,
+                                  const std::string& rdir, ResultDir& rd) {
+  const bool resume = !o.resume.empty(), tty = ::isatty(2);
+  const std::string out = rd.path(), ckpt_dir = out + "/checkpoint";
+  if (tty) std::fprintf(stderr, "\r\033[K");
+  const int code = exitCodeFor(failure);
+  try {
+    std::error_code ec;
+    if (!checkpointed && resume) fs::copy(rdir + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
+    json summary;
+    summary["status"] = runStatusName(code);
+    summary["error"] = exceptionMessage(failure);
+    summary["exit_code"] = code;
+    summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
+    summary["dt"] = cfg.step.dt;
+    summary["steps"] = m.steps() - first;
+    summary["sim_time"] = m.time();
+    summary["frames"] = frames.count();
+    summary["checkpoint"] = fs::exists(ckpt_dir + "/state.bin") ? json("checkpoint/") : json(nullptr);
+    summary["note"] = "incomplete: the run ended with the error above; checkpoint/ (if any) is the last good state";
+    writeSummary(out + "/summary.json", summary);
+    rd.commit();
+    std::printf("results so far: %s/ (summary.json status \"%s\"%s)\n", rd.out().c_str(), runStatusName(code),
+                summary["checkpoint"].is_null() ? "" : ", checkpoint/");
+  } catch (...) {}
+  std::rethrow_exception(failure);
+}
+
+// summary.json of a finished (or interrupted) CES run: the run's keys as a scene run's, and "ces": the mass balance,
+// the bins at the configured splitters, the best splitters, the corona, the drive and each material's masses.
+json cesRunSummary(const CesRunOptions& o, const json& doc, const CesMachine& m, const CesRunTotals& tot,
+                   const std::string& collision, int64_t steps_run, double wall, int frame_count, bool interrupted,
+                   const MassBalance& bal, const SplitterTable& table, const BinMasses& at,
+                   const SplitterCell& configured) {
+  const CesConfig& cfg = m.config();
+  const bool resume = !o.resume.empty();
+  json summary;
+  summary["status"] = interrupted ? "interrupted" : "done";
+  summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
+  summary["scene_name"] = doc.contains("name") && doc["name"].is_string() ? doc["name"].get<std::string>() : "ces";
+  summary["bodies"] = m.system().bodies().count();
+  summary["dt"] = cfg.step.dt;
+  summary["steps"] = steps_run;
+  summary["threads"] = m.system().effectiveThreads();
+  summary["backend"] = m.system().backendName();
+  summary["device"] = m.system().deviceName();
+  summary["solver"] = solverName(cfg.solver.type);
+  summary["collision"] = collision;
+  summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
+  summary["residual_final"] = m.system().lastStats().relative_residual;  // relative (solver.h)
+  summary["residual_final_abs"] = tot.residual;
+  addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver);
+  summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
+  summary["max_penetration"] = tot.max_penetration;
+  addStageSummary(summary, tot.log);
+  summary["sim_time"] = m.time();
+  summary["wall_time_s"] = wall;
+  summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
+  summary["frames"] = frame_count;
+  json c = massBalanceJson(bal);
+  c["splitters"] = {{"s1_mm", cfg.s1 * 1e3}, {"s2_mm", cfg.s2 * 1e3}};
+  c["bins"] = binsJson(at);
+  c["at_splitters"] = cellJson(configured);
+  c["best"] = cellJson(table.cells[table.best]);
+  c["best"]["targets_met"] = table.targets_met;
+  c["grade_targets"] = {{"conductor", cfg.grade_target_conductor}, {"nonconductor", cfg.grade_target_nonconductor}};
+  c["metrics"] = cesMetrics(m, table, bal);
+  {
+    const CoronaInfo ci = m.coronaInfo();
+    c["corona"] = {{"ionised", ci.ionised},
+                   {"onset_voltage_kV", numberOrNull(ci.onset_voltage * 1e-3)},
+                   {"wire_field_on_kV_cm", numberOrNull(ci.wire_field_on * 1e-5)},
+                   {"current_uA_per_m", numberOrNull(ci.current_per_m * 1e6)}};
+  }
+  c["sparkover"] = {{"margin", sparkoverMargin(cfg)},
+                    {"tube_surface_field_kV_cm", numberOrNull(m.tubeSurfaceField() * 1e-5)},
+                    {"tube_onset_field_kV_cm", numberOrNull(tubeOnsetField(cfg) * 1e-5)},
+                    {"tube_in_corona", tubeFieldRatio(m) >= 1}};
+  c["voltage_kV"] = cfg.voltage * 1e-3;
+  c["splitter_positions"] = cfg.splitter_positions;
+  c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};
+  c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
+  c["field_model"] = cfg.field_model;
+  c["drum_drive"] = m.rheonomicDrive() ? "rheonomic" : "kinematic";
+  if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? tot.drive_torque_sum / double(steps_run) : 0.0;
+  c["forces_on_host"] = m.system().backendName() != "cpu";
+  json mats = json::array();
+  for (size_t k = 0; k < cfg.materials.size(); ++k) {
+    int64_t fed = 0, col = 0;
+    for (size_t i = size_t(m.firstParticleBody()); i < m.particles().count(); ++i) {
+      if (m.particles().material[i] != int32_t(k)) continue;
+      fed += m.particles().mass_fg[i];
+      if (m.particles().status[i] == kStatusCollected) col += m.particles().mass_fg[i];
+    }
+    mats.push_back({{"name", cfg.materials[k].name},
+                    {"kind", materialKindName(cfg.materials[k].kind)},
+                    {"fed_mass_kg", double(fed) * kFemtogram},
+                    {"collected_mass_kg", double(col) * kFemtogram}});
+  }
+  c["materials"] = mats;
+  summary["ces"] = c;
+  return summary;
+}
+
+// The run's lines: the mass balance, the corona, the bins at the configured splitters and the best splitters.
+void printCesResults(const CesMachine& m, const MassBalance& bal, const SplitterTable& table, const BinMasses& at) {
+  const CesConfig& cfg = m.config();
+  const double g = kFemtogram * 1e3;
+  std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
+  if (bal.lost > 0)
+    std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n",
+                 (long long)bal.lost);
+  const SplitterCell& best = table.cells[table.best];
+  {
+    const CoronaInfo ci = m.coronaInfo();
+    if (cfg.field_model == "corona")
+      std::printf("corona: onset %.3g kV, %s, current %.4g uA/m\n", ci.onset_voltage * 1e-3,
+                  ci.ionised ? "ionised" : "below onset (Laplace field, no ions)", ci.current_per_m * 1e6);
+  }
+  std::printf(
+      "bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g "
+      "(nonconductor/middling/conductor)\n",
+      cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
+      double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
+  std::printf(
+      "best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
+      "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
+      best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
+      cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic, best.recovery_plastic,
+      best.middling_fraction);
+}
+
+// The command line's choices checked before any work (bullet is refused: the machine runs on the DVI engine).
+void checkCesOptions(const CesRunOptions& o) {
+  if (o.backend == "bullet")
+    throw InputError("--backend bullet: the CES machine runs on the DVI engine only (auto|cpu|gpu)");
+  requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu"});
+  if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
+  if (!o.solver.empty()) requireOneOf("--solver", o.solver, {"jacobi", "gs", "apgd", "bb"});
+  if (!o.time.empty() && !o.steps.empty()) throw InputError("--time and --steps are mutually exclusive");
+}
+
+// The configuration as run: the document with the command line's overrides (--steps as a duration); in.doc becomes
+// the document as run (what a checkpoint records), and a resumed run's must match its checkpoint's.
+CesConfig configureCesRun(const CesRunOptions& o, CesRunInput& in, const std::string& collision) {
+  json& doc = in.doc;
+  std::vector<std::string> sets = commandLineSets(o);
+  const json doc_before = doc;
+  CesConfig cfg = parseCesDocument(doc, sets, in.origin);
+  if (!o.steps.empty()) {
+    const long long n = parseInt("--steps", o.steps, 0, 1LL << 40);
+    cfg.duration = double(n) * cfg.step.dt;
+    sets.push_back("duration_s=" + fmt(cfg.duration));
+  }
+  for (const std::string& s : sets) applyCesOverride(doc, s);  // the document as run
+  if (!o.resume.empty()) checkResumable(doc_before, doc, in.collision_before, collision);
+  return cfg;
+}
+
+// The run's first lines: the machine, its field, drive, voltage and feed, the steps to run.
+void printCesStart(const CesMachine& m, const std::string& origin, int64_t total, bool resume) {
+  const CesConfig& cfg = m.config();
+  const int64_t first = m.steps();
+  std::printf("ces machine: %s, %s field, drum %s at %g rpm, U = %g kV, feed %g g/s for %g s; %lld steps of %g s%s\n",
+              origin.c_str(), cfg.field_model.c_str(), m.rheonomicDrive() ? "rheonomic" : "kinematic", cfg.drum_rpm,
+              cfg.voltage * 1e-3, cfg.feed_mass_flow * 1e3, cfg.feed_duration, (long long)(total - first), cfg.step.dt,
+              resume ? (" (resumed at t = " + fmt(m.time()) + " s)").c_str() : "");
+  if (m.system().backendName() != "cpu" && !m.deviceParticles())
+    std::printf("note: the %s backend applies the CES forces on the host (bodies synced every step)\n",
+                m.system().backendName().c_str());
+  std::fflush(stdout);
+  if (tubeFieldRatio(m) >= 1)
+    std::fprintf(stderr,
+                 "dvisim: warning: the static tube's surface field %.1f kV/cm reaches Peek's onset field %.1f kV/cm of "
+                 "its radius: it would ionise (spark-over risk, docs/CES.md \"Spark-over\")\n",
+                 m.tubeSurfaceField() * 1e-5, tubeOnsetField(cfg) * 1e-5);
+}
+
+int runCesMachine(const CesRunOptions& o) {
+  checkCesOptions(o);
+  CesRunInput in = loadCesRunInput(o);
+  json& doc = in.doc;
+  const std::string &origin = in.origin, &rdir = in.rdir, &rlabel = in.rlabel;
+  std::string& state_bytes = in.state_bytes;
+  const bool resume = !o.resume.empty();
+  const std::string collision = o.collision.empty() ? "native" : o.collision;
+  const CesConfig cfg = configureCesRun(o, in, collision);
+  const int threads = o.threads.empty() ? 0 : int(parseInt("--threads", o.threads, 0, 4096));
+  const int64_t total = checkedStepCount(cfg.duration, cfg.step.dt, origin + ": ces.duration_s");
+  checkFrameCount(cfg.frames, total, o.frames.empty() ? origin + ": ces.output.frames" : "--frames");
+  const std::string backend = resolveCesBackend(o.backend);
+  // Everything is written into a fresh directory beside --out, put in its place at the end (ResultDir).
+  ResultDir rd(o.out);
+  const std::string out = rd.path();
+  std::unique_ptr<System> sys = makeCesSystem(cfg, backend, threads, collision);
+  CesMachine m(cfg, *sys);
+  if (resume) {
+    std::istringstream in(std::move(state_bytes), std::ios::binary);
+    m.load(in);
+    if (m.steps() > total)
+      throw InputError("--resume: the checkpoint is at t = " + fmt(m.time()) +
+                       " s, beyond duration_s = " + fmt(cfg.duration));
+  }
+  const int64_t first = m.steps();
+  printCesStart(m, origin, total, resume);
+
+  CesFrameWriter frames(out);
+  if (cfg.frames > 0) writeFileAtomic(out + "/machine.vtp", cesMachineVtp(m));
+  const CesLoop L = stepCesMachine(m, cfg, doc, collision, out, total, frames);
+  const CesRunTotals& tot = L.tot;
+  const double wall = L.wall;
+  const bool interrupted = L.interrupted;
   auto writeFailure = [&](std::exception_ptr failure) {
-    if (tty) std::fprintf(stderr, "\r\033[K");
-    const int code = exitCodeFor(failure);
-    try {
-      std::error_code ec;
-      if (!checkpointed && resume) fs::copy(rdir + "/checkpoint", ckpt_dir, fs::copy_options::recursive, ec);
-      json summary;
-      summary["status"] = runStatusName(code);
-      summary["error"] = exceptionMessage(failure);
-      summary["exit_code"] = code;
-      summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
-      summary["dt"] = cfg.step.dt;
-      summary["steps"] = m.steps() - first;
-      summary["sim_time"] = m.time();
-      summary["frames"] = frames.count();
-      summary["checkpoint"] = fs::exists(ckpt_dir + "/state.bin") ? json("checkpoint/") : json(nullptr);
-      summary["note"] = "incomplete: the run ended with the error above; checkpoint/ (if any) is the last good state";
-      writeSummary(out + "/summary.json", summary);
-      rd.commit();
-      std::printf("results so far: %s/ (summary.json status \"%s\"%s)\n", rd.out().c_str(), runStatusName(code),
-                  summary["checkpoint"].is_null() ? "" : ", checkpoint/");
-    } catch (...) {}
-    std::rethrow_exception(failure);
+    writeCesFailure(failure, o, cfg, m, first, frames, L.checkpointed, rdir, rd);
   };
-  if (failure) writeFailure(failure);
+  if (L.failure) writeFailure(L.failure);
 
   try {
     // Results.
@@ -602,72 +777,9 @@ int runCesMachine(const CesRunOptions& o) {
     const Distribution dist = massDistribution(m.collected(), cfg.histogram_bin);
 
     const int64_t steps_run = m.steps() - first;
-    json summary;
-    summary["status"] = interrupted ? "interrupted" : "done";
-    summary["scene"] = resume ? o.resume : (o.scene.empty() ? "<default>" : o.scene);
-    summary["scene_name"] = doc.contains("name") && doc["name"].is_string() ? doc["name"].get<std::string>() : "ces";
-    summary["bodies"] = m.system().bodies().count();
-    summary["dt"] = cfg.step.dt;
-    summary["steps"] = steps_run;
-    summary["threads"] = m.system().effectiveThreads();
-    summary["backend"] = m.system().backendName();
-    summary["device"] = m.system().deviceName();
-    summary["solver"] = solverName(cfg.solver.type);
-    summary["collision"] = collision;
-    summary["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
-    summary["residual_final"] = m.system().lastStats().relative_residual;  // relative (solver.h)
-    summary["residual_final_abs"] = tot.residual;
-    addConvergenceSummary(summary, m.system().convergence(), m.system().config().solver);
-    summary["contacts_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
-    summary["max_penetration"] = tot.max_penetration;
-    addStageSummary(summary, tot.log);
-    summary["sim_time"] = m.time();
-    summary["wall_time_s"] = wall;
-    summary["ms_per_step"] = steps_run > 0 ? 1000.0 * wall / double(steps_run) : 0.0;
-    summary["frames"] = frames.count();
-    json c = massBalanceJson(bal);
-    c["splitters"] = {{"s1_mm", cfg.s1 * 1e3}, {"s2_mm", cfg.s2 * 1e3}};
-    c["bins"] = binsJson(at);
-    c["at_splitters"] = cellJson(configured);
-    c["best"] = cellJson(table.cells[table.best]);
-    c["best"]["targets_met"] = table.targets_met;
-    c["grade_targets"] = {{"conductor", cfg.grade_target_conductor}, {"nonconductor", cfg.grade_target_nonconductor}};
-    c["metrics"] = cesMetrics(m, table, bal);
-    {
-      const CoronaInfo ci = m.coronaInfo();
-      c["corona"] = {{"ionised", ci.ionised},
-                     {"onset_voltage_kV", numberOrNull(ci.onset_voltage * 1e-3)},
-                     {"wire_field_on_kV_cm", numberOrNull(ci.wire_field_on * 1e-5)},
-                     {"current_uA_per_m", numberOrNull(ci.current_per_m * 1e6)}};
-    }
-    c["sparkover"] = {{"margin", sparkoverMargin(cfg)},
-                      {"tube_surface_field_kV_cm", numberOrNull(m.tubeSurfaceField() * 1e-5)},
-                      {"tube_onset_field_kV_cm", numberOrNull(tubeOnsetField(cfg) * 1e-5)},
-                      {"tube_in_corona", tubeFieldRatio(m) >= 1}};
-    c["voltage_kV"] = cfg.voltage * 1e-3;
-    c["splitter_positions"] = cfg.splitter_positions;
-    c["splitter_range_mm"] = {cfg.splitter_lo * 1e3, cfg.splitter_hi * 1e3};
-    c["splitter_methods_agree"] = true;  // splitterAnalysis throws otherwise
-    c["field_model"] = cfg.field_model;
-    c["drum_drive"] = m.rheonomicDrive() ? "rheonomic" : "kinematic";
-    if (m.rheonomicDrive()) c["drive_torque_mean_Nm"] = steps_run > 0 ? tot.drive_torque_sum / double(steps_run) : 0.0;
-    c["forces_on_host"] = m.system().backendName() != "cpu";
-    json mats = json::array();
-    for (size_t k = 0; k < cfg.materials.size(); ++k) {
-      int64_t fed = 0, col = 0;
-      for (size_t i = size_t(m.firstParticleBody()); i < m.particles().count(); ++i) {
-        if (m.particles().material[i] != int32_t(k)) continue;
-        fed += m.particles().mass_fg[i];
-        if (m.particles().status[i] == kStatusCollected) col += m.particles().mass_fg[i];
-      }
-      mats.push_back({{"name", cfg.materials[k].name},
-                      {"kind", materialKindName(cfg.materials[k].kind)},
-                      {"fed_mass_kg", double(fed) * kFemtogram},
-                      {"collected_mass_kg", double(col) * kFemtogram}});
-    }
-    c["materials"] = mats;
+    json summary = cesRunSummary(o, doc, m, tot, collision, steps_run, wall, frames.count(), interrupted, bal, table,
+                                 at, configured);
     std::string plots = "disabled (ces.output.plots = false)";
-    summary["ces"] = c;
 
     std::vector<BodyState> state;
     const BodyArrays& b = m.system().bodies();
@@ -688,29 +800,7 @@ int runCesMachine(const CesRunOptions& o) {
       writeSummary(out + "/summary.json", summary);
     }
 
-    const double g = kFemtogram * 1e3;
-    std::printf("mass balance: %s\n", massBalanceLine(bal).c_str());
-    if (bal.lost > 0)
-      std::fprintf(stderr, "dvisim: warning: %lld particles were lost (left the machine without being collected)\n",
-                   (long long)bal.lost);
-    const SplitterCell& best = table.cells[table.best];
-    {
-      const CoronaInfo ci = m.coronaInfo();
-      if (cfg.field_model == "corona")
-        std::printf("corona: onset %.3g kV, %s, current %.4g uA/m\n", ci.onset_voltage * 1e-3,
-                    ci.ionised ? "ionised" : "below onset (Laplace field, no ions)", ci.current_per_m * 1e6);
-    }
-    std::printf(
-        "bins at s1 = %.1f mm, s2 = %.1f mm: metal %.3g/%.3g/%.3g g, plastic %.3g/%.3g/%.3g g "
-        "(nonconductor/middling/conductor)\n",
-        cfg.s1 * 1e3, cfg.s2 * 1e3, double(at.fg[0][0]) * g, double(at.fg[1][0]) * g, double(at.fg[2][0]) * g,
-        double(at.fg[0][1]) * g, double(at.fg[1][1]) * g, double(at.fg[2][1]) * g);
-    std::printf(
-        "best splitters: s1 = %.1f mm, s2 = %.1f mm (%s grade targets %.2f/%.2f; metal grade %.3f recovery %.3f; "
-        "plastic grade %.3f recovery %.3f; middlings %.3f of the feed; recoveries of the fed mass)\n",
-        best.s1 * 1e3, best.s2 * 1e3, table.targets_met ? "meets the" : "MISSES the", cfg.grade_target_conductor,
-        cfg.grade_target_nonconductor, best.grade_metal, best.recovery_metal, best.grade_plastic, best.recovery_plastic,
-        best.middling_fraction);
+    printCesResults(m, bal, table, at);
     rd.commit();
     std::error_code ec;  // a killed run that wrote this --out is superseded: its folder goes
     if (!rlabel.empty() && fs::equivalent(rd.out(), fs::absolute(o.resume, ec), ec)) fs::remove_all(rdir, ec);

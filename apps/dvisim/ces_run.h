@@ -37,7 +37,7 @@ bool isCesScene(const std::string& path);
 // Runs the machine; writes the results under o.out. Throws InputError on bad input. Returns the exit code.
 int runCesMachine(const CesRunOptions& o);
 
-// ---- Pieces of the run, shared with `dvisim bench ces` (apps/dvisim/bench_ces.cpp) ----
+// ---- Pieces of the run, shared with `dvisim bench ces` (bench/ces/bench_ces.cpp) ----
 
 // The machine document: the embedded default (empty scene) or a scene file. `origin` names it in errors.
 nlohmann::json loadCesDocument(const std::string& scene, std::string& origin);
@@ -45,6 +45,9 @@ nlohmann::json loadCesDocument(const std::string& scene, std::string& origin);
 // Checks `requested` (auto|cpu|gpu; bullet is refused) and resolves auto to gpu when a device is usable
 // (printed), else cpu. gpu without a device is an InputError.
 std::string resolveCesBackend(const std::string& requested);
+// The backend a run uses for --backend (`dvisim run` of a scene, and the CES machine above): auto picks the GPU where
+// there is one (and prints which), gpu without a usable device is an InputError; any other name is returned as given.
+std::string resolveBackend(const std::string& requested);
 
 // The System the machine runs on: cfg's step and solver, `threads` (0: OpenMP default), collision
 // native|bullet, the product friction rule, a sparse broad-phase grid; a CheckpointSystem on the CPU.

@@ -48,10 +48,10 @@
 #include "chrono_like/system.h"
 #include "gpu/gpu_factory.h"
 #include "parse.h"
+#include "progress.h"
 #include "run_checkpoint.h"
 #ifdef DVISIM_HAVE_MPI
 #include "mpi_run.h"
-#include "progress.h"
 #endif
 
 namespace {
@@ -129,19 +129,9 @@ int runCes(const Options& o) {
   return dvi::ces::runCesMachine(c);
 }
 
-int run(const Options& o) {
-  // --resume DIR of a scene run (run_checkpoint.h: one process or under mpirun) needs the scene it ran; without a
-  // scene, DIR is a CES machine's.
-  if (o.scene.empty() && !o.resume.empty() && runckpt::isSceneCheckpoint(o.resume))
-    throw InputError("--resume " + o.resume +
-                     ": a scene run's checkpoint resumes with the scene it ran: dvisim run SCENE --resume DIR");
-  const bool ces = o.scene.empty() || dvi::ces::isCesScene(o.scene);
-#ifdef DVISIM_HAVE_MPI
-  if (ces && mpiProcesses() > 1)
-    throw InputError("a CES machine does not run over several processes (MPI): run it without mpirun");
-#endif
-  if (ces) return runCes(o);
-  // Validate the command line before doing any work.
+// The command line validated and written into the scene's settings (SceneSettings, its SystemConfig) after the
+// scene file; the scene is loaded here.
+dvi::Scene loadScene(const Options& o) {
   requireOneOf("--backend", o.backend, {"auto", "cpu", "gpu", "bullet"});
   if (!o.collision.empty()) requireOneOf("--collision", o.collision, {"native", "bullet"});
   if (!o.solver.empty()) requireOneOf("--solver", o.solver, {"jacobi", "gs", "apgd", "bb"});
@@ -178,6 +168,270 @@ int run(const Options& o) {
   if (!o.solver.empty()) dvi::parseSolver(o.solver, cfg.solver.type);  // validated above
   if (!o.collision.empty())
     cfg.collision.backend = o.collision == "bullet" ? dvi::CollisionBackend::Bullet : dvi::CollisionBackend::Native;
+  return scene;
+}
+
+// Steps either backend: writes the due frames (through `collect`), times `stepOnce`, then lets `afterStep` gather its
+// statistics. One loop for both, so frames and timing cannot differ. A step that diverges (SimulationDiverged,
+// SolverError), fails, or SIGINT/SIGTERM ends the loop early: `done` counts the steps that completed, `failure` holds
+// the exception.
+struct StepLoop {
+  int64_t first, steps;
+  double dt;
+  std::vector<dvi::BodyState>& state;
+  dvi::FrameWriter& frames;
+  std::vector<int64_t> frame_at;
+  Progress progress;
+  size_t next_frame = 0;
+  double wall = 0;
+  int64_t done = first;
+  bool interrupted = false;
+  std::exception_ptr failure;
+
+  StepLoop(int64_t first_, int64_t steps_, double dt_, std::vector<dvi::BodyState>& state_, dvi::FrameWriter& frames_,
+           std::vector<int64_t> frame_at_)
+      : first(first_),
+        steps(steps_),
+        dt(dt_),
+        state(state_),
+        frames(frames_),
+        frame_at(std::move(frame_at_)),
+        progress(steps_) {
+    while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
+  }
+
+  template <class Collect, class StepOnce, class AfterStep>
+  void run(Collect&& collect, StepOnce&& stepOnce, AfterStep&& afterStep) {
+    try {
+      for (int64_t k = first;; ++k) {
+        while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
+          collect();
+          frames.write(double(k) * dt, state);
+          ++next_frame;
+        }
+        if (k == steps) break;
+        if (dvi::stopRequested()) {
+          interrupted = true;
+          break;
+        }
+        const auto t0 = Clock::now();
+        stepOnce(k);
+        wall += std::chrono::duration<double>(Clock::now() - t0).count();
+        done = k + 1;
+        afterStep();
+        progress.update(k + 1);
+      }
+    } catch (...) { failure = std::current_exception(); }
+    progress.finish();
+    collect();
+  }
+};
+
+// The run on Bullet's own world (--backend bullet), the peer to compare against.
+void runOnBullet(const Options& o, const dvi::SceneSettings& st, const std::vector<btRigidBody*>& bodies,
+                 const std::vector<dvi::real>& sizes, StepLoop& loop, nlohmann::json& summary) {
+  const dvi::SystemConfig& cfg = st.system;
+  std::vector<dvi::BodyState>& state = loop.state;
+  const int64_t steps = loop.steps;
+  const double& wall = loop.wall;
+  dvi::BulletPeerSettings ps;
+  ps.dt = dvi::real(cfg.step.dt);
+  ps.gravity = cfg.step.gravity;
+  ps.solver_iterations = o.iterations.empty() ? st.bullet_iterations : std::max(1, st.iterations());
+  ps.length_scale = st.bullet_length_scale > 0 ? st.bullet_length_scale : autoLengthScale(bodies, sizes);
+  dvi::BulletPeer peer(bodies, ps);
+  auto collect = [&] {
+    for (size_t i = 0; i < bodies.size(); ++i)
+      state[i] =
+          dvi::BodyState{peer.position(i), peer.rotation(i), peer.velocity(i), peer.angularVelocity(i), sizes[i]};
+  };
+  int64_t contacts = 0;
+  dvi::real max_pen = 0;
+  loop.run(
+      collect,
+      [&](int64_t k) {
+        peer.step();
+        for (size_t i = 0; i < bodies.size(); ++i)
+          if (!dvi::isFinite(peer.position(i)) || !dvi::isFinite(peer.velocity(i))) {
+            char msg[200];
+            std::snprintf(msg, sizeof msg,
+                          "the simulation diverged in step %lld (t = %.6g s): body %zu has a non-finite "
+                          "position or velocity; try a smaller time step",
+                          (long long)(k + 1), double(k + 1) * cfg.step.dt, i);
+            throw dvi::SimulationDiverged(msg);
+          }
+      },
+      [&] {
+        contacts += peer.lastStats().contacts;
+        max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
+      });
+  summary["backend"] = "bullet";
+  summary["device"] = "Bullet " + std::to_string(btGetVersion()) + " btDiscreteDynamicsWorld (CPU, 1 thread)";
+  summary["solver"] = "bullet-si";
+  summary["collision"] = "bullet";
+  summary["iterations_mean"] = ps.solver_iterations;
+  summary["residual_final"] = nullptr;
+  summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
+  summary["max_penetration"] = max_pen;
+  summary["bullet_length_scale"] = ps.length_scale;
+  summary["stages"] = {"bullet"};
+  summary["stage_seconds"] = {{"bullet", wall}};
+  summary["threads"] = 1;
+  summary["checkpoint"] = nullptr;  // Bullet's world has none
+}
+
+// The run on the DVI System (cpu or gpu), with checkpoints.
+void runOnSystem(const std::string& backend, const dvi::Scene& scene, const std::optional<runckpt::Resumed>& resumed,
+                 const std::string& resumed_from, const std::string& out, StepLoop& loop, nlohmann::json& summary,
+                 std::string& not_converged) {
+  const dvi::SceneSettings& st = scene.settings;
+  const dvi::SystemConfig& cfg = st.system;
+  const std::vector<btRigidBody*>& bodies = scene.bodies();
+  std::vector<dvi::BodyState>& state = loop.state;
+  const int64_t steps = loop.steps;
+  const int64_t& done = loop.done;
+  const std::exception_ptr& failure = loop.failure;
+  std::unique_ptr<dvi::System> sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
+                                                      : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
+  const std::vector<int> ids = dvi::importBullet(*sys, bodies);
+  if (resumed) runckpt::restore(*sys, *resumed);
+  // a checkpoint every checkpoint_every steps (the newest two kept) into the run's folder, and one at the end
+  runckpt::Periodic periodic(out, st.checkpoint_every);
+  auto collect = [&] {
+    sys->syncToHost();  // a device backend copies its state into the host arrays
+    const dvi::BodyArrays& b = sys->bodies();
+    for (size_t i = 0; i < ids.size(); ++i) {
+      const size_t k = size_t(ids[i]);
+      state[i] = dvi::BodyState{b.pos[k], b.rot[k], b.vel[k], b.omega[k], b.size[k]};
+    }
+  };
+  int64_t contacts = 0, iterations = 0;
+  dvi::real max_pen = 0, residual = 0, relative = 0;
+  double checkpoint_s = 0;
+  dvi::StageLog stage_log;
+  const bool host_state = sys->backendName() == "cpu";  // the bodies are checked for divergence every step
+  loop.run(
+      collect,
+      [&](int64_t k) {
+        try {
+          sys->step();
+        } catch (const dvi::SolverError& e) {
+          sys->syncToHost();
+          throw dvi::SimulationDiverged(
+              dvi::divergedMessage(k + 1, double(k + 1) * cfg.step.dt, sys->bodies(), e.what(), cfg.step.dt));
+        }
+        if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * cfg.step.dt, sys->bodies());
+      },
+      [&] {
+        const dvi::StepStats& s = sys->lastStats();
+        contacts += s.contacts;
+        iterations += s.iterations;
+        max_pen = std::fmax(max_pen, s.max_penetration);
+        residual = s.residual;
+        relative = s.relative_residual;
+        stage_log.add(s);
+        if (!periodic.due(done)) return;
+        const auto c0 = Clock::now();
+        sys->syncToHost();
+        runckpt::writeSingle(*sys, scene, periodic.begin(done));
+        periodic.commit(done);
+        checkpoint_s += std::chrono::duration<double>(Clock::now() - c0).count();
+      });
+  const auto c0 = Clock::now();
+  const bool saved = runckpt::finalCheckpoint(*sys, scene, periodic, out + "/checkpoint", bool(failure), resumed_from);
+  checkpoint_s += std::chrono::duration<double>(Clock::now() - c0).count();
+  summary["checkpoint"] = saved ? nlohmann::json("checkpoint/") : nlohmann::json(nullptr);
+  summary["checkpoint_seconds"] = checkpoint_s;  // writing them (periodic and final), not in wall_time_s
+  summary["backend"] = sys->backendName();
+  summary["device"] = sys->deviceName();
+  summary["solver"] = dvi::solverName(cfg.solver.type);
+  summary["collision"] = dvi::collisionBackendName(cfg.collision.backend);
+  summary["iterations_mean"] = steps > 0 ? double(iterations) / double(steps) : 0.0;
+  summary["residual_final"] = relative;  // relative residual (solver.h)
+  summary["residual_final_abs"] = residual;
+  summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
+  summary["max_penetration"] = max_pen;
+  dvi::addConvergenceSummary(summary, sys->convergence(), cfg.solver);
+  dvi::addStageSummary(summary, stage_log);
+  not_converged = dvi::convergenceWarning(sys->convergence(), cfg.solver);
+  summary["prune"] = cfg.prune;
+}
+
+// The run's end: the state checked (a device backend's only here), summary.json and bodies.csv written, the result
+// directory put in place, and the lines that say how it ended. Returns the exit code, or rethrows the run's failure.
+int finishRun(StepLoop& loop, nlohmann::json& summary, dvi::ResultDir& rd, const std::string& out,
+              const std::string& resumed_from, const std::string& not_converged) {
+  const int64_t done = loop.done, first = loop.first, steps = loop.steps;
+  const bool interrupted = loop.interrupted;
+  std::exception_ptr failure = loop.failure;
+  const double wall = loop.wall;
+  const std::vector<dvi::BodyState>& state = loop.state;
+  const dvi::FrameWriter& frames = loop.frames;
+  // A device backend's state is checked once, at the end (the host copy of every step would cost a transfer).
+  for (size_t i = 0; !failure && !interrupted && i < state.size(); ++i)
+    if (!dvi::isFinite(state[i].pos) || !dvi::isFinite(state[i].vel))
+      failure = std::make_exception_ptr(dvi::SimulationDiverged(
+          "the simulation diverged by step " + std::to_string(done) + ": body " + std::to_string(i) +
+          " has a non-finite position or velocity; try a smaller time step"));
+  const int code = failure ? dvi::exitCodeFor(failure) : interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
+  summary["status"] = dvi::runStatusName(code);
+  if (failure) {
+    summary["error"] = dvi::exceptionMessage(failure);
+    summary["exit_code"] = code;
+  }
+  summary["steps"] = done;
+  summary["steps_planned"] = steps;
+  if (first > 0) summary["resumed_from_step"] = first;
+  summary["sim_time"] = double(done) * loop.dt;
+  summary["wall_time_s"] = wall;
+  summary["ms_per_step"] = done > first ? 1000.0 * wall / double(done - first) : 0.0;
+  summary["frames"] = frames.count();
+
+  try {
+    dvi::writeBodiesCsv(out + "/bodies.csv", state);
+    dvi::writeSummary(out + "/summary.json", summary);
+    rd.commit();
+    runckpt::forgetKilledRun(resumed_from, rd.out());
+  } catch (...) {
+    if (!failure) throw;  // the failure of the run is the one to report
+  }
+  if (failure) {
+    std::printf("results so far: %s/ (summary.json status \"%s\", bodies.csv after step %lld)\n", rd.out().c_str(),
+                dvi::runStatusName(code), (long long)done);
+    std::rethrow_exception(failure);
+  }
+  std::printf("results: %s/ (summary.json, bodies.csv%s%s), %.3f s wall, %.2f ms/step\n", rd.out().c_str(),
+              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "",
+              summary["checkpoint"].is_null() ? "" : ", checkpoint/", wall,
+              done > first ? 1000.0 * wall / double(done - first) : 0.0);
+  if (!not_converged.empty()) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "%s\n", not_converged.c_str());
+  }
+  if (interrupted) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "dvisim: interrupted by %s after step %lld of %lld; the results so far are in %s/\n",
+                 dvi::stopSignalName(), (long long)done, (long long)steps, rd.out().c_str());
+    return dvi::kExitInterrupted;
+  }
+  return 0;
+}
+
+int run(const Options& o) {
+  // --resume DIR of a scene run (run_checkpoint.h: one process or under mpirun) needs the scene it ran; without a
+  // scene, DIR is a CES machine's.
+  if (o.scene.empty() && !o.resume.empty() && runckpt::isSceneCheckpoint(o.resume))
+    throw InputError("--resume " + o.resume +
+                     ": a scene run's checkpoint resumes with the scene it ran: dvisim run SCENE --resume DIR");
+  const bool ces = o.scene.empty() || dvi::ces::isCesScene(o.scene);
+#ifdef DVISIM_HAVE_MPI
+  if (ces && mpiProcesses() > 1)
+    throw InputError("a CES machine does not run over several processes (MPI): run it without mpirun");
+#endif
+  if (ces) return runCes(o);
+  dvi::Scene scene = loadScene(o);
+  const dvi::SceneSettings& st = scene.settings;
+  const dvi::SystemConfig& cfg = st.system;
   const int64_t steps = st.stepCount();
   dvi::checkFrameCount(st.frames, steps, o.frames.empty() ? scene.source + ": settings.frames" : "--frames");
 #ifdef DVISIM_HAVE_MPI
@@ -187,17 +441,7 @@ int run(const Options& o) {
                        st.checkpoint_every);
 #endif
 
-  // Backend.
-  std::string backend = o.backend, gpu_name;
-  const bool have_gpu = dvi::gpuAvailable(&gpu_name);
-  if (backend == "auto") {
-    backend = have_gpu ? "gpu" : "cpu";
-    std::printf("backend: %s (%s)\n", backend.c_str(), have_gpu ? gpu_name.c_str() : "no GPU device");
-  }
-  if (backend == "gpu" && !have_gpu)
-    throw InputError("--backend gpu: no usable GPU device" +
-                     (gpu_name.empty() ? std::string() : " (" + gpu_name + ")"));
-
+  const std::string backend = dvi::ces::resolveBackend(o.backend);  // auto: the GPU where there is one
   // --resume: the checkpoint read and checked before anything is written (run_checkpoint.h).
   std::optional<runckpt::Resumed> resumed;
   std::string resumed_from;  // its folder
@@ -236,205 +480,14 @@ int run(const Options& o) {
 
   std::vector<dvi::BodyState> state(bodies.size());
   dvi::FrameWriter frames(out);
-  const std::vector<int64_t> frame_at = frameSteps(st.frames, steps);
-  size_t next_frame = 0;
-  while (next_frame < frame_at.size() && frame_at[next_frame] < first) ++next_frame;
-  Progress progress(steps);
-  double wall = 0;
 
-  // Steps either backend: writes the due frames (through `collect`), times `stepOnce`, then lets
-  // `afterStep` gather its statistics. One loop for both, so frames and timing cannot differ.
-  // A step that diverges (SimulationDiverged, SolverError), fails, or SIGINT/SIGTERM ends the loop early: `done`
-  // counts the steps that completed, `failure` holds the exception.
-  int64_t done = first;
-  bool interrupted = false;
-  std::exception_ptr failure;
+  StepLoop loop(first, steps, cfg.step.dt, state, frames, frameSteps(st.frames, steps));
   dvi::installStopHandlers();
-  auto runSteps = [&](auto&& collect, auto&& stepOnce, auto&& afterStep) {
-    try {
-      for (int64_t k = first;; ++k) {
-        while (next_frame < frame_at.size() && frame_at[next_frame] == k) {
-          collect();
-          frames.write(double(k) * cfg.step.dt, state);
-          ++next_frame;
-        }
-        if (k == steps) break;
-        if (dvi::stopRequested()) {
-          interrupted = true;
-          break;
-        }
-        const auto t0 = Clock::now();
-        stepOnce(k);
-        wall += std::chrono::duration<double>(Clock::now() - t0).count();
-        done = k + 1;
-        afterStep();
-        progress.update(k + 1);
-      }
-    } catch (...) { failure = std::current_exception(); }
-    progress.finish();
-    collect();
-  };
-
-  if (backend == "bullet") {
-    dvi::BulletPeerSettings ps;
-    ps.dt = dvi::real(cfg.step.dt);
-    ps.gravity = cfg.step.gravity;
-    ps.solver_iterations = o.iterations.empty() ? st.bullet_iterations : std::max(1, st.iterations());
-    ps.length_scale = st.bullet_length_scale > 0 ? st.bullet_length_scale : autoLengthScale(bodies, sizes);
-    dvi::BulletPeer peer(bodies, ps);
-    auto collect = [&] {
-      for (size_t i = 0; i < bodies.size(); ++i)
-        state[i] =
-            dvi::BodyState{peer.position(i), peer.rotation(i), peer.velocity(i), peer.angularVelocity(i), sizes[i]};
-    };
-    int64_t contacts = 0;
-    dvi::real max_pen = 0;
-    runSteps(
-        collect,
-        [&](int64_t k) {
-          peer.step();
-          for (size_t i = 0; i < bodies.size(); ++i)
-            if (!dvi::isFinite(peer.position(i)) || !dvi::isFinite(peer.velocity(i))) {
-              char msg[200];
-              std::snprintf(msg, sizeof msg,
-                            "the simulation diverged in step %lld (t = %.6g s): body %zu has a non-finite "
-                            "position or velocity; try a smaller time step",
-                            (long long)(k + 1), double(k + 1) * cfg.step.dt, i);
-              throw dvi::SimulationDiverged(msg);
-            }
-        },
-        [&] {
-          contacts += peer.lastStats().contacts;
-          max_pen = std::fmax(max_pen, peer.lastStats().max_penetration);
-        });
-    summary["backend"] = "bullet";
-    summary["device"] = "Bullet " + std::to_string(btGetVersion()) + " btDiscreteDynamicsWorld (CPU, 1 thread)";
-    summary["solver"] = "bullet-si";
-    summary["collision"] = "bullet";
-    summary["iterations_mean"] = ps.solver_iterations;
-    summary["residual_final"] = nullptr;
-    summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
-    summary["max_penetration"] = max_pen;
-    summary["bullet_length_scale"] = ps.length_scale;
-    summary["stages"] = {"bullet"};
-    summary["stage_seconds"] = {{"bullet", wall}};
-    summary["threads"] = 1;
-    summary["checkpoint"] = nullptr;  // Bullet's world has none
-  } else {
-    std::unique_ptr<dvi::System> sys = backend == "gpu" ? dvi::makeGpuSystem(cfg, dvi::makeBulletCollision)
-                                                        : std::make_unique<dvi::System>(cfg, dvi::makeBulletCollision);
-    const std::vector<int> ids = dvi::importBullet(*sys, bodies);
-    if (resumed) runckpt::restore(*sys, *resumed);
-    // a checkpoint every checkpoint_every steps (the newest two kept) into the run's folder, and one at the end
-    runckpt::Periodic periodic(out, st.checkpoint_every);
-    auto collect = [&] {
-      sys->syncToHost();  // a device backend copies its state into the host arrays
-      const dvi::BodyArrays& b = sys->bodies();
-      for (size_t i = 0; i < ids.size(); ++i) {
-        const size_t k = size_t(ids[i]);
-        state[i] = dvi::BodyState{b.pos[k], b.rot[k], b.vel[k], b.omega[k], b.size[k]};
-      }
-    };
-    int64_t contacts = 0, iterations = 0;
-    dvi::real max_pen = 0, residual = 0, relative = 0;
-    double checkpoint_s = 0;
-    dvi::StageLog stage_log;
-    const bool host_state = sys->backendName() == "cpu";  // the bodies are checked for divergence every step
-    runSteps(
-        collect,
-        [&](int64_t k) {
-          try {
-            sys->step();
-          } catch (const dvi::SolverError& e) {
-            sys->syncToHost();
-            throw dvi::SimulationDiverged(
-                dvi::divergedMessage(k + 1, double(k + 1) * cfg.step.dt, sys->bodies(), e.what(), cfg.step.dt));
-          }
-          if (host_state) dvi::checkFiniteState(k + 1, double(k + 1) * cfg.step.dt, sys->bodies());
-        },
-        [&] {
-          const dvi::StepStats& s = sys->lastStats();
-          contacts += s.contacts;
-          iterations += s.iterations;
-          max_pen = std::fmax(max_pen, s.max_penetration);
-          residual = s.residual;
-          relative = s.relative_residual;
-          stage_log.add(s);
-          if (!periodic.due(done)) return;
-          const auto c0 = Clock::now();
-          sys->syncToHost();
-          runckpt::writeSingle(*sys, scene, periodic.begin(done));
-          periodic.commit(done);
-          checkpoint_s += std::chrono::duration<double>(Clock::now() - c0).count();
-        });
-    const auto c0 = Clock::now();
-    const bool saved =
-        runckpt::finalCheckpoint(*sys, scene, periodic, out + "/checkpoint", bool(failure), resumed_from);
-    checkpoint_s += std::chrono::duration<double>(Clock::now() - c0).count();
-    summary["checkpoint"] = saved ? nlohmann::json("checkpoint/") : nlohmann::json(nullptr);
-    summary["checkpoint_seconds"] = checkpoint_s;  // writing them (periodic and final), not in wall_time_s
-    summary["backend"] = sys->backendName();
-    summary["device"] = sys->deviceName();
-    summary["solver"] = dvi::solverName(cfg.solver.type);
-    summary["collision"] = dvi::collisionBackendName(cfg.collision.backend);
-    summary["iterations_mean"] = steps > 0 ? double(iterations) / double(steps) : 0.0;
-    summary["residual_final"] = relative;  // relative residual (solver.h)
-    summary["residual_final_abs"] = residual;
-    summary["contacts_mean"] = steps > 0 ? double(contacts) / double(steps) : 0.0;
-    summary["max_penetration"] = max_pen;
-    dvi::addConvergenceSummary(summary, sys->convergence(), cfg.solver);
-    dvi::addStageSummary(summary, stage_log);
-    not_converged = dvi::convergenceWarning(sys->convergence(), cfg.solver);
-    summary["prune"] = cfg.prune;
-  }
-  // A device backend's state is checked once, at the end (the host copy of every step would cost a transfer).
-  for (size_t i = 0; !failure && !interrupted && i < state.size(); ++i)
-    if (!dvi::isFinite(state[i].pos) || !dvi::isFinite(state[i].vel))
-      failure = std::make_exception_ptr(dvi::SimulationDiverged(
-          "the simulation diverged by step " + std::to_string(done) + ": body " + std::to_string(i) +
-          " has a non-finite position or velocity; try a smaller time step"));
-  const int code = failure ? dvi::exitCodeFor(failure) : interrupted ? int(dvi::kExitInterrupted) : int(dvi::kExitDone);
-  summary["status"] = dvi::runStatusName(code);
-  if (failure) {
-    summary["error"] = dvi::exceptionMessage(failure);
-    summary["exit_code"] = code;
-  }
-  summary["steps"] = done;
-  summary["steps_planned"] = steps;
-  if (first > 0) summary["resumed_from_step"] = first;
-  summary["sim_time"] = double(done) * cfg.step.dt;
-  summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = done > first ? 1000.0 * wall / double(done - first) : 0.0;
-  summary["frames"] = frames.count();
-
-  try {
-    dvi::writeBodiesCsv(out + "/bodies.csv", state);
-    dvi::writeSummary(out + "/summary.json", summary);
-    rd.commit();
-    runckpt::forgetKilledRun(resumed_from, rd.out());
-  } catch (...) {
-    if (!failure) throw;  // the failure of the run is the one to report
-  }
-  if (failure) {
-    std::printf("results so far: %s/ (summary.json status \"%s\", bodies.csv after step %lld)\n", rd.out().c_str(),
-                dvi::runStatusName(code), (long long)done);
-    std::rethrow_exception(failure);
-  }
-  std::printf("results: %s/ (summary.json, bodies.csv%s%s), %.3f s wall, %.2f ms/step\n", rd.out().c_str(),
-              frames.count() ? (", " + std::to_string(frames.count()) + " frames + frames.pvd").c_str() : "",
-              summary["checkpoint"].is_null() ? "" : ", checkpoint/", wall,
-              done > first ? 1000.0 * wall / double(done - first) : 0.0);
-  if (!not_converged.empty()) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "%s\n", not_converged.c_str());
-  }
-  if (interrupted) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "dvisim: interrupted by %s after step %lld of %lld; the results so far are in %s/\n",
-                 dvi::stopSignalName(), (long long)done, (long long)steps, rd.out().c_str());
-    return dvi::kExitInterrupted;
-  }
-  return 0;
+  if (backend == "bullet")
+    runOnBullet(o, st, bodies, sizes, loop, summary);
+  else
+    runOnSystem(backend, scene, resumed, resumed_from, out, loop, summary, not_converged);
+  return finishRun(loop, summary, rd, out, resumed_from, not_converged);
 }
 
 // An option given an empty value (--dt "") is refused, not taken as "not given" (the run options test

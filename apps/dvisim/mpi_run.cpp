@@ -206,6 +206,42 @@ void writePeriodic(const dvi::DistributedSystem& sys, const dvi::Scene& scene, d
   if (sys.rank() == 0) periodic.commit(step);
 }
 
+// What a run over processes counted, for its summary.
+struct MpiTally {
+  int64_t done, first, steps, contacts, iterations, moved;
+  double relative, wall;
+  int frames;
+};
+
+// summary.json of a run over processes (process 0), the keys of one process's run and the decomposition's.
+nlohmann::json mpiSummary(const dvi::Scene& scene, const dvi::SystemConfig& cfg, const dvi::DistributedSystem& sys,
+                          bool gpu, const MpiTally& t, int code) {
+  nlohmann::json summary;
+  summary["scene"] = scene.source;
+  summary["scene_name"] = scene.name;
+  summary["bodies"] = scene.bodies().size();
+  summary["dt"] = cfg.step.dt;
+  summary["steps"] = t.done;
+  summary["steps_planned"] = t.steps;
+  summary["sim_time"] = double(t.done) * cfg.step.dt;
+  summary["backend"] = gpu ? "gpu" : "cpu";
+  summary["processes"] = sys.processes();
+  summary["solver"] = dvi::solverName(cfg.solver.type);
+  summary["collision"] = "native";
+  summary["iterations_mean"] = t.done > 0 ? double(t.iterations) / double(t.done) : 0.0;
+  summary["residual_final"] = t.relative;
+  summary["contacts_mean"] = t.done > 0 ? double(t.contacts) / double(t.done) : 0.0;
+  summary["migrations"] = t.moved;
+  if (t.first > 0) summary["resumed_from_step"] = t.first;
+  summary["checkpoint"] = "checkpoint/";
+  summary["rebalances"] = sys.migrations().rebalances;
+  summary["frames"] = t.frames;
+  summary["status"] = dvi::runStatusName(code);
+  summary["wall_time_s"] = t.wall;
+  summary["ms_per_step"] = t.done > t.first ? 1000.0 * t.wall / double(t.done - t.first) : 0.0;
+  return summary;
+}
+
 }  // namespace
 
 int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t steps,
@@ -291,29 +327,8 @@ int runSceneMpi(const dvi::Scene& scene, const dvi::SystemConfig& cfg, int64_t s
   std::vector<dvi::BodyState> state(all.size());
   for (size_t i = 0; i < all.size(); ++i)
     state[i] = dvi::BodyState{all[i].pos, all[i].rot, all[i].vel, all[i].omega, sizes[i]};
-  nlohmann::json summary;
-  summary["scene"] = scene.source;
-  summary["scene_name"] = scene.name;
-  summary["bodies"] = bodies.size();
-  summary["dt"] = cfg.step.dt;
-  summary["steps"] = done;
-  summary["steps_planned"] = steps;
-  summary["sim_time"] = double(done) * cfg.step.dt;
-  summary["backend"] = gpu ? "gpu" : "cpu";
-  summary["processes"] = sys.processes();
-  summary["solver"] = dvi::solverName(cfg.solver.type);
-  summary["collision"] = "native";
-  summary["iterations_mean"] = done > 0 ? double(iterations) / double(done) : 0.0;
-  summary["residual_final"] = relative;
-  summary["contacts_mean"] = done > 0 ? double(contacts) / double(done) : 0.0;
-  summary["migrations"] = moved;
-  if (first > 0) summary["resumed_from_step"] = first;
-  summary["checkpoint"] = "checkpoint/";
-  summary["rebalances"] = sys.migrations().rebalances;
-  summary["frames"] = frames;
-  summary["status"] = dvi::runStatusName(code);
-  summary["wall_time_s"] = wall;
-  summary["ms_per_step"] = done > first ? 1000.0 * wall / double(done - first) : 0.0;
+  const MpiTally tally{done, first, steps, contacts, iterations, moved, relative, wall, frames};
+  const nlohmann::json summary = mpiSummary(scene, cfg, sys, gpu, tally, code);
   dvi::writeBodiesCsv(dir + "/bodies.csv", state);
   dvi::writeSummary(dir + "/summary.json", summary);
   series.reset();  // frames.pvd closed before the directory moves

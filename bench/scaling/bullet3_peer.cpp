@@ -255,6 +255,10 @@ struct Bullet3Peer::Impl {
     return hulls.back().get();
   }
 
+  // Bullet 3's capacities (config) for nspec bodies of which nspheres distinct sphere radii, and the hulls made.
+  void setCapacities(size_t nspec, size_t nspheres, int pairs_per_body);
+  // The bodies' inertia as the scene has it, in place of the one Bullet 3 made from each shape's bounding box.
+  void setInertias(const SceneSpec& spec);
   void checkMemory(size_t largest, size_t total) const {
     const auto max_alloc = deviceValue<cl_ulong>(device.device, CL_DEVICE_MAX_MEM_ALLOC_SIZE);
     const auto global = deviceValue<cl_ulong>(device.device, CL_DEVICE_GLOBAL_MEM_SIZE);
@@ -267,6 +271,58 @@ struct Bullet3Peer::Impl {
                          mib(double(global)));
   }
 };
+
+void Bullet3Peer::Impl::setCapacities(size_t nspec, size_t nspheres, int pairs_per_body) {
+  size_t faces = 1, vertices = 0, indices = 0, edges = 0, max_faces = 0;  // 1: the ground's face
+  for (const auto& h : hulls) {
+    faces += size_t(h->m_faces.size());
+    max_faces = std::max(max_faces, size_t(h->m_faces.size()));
+    vertices += size_t(h->m_vertices.size());
+    edges += size_t(h->m_uniqueEdges.size());
+    for (int f = 0; f < h->m_faces.size(); ++f) indices += size_t(h->m_faces[f].m_indices.size());
+  }
+
+  // Capacities from the scene (b3Config.h's defaults are for 128k bodies): every buffer Bullet 3 sizes from
+  // them is allocated once here, so an overflow later is an error, not a reallocation.
+  const size_t nbodies = size_t(kStaticBodies) + nspec;
+  const size_t nshapes = 1 + hulls.size() + nspheres;
+  b3Config& c = config;
+  const double pairs = double(pairs_per_body) * double(nbodies + 8);
+  if (pairs > 2e9)
+    throw Bullet3Error("Bullet 3's capacities are 32-bit: " + std::to_string(nbodies) + " bodies is too many");
+  c.m_maxConvexBodies = int(nbodies + 8);
+  c.m_maxConvexShapes = int(nshapes + 8);
+  c.m_maxBroadphasePairs = int(pairs);
+  c.m_maxContactCapacity = c.m_maxBroadphasePairs;
+  c.m_maxFacesPerShape = int(std::max<size_t>({12, max_faces, faces / size_t(c.m_maxConvexShapes) + 1}));
+  c.m_maxConvexVertices = int(std::max<size_t>(8192, vertices + 16));
+  c.m_maxConvexIndices = int(std::max<size_t>(81920, indices + 16));
+  c.m_maxConvexUniqueEdges = int(std::max<size_t>(8192, edges + 16));
+  // The largest buffers: two contact buffers and the solver's constraints per contact, broad-phase pairs
+  // (the pipeline's and the SAP's), and three per-body clipping buffers of m_maxVerticesPerFace vertices.
+  const size_t contact_bytes = size_t(c.m_maxContactCapacity) * sizeof(b3Contact4);
+  const size_t clip_bytes = size_t(c.m_maxConvexBodies) * size_t(c.m_maxVerticesPerFace) * sizeof(b3Vector3);
+  const size_t total = 2 * contact_bytes + size_t(c.m_maxContactCapacity) * sizeof(b3GpuConstraint4) +
+                       3 * size_t(c.m_maxBroadphasePairs) * sizeof(b3Int4) + 3 * clip_bytes +
+                       size_t(c.m_maxConvexShapes) * size_t(c.m_maxFacesPerShape) * sizeof(b3GpuFace);
+  checkMemory(std::max(contact_bytes, clip_bytes), total);
+}
+
+void Bullet3Peer::Impl::setInertias(const SceneSpec& spec) {
+  // The scene's inertia (Bullet 3 made one from each shape's bounding box), in kg x Bullet length^2.
+  b3GpuNarrowPhaseInternalData* data = narrow->getInternalData();
+  for (size_t i = 0; i < spec.bodies.size(); ++i) {
+    const BodySpec& b = spec.bodies[i];
+    const size_t id = size_t(kStaticBodies) + i;
+    const float s2 = s * s;
+    const b3Vector3 inv_local = b3MakeVector3(1.f / (float(b.inertia.x) * s2), 1.f / (float(b.inertia.y) * s2),
+                                              1.f / (float(b.inertia.z) * s2));
+    b3InertiaData& inertia = data->m_inertiaBufferCPU->at(int(id));
+    inertia.m_initInvInertia.setValue(inv_local.x, 0, 0, 0, inv_local.y, 0, 0, 0, inv_local.z);
+    const b3Matrix3x3 r(data->m_bodyBufferCPU->at(int(id)).m_quat);
+    inertia.m_invInertiaWorld = r.scaled(inv_local) * r.transpose();
+  }
+}
 
 Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& settings)
     : impl_(std::make_unique<Impl>()) {
@@ -318,39 +374,8 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
     else
       body_hulls[i] = m.makeHull(hullPoints(spec, b));
   }
-  size_t faces = 1, vertices = 0, indices = 0, edges = 0, max_faces = 0;  // 1: the ground's face
-  for (const auto& h : m.hulls) {
-    faces += size_t(h->m_faces.size());
-    max_faces = std::max(max_faces, size_t(h->m_faces.size()));
-    vertices += size_t(h->m_vertices.size());
-    edges += size_t(h->m_uniqueEdges.size());
-    for (int f = 0; f < h->m_faces.size(); ++f) indices += size_t(h->m_faces[f].m_indices.size());
-  }
-
-  // Capacities from the scene (b3Config.h's defaults are for 128k bodies): every buffer Bullet 3 sizes from
-  // them is allocated once here, so an overflow later is an error, not a reallocation.
-  const size_t nbodies = size_t(kStaticBodies) + spec.bodies.size();
-  const size_t nshapes = 1 + m.hulls.size() + sphere_radii.size();
-  b3Config& c = m.config;
-  const double pairs = double(settings.pairs_per_body) * double(nbodies + 8);
-  if (pairs > 2e9)
-    throw Bullet3Error("Bullet 3's capacities are 32-bit: " + std::to_string(nbodies) + " bodies is too many");
-  c.m_maxConvexBodies = int(nbodies + 8);
-  c.m_maxConvexShapes = int(nshapes + 8);
-  c.m_maxBroadphasePairs = int(pairs);
-  c.m_maxContactCapacity = c.m_maxBroadphasePairs;
-  c.m_maxFacesPerShape = int(std::max<size_t>({12, max_faces, faces / size_t(c.m_maxConvexShapes) + 1}));
-  c.m_maxConvexVertices = int(std::max<size_t>(8192, vertices + 16));
-  c.m_maxConvexIndices = int(std::max<size_t>(81920, indices + 16));
-  c.m_maxConvexUniqueEdges = int(std::max<size_t>(8192, edges + 16));
-  // The largest buffers: two contact buffers and the solver's constraints per contact, broad-phase pairs
-  // (the pipeline's and the SAP's), and three per-body clipping buffers of m_maxVerticesPerFace vertices.
-  const size_t contact_bytes = size_t(c.m_maxContactCapacity) * sizeof(b3Contact4);
-  const size_t clip_bytes = size_t(c.m_maxConvexBodies) * size_t(c.m_maxVerticesPerFace) * sizeof(b3Vector3);
-  const size_t total = 2 * contact_bytes + size_t(c.m_maxContactCapacity) * sizeof(b3GpuConstraint4) +
-                       3 * size_t(c.m_maxBroadphasePairs) * sizeof(b3Int4) + 3 * clip_bytes +
-                       size_t(c.m_maxConvexShapes) * size_t(c.m_maxFacesPerShape) * sizeof(b3GpuFace);
-  m.checkMemory(std::max(contact_bytes, clip_bytes), total);
+  m.setCapacities(spec.bodies.size(), sphere_radii.size(), settings.pairs_per_body);
+  const b3Config& c = m.config;
 
   m.narrow = std::make_unique<b3GpuNarrowPhase>(m.context, m.device.device, m.queue, c);
   m.broad = std::make_unique<b3GpuSapBroadphase>(m.context, m.device.device, m.queue);
@@ -385,19 +410,7 @@ Bullet3Peer::Bullet3Peer(const SceneSpec& scene, const Bullet3PeerSettings& sett
     instance(float(b.mass), b.pos, orn, col, bodyKindName(b.kind));
   }
 
-  // The scene's inertia (Bullet 3 made one from each shape's bounding box), in kg x Bullet length^2.
-  b3GpuNarrowPhaseInternalData* data = m.narrow->getInternalData();
-  for (size_t i = 0; i < spec.bodies.size(); ++i) {
-    const BodySpec& b = spec.bodies[i];
-    const size_t id = size_t(kStaticBodies) + i;
-    const float s2 = m.s * m.s;
-    const b3Vector3 inv_local = b3MakeVector3(1.f / (float(b.inertia.x) * s2), 1.f / (float(b.inertia.y) * s2),
-                                              1.f / (float(b.inertia.z) * s2));
-    b3InertiaData& inertia = data->m_inertiaBufferCPU->at(int(id));
-    inertia.m_initInvInertia.setValue(inv_local.x, 0, 0, 0, inv_local.y, 0, 0, 0, inv_local.z);
-    const b3Matrix3x3 r(data->m_bodyBufferCPU->at(int(id)).m_quat);
-    inertia.m_invInertiaWorld = r.scaled(inv_local) * r.transpose();
-  }
+  m.setInertias(spec);
 
   m.pipeline->writeAllInstancesToGpu();
   m.narrow->writeAllBodiesToGpu();

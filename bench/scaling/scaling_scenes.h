@@ -1,4 +1,4 @@
-// Benchmark scenes shared by `dvisim bench ...` (apps/dvisim/bench_*.cpp): a pile of N equal spheres and
+// Benchmark scenes shared by `dvisim bench ...` (bench/*/bench_*.cpp): a pile of N equal spheres and
 // a multidisperse mix, described once (SceneSpec) and built for our System (CPU or GPU, through
 // makeSphere/makeBox/...) and as Bullet bodies for the Bullet peer, so every engine steps the same bodies
 // with the same masses, inertias and friction.

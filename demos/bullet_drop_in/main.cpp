@@ -15,8 +15,8 @@
 #include "demo_scene.h"
 
 #ifdef DVISIM_DROP_IN
-#include "chrono_like/bullet/bullet_world.h"
-#include "gpu/gpu_factory.h"
+#include <dvisim/bullet_world.h>
+#include <dvisim/gpu.h>
 #endif
 
 int main(int argc, char** argv) {

@@ -9,8 +9,8 @@
 #include <memory>
 #include <vector>
 
-#include "chrono_like/bullet/bullet_import.h"
-#include "chrono_like/system.h"
+#include <dvisim/bullet_import.h>
+#include <dvisim/world.h>
 
 int main(int argc, char** argv) {
   const int steps = argc > 1 ? std::atoi(argv[1]) : 1000;

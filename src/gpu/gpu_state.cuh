@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "chrono_like/base/contact_fields.h"
 #include "chrono_like/base/data.h"
 #include "chrono_like/collision/broadphase.h"
 #include "chrono_like/collision/narrowphase.h"
@@ -66,17 +67,7 @@ struct DeviceContacts {
   DeviceBuffer<uint64_t> key{"contact key"};
   size_t count = 0;
   void resize(size_t n) {
-    shape_a.resize(n);
-    shape_b.resize(n);
-    body_a.resize(n);
-    body_b.resize(n);
-    normal.resize(n);
-    pa.resize(n);
-    pb.resize(n);
-    dist.resize(n);
-    mu.resize(n);
-    size.resize(n);
-    key.resize(n);
+    forEachContactField(*this, [n](auto& field) { field.resize(n); });
     count = n;
   }
 };

@@ -17,7 +17,7 @@
 
 #include "corpus_api.h"
 #ifdef DVISIM_CORPUS_DVI
-#include "chrono_like/bullet/bullet_world.h"
+#include <dvisim/bullet_world.h>
 #endif
 #include "CommonInterfaces/CommonExampleInterface.h"
 #include "CommonInterfaces/CommonGUIHelperInterface.h"

@@ -1,5 +1,7 @@
 #include "chrono_like/base/data.h"
 
+#include "chrono_like/base/contact_fields.h"
+
 namespace dvi {
 
 void BodyArrays::resize(size_t n) {
@@ -23,17 +25,7 @@ void BodyArrays::resize(size_t n) {
 }
 
 void ContactArrays::resize(size_t n) {
-  shape_a.resize(n);
-  shape_b.resize(n);
-  body_a.resize(n);
-  body_b.resize(n);
-  normal.resize(n);
-  pa.resize(n);
-  pb.resize(n);
-  dist.resize(n);
-  mu.resize(n);
-  size.resize(n);
-  key.resize(n);
+  forEachContactField(*this, [n](auto& field) { field.resize(n); });
 }
 
 void ContactArrays::moveContact(size_t from, size_t to) {

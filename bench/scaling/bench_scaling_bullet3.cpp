@@ -1,6 +1,6 @@
 // The Bullet 3 OpenCL rows of `dvisim bench scaling`: the measurement, the child process that runs it and the
 // hidden `dvisim bench bullet3-worker` subcommand (bench_scaling_bullet3.h).
-#include "bench_scaling_bullet3.h"
+#include "scaling/bench_scaling_bullet3.h"
 
 #include <fcntl.h>
 #include <signal.h>

@@ -397,11 +397,125 @@ std::string joined(const std::vector<std::string>& v) {
   return s;
 }
 
+// The goal section of the report: APGD against Jacobi to residual 1e-4 on the pile's CCP, and each solver's time to
+// the default tolerance, on each engine (none unless run_goal).
+std::string goalText(const std::vector<std::string>& engines, bool run_goal, bool quick, int threads) {
+  // The goal: APGD against Jacobi to residual 1e-4 on the pile's CCP.
+  const long goal_n = quick ? 2000 : 100000;
+  const int cap = quick ? 3000 : 5000;
+  std::ostringstream goal;
+  goal << "Goal: time for the CCP solve to reach relative residual 1e-4 on the " << goal_n
+       << "-sphere pile, APGD vs Jacobi, the same CCP (5 settling steps, then one step per solver from the same state; "
+          "Solve-stage time, tolerance stop, Jacobi capped at "
+       << cap << " iterations):\n";
+  for (const std::string& engine : run_goal ? engines : std::vector<std::string>{})
+    for (bool warm : {true, false}) {
+      const bool gpu = engine == "gpu";
+      const GoalResult a = timeToResidual(goal_n, dvi::SolverType::APGD, warm, cap, threads, 5, gpu);
+      const GoalResult j = timeToResidual(goal_n, dvi::SolverType::Jacobi, warm, cap, threads, 5, gpu);
+      char b[512];
+      const std::string label = engine + (warm ? ", warm start" : ", cold start");
+      if (!a.error.empty() || !j.error.empty()) {
+        goal << "  " << label << ": error: " << a.error << " " << j.error << "\n";
+        continue;
+      }
+      const double ratio = a.seconds > 0 ? j.seconds / a.seconds : NAN;
+      std::snprintf(
+          b, sizeof b,
+          "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
+          label.c_str(), a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached", j.iterations, j.seconds,
+          j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
+          !a.reached    ? "APGD did not reach 1e-4"
+          : ratio >= 10 ? "met"
+                        : (j.reached ? "missed" : "met (lower bound)"));
+      goal << b;
+    }
+  // Time to the default tolerance (SolverSettings: relative residual, iteration cap) per solver, the same CCP.
+  if (run_goal) {
+    const dvi::SolverSettings defaults;
+    goal << "Time to the default tolerance (relative residual " << num(double(defaults.tolerance), "%g") << ", cap "
+         << defaults.max_iterations << " iterations) on the " << goal_n
+         << "-sphere pile's CCP after 5 settling steps, warm start, Solve-stage time:\n";
+    for (const std::string& engine : engines) {
+      const bool gpu = engine == "gpu";
+      for (dvi::SolverType t :
+           {dvi::SolverType::APGD, dvi::SolverType::BB, dvi::SolverType::Jacobi, dvi::SolverType::GaussSeidel}) {
+        if (gpu && t == dvi::SolverType::GaussSeidel) continue;  // CPU only
+        const GoalResult a =
+            timeToResidual(goal_n, t, true, defaults.max_iterations, threads, 5, gpu, double(defaults.tolerance));
+        char b[256];
+        if (!a.error.empty())
+          std::snprintf(b, sizeof b, "  %s %s: error: %s\n", engine.c_str(), dvi::solverName(t), a.error.c_str());
+        else
+          std::snprintf(b, sizeof b, "  %s %-6s: %5d it, %.4g s, relative residual %.3g%s\n", engine.c_str(),
+                        dvi::solverName(t), a.iterations, a.seconds, a.residual, a.reached ? "" : " (NOT reached)");
+        goal << b;
+      }
+    }
+  }
+  return goal.str();
+}
+
+// One run of a scene's sweep (engine, solver, iterations, step), printed as a line: its row, or the error it ended
+// with. ref and ces_ref: the scene's reference observable; cpu_device: set by a CPU run.
+Row attemptRun(const AccScene& sc, const std::string& engine, const std::string& solver, int it, double dt,
+               const std::string& sweep, int threads, const std::vector<double>& ces_ref, Vec3 ref,
+               std::string& cpu_device) {
+  const bool ces = !sc.ces_sets.empty();
+  if (isatty(fileno(stdout))) {  // a progress line on a terminal, overwritten by the row's line
+    std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g ...\r", sc.name.c_str(), engine.c_str(),
+                solver.empty() ? "bullet-si" : solver.c_str(), sweep.c_str(), it, dt);
+    std::fflush(stdout);
+  }
+  Row r;
+  Vec3 obs{0, 0, 0};
+  try {
+    if (ces) {
+      std::vector<double> frac;
+      r = runCesOne(sc, engine, solver, it, dt, 0, threads, &frac);
+      r.obs_err = tvDistance(frac, ces_ref);
+    } else {
+      r = runOne(sc, engine, solver, it, dt, 0, threads, &obs);
+      r.obs_err = double(dvi::length(obs - ref)) / sc.obs_scale;
+    }
+    if (engine == "cpu") cpu_device = r.device;
+  } catch (const dvi::SolverError& e) {
+    r.scene = sc.name, r.engine = engine, r.solver = solver, r.iterations = it, r.dt = dt;
+    r.status = std::string("SolverError: ") + e.what();
+  } catch (const std::exception& e) {
+    r.scene = sc.name, r.engine = engine, r.solver = solver.empty() ? "bullet-si" : solver, r.iterations = it,
+    r.dt = dt;
+    r.status = std::string("error: ") + e.what();
+  }
+  r.sweep = sweep;
+  std::printf(
+      "  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s (run %.1f s)  res %-10s pen %-10s compl %-10s obs err %s%s\n",
+      sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s, r.run_s,
+      num(r.res_mean, "%.3g").c_str(), num(r.pen_rel, "%.3g").c_str(), num(r.compl_mean, "%.3g").c_str(),
+      num(r.obs_err, "%.3g").c_str(), r.status == "ok" ? "" : ("  [" + r.status + "]").c_str());
+  std::fflush(stdout);
+  return r;
+}
+
+// The record of a run (--record): the report as .md and the rows as .csv, into bench/results/ and the output folder.
+void writeAccuracyRecord(const AccOptions& o, const std::string& device, const std::string& scenes,
+                         const std::string& engines, bool have_gpu, const std::string& goal_text,
+                         const std::string& results_dir, const std::string& csv) {
+  const std::string base = "accuracy_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
+  std::ostringstream md;
+  md << "# Accuracy against run time" << (o.quick ? " (--quick)" : "") << "\n\n"
+     << "Written by `dvisim bench accuracy --record` (bench/accuracy/bench_accuracy.cpp).\n\n- device: " << device
+     << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scenes: pile "
+     << (o.quick ? "400" : "100k") << " spheres r 1 cm; mix " << (o.quick ? "250" : "20k")
+     << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2; the default CES machine fed for "
+     << (o.quick ? "0.05 s, 0.8 s" : "0.15 s, 1 s") << " of machine time, h0 = 2e-4\n- this run: --scenes " << scenes
+     << " --engines " << engines << (have_gpu ? "" : " (no GPU)") << "\n\n"
+     << goal_text << "\nRows: " << base << ".csv (columns in bench/accuracy/bench_accuracy.cpp's header).\n";
+  writeBenchRecord({results_dir, o.out}, base, {{"md", md.str()}, {"csv", csv}}, writeFile);
+}
+
 int runAccuracy(const AccOptions& o) {
-  char* end = nullptr;
-  const long threads = std::strtol(o.threads.c_str(), &end, 10);
-  if (o.threads.empty() || *end || threads < 0 || threads > 4096)
-    throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
+  const int threads = benchThreads(o.threads);
   const std::vector<std::string> scene_sel = selectNames("--scenes", o.scenes, {"pile", "mix", "stack", "ces", "goal"});
   const std::vector<std::string> engine_sel = selectNames("--engines", o.engines, {"cpu", "gpu", "bullet"});
   auto selected = [](const std::vector<std::string>& v, const std::string& n) {
@@ -458,39 +572,7 @@ int runAccuracy(const AccOptions& o) {
     std::fflush(stdout);
     auto attempt = [&](const std::string& engine, const std::string& solver, int it, double dt,
                        const std::string& sweep) {
-      if (isatty(fileno(stdout))) {  // a progress line on a terminal, overwritten by the row's line
-        std::printf("  %-5s %-6s %-9s %-10s it %4d h %-8g ...\r", sc.name.c_str(), engine.c_str(),
-                    solver.empty() ? "bullet-si" : solver.c_str(), sweep.c_str(), it, dt);
-        std::fflush(stdout);
-      }
-      Row r;
-      Vec3 obs{0, 0, 0};
-      try {
-        if (ces) {
-          std::vector<double> frac;
-          r = runCesOne(sc, engine, solver, it, dt, 0, int(threads), &frac);
-          r.obs_err = tvDistance(frac, ces_ref);
-        } else {
-          r = runOne(sc, engine, solver, it, dt, 0, int(threads), &obs);
-          r.obs_err = double(dvi::length(obs - ref)) / sc.obs_scale;
-        }
-        if (engine == "cpu") cpu_device = r.device;
-      } catch (const dvi::SolverError& e) {
-        r.scene = sc.name, r.engine = engine, r.solver = solver, r.iterations = it, r.dt = dt;
-        r.status = std::string("SolverError: ") + e.what();
-      } catch (const std::exception& e) {
-        r.scene = sc.name, r.engine = engine, r.solver = solver.empty() ? "bullet-si" : solver, r.iterations = it,
-        r.dt = dt;
-        r.status = std::string("error: ") + e.what();
-      }
-      r.sweep = sweep;
-      rows.push_back(r);
-      std::printf(
-          "  %-5s %-6s %-9s %-10s it %4d h %-8g %8.3f s (run %.1f s)  res %-10s pen %-10s compl %-10s obs err %s%s\n",
-          sc.name.c_str(), r.engine.c_str(), r.solver.c_str(), sweep.c_str(), it, dt, r.wall_s, r.run_s,
-          num(r.res_mean, "%.3g").c_str(), num(r.pen_rel, "%.3g").c_str(), num(r.compl_mean, "%.3g").c_str(),
-          num(r.obs_err, "%.3g").c_str(), r.status == "ok" ? "" : ("  [" + r.status + "]").c_str());
-      std::fflush(stdout);
+      rows.push_back(attemptRun(sc, engine, solver, it, dt, sweep, int(threads), ces_ref, ref, cpu_device));
       flush();
     };
     for (const std::string& engine : engines)
@@ -512,80 +594,15 @@ int runAccuracy(const AccOptions& o) {
     }
   }
 
-  // The goal: APGD against Jacobi to residual 1e-4 on the pile's CCP.
-  const long goal_n = o.quick ? 2000 : 100000;
-  const int cap = o.quick ? 3000 : 5000;
-  std::ostringstream goal;
-  goal << "Goal: time for the CCP solve to reach relative residual 1e-4 on the " << goal_n
-       << "-sphere pile, APGD vs Jacobi, the same CCP (5 settling steps, then one step per solver from the same state; "
-          "Solve-stage time, tolerance stop, Jacobi capped at "
-       << cap << " iterations):\n";
-  for (const std::string& engine : selected(scene_sel, "goal") ? engines : std::vector<std::string>{})
-    for (bool warm : {true, false}) {
-      const bool gpu = engine == "gpu";
-      const GoalResult a = timeToResidual(goal_n, dvi::SolverType::APGD, warm, cap, int(threads), 5, gpu);
-      const GoalResult j = timeToResidual(goal_n, dvi::SolverType::Jacobi, warm, cap, int(threads), 5, gpu);
-      char b[512];
-      const std::string label = engine + (warm ? ", warm start" : ", cold start");
-      if (!a.error.empty() || !j.error.empty()) {
-        goal << "  " << label << ": error: " << a.error << " " << j.error << "\n";
-        continue;
-      }
-      const double ratio = a.seconds > 0 ? j.seconds / a.seconds : NAN;
-      std::snprintf(
-          b, sizeof b,
-          "  %s: APGD %d it, %.4g s (res %.3g%s); Jacobi %d it, %.4g s (res %.3g%s): ratio %s%.1fx (goal >= 10x): %s\n",
-          label.c_str(), a.iterations, a.seconds, a.residual, a.reached ? "" : ", NOT reached", j.iterations, j.seconds,
-          j.residual, j.reached ? "" : ", NOT reached", j.reached ? "" : ">= ", ratio,
-          !a.reached    ? "APGD did not reach 1e-4"
-          : ratio >= 10 ? "met"
-                        : (j.reached ? "missed" : "met (lower bound)"));
-      goal << b;
-    }
-  // Time to the default tolerance (SolverSettings: relative residual, iteration cap) per solver, the same CCP.
-  if (selected(scene_sel, "goal")) {
-    const dvi::SolverSettings defaults;
-    goal << "Time to the default tolerance (relative residual " << num(double(defaults.tolerance), "%g") << ", cap "
-         << defaults.max_iterations << " iterations) on the " << goal_n
-         << "-sphere pile's CCP after 5 settling steps, warm start, Solve-stage time:\n";
-    for (const std::string& engine : engines) {
-      const bool gpu = engine == "gpu";
-      for (dvi::SolverType t :
-           {dvi::SolverType::APGD, dvi::SolverType::BB, dvi::SolverType::Jacobi, dvi::SolverType::GaussSeidel}) {
-        if (gpu && t == dvi::SolverType::GaussSeidel) continue;  // CPU only
-        const GoalResult a =
-            timeToResidual(goal_n, t, true, defaults.max_iterations, int(threads), 5, gpu, double(defaults.tolerance));
-        char b[256];
-        if (!a.error.empty())
-          std::snprintf(b, sizeof b, "  %s %s: error: %s\n", engine.c_str(), dvi::solverName(t), a.error.c_str());
-        else
-          std::snprintf(b, sizeof b, "  %s %-6s: %5d it, %.4g s, relative residual %.3g%s\n", engine.c_str(),
-                        dvi::solverName(t), a.iterations, a.seconds, a.residual, a.reached ? "" : " (NOT reached)");
-        goal << b;
-      }
-    }
-  }
-  const std::string goal_text = goal.str();
+  const std::string goal_text = goalText(engines, selected(scene_sel, "goal"), o.quick, int(threads));
   const double total = std::chrono::duration<double>(Clock::now() - t_all).count();
   flush();
   std::printf("\n%s", goal_text.c_str());
   std::printf("results: %s/accuracy.csv (%.1f s)\n", o.out.c_str(), total);
   std::printf("%s\n", runPlot("plot_accuracy.py", o.out, "accuracy.png").c_str());
-  if (o.record) {
-    const std::string device = have_gpu ? gpu_name : cpu_device;
-    const std::string base = "accuracy_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    std::ostringstream md;
-    md << "# Accuracy against run time" << (o.quick ? " (--quick)" : "") << "\n\n"
-       << "Written by `dvisim bench accuracy --record` (apps/dvisim/bench_accuracy.cpp).\n\n- device: " << device
-       << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scenes: pile "
-       << (o.quick ? "400" : "100k") << " spheres r 1 cm; mix " << (o.quick ? "250" : "20k")
-       << " mixed shapes 0.5-2 cm; 10-box stack with a 1000x top, h0 = 1e-2; the default CES machine fed for "
-       << (o.quick ? "0.05 s, 0.8 s" : "0.15 s, 1 s") << " of machine time, h0 = 2e-4\n- this run: --scenes "
-       << joined(scene_sel) << " --engines " << joined(engine_sel) << (have_gpu ? "" : " (no GPU)") << "\n\n"
-       << goal_text << "\nRows: " << base << ".csv (columns in apps/dvisim/bench_accuracy.cpp's header).\n";
-    writeBenchRecord({results_dir, o.out}, base, {{"md", md.str()}, {"csv", csvText(rows, ref_obs, ref_scene)}},
-                     writeFile);
-  }
+  if (o.record)
+    writeAccuracyRecord(o, have_gpu ? gpu_name : cpu_device, joined(scene_sel), joined(engine_sel), have_gpu, goal_text,
+                        results_dir, csvText(rows, ref_obs, ref_scene));
   return 0;
 }
 

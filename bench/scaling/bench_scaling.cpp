@@ -48,9 +48,9 @@
 #endif
 
 #include "bench_common.h"
-#include "bench_scaling_bullet3.h"
+#include "scaling/bench_scaling_bullet3.h"
 #ifdef DVISIM_HAVE_MPI
-#include "bench_scaling_mpi.h"
+#include "scaling/bench_scaling_mpi.h"
 #endif
 #include "bench_util.h"
 #include "chrono_like/bullet/bullet_peer.h"
@@ -635,23 +635,37 @@ std::string regressionText(const std::vector<Row>& rows, const std::string& reco
   return o.str() + bad.str();
 }
 
-int runScaling(const ScalingOptions& o) {
-  if (o.mpi) {
+// `bench scaling --mpi`: the domain decomposition's weak and strong scaling (bench_scaling_mpi.h).
+int runScalingOverMpi(const ScalingOptions& o) {
 #ifdef DVISIM_HAVE_MPI
-    MpiScalingOptions m;
-    static_cast<BenchBasics&>(m) = o;
-    m.per_process = o.per_process;
-    m.total = o.total;
-    m.steps = o.mpi_steps;
-    m.backend = o.mpi_backend;
-    m.modes = o.mpi_modes;
-    m.baseline = o.mpi_baseline;
-    return runScalingMpi(m);
+  MpiScalingOptions m;
+  static_cast<BenchBasics&>(m) = o;
+  m.per_process = o.per_process;
+  m.total = o.total;
+  m.steps = o.mpi_steps;
+  m.backend = o.mpi_backend;
+  m.modes = o.mpi_modes;
+  m.baseline = o.mpi_baseline;
+  return runScalingMpi(m);
 #else
-    throw InputError("--mpi: this build has no MPI (configure with DVISIM_ENABLE_MPI=ON and libopenmpi-dev)");
+  (void)o;
+  throw InputError("--mpi: this build has no MPI (configure with DVISIM_ENABLE_MPI=ON and libopenmpi-dev)");
 #endif
-  }
-  // Validate everything before any work.
+}
+
+// The run's input, validated before any work.
+struct ScalingPlan {
+  std::vector<long> sizes;
+  std::vector<std::string> scenes, engines;
+  dvi::bench::OpenClDeviceType b3_device;
+  long cpu_max;
+  int threads;
+  double budget;
+  std::string dir, results_dir;
+  bool has(const char* e) const { return std::find(engines.begin(), engines.end(), e) != engines.end(); }
+};
+
+ScalingPlan planScaling(const ScalingOptions& o) {
   std::vector<long> sizes;
   for (const std::string& t : splitList(o.sizes)) sizes.push_back(parseCount("--sizes", t));
   if (sizes.empty())
@@ -666,13 +680,10 @@ int runScaling(const ScalingOptions& o) {
   for (const std::string& e : engines)
     if (e != "gpu" && e != "cpu" && e != "bullet" && e != "bullet3_opencl")
       throw InputError("--engines: unknown engine '" + e + "' (expected gpu,cpu,bullet,bullet3_opencl)");
-  auto has = [&](const char* e) { return std::find(engines.begin(), engines.end(), e) != engines.end(); };
   const dvi::bench::OpenClDeviceType b3_device = dvi::bench::parseOpenClDeviceType(o.bullet3_device);
   const long cpu_max = parseCount("--cpu-max", o.cpu_max);
+  const int threads = benchThreads(o.threads);
   char* end = nullptr;
-  const long threads = std::strtol(o.threads.c_str(), &end, 10);
-  if (o.threads.empty() || *end || threads < 0 || threads > 4096)
-    throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
   const double budget = std::strtod(o.budget.c_str(), &end);
   if (o.budget.empty() || *end || !(budget > 0) || !std::isfinite(budget))
     throw InputError("--budget: expected seconds > 0, got '" + o.budget + "'");
@@ -694,6 +705,11 @@ int runScaling(const ScalingOptions& o) {
       throw InputError("--results-dir " + results_dir + ": cannot create or write the directory");
   }
 
+  return ScalingPlan{sizes, scenes, engines, b3_device, cpu_max, threads, budget, dir, results_dir};
+}
+
+// Our engine's settings for the rows: APGD at a fixed 50 iterations, h = 1 ms, and the options' variants.
+dvi::SystemConfig scalingConfig(const ScalingOptions& o, int threads) {
   dvi::SystemConfig cfg;
   cfg.step.dt = dvi::real(1e-3);
   cfg.solver.type = dvi::SolverType::APGD;
@@ -721,6 +737,26 @@ int runScaling(const ScalingOptions& o) {
                                 : o.speculation == "both"     ? dvi::ApgdSpeculation::Both
                                                               : dvi::ApgdSpeculation::Auto;
 
+  return cfg;
+}
+
+// What the machine offers: the GPU (or why none), the host's CPU, Bullet 3's OpenCL device, copy bandwidths.
+struct ScalingEnv {
+  bool have_gpu;
+  std::string gpu_name, gpu_status, cpu_model, cpu_name, b3_what, b3_status, b3_dir;
+  int host_threads;
+  double dev_copy, host_copy;
+};
+
+// Probes the machine, prints what it found, and (with --record on a GPU) adds the mixed pile at 1M bodies.
+ScalingEnv probeScaling(const ScalingOptions& o, ScalingPlan& p, const dvi::SystemConfig& cfg) {
+  std::vector<long>& sizes = p.sizes;
+  std::vector<std::string>& scenes = p.scenes;
+  const int threads = p.threads;
+  const std::string& dir = p.dir;
+  auto has = [&](const char* e) { return p.has(e); };
+  const dvi::bench::OpenClDeviceType b3_device = p.b3_device;
+  std::error_code ec;
   std::string gpu_name;
   const bool have_gpu = has("gpu") && dvi::gpuAvailable(&gpu_name);
   // Every GPU record carries the mixed pile at 1M bodies: the narrow phase's cost there (MPR pairs) is what a
@@ -779,93 +815,14 @@ int runScaling(const ScalingOptions& o) {
               dev_copy > 0 ? (num(dev_copy, "%.0f") + " GB/s").c_str() : "-", host_copy);
   std::fflush(stdout);
 
-  std::vector<Row> rows;
-  auto flush = [&] { writeFile(dir + "/scaling.csv", csvText(rows)); };
-  auto report = [&](const Row& r) {
-    if (r.ok())
-      std::printf(
-          "  %-6s %-4s %6s: %10.2f ms/step (%d timed after %d warm-up), %.0f contacts, pen/ref %.4f, setup %.1f s\n",
-          r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.ms, r.steps, r.warmup, r.contacts,
-          r.max_pen_rel, r.setup_s);
-    else if (b3_status.empty() || r.status != b3_status)
-      std::printf("  %-6s %-4s %6s: %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(),
-                  r.status.c_str());
-    std::fflush(stdout);
-  };
-  auto failed = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, const std::string& status) {
-    Row r;
-    r.engine = engine, r.scene = spec.name, r.n = long(spec.bodies.size()), r.status = status;
-    r.ref_length = double(spec.ref_length);
-    return r;
-  };
-  std::map<std::string, long> b3_failed_at;  // scene -> the N at which Bullet 3 failed (larger N are not run)
-  // The solver's default stop (tolerance on the relative residual, SolverSettings) against the fixed 50 iterations
-  // of the rows: each of our rows is run again at the defaults and the ratio printed side by side (one line per row,
-  // repeated after the table). The CSV keeps the fixed-50 rows.
-  dvi::SystemConfig cfg_default = cfg;
-  cfg_default.solver.max_iterations = dvi::SolverSettings{}.max_iterations;
-  cfg_default.solver.tolerance = dvi::SolverSettings{}.tolerance;
-  std::string stop_lines;
-  auto compareStop = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, double copy) {
-    const Row& fixed = rows.back();
-    if (!fixed.ok() || o.stop_compare == "off") return;
-    std::string line;
-    try {
-      const Row d = runOurs(engine, spec, cfg_default, o.quick, budget, copy);
-      char buf[400];
-      std::snprintf(
-          buf, sizeof buf,
-          "  stop   %-4s %-4s %6s: default stop (tolerance %g, cap %d) %.2f ms/step, %.1f iterations; fixed 50 "
-          "%.2f ms/step; ratio %.3f",
-          engine.c_str(), spec.name.c_str(), countLabel(fixed.n).c_str(), double(cfg_default.solver.tolerance),
-          cfg_default.solver.max_iterations, d.ms, d.iterations, fixed.ms, d.ms / fixed.ms);
-      line = buf;
-    } catch (const std::exception& e) {
-      line = "  stop   " + engine + " " + spec.name + " " + countLabel(fixed.n) + ": default stop failed: " + e.what();
-    }
-    std::printf("%s\n", line.c_str());
-    std::fflush(stdout);
-    stop_lines += line + "\n";
-  };
-  for (long n : sizes) {
-    for (const std::string& scene : scenes) {
-      const dvi::bench::SceneSpec spec = dvi::bench::makeSceneSpec(scene, n);
-      auto attempt = [&](const std::string& engine, auto&& fn) {
-        try {
-          rows.push_back(fn());
-        } catch (const std::exception& e) { rows.push_back(failed(engine, spec, std::string("error: ") + e.what())); }
-        report(rows.back());
-        flush();
-      };
-      if (has("gpu")) {
-        if (have_gpu)
-          attempt("gpu", [&] { return runOurs("gpu", spec, cfg, o.quick, budget, dev_copy); }),
-              compareStop("gpu", spec, dev_copy);
-        else
-          rows.push_back(failed("gpu", spec, gpu_status)), report(rows.back());
-      }
-      if (has("bullet3_opencl")) {
-        if (!b3_status.empty()) {
-          rows.push_back(failed("bullet3_opencl", spec, b3_status)), report(rows.back());
-        } else if (b3_failed_at.count(scene)) {
-          rows.push_back(
-              failed("bullet3_opencl", spec, "not run: failed at smaller N (" + countLabel(b3_failed_at[scene]) + ")"));
-          report(rows.back());
-        } else {
-          attempt("bullet3_opencl", [&] { return runBullet3Row(spec, o.quick, budget, b3_device, b3_dir); });
-          if (!rows.back().ok()) b3_failed_at[scene] = n;
-        }
-      }
-      if (n <= cpu_max) {
-        if (has("cpu"))
-          attempt("cpu", [&] { return runOurs("cpu", spec, cfg, o.quick, budget, host_copy); }),
-              compareStop("cpu", spec, host_copy);
-        if (has("bullet")) attempt("bullet", [&] { return runBullet(spec, o.quick, budget); });
-      }
-      flush();
-    }
-  }
+  return ScalingEnv{have_gpu,  gpu_name, gpu_status,   cpu_model, cpu_name, b3_what,
+                    b3_status, b3_dir,   host_threads, dev_copy,  host_copy};
+}
 
+// The status of Bullet 3's rows, or what its rows measured and how.
+std::string bullet3Note(const ScalingOptions& o, const ScalingPlan& p, const ScalingEnv& e) {
+  const std::string &b3_status = e.b3_status, &b3_what = e.b3_what, &b3_dir = e.b3_dir;
+  auto has = [&](const char* x) { return p.has(x); };
   std::string b3_note = b3_status;
   if (b3_status.empty() && has("bullet3_opencl"))
     b3_note =
@@ -882,6 +839,182 @@ int runScaling(const ScalingOptions& o) {
         "had; after a failure at one N the larger N of that scene are not run.";
   else if (!has("bullet3_opencl"))
     b3_note = "not in --engines.";
+  return b3_note;
+}
+
+// The record's .md (--record): the machine, the settings, the table, the goals and the notes.
+std::string scalingRecordMd(const ScalingOptions& o, const ScalingPlan& p, const ScalingEnv& e,
+                            const dvi::SystemConfig& cfg, const std::string& table, const std::string& goals,
+                            const std::string& notes, const std::string& stop_lines, const std::string& regressions,
+                            const std::string& base) {
+  const bool have_gpu = e.have_gpu;
+  const std::string &gpu_name = e.gpu_name, &gpu_status = e.gpu_status, &cpu_name = e.cpu_name;
+  const std::string &b3_status = e.b3_status, &b3_what = e.b3_what;
+  const double dev_copy = e.dev_copy, host_copy = e.host_copy;
+  auto has = [&](const char* x) { return p.has(x); };
+  std::ostringstream md;
+  md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
+     << "Written by `dvisim bench scaling --record` (bench/scaling/bench_scaling.cpp); do not edit by hand.\n\n"
+     << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- Bullet 3 OpenCL: "
+     << (!has("bullet3_opencl") ? std::string("not in --engines")
+         : b3_status.empty()    ? b3_what
+                                : b3_status)
+     << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ")
+     << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
+     << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg) << "; APGD storage: " << storageLabel(cfg.solver, true)
+     << " on the GPU, "
+     << (cfg.gpu.entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and "
+                                "isotropic inverse masses as 16 B (gpu_entry_gather), "
+                              : "the gather reading each contact's Jacobian (--gpu-entry-gather false), ")
+     << storageLabel(cfg.solver, false) << " on the CPU (arithmetic in "
+     << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
+     << "; next step speculated by the test pass: " << speculationLabel(cfg.solver.apgd_speculation)
+     << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.collision.broadphase.pair_margin) << "\n- NarrowPhase (ours): "
+     << (cfg.collision.mpr_manifold
+             ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)"
+             : "MPR's one point per pair (--mpr-manifold false)")
+     << "; deep MPR pairs on last step's face keep it (--mpr-coherence): "
+     << (cfg.collision.mpr_coherence ? "true" : "false") << "; GJK before MPR (--gjk): " << o.gjk
+     << "; GPU pairs by shape-pair class (--gpu-narrow-classes): " << (cfg.gpu.narrow_classes ? "true" : "false")
+     << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
+        "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
+     << "- copy bandwidth (read + write): device "
+     << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-")) << ", host " << num(host_copy, "%.0f")
+     << " GB/s\n\n"
+     << "```\n"
+     << table << "```\n\n"
+     << goals << "\n"
+     << notes
+     << (stop_lines.empty()
+             ? std::string()
+             : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
+               "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
+                   stop_lines + "```\n")
+     << (regressions.empty() ? std::string() : "\n```\n" + regressions + "```\n") << "\nThe rows: " << base << ".csv\n";
+  return md.str();
+}
+
+// cfg at the solver's default stop (SolverSettings: tolerance on the relative residual, iteration cap).
+dvi::SystemConfig withDefaultStop(const dvi::SystemConfig& cfg) {
+  dvi::SystemConfig d = cfg;
+  d.solver.max_iterations = dvi::SolverSettings{}.max_iterations;
+  d.solver.tolerance = dvi::SolverSettings{}.tolerance;
+  return d;
+}
+
+// A row's line as it is measured (Bullet 3's rows that share one status print it once, above).
+void printRow(const Row& r, const std::string& b3_status) {
+  if (r.ok())
+    std::printf(
+        "  %-6s %-4s %6s: %10.2f ms/step (%d timed after %d warm-up), %.0f contacts, pen/ref %.4f, setup %.1f s\n",
+        r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.ms, r.steps, r.warmup, r.contacts, r.max_pen_rel,
+        r.setup_s);
+  else if (b3_status.empty() || r.status != b3_status)
+    std::printf("  %-6s %-4s %6s: %s\n", r.engine.c_str(), r.scene.c_str(), countLabel(r.n).c_str(), r.status.c_str());
+  std::fflush(stdout);
+}
+
+// The row of an engine that did not run a scene (status says why).
+Row failedRow(const std::string& engine, const dvi::bench::SceneSpec& spec, const std::string& status) {
+  Row r;
+  r.engine = engine, r.scene = spec.name, r.n = long(spec.bodies.size()), r.status = status;
+  r.ref_length = double(spec.ref_length);
+  return r;
+}
+
+// The solver's default stop against the row's fixed 50 iterations: the row (fixed) run again at cfg_default, the
+// line printed and appended to stop_lines.
+void stopLine(const Row& fixed, const std::string& engine, const dvi::bench::SceneSpec& spec, double copy,
+              const dvi::SystemConfig& cfg_default, const ScalingOptions& o, double budget, std::string& stop_lines) {
+  if (!fixed.ok() || o.stop_compare == "off") return;
+  std::string line;
+  try {
+    const Row d = runOurs(engine, spec, cfg_default, o.quick, budget, copy);
+    char buf[400];
+    std::snprintf(buf, sizeof buf,
+                  "  stop   %-4s %-4s %6s: default stop (tolerance %g, cap %d) %.2f ms/step, %.1f iterations; fixed 50 "
+                  "%.2f ms/step; ratio %.3f",
+                  engine.c_str(), spec.name.c_str(), countLabel(fixed.n).c_str(), double(cfg_default.solver.tolerance),
+                  cfg_default.solver.max_iterations, d.ms, d.iterations, fixed.ms, d.ms / fixed.ms);
+    line = buf;
+  } catch (const std::exception& e) {
+    line = "  stop   " + engine + " " + spec.name + " " + countLabel(fixed.n) + ": default stop failed: " + e.what();
+  }
+  std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
+  stop_lines += line + "\n";
+}
+
+int runScaling(const ScalingOptions& o) {
+  if (o.mpi) return runScalingOverMpi(o);
+  ScalingPlan p = planScaling(o);
+  const dvi::SystemConfig cfg = scalingConfig(o, p.threads);
+  const ScalingEnv env = probeScaling(o, p, cfg);
+  const std::vector<long>& sizes = p.sizes;
+  const std::vector<std::string>& scenes = p.scenes;
+  auto has = [&](const char* e) { return p.has(e); };
+  const dvi::bench::OpenClDeviceType b3_device = p.b3_device;
+  const long cpu_max = p.cpu_max;
+  const double budget = p.budget;
+  const std::string &dir = p.dir, &results_dir = p.results_dir;
+  const bool have_gpu = env.have_gpu;
+  const std::string &gpu_name = env.gpu_name, &gpu_status = env.gpu_status, &cpu_model = env.cpu_model;
+  const std::string &cpu_name = env.cpu_name, &b3_status = env.b3_status, &b3_dir = env.b3_dir;
+  const double dev_copy = env.dev_copy, host_copy = env.host_copy;
+  std::vector<Row> rows;
+  auto flush = [&] { writeFile(dir + "/scaling.csv", csvText(rows)); };
+  auto report = [&](const Row& r) { printRow(r, b3_status); };
+  std::map<std::string, long> b3_failed_at;  // scene -> the N at which Bullet 3 failed (larger N are not run)
+  // The solver's default stop (tolerance on the relative residual, SolverSettings) against the fixed 50 iterations
+  // of the rows: each of our rows is run again at the defaults and the ratio printed side by side (one line per row,
+  // repeated after the table). The CSV keeps the fixed-50 rows.
+  const dvi::SystemConfig cfg_default = withDefaultStop(cfg);
+  std::string stop_lines;
+  auto compareStop = [&](const std::string& engine, const dvi::bench::SceneSpec& spec, double copy) {
+    stopLine(rows.back(), engine, spec, copy, cfg_default, o, budget, stop_lines);
+  };
+  for (long n : sizes) {
+    for (const std::string& scene : scenes) {
+      const dvi::bench::SceneSpec spec = dvi::bench::makeSceneSpec(scene, n);
+      auto attempt = [&](const std::string& engine, auto&& fn) {
+        try {
+          rows.push_back(fn());
+        } catch (const std::exception& e) {
+          rows.push_back(failedRow(engine, spec, std::string("error: ") + e.what()));
+        }
+        report(rows.back());
+        flush();
+      };
+      if (has("gpu")) {
+        if (have_gpu)
+          attempt("gpu", [&] { return runOurs("gpu", spec, cfg, o.quick, budget, dev_copy); }),
+              compareStop("gpu", spec, dev_copy);
+        else
+          rows.push_back(failedRow("gpu", spec, gpu_status)), report(rows.back());
+      }
+      if (has("bullet3_opencl")) {
+        if (!b3_status.empty()) {
+          rows.push_back(failedRow("bullet3_opencl", spec, b3_status)), report(rows.back());
+        } else if (b3_failed_at.count(scene)) {
+          rows.push_back(failedRow("bullet3_opencl", spec,
+                                   "not run: failed at smaller N (" + countLabel(b3_failed_at[scene]) + ")"));
+          report(rows.back());
+        } else {
+          attempt("bullet3_opencl", [&] { return runBullet3Row(spec, o.quick, budget, b3_device, b3_dir); });
+          if (!rows.back().ok()) b3_failed_at[scene] = n;
+        }
+      }
+      if (n <= cpu_max) {
+        if (has("cpu"))
+          attempt("cpu", [&] { return runOurs("cpu", spec, cfg, o.quick, budget, host_copy); }),
+              compareStop("cpu", spec, host_copy);
+        if (has("bullet")) attempt("bullet", [&] { return runBullet(spec, o.quick, budget); });
+      }
+      flush();
+    }
+  }
+
+  const std::string b3_note = bullet3Note(o, p, env);
   const std::string table = tableText(rows, b3_status), goals = goalsText(rows, gpu_status),
                     notes = notesText(dev_copy, host_copy, b3_note);
   std::printf("\n%s\n%s\n%s", table.c_str(), goals.c_str(), notes.c_str());
@@ -900,49 +1033,9 @@ int runScaling(const ScalingOptions& o) {
   if (o.record) {
     const std::string device = have_gpu ? gpu_name : cpu_name;
     const std::string base = device_prefix + utcNow("%Y%m%d-%H%M%S");
-    std::ostringstream md;
-    md << "# Scaling benchmark: sphere pile and multidisperse mix\n\n"
-       << "Written by `dvisim bench scaling --record` (apps/dvisim/bench_scaling.cpp); do not edit by hand.\n\n"
-       << "- GPU: " << (have_gpu ? gpu_name : gpu_status) << "\n- host CPU: " << cpu_name << "\n- Bullet 3 OpenCL: "
-       << (!has("bullet3_opencl") ? std::string("not in --engines")
-           : b3_status.empty()    ? b3_what
-                                  : b3_status)
-       << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ")
-       << "\n- precision: " << (sizeof(dvi::real) == 8 ? "double" : "float")
-       << "\n- GPU APGD trials: " << gpuTrialsLabel(cfg) << "; APGD storage: " << storageLabel(cfg.solver, true)
-       << " on the GPU, "
-       << (cfg.gpu.entry_gather ? "the gather reading each adjacency entry's float Jacobian side in entry order and "
-                                  "isotropic inverse masses as 16 B (gpu_entry_gather), "
-                                : "the gather reading each contact's Jacobian (--gpu-entry-gather false), ")
-       << storageLabel(cfg.solver, false) << " on the CPU (arithmetic in "
-       << (sizeof(dvi::real) == 8 ? "double" : "float") << ")"
-       << "; next step speculated by the test pass: " << speculationLabel(cfg.solver.apgd_speculation)
-       << "\n- BroadPhase (ours): " << pairMarginLabel(cfg.collision.broadphase.pair_margin)
-       << "\n- NarrowPhase (ours): "
-       << (cfg.collision.mpr_manifold
-               ? "MPR pairs of two flat features get up to 4 more points of their overlap (mpr_manifold)"
-               : "MPR's one point per pair (--mpr-manifold false)")
-       << "; deep MPR pairs on last step's face keep it (--mpr-coherence): "
-       << (cfg.collision.mpr_coherence ? "true" : "false") << "; GJK before MPR (--gjk): " << o.gjk
-       << "; GPU pairs by shape-pair class (--gpu-narrow-classes): " << (cfg.gpu.narrow_classes ? "true" : "false")
-       << "\n- scenes: pile of N spheres (r = 1 cm, mu = 0.5) and a mix of spheres, boxes, cylinders, ellipsoids and "
-          "convex hulls (sizes 0.5-2 cm, mu = 0.5), h = 1e-3 s, APGD 50 iterations (ours)\n"
-       << "- copy bandwidth (read + write): device "
-       << (dev_copy > 0 ? num(dev_copy, "%.0f") + " GB/s" : std::string("-")) << ", host " << num(host_copy, "%.0f")
-       << " GB/s\n\n"
-       << "```\n"
-       << table << "```\n\n"
-       << goals << "\n"
-       << notes
-       << (stop_lines.empty()
-               ? std::string()
-               : "\nSolver stop, the default (relative tolerance, iteration cap) against the rows' fixed 50 "
-                 "iterations, each row run again in this run (ratio = default / fixed ms per step):\n\n```\n" +
-                     stop_lines + "```\n")
-       << (regressions.empty() ? std::string() : "\n```\n" + regressions + "```\n") << "\nThe rows: " << base
-       << ".csv\n";
+    const std::string md = scalingRecordMd(o, p, env, cfg, table, goals, notes, stop_lines, regressions, base);
     for (const std::string& d : {results_dir, dir}) {
-      writeFile(d + "/" + base + ".md", md.str());
+      writeFile(d + "/" + base + ".md", md);
       writeFile(d + "/" + base + ".csv", csvText(rows));
     }
     std::printf("recorded: %s/%s.md and .csv (copies in %s/) -- device %s\n", results_dir.c_str(), base.c_str(),

@@ -249,8 +249,8 @@ void applySolver(const Case& c, dvi::SolverSettings& s) {
     s.tolerance = 0;  // a fixed count
 }
 
-std::vector<Case> makeCases(bool quick, bool have_gpu) {
-  std::vector<Case> cases;
+// The cases of makeCases: mass ratios in a stack and between particles, tall stacks.
+void massAndStackCases(std::vector<Case>& cases, bool quick) {
   // 1. Mass ratios in a stack: 10 boxes of 10 cm (4 from 1e4 on), the top one R times heavier; h = 1/60 s.
   for (double ratio : {1e2, 1e4, 1e6}) {
     Case c;
@@ -327,6 +327,10 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     cases.push_back(c);
   }
+}
+
+// The cases of makeCases: particles from 0.1 mm to 10 cm in one scene.
+void scaleRangeCase(std::vector<Case>& cases, bool quick) {
   // 4. Particles from 0.1 mm to 10 cm in one scene: a graded stack of cubes (10 cm, 1 cm, 1 mm, 0.1 mm) on the
   //    ground and spheres of 0.1 mm .. 10 cm diameter resting on the ground, h = 1e-3 s.
   {
@@ -387,6 +391,10 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     cases.push_back(c);
   }
+}
+
+// The cases of makeCases: 0.1 mm particles at h = 1e-4 s.
+void finePileCase(std::vector<Case>& cases, bool quick) {
   // 5. 0.1 mm particles at h = 1e-4 s: a collapsing pile of spheres of 0.1 mm diameter in a box.
   {
     Case c;
@@ -431,6 +439,10 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     cases.push_back(c);
   }
+}
+
+// The cases of makeCases: impacts on a thin wall, friction from 0 to 2.
+void impactAndFrictionCases(std::vector<Case>& cases, bool quick) {
   // 6. Impacts at 10-100 m/s on a thin wall (2 mm, fixed), sphere r = 1 cm, no gravity, h = 1e-3 s.
   for (double speed : {10.0, 30.0, 100.0}) {
     Case c;
@@ -491,6 +503,10 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     cases.push_back(c);
   }
+}
+
+// The cases of makeCases: initially overlapping bodies, thin plates and needles.
+void overlapAndThinCases(std::vector<Case>& cases, bool quick) {
   // 8. Initially overlapping bodies: 27 spheres r = 1 cm on a lattice of pitch 1.5 cm (0.5 cm overlaps, bottom
   //    layer 0.25 cm into the ground) and two boxes overlapping by a quarter of their size.
   {
@@ -553,6 +569,10 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     cases.push_back(c);
   }
+}
+
+// The cases of makeCases: a 1e6-body pile (GPU, full mode).
+void hugePileCase(std::vector<Case>& cases, bool quick, bool have_gpu) {
   // 10. A 1e6-body pile: full mode, on the GPU only.
   {
     Case c;
@@ -574,6 +594,16 @@ std::vector<Case> makeCases(bool quick, bool have_gpu) {
     };
     cases.push_back(c);
   }
+}
+
+std::vector<Case> makeCases(bool quick, bool have_gpu) {
+  std::vector<Case> cases;
+  massAndStackCases(cases, quick);
+  scaleRangeCase(cases, quick);
+  finePileCase(cases, quick);
+  impactAndFrictionCases(cases, quick);
+  overlapAndThinCases(cases, quick);
+  hugePileCase(cases, quick, have_gpu);
   return cases;
 }
 
@@ -702,11 +732,57 @@ std::string summaryText(const std::vector<Row>& rows) {
   return o.str();
 }
 
+// One case on one engine (ours on the CPU or GPU when bullet_iters is 0, else Bullet at that many iterations): its
+// row with the verdict, or the error it ended with. cpu_device: set by the CPU run.
+Row runEngine(const Case& c, const std::string& engine, int bullet_iters, int threads, std::string& cpu_device) {
+  Row r;
+  r.name = c.name, r.engine = engine, r.criterion = c.criterion, r.dt = c.dt, r.steps = c.steps;
+  try {
+    BtBodies s;
+    c.build(s);
+    r.bodies = int(s.bodies.size());
+    std::unique_ptr<Runner> run;
+    if (bullet_iters == 0) {
+      dvi::SystemConfig cfg;
+      cfg.step.dt = real(c.dt);
+      cfg.step.gravity = c.gravity;
+      cfg.solver.type = dvi::SolverType::APGD;
+      applySolver(c, cfg.solver);
+      cfg.threads = threads;
+      run = std::make_unique<OursRunner>(s.bodies, cfg, engine == "gpu");
+      const dvi::SolverSettings& ss = cfg.solver;
+      r.note = ss.tolerance > 0 ? "APGD to relative residual " + fmt("%.0e", double(ss.tolerance)) + ", at most " +
+                                      std::to_string(ss.max_iterations) + " iterations"
+                                : "APGD " + std::to_string(ss.max_iterations) + " iterations";
+      r.note += c.why.empty() ? " (defaults)" : " (hand-set: " + c.why + ")";
+    } else {
+      dvi::BulletPeerSettings bs;
+      bs.dt = real(c.dt);
+      bs.gravity = c.gravity;
+      bs.solver_iterations = bullet_iters;
+      bs.length_scale = real(c.bullet_scale);
+      run = std::make_unique<BulletRunner>(s.bodies, bs);
+      r.note = "Bullet in " + c.bullet_units + ", " + std::to_string(bullet_iters) + " iterations, no CCD";
+    }
+    r.device = run->device();
+    if (engine == "cpu") cpu_device = r.device;
+    r.m = runCase(c, *run, s.bodies, threads);
+    if (const auto* ours = dynamic_cast<const OursRunner*>(run.get())) {
+      const dvi::ConvergenceLog& cl = ours->sys->convergence();
+      r.note += "; " + std::to_string(cl.steps_not_converged) + "/" + std::to_string(cl.steps) +
+                " steps missed the tolerance, worst relative residual " +
+                fmt("%.2g", double(cl.worst_relative_residual));
+    }
+    const Verdict v = c.judge(r.m);
+    r.measured = v.measured, r.verdict = v.pass ? "PASS" : "FAIL";
+  } catch (const std::exception& ex) {
+    r.measured = std::string("error: ") + ex.what(), r.verdict = "FAIL", r.m.error = ex.what();
+  }
+  return r;
+}
+
 int runStability(const StabOptions& o) {
-  char* end = nullptr;
-  const long threads = std::strtol(o.threads.c_str(), &end, 10);
-  if (o.threads.empty() || *end || threads < 0 || threads > 4096)
-    throw InputError("--threads: expected an integer in [0, 4096], got '" + o.threads + "'");
+  const int threads = benchThreads(o.threads);
   prepareOutDir(o.out, "stability.csv");
   const std::string results_dir = o.record ? resultsDir() : std::string();
   std::string gpu_name;
@@ -746,49 +822,7 @@ int runStability(const StabOptions& o) {
       continue;
     }
     for (const Eng& e : engines) {
-      Row r;
-      r.name = c.name, r.engine = e.name, r.criterion = c.criterion, r.dt = c.dt, r.steps = c.steps;
-      try {
-        BtBodies s;
-        c.build(s);
-        r.bodies = int(s.bodies.size());
-        std::unique_ptr<Runner> run;
-        if (e.bullet_iters == 0) {
-          dvi::SystemConfig cfg;
-          cfg.step.dt = real(c.dt);
-          cfg.step.gravity = c.gravity;
-          cfg.solver.type = dvi::SolverType::APGD;
-          applySolver(c, cfg.solver);
-          cfg.threads = int(threads);
-          run = std::make_unique<OursRunner>(s.bodies, cfg, e.name == "gpu");
-          const dvi::SolverSettings& ss = cfg.solver;
-          r.note = ss.tolerance > 0 ? "APGD to relative residual " + fmt("%.0e", double(ss.tolerance)) + ", at most " +
-                                          std::to_string(ss.max_iterations) + " iterations"
-                                    : "APGD " + std::to_string(ss.max_iterations) + " iterations";
-          r.note += c.why.empty() ? " (defaults)" : " (hand-set: " + c.why + ")";
-        } else {
-          dvi::BulletPeerSettings bs;
-          bs.dt = real(c.dt);
-          bs.gravity = c.gravity;
-          bs.solver_iterations = e.bullet_iters;
-          bs.length_scale = real(c.bullet_scale);
-          run = std::make_unique<BulletRunner>(s.bodies, bs);
-          r.note = "Bullet in " + c.bullet_units + ", " + std::to_string(e.bullet_iters) + " iterations, no CCD";
-        }
-        r.device = run->device();
-        if (e.name == "cpu") cpu_device = r.device;
-        r.m = runCase(c, *run, s.bodies, int(threads));
-        if (const auto* ours = dynamic_cast<const OursRunner*>(run.get())) {
-          const dvi::ConvergenceLog& cl = ours->sys->convergence();
-          r.note += "; " + std::to_string(cl.steps_not_converged) + "/" + std::to_string(cl.steps) +
-                    " steps missed the tolerance, worst relative residual " +
-                    fmt("%.2g", double(cl.worst_relative_residual));
-        }
-        const Verdict v = c.judge(r.m);
-        r.measured = v.measured, r.verdict = v.pass ? "PASS" : "FAIL";
-      } catch (const std::exception& ex) {
-        r.measured = std::string("error: ") + ex.what(), r.verdict = "FAIL", r.m.error = ex.what();
-      }
+      const Row r = runEngine(c, e.name, e.bullet_iters, threads, cpu_device);
       rows.push_back(r);
       std::printf("  %-28s %-9s %-4s  %s  (%.2f s)\n", r.name.c_str(), r.engine.c_str(), r.verdict.c_str(),
                   r.measured.c_str(), r.m.wall_s);
@@ -801,7 +835,7 @@ int runStability(const StabOptions& o) {
   const std::string device = have_gpu ? gpu_name : cpu_device;
   std::ostringstream md;
   md << "# Stability on stiff and extreme cases" << (o.quick ? " (--quick)" : "") << "\n\n"
-     << "Written by `dvisim bench stability` (apps/dvisim/bench_stability.cpp).\n\n"
+     << "Written by `dvisim bench stability` (bench/stability/bench_stability.cpp).\n\n"
      << "- device: " << device << "\n- commit: " << commitId() << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ")
      << "\n- engines: cpu/gpu = ours, APGD at the solver's default stop (relative tolerance, iteration cap) unless the "
         "row's note says why not; bullet = btDiscreteDynamicsWorld at its default 10 "

@@ -64,6 +64,54 @@ const char* kHeader =
     "BuildRows_ms,WarmStart_ms,Solve_ms,IntegrateVelocities_ms,IntegratePositions_ms,contacts_mean,normal_only_steps,"
     "saving_pct,backend,threads,device,parts_ran";
 
+// The saving of the pruned run results[i] against the full one results[i + 1], percent of its time.
+double saving(const std::vector<Result>& results, size_t i) {
+  const double a = results[i].msPerStep(), b = results[i + 1].msPerStep();
+  return b > 0 ? 100.0 * (1 - a / b) : 0.0;
+}
+
+// pruning.csv: one row a run (kHeader).
+std::string pruningCsv(const std::vector<Result>& results, size_t bodies, bool gpu, int used_threads,
+                       const std::string& device) {
+  std::ostringstream csv;
+  csv << kHeader << "\n";
+  for (size_t i = 0; i < results.size(); ++i) {
+    const Result& r = results[i];
+    csv << r.scene << "," << num(r.mu) << "," << (r.prune ? "true" : "false") << "," << bodies << "," << r.steps << ","
+        << num(r.msPerStep(), "%.4f");
+    for (int k = 0; k < dvi::kStageCount; ++k)
+      csv << "," << num(1e3 * r.stage[size_t(k)] / double(std::max(1L, r.steps)), "%.4f");
+    csv << "," << num(r.contacts, "%.1f") << "," << r.normal_only_steps << ","
+        << (r.prune ? num(saving(results, i), "%.2f") : std::string()) << "," << (gpu ? "gpu" : "cpu") << ","
+        << used_threads << "," << csvField(device) << "," << csvField(r.parts) << "\n";
+  }
+  return csv.str();
+}
+
+// The report's table of the runs and the savings against the goal (>= 30 % on the frictionless pile).
+std::string pruningTable(const std::vector<Result>& results, double s0, double s1, bool pass) {
+  std::ostringstream md;
+  char line[512];
+  md << "| scene | prune | ms/step | BuildRows | WarmStart | Solve | IntegrateVelocities | contacts | normal-only "
+        "steps |\n"
+     << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
+  for (const Result& r : results) {
+    auto ms = [&](dvi::StageType s) { return 1e3 * r.stage[size_t(s)] / double(std::max(1L, r.steps)); };
+    std::snprintf(line, sizeof line, "| %s | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %ld/%ld |\n",
+                  r.scene.c_str(), r.prune ? "true" : "false", r.msPerStep(), ms(dvi::StageType::BuildRows),
+                  ms(dvi::StageType::WarmStart), ms(dvi::StageType::Solve), ms(dvi::StageType::IntegrateVelocities),
+                  r.contacts, r.normal_only_steps, r.steps);
+    md << line;
+  }
+  std::snprintf(line, sizeof line,
+                "\nSaving of prune = true against prune = false (measured side by side in this run):\n"
+                "- frictionless pile: %.1f%% -> goal >= 30%%: %s\n"
+                "- frictional pile (control, every contact needs its friction rows): %.1f%%\n",
+                s0, pass ? "MET" : "NOT MET", s1);
+  md << line;
+  return md.str();
+}
+
 int runPruning(const PruneOptions& o) {
   if (o.backend != "cpu" && o.backend != "gpu" && o.backend != "auto")
     throw InputError("--backend: expected cpu, gpu or auto, got '" + o.backend + "'");
@@ -130,63 +178,29 @@ int runPruning(const PruneOptions& o) {
     }
   }
 
-  auto saving = [&](size_t i) {  // results[i] is pruned, results[i + 1] the full one
-    const double a = results[i].msPerStep(), b = results[i + 1].msPerStep();
-    return b > 0 ? 100.0 * (1 - a / b) : 0.0;
-  };
-  std::ostringstream csv;
-  csv << kHeader << "\n";
-  for (size_t i = 0; i < results.size(); ++i) {
-    const Result& r = results[i];
-    csv << r.scene << "," << num(r.mu) << "," << (r.prune ? "true" : "false") << "," << bodies << "," << r.steps << ","
-        << num(r.msPerStep(), "%.4f");
-    for (int k = 0; k < dvi::kStageCount; ++k)
-      csv << "," << num(1e3 * r.stage[size_t(k)] / double(std::max(1L, r.steps)), "%.4f");
-    csv << "," << num(r.contacts, "%.1f") << "," << r.normal_only_steps << ","
-        << (r.prune ? num(saving(i), "%.2f") : std::string()) << "," << (gpu ? "gpu" : "cpu") << "," << used_threads
-        << "," << csvField(device) << "," << csvField(r.parts) << "\n";
-  }
-  const double s0 = saving(0), s1 = saving(2);
+  const std::string csv = pruningCsv(results, bodies, gpu, used_threads, device);
+  const double s0 = saving(results, 0), s1 = saving(results, 2);
   const bool pass = s0 >= 30.0;
-  std::ostringstream md;
-  char line[512];
-  md << "| scene | prune | ms/step | BuildRows | WarmStart | Solve | IntegrateVelocities | contacts | normal-only "
-        "steps |\n"
-     << "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n";
-  for (const Result& r : results) {
-    auto ms = [&](dvi::StageType s) { return 1e3 * r.stage[size_t(s)] / double(std::max(1L, r.steps)); };
-    std::snprintf(line, sizeof line, "| %s | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %ld/%ld |\n",
-                  r.scene.c_str(), r.prune ? "true" : "false", r.msPerStep(), ms(dvi::StageType::BuildRows),
-                  ms(dvi::StageType::WarmStart), ms(dvi::StageType::Solve), ms(dvi::StageType::IntegrateVelocities),
-                  r.contacts, r.normal_only_steps, r.steps);
-    md << line;
-  }
-  std::snprintf(line, sizeof line,
-                "\nSaving of prune = true against prune = false (measured side by side in this run):\n"
-                "- frictionless pile: %.1f%% -> goal >= 30%%: %s\n"
-                "- frictional pile (control, every contact needs its friction rows): %.1f%%\n",
-                s0, pass ? "MET" : "NOT MET", s1);
-  md << line;
-  std::printf("%s", md.str().c_str());
+  const std::string table = pruningTable(results, s0, s1, pass);
+  std::printf("%s", table.c_str());
   std::printf("Goal: pruning saves >= 30%% on a frictionless all-sphere scene: %s (%.1f%%)\n", pass ? "MET" : "NOT MET",
               s0);
 
   std::ostringstream head;
   head << "# Pruning: the stages a scene does not need" << (o.quick ? " (--quick)" : "") << "\n\n"
-       << "Written by the benchmark (`dvisim bench pruning`, apps/dvisim/bench_pruning.cpp); do not edit by hand.\n\n"
+       << "Written by the benchmark (`dvisim bench pruning`, bench/pruning/bench_pruning.cpp); do not edit by hand.\n\n"
        << "- device: " << device << "\n- backend: " << (gpu ? "gpu" : "cpu")
        << (gpu ? "" : ", threads " + std::to_string(used_threads)) << "\n- commit: " << commitId()
        << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ") << "\n- scene: pile of " << n
        << " spheres r 1 cm (bench/scaling/scaling_scenes.h), APGD 50 iterations, h = 1 ms; " << warmup
        << " warm-up steps, then " << rounds << " alternating rounds of " << per_round << " steps per system\n\n";
-  const std::string md_text = head.str() + md.str();
-  writeFile(o.out + "/pruning.csv", csv.str());
+  const std::string md_text = head.str() + table;
+  writeFile(o.out + "/pruning.csv", csv);
   writeFile(o.out + "/pruning.md", md_text);
   std::printf("results: %s/pruning.csv, pruning.md\n", o.out.c_str());
   if (o.record) {
     const std::string base = "pruning_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeBenchRecord({results_dir}, base, {{"md", md_text + "\nRows: " + base + ".csv\n"}, {"csv", csv.str()}},
-                     writeFile);
+    writeBenchRecord({results_dir}, base, {{"md", md_text + "\nRows: " + base + ".csv\n"}, {"csv", csv}}, writeFile);
   }
   return 0;
 }

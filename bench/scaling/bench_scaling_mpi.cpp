@@ -1,4 +1,4 @@
-#include "bench_scaling_mpi.h"
+#include "scaling/bench_scaling_mpi.h"
 
 #include <mpi.h>
 
@@ -261,7 +261,7 @@ int runScalingMpi(const MpiScalingOptions& o) {
   std::ostringstream head;
   head << "# Domain decomposition over MPI: weak and strong scaling ("
        << (gpu ? "GPU backend, one GPU a process" : "CPU backend") << ")\n\n"
-       << "Written by the benchmark (`mpirun -np K dvisim bench scaling --mpi`, apps/dvisim/bench_scaling_mpi.cpp); "
+       << "Written by the benchmark (`mpirun -np K dvisim bench scaling --mpi`, bench/scaling/bench_scaling_mpi.cpp); "
           "do not edit by hand.\n\n";
   if (gpu) head << "- GPU: " << device << ", " << size << " processes, one GPU each\n";
   head << "- CPU: " << cpu

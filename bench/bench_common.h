@@ -15,11 +15,14 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <string>
 #include <stdexcept>
 #include <utility>
 #include <vector>
+
+#include "chrono_like/base/errors.h"
 
 // The `bench` subcommand of app: the existing one, or a new one (which requires exactly one benchmark).
 inline CLI::App* benchCommand(CLI::App& app) {
@@ -61,6 +64,15 @@ inline void addBenchBasics(CLI::App* cmd, BenchBasics& o, const std::string& nam
   cmd->add_flag("--quick", o.quick, quick_help);
   cmd->add_flag("--record", o.record, "Also write bench/results/" + name + "_<device>_<date>.{" + record_exts + "}");
   cmd->add_option("--threads", o.threads, threads_help);
+}
+
+// The value of --threads: an integer in [0, 4096] (0: all), else an InputError naming it.
+inline int benchThreads(const std::string& text) {
+  char* end = nullptr;
+  const long threads = std::strtol(text.c_str(), &end, 10);
+  if (text.empty() || *end || threads < 0 || threads > 4096)
+    throw dvi::InputError("--threads: expected an integer in [0, 4096], got '" + text + "'");
+  return int(threads);
 }
 
 // A record of a benchmark run: each (extension, text) of files written as DIR/BASE.EXTENSION into each of dirs,

@@ -33,6 +33,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -105,8 +106,28 @@ struct Progress {
   double ms_per_step;
 };
 
-int runCesBench(const CesBenchOptions& o) {
-  // ---- input ----
+// What a run is to do: the input (options and the machine's document after the overrides) resolved.
+struct CesBenchPlan {
+  double duration, rate, wall_limit, mean_mass, mass_flow;  // s, particles/s, s, kg, kg/s
+  int threads;
+  std::string origin, backend, results_dir;
+  dvi::ces::CesConfig cfg;
+};
+
+// What the steps measured.
+struct CesBenchLoop {
+  dvi::ces::CesRunTotals tot;
+  std::vector<float> step_ms;
+  int64_t max_in_flight = 0;
+  std::vector<Progress> progress;
+  double step_wall = 0;
+  std::string stopped_by = "duration";
+  double wall_at_goal = -1;  // wall time when the goal's 10 s of machine time were reached
+};
+
+// ---- input ----
+CesBenchPlan planCesBench(const CesBenchOptions& o) {
+  CesBenchPlan p;
   const double duration = !o.duration.empty() ? positive("--duration", o.duration) : o.quick ? 0.02 : kGoalDuration;
   const double rate = !o.rate.empty() ? positive("--rate", o.rate) : o.quick ? 5000.0 : kGoalRate;
   const double wall_limit = !o.wall_limit.empty() ? positive("--wall-limit", o.wall_limit) : kGoalWall;
@@ -140,34 +161,29 @@ int runCesBench(const CesBenchOptions& o) {
   prepareOutDir(o.out, "ces_bench.json");
   const std::string results_dir = o.record ? resultsDir() : std::string();
 
-  // ---- run ----
-  const int64_t total = std::max<int64_t>(1, int64_t(std::llround(cfg.duration / cfg.step.dt)));
-  const auto t_start = Clock::now();
-  auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
-  std::unique_ptr<dvi::System> sys = dvi::ces::makeCesSystem(cfg, backend, threads, "native");
-  dvi::ces::CesMachine m(cfg, *sys);
-  const double setup_s = elapsed();
-  std::printf(
-      "bench ces%s: %s backend, %g s of machine time (%lld steps of %g s, %s %d it) at %s particles/s "
-      "(mean particle %.4g mg -> %.4g g/s), wall limit %g s\n",
-      o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.step.dt,
-      dvi::solverName(cfg.solver.type), cfg.solver.max_iterations, grouped(rate).c_str(), mean_mass * 1e6,
-      mass_flow * 1e3, wall_limit);
-  const std::string where = m.deviceParticles() ? "CES field, charges and classification on the device (CesDevice)"
-                                                : "CES forces applied on the host";
-  std::printf("note: %s (docs/CES.md)\n", where.c_str());
-  std::fflush(stdout);
+  p.duration = duration, p.rate = rate, p.wall_limit = wall_limit, p.mean_mass = mean_mass, p.mass_flow = mass_flow;
+  p.threads = threads, p.origin = origin, p.backend = backend, p.results_dir = results_dir, p.cfg = cfg;
+  return p;
+}
 
-  dvi::ces::CesRunTotals tot;
-  std::vector<float> step_ms;
+// ---- run ----
+// The machine's steps to the planned duration or the wall limit, with a progress line every 10 % of either.
+CesBenchLoop stepCesBench(dvi::ces::CesMachine& m, const CesBenchPlan& p, int64_t total,
+                          const std::function<double()>& elapsed) {
+  const double duration = p.duration, wall_limit = p.wall_limit;
+  const dvi::ces::CesConfig& cfg = p.cfg;
+  CesBenchLoop L;
+  dvi::ces::CesRunTotals& tot = L.tot;
+  std::vector<float>& step_ms = L.step_ms;
+  int64_t& max_in_flight = L.max_in_flight;
+  std::vector<Progress>& progress = L.progress;
+  double& step_wall = L.step_wall;
+  std::string& stopped_by = L.stopped_by;
+  double& wall_at_goal = L.wall_at_goal;
   step_ms.reserve(size_t(total));
-  int64_t max_in_flight = 0;
-  std::vector<Progress> progress;
   int next_t = 1, next_w = 1;  // the next 10% mark of machine time and of the wall limit
   int64_t mark_steps = 0;
-  double mark_ms = 0, step_wall = 0;
-  std::string stopped_by = "duration";
-  double wall_at_goal = -1;  // wall time when the goal's 10 s of machine time were reached
+  double mark_ms = 0;
   for (int64_t k = 0; k < total; ++k) {
     if (elapsed() > wall_limit) {
       stopped_by = "wall_limit";
@@ -200,27 +216,18 @@ int runCesBench(const CesBenchOptions& o) {
       mark_ms = 0, mark_steps = 0;
     }
   }
-  const double wall = elapsed();
-  m.system().syncToHost();
+  return L;
+}
 
-  // ---- results ----
-  const dvi::ces::MassBalance bal = m.balance();
-  const int64_t steps_run = int64_t(step_ms.size());
-  const double reached = m.time();
-  const size_t last_from = size_t(std::llround(0.9 * double(steps_run)));
-  double last_sum = 0;
-  for (size_t i = last_from; i < step_ms.size(); ++i) last_sum += double(step_ms[i]);
-  const int64_t last_n = steps_run - int64_t(last_from);
-  const double ms_mean = steps_run > 0 ? 1e3 * step_wall / double(steps_run) : 0.0;
-  const double ms_last = last_n > 0 ? last_sum / double(last_n) : 0.0;
-  const double fed_rate = reached > 0 ? double(bal.fed) / reached : 0.0;
-  const double fed_flow_g_s = reached > 0 ? double(bal.fed_fg) * dvi::ces::kFemtogram * 1e3 / reached : 0.0;
-  const std::string device = m.system().deviceName();
-  const std::string commit = commitId(), date = utcNow("%Y-%m-%dT%H:%M:%SZ"), stamp = utcNow("%Y%m%d-%H%M%S");
-  // particlesInFlight() counts every particle still in the machine: in flight or held up.
-  const bool counts_agree = bal.in_flight + bal.held_up == m.particlesInFlight();
-
-  // The goal's verdict.
+// The goal's verdict (and its keys in goal): met, missed (by how much), or no verdict where the run was not the
+// goal's (shorter, slower feed, not on the GPU).
+std::string goalVerdict(const CesBenchPlan& p, const CesBenchLoop& L, double reached, double wall, double ms_last,
+                        double fed_rate, json& goal) {
+  const double duration = p.duration, rate = p.rate, wall_limit = p.wall_limit;
+  const std::string& backend = p.backend;
+  const std::string& stopped_by = L.stopped_by;
+  const double wall_at_goal = L.wall_at_goal;
+  const dvi::ces::CesConfig& cfg = p.cfg;
   std::vector<std::string> why_not;
   if (duration < kGoalDuration) why_not.push_back("--duration " + fmt(duration, "%g") + " s < 10 s");
   if (rate < kGoalRate) why_not.push_back("--rate " + grouped(rate) + " < 20,000 particles/s");
@@ -228,7 +235,7 @@ int runCesBench(const CesBenchOptions& o) {
   if (stopped_by == "wall_limit" && wall_limit < kGoalWall && wall_at_goal < 0)
     why_not.push_back("--wall-limit " + fmt(wall_limit, "%g") + " s < 300 s cut the run short");
   const std::string statement = "10 s at >= 20,000 particles/s in <= 300 s wall";
-  json goal{{"statement", statement}, {"valid", why_not.empty()}, {"met", nullptr}};
+  goal = json{{"statement", statement}, {"valid", why_not.empty()}, {"met", nullptr}};
   std::string verdict;
   if (!why_not.empty()) {
     verdict = "no verdict:";
@@ -262,16 +269,48 @@ int runCesBench(const CesBenchOptions& o) {
     verdict = b;
   }
   goal["verdict"] = verdict;
+  return verdict;
+}
 
-  std::string command = "dvisim bench ces --out " + o.out + " --backend " + o.backend;
-  if (!o.duration.empty()) command += " --duration " + o.duration;
-  if (!o.rate.empty()) command += " --rate " + o.rate;
-  if (!o.wall_limit.empty()) command += " --wall-limit " + o.wall_limit;
-  if (!o.threads.empty()) command += " --threads " + o.threads;
-  for (const std::string& s : o.sets) command += " --set " + s;
-  if (o.quick) command += " --quick";
-  if (o.record) command += " --record";
+// What the run's report says, derived from the steps.
+struct CesBenchResult {
+  int64_t total, steps_run;
+  double setup_s, wall, reached, ms_mean, ms_last, fed_rate, fed_flow_g_s;
+  dvi::ces::MassBalance bal;
+  std::string device, commit, date, where, command;
+  bool counts_agree;
+};
 
+// The core's stages that ran, in the order of a step, with their seconds summed over the run.
+std::vector<std::pair<std::string, double>> coreStages(const dvi::ces::CesRunTotals& tot, double& stage_total) {
+  std::vector<std::pair<std::string, double>> stages;
+  stage_total = 0;
+  for (int i = 0; i < dvi::kStageCount; ++i)
+    if (tot.log.ran[size_t(i)]) {
+      stages.emplace_back(dvi::stageName(dvi::StageType(i)), tot.log.seconds[size_t(i)]);
+      stage_total += tot.log.seconds[size_t(i)];
+    }
+  return stages;
+}
+
+// ces_bench.json: the run, its target, what it reached, the counts, the stages, the mass balance and the goal.
+json cesBenchJson(const CesBenchOptions& o, const CesBenchPlan& p, const CesBenchLoop& L, const CesBenchResult& R,
+                  const dvi::ces::CesMachine& m, const json& goal) {
+  const double duration = p.duration, rate = p.rate, wall_limit = p.wall_limit;
+  const double mean_mass = p.mean_mass, mass_flow = p.mass_flow;
+  const std::string& origin = p.origin;
+  const dvi::ces::CesConfig& cfg = p.cfg;
+  const dvi::ces::CesRunTotals& tot = L.tot;
+  const std::vector<Progress>& progress = L.progress;
+  const int64_t max_in_flight = L.max_in_flight, total = R.total, steps_run = R.steps_run;
+  const double step_wall = L.step_wall, wall_at_goal = L.wall_at_goal, setup_s = R.setup_s, wall = R.wall;
+  const double reached = R.reached, ms_mean = R.ms_mean, ms_last = R.ms_last, fed_rate = R.fed_rate;
+  const double fed_flow_g_s = R.fed_flow_g_s;
+  const std::string &stopped_by = L.stopped_by, &device = R.device, &commit = R.commit, &date = R.date;
+  const std::string& command = R.command;
+  const dvi::ces::MassBalance& bal = R.bal;
+  const std::string& backend = p.backend;
+  const bool counts_agree = R.counts_agree;
   json j;
   j["benchmark"] = "ces";
   j["quick"] = o.quick;
@@ -323,10 +362,29 @@ int runCesBench(const CesBenchOptions& o) {
                              {"steps", p.steps},
                              {"ms_per_step", p.ms_per_step}});
 
+  return j;
+}
+
+// ces_bench.md: the report for a reader.
+std::string cesBenchMarkdown(const CesBenchOptions& o, const CesBenchPlan& p, const CesBenchLoop& L,
+                             const CesBenchResult& R, const json& j, const std::string& verdict) {
+  const double duration = p.duration, rate = p.rate, wall_limit = p.wall_limit;
+  const double mean_mass = p.mean_mass, mass_flow = p.mass_flow;
+  const std::string& origin = p.origin;
+  const dvi::ces::CesConfig& cfg = p.cfg;
+  const dvi::ces::CesRunTotals& tot = L.tot;
+  const std::vector<Progress>& progress = L.progress;
+  const int64_t max_in_flight = L.max_in_flight, total = R.total, steps_run = R.steps_run;
+  const double step_wall = L.step_wall, setup_s = R.setup_s, wall = R.wall;
+  const double reached = R.reached, ms_mean = R.ms_mean, ms_last = R.ms_last, fed_rate = R.fed_rate;
+  const double fed_flow_g_s = R.fed_flow_g_s;
+  const std::string &stopped_by = L.stopped_by, &device = R.device, &commit = R.commit, &date = R.date;
+  const std::string &command = R.command, &where = R.where;
+  const dvi::ces::MassBalance& bal = R.bal;
   std::ostringstream md;
   md << "# CES industrial-feed benchmark" << (o.quick ? " (--quick)" : "") << "\n\n"
      << "Written by `dvisim bench ces" << (o.record ? " --record" : "")
-     << "` (apps/dvisim/bench_ces.cpp); do not edit by hand.\n\n"
+     << "` (bench/ces/bench_ces.cpp); do not edit by hand.\n\n"
      << "- command: `" << command << "`\n- device: " << device << "\n- backend: " << j["backend"].get<std::string>()
      << " (" << where << ")\n- commit: " << commit << "\n- date: " << date << "\n- machine: " << origin
      << (o.sets.empty() ? "" : " with --set") << "; dt " << fmt(cfg.step.dt, "%g") << " s, "
@@ -352,14 +410,8 @@ int runCesBench(const CesBenchOptions& o) {
      << "| solver iterations per step | " << fmt(j["iterations_mean"].get<double>(), "%.3g") << " |\n"
      << "| mass balance | " << dvi::ces::massBalanceLine(bal) << " |\n\n"
      << "Stage split (core stages, summed over the run):\n\n| stage | s | share |\n| --- | --- | --- |\n";
-  // The stages in the order of a step.
-  std::vector<std::pair<std::string, double>> stages;
   double stage_total = 0;
-  for (int i = 0; i < dvi::kStageCount; ++i)
-    if (tot.log.ran[size_t(i)]) {
-      stages.emplace_back(dvi::stageName(dvi::StageType(i)), tot.log.seconds[size_t(i)]);
-      stage_total += tot.log.seconds[size_t(i)];
-    }
+  const std::vector<std::pair<std::string, double>> stages = coreStages(tot, stage_total);
   for (const auto& [name, sec] : stages)
     md << "| " << name << " | " << fmt(sec, "%.3g") << " | "
        << fmt(stage_total > 0 ? 100 * sec / stage_total : 0.0, "%.1f") << "% |\n";
@@ -369,8 +421,88 @@ int runCesBench(const CesBenchOptions& o) {
     md << "| " << fmt(p.t, "%.4g") << " | " << fmt(p.wall, "%.4g") << " | " << p.in_flight << " | "
        << fmt(p.ms_per_step, "%.3g") << " |\n";
 
+  return md.str();
+}
+
+// The command line of this run, for the report.
+std::string commandLine(const CesBenchOptions& o) {
+  std::string command = "dvisim bench ces --out " + o.out + " --backend " + o.backend;
+  if (!o.duration.empty()) command += " --duration " + o.duration;
+  if (!o.rate.empty()) command += " --rate " + o.rate;
+  if (!o.wall_limit.empty()) command += " --wall-limit " + o.wall_limit;
+  if (!o.threads.empty()) command += " --threads " + o.threads;
+  for (const std::string& s : o.sets) command += " --set " + s;
+  if (o.quick) command += " --quick";
+  if (o.record) command += " --record";
+  return command;
+}
+
+int runCesBench(const CesBenchOptions& o) {
+  const CesBenchPlan plan = planCesBench(o);
+  const double duration = plan.duration, rate = plan.rate, wall_limit = plan.wall_limit;
+  const double mean_mass = plan.mean_mass, mass_flow = plan.mass_flow;
+  const int threads = plan.threads;
+  const std::string &backend = plan.backend, &results_dir = plan.results_dir;
+  const dvi::ces::CesConfig& cfg = plan.cfg;
+
+  // ---- run ----
+  const int64_t total = std::max<int64_t>(1, int64_t(std::llround(cfg.duration / cfg.step.dt)));
+  const auto t_start = Clock::now();
+  auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - t_start).count(); };
+  std::unique_ptr<dvi::System> sys = dvi::ces::makeCesSystem(cfg, backend, threads, "native");
+  dvi::ces::CesMachine m(cfg, *sys);
+  const double setup_s = elapsed();
+  std::printf(
+      "bench ces%s: %s backend, %g s of machine time (%lld steps of %g s, %s %d it) at %s particles/s "
+      "(mean particle %.4g mg -> %.4g g/s), wall limit %g s\n",
+      o.quick ? " --quick" : "", backend.c_str(), duration, (long long)total, cfg.step.dt,
+      dvi::solverName(cfg.solver.type), cfg.solver.max_iterations, grouped(rate).c_str(), mean_mass * 1e6,
+      mass_flow * 1e3, wall_limit);
+  const std::string where = m.deviceParticles() ? "CES field, charges and classification on the device (CesDevice)"
+                                                : "CES forces applied on the host";
+  std::printf("note: %s (docs/CES.md)\n", where.c_str());
+  std::fflush(stdout);
+
+  const CesBenchLoop L = stepCesBench(m, plan, total, elapsed);
+  const dvi::ces::CesRunTotals& tot = L.tot;
+  const std::vector<float>& step_ms = L.step_ms;
+  const int64_t max_in_flight = L.max_in_flight;
+  const double step_wall = L.step_wall;
+  const std::string& stopped_by = L.stopped_by;
+  const double wall = elapsed();
+  m.system().syncToHost();
+
+  // ---- results ----
+  const dvi::ces::MassBalance bal = m.balance();
+  const int64_t steps_run = int64_t(step_ms.size());
+  const double reached = m.time();
+  const size_t last_from = size_t(std::llround(0.9 * double(steps_run)));
+  double last_sum = 0;
+  for (size_t i = last_from; i < step_ms.size(); ++i) last_sum += double(step_ms[i]);
+  const int64_t last_n = steps_run - int64_t(last_from);
+  const double ms_mean = steps_run > 0 ? 1e3 * step_wall / double(steps_run) : 0.0;
+  const double ms_last = last_n > 0 ? last_sum / double(last_n) : 0.0;
+  const double fed_rate = reached > 0 ? double(bal.fed) / reached : 0.0;
+  const double fed_flow_g_s = reached > 0 ? double(bal.fed_fg) * dvi::ces::kFemtogram * 1e3 / reached : 0.0;
+  const std::string device = m.system().deviceName();
+  const std::string commit = commitId(), date = utcNow("%Y-%m-%dT%H:%M:%SZ"), stamp = utcNow("%Y%m%d-%H%M%S");
+  // particlesInFlight() counts every particle still in the machine: in flight or held up.
+  const bool counts_agree = bal.in_flight + bal.held_up == m.particlesInFlight();
+
+  json goal;
+  const std::string verdict = goalVerdict(plan, L, reached, wall, ms_last, fed_rate, goal);
+
+  const std::string command = commandLine(o);
+
+  const CesBenchResult R{total,        steps_run, setup_s, wall,   reached, ms_mean, ms_last, fed_rate,
+                         fed_flow_g_s, bal,       device,  commit, date,    where,   command, counts_agree};
+  const json j = cesBenchJson(o, plan, L, R, m, goal);
+  const std::string md = cesBenchMarkdown(o, plan, L, R, j, verdict);
+  double stage_total = 0;
+  const std::vector<std::pair<std::string, double>> stages = coreStages(tot, stage_total);
+
   writeFile(o.out + "/ces_bench.json", j.dump(2) + "\n");
-  writeFile(o.out + "/ces_bench.md", md.str());
+  writeFile(o.out + "/ces_bench.md", md);
 
   std::printf("device: %s; commit %s; %s\n", device.c_str(), commit.c_str(), date.c_str());
   std::printf("reached %.4g s of %g s machine time in %.4g s wall (setup %.3g s), stopped by %s\n", reached, duration,
@@ -393,7 +525,7 @@ int runCesBench(const CesBenchOptions& o) {
   std::printf("results: %s/ces_bench.json, %s/ces_bench.md\n", o.out.c_str(), o.out.c_str());
   if (o.record) {
     const std::string base = "ces_" + slug(device) + "_" + stamp;
-    writeBenchRecord({results_dir}, base, {{"md", md.str()}, {"json", j.dump(2) + "\n"}}, writeFile);
+    writeBenchRecord({results_dir}, base, {{"md", md}, {"json", j.dump(2) + "\n"}}, writeFile);
   }
   if (!bal.closes() || !counts_agree) {
     std::fflush(stdout);
