@@ -279,19 +279,21 @@ bool System::combineRolling(int64_t nc) {
   const BodyArrays& B = bodies_;
   bool any = false;
   if (nc == 0) return false;
-#pragma omp parallel for schedule(static) reduction(|| : any)
-  for (int64_t k = 0; k < nc; ++k) {
-    const int32_t a = contacts_.body_a[k], b = contacts_.body_b[k];
-    const real ra[2] = {B.spinning_friction[a], B.rolling_friction[a]};
-    const real rb[2] = {B.spinning_friction[b], B.rolling_friction[b]};
-    for (int j = 0; j < 2; ++j) {
-      const real c = rule == FrictionCombine::Product ? fmin(ra[j] * B.friction[b] + rb[j] * B.friction[a], real(10))
-                     : rule == FrictionCombine::Min   ? fmin(ra[j], rb[j])
-                                                      : real(0.5) * (ra[j] + rb[j]);
-      roll_coef_[size_t(2 * k + j)] = c;
-      any = any || c > 0;
-    }
-  }
+  any = parallelSum(nc, nc >= kSerialContacts ? ompTeam() : 1, [&](int64_t k) {
+          const int32_t a = contacts_.body_a[k], b = contacts_.body_b[k];
+          const real ra[2] = {B.spinning_friction[a], B.rolling_friction[a]};
+          const real rb[2] = {B.spinning_friction[b], B.rolling_friction[b]};
+          bool some = false;
+          for (int j = 0; j < 2; ++j) {
+            const real c = rule == FrictionCombine::Product
+                               ? fmin(ra[j] * B.friction[b] + rb[j] * B.friction[a], real(10))
+                           : rule == FrictionCombine::Min ? fmin(ra[j], rb[j])
+                                                          : real(0.5) * (ra[j] + rb[j]);
+            roll_coef_[size_t(2 * k + j)] = c;
+            some = some || c > 0;
+          }
+          return some;
+        }) > 0;
   return any;
 }
 
@@ -545,7 +547,7 @@ void System::buildAndSolve() {
     SolverStats s;
     switch (config_.solver.type) {
       case SolverType::Jacobi: s = solveJacobi(*problem_, x, config_.solver); break;
-      case SolverType::GaussSeidel: s = problem_->solveGaussSeidel(x, config_.solver); break;
+      case SolverType::GaussSeidel: s = solveGaussSeidelThenApgd(x); break;
       case SolverType::APGD: s = solveApgd(*problem_, x, config_.solver); break;
       case SolverType::BB: s = solveBB(*problem_, x, config_.solver); break;
     }
@@ -557,6 +559,22 @@ void System::buildAndSolve() {
   for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
     row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
   cacheImpulsesByKey(nc);
+}
+
+// Gauss-Seidel, finished by APGD where it reached its cap above the tolerance (SolverSettings::gs_apgd_finish);
+// the iterations reported are both solvers'.
+SolverStats System::solveGaussSeidelThenApgd(real* x) const {
+  const SolverSettings& cfg = config_.solver;
+  SolverStats s = problem_->solveGaussSeidel(x, cfg);
+  if (cfg.gs_apgd_finish <= 0 || !(cfg.tolerance > 0) || s.relative_residual <= cfg.tolerance) return s;
+  SolverSettings a = cfg;
+  a.type = SolverType::APGD;
+  a.min_iterations = 0;
+  a.max_iterations = cfg.gs_apgd_finish;
+  const int gs_iterations = s.iterations;
+  s = solveApgd(*problem_, x, a);
+  s.iterations += gs_iterations;
+  return s;
 }
 
 // BuildRows after the row collection: each contact's friction, size and rolling coefficients, the step's parts, and
@@ -613,6 +631,7 @@ void System::buildProblem(int64_t nc) {
   ps.jacobi_steps = type == SolverType::Jacobi;
   ps.block_inverses = (type == SolverType::Jacobi || type == SolverType::GaussSeidel) &&
                       config_.solver.block_scaling == BlockScaling::Inverse3x3;
+  ps.gs_blocks = type == SolverType::GaussSeidel;
   ps.float_jacobians =
       config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) && !std::is_same_v<real, float>;
   problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_,
@@ -625,11 +644,10 @@ void System::buildProblem(int64_t nc) {
 void System::warmStartContacts(int64_t nc, int64_t nroll) {
   const size_t np = prev_keys_.size();
   if (nc == 0) return;
-#pragma omp parallel
-  {
-    size_t next = np;  // per thread: where the previous contact's key matched, plus one
-#pragma omp for schedule(static)
-    for (int64_t k = 0; k < nc; ++k) {
+  // Contacts [lo, hi), `next` carried from one contact to the next (a thread's own in the team).
+  auto range = [&](int64_t lo, int64_t hi) {
+    size_t next = np;  // where the previous contact's key matched, plus one
+    for (int64_t k = lo; k < hi; ++k) {
       const uint64_t key = contacts_.key[k];
       size_t j = next;
       if (j >= np || prev_keys_[j] != key) {
@@ -642,6 +660,15 @@ void System::warmStartContacts(int64_t nc, int64_t nroll) {
       if (q >= 0 && !prev_roll_.empty())
         for (int r = 0; r < 3; ++r) gamma_[size_t(3 * (nc + q) + r)] = prev_roll_[3 * j + r];
     }
+  };
+  // A small problem (or one thread) enters no OpenMP region (base/parallel_for.h: a region costs ~0.4 us even for
+  // a team of one); the result is the same either way (each contact's copy is independent).
+  const int team = ompTeam();
+  if (team <= 1 || nc < kSerialContacts) return range(0, nc);
+#pragma omp parallel num_threads(team)
+  {
+    const int64_t t = omp_get_thread_num(), T = omp_get_num_threads();
+    range(nc * t / T, nc * (t + 1) / T);
   }
 }
 

@@ -363,14 +363,15 @@ class System {
   }
   // The stages; a GPU subclass overrides them with device versions.
   virtual void integrateForces();
-  virtual void detectCollisions();                    // ComputeAabbs + BroadPhase + NarrowPhase
-  virtual void buildAndSolve();                       // BuildRows + WarmStart + Solve
-  void buildProblem(int64_t nc);                      // BuildRows after the rows: mu, size, parts, the problem
-  void warmStartContacts(int64_t nc, int64_t nroll);  // WarmStart of the contacts and rolling blocks
-  virtual void integrate();                           // IntegrateVelocities + IntegratePositions
-  void collectRows();                                 // rows_ from the row providers (part of BuildRows)
-  void cacheImpulsesByKey(int64_t nc);                // this step's impulses by contact key (end of Solve)
-  std::vector<int32_t> touchedCopies() const;         // the group's copies this process's contacts touch
+  virtual void detectCollisions();                      // ComputeAabbs + BroadPhase + NarrowPhase
+  virtual void buildAndSolve();                         // BuildRows + WarmStart + Solve
+  void buildProblem(int64_t nc);                        // BuildRows after the rows: mu, size, parts, the problem
+  SolverStats solveGaussSeidelThenApgd(real* x) const;  // Solve with SolverType::GaussSeidel (gs_apgd_finish)
+  void warmStartContacts(int64_t nc, int64_t nroll);    // WarmStart of the contacts and rolling blocks
+  virtual void integrate();                             // IntegrateVelocities + IntegratePositions
+  void collectRows();                                   // rows_ from the row providers (part of BuildRows)
+  void cacheImpulsesByKey(int64_t nc);                  // this step's impulses by contact key (end of Solve)
+  std::vector<int32_t> touchedCopies() const;           // the group's copies this process's contacts touch
   // Scene-level parts (host arrays): gyroscopic term and MPR needed? Fills stats_.part_ran/part_reason for
   // ForceFields, Gyroscopic, Mpr, ConstraintRows and RollingSpinningRows; returns whether the gyroscopic
   // term runs.

@@ -454,7 +454,9 @@ void DviDynamicsWorld::applyBulletEffort(SolverSettings& s) const {
   }
   s.min_iterations = sweeps;
   s.max_iterations = std::max(sweeps, config_.bullet_max_sweeps > 0 ? config_.bullet_max_sweeps : 3 * sweeps);
+  s.gs_apgd_finish = kDefaultMaxIterations;
   s.tolerance = config_.system.solver.tolerance > 0 ? config_.system.solver.tolerance : kDefaultTolerance;
+  s.gs_row_tolerance = real(0.01);
 }
 
 void DviDynamicsWorld::syncIn(btScalar h) {

@@ -57,15 +57,17 @@ enum class WorldBackend { Cpu, Gpu, Auto };
 
 // How much work each sub-step's solve does (docs/DROP_IN.md, "Solver effort", measures both on Bullet's scenes).
 enum class SolverEffort {
-  // Bullet's effort as the minimum, then on to the tolerance: projected Gauss-Seidel (as
-  // BulletIterations below) for at least m_numIterations sweeps, continued while the relative residual is above
-  // SystemConfig::solver.tolerance (0.15), checked every few sweeps, up to DviWorldConfig::bullet_max_sweeps. Costs
-  // Bullet's effort where Bullet's sweeps already converge and more only where they do not; a sub-step stopped by
-  // the cap is reported as not converged (convergence(), system().lastStats()). The GPU backend runs APGD with the
-  // same minimum, tolerance and cap.
+  // Bullet's effort as the minimum, then on to the tolerance: projected Gauss-Seidel (as BulletIterations below,
+  // each contact's normal and friction impulses first stepped exactly, as Bullet's rows are) for at least
+  // m_numIterations sweeps, continued while the relative residual is above SystemConfig::solver.tolerance (0.15),
+  // or the joint rows' own relative residual above 0.01 (SolverSettings::gs_row_tolerance), checked every few
+  // sweeps, up to DviWorldConfig::bullet_max_sweeps; a sub-step still above the tolerance there is finished by APGD
+  // (SolverSettings::gs_apgd_finish). Costs Bullet's effort where Bullet's sweeps already converge and more only
+  // where they do not. The GPU backend runs APGD with the same minimum, tolerance and cap. Not the default yet:
+  // docs/DROP_IN.md, "Solver effort", lists the checks it still fails.
   BulletThenConverged,
   // The default. SystemConfig::solver as given (default: APGD to the relative tolerance, at least 50 iterations):
-  // every step converged; Bullet's iteration count is not used.
+  // every step converged, far below the tolerance on small problems; Bullet's iteration count is not used.
   Converged,
   // Bullet's effort, read from the world's btContactSolverInfo (getSolverInfo()) each sub-step: projected
   // Gauss-Seidel (the method of Bullet's sequential impulses, on our cone-complementarity problem) for
@@ -87,7 +89,8 @@ inline SystemConfig dropInSystemDefaults() {
 struct DviWorldConfig {
   WorldBackend backend = WorldBackend::Cpu;
   SolverEffort effort = SolverEffort::Converged;
-  // BulletThenConverged: at most this many sweeps a sub-step (0: 3 x btContactSolverInfo::m_numIterations).
+  // BulletThenConverged: at most this many Gauss-Seidel sweeps a sub-step before APGD finishes it (0: 3 x
+  // btContactSolverInfo::m_numIterations).
   int bullet_max_sweeps = 0;
   SystemConfig system = dropInSystemDefaults();  // solver, threads, collision...; step.dt and gravity from Bullet
   JointSettings joints;

@@ -74,6 +74,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   have_jacobi_steps_ = settings.jacobi_steps;
   have_block_inverses_ = settings.block_inverses;
   gs_deltas_of_ = nullptr;
+  nkk_.resize(settings.gs_blocks && !normal_only_ ? size_t(6 * nc) : 0);
   // Sized in full either way (the normal-only and row blocks' assembly writes them all; the contacts' skips the
   // unwanted): binv_ feeds blockInverses(), colnorm_ and rowsum_ the Jacobi steps.
   binv_.resize(size_t(6 * nblk));
@@ -142,6 +143,7 @@ real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArr
     real N[6];
     contactDiagonalBlock(J, inv_[a], inv_[b], N);
     if (have_block_inverses_) invertSymmetric3(N, binv_.data() + 6 * k);
+    if (!nkk_.empty()) std::copy(N, N + 6, nkk_.data() + 6 * k);
     eta_[k] = blockStepFromDiagonal(N);
     if (have_jacobi_steps_) {
       contactColumnNorms(J, inv_[a], inv_[b], colnorm_.data() + 6 * k);
@@ -498,27 +500,60 @@ void ContactProblem::gsRowSweep(int64_t k, real* gamma, real w) const {
   }
 }
 
+// Exact coordinate steps of one friction cone's block (N its diagonal block N_kk, packed nn, uu, ww, nu, nw, uw;
+// y = (N gamma + r)_k kept current as g moves): the normal impulse to the minimiser of the problem along it over
+// g_n >= |g_t| / mu, then each tangent impulse to its minimiser over the disk |g_t| <= mu g_n (the other tangent
+// held), each step relaxed by w. These are the row-by-row steps of Bullet's sequential impulses (normal row, then
+// the friction rows, each with its exact diagonal) on the cone's own feasible set: each lowers the problem's
+// objective and leaves a solution unmoved (Cottle, Pang & Stone 1992, sec. 5.2, for one coordinate over an
+// interval), so the fixed points stay the CCP's. The scalar projected step that follows them in gsContactBlock
+// keeps the cone's coupled directions moving (coordinate steps alone can stall on the cone's curved boundary).
+static void coneCoordinateSteps(real mu, const real* N, real w, real* g, real* y) {
+  const int col[3][3] = {{0, 3, 4}, {3, 1, 5}, {4, 5, 2}};  // N's entries of column j
+  auto move = [&](int j, real target) {
+    const real d = target - g[j];
+    g[j] = target;
+    for (int i = 0; i < 3; ++i) y[i] += N[col[j][i]] * d;
+  };
+  if (N[0] > 0) {
+    const real lo = mu > 0 ? std::sqrt(g[1] * g[1] + g[2] * g[2]) / mu : real(0);
+    move(0, std::max(lo, g[0] - w * y[0] / N[0]));
+  }
+  for (int j = 1; j < 3; ++j) {
+    if (!(N[j] > 0)) continue;
+    const real o = g[3 - j], r = mu * g[0];
+    const real b = std::sqrt(std::max(real(0), r * r - o * o));
+    move(j, std::min(b, std::max(-b, g[j] - w * y[j] / N[j])));
+  }
+}
+
+// Gauss-Seidel on contact k (a plain friction cone, Scalar scaling): its exact coordinate steps (where the problem
+// holds N_kk), then the scalar block step g' = P(g - w eta_k y), and the impulse's change into delta_.
+void ContactProblem::gsContactBlock(int64_t k, real* gamma, real w) const {
+  BodyDelta* dl = delta_.data();
+  const ContactJacobian& J = jac_[size_t(k)];
+  real y[3];
+  contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
+  real* g = gamma + 3 * k;
+  for (int j = 0; j < 3; ++j) y[j] += rhs_[size_t(3 * k + j)];
+  real gn[3] = {g[0], g[1], g[2]};
+  if (!nkk_.empty()) coneCoordinateSteps(mu_[size_t(k)], nkk_.data() + 6 * k, w, gn, y);
+  const real t = w * eta_[size_t(k)];
+  for (int j = 0; j < 3; ++j) gn[j] -= t * y[j];
+  projectConeBlock(mu_[size_t(k)], gn);
+  const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
+  g[0] = gn[0];
+  g[1] = gn[1];
+  g[2] = gn[2];
+  if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) return;
+  applyContactChange(J, dg, inv_.data(), dl);
+}
+
 // One Gauss-Seidel sweep over the contact blocks alone, for problems whose contacts are all plain friction cones
 // under Scalar scaling (no rolling block, not normal-only): the general sweep's operations in the same order (so
-// the same iterates), in one loop the compiler sees whole. It is a drop-in world's hot loop.
+// the same iterates). It is a drop-in world's hot loop.
 void ContactProblem::gsContactSweep(real* gamma, real w) const {
-  BodyDelta* dl = delta_.data();
-  for (int64_t k = 0; k < nc_; ++k) {
-    const ContactJacobian& J = jac_[size_t(k)];
-    real y[3];
-    contactRelativeVelocity(J, dl[J.a].v, dl[J.a].w, dl[J.b].v, dl[J.b].w, y);
-    real* g = gamma + 3 * k;
-    const real t = w * eta_[size_t(k)];
-    real gn[3];
-    for (int j = 0; j < 3; ++j) gn[j] = g[j] - t * (y[j] + rhs_[size_t(3 * k + j)]);
-    projectConeBlock(mu_[size_t(k)], gn);
-    const real dg[3] = {gn[0] - g[0], gn[1] - g[1], gn[2] - g[2]};
-    g[0] = gn[0];
-    g[1] = gn[1];
-    g[2] = gn[2];
-    if (dg[0] == 0 && dg[1] == 0 && dg[2] == 0) continue;
-    applyContactChange(J, dg, inv_.data(), dl);
-  }
+  for (int64_t k = 0; k < nc_; ++k) gsContactBlock(k, gamma, w);
 }
 
 // Whether Gauss-Seidel computes the residual after sweep `iterations` (no history kept): only where the tolerance
@@ -531,27 +566,11 @@ static bool gsCheckDue(const SolverSettings& s, int iterations) {
   return (iterations - s.min_iterations) % every == 0;
 }
 
-// Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
-// CMAME 200 (2011)): sweep the contacts in order; for contact k
-//   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
-// with dv = M^-1 D g kept up to date, so each block costs O(1). S_k = eta_k I3 (Scalar, default) or
-// N_kk^-1 (Inverse3x3). With Scalar scaling the provider rows (joints, drives) go row by row instead (gsRowSweep).
-// dv is formed exactly from the warm start; the history uses the maintained dv, the final residual a fresh Schur
-// product.
-SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
-  // Row by row over one process's contacts: not an algorithm that splits over processes (process_group.h).
-  if (group_) throw InputError("solver gs: Gauss-Seidel does not run over several processes (use apgd)");
-  SolverStats st;
-  const int64_t nblk = ncb_ + nrb_;
-  if (nblk == 0) return st;
-  const real a = residualAlpha(*this, s), inv_a = real(1) / a;
-  const real w = s.gs_omega;
-  const bool full = s.block_scaling == BlockScaling::Inverse3x3;
+// One Gauss-Seidel sweep over every block: the contacts (gsContactBlock, or with Inverse3x3 scaling, normal-only
+// blocks and rolling pairs the block step g' = P(g - w S y)), then the provider rows row by row (gsRowSweep).
+void ContactProblem::gsSweep(real* gamma, real w, bool full) const {
   const BlockSet bs = blockSet();
-  std::vector<double> part;
-  project(gamma);
-  gatherBodyDeltas(gamma);             // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
-  const int64_t row0 = ncb_ + nroll_;  // the provider rows' first block
+  const int64_t nblk = ncb_ + nrb_, row0 = ncb_ + nroll_;
   // Block b's values after its scaled step, before the projection.
   auto blockStep = [&](int64_t b, real* gn) {
     const real* g = gamma + 3 * b;
@@ -576,9 +595,62 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
     g[2] = gn[2];
     if (dg[0] != 0 || dg[1] != 0 || dg[2] != 0) gsApplyBlockChange(b, dg);
   };
-  auto residualFromDeltas = [&]() {
+  const bool plain = !full && !normal_only_ && nroll_ == 0;  // every contact a plain cone: gsContactSweep
+  if (plain) gsContactSweep(gamma, w);
+  for (int64_t k = plain ? ncb_ : 0; k < nblk; ++k) {
+    if (isRollingBlock(bs, k)) continue;  // updated with its contact (a rolling pair is one Gauss-Seidel unit)
+    if (k >= row0 && !full) {
+      gsRowSweep(k, gamma, w);
+      continue;
+    }
+    const int64_t p = rollingPartner(bs, k);
+    if (p < 0 && k < ncb_ && !full && !normal_only_) {
+      gsContactBlock(k, gamma, w);
+      continue;
+    }
+    real gk[3];
+    blockStep(k, gk);
+    if (p < 0) {
+      projectBlock(bs, k, gk);
+      commit(k, gk);
+      continue;
+    }
+    real gp[3];
+    blockStep(p, gp);
+    projectUnit(bs, k, p, gk, gp);
+    commit(k, gk);
+    commit(p, gp);
+  }
+}
+
+// Projected block Gauss-Seidel (Anitescu & Tasora, Comput. Optim. Appl. 47 (2010); Tasora & Anitescu,
+// CMAME 200 (2011)): sweep the contacts in order; for contact k
+//   y_k = D_k^T dv + r_k,   g_k' = P(g_k - w S_k y_k),   dv += M^-1 D_k (g_k' - g_k)
+// with dv = M^-1 D g kept up to date, so each block costs O(1). S_k = eta_k I3 (Scalar, default) or
+// N_kk^-1 (Inverse3x3). With Scalar scaling the provider rows (joints, drives) go row by row instead (gsRowSweep),
+// and a plain cone's step is preceded by its exact coordinate steps (gsContactBlock). dv is formed exactly from the
+// warm start; the history uses the maintained dv, the final residual a fresh Schur product. With
+// gs_row_tolerance the solve stops only where the provider rows' own relative residual (against their res(0)) is
+// at or below it too; the reported residual is the whole problem's.
+SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& s) const {
+  // Row by row over one process's contacts: not an algorithm that splits over processes (process_group.h).
+  if (group_) throw InputError("solver gs: Gauss-Seidel does not run over several processes (use apgd)");
+  SolverStats st;
+  const int64_t nblk = ncb_ + nrb_;
+  if (nblk == 0) return st;
+  const real a = residualAlpha(*this, s), inv_a = real(1) / a;
+  const real w = s.gs_omega;
+  const bool full = s.block_scaling == BlockScaling::Inverse3x3;
+  const BlockSet bs = blockSet();
+  std::vector<double> part;
+  project(gamma);
+  gatherBodyDeltas(gamma);             // delta_ = M^-1 D gamma on the active bodies, 0 elsewhere
+  const int64_t row0 = ncb_ + nroll_;  // the provider rows' first block
+  // The squared residual over blocks [lo, hi) (rolling blocks with their contact), from the maintained deltas.
+  auto residual2 = [&](int64_t lo, int64_t hi) {
     double sum;
-    detail::blockReduce<1>(nblk, threads_, part, &sum, [&](int64_t k, double* acc) {
+    detail::blockReduce<1>(hi - lo, threads_, part, &sum, [&](int64_t i, double* acc) {
+      const int64_t k = lo + i;
       if (isRollingBlock(bs, k)) return;  // with its contact
       const int64_t p = rollingPartner(bs, k);
       real y[3], yp[3] = {0, 0, 0};
@@ -586,7 +658,24 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
       if (p >= 0) gsBlockGradient(p, yp);
       acc[0] += unitResidual2(bs, k, p, gamma + 3 * k, y, p >= 0 ? gamma + 3 * p : nullptr, yp, a, inv_a);
     });
-    return real(std::sqrt(sum));
+    return sum;
+  };
+  // With a row tolerance the rows' residual is checked on its own, against the rows' res(0).
+  const bool split = s.gs_row_tolerance > 0 && s.tolerance > 0 && nrb_ > 0;
+  real row_thr = 0;
+  if (split) {
+    const real zero[3] = {0, 0, 0};
+    double z = 0;
+    for (int64_t k = row0; k < nblk; ++k)
+      z += unitResidual2(bs, k, -1, zero, rhs_.data() + 3 * k, zero, nullptr, a, inv_a);
+    row_thr = s.gs_row_tolerance * real(std::sqrt(z));
+  }
+  bool rows_ok = true;  // the rows' residual at the last check met row_thr
+  auto residualFromDeltas = [&]() {
+    if (!split) return real(std::sqrt(residual2(0, nblk)));
+    const double rows = residual2(row0, nblk);
+    rows_ok = real(std::sqrt(rows)) <= row_thr;
+    return real(std::sqrt((row0 > 0 ? residual2(0, row0) : 0.0) + rows));
   };
   st.residual_scale = ccpResidualScale(*this, a);
   const real thr = stopThreshold(s, st.residual_scale);
@@ -598,36 +687,15 @@ SolverStats ContactProblem::solveGaussSeidel(real* gamma, const SolverSettings& 
   real res = fixed_count ? real(INFINITY) : residualFromDeltas();
   bool res_fresh = false;  // res is that of the current gamma
   if (s.record_history) st.history.push_back(res);
-  const bool plain = !full && !normal_only_ && nroll_ == 0;  // every contact a plain cone: gsContactSweep
-  if (!reachedStop(res, thr, 0, s.min_iterations)) {
+  if (!(reachedStop(res, thr, 0, s.min_iterations) && rows_ok)) {
     for (int it = 0; it < s.max_iterations; ++it) {
-      if (plain) gsContactSweep(gamma, w);
-      for (int64_t k = plain ? ncb_ : 0; k < nblk; ++k) {
-        if (isRollingBlock(bs, k)) continue;  // updated with its contact (a rolling pair is one Gauss-Seidel unit)
-        if (k >= row0 && !full) {
-          gsRowSweep(k, gamma, w);
-          continue;
-        }
-        const int64_t p = rollingPartner(bs, k);
-        real gk[3];
-        blockStep(k, gk);
-        if (p < 0) {
-          projectBlock(bs, k, gk);
-          commit(k, gk);
-          continue;
-        }
-        real gp[3];
-        blockStep(p, gp);
-        projectUnit(bs, k, p, gk, gp);
-        commit(k, gk);
-        commit(p, gp);
-      }
+      gsSweep(gamma, w, full);
       ++st.iterations;
       res_fresh = s.record_history || gsCheckDue(s, st.iterations);
       if (res_fresh) {
         res = residualFromDeltas();
         if (s.record_history) st.history.push_back(res);
-        if (reachedStop(res, thr, st.iterations, s.min_iterations)) break;
+        if (reachedStop(res, thr, st.iterations, s.min_iterations) && rows_ok) break;
       }
     }
   }

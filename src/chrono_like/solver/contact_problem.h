@@ -59,6 +59,10 @@ struct ContactProblemSettings {
   // them throws std::logic_error.
   bool jacobi_steps = true;
   bool block_inverses = true;
+  // Gauss-Seidel's exact coordinate steps on each friction cone (gsContactBlock) read the contacts' diagonal
+  // blocks N_kk; without them its contact steps are the scalar block steps alone. Default on; System::buildProblem
+  // turns it off for the other solvers.
+  bool gs_blocks = true;
 };
 
 class ContactProblem final : public CcpProblem {
@@ -140,6 +144,10 @@ class ContactProblem final : public CcpProblem {
   void gsApplyBlockChange(int64_t k, const real* dg) const;
   // Gauss-Seidel's sweep over the contact blocks where all are plain friction cones under Scalar scaling.
   void gsContactSweep(real* gamma, real w) const;
+  // One Gauss-Seidel sweep over every block (Inverse3x3 block scaling where full).
+  void gsSweep(real* gamma, real w, bool full) const;
+  // Gauss-Seidel's update of contact block k, a plain friction cone under Scalar scaling.
+  void gsContactBlock(int64_t k, real* gamma, real w) const;
   // Gauss-Seidel's update of provider row block k, row by row with each row's exact diagonal step.
   void gsRowSweep(int64_t k, real* gamma, real w) const;
 
@@ -166,6 +174,7 @@ class ContactProblem final : public CcpProblem {
   std::vector<real> mu_;                  // per contact
   std::vector<real> eta_;                 // per block: scalar block step
   std::vector<real> binv_;                // 6 per block: N_kk^-1, symmetric
+  std::vector<real> nkk_;                 // 6 per contact: N_kk, symmetric (gs_blocks; else empty)
   std::vector<real> jeta_;                // per block: Jacobi step (coupling-aware Gershgorin bound)
   std::vector<real> colnorm_;             // 6 per block: M^-1 norms of the Jacobian columns (build only)
   std::vector<real> rowsum_;              // 3 per block: absolute row sums of N_kk (build only)

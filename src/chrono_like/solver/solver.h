@@ -116,7 +116,16 @@ struct SolverSettings {
   // any omega in (0, 1] decreases the objective at every iteration (omega < 2 converges); with Inverse3x3
   // Chrono's 0.3 is the usual choice.
   real jacobi_omega = real(1.0);
-  real gs_omega = real(1.0);                          // Gauss-Seidel relaxation
+  real gs_omega = real(1.0);  // Gauss-Seidel relaxation
+  // Gauss-Seidel with a tolerance: a solve that reaches max_iterations above it goes on with APGD from where it
+  // stopped, to the tolerance or at most this many more iterations (0: it stops there). Gauss-Seidel converges
+  // slowly along the problem's ill-conditioned directions (long lever arms, mass ratios); APGD's rate depends on the
+  // square root of the condition number instead (Nesterov 1983; Mazhar et al., ACM TOG 34 (2015)).
+  int gs_apgd_finish = 0;
+  // Gauss-Seidel: the relative residual the constraint-row blocks (joints) must reach as well, each part measured
+  // against its own res(0) (0: none beyond `tolerance`). A joint's rows are equalities whose unsolved part the next
+  // step sees as position error; contacts at rest are bounded by the ground, and stop at `tolerance`.
+  real gs_row_tolerance = 0;
   real residual_alpha = real(1e-4);                   // a in the residual, as a fraction of 1 / max diag(N) (see above)
   bool record_history = false;                        // keep the residual of every iteration
   BlockScaling block_scaling = BlockScaling::Scalar;  // Jacobi and Gauss-Seidel
