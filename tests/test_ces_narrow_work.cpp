@@ -36,17 +36,22 @@ struct ClassCensus {
   double mean() const { return pairs > 0 ? supports / pairs : 0; }
 };
 
+// The shape pairs with a contact in sys's last step.
+std::set<std::pair<int32_t, int32_t>> touchingPairs(const System& sys) {
+  const ContactArrays& c = sys.contacts();
+  std::set<std::pair<int32_t, int32_t>> touching;
+  for (size_t k = 0; k < c.count(); ++k) touching.insert({c.shape_a[k], c.shape_b[k]});
+  return touching;
+}
+
 // Each (type, type) class (smaller type first) of the touching pairs of sys's last step.
 std::map<std::pair<ShapeType, ShapeType>, ClassCensus> census(const System& sys) {
   const ShapeArrays& sh = sys.shapes();
   const BodyArrays& bodies = sys.bodies();
-  const ContactArrays& c = sys.contacts();
   const CollisionSettings& cs = sys.config().collision;
-  std::set<std::pair<int32_t, int32_t>> touching;
-  for (size_t k = 0; k < c.count(); ++k) touching.insert({c.shape_a[k], c.shape_b[k]});
   std::map<std::pair<ShapeType, ShapeType>, ClassCensus> out;
   ContactPoint pts[kMaxContactsPerPair];
-  for (const auto& [ia, ib] : touching) {
+  for (const auto& [ia, ib] : touchingPairs(sys)) {
     const Shape &a = sh.shape[size_t(ia)], &b = sh.shape[size_t(ib)];
     const Pose wa = shapeWorldPose(Pose{bodies.pos[size_t(a.body)], bodies.rot[size_t(a.body)]}, a);
     const Pose wb = shapeWorldPose(Pose{bodies.pos[size_t(b.body)], bodies.rot[size_t(b.body)]}, b);
@@ -93,13 +98,10 @@ struct CoherenceCheck {
 CoherenceCheck checkCoherence(const System& sys, const LastNormals& last) {
   const ShapeArrays& sh = sys.shapes();
   const BodyArrays& bodies = sys.bodies();
-  const ContactArrays& c = sys.contacts();
   const CollisionSettings& cs = sys.config().collision;
-  std::set<std::pair<int32_t, int32_t>> touching;
-  for (size_t k = 0; k < c.count(); ++k) touching.insert({c.shape_a[k], c.shape_b[k]});
   CoherenceCheck out;
   ContactPoint full[kMaxContactsPerPair], kept[kMaxContactsPerPair];
-  for (const auto& [ia, ib] : touching) {
+  for (const auto& [ia, ib] : touchingPairs(sys)) {
     const Shape &a = sh.shape[size_t(ia)], &b = sh.shape[size_t(ib)];
     if (!pairUsesMpr(a.type, b.type)) continue;
     const Pose wa = shapeWorldPose(Pose{bodies.pos[size_t(a.body)], bodies.rot[size_t(a.body)]}, a);
