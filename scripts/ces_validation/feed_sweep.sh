@@ -22,6 +22,18 @@ HERE=$(cd "$(dirname "$0")" && pwd)
 rc=0
 LIMIT=()
 [ "${TIMEOUT_S:-0}" != 0 ] && LIMIT=(timeout -s TERM "$TIMEOUT_S")
+mkdir -p "$OUT"
+# Provenance beside the tables: commit (DVISIM_COMMIT, else the source tree's HEAD), device, date, command.
+{
+  echo "- commit: ${DVISIM_COMMIT:-$(git -C "$HERE" rev-parse --short HEAD 2>/dev/null || echo unknown)}"
+  if [ "$BACKEND" = gpu ] && command -v nvidia-smi > /dev/null; then
+    echo "- device: $(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)"
+  else
+    echo "- device: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores"
+  fi
+  echo "- date: $(date -u +%Y-%m-%dT%H:%M:%SZ)"
+  echo "- command: feed_sweep.sh $BIN $BACKEND $OUT $RATES $JOBS (SEEDS=${SEEDS:-3}, TIMEOUT_S=${TIMEOUT_S:-0})"
+} >> "$OUT/provenance.md"  # a resumed sweep adds its lines
 "${LIMIT[@]}" "$BIN" sweep --grid feed.mass_flow_g_s="$RATES" --seeds "${SEEDS:-3}" --backend "$BACKEND" --jobs "$JOBS" \
   --set drum.width_mm=30 --set feed.width_mm=28 --set feed.duration_s=0.3 --set duration_s=1.5 --no-plots \
   --out "$OUT" || rc=$?

@@ -116,11 +116,11 @@ PY
     ces) $BIN run --backend gpu --out "$LOGS/ces_default" 2>&1 | tail -25 ;;
     cesfeed)  # the feed-rate sweep of docs/CES.md (scripts/ces_validation/feed_sweep.sh; CES_FEED_RATES, CES_FEED_JOBS,
               # SEEDS) in $LOGS/ces_feed, stopped after CES_FEED_TIMEOUT s (default 420; the same call again resumes
-              # it on a warm machine); its tables (feed_table.md, summary.csv, runs.csv, sweep.json) to $OUT/ces_feed
+              # it on a warm machine); its tables (feed_table.md, summary.csv, runs.csv, sweep.json, provenance.md) to $OUT/ces_feed
       mkdir -p "$OUT/ces_feed"
       TIMEOUT_S=${CES_FEED_TIMEOUT:-420} scripts/ces_validation/feed_sweep.sh $BIN gpu "$LOGS/ces_feed" \
         "${CES_FEED_RATES:-}" "${CES_FEED_JOBS:-4}" 2>&1 | tail -40
-      cp "$LOGS"/ces_feed/{feed_table.md,summary.csv,runs.csv,sweep.json} "$OUT/ces_feed/" ;;
+      cp "$LOGS"/ces_feed/{feed_table.md,summary.csv,runs.csv,sweep.json,provenance.md} "$OUT/ces_feed/" ;;
     scaling) bench scaling --budget 5 ;;
     probe)  # unrecorded GPU timings (PROBE_SIZES, default 10k,100k,1M; PROBE_SCENES, default pile) for each APGD
             # storage in PROBE_STORAGE (default "float real") and --gpu-persistent-max in PROBE_PERSISTENT
