@@ -12,12 +12,7 @@ namespace ces {
 
 namespace {
 
-void num(std::string& o, double x) {
-  char buf[40];
-  if (!std::isfinite(x)) x = std::isnan(x) ? 0.0 : (x > 0 ? 1e308 : -1e308);
-  std::snprintf(buf, sizeof buf, "%.9g", x);
-  o += buf;
-}
+void num(std::string& o, double x) { appendNumber(o, x, 9); }
 
 }  // namespace
 
@@ -46,14 +41,7 @@ std::string cesVtpFrame(const CesMachine& m) {
   };
   auto vecArray = [&](const char* name, const std::vector<Vec3>& v) {
     o += std::string("<DataArray type=\"Float64\" Name=\"") + name + "\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-    for (size_t k = first; k < p.count(); ++k) {
-      num(o, v[k].x);
-      o += ' ';
-      num(o, v[k].y);
-      o += ' ';
-      num(o, v[k].z);
-      o += '\n';
-    }
+    for (size_t k = first; k < p.count(); ++k) appendVec3Line(o, v[k], 9);
     o += "</DataArray>\n";
   };
   const auto& specs = m.specs();
@@ -113,14 +101,7 @@ std::string cesMachineVtp(const CesMachine& m) {
   o += "<CellData Scalars=\"part\">\n<DataArray type=\"Int32\" Name=\"part\" format=\"ascii\">\n";
   for (int p : part) o += std::to_string(p) + "\n";
   o += "</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  for (const Vec3& q : pts) {
-    num(o, q.x);
-    o += ' ';
-    num(o, q.y);
-    o += ' ';
-    num(o, q.z);
-    o += '\n';
-  }
+  for (const Vec3& q : pts) appendVec3Line(o, q, 9);
   o += "</DataArray>\n</Points>\n<Polys>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
   size_t off = 0;
   std::string offsets;

@@ -84,6 +84,24 @@ void pickBest(SplitterTable& t, const SplitterBasis& basis) {
   t.targets_met = !t.cells.empty() && t.cells[t.best].meets_targets;
 }
 
+// Every splitter pair s1 <= s2 of the grid, its masses from massOf(i, j) (grid indices), and the best cell.
+template <class MassOf>
+SplitterTable splitterGrid(double lo, double hi, int n, const SplitterBasis& basis, MassOf massOf) {
+  SplitterTable t;
+  t.positions = gridPositions(lo, hi, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = i; j < n; ++j) {
+      SplitterCell cell{};
+      cell.s1 = t.positions[size_t(i)];
+      cell.s2 = t.positions[size_t(j)];
+      cell.mass = massOf(i, j, cell.s1, cell.s2);
+      finishCell(cell, basis);
+      t.cells.push_back(cell);
+    }
+  pickBest(t, basis);
+  return t;
+}
+
 }  // namespace
 
 BinMasses binDirect(const std::vector<CollectedParticle>& c, double s1, double s2) {
@@ -103,20 +121,12 @@ SplitterCell splitterCell(const std::vector<CollectedParticle>& c, double s1, do
 
 SplitterTable splittersDirect(const std::vector<CollectedParticle>& c, double lo, double hi, int n,
                               const SplitterBasis& basis) {
-  SplitterTable t;
-  t.positions = gridPositions(lo, hi, n);
-  for (int i = 0; i < n; ++i)
-    for (int j = i; j < n; ++j) {
-      t.cells.push_back(splitterCell(c, t.positions[size_t(i)], t.positions[size_t(j)], basis));
-    }
-  pickBest(t, basis);
-  return t;
+  return splitterGrid(lo, hi, n, basis, [&](int, int, double s1, double s2) { return binDirect(c, s1, s2); });
 }
 
 SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, double lo, double hi, int n,
                                   const SplitterBasis& basis) {
-  SplitterTable t;
-  t.positions = gridPositions(lo, hi, n);
+  const std::vector<double> positions = gridPositions(lo, hi, n);
   std::vector<const CollectedParticle*> sorted;
   for (const CollectedParticle& p : c) sorted.push_back(&p);
   std::stable_sort(sorted.begin(), sorted.end(),
@@ -130,28 +140,22 @@ SplitterTable splittersCumulative(const std::vector<CollectedParticle>& c, doubl
   // below[i] = prefix at the first particle with x >= positions[i] (mass with x < s).
   std::vector<std::array<int64_t, kMaterialKinds>> below(static_cast<size_t>(n));
   for (int i = 0; i < n; ++i) {
-    const double s = t.positions[size_t(i)];
+    const double s = positions[size_t(i)];
     const size_t k = size_t(std::lower_bound(sorted.begin(), sorted.end(), s,
                                              [](const CollectedParticle* p, double v) { return p->x < v; }) -
                             sorted.begin());
     below[size_t(i)] = prefix[k];
   }
   const auto& all = prefix.back();
-  for (int i = 0; i < n; ++i)
-    for (int j = i; j < n; ++j) {
-      SplitterCell cell{};
-      cell.s1 = t.positions[size_t(i)];
-      cell.s2 = t.positions[size_t(j)];
-      for (int k = 0; k < kMaterialKinds; ++k) {
-        cell.mass.fg[kBinNonconductor][size_t(k)] = below[size_t(i)][size_t(k)];
-        cell.mass.fg[kBinMiddling][size_t(k)] = below[size_t(j)][size_t(k)] - below[size_t(i)][size_t(k)];
-        cell.mass.fg[kBinConductor][size_t(k)] = all[size_t(k)] - below[size_t(j)][size_t(k)];
-      }
-      finishCell(cell, basis);
-      t.cells.push_back(cell);
+  return splitterGrid(lo, hi, n, basis, [&](int i, int j, double, double) {
+    BinMasses m;
+    for (int k = 0; k < kMaterialKinds; ++k) {
+      m.fg[kBinNonconductor][size_t(k)] = below[size_t(i)][size_t(k)];
+      m.fg[kBinMiddling][size_t(k)] = below[size_t(j)][size_t(k)] - below[size_t(i)][size_t(k)];
+      m.fg[kBinConductor][size_t(k)] = all[size_t(k)] - below[size_t(j)][size_t(k)];
     }
-  pickBest(t, basis);
-  return t;
+    return m;
+  });
 }
 
 SplitterTable splitterAnalysis(const std::vector<CollectedParticle>& c, double lo, double hi, int n,

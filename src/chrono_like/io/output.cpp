@@ -16,14 +16,23 @@
 
 namespace dvi {
 
-namespace {
-
-void appendNumber(std::string& out, double x) {
-  char buf[40];
+void appendNumber(std::string& out, double x, int digits) {
+  char buf[48];
   if (!std::isfinite(x)) x = std::isnan(x) ? 0.0 : (x > 0 ? 1e308 : -1e308);  // VTK and CSV readers want numbers
-  std::snprintf(buf, sizeof buf, "%.17g", x);
+  std::snprintf(buf, sizeof buf, "%.*g", digits, x);
   out += buf;
 }
+
+void appendVec3Line(std::string& out, const Vec3& v, int digits) {
+  appendNumber(out, v.x, digits);
+  out += ' ';
+  appendNumber(out, v.y, digits);
+  out += ' ';
+  appendNumber(out, v.z, digits);
+  out += '\n';
+}
+
+namespace {
 
 std::string xmlEscape(const std::string& s) {
   std::string o;
@@ -120,15 +129,7 @@ std::string vtpFrame(const std::vector<BodyState>& bodies, const std::vector<int
   o += "<PointData Scalars=\"size\" Vectors=\"velocity\">\n";
   auto vec3Array = [&](const char* name, auto get) {
     o += std::string("<DataArray type=\"Float64\" Name=\"") + name + "\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-    for (const BodyState& b : bodies) {
-      const Vec3 v = get(b);
-      appendNumber(o, v.x);
-      o += ' ';
-      appendNumber(o, v.y);
-      o += ' ';
-      appendNumber(o, v.z);
-      o += '\n';
-    }
+    for (const BodyState& b : bodies) { appendVec3Line(o, get(b)); }
     o += "</DataArray>\n";
   };
   o += "<DataArray type=\"Int64\" Name=\"id\" format=\"ascii\">\n";

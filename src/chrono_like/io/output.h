@@ -43,6 +43,11 @@ std::string shellQuote(const std::string& s);
 std::string pythonWithMatplotlib();
 
 // bodies.csv: header id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz, one row per body, full precision (%.17g).
+// Appends x as text with `digits` significant digits (NaN as 0 and +-inf as +-1e308: VTK and CSV readers want
+// numbers), and a vector as "x y z" and a newline.
+void appendNumber(std::string& out, double x, int digits = 17);
+void appendVec3Line(std::string& out, const Vec3& v, int digits = 17);
+
 std::string bodiesCsv(const std::vector<BodyState>& bodies);
 void writeBodiesCsv(const std::string& path, const std::vector<BodyState>& bodies);
 

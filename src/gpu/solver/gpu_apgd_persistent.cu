@@ -288,11 +288,7 @@ bool apgdPersistent(DeviceState& d, int64_t n, const ApgdBuffers<V>& B, int grid
   if (grid_max < 1) return false;
   using JT = JacobianOf<V>;
   SolverScratch& S = d.solver;
-  const JT* jac = nullptr;
-  if constexpr (std::is_same_v<JT, ContactJacobian>)
-    jac = S.jac.data();
-  else
-    jac = S.jacf.data();
+  const JT* jac = contactJacobians<JT>(S);
   PersistentApgd<V, JT> p{};
   p.B = B;
   p.g = gatherOf<JT>(d, jac, nullptr, nullptr);

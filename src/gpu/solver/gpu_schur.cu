@@ -83,11 +83,7 @@ template <class V>
 void schur(DeviceState& d, const real* x, V* y, const real* const* x_slot, V* const* y_slot, const real* add) {
   using JT = std::conditional_t<std::is_same_v<V, real>, ContactJacobian, ContactJacobianF>;
   SolverScratch& S = d.solver;
-  const JT* jac = nullptr;
-  if constexpr (std::is_same_v<JT, ContactJacobian>)
-    jac = S.jac.data();
-  else
-    jac = S.jacf.data();
+  const JT* jac = contactJacobians<JT>(S);
   const int64_t nc = int64_t(d.contacts.count);
   const SchurOut<V> out{y, y_slot, add};
   gather<JT>(d, x, "launch of GatherF (Schur pass a)", x_slot, jac);

@@ -173,6 +173,15 @@ struct RowSchurF {  // y of every constraint row (pass (b) for the row blocks)
   }
 };
 
+// The contacts' Jacobians as JT: S.jac (ContactJacobian) or its float copy S.jacf (ContactJacobianF).
+template <class JT>
+const JT* contactJacobians(const SolverScratch& S) {
+  if constexpr (std::is_same_v<JT, ContactJacobian>)
+    return S.jac.data();
+  else
+    return S.jacf.data();
+}
+
 inline EntryLayout layoutOf(const DeviceState& d) {
   return EntryLayout{int64_t(d.contacts.count), d.contact_blocks, d.normal_only};
 }
