@@ -758,6 +758,40 @@ TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors
 // The CES machine on the GPU: field, charging and classification as device kernels (CesDevice)
 // ---------------------------------------------------------------------------------------------------
 
+TEST_CASE("CES machine: two touching metal spheres in flight share their charge as their radii; a plastic keeps its",
+          "[ces][ces_machine]") {
+  // No field (supply off), no feed. Copper spheres of radii 0.5 and 0.25 mm, just touching (1e-7 m), below the
+  // drum; after one step q1 + q2 is split as r1 : r2 (equal potentials, charging.h: contactChargeFlux). A copper
+  // sphere touching a plastic one moves h / 2214 s of the way: nothing measurable.
+  const CesConfig cfg = configWith(
+      {"feed.mass_flow_g_s=0", "electrode.voltage_kV=0", "electrode.wire.enabled=false", "field.model=two_cylinder"});
+  SystemConfig sc;
+  sc.step.dt = real(cfg.step.dt);
+  System sys(sc);
+  CesMachine m(cfg, sys);
+  SplitMix64 rng;
+  const double r1 = 0.5e-3, r2 = 0.25e-3;
+  const ParticleSpec s1 = makeParticleSpec(0, ParticleShape::Sphere, 2 * r1, 8900, rng);
+  const ParticleSpec s2 = makeParticleSpec(0, ParticleShape::Sphere, 2 * r2, 8900, rng);
+  const ParticleSpec sp = makeParticleSpec(1, ParticleShape::Sphere, 2 * r2, 946, rng);
+  const Vec3 p1{0, real(-0.25), 0}, p2{real(r1 + r2 - 1e-7), real(-0.25), 0};
+  const Vec3 p3{0, real(-0.25), real(0.05)}, p4{real(r1 + r2 - 1e-7), real(-0.25), real(0.05)};
+  const real q0 = real(2e-12);
+  const int a = m.addParticle(s1, p1, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0}, q0);
+  const int b = m.addParticle(s2, p2, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0}, 0);
+  const int c = m.addParticle(s1, p3, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0}, q0);
+  const int d = m.addParticle(sp, p4, Quat{1, 0, 0, 0}, Vec3{0, 0, 0}, Vec3{0, 0, 0}, 0);
+  m.step();
+  const auto& q = m.particles().charge;
+  const double ra = double(m.particles().radius[size_t(a)]), rb = double(m.particles().radius[size_t(b)]);
+  CHECK(ra == Approx(r1).epsilon(1e-12));
+  CHECK(double(q[size_t(a)]) == Approx(double(q0) * ra / (ra + rb)).epsilon(1e-12));
+  CHECK(double(q[size_t(b)]) == Approx(double(q0) * rb / (ra + rb)).epsilon(1e-12));
+  CHECK(double(q[size_t(a)] + q[size_t(b)]) == Approx(double(q0)).epsilon(1e-14));
+  CHECK(std::fabs(double(q[size_t(d)])) < 1e-6 * double(q0));
+  CHECK(double(q[size_t(c)]) == Approx(double(q0)).epsilon(1e-6));
+}
+
 namespace {
 std::unique_ptr<System> cesSystem(const CesConfig& cfg, bool gpu) {
   SystemConfig sc;

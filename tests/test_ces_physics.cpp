@@ -592,3 +592,63 @@ TEST_CASE("CES rolling resistance: mu_r r F_n against the relative rolling, limi
   CHECK(length(drumRollingTorque(g, p, none, Vec3{0, 0, -50}, none, none, grav, real(m), real(r), real(I), 0,
                                  real(h))) == 0);
 }
+
+TEST_CASE("CES charge exchange on contact: equal potentials, the pair's relaxation, charge kept, no overshoot",
+          "[ces][charging]") {
+  const real h = real(2e-4);
+  // Two metals (tau = 0) share at once until q/r is equal: r 1 and 3, charges 1 and 0 -> 1/4 and 3/4.
+  CHECK(double(contactChargeFlux(1, 0, 1, 3, 0, 0, h, 1)) == Approx(0.75).epsilon(1e-14));
+  // Equal spheres split evenly, whatever the signs.
+  CHECK(double(contactChargeFlux(2, -4, 1, 1, 0, 0, h, 1)) == Approx(3.0).epsilon(1e-14));
+  // tau_i + tau_j = h / ln 2: half of the way in one step.
+  const real tau = h / real(std::log(2.0));
+  CHECK(double(contactChargeFlux(1, 0, 1, 1, tau / 2, tau / 2, h, 1)) == Approx(0.25).epsilon(1e-12));
+  // A metal against an insulator (tau 2214 s): h / tau of the way, i.e. practically nothing.
+  CHECK(std::fabs(double(contactChargeFlux(1, 0, 1, 1, 0, 2214, h, 1))) < 1e-7);
+  // Equal potentials already: nothing moves.
+  CHECK(double(contactChargeFlux(2, 6, 1, 3, 0, 0, h, 1)) == Approx(0.0).margin(1e-15));
+
+  // A chain of three metals a-b-c (b has two partners): one Jacobi sweep keeps the total charge and moves no body
+  // past its partners' potentials (q/r between the smallest and the largest before).
+  const real r[3] = {real(0.4e-3), real(0.25e-3), real(0.5e-3)};
+  const real q[3] = {real(3e-12), real(-1e-12), real(0.5e-12)};
+  const int32_t partners[3] = {1, 2, 1};
+  ParticleElectro pe[3];
+  for (ParticleElectro& e : pe) e.tau = 0;
+  const int32_t body_a[2] = {0, 1}, body_b[2] = {1, 2};
+  real dq[3] = {0, 0, 0};
+  for (int k = 0; k < 2; ++k) {
+    const real f = exchangeFlux(pe, r, q, partners, body_a[k], body_b[k], h);
+    dq[body_a[k]] -= f;
+    dq[body_b[k]] += f;
+  }
+  double before = 0, after = 0, vmin = 1e300, vmax = -1e300;
+  for (int i = 0; i < 3; ++i) {
+    before += double(q[i]);
+    after += double(q[i] + dq[i]);
+    vmin = std::min(vmin, double(q[i] / r[i]));
+    vmax = std::max(vmax, double(q[i] / r[i]));
+  }
+  CHECK(after == Approx(before).epsilon(1e-14));
+  for (int i = 0; i < 3; ++i) {
+    const double v = double((q[i] + dq[i]) / r[i]);
+    CHECK(v >= vmin * (1 + 1e-12) - 1e-30);
+    CHECK(v <= vmax * (1 + 1e-12) + 1e-30);
+  }
+  // The spread of the potentials shrinks.
+  double wmin = 1e300, wmax = -1e300;
+  for (int i = 0; i < 3; ++i) {
+    wmin = std::min(wmin, double((q[i] + dq[i]) / r[i]));
+    wmax = std::max(wmax, double((q[i] + dq[i]) / r[i]));
+  }
+  CHECK(wmax - wmin < 0.6 * (vmax - vmin));
+}
+
+TEST_CASE("CES charge exchange: a pair counts once, at its first touching point", "[ces][charging]") {
+  // Contacts: pair (1,2) with three points (the first apart, the second and third touching), pair (1,3) apart,
+  // pair (2,4) with one touching point.
+  const int32_t a[5] = {1, 1, 1, 1, 2}, b[5] = {2, 2, 2, 3, 4};
+  const real dist[5] = {real(1e-6), real(-1e-7), real(-2e-7), real(5e-7), real(0)};
+  const bool expect[5] = {false, true, false, false, true};
+  for (int k = 0; k < 5; ++k) CHECK(firstTouchingPointOfPair(a, b, dist, k) == expect[k]);
+}

@@ -15,6 +15,40 @@ namespace {
 
 constexpr int kThreads = 256;
 
+// The particles' charge exchange on contact (CesMachine::exchangeContactCharges' two passes): partner counts,
+// then each pair's flux from the charges before the exchange, summed per particle, then added.
+__global__ void exchangeHeldKernel(int64_t nc, const uint8_t* status, const int32_t* a, const int32_t* b,
+                                   const real* dist, uint8_t* held) {
+  const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (k >= nc) return;
+  const int32_t i = heldParticle(status, a, b, dist, k);
+  if (i >= 0) held[i] = 1;  // every writer stores 1
+}
+
+__global__ void exchangeCountKernel(int64_t nc, const uint8_t* status, const uint8_t* held, const int32_t* a,
+                                    const int32_t* b, const real* dist, int32_t* partners) {
+  const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (k >= nc || !exchangesCharge(status, held, a, b, dist, k)) return;
+  atomicAdd(partners + a[k], 1);
+  atomicAdd(partners + b[k], 1);
+}
+
+__global__ void exchangeFluxKernel(int64_t nc, const uint8_t* status, const uint8_t* held, const int32_t* a,
+                                   const int32_t* b, const real* dist, const int32_t* partners,
+                                   const ParticleElectro* electro, const real* radius, const real* charge, real h,
+                                   real* dq) {
+  const int64_t k = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (k >= nc || !exchangesCharge(status, held, a, b, dist, k)) return;
+  const real f = exchangeFlux(electro, radius, charge, partners, a[k], b[k], h);
+  atomicAdd(dq + a[k], -f);
+  atomicAdd(dq + b[k], f);
+}
+
+__global__ void addChargeKernel(int64_t n, const real* dq, real* charge) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i < n) charge[i] += dq[i];
+}
+
 int blocks(int64_t n) { return int((n + kThreads - 1) / kThreads); }
 
 __global__ void forceKernel(int64_t n, const CesModel* m, real h, const uint8_t* status, const ParticleElectro* electro,
@@ -122,6 +156,30 @@ class CudaCesDevice final : public CesDevice {
     std::sort(changed.begin(), changed.end());  // the atomic order is arbitrary; the host's is by body
   }
 
+  void exchangeCharges(const DeviceContactRefs& c, real h) override {
+    const int64_t n = int64_t(count_);
+    if (n == 0 || c.count == 0) return;
+    cudaStream_t s = static_cast<cudaStream_t>(c.stream);
+    held_.resize(size_t(n));
+    partners_.resize(size_t(n));
+    dq_.resize(size_t(n));
+    DVI_CUDA(cudaMemsetAsync(held_.data(), 0, sizeof(uint8_t) * size_t(n), s));
+    DVI_CUDA(cudaMemsetAsync(partners_.data(), 0, sizeof(int32_t) * size_t(n), s));
+    DVI_CUDA(cudaMemsetAsync(dq_.data(), 0, sizeof(real) * size_t(n), s));
+    exchangeHeldKernel<<<blocks(c.count), kThreads, 0, s>>>(c.count, status_.data(), c.body_a, c.body_b, c.dist,
+                                                            held_.data());
+    DVI_CUDA_LAUNCH("CES exchangeHeldKernel");
+    exchangeCountKernel<<<blocks(c.count), kThreads, 0, s>>>(c.count, status_.data(), held_.data(), c.body_a, c.body_b,
+                                                             c.dist, partners_.data());
+    DVI_CUDA_LAUNCH("CES exchangeCountKernel");
+    exchangeFluxKernel<<<blocks(c.count), kThreads, 0, s>>>(c.count, status_.data(), held_.data(), c.body_a, c.body_b,
+                                                            c.dist, partners_.data(), electro_.data(), radius_.data(),
+                                                            charge_.data(), h, dq_.data());
+    DVI_CUDA_LAUNCH("CES exchangeFluxKernel");
+    addChargeKernel<<<blocks(n), kThreads, 0, s>>>(n, dq_.data(), charge_.data());
+    DVI_CUDA_LAUNCH("CES addChargeKernel");
+  }
+
   void downloadCharges(std::vector<real>& charge) override { charge_.download(charge, count_, 0); }
   void downloadFlags(std::vector<uint8_t>& flags) override { pflags_.download(flags, count_, 0); }
 
@@ -144,6 +202,9 @@ class CudaCesDevice final : public CesDevice {
   gpu::DeviceBuffer<real> mass_{"CES particle mass"}, moment_{"CES particle moment"};
   gpu::DeviceBuffer<int32_t> changed_{"CES changed particles"}, n_changed_{"CES changed count"};
   gpu::DeviceBuffer<uint8_t> changed_status_{"CES changed status"};
+  gpu::DeviceBuffer<uint8_t> held_{"CES particles held by a part"};
+  gpu::DeviceBuffer<int32_t> partners_{"CES exchange partners"};
+  gpu::DeviceBuffer<real> dq_{"CES exchanged charge"};
   size_t count_ = 0;
 };
 

@@ -29,6 +29,9 @@ class CesDevice {
   // Charge update and classification of every in-flight particle after a step of h; the device's status
   // follows. changed: the particles whose status changed (body, new status), in body order.
   virtual void postStep(const DeviceBodyRefs& b, real h, std::vector<std::pair<int32_t, uint8_t>>& changed) = 0;
+  // Touching in-flight particles share their charge after a step of h (particle_model.h: exchangeFlux), on the
+  // system's device contacts.
+  virtual void exchangeCharges(const DeviceContactRefs& c, real h) = 0;
   virtual void downloadCharges(std::vector<real>& charge) = 0;  // resized to the uploaded count
   virtual void downloadFlags(std::vector<uint8_t>& flags) = 0;  // ParticleFlag bits, resized likewise
   virtual void setCharge(int32_t body, real q) = 0;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 
 #include "ces/ces_constants.h"
 #include "chrono_like/base/math.h"
@@ -161,6 +162,35 @@ DVI_HD real surfaceRelaxationTime(real tau_bulk, real sigma_s, real r, real eps_
   const real rate =
       real(2) * sigma_s / (r * kEps0 * eps_r) + (tau_bulk > real(0) ? real(1) / tau_bulk : real(INFINITY));
   return real(1) / rate;
+}
+
+// Charge exchange between two touching particles i and j. Through their contact the two bodies come to one
+// potential: charge moves until q_i / C_i = q_j / C_j. The capacitances are those of isolated spheres of the
+// volume-equivalent radii, C = 4 pi eps0 r (J. D. Jackson, Classical Electrodynamics, 3rd ed., 1999, sec. 1.13),
+// so only r_i / r_j enters; for two equal touching spheres the even split is exact by symmetry. The charge flows
+// through the two bodies' resistances in series, so the pair relaxes with tau_ij = tau_i + tau_j, each body's
+// tau = eps / sigma its charge relaxation time (Haus & Melcher, Electromagnetic Fields and Energy, sec. 7.7):
+// two metals (tau = 0) share at once, a metal and an insulator (tau = 2214 s) in practice not at all. The
+// charge passed from i to j over a step h:
+//     f = (1 - exp(-h / tau_ij)) (r_j q_i - r_i q_j) / (r_i + r_j) / m_ij,
+// with m_ij = max(n_i, n_j), the larger count of touching partners of the two. Every contact is evaluated from
+// the charges at the start of the exchange (one Jacobi sweep): each body moves at most 1/n_i of the way towards
+// each partner's potential, so none overshoots, and f leaves i as it reaches j, so the total charge is kept
+// exactly.
+DVI_HD real contactChargeFlux(real qi, real qj, real ri, real rj, real tau_i, real tau_j, real h, int32_t m_ij) {
+  const real tau = tau_i + tau_j;
+  const real share = tau > real(0) ? real(1) - std::exp(-h / tau) : real(1);
+  const real m = real(m_ij > 1 ? m_ij : 1);
+  return share * (rj * qi - ri * qj) / ((ri + rj) * m);
+}
+
+// The contact points k that stand for a touching pair of bodies in the exchange above: the first point of its
+// pair (the points of one pair are adjacent in both backends' contact lists) at a distance <= 0.
+DVI_HD bool firstTouchingPointOfPair(const int32_t* body_a, const int32_t* body_b, const real* dist, int64_t k) {
+  if (!(dist[k] <= real(0))) return false;
+  for (int64_t j = k - 1; j >= 0 && body_a[j] == body_a[k] && body_b[j] == body_b[k]; --j)
+    if (dist[j] <= real(0)) return false;
+  return true;
 }
 
 }  // namespace ces

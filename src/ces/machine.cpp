@@ -580,6 +580,8 @@ void CesMachine::postStepDevice() {
   sys_.deviceBodies(refs);
   std::vector<std::pair<int32_t, uint8_t>> changed;
   dev_->postStep(refs, real(cfg_.step.dt), changed);
+  DeviceContactRefs contacts;
+  if (sys_.deviceContacts(contacts)) dev_->exchangeCharges(contacts, real(cfg_.step.dt));
   if (changed.empty()) return;
   std::vector<int32_t> ids;
   ids.reserve(changed.size());
@@ -627,6 +629,34 @@ void CesMachine::postStep() {
   }
   for (int64_t i = n_machine_; i < n; ++i)
     if (next[size_t(i)] != p_.status[size_t(i)]) settle(size_t(i), next[size_t(i)]);
+  exchangeContactCharges(h);
+}
+
+void CesMachine::exchangeContactCharges(real h) {
+  const ContactArrays& c = sys_.contacts();
+  const int64_t nc = int64_t(c.count());
+  std::vector<uint8_t> held(p_.count(), 0);
+  for (int64_t k = 0; k < nc; ++k) {
+    const int32_t i = heldParticle(p_.status.data(), c.body_a.data(), c.body_b.data(), c.dist.data(), k);
+    if (i >= 0) held[size_t(i)] = 1;
+  }
+  std::vector<int32_t> partners(p_.count(), 0);
+  std::vector<int64_t> pairs;
+  for (int64_t k = 0; k < nc; ++k)
+    if (exchangesCharge(p_.status.data(), held.data(), c.body_a.data(), c.body_b.data(), c.dist.data(), k)) {
+      pairs.push_back(k);
+      ++partners[size_t(c.body_a[size_t(k)])];
+      ++partners[size_t(c.body_b[size_t(k)])];
+    }
+  if (pairs.empty()) return;
+  std::vector<real> dq(p_.count(), real(0));
+  for (const int64_t k : pairs) {
+    const int32_t a = c.body_a[size_t(k)], b = c.body_b[size_t(k)];
+    const real f = exchangeFlux(p_.electro.data(), p_.radius.data(), p_.charge.data(), partners.data(), a, b, h);
+    dq[size_t(a)] -= f;
+    dq[size_t(b)] += f;
+  }
+  for (size_t i = 0; i < dq.size(); ++i) p_.charge[i] += dq[i];
 }
 
 void CesMachine::settle(size_t k, uint8_t next) {

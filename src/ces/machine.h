@@ -227,6 +227,8 @@ class CesMachine {
   int addBody(const BodyDesc& d, int material, const ParticleSpec* spec, real charge);
   void emit();
   void postStep();
+  // Touching in-flight particles share their charge (particle_model.h: exchangeFlux), on the host's contacts.
+  void exchangeContactCharges(real h);
   void applyForcesOnHost();
   void stepDevice();
   void postStepDevice();

@@ -239,5 +239,30 @@ DVI_HD uint8_t cesClassify(const CesModel& m, Vec3 p) {
   return kStatusInFlight;
 }
 
+// Charge exchange between touching in-flight particles after a step (charging.h: contactChargeFlux), in three
+// passes over the step's contacts, the same on both backends: the particles a machine part holds (heldParticle:
+// touching the drum, an electrode, the brush or a wall, whose charge the relaxations of cesChargeUpdate set: their
+// potential is the part's, not q / C), the partner counts n of the others (exchangesCharge), then each pair's flux
+// from the charges before the exchange (exchangeFlux: minus to body a, plus to body b).
+DVI_HD int32_t heldParticle(const uint8_t* status, const int32_t* body_a, const int32_t* body_b, const real* dist,
+                            int64_t k) {
+  if (!(dist[k] <= real(0))) return -1;
+  const int32_t a = body_a[k], b = body_b[k];
+  if (status[a] == kStatusMachine && status[b] == kStatusInFlight) return b;
+  if (status[b] == kStatusMachine && status[a] == kStatusInFlight) return a;
+  return -1;
+}
+DVI_HD bool exchangesCharge(const uint8_t* status, const uint8_t* held, const int32_t* body_a, const int32_t* body_b,
+                            const real* dist, int64_t k) {
+  const int32_t a = body_a[k], b = body_b[k];
+  return status[a] == kStatusInFlight && status[b] == kStatusInFlight && !held[a] && !held[b] &&
+         firstTouchingPointOfPair(body_a, body_b, dist, k);
+}
+DVI_HD real exchangeFlux(const ParticleElectro* pe, const real* radius, const real* charge, const int32_t* partners,
+                         int32_t a, int32_t b, real h) {
+  const int32_t m = partners[a] > partners[b] ? partners[a] : partners[b];
+  return contactChargeFlux(charge[a], charge[b], radius[a], radius[b], pe[a].tau, pe[b].tau, h, m);
+}
+
 }  // namespace ces
 }  // namespace dvi

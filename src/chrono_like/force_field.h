@@ -24,6 +24,16 @@ struct DeviceBodyRefs {
   void* stream = nullptr;
 };
 
+// A device backend's contacts of the last step (device pointers, one per contact point, the points of a pair
+// adjacent), for plug-ins with device code that act on touching bodies.
+struct DeviceContactRefs {
+  const int32_t* body_a = nullptr;
+  const int32_t* body_b = nullptr;
+  const real* dist = nullptr;  // signed distance (negative = penetration)
+  int64_t count = 0;
+  void* stream = nullptr;
+};
+
 // Adds forces and torques (world frame, N and N m, acting at the centre of mass) to every body it
 // models. Called once per step in IntegrateForces, before the velocities are updated, with the step's context
 // (step.t: the time at the start of the step; step.dt: h).

@@ -311,6 +311,8 @@ class System {
   virtual void markBodyParamsDirty(const std::vector<int32_t>& /*ids*/) {}
   // A device backend's body arrays (force_field.h), for plug-ins with device code; false on the CPU.
   virtual bool deviceBodies(DeviceBodyRefs& /*out*/) { return false; }
+  // The same for the last step's contacts; false on the CPU (contacts() holds them there).
+  virtual bool deviceContacts(DeviceContactRefs& /*out*/) { return false; }
 
   // Plug-ins (force_field.h, solver/constraint_row.h). Force fields run in IntegrateForces in the order added; row
   // providers add their constraint rows to the CCP of every step (solved with the contacts, stage BuildRows/Solve).

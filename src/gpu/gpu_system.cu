@@ -480,6 +480,16 @@ bool GpuSystem::deviceBodies(DeviceBodyRefs& out) {
   return true;
 }
 
+bool GpuSystem::deviceContacts(DeviceContactRefs& out) {
+  DeviceContacts& c = d_->contacts;
+  out.body_a = c.body_a.data();
+  out.body_b = c.body_b.data();
+  out.dist = c.dist.data();
+  out.count = int64_t(c.count);
+  out.stream = d_->stream;
+  return true;
+}
+
 namespace {
 void checkIds(const std::vector<int32_t>& ids, size_t count, const char* what) {
   for (int32_t i : ids)

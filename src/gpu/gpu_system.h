@@ -66,6 +66,7 @@ class GpuSystem : public System {
   // A few bodies' inv_mass, inv_inertia, force, torque, gravity, friction and restitution (one scatter kernel).
   void markBodyParamsDirty(const std::vector<int32_t>& ids) override;
   bool deviceBodies(DeviceBodyRefs& out) override;
+  bool deviceContacts(DeviceContactRefs& out) override;
 
   // On the device arrays (one selection kernel, the selected elements read back).
   void motionBounds(real& vmax, real& wmax) const override;
