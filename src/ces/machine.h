@@ -22,15 +22,16 @@
 //      drum and the brush, the particles that change status). A device backend without the CES kernels
 //      gets the old path: all bodies synced to the host, the field applied there by the System's host plug-in
 //      path (with the System's StepContext, as every ForceField), the host marked dirty.
-// The step: the constructor writes the configuration's step (ces.time_step_s, CesConfig::step.dt) into the
-// System's (SystemConfig::step.dt); from then on the machine reads it from the System only: the step's context
-// (System::stepContext) after a step, the System's configuration for the step about to run and for the clock.
 //   4. Post-step (CesParticles; on the device with CesDevice): charge update (ions, drum contact, electrode
 //      contact, brush), the pinned flag, and status:
 //      a particle whose centre crosses the collection plane is collected: its crossing point is recorded
 //      and the body is frozen (kBodyFixed, zero velocity) 5 cm below the plane, in the "bin"; one that leaves
 //      the domain is lost (frozen where it is). Bodies are never removed: the body count only grows, and
 //      fed = collected + in flight + held up + lost holds exactly (masses in whole femtograms).
+//
+// The step: the constructor writes the configuration's step (ces.time_step_s, CesConfig::step.dt) into the
+// System's (SystemConfig::step.dt); from then on the machine reads it from the System only: the step's context
+// (System::stepContext) after a step, the System's configuration for the step about to run and for the clock.
 //
 // Per-particle state lives here, in arrays indexed by body (machine parts included, status kStatusMachine).
 #pragma once
