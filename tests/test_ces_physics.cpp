@@ -5,6 +5,7 @@
 #include <cmath>
 #include <vector>
 
+#include "ces/ces_config.h"
 #include "ces/ces_constants.h"
 #include "ces/charging.h"
 #include "ces/field/field_csm.h"
@@ -538,12 +539,23 @@ TEST_CASE("CES brush: the bristles' sweep relaxes the velocity exactly over a st
   CHECK(cesChargeUpdate(md, 1, Vec3{0.4, 0, 0}, real(-4e-12), real(r), real(r), real(h), flags) == real(-4e-12));
 }
 
+// The configuration's defaults are the machine of docs/CES.md (drum 320 x 300 mm at 44.8 rpm, the 38 mm tube at
+// 230 mm, brush 106 mm, h = 2e-4 s) and the default document (scenes/ces_default.json) says the same.
 TEST_CASE("CES default machine parameters", "[ces]") {
-  const CesMachineParams m;
+  const CesConfig m;
   CHECK(m.drumRadius() == Approx(0.16));
-  CHECK(m.electrodeRadius() == Approx(0.019));
-  CHECK(m.brushRadius() == Approx(0.053));
-  CHECK(m.drumOmega() == Approx(44.8 * 2 * M_PI / 60));  // 4.6914 rad/s
+  CHECK(m.drum_width == Approx(0.300));
+  CHECK(m.tube.diameter / 2 == Approx(0.019));
+  CHECK(m.tube.distance == Approx(0.230));
+  CHECK(m.brush_diameter / 2 == Approx(0.053));
+  CHECK(m.omegaDrum() == Approx(-44.8 * 2 * M_PI / 60));  // 4.6914 rad/s, clockwise seen from +z
+  CHECK(m.step.dt == 2e-4);
+  CHECK(defaultMaterial(MaterialKind::Metal).density_max == 8900);
+  CHECK(std::isinf(defaultMaterial(MaterialKind::Plastic).relaxation_time));
+  const CesConfig doc = parseCesDocument(nlohmann::json::parse(defaultCesJson()), {}, "default");
+  CHECK(doc.drum_diameter == Approx(m.drum_diameter));
+  CHECK(doc.tube.distance == Approx(m.tube.distance));
+  CHECK(doc.step.dt == m.step.dt);
   CHECK(kEps0 == 8.8541878128e-12);
 }
 

@@ -534,11 +534,9 @@ class StudySystem : public System {
       b.inv_inertia[i] = b.inv_inertia[i] * m;
     }
     ContactProblemSettings ps;
-    ps.dt = real(config_.step.dt);
-    ps.solver = config_.solver;
     ps.threads = 1;
     auto sp = std::make_shared<ContactProblem>();
-    sp->build(b, contacts_, v_free_.data(), w_free_.data(), ps);
+    sp->build(b, contacts_, v_free_.data(), w_free_.data(), stepContext(), config_.solver, ps);
     return sp;
   }
   void capture() {

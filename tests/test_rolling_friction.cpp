@@ -268,10 +268,9 @@ TEST_CASE("rolling friction: Jacobi, Gauss-Seidel, APGD and BB reach the same op
     rolling[size_t(2 * k)] = k % 4 == 0 ? real(0) : real(0.004);  // some contacts without spinning friction
     rolling[size_t(2 * k + 1)] = k % 5 == 0 ? real(0) : real(0.008);
   }
-  ContactProblemSettings ps;
-  ps.dt = real(cfg.step.dt);
   ContactProblem p;
-  p.build(B, C, vf.data(), wf.data(), ps, nullptr, rolling.data());
+  p.build(B, C, vf.data(), wf.data(), makeStepContext(real(cfg.step.dt)), cfg.solver, ContactProblemSettings{}, nullptr,
+          rolling.data());
   REQUIRE(p.rollingBlocks() > nc / 2);
   auto objective = [&](const std::vector<real>& g) {
     std::vector<real> Ng(g.size());

@@ -23,6 +23,8 @@ struct Scene {
   BodyArrays bodies;
   ContactArrays contacts;
   std::vector<Vec3> vf, wf;
+  StepContext step = makeStepContext(real(1e-3));  // the step the problem is built for (build's argument)
+  SolverSettings solver;                           // recovery_rel, min_bounce_speed
   ContactProblemSettings ps;
 };
 
@@ -91,14 +93,14 @@ Scene randomScene(uint64_t seed, int nb, int nc, bool local_pairs = false) {
     const Vec3 pa = pb - n * (0.001 * U(rng));
     addContact(s, a, b, n, pa, pb, real(U(rng) < 0.15 ? 0.0 : 0.8 * U(rng)));
   }
-  s.ps.dt = 1e-2;
-  s.ps.solver.recovery_rel = 1;
+  s.step = makeStepContext(real(1e-2));
+  s.solver.recovery_rel = 1;
   s.ps.threads = 1;
   return s;
 }
 
 refsolver::DenseCcp dense(const Scene& s) {
-  return refsolver::denseFromScene(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps.dt, s.ps.solver.recovery_rel);
+  return refsolver::denseFromScene(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step.dt, s.solver.recovery_rel);
 }
 
 double maxAbsDiff(const real* a, const real* b, size_t n) {
@@ -198,7 +200,7 @@ TEST_CASE("cone projection: Moreau decomposition, idempotence, special cases", "
 TEST_CASE("contact problem operators equal the dense D^T M^-1 D", "[solver]") {
   Scene s = randomScene(11, 7, 15);
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   const refsolver::DenseCcp P = dense(s);
   REQUIRE(cp.size() == P.n);
   const double scaleN = maxAbs(P.N);
@@ -396,7 +398,7 @@ TEST_CASE("every solver reaches the dense reference on random contact scenes", "
   // 8 contacts on 5 free bodies: D has full column rank, the solution is unique
   Scene s = randomScene(21, 6, 8);
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   checkAgainstReference(cp, dense(s), true, true, "random scene, unique");
 }
 
@@ -410,7 +412,7 @@ TEST_CASE("Gauss-Seidel's kept velocity changes equal a fresh gather, and unbuil
   s.ps.jacobi_steps = false;
   s.ps.block_inverses = false;
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   CHECK_THROWS_AS(cp.jacobiSteps(), std::logic_error);
   CHECK_THROWS_AS(cp.blockInverses(), std::logic_error);
   SolverSettings st;
@@ -435,7 +437,7 @@ TEST_CASE("Gauss-Seidel's kept velocity changes equal a fresh gather, and unbuil
   // The same problem built with them hands them out, each step positive and finite.
   s.ps.jacobi_steps = s.ps.block_inverses = true;
   ContactProblem full;
-  full.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  full.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   for (int k = 0; k < full.size() / 3; ++k) CHECK((full.jacobiSteps()[k] > 0 && std::isfinite(full.jacobiSteps()[k])));
   CHECK_NOTHROW(full.blockInverses());
 }
@@ -447,7 +449,7 @@ TEST_CASE("APGD with float storage reaches the dense reference to float precisio
   if (sizeof(real) == sizeof(float)) return;  // a float build stores real = float anyway
   Scene sc = randomScene(21, 6, 8);
   ContactProblem cp;
-  cp.build(sc.bodies, sc.contacts, sc.vf.data(), sc.wf.data(), sc.ps);
+  cp.build(sc.bodies, sc.contacts, sc.vf.data(), sc.wf.data(), sc.step, sc.solver, sc.ps);
   const refsolver::DenseCcp P = dense(sc);
   const std::vector<double> ref = refsolver::solve(P);
   REQUIRE(refsolver::kktViolation(P, ref) < 1e-9);
@@ -485,7 +487,7 @@ TEST_CASE("APGD with float storage reaches the dense reference to float precisio
 TEST_CASE("APGD's speculated steps give bitwise the iterates of the plain loop", "[solver]") {
   Scene sc = randomScene(21, 6, 8);
   ContactProblem cp;
-  cp.build(sc.bodies, sc.contacts, sc.vf.data(), sc.wf.data(), sc.ps);
+  cp.build(sc.bodies, sc.contacts, sc.vf.data(), sc.wf.data(), sc.step, sc.solver, sc.ps);
   const ApgdSpeculation kinds[4] = {ApgdSpeculation::None, ApgdSpeculation::Accepted, ApgdSpeculation::Both,
                                     ApgdSpeculation::Auto};
   for (const VectorStorage storage : {VectorStorage::Real, VectorStorage::Float}) {
@@ -542,9 +544,9 @@ TEST_CASE("box resting on the ground with four contacts", "[solver]") {
       const Vec3 p = c + rotate(q, Vec3{sx * half.x, -half.y, sz * half.z});
       addContact(s, 0, 1, {0, 1, 0}, {p.x, 0, p.z}, p, 0.5, 0.25);
     }
-  s.ps.dt = h;
+  s.step = makeStepContext(real(h));
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   const refsolver::DenseCcp P = dense(s);
   checkAgainstReference(cp, P, false, true, "box on 4 contacts");
   for (SolverType t : kAll) {
@@ -574,7 +576,7 @@ Scene sphereOnGround(real m, real R, real mu, Vec3 v_free) {
   addBody(s, {0, R, 0}, quatIdentity(), m, {I, I, I});
   s.vf[1] = v_free;
   addContact(s, 0, 1, {0, 1, 0}, {0, 0, 0}, {0, 0, 0}, mu, R);
-  s.ps.dt = 1e-3;
+  s.step = makeStepContext(real(1e-3));
   return s;
 }
 }  // namespace
@@ -584,7 +586,7 @@ TEST_CASE("sphere at rest on the ground: normal impulse m g h", "[solver]") {
   for (real mu : {real(0), real(0.4)}) {
     Scene s = sphereOnGround(m, R, mu, {0, -g * h, 0});
     ContactProblem cp;
-    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
     for (SolverType t : kAll) {
       INFO(solverName(t) << " mu " << mu);
       std::vector<real> gam(3, 0);
@@ -609,7 +611,7 @@ TEST_CASE("sphere sliding and sticking on the ground: CCP friction impulse", "[s
     const real vt = 0.2;
     Scene s = sphereOnGround(m, R, mu, {vt, -g * h, 0});
     ContactProblem cp;
-    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
     const real gn = (g * h + mu * vt) / (1 / m + mu * mu * Ntt);
     REQUIRE(vt > Ntt * mu * gn);
     // the contact's u tangent is tangentBasis((0,1,0)); express the expected friction in it
@@ -629,7 +631,7 @@ TEST_CASE("sphere sliding and sticking on the ground: CCP friction impulse", "[s
     const real vt = 0.5 * Ntt * mu * m * g * h;
     Scene s = sphereOnGround(m, R, mu, {0, -g * h, vt});
     ContactProblem cp;
-    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
     Vec3 u, w;
     tangentBasis({0, 1, 0}, u, w);
     for (SolverType t : kAll) {
@@ -657,7 +659,7 @@ TEST_CASE("warm start at the solution stays there, Inverse3x3 scaling converges 
     addContact(s, b - 1, b, {0, 1, 0}, p, p, 0.0, R);
   }
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   for (SolverType t : {SolverType::Jacobi, SolverType::GaussSeidel}) {
     INFO(solverName(t));
     SolverSettings st = tightSettings(t);
@@ -684,9 +686,9 @@ TEST_CASE("solvers are bitwise identical with 1 and 2 threads", "[solver]") {
   Scene s = randomScene(99, 4000, 6000, true);
   s.ps.threads = 1;
   ContactProblem p1, p2;
-  p1.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  p1.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   s.ps.threads = 2;
-  p2.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  p2.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   REQUIRE(p1.threads() == 1);
   REQUIRE(p2.threads() == 2);
   const size_t n = size_t(p1.size());
@@ -762,11 +764,11 @@ TEST_CASE("disparate scales: no solver ends worse than its warm start or zero, r
     const real gn = real(2e-3 * U(rng));  // stale: about 100 x the impulses this step needs
     warm.insert(warm.end(), {gn, real(0.5 * gn * (U(rng) - 0.5)), real(0.5 * gn * (U(rng) - 0.5))});
   }
-  s.ps.dt = 1e-3;
-  s.ps.solver.recovery_rel = 10;
+  s.step = makeStepContext(real(1e-3));
+  s.solver.recovery_rel = 10;
   s.ps.threads = 2;
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   CHECK(cp.threads() == 1);  // a small problem runs serially
   std::vector<real> pw = warm;
   cp.project(pw.data());
@@ -793,7 +795,7 @@ TEST_CASE("solvers stop on non-finite values with SolverError", "[solver]") {
   Scene s = randomScene(3, 10, 20);
   s.vf[3].x = std::numeric_limits<real>::quiet_NaN();
   ContactProblem cp;
-  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.ps);
+  cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
   for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
     INFO(solverName(t));
     std::vector<real> g(size_t(cp.size()), 0);
@@ -801,7 +803,7 @@ TEST_CASE("solvers stop on non-finite values with SolverError", "[solver]") {
   }
   Scene s2 = randomScene(3, 10, 20);
   ContactProblem cp2;
-  cp2.build(s2.bodies, s2.contacts, s2.vf.data(), s2.wf.data(), s2.ps);
+  cp2.build(s2.bodies, s2.contacts, s2.vf.data(), s2.wf.data(), s2.step, s2.solver, s2.ps);
   for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
     INFO("warm " << solverName(t));
     std::vector<real> g(size_t(cp2.size()), 0);

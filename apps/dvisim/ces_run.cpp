@@ -439,14 +439,21 @@ CesRunInput loadCesRunInput(const CesRunOptions& o) {
   return in;
 }
 
-// The command line's options as overrides of the document (so that a checkpoint records them).
+// --dt as a number into the document's ces.time_step_s (the one place the machine's step is set; a checkpoint
+// records the document): no round trip through text. A document without a ces object is left to the parser's error.
+void setCommandLineStep(const CesRunOptions& o, json& doc) {
+  if (o.dt.empty()) return;
+  const double dt = parseReal("--dt", o.dt);
+  if (!(dt > 0)) throw InputError("--dt: the time step must be > 0, got " + o.dt);
+  for (const std::string& s : o.sets)
+    if (s.rfind("time_step_s=", 0) == 0 || s.rfind("ces.time_step_s=", 0) == 0)
+      throw InputError("--dt and --set " + s.substr(0, s.find('=')) + " are mutually exclusive");
+  if (doc.is_object() && doc.contains("ces") && doc["ces"].is_object()) doc["ces"]["time_step_s"] = dt;
+}
+
+// The command line's other options as overrides of the document (so that a checkpoint records them).
 std::vector<std::string> commandLineSets(const CesRunOptions& o) {
   std::vector<std::string> sets = o.sets;
-  if (!o.dt.empty()) {
-    const double dt = parseReal("--dt", o.dt);
-    if (!(dt > 0)) throw InputError("--dt: the time step must be > 0, got " + o.dt);
-    sets.push_back("time_step_s=" + fmt(dt));
-  }
   if (!o.time.empty()) {
     const double t = parseReal("--time", o.time);
     if (t < 0) throw InputError("--time: must be >= 0, got " + o.time);
@@ -696,6 +703,7 @@ CesConfig configureCesRun(const CesRunOptions& o, CesRunInput& in, const std::st
   json& doc = in.doc;
   std::vector<std::string> sets = commandLineSets(o);
   const json doc_before = doc;
+  setCommandLineStep(o, doc);
   CesConfig cfg = parseCesDocument(doc, sets, in.origin);
   if (!o.steps.empty()) {
     const long long n = parseInt("--steps", o.steps, 0, 1LL << 40);

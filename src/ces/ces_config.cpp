@@ -208,15 +208,9 @@ MaterialConfig parseMaterial(const Checker& c, const json& m, const std::string&
     out.surface_conductivity = parseSurfaceConductivity(c, m, p);
     return out;
   }
+  out = defaultMaterial(out.kind);  // by kind: docs/CES.md, "Charges"
   out.surface_conductivity = parseSurfaceConductivity(c, m, p);
   out.name = m.contains("name") ? c.string(m["name"], p + ".name") : kind;
-  // Defaults by kind (docs/CES.md, Charges): tau = 0 for metals, infinite for plastics, 0.5 s middlings [assumed].
-  const CesMachineParams d;
-  out.relaxation_time = out.kind == MaterialKind::Metal     ? double(d.metal_relaxation_time)
-                        : out.kind == MaterialKind::Plastic ? std::numeric_limits<double>::infinity()
-                                                            : double(d.middling_relaxation_time);
-  out.eps_r = out.kind == MaterialKind::Metal ? std::numeric_limits<double>::infinity() : double(d.plastic_eps_r);
-  if (out.kind == MaterialKind::Metal) out.density_min = d.metal_density_min, out.density_max = d.metal_density_max;
   for (const char* k : {"metal_fraction", "metal_density_kg_m3"})
     if (m.contains(k)) c.fail(p + "." + k, "only a composite material has it (kind \"composite\")");
   if (!m.contains("mass_fraction")) c.fail(p + ".mass_fraction", "missing");

@@ -3,7 +3,7 @@
 // out-of-range number is an InputError naming the key path ("ces.electrode.voltage_kV: ...").
 //
 // Units are in the key names (mm, kV, rpm, g/s, deg); CesConfig holds SI values (m, V, rad/s, kg/s,
-// rad), converted once here. Defaults are the machine of docs/CES.md (ces_constants.h); the embedded
+// rad), converted once here. Defaults are the machine of docs/CES.md, held here only (CesConfig); the embedded
 // default document (defaultCesJson(), identical to scenes/ces_default.json, tested) is what
 // `dvisim run` runs without a scene.
 //
@@ -15,6 +15,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,23 @@ struct MaterialConfig {
   // along the surface to the drum, 1/tau = 1/tau_bulk + 2 sigma_s / (r eps0 eps_r) (charging.h).
   double surface_conductivity = 0;
 };
+
+// The defaults of a metal, plastic or middling material before its keys are read (docs/CES.md, "Charges"):
+// metal: copper-like, 8400-8900 kg/m^3 [spec], a conductor (eps_r = inf, tau = 0); plastic: 946 kg/m^3 and
+// eps_r = 2.5 [spec], an insulator that keeps its charge (tau = inf); middling: a plastic whose charge relaxes
+// through the drum contact with tau = 0.5 s [assumed].
+inline MaterialConfig defaultMaterial(MaterialKind kind) {
+  MaterialConfig m;
+  m.kind = kind;
+  if (kind == MaterialKind::Metal) {
+    m.density_min = 8400, m.density_max = 8900;
+    m.eps_r = std::numeric_limits<double>::infinity();
+    m.relaxation_time = 0;
+  } else {
+    m.relaxation_time = kind == MaterialKind::Plastic ? std::numeric_limits<double>::infinity() : 0.5;
+  }
+  return m;
+}
 
 // A cylindrical electrode (axis along z): the corona wire, the static tube, or a further electrode of the
 // charge-simulation model. The wire and the tube are on the machine's one supply (CesConfig::voltage).

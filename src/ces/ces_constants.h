@@ -1,4 +1,5 @@
-// Physical constants and the default machine of the corona electrostatic separator (docs/CES.md).
+// Physical constants of the corona electrostatic separator (docs/CES.md). The default machine (drum, electrodes,
+// brush, air, materials, the time step) is the configuration's: ces/ces_config.h (CesConfig, defaultMaterial).
 //
 // Coordinates of the CES model: the drum axis is the z axis of the machine, the field problems are
 // solved in the (x, y) cross-section with y up (gravity along -y), angles are measured
@@ -25,63 +26,6 @@ constexpr real kInv2PiEps0 = real(1) / (real(2) * kPi * kEps0);
 
 DVI_HD constexpr real degToRad(real deg) { return deg * kPi / real(180); }
 DVI_HD constexpr real rpmToRadPerSec(real rpm) { return rpm * real(2) * kPi / real(60); }
-
-// Machine constants. Values marked [spec] are the project's specification (drum, particles, air, from the
-// public Chrono CES demo machine); [assumed] values are placeholders. The electrodes of the default machine
-// (corona wire and static tube) are in scenes/ces_default.json and docs/CES.md; electrode_* here is the
-// single tube of the old demo machine.
-struct CesMachineParams {
-  // --- drum (grounded, phi = 0) ---
-  real drum_diameter = real(0.320);  // m [spec]
-  real drum_width = real(0.300);     // m, extent along z; electric forces act for |z| <= width/2 [spec]
-  real drum_rpm = real(44.8);        // rev/min [spec]
-  real drum_center_x = real(0);      // m, axis position in the cross-section [assumed: origin]
-  real drum_center_y = real(0);      // m
-  real drum_friction = real(0.5);    // particle-drum Coulomb friction [spec]
-
-  // --- static electrode (tube, phi = U) ---
-  real electrode_diameter = real(0.038);  // m [spec]
-  real electrode_distance = real(0.267);  // m, centre distance L from the drum axis [spec]
-  real electrode_angle_deg = real(30);    // deg above the horizontal, alpha [spec]
-  real electrode_voltage = real(-35000);  // V, U [spec]
-
-  // --- brush (rotating cylinder that sweeps insulators off the drum) ---
-  real brush_diameter = real(0.106);       // m [spec]
-  real brush_angle_deg = real(-135);       // deg, direction of the brush axis from the drum axis [assumed]
-  real brush_rpm = real(-120);             // rev/min, sign = sense of rotation [assumed]
-  real brush_discharge_time = real(1e-3);  // s, relaxation time of a particle's charge in brush contact [assumed]
-
-  // --- air ---
-  real air_viscosity = real(1.81e-5);  // Pa s, eta [spec]
-  real air_density = real(1.225);      // kg/m^3, rho [spec]
-
-  // --- particles and materials ---
-  real particle_diameter_min = real(0.5e-3);  // m [spec]
-  real particle_diameter_max = real(1.0e-3);  // m [spec]
-  real metal_density_min = real(8400);        // kg/m^3 [spec]
-  real metal_density_max = real(8900);        // kg/m^3 [spec]
-  real plastic_density = real(946);           // kg/m^3 [spec]
-  real plastic_eps_r = real(2.5);             // relative permittivity of the insulator [spec]
-  real particle_friction = real(0.2);         // particle-particle Coulomb friction [spec]
-  // Charge relaxation time constants tau = eps/sigma through the drum contact (infinite
-  // for plastics, ~0 for metals, in between for non-liberated middlings).
-  real metal_relaxation_time = real(0);                                  // s
-  real plastic_relaxation_time = std::numeric_limits<real>::infinity();  // s
-  real middling_relaxation_time = real(0.5);                             // s [assumed]
-
-  // --- electric force model ---
-  real image_force_cutoff = real(5e-3);  // m, image force acts for charge-to-drum-surface distance <= cutoff [assumed]
-
-  // --- integration ---
-  real time_step = real(1e-4);  // s, h in [1e-4, 1e-3] [spec]
-
-  // Derived helpers.
-  DVI_HD real drumRadius() const { return drum_diameter / 2; }
-  DVI_HD real electrodeRadius() const { return electrode_diameter / 2; }
-  DVI_HD real brushRadius() const { return brush_diameter / 2; }
-  DVI_HD real drumOmega() const { return rpmToRadPerSec(drum_rpm); }
-  DVI_HD real electrodeAngle() const { return degToRad(electrode_angle_deg); }
-};
 
 }  // namespace ces
 }  // namespace dvi

@@ -233,7 +233,11 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   if (cfg_.materials.size() > size_t(kMaxMaterials)) throw InputError("CES machine: at most 64 materials");
   if (cfg_.extra_electrodes.size() + 2 > size_t(kMaxElectrodes))
     throw InputError("CES machine: at most 6 extra electrodes");
-  sys_.mutableConfig().step.gyroscopic = cfg_.step.gyroscopic;  // see cesDefaultStep
+  if (!(cfg_.step.dt > 0 && std::isfinite(cfg_.step.dt)))
+    throw InputError("CES machine: the time step (ces.time_step_s) must be positive and finite");
+  // The machine's step into the System (see cesDefaultStep); the machine reads it from the System from here on.
+  sys_.mutableConfig().step.dt = cfg_.step.dt;
+  sys_.mutableConfig().step.gyroscopic = cfg_.step.gyroscopic;
   // Pair coefficients under the product rule (Bullet's, the core's default): f_particle^2 = mu_pp and
   // f_particle f_part = mu_(particle, part).
   particle_friction_ = real(std::sqrt(cfg_.mu_particle_particle));
@@ -258,7 +262,7 @@ CesMachine::CesMachine(const CesConfig& cfg, System& sys) : cfg_(cfg), sys_(sys)
   if (sys_.deviceBodies(refs)) dev_ = makeCesDevice(model_);
 #endif
   host_forces_ = sys_.backendName() != "cpu" && !dev_;
-  if (!host_forces_) sys_.addForceField(field_);
+  sys_.addForceField(field_);  // without CesDevice a device backend runs it as a host plug-in
 }
 
 // Field: the model's solution (two-cylinder, charge simulation or corona) behind model_.field.
@@ -492,7 +496,7 @@ int CesMachine::addParticle(const ParticleSpec& spec, Vec3 pos, Quat rot, Vec3 v
 
 void CesMachine::emit() {
   std::vector<ParticleSpec> due;
-  const double t = time(), h = cfg_.step.dt;
+  const double t = time(), h = sys_.config().step.dt;  // the step about to run
   feeder_.emit(t, h, due);
   // Forget spawns older than 50 ms: they have left the outlet.
   const BodyArrays& b = sys_.bodies();
@@ -500,7 +504,7 @@ void CesMachine::emit() {
   const real ux = real(std::cos(cfg_.feed_angle)), uy = real(std::sin(cfg_.feed_angle));
   const real dir = cfg_.drum_rpm >= 0 ? real(1) : real(-1);
   const Vec3 tangent{dir * uy, -dir * ux, 0};  // the drum surface's direction of motion at the outlet
-  const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / cfg_.step.dt)));
+  const int64_t keep = std::max<int64_t>(1, int64_t(std::llround(0.05 / h)));
   recent_.erase(
       std::remove_if(recent_.begin(), recent_.end(), [&](const RecentSpawn& r) { return steps_ - r.step > keep; }),
       recent_.end());
@@ -531,13 +535,6 @@ void CesMachine::emit() {
     recent_.push_back(RecentSpawn{id, steps_});
     insert(id);
   }
-}
-
-void CesMachine::applyForcesOnHost() {
-  BodyArrays& b = sys_.mutableBodies();
-  std::fill(b.force.begin(), b.force.end(), Vec3{0, 0, 0});
-  std::fill(b.torque.begin(), b.torque.end(), Vec3{0, 0, 0});
-  field_->apply(b, makeStepContext(real(cfg_.step.dt), sys_.time(), sys_.stepCount()), b.force.data(), b.torque.data());
 }
 
 void CesMachine::setCharge(int body, real q) {
@@ -579,9 +576,9 @@ void CesMachine::postStepDevice() {
   DeviceBodyRefs refs;
   sys_.deviceBodies(refs);
   std::vector<std::pair<int32_t, uint8_t>> changed;
-  dev_->postStep(refs, real(cfg_.step.dt), changed);
+  dev_->postStep(refs, sys_.stepContext().dt, changed);  // the step just taken
   DeviceContactRefs contacts;
-  if (sys_.deviceContacts(contacts)) dev_->exchangeCharges(contacts, real(cfg_.step.dt));
+  if (sys_.deviceContacts(contacts)) dev_->exchangeCharges(contacts, sys_.stepContext().dt);
   if (changed.empty()) return;
   std::vector<int32_t> ids;
   ids.reserve(changed.size());
@@ -600,10 +597,7 @@ void CesMachine::step() {
   emit();
   if (!drive_) sys_.mutableBodies().omega[size_t(drum_)] = Vec3{0, 0, real(cfg_.omegaDrum())};
   sys_.mutableBodies().omega[size_t(brush_)] = Vec3{0, 0, real(cfg_.omegaBrush())};
-  if (host_forces_) {
-    applyForcesOnHost();
-    sys_.markHostDirty();
-  }
+  if (host_forces_) sys_.markHostDirty();  // the drive's omega (the field runs inside the step)
   sys_.step();
   if (host_forces_) sys_.syncToHost();
   ++steps_;
@@ -614,7 +608,7 @@ void CesMachine::step() {
 void CesMachine::postStep() {
   BodyArrays& b = sys_.mutableBodies();
   const int64_t n = int64_t(p_.count());
-  const real h = real(cfg_.step.dt);
+  const real h = sys_.stepContext().dt;  // the step just taken
   const CesModel& m = model_;
   std::vector<uint8_t> next(size_t(n), kStatusMachine);
   const int threads = sys_.effectiveThreads();
@@ -665,7 +659,7 @@ void CesMachine::settle(size_t k, uint8_t next) {
   if (next == kStatusLost) ++lost_;
   if (next == kStatusCollected) {
     // Crossing point of the collection plane on the step's straight path x - h v .. x.
-    const real h = real(cfg_.step.dt);
+    const real h = sys_.stepContext().dt;  // the step just taken
     const Vec3 x1 = b.pos[k], x0 = x1 - h * b.vel[k];
     const double f = x0.y > x1.y ? double((x0.y - model_.collect_y) / (x0.y - x1.y)) : 1.0;
     const double fc = std::min(1.0, std::max(0.0, f));
@@ -677,7 +671,8 @@ void CesMachine::settle(size_t k, uint8_t next) {
     c.metal_mass_fraction = compositeMassFraction(k);
     c.x = double(x0.x) + fc * double(x1.x - x0.x) - cfg_.collection_x0;
     c.z = double(x0.z) + fc * double(x1.z - x0.z);
-    c.t = time() - cfg_.step.dt + fc * cfg_.step.dt;
+    const double dt = sys_.config().step.dt;  // h in double, as time() counts it
+    c.t = time() - dt + fc * dt;
     collected_.push_back(c);
     b.pos[k].y = model_.collect_y - kBinDrop;  // into the bin, out of everyone's way
   }

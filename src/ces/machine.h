@@ -20,13 +20,18 @@
 //      particle in flight. On the GPU backend it does so on the device (CesDevice, ces_device.cu, the same
 //      cesParticleForce), and the machine copies only the bodies it reads or edits (the recent spawns, the
 //      drum and the brush, the particles that change status). A device backend without the CES kernels
-//      gets the old path: all bodies synced to the host, the field applied there, the host marked dirty.
+//      gets the old path: all bodies synced to the host, the field applied there by the System's host plug-in
+//      path (with the System's StepContext, as every ForceField), the host marked dirty.
 //   4. Post-step (CesParticles; on the device with CesDevice): charge update (ions, drum contact, electrode
 //      contact, brush), the pinned flag, and status:
 //      a particle whose centre crosses the collection plane is collected: its crossing point is recorded
 //      and the body is frozen (kBodyFixed, zero velocity) 5 cm below the plane, in the "bin"; one that leaves
 //      the domain is lost (frozen where it is). Bodies are never removed: the body count only grows, and
 //      fed = collected + in flight + held up + lost holds exactly (masses in whole femtograms).
+//
+// The step: the constructor writes the configuration's step (ces.time_step_s, CesConfig::step.dt) into the
+// System's (SystemConfig::step.dt); from then on the machine reads it from the System only: the step's context
+// (System::stepContext) after a step, the System's configuration for the step about to run and for the clock.
 //
 // Per-particle state lives here, in arrays indexed by body (machine parts included, status kStatusMachine).
 #pragma once
@@ -150,7 +155,8 @@ class CesMachine {
   CesMachine(const CesConfig& cfg, System& sys);
 
   void step();
-  double time() const { return double(steps_) * cfg_.step.dt; }
+  // [s] machine time: steps() steps of the System's step (in double, the step as given: StepSettings::dt).
+  double time() const { return double(steps_) * sys_.config().step.dt; }
   int64_t steps() const { return steps_; }
   const CesConfig& config() const { return cfg_; }
   System& system() { return sys_; }
@@ -229,7 +235,6 @@ class CesMachine {
   void postStep();
   // Touching in-flight particles share their charge (particle_model.h: exchangeFlux), on the host's contacts.
   void exchangeContactCharges(real h);
-  void applyForcesOnHost();
   void stepDevice();
   void postStepDevice();
   // Status change of particle body i (collected: its crossing point recorded; collected or lost: frozen).
@@ -257,7 +262,7 @@ class CesMachine {
   real particle_friction_ = 1;
   int64_t steps_ = 0;
   int64_t lost_ = 0;                // particles with kStatusLost (kept for particlesInFlight)
-  bool host_forces_ = false;        // device backend without CesDevice: forces applied on the host (see above)
+  bool host_forces_ = false;        // device backend without CesDevice: the per-particle work on the host (see above)
   std::unique_ptr<CesDevice> dev_;  // device backend: the per-particle work as kernels
   size_t dev_uploaded_ = 0;         // particles uploaded to dev_
   mutable bool charges_stale_ = false;

@@ -622,8 +622,6 @@ void System::buildProblem(int64_t nc) {
                                                      : normal_only ? "no contact with mu > 0 this step"
                                                                    : nullptr;
   ContactProblemSettings ps;
-  ps.dt = ctx_.dt;
-  ps.solver = config_.solver;
   ps.threads = omp_get_max_threads();
   ps.normal_only = normal_only;
   // Only the Jacobi solver reads the Jacobi steps; the block inverses only Jacobi's and Gauss-Seidel's Inverse3x3.
@@ -634,7 +632,7 @@ void System::buildProblem(int64_t nc) {
   ps.gs_blocks = type == SolverType::GaussSeidel;
   ps.float_jacobians =
       config_.solver.type == SolverType::APGD && floatStorage(config_.solver, false) && !std::is_same_v<real, float>;
-  problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ps, &rows_,
+  problem_->build(bodies_, contacts_, v_free_.data(), w_free_.data(), ctx_, config_.solver, ps, &rows_,
                   rolling ? roll_coef_.data() : nullptr);
 }
 
@@ -731,7 +729,7 @@ Vec3 System::contactForce(size_t k) const {
   Vec3 u, w;
   tangentBasis(contacts_.normal[k], u, w);
   const real* g = &gamma_[3 * k];
-  return (contacts_.normal[k] * g[0] + u * g[1] + w * g[2]) / real(config_.step.dt);
+  return (contacts_.normal[k] * g[0] + u * g[1] + w * g[2]) / ctx_.dt;  // the last step's h
 }
 
 uint64_t System::stateHash() const {

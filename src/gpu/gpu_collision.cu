@@ -760,13 +760,13 @@ int residentBlocks(K* kernel, int* cached) {
 
 }  // namespace
 
-void computeAabbs(DeviceState& d, const SystemConfig& cfg) {
+void computeAabbs(DeviceState& d, const SystemConfig& cfg, const StepContext& step) {
   const int n = int(d.shapes.count);
   if (n == 0) return;
   aabbKernel<<<blocksFor(n), kBlock, 0, d.stream>>>(
       n, d.shapes.shape.data(), d.bodies.pos.data(), d.bodies.rot.data(), d.bodies.v_free.data(),
       d.bodies.w_free.data(), d.shapes.hull.data(), cfg.collision.envelope_rel,
-      cfg.collision.speculative ? real(cfg.step.dt) : real(0), d.shapes.sweep.data(), d.shapes.aabb.data());
+      cfg.collision.speculative ? step.dt : real(0), d.shapes.sweep.data(), d.shapes.aabb.data());
   DVI_CUDA_LAUNCH("aabbKernel");
 }
 
@@ -1042,7 +1042,7 @@ LastNormals lastNormals(const DeviceState& d, const SystemConfig& cfg) {
 }
 
 // The narrow-phase kernels' view of this step's pairs, shapes and bodies.
-NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg) {
+NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg, const StepContext& step) {
   return NarrowArgs{d.broad.pair_key_sorted.data(),
                     d.shapes.shape.data(),
                     d.bodies.pos.data(),
@@ -1052,7 +1052,7 @@ NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg) {
                     d.shapes.hull.data(),
                     d.shapes.sweep.data(),
                     cfg.collision.envelope_rel,
-                    real(cfg.step.dt),
+                    step.dt,
                     d.pair_shift,
                     cfg.collision.mpr_manifold,
                     resolvedGjk(cfg.collision.gjk, true),
@@ -1060,7 +1060,7 @@ NarrowArgs narrowArgs(DeviceState& d, const SystemConfig& cfg) {
                     lastNormals(d, cfg)};
 }
 
-void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
+void narrowPhase(DeviceState& d, const SystemConfig& cfg, const StepContext& step) {
   const int64_t np = d.pairs;
   cudaStream_t st = d.stream;
   NarrowScratch& N = d.narrow;
@@ -1076,7 +1076,7 @@ void narrowPhase(DeviceState& d, const SystemConfig& cfg) {
       std::min<int64_t>({np, std::max<int64_t>(1024, N.general_last + N.general_last / 2), int64_t(INT32_MAX)});
   N.first.resize(size_t(first_cap));
   N.first_slot.resize(np);
-  const NarrowArgs A = narrowArgs(d, cfg);
+  const NarrowArgs A = narrowArgs(d, cfg, step);
   // Deep MPR pairs' room: last step's count and half again (at least 64, at most every pair); the ones past it
   // are finished in the count pass (slower, the same contacts).
   const int64_t deep_cap = std::min<int64_t>(np, std::max<int64_t>(64, N.deep_last + N.deep_last / 2));

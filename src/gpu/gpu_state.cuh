@@ -280,18 +280,20 @@ struct DeviceState {
   size_t bytes() const;
 };
 
-// Stages (one .cu each), called by GpuSystem.
-void computeAabbs(DeviceState& d, const SystemConfig& cfg);
+// Stages (one .cu each), called by GpuSystem. `step` is the System's context of the step running (System::beginStep):
+// the stages read its h (StepContext::dt) from there, never from cfg.step.
+void computeAabbs(DeviceState& d, const SystemConfig& cfg, const StepContext& step);
 // The binned broad phase on `boxes` (one per shape; null: d.shapes.aabb), every pair into d.pairs.
 void broadPhase(DeviceState& d, const SystemConfig& cfg, BroadPhaseStats* stats, const Aabb* boxes = nullptr);
 // The BroadPhase stage: last step's pairs kept while they hold (BroadPhaseSettings::pair_margin), else
 // broadPhase on the boxes grown by the margin. Returns true when the pairs were kept.
 bool broadPhaseStep(DeviceState& d, const SystemConfig& cfg);
-void narrowPhase(DeviceState& d, const SystemConfig& cfg);
+void narrowPhase(DeviceState& d, const SystemConfig& cfg, const StepContext& step);
 
 // Builds rows (Jacobians, rhs, block inverses, the adjacency) for the current contacts.
 // rows: the constraint rows of this step from the host's RowProviders (may be empty).
-void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows, real* max_penetration);
+void buildRows(DeviceState& d, const SystemConfig& cfg, const StepContext& step, const std::vector<ConstraintRow>& rows,
+               real* max_penetration);
 // Contacts from last step's impulses by key (when enabled), rows from row_lambda by index when it has
 // one value per row.
 void warmStart(DeviceState& d, bool enabled, const std::vector<real>& row_lambda);

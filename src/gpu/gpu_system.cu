@@ -346,11 +346,11 @@ void GpuSystem::detectCollisions() {
     d_->exclusions_version = exclusions_version_;
   }
   uploadHandedOverWarmStart();  // its normals are the narrow phase's last ones where the device has none
-  computeAabbs(*d_, config_);
+  computeAabbs(*d_, config_, ctx_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::ComputeAabbs) + 1], d_->stream));
   stats_.pairs_reused = broadPhaseStep(*d_, config_);
   DVI_CUDA(cudaEventRecord(ev[int(StageType::BroadPhase) + 1], d_->stream));
-  narrowPhase(*d_, config_);
+  narrowPhase(*d_, config_, ctx_);
   if (group_)
     keepOwnedContacts(*d_, config_.gpu.peer_exchange);  // a domain decomposition: the contacts this process owns
   DVI_CUDA(cudaEventRecord(ev[int(StageType::NarrowPhase) + 1], d_->stream));
@@ -400,7 +400,7 @@ void GpuSystem::buildAndSolve() {
     return;
   }
   real max_pen = 0;
-  buildRows(*d_, config_, rows_, &max_pen);
+  buildRows(*d_, config_, ctx_, rows_, &max_pen);
   stats_.max_penetration = max_pen;
   stats_.stage_ran[int(StageType::BuildRows)] = true;
   stats_.normal_only = d_->normal_only;

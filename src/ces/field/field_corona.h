@@ -226,8 +226,9 @@ struct CoronaCylinder {
 
 struct CoronaSetup {
   CoronaCylinder drum{real(0), real(0), real(0.160), true};
-  // Default wire: 0.2 mm diameter, 60 mm from the drum surface at 60 deg [assumed; the machine
-  // configuration sets it]. Default tube: the 38 mm tube at 0.267 m, 30 deg of CesMachineParams.
+  // Default wire: 0.2 mm diameter, 60 mm from the drum surface at 60 deg; default tube: 38 mm at 0.267 m, 30 deg
+  // (the old demo machine's). A stand-alone problem's geometry [assumed]: the CES machine sets both from its
+  // configuration (CesConfig::wire, tube; the config's defaults are the machine's).
   CoronaCylinder wire{real(0.110), real(0.190526), real(1e-4), true};
   CoronaCylinder tube{real(0.231229), real(0.1335), real(0.019), true};
   real U = real(-30000);                        // V, wire and tube (one supply); drum earthed

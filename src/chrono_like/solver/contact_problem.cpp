@@ -46,8 +46,9 @@ inline void applyContactChange(const ContactJacobian& J, const real* dg, const B
 }  // namespace
 
 void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
-                           const Vec3* w_free, const ContactProblemSettings& settings,
-                           const std::vector<ConstraintRow>* rows, const real* rolling) {
+                           const Vec3* w_free, const StepContext& step, const SolverSettings& solver,
+                           const ContactProblemSettings& settings, const std::vector<ConstraintRow>* rows,
+                           const real* rolling) {
   threads_ = settings.threads > 0 ? settings.threads : omp_get_max_threads();
   const int T = threads_;
   const int64_t nb = int64_t(bodies.count());
@@ -90,7 +91,16 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
     inv_[i] = fixed ? kNoBody : makeBodyInverseMass(bodies.inv_mass[i], bodies.inv_inertia[i], bodies.rot[i]);
   });
 
-  real max_diag = assembleContacts(bodies, contacts, v_free, w_free, settings);
+  const bool have_restitution = bodies.restitution.size() == bodies.count();
+  const ContactBiasInputs bias_in{step.dt,
+                                  solver.recovery_rel,
+                                  solver.min_bounce_speed,
+                                  have_restitution ? bodies.restitution.data() : nullptr,
+                                  bodies.vel.data(),
+                                  bodies.omega.data(),
+                                  v_free,
+                                  w_free};
+  real max_diag = assembleContacts(bodies, contacts, v_free, w_free, bias_in, settings.float_jacobians);
   max_diag = assembleBoxesAndRows(rows, nb, v_free, w_free, max_diag);
   max_diag_ = max_diag > 0 ? max_diag : real(1);
   buildAdjacency(nb);
@@ -112,24 +122,15 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
 // restitution), diagonal block, its inverse, block step, column norms and row sums (the normal-only blocks are
 // assembled in assembleBoxesAndRows). Returns the largest diagonal entry.
 real ContactProblem::assembleContacts(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free,
-                                      const Vec3* w_free, const ContactProblemSettings& settings) {
+                                      const Vec3* w_free, const ContactBiasInputs& bias_in, bool float_jacobians) {
   const int T = threads_;
   const int64_t nc = nc_;
-  const bool have_restitution = bodies.restitution.size() == bodies.count();
-  const ContactBiasInputs bias_in{settings.dt,
-                                  settings.solver.recovery_rel,
-                                  settings.solver.min_bounce_speed,
-                                  have_restitution ? bodies.restitution.data() : nullptr,
-                                  bodies.vel.data(),
-                                  bodies.omega.data(),
-                                  v_free,
-                                  w_free};
   real max_diag = 0;
   auto contact = [&](int64_t k, real& max_diag) {
     const int32_t a = contacts.body_a[k], b = contacts.body_b[k];
     ContactJacobian J =
         makeContactJacobian(contacts.normal[k], contacts.pa[k], contacts.pb[k], bodies.pos[a], bodies.pos[b], a, b);
-    if (settings.float_jacobians) J = roundJacobian(J);
+    if (float_jacobians) J = roundJacobian(J);
     jac_[k] = J;
     mu_[k] = contacts.mu[k];
     if (normal_only_) {  // block data per block of three contacts, below

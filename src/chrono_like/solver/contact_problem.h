@@ -40,13 +40,11 @@
 
 namespace dvi {
 
-// What one build of the problem reads: the step, the solver settings (recovery_rel) and how the System runs
-// this step.
+// How one build of the problem runs this step. The step itself (h: StepContext::dt) and the solver settings
+// (recovery_rel, min_bounce_speed) are build()'s own arguments, passed by the System, not copied here.
 struct ContactProblemSettings {
-  real dt = real(1e-3);   // [s] the step h (StepContext::dt)
-  SolverSettings solver;  // the System's (SystemConfig::solver): recovery_rel, min_bounce_speed
-  int threads = 0;        // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
-                          // under kSerialContacts contacts solve serially (threads() == 1).
+  int threads = 0;  // OpenMP threads; 0 = OpenMP's default (omp_get_max_threads()). Problems
+                    // under kSerialContacts contacts solve serially (threads() == 1).
   // Every contact is frictionless (mu = 0): assemble the normal rows only, packed three per block
   // (jacobian.h); the solution vector is then in the normal layout (toSolverLayout / fromSolverLayout).
   bool normal_only = false;
@@ -68,15 +66,16 @@ struct ContactProblemSettings {
 class ContactProblem final : public CcpProblem {
  public:
   // Reads bodies.{pos, inv_mass, inv_inertia, rot, flags, restitution} (and vel, omega where a contact's
-  // restitution is > 0), contacts.*, and the free velocities (after external forces, before contact impulses).
-  // Writes the Jacobian blocks, r and the body -> contact adjacency.
+  // restitution is > 0), contacts.*, and the free velocities (after external forces, before contact impulses);
+  // step: the step's context (its h, StepContext::dt, in the bias dist / h); solver: recovery_rel and
+  // min_bounce_speed (SystemConfig::solver). Writes the Jacobian blocks, r and the body -> contact adjacency.
   // rows: constraint rows solved with the contacts (may be null or empty); their impulses follow the
   // contacts' in the solution vector (3 per block, the padding rows last).
   // rolling: 2 per contact, (mu_s, mu_r) in metres, or null (no rolling or spinning friction); a contact with
   // either > 0 gets a rolling block (above), whose impulses come after the contacts' (3 each) and before the rows'.
   void build(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,
-             const ContactProblemSettings& settings, const std::vector<ConstraintRow>* rows = nullptr,
-             const real* rolling = nullptr);
+             const StepContext& step, const SolverSettings& solver, const ContactProblemSettings& settings,
+             const std::vector<ConstraintRow>* rows = nullptr, const real* rolling = nullptr);
 
   int size() const override;
   const real* rhs() const override;
@@ -128,7 +127,7 @@ class ContactProblem final : public CcpProblem {
   void gatherBodyDeltas(const real* x) const;
   // The passes of build(): contact blocks, box bounds and row blocks, body -> entry adjacency, Jacobi steps.
   real assembleContacts(const BodyArrays& bodies, const ContactArrays& contacts, const Vec3* v_free, const Vec3* w_free,
-                        const ContactProblemSettings& settings);
+                        const ContactBiasInputs& bias_in, bool float_jacobians);
   real assembleBoxesAndRows(const std::vector<ConstraintRow>* rows, int64_t nb, const Vec3* v_free, const Vec3* w_free,
                             real max_diag);
   // The rolling rows of the contacts with rolling or spinning friction (roll_, roll_mu_ filled), then `rows`, in

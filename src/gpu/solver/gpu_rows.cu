@@ -349,7 +349,7 @@ void resizeProblem(DeviceState& d, const RowCounts& n) {
 
 // Every block's rhs, inverse, steps, column norms, row sums and max diagonal, the Jacobians, the unsorted
 // adjacency entries, and the contact keys' order flags.
-void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const RowCounts& n) {
+void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const StepContext& step, const RowCounts& n) {
   SolverScratch& S = d.solver;
   DeviceBodies& B = d.bodies;
   DeviceContacts& C = d.contacts;
@@ -366,7 +366,7 @@ void assembleBlocks(DeviceState& d, const SystemConfig& cfg, const RowCounts& n)
           C.dist.data(),
           C.size.data(),
           B.inv.data(),
-          ContactBiasInputs{real(cfg.step.dt), cfg.solver.recovery_rel, cfg.solver.min_bounce_speed,
+          ContactBiasInputs{step.dt, cfg.solver.recovery_rel, cfg.solver.min_bounce_speed,
                             d.any_restitution ? B.restitution.data() : nullptr, B.vel.data(), B.omega.data(),
                             B.v_free.data(), B.w_free.data()},
           int32_t(nb),
@@ -475,7 +475,8 @@ void readMaxima(DeviceState& d, const RowCounts& n, real* max_penetration) {
 
 }  // namespace
 
-void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<ConstraintRow>& rows, real* max_penetration) {
+void buildRows(DeviceState& d, const SystemConfig& cfg, const StepContext& step, const std::vector<ConstraintRow>& rows,
+               real* max_penetration) {
   RowCounts n;
   n.nc = int64_t(d.contacts.count);
   n.nb = int64_t(d.bodies.count);
@@ -499,7 +500,7 @@ void buildRows(DeviceState& d, const SystemConfig& cfg, const std::vector<Constr
   n.float_jac = cfg.solver.type == SolverType::APGD && floatStorage(cfg.solver, true) && !std::is_same_v<real, float>;
   n.nent = 2 * n.nc + 6 * n.nrb;
   resizeProblem(d, n);
-  assembleBlocks(d, cfg, n);
+  assembleBlocks(d, cfg, step, n);
   buildAdjacency(d, n);
   // Only Jacobi reads the Jacobi steps: for the other solvers they are left out (the per-body sum runs in one
   // thread per body, and the CES drum's 15,000 entries made it 3.6 ms of every step's BuildRows on an H200).
