@@ -758,7 +758,7 @@ TEST_CASE("CES CLI: default machine, resume through the CLI, and one-line errors
 // The CES machine on the GPU: field, charging and classification as device kernels (CesDevice)
 // ---------------------------------------------------------------------------------------------------
 
-TEST_CASE("CES machine: two touching metal spheres in flight share their charge as their radii; a plastic keeps its",
+TEST_CASE("CES machine: two touching metal spheres in flight share their charge as their radii, a plastic keeps its",
           "[ces][ces_machine]") {
   // No field (supply off), no feed. Copper spheres of radii 0.5 and 0.25 mm, just touching (1e-7 m), below the
   // drum; after one step q1 + q2 is split as r1 : r2 (equal potentials, charging.h: contactChargeFlux). A copper
