@@ -1,8 +1,8 @@
 // dvisim_dropin_corpus [--examples A,B] [--frames N] [--repeat N] [--threads N] [--check] [--record] [--out FILE]
 //                      [--bodies]
 //
-// Bullet's own example programs (bench/dropin_corpus/bullet3_examples/, bullet3 at 6c888f4, unmodified) run
-// on stock Bullet and on the drop-in world, changed only in the line that constructs the world
+// Bullet's own example programs (bench/dropin_corpus/third_party/bullet3_examples/, bullet3 at 6c888f4, unmodified)
+// run on stock Bullet and on the drop-in world, changed only in the line that constructs the world
 // (docs/DROP_IN.md, "Bullet's example programs"). Each example runs once per world in this process: its
 // CreateFunc, initPhysics and `--frames` calls (300) of its own stepSimulation(1/60), one thread each
 // (OMP_NUM_THREADS=1 for the drop-in; Bullet's world is single-threaded). Printed per example: whether it ran or
@@ -359,7 +359,8 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
      << "- device: " << cpuName() << " (" << o.threads << " thread each), no GPU used\n"
      << "- host CPU: " << cpuName() << "\n- load average at the start: " << o.load << "\n- commit: " << commitId()
      << "\n- date: " << utc("%Y-%m-%dT%H:%M:%SZ")
-     << "\n- examples: bullet3 6c888f4 (bench/dropin_corpus/bullet3_examples), unchanged but for the world line\n"
+     << "\n- examples: bullet3 6c888f4 (bench/dropin_corpus/third_party/bullet3_examples), unchanged but for the world "
+        "line\n"
      << "- frames: " << o.frames << " calls of each example's stepSimulation(1/60); drop-in at the default "
      << "DviWorldConfig; time: the lowest mean ms per frame of " << o.repeat << " alternating runs\n\n"
      << "Joint errors: the largest error of a locked axis (mm, mrad) over the frames after the first 60, stock / ours, "
