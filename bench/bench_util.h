@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_common.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/bullet/bullet_import.h"
@@ -35,6 +36,13 @@
 namespace dvi::benchutil {
 
 namespace fs = std::filesystem;
+
+// The names a benchmark file uses unqualified once it says `using namespace dvi::benchutil`.
+using dvi::InputError;
+using dvi::Quat;
+using dvi::real;
+using dvi::Vec3;
+using Clock = std::chrono::steady_clock;
 
 inline std::string trim(std::string s) {
   while (!s.empty() && std::isspace((unsigned char)s.back())) s.pop_back();
@@ -150,6 +158,19 @@ inline void writeFile(const std::string& path, const std::string& text) {
   std::ofstream f(path, std::ios::binary);
   f << text;
   if (!f) throw std::runtime_error("cannot write " + path);
+}
+
+// The results of a benchmark that writes its table twice, OUT/NAME.csv and OUT/NAME.md: both files, a line saying
+// where, and with --record the record bench/results/NAME_<device>_<date>.{md,csv} (into results_dir), whose md ends
+// naming its csv.
+inline void writeCsvMdResults(const BenchBasics& o, const std::string& name, const std::string& device,
+                              const std::string& results_dir, const std::string& md, const std::string& csv) {
+  writeFile(o.out + "/" + name + ".csv", csv);
+  writeFile(o.out + "/" + name + ".md", md);
+  std::printf("results: %s/%s.csv, %s.md\n", o.out.c_str(), name.c_str(), name.c_str());
+  if (!o.record) return;
+  const std::string base = name + "_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
+  writeBenchRecord({results_dir}, base, {{"md", md + "\nRows: " + base + ".csv\n"}, {"csv", csv}}, writeFile);
 }
 
 // Creates DIR and checks that `probe_file` can be written in it; InputError (exit 2) otherwise.

@@ -62,16 +62,16 @@
 
 namespace {
 
-using dvi::InputError;
-using dvi::Quat;
-using dvi::real;
-using dvi::Vec3;
 using namespace dvi::benchutil;
-using Clock = std::chrono::steady_clock;
 
 struct AccOptions : BenchBasics {
   std::vector<std::string> scenes, engines;
 };
+
+// `dvisim bench accuracy`: its name, description and the texts of its common options.
+const BenchSpec kBench{
+    "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time",
+    "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)"};
 
 // A scene of the benchmark: its bodies (rebuilt for each run), step, duration and observable.
 struct AccScene {
@@ -609,12 +609,8 @@ int runAccuracy(const AccOptions& o) {
 }  // namespace
 
 void registerBenchAccuracy(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<AccOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time");
-  addBenchBasics(cmd, *o, "accuracy", "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)");
+  auto [cmd, o] = addBench<AccOptions>(app, reg, kBench, runAccuracy);
   cmd->add_option("--scenes", o->scenes,
                   "pile,mix,stack,ces,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
   cmd->add_option("--engines", o->engines, "cpu,gpu,bullet (default all; gpu where a device is present)");
-  addBenchRunner(reg, cmd, [o] { return runAccuracy(*o); });
 }

@@ -52,10 +52,8 @@
 
 namespace {
 
-using dvi::InputError;
 using namespace dvi::benchutil;
 using nlohmann::json;
-using Clock = std::chrono::steady_clock;
 
 // The goal of the issue.
 constexpr double kGoalDuration = 10.0;   // s of machine time
@@ -66,7 +64,17 @@ constexpr double kRateTolerance = 0.99;  // measured feed >= 99% of the goal rat
 struct CesBenchOptions : BenchBasics {
   std::string backend = "auto", duration, rate, wall_limit;
   std::vector<std::string> sets;
+  CesBenchOptions() { threads.clear(); }  // none given: the machine's own setting
 };
+
+// `dvisim bench ces`: its name, description and the texts of its common options.
+const BenchSpec kBench{
+    "ces",
+    "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)",
+    "ces_bench.json, ces_bench.md",
+    "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close",
+    "md,json",
+    "OpenMP threads of the CPU backend (0: all)"};
 
 double positive(const std::string& opt, const std::string& v) {
   const double x = dvi::parseReal(opt, v);
@@ -539,14 +547,7 @@ int runCesBench(const CesBenchOptions& o) {
 }  // namespace
 
 void registerBenchCes(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<CesBenchOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "ces",
-      "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)");
-  o->threads.clear();  // none given: the machine's own setting
-  addBenchBasics(cmd, *o, "ces", "ces_bench.json, ces_bench.md",
-                 "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close", "md,json",
-                 "OpenMP threads of the CPU backend (0: all)");
+  auto [cmd, o] = addBench<CesBenchOptions>(app, reg, kBench, runCesBench);
   cmd->add_option("--backend", o->backend, "auto|cpu|gpu (default auto; --quick: cpu)");
   cmd->add_option("--duration", o->duration, "Machine time in seconds (default 10; --quick: 0.02)");
   cmd->add_option("--rate", o->rate, "Particles fed per second (default 20000; --quick: 5000)");
@@ -554,5 +555,4 @@ void registerBenchCes(CLI::App& app, BenchRegistry& reg) {
   cmd->add_option("--set", o->sets, "Override a machine value, KEY relative to ces (e.g. drum.rpm=60; repeatable)")
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-  addBenchRunner(reg, cmd, [o] { return runCesBench(*o); });
 }
