@@ -85,10 +85,9 @@ void checkConsistent(const ContactPoint* c, int n, double envelope) {
   }
 }
 
-// Closest distance of point p to segment [a, b], by golden-section search on the convex function
-// |p - (a + s (b - a))| (independent of the closed forms used by the code under test).
-double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
-  auto f = [&](double s) { return length(p - (a + (b - a) * s)); };
+// The s in [0, 1] that minimises the convex function f: golden-section search, then either end where lower.
+template <class F>
+double argminOnUnitInterval(F f) {
   double lo = 0, hi = 1;
   for (int i = 0; i < 100; ++i) {
     double m1 = lo + (hi - lo) * 0.381966, m2 = hi - (hi - lo) * 0.381966;
@@ -100,20 +99,20 @@ double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
   double s = 0.5 * (lo + hi);
   if (f(0) < f(s)) s = 0;
   if (f(1) < f(s)) s = 1;
+  return s;
+}
+
+// Closest distance of point p to segment [a, b], by golden-section search on the convex function
+// |p - (a + s (b - a))| (independent of the closed forms used by the code under test).
+double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
+  auto f = [&](double s) { return length(p - (a + (b - a) * s)); };
+  const double s = argminOnUnitInterval(f);
   if (s_out) *s_out = s;
   return f(s);
 }
 double segmentSegmentDistance(Vec3 a0, Vec3 a1, Vec3 b0, Vec3 b1) {
   auto f = [&](double s) { return pointSegmentDistance(a0 + (a1 - a0) * s, b0, b1); };
-  double lo = 0, hi = 1;
-  for (int i = 0; i < 100; ++i) {
-    double m1 = lo + (hi - lo) * 0.381966, m2 = hi - (hi - lo) * 0.381966;
-    if (f(m1) < f(m2))
-      hi = m2;
-    else
-      lo = m1;
-  }
-  return std::min({f(0.5 * (lo + hi)), f(0), f(1)});
+  return f(argminOnUnitInterval(f));
 }
 
 }  // namespace
