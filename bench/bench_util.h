@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "bench_common.h"
+#include "bench_text.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/bullet/bullet_import.h"
@@ -102,28 +103,6 @@ inline std::string num(double v, const char* fmt = "%.6g") {
   return b;
 }
 
-inline std::string slug(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (std::isalnum((unsigned char)c))
-      o += char(std::tolower((unsigned char)c));
-    else if (!o.empty() && o.back() != '-')
-      o += '-';
-  }
-  while (!o.empty() && o.back() == '-') o.pop_back();
-  if (o.size() > 48) o.resize(48);
-  return o.empty() ? "unknown" : o;
-}
-
-inline std::string utcNow(const char* fmt) {
-  std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[64];
-  std::strftime(b, sizeof b, fmt, &tm);
-  return b;
-}
-
 inline std::string sourceDir() {
 #ifdef DVISIM_SOURCE_DIR
   if (fs::is_directory(DVISIM_SOURCE_DIR)) return DVISIM_SOURCE_DIR;
@@ -152,12 +131,6 @@ inline std::string commitId() {
 inline int fitSteps(int steps, double last_step_s, double budget) {
   if (last_step_s <= 0) return steps;
   return std::max(1, std::min(steps, int(budget / last_step_s)));
-}
-
-inline void writeFile(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::binary);
-  f << text;
-  if (!f) throw std::runtime_error("cannot write " + path);
 }
 
 // The results of a benchmark that writes its table twice, OUT/NAME.csv and OUT/NAME.md: both files, a line saying
