@@ -26,6 +26,7 @@
 #include "ces/output/splitters.h"
 #include "chrono_like/base/errors.h"
 #include "cli_test_util.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 
 using namespace dvi;
@@ -776,11 +777,7 @@ double relL2(const std::vector<double>& a, const std::vector<double>& b) {
 // the test above (collection plane raised): the particles collected and their masses agree, nothing is lost,
 // every collected body is frozen on the device, and the balance closes at every step.
 TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's, the mass balance closes", "[gpu][ces]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   {
     const CesConfig cfg = configWith({"feed.mass_flow_g_s=8"});  // the industrial feed, 20,000 particles/s
     auto cpu_sys = cesSystem(cfg, false);
