@@ -2,9 +2,8 @@
 // (bench_scaling.cpp: `bench scaling`; `bench accuracy`, `bench stability` can join the same way):
 //
 //   void registerBenchFoo(CLI::App& app, BenchRegistry& reg) {
-//     CLI::App* cmd = benchCommand(app)->add_subcommand("foo", "...");
-//     auto opts = std::make_shared<FooOptions>();   // options bound to cmd
-//     addBenchRunner(reg, cmd, [opts] { return runFoo(*opts); });
+//     auto [cmd, o] = addBench<FooOptions>(app, reg, {"foo", "...", "foo.csv", "..."}, runFoo);
+//     cmd->add_option("--size", o->size, "...");   // its own options, bound to *o
 //   }
 //
 // main.cpp calls each register function once, then, when `bench` was given, runBenchCommand(reg) runs the
@@ -17,6 +16,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
+#include <memory>
 #include <string>
 #include <stdexcept>
 #include <utility>
@@ -55,15 +55,33 @@ struct BenchBasics {
   bool quick = false, record = false;
 };
 
-// Adds the BenchBasics options of benchmark `name` to cmd: out_files names what --out receives, record_exts the
-// extensions of the record --record writes under bench/results/.
-inline void addBenchBasics(CLI::App* cmd, BenchBasics& o, const std::string& name, const std::string& out_files,
-                           const std::string& quick_help, const std::string& record_exts = "md,csv",
-                           const std::string& threads_help = "OpenMP threads of our CPU backend (0: all)") {
-  cmd->add_option("--out", o.out, "Output directory (" + out_files + ")")->required();
-  cmd->add_flag("--quick", o.quick, quick_help);
-  cmd->add_flag("--record", o.record, "Also write bench/results/" + name + "_<device>_<date>.{" + record_exts + "}");
-  cmd->add_option("--threads", o.threads, threads_help);
+// What a benchmark subcommand is called and says of itself: its name and one-line description; what --out receives
+// (out_files), what --quick does, the extensions of the record --record writes under bench/results/ and what
+// --threads sets.
+struct BenchSpec {
+  std::string name, description, out_files, quick_help;
+  std::string record_exts = "md,csv", threads_help = "OpenMP threads of our CPU backend (0: all)";
+};
+
+// Adds the BenchBasics options of benchmark spec.name to cmd, bound to o.
+inline void addBenchBasics(CLI::App* cmd, BenchBasics& o, const BenchSpec& spec) {
+  cmd->add_option("--out", o.out, "Output directory (" + spec.out_files + ")")->required();
+  cmd->add_flag("--quick", o.quick, spec.quick_help);
+  cmd->add_flag("--record", o.record,
+                "Also write bench/results/" + spec.name + "_<device>_<date>.{" + spec.record_exts + "}");
+  cmd->add_option("--threads", o.threads, spec.threads_help);
+}
+
+// The benchmark subcommand spec.name: its BenchBasics options bound to a new Options (a BenchBasics) and run(options)
+// registered as its runner. Returns the subcommand and the options, to which the benchmark binds its own options.
+template <class Options, class Run>
+std::pair<CLI::App*, std::shared_ptr<Options>> addBench(CLI::App& app, BenchRegistry& reg, const BenchSpec& spec,
+                                                        Run run) {
+  auto o = std::make_shared<Options>();
+  CLI::App* cmd = benchCommand(app)->add_subcommand(spec.name, spec.description);
+  addBenchBasics(cmd, *o, spec);
+  addBenchRunner(reg, cmd, [o, run] { return run(*o); });
+  return {cmd, o};
 }
 
 // The value of --threads: an integer in [0, 4096] (0: all), else an InputError naming it.

@@ -88,6 +88,29 @@ Pile makePile(long n, double r, double mu) {
 double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
 // The command line into a; false (with the message printed) on bad input.
+// Means over the timed steps: ms per step and contacts; the deepest penetration (m).
+struct Timed {
+  double ms = 0, contacts = 0, pen = 0;
+};
+
+// a.warmup untimed steps of engine (our System or the Bullet peer), then a.steps timed ones, each followed by
+// after_step() (for the caller's own sums).
+template <class Engine, class AfterStep>
+Timed timeSteps(Engine& engine, const Args& a, AfterStep after_step) {
+  Timed r;
+  for (int s = 0; s < a.warmup + a.steps; ++s) {
+    const double t0 = now();
+    engine.step();
+    const double dt = now() - t0;
+    if (s < a.warmup) continue;
+    r.ms += 1e3 * dt / a.steps;
+    r.contacts += double(engine.lastStats().contacts) / a.steps;
+    r.pen = std::max(r.pen, double(engine.lastStats().max_penetration));
+    after_step();
+  }
+  return r;
+}
+
 bool parseArgs(int argc, char** argv, Args& a) {
   if (argc < 2 || std::strcmp(argv[1], "pile") != 0) {
     std::fprintf(stderr,
@@ -151,18 +174,11 @@ int main(int argc, char** argv) {
   cfg.solver.max_iterations = a.iterations;
   dvi::System sys(cfg);
   dvi::importBullet(sys, pile.bodies);
-  double ours_ms = 0, ours_contacts = 0, ours_pen = 0;
   std::vector<double> stage_ms(dvi::kStageCount, 0.0);
-  for (int s = 0; s < a.warmup + a.steps; ++s) {
-    double t0 = now();
-    sys.step();
-    double dt = now() - t0;
-    if (s < a.warmup) continue;
-    ours_ms += 1e3 * dt / a.steps;
-    ours_contacts += double(sys.lastStats().contacts) / a.steps;
-    ours_pen = std::max(ours_pen, double(sys.lastStats().max_penetration));
+  const Timed ours = timeSteps(sys, a, [&] {
     for (int k = 0; k < dvi::kStageCount; ++k) stage_ms[k] += 1e3 * sys.lastStats().stage_seconds[k] / a.steps;
-  }
+  });
+  const double ours_ms = ours.ms, ours_contacts = ours.contacts, ours_pen = ours.pen;
   std::printf("\n%-34s %12s %12s %16s\n", "engine", "ms/step", "contacts", "max pen / r");
   std::printf("%-34s %12.1f %12.0f %16.4f\n",
               ("dvisim cpu " + a.solver + " " + std::to_string(a.iterations) + " it, " +
@@ -180,15 +196,8 @@ int main(int argc, char** argv) {
     bs.solver_iterations = a.bullet_iterations;
     bs.length_scale = 100;  // centimetres: Bullet's absolute tolerances break 1 cm spheres in metres
     dvi::BulletPeer peer(pile.bodies, bs);
-    for (int s = 0; s < a.warmup + a.steps; ++s) {
-      double t0 = now();
-      peer.step();
-      double dt = now() - t0;
-      if (s < a.warmup) continue;
-      bullet_ms += 1e3 * dt / a.steps;
-      bullet_contacts += double(peer.lastStats().contacts) / a.steps;
-      bullet_pen = std::max(bullet_pen, double(peer.lastStats().max_penetration));
-    }
+    const Timed b = timeSteps(peer, a, [] {});
+    bullet_ms = b.ms, bullet_contacts = b.contacts, bullet_pen = b.pen;
     std::printf("%-34s %12.1f %12.0f %16.4f\n",
                 ("bullet 2 SI " + std::to_string(a.bullet_iterations) + " it, 1 thr, cm units").c_str(), bullet_ms,
                 bullet_contacts, bullet_pen / r);

@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include "bench_common.h"
+#include "bench_text.h"
 #include "chrono_like/base/errors.h"
 #include "chrono_like/base/math.h"
 #include "chrono_like/bullet/bullet_import.h"
@@ -35,6 +37,13 @@
 namespace dvi::benchutil {
 
 namespace fs = std::filesystem;
+
+// The names a benchmark file uses unqualified once it says `using namespace dvi::benchutil`.
+using dvi::InputError;
+using dvi::Quat;
+using dvi::real;
+using dvi::Vec3;
+using Clock = std::chrono::steady_clock;
 
 inline std::string trim(std::string s) {
   while (!s.empty() && std::isspace((unsigned char)s.back())) s.pop_back();
@@ -94,28 +103,6 @@ inline std::string num(double v, const char* fmt = "%.6g") {
   return b;
 }
 
-inline std::string slug(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (std::isalnum((unsigned char)c))
-      o += char(std::tolower((unsigned char)c));
-    else if (!o.empty() && o.back() != '-')
-      o += '-';
-  }
-  while (!o.empty() && o.back() == '-') o.pop_back();
-  if (o.size() > 48) o.resize(48);
-  return o.empty() ? "unknown" : o;
-}
-
-inline std::string utcNow(const char* fmt) {
-  std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[64];
-  std::strftime(b, sizeof b, fmt, &tm);
-  return b;
-}
-
 inline std::string sourceDir() {
 #ifdef DVISIM_SOURCE_DIR
   if (fs::is_directory(DVISIM_SOURCE_DIR)) return DVISIM_SOURCE_DIR;
@@ -146,10 +133,17 @@ inline int fitSteps(int steps, double last_step_s, double budget) {
   return std::max(1, std::min(steps, int(budget / last_step_s)));
 }
 
-inline void writeFile(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::binary);
-  f << text;
-  if (!f) throw std::runtime_error("cannot write " + path);
+// The results of a benchmark that writes its table twice, OUT/NAME.csv and OUT/NAME.md: both files, a line saying
+// where, and with --record the record bench/results/NAME_<device>_<date>.{md,csv} (into results_dir), whose md ends
+// naming its csv.
+inline void writeCsvMdResults(const BenchBasics& o, const std::string& name, const std::string& device,
+                              const std::string& results_dir, const std::string& md, const std::string& csv) {
+  writeFile(o.out + "/" + name + ".csv", csv);
+  writeFile(o.out + "/" + name + ".md", md);
+  std::printf("results: %s/%s.csv, %s.md\n", o.out.c_str(), name.c_str(), name.c_str());
+  if (!o.record) return;
+  const std::string base = name + "_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
+  writeBenchRecord({results_dir}, base, {{"md", md + "\nRows: " + base + ".csv\n"}, {"csv", csv}}, writeFile);
 }
 
 // Creates DIR and checks that `probe_file` can be written in it; InputError (exit 2) otherwise.

@@ -25,6 +25,12 @@ expect_header() {
   [ "$(head -1 "$1")" = "$2" ] || fail "CSV header of $1: $(head -1 "$1")"
 }
 
+# expect_files FILE...: each file exists and is not empty.
+expect_files() {
+  local f
+  for f in "$@"; do [ -s "$f" ] || fail "no $f"; done
+}
+
 # expect2 ARGS...: dvisim ARGS... is bad input: exit code 2 and one line "dvisim: error: ..." on stderr.
 expect2() {
   "$cli" "$@" > /dev/null 2> "$work/err.txt"
@@ -32,4 +38,13 @@ expect2() {
   [ $rc -eq 2 ] || fail "'$*' exited with $rc, expected 2"
   [ "$(wc -l < "$work/err.txt")" -eq 1 ] || fail "'$*': expected a one-line error, got: $(cat "$work/err.txt")"
   grep -q "^dvisim: error: " "$work/err.txt" || fail "'$*': $(cat "$work/err.txt")"
+}
+
+# expect_basic_refusals NAME: the bad input every benchmark refuses (expect2): an unknown option, no --out, and an
+# --out below a plain file.
+expect_basic_refusals() {
+  expect2 bench "$1" --quick --out "$work/e_bogus" --bogus
+  expect2 bench "$1" --quick
+  echo plain > "$work/a_file"
+  expect2 bench "$1" --quick --out "$work/a_file/sub"
 }

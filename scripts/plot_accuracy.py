@@ -11,22 +11,10 @@ log-log, one line per engine and solver over the iteration sweep (the time-step 
 Bullet's sequential impulse is a line too (no CCP residual).
 """
 import csv
-import math
 import os
 import sys
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-
-def fl(x):
-    try:
-        v = float(x)
-        return v if math.isfinite(v) else None
-    except (TypeError, ValueError):
-        return None
+from plot_common import fl, plt
 
 
 def main():

@@ -9,23 +9,11 @@ one line per combination of the other swept keys' levels.
 """
 import csv
 import json
-import math
 import os
 import re
 import sys
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-
-def fl(x):
-    try:
-        v = float(x)
-        return v if math.isfinite(v) else None
-    except (TypeError, ValueError):
-        return None
+from plot_common import fl, plt
 
 
 def level_axis(values):

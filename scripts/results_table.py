@@ -28,6 +28,12 @@ def field(text, name):
     return m.group(1).strip() if m else None
 
 
+def line_group(pattern, text):
+    """The first group of pattern's first match in text, with ^ and $ at every line (re.M); None without one."""
+    m = re.search(pattern, text, re.M)
+    return m.group(1) if m else None
+
+
 def short_device(s):
     """'NVIDIA H200 (143155 MiB, sm_90)' -> 'NVIDIA H200'; CPU names keep their thread count."""
     if not s:
@@ -145,6 +151,18 @@ def table_value(text, quantity):
     return m.group(1).strip() if m else None
 
 
+# The CES columns read from a row of the record's table: (column, row, re.match or re.search, the pattern whose first
+# group is the value, whether the row's whole text stands in when the pattern does not match).
+CES_TABLE_VALUES = [
+    ("machine time", "machine time reached", re.match, r"([\d.]+ s of [\d.]+ s)", True),
+    ("wall", "wall time", re.match, r"([\d.]+ s)", True),
+    ("particles/s", "particles fed", re.search, r"\(([\d,]+) particles/s", False),
+    ("ms/step", "ms/step", re.match, r"([\d.]+) mean", False),
+    ("in flight", "bodies in flight", re.match, r"([\d,]+) max", False),
+    ("contacts", "contacts per step", re.match, r"([\d,]+) mean", False),
+]
+
+
 def ces(text):
     r = common(text)
     backend = field(text, "backend")
@@ -166,32 +184,12 @@ def ces(text):
         elif g.startswith("no verdict"):
             w = re.search(r"--wall-limit ([\d.]+ s)", g)
             r["goal"] = "no verdict (wall limit %s)" % w.group(1) if w else "no verdict"
-    reached = table_value(text, "machine time reached")
-    if reached:
-        m = re.match(r"([\d.]+ s of [\d.]+ s)", reached)
-        r["machine time"] = m.group(1) if m else reached
-    wall = table_value(text, "wall time")
-    if wall:
-        m = re.match(r"([\d.]+ s)", wall)
-        r["wall"] = m.group(1) if m else wall
-    fed = table_value(text, "particles fed")
-    if fed:
-        m = re.search(r"\(([\d,]+) particles/s", fed)
-        r["particles/s"] = m.group(1) if m else None
-    ms = table_value(text, "ms/step")
-    if ms:
-        m = re.match(r"([\d.]+) mean", ms)
-        r["ms/step"] = m.group(1) if m else None
-    inflight = table_value(text, "bodies in flight")
-    if inflight:
-        m = re.match(r"([\d,]+) max", inflight)
-        r["in flight"] = m.group(1) if m else None
-    contacts = table_value(text, "contacts per step")
-    if contacts:
-        m = re.match(r"([\d,]+) mean", contacts)
-        r["contacts"] = m.group(1) if m else None
-    narrow = re.search(r"^\| NarrowPhase \| [\d.]+ \| ([\d.]+%) \|", text, re.M)
-    r["narrow share"] = narrow.group(1) if narrow else None
+    for col, row, find, pattern, keep in CES_TABLE_VALUES:
+        value = table_value(text, row)
+        if value:
+            m = find(pattern, value)
+            r[col] = m.group(1) if m else (value if keep else None)
+    r["narrow share"] = line_group(r"^\| NarrowPhase \| [\d.]+ \| ([\d.]+%) \|", text)
     return r
 
 
@@ -248,12 +246,10 @@ def pruning(text):
             ("%dk" % (n // 1000)) if n % 1000 == 0 else str(n))
     for scene in ("frictionless", "frictional"):
         for prune in ("true", "false"):
-            m = re.search(r"^\| pile-" + scene + r" \| " + prune + r" \| ([\d.]+) \|", text, re.M)
-            r["%s %s" % (scene, prune)] = m.group(1) if m else None
-    m = re.search(r"^- frictionless pile: ([\d.]+%)", text, re.M)
-    r["saving frictionless"] = m.group(1) if m else None
-    m = re.search(r"^- frictional pile[^:]*: ([\d.]+%)", text, re.M)
-    r["saving frictional"] = m.group(1) if m else None
+            r["%s %s" % (scene, prune)] = line_group(
+                r"^\| pile-" + scene + r" \| " + prune + r" \| ([\d.]+) \|", text)
+    r["saving frictionless"] = line_group(r"^- frictionless pile: ([\d.]+%)", text)
+    r["saving frictional"] = line_group(r"^- frictional pile[^:]*: ([\d.]+%)", text)
     return r
 
 
@@ -284,8 +280,7 @@ def stability(text):
     cases = [c for c in cases if c != "case"]
     if cases:
         r["cases"] = str(len(set(cases)))
-    m = re.search(r"^Total run time ([\d.]+ s)", text, re.M)
-    r["run time"] = m.group(1) if m else None
+    r["run time"] = line_group(r"^Total run time ([\d.]+ s)", text)
     return r
 
 
@@ -307,11 +302,10 @@ def dropin(text):
     r = common(text, device_names=("GPU", "CPU") if field(text, "GPU") not in (None, "none") else ("CPU",))
     for scene in DROPIN_SCENES:
         for engine in ("cpu", "gpu"):
-            m = re.search(r"^\| " + scene + r" \| " + engine + r" \| [^|]*\| [^|]*\| [^|]*\| ([\d.]+x) \|", text, re.M)
-            r["%s %s" % (scene, engine)] = m.group(1) if m else None
-    m = re.search(r"^Goal: our CPU drop-in at <= 1.0x Bullet's time on every scene: ([A-Z ]+ \(\d+ of \d+ scenes\))",
-                  text, re.M)
-    r["cpu goal"] = m.group(1) if m else None
+            r["%s %s" % (scene, engine)] = line_group(
+                r"^\| " + scene + r" \| " + engine + r" \| [^|]*\| [^|]*\| [^|]*\| ([\d.]+x) \|", text)
+    r["cpu goal"] = line_group(
+        r"^Goal: our CPU drop-in at <= 1.0x Bullet's time on every scene: ([A-Z ]+ \(\d+ of \d+ scenes\))", text)
     return r
 
 
@@ -332,8 +326,7 @@ def dropincorpus(text):
         r["geomean"], r["ran"], r["largest"] = m.group(1), m.group(2), m.group(3)
     r["examples"] = str(len(re.findall(r"^\| [A-Za-z0-9]+ \| (?:runs|\*\*refused\*\*) \|", text, re.M)))
     r["failing"] = str(len(re.findall(r"^- \S+ (?:FAILS|fails) ", text, re.M)))
-    m = re.search(r"^Goal \(issue 37\).*: (MET|NOT MET)\.$", text, re.M)
-    r["goal"] = m.group(1) if m else None
+    r["goal"] = line_group(r"^Goal \(issue 37\).*: (MET|NOT MET)\.$", text)
     return r
 
 

@@ -4,7 +4,7 @@
 #   tests/check_format.sh --fix [SOURCE_DIR]    format them in place
 # Uses clang-format 14 (Debian 12's), the version the tree was formatted with: other versions break lines
 # differently, so without it the check is skipped (exit 77, CTest's skip code). Bullet's example sources vendored
-# unmodified under bench/dropin_corpus/bullet3_examples/ keep Bullet's own format.
+# unmodified under bench/dropin_corpus/third_party/bullet3_examples/ keep Bullet's own format.
 set -uo pipefail
 fix=0
 if [ "${1:-}" = "--fix" ]; then fix=1; shift; fi
@@ -20,10 +20,10 @@ fi
 cd "$src" || exit 2
 if git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
   mapfile -t files < <(git ls-files -- 'src/*' 'apps/*' 'tests/*' 'bench/*' 'demos/*' | grep -E '\.(h|hpp|cpp|cu|cuh)$' |
-    grep -v '^bench/dropin_corpus/bullet3_examples/')
+    grep -v '^bench/dropin_corpus/third_party/bullet3_examples/')
 else
   mapfile -t files < <(find src apps tests bench demos -type f \( -name '*.h' -o -name '*.hpp' -o -name '*.cpp' -o -name '*.cu' -o -name '*.cuh' \) |
-    grep -v '^bench/dropin_corpus/bullet3_examples/' | sort)
+    grep -v '^bench/dropin_corpus/third_party/bullet3_examples/' | sort)
 fi
 if [ "$fix" = 1 ]; then
   "$cf" -i --style=file "${files[@]}"

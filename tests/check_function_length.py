@@ -108,7 +108,7 @@ def functions(text):
 
 # Code of other projects kept unchanged as benchmark input (Bullet's example programs of bench/dropin_corpus/): not
 # ours to split.
-FOREIGN = os.path.join("dropin_corpus", "bullet3_examples")
+FOREIGN = os.path.join("dropin_corpus", "third_party", "bullet3_examples")
 
 
 def long_functions(src_dir, max_lines):

@@ -18,6 +18,7 @@
 
 #include "bullet_test_world.h"
 #include "chrono_like/bullet/bullet_world.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 
 namespace dvi {
@@ -102,20 +103,12 @@ TEST_CASE("drop-in world: an unsupported shape is refused by addRigidBody and ad
   btVector3 inertia;
   sum->calculateLocalInertia(1, inertia);
   btRigidBody body(btRigidBody::btRigidBodyConstructionInfo(1, nullptr, sum, inertia));
-  try {
-    w.world->addRigidBody(&body);
-    FAIL("not refused");
-  } catch (const InputError& e) {
-    CHECK(std::string(e.what()) == "addRigidBody: unsupported collision shape: MinkowskiSum");
-  }
+  CHECK_THROWS_MATCHES(w.world->addRigidBody(&body), InputError,
+                       Catch::Matchers::Message("addRigidBody: unsupported collision shape: MinkowskiSum"));
   btCollisionObject obj;
   obj.setCollisionShape(sum);
-  try {
-    w.world->addCollisionObject(&obj);
-    FAIL("not refused");
-  } catch (const InputError& e) {
-    CHECK(std::string(e.what()) == "addCollisionObject: unsupported collision shape: MinkowskiSum");
-  }
+  CHECK_THROWS_MATCHES(w.world->addCollisionObject(&obj), InputError,
+                       Catch::Matchers::Message("addCollisionObject: unsupported collision shape: MinkowskiSum"));
   btEmptyShape empty;
   btRigidBody with_empty(btRigidBody::btRigidBodyConstructionInfo(0, nullptr, &empty));
   CHECK_THROWS_WITH(w.world->addRigidBody(&with_empty), "addRigidBody: unsupported collision shape: Empty");
@@ -385,11 +378,7 @@ namespace dvi {
 // On the GPU backend rolling and spinning friction are refused when the body is added (the device solver has no
 // rolling blocks), naming the API, and Bullet's world is left without it; the same body without them is taken.
 TEST_CASE("drop-in world on the GPU backend: rolling friction is refused by addRigidBody", "[world][examples][gpu]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   DviWorldConfig c;
   c.backend = WorldBackend::Gpu;
   ExampleWorld w(true, btVector3(0, -10, 0), c);

@@ -20,6 +20,7 @@
 #include "bullet_test_world.h"
 #include "chrono_like/bullet/bullet_joints.h"
 #include "chrono_like/bullet/bullet_world.h"
+#include "device_check.h"
 
 using namespace dvi;
 
@@ -129,26 +130,19 @@ TEST_CASE("slider: angular limit ranges, locked angles and the angular motor as 
     CHECK(withinStock(ours.worst, bullet.worst, 5e-3));
     CHECK(std::fabs(ours.angle) <= kPi / 3 + 5e-3);
   }
-  SECTION("a range off zero: the box rests at its lower end, as in Bullet") {
-    auto setup = [](btSliderConstraint& sl) {
-      sl.setLowerAngLimit(btScalar(0.3));
-      sl.setUpperAngLimit(btScalar(0.8));
+  // Angular limits [lo, hi]: after `frames` frames the box rests at `expect`, where Bullet's rests.
+  auto restsAt = [](double lo, double hi, int frames, double expect) {
+    auto setup = [lo, hi](btSliderConstraint& sl) {
+      sl.setLowerAngLimit(btScalar(lo));
+      sl.setUpperAngLimit(btScalar(hi));
     };
-    const SliderRun bullet = sliderRun(false, 180, setup), ours = sliderRun(true, 180, setup);
+    const SliderRun bullet = sliderRun(false, frames, setup), ours = sliderRun(true, frames, setup);
     INFO("angle Bullet " << bullet.angle << ", ours " << ours.angle);
     CHECK(ours.angle == Approx(bullet.angle).margin(5e-3));
-    CHECK(ours.angle == Approx(0.3).margin(5e-3));
-  }
-  SECTION("a non-zero locked angle") {
-    auto setup = [](btSliderConstraint& sl) {
-      sl.setLowerAngLimit(btScalar(0.4));
-      sl.setUpperAngLimit(btScalar(0.4));
-    };
-    const SliderRun bullet = sliderRun(false, 120, setup), ours = sliderRun(true, 120, setup);
-    INFO("angle Bullet " << bullet.angle << ", ours " << ours.angle);
-    CHECK(ours.angle == Approx(bullet.angle).margin(5e-3));
-    CHECK(ours.angle == Approx(0.4).margin(5e-3));
-  }
+    CHECK(ours.angle == Approx(expect).margin(5e-3));
+  };
+  SECTION("a range off zero: the box rests at its lower end, as in Bullet") { restsAt(0.3, 0.8, 180, 0.3); }
+  SECTION("a non-zero locked angle") { restsAt(0.4, 0.4, 120, 0.4); }
   SECTION("the linear limit stops the box at it, where Bullet's passes it and drifts back") {
     // Bullet's code asks for |1 - dampingLimLin| of the incoming speed back, but stock Bullet leaves at -0.24 m/s
     // with dampingLimLin 0.5 and 1 alike (its limit's position correction); ours stops at the limit.
@@ -708,10 +702,6 @@ TEST_CASE("ConstraintDemo's constraints together: each joint held as stock Bulle
 
 TEST_CASE("ConstraintDemo's constraints on the GPU backend: each joint held as stock Bullet holds it",
           "[world][joints][bullet][gpu]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   checkDemoAgainstStock(WorldBackend::Gpu);
 }

@@ -50,6 +50,15 @@ JointBody closeB(const JointSpec& j, const JointBody& A, std::mt19937& rng, real
   return B;
 }
 
+// J v of row r: the constraint's rate at the bodies' velocities, each body's (linear, angular) part of J times its
+// (v, w); written here, not taken from the code under test.
+real rowVelocity(const ConstraintRow& r, const JointBody& A, const JointBody& B) {
+  auto part = [](const real* J, Vec3 v, Vec3 w) {
+    return J[0] * v.x + J[1] * v.y + J[2] * v.z + J[3] * w.x + J[4] * w.y + J[5] * w.z;
+  };
+  return part(r.Ja, A.v, A.w) + part(r.Jb, B.v, B.w);
+}
+
 }  // namespace
 
 TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint functions", "[world][joints]") {
@@ -105,10 +114,7 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
       for (size_t k = 0; k < r0.size(); ++k) {
         if (std::isfinite(r0[k].hi)) continue;  // a motor row (bias = -target), not a position row
         const real fd = (r1[k].bias - r0[k].bias) * dt / d;
-        real jv = 0;
-        const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z},
-                   vb[6] = {B.v.x, B.v.y, B.v.z, B.w.x, B.w.y, B.w.z};
-        for (int i = 0; i < 6; ++i) jv += r0[k].Ja[i] * va[i] + r0[k].Jb[i] * vb[i];
+        const real jv = rowVelocity(r0[k], A, B);
         INFO("row " << k << " J v = " << jv << ", finite difference " << fd);
         // First order in the joint error (0.05): the rows are exact at C = 0 and accurate to O(C) near it.
         CHECK(std::fabs(fd - jv) < 0.06 * (1 + std::fabs(jv)));
@@ -125,10 +131,7 @@ TEST_CASE("joint rows: Jacobians are the time derivatives of the constraint func
         if (std::isfinite(r0[k].hi)) continue;                           // motor rows
         if (r0[k].lo == 0 && std::fabs(r0[k].bias) > real(1)) continue;  // an inactive limit far away
         const real fd = (r1[k].bias - r0[k].bias) * dt / d;
-        real jv = 0;
-        const real va[6] = {A.v.x, A.v.y, A.v.z, A.w.x, A.w.y, A.w.z},
-                   vb[6] = {B0.v.x, B0.v.y, B0.v.z, B0.w.x, B0.w.y, B0.w.z};
-        for (int i = 0; i < 6; ++i) jv += r0[k].Ja[i] * va[i] + r0[k].Jb[i] * vb[i];
+        const real jv = rowVelocity(r0[k], A, B0);
         INFO("exact pose, row " << k << " J v = " << jv << ", finite difference " << fd);
         CHECK(std::fabs(fd - jv) < 1e-4 * (1 + std::fabs(jv)));
       }

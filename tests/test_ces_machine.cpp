@@ -26,6 +26,7 @@
 #include "ces/output/splitters.h"
 #include "chrono_like/base/errors.h"
 #include "cli_test_util.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 
 using namespace dvi;
@@ -39,6 +40,45 @@ using namespace clitest;  // runCli, tempDir, slurp, spit, quote, expectInputErr
 
 CesConfig configWith(const std::vector<std::string>& sets) {
   return parseCesDocument(json::parse(defaultCesJson()), sets, "<test>");
+}
+
+// Checks that the configuration of `sets` is refused with a one-line InputError holding each of needles.
+void checkRefused(const std::vector<std::string>& sets, const std::vector<std::string>& needles) {
+  INFO(sets.front());
+  try {
+    configWith(sets);
+    FAIL("accepted");
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    INFO(what);
+    for (const std::string& needle : needles) CHECK(what.find(needle) != std::string::npos);
+    CHECK(what.find('\n') == std::string::npos);
+  }
+}
+
+// The settings of the system a test machine runs in: cfg's time step and, where given, max_iterations solver
+// iterations a step.
+SystemConfig systemFor(const CesConfig& cfg, int max_iterations = 0) {
+  SystemConfig sc;
+  sc.step.dt = real(cfg.step.dt);
+  if (max_iterations > 0) sc.solver.max_iterations = max_iterations;
+  return sc;
+}
+
+// A heavy sphere that does not roll (inertia x 1e6) of the given density, diameter (m) and material id.
+ParticleSpec heavySphere(double density_kg_m3, double diameter = 1e-3, int material = 0) {
+  SplitMix64 rng;
+  ParticleSpec s = makeParticleSpec(material, ParticleShape::Sphere, diameter, density_kg_m3, rng);
+  s.inertia = s.inertia * real(1e6);
+  return s;
+}
+
+// Adds s to m on a circle of radius Rc about the drum axis at th0 (rad above the horizontal, electrode side),
+// moving and turning with the drum (angular speed -w); returns its body id.
+int addRiding(CesMachine& m, const ParticleSpec& s, double Rc, double w, double th0) {
+  const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
+  const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
+  return m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
 }
 
 // Angle of p about the drum axis, in (-pi, pi].
@@ -135,18 +175,7 @@ TEST_CASE("CES config: the embedded default equals scenes/ces_default.json and k
 }
 
 TEST_CASE("CES config: bad values are InputErrors naming the key", "[ces][ces_machine]") {
-  auto fails = [](const std::vector<std::string>& sets, const std::string& needle) {
-    INFO(sets.front());
-    try {
-      configWith(sets);
-      FAIL("no error");
-    } catch (const InputError& e) {
-      const std::string what = e.what();
-      INFO(what);
-      CHECK(what.find(needle) != std::string::npos);
-      CHECK(what.find('\n') == std::string::npos);
-    }
-  };
+  auto fails = [](const std::vector<std::string>& sets, const std::string& needle) { checkRefused(sets, {needle}); };
   fails({"drum.colour=3"}, "ces.drum.colour: unknown key");
   fails({"brush.core_diameter_mm=120"}, "ces.brush.core_diameter_mm");
   fails({"electrode.voltage_kV=nan"}, "ces.electrode.voltage_kV");
@@ -182,16 +211,7 @@ TEST_CASE("CES spark-over: the uniform-field breakdown bound, and settings beyon
   CHECK(uniformBreakdownVoltage(0.01) < 33e3);
   CHECK(uniformBreakdownVoltage(0.01, 0.8) < 0.85 * uniformBreakdownVoltage(0.01));  // thinner air
   auto refused = [](const std::vector<std::string>& sets, const std::string& needle) {
-    try {
-      configWith(sets);
-      FAIL("accepted");
-    } catch (const InputError& e) {
-      const std::string what = e.what();
-      INFO(what);
-      CHECK(what.find(needle) != std::string::npos);
-      CHECK(what.find("breakdown") != std::string::npos);
-      CHECK(what.find('\n') == std::string::npos);
-    }
+    checkRefused(sets, {needle, "breakdown"});
   };
   // The tube 11 mm from the drum (230 -> 190 mm): V_b = 24.36 (1.1) + 6.72 sqrt(1.1) = 33.8 kV.
   refused({"electrode.tube.distance_mm=190"}, "ces.electrode.voltage_kV");
@@ -317,19 +337,10 @@ TEST_CASE("CES machine: a particle carried by the turning drum leaves where g si
                     "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
                     "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=" + drive,
                     "feed.materials=[{\"kind\": \"plastic\", \"mass_fraction\": 1, \"density_kg_m3\": 8000}]"});
-    SystemConfig sc;
-    sc.step.dt = real(cfg.step.dt);
-    sc.solver.max_iterations = 100;
-    System sys(sc);
+    System sys(systemFor(cfg, 100));
     CesMachine m(cfg, sys);
-    SplitMix64 rng;
-    ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8000, rng);
-    s.inertia = s.inertia * real(1e6);
     const double R = cfg.drumRadius(), r = 0.5e-3, w = -cfg.omegaDrum(), Rc = R + r, g = 9.81;
-    const double th0 = 80 * M_PI / 180;
-    const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
-    const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
-    const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
+    const int id = addRiding(m, heavySphere(8000), Rc, w, 80 * M_PI / 180);
     const double th_star = std::asin(w * w * Rc / g);  // 21.1 degrees
     // Leaving: the first step at which the gap to the drum opens beyond 1e-7 m (0.02 % of r; resting, the
     // gap is ~2e-8 m). Contact impulses are no criterion here: the convex (Anitescu-Tasora) relaxation of
@@ -366,9 +377,7 @@ TEST_CASE("CES machine: rolling resistance holds a sphere on the drum up to the 
                     "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0", "drum.rpm=0",
                     "drum.drive=kinematic", "friction.rolling_drum=" + mu_r,
                     "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
-    SystemConfig sc;
-    sc.step.dt = real(cfg.step.dt);
-    System sys(sc);
+    System sys(systemFor(cfg));
     CesMachine m(cfg, sys);
     SplitMix64 rng;
     const ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8900, rng);
@@ -399,14 +408,9 @@ TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal 
                               "field.model=two_cylinder", "air.viscosity_Pa_s=1e-12", "air.density_kg_m3=0",
                               "friction.particle_drum=200", "time_step_s=0.0001", "drum.drive=kinematic",
                               "feed.materials=[{\"kind\": \"metal\", \"mass_fraction\": 1, \"density_kg_m3\": 8900}]"});
-  SystemConfig sc;
-  sc.step.dt = real(cfg.step.dt);
-  sc.solver.max_iterations = 100;
-  System sys(sc);
+  System sys(systemFor(cfg, 100));
   CesMachine m(cfg, sys);
-  SplitMix64 rng;
-  ParticleSpec s = makeParticleSpec(0, ParticleShape::Sphere, 1e-3, 8900, rng);
-  s.inertia = s.inertia * real(1e6);
+  const ParticleSpec s = heavySphere(8900);
   const double R = cfg.drumRadius(), r = s.radius, w = -cfg.omegaDrum(), Rc = R + r, g = 9.81;
   const double mass = double(s.mass_fg) * kFemtogram;
   double th_star = -1;
@@ -423,10 +427,7 @@ TEST_CASE("CES machine: a conductor on the drum leaves where lift + centrifugal 
   INFO("analytic leaving angle " << th_star * 180 / M_PI
                                  << " deg (bare drum: " << std::asin(w * w * Rc / g) * 180 / M_PI << ")");
   REQUIRE(th_star > 35 * M_PI / 180);  // well above the bare drum's 21 deg: the lift matters
-  const double th0 = 80 * M_PI / 180;
-  const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
-  const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
-  const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
+  const int id = addRiding(m, s, Rc, w, 80 * M_PI / 180);
   double th_leave = -1, q_leave = 0;
   for (int k = 0; k < 6000 && th_leave < 0; ++k) {
     m.step();
@@ -449,21 +450,15 @@ TEST_CASE(
   for (const double U : {-35.0, -8.0}) {
     INFO("U = " << U << " kV");
     CesConfig cfg = configWith({"feed.mass_flow_g_s=0", "electrode.voltage_kV=" + std::to_string(U)});
-    SystemConfig sc;
-    sc.step.dt = real(cfg.step.dt);
-    System sys(sc);
+    System sys(systemFor(cfg));
     CesMachine m(cfg, sys);
     const bool ionised = m.coronaInfo().ionised;
     INFO("onset " << m.coronaInfo().onset_voltage << " V");
     CHECK(ionised == (U < m.coronaInfo().onset_voltage * 1e-3));
-    SplitMix64 rng;
-    ParticleSpec s = makeParticleSpec(1, ParticleShape::Sphere, 0.75e-3, 946, rng);
-    s.inertia = s.inertia * real(1e6);
+    const ParticleSpec s = heavySphere(946, 0.75e-3, 1);
     const double R = cfg.drumRadius(), r = s.radius, w = -cfg.omegaDrum(), Rc = R + r;
     const double th0 = 80 * M_PI / 180;
-    const Vec3 p0{real(Rc * std::cos(th0)), real(Rc * std::sin(th0)), 0};
-    const Vec3 v0{real(w * Rc * std::sin(th0)), real(-w * Rc * std::cos(th0)), 0};
-    const int id = m.addParticle(s, p0, Quat{1, 0, 0, 0}, v0, Vec3{0, 0, real(-w)});
+    const int id = addRiding(m, s, Rc, w, th0);
     double unwrapped = th0, prev = th0, qmin = 0, left_at = 1e9;
     for (int k = 0; k < 12000 && left_at > 1e8; ++k) {
       m.step();
@@ -498,10 +493,7 @@ TEST_CASE(
 
 TEST_CASE("CES machine: the mass balance closes exactly and nothing is lost", "[ces][ces_machine]") {
   CesConfig cfg = configWith({"feed.mass_flow_g_s=1.5", "feed.duration_s=0.1", "collection.y_mm=-170"});
-  SystemConfig sc;
-  sc.step.dt = real(cfg.step.dt);
-  sc.solver.max_iterations = cfg.solver.max_iterations;
-  System sys(sc);
+  System sys(systemFor(cfg, cfg.solver.max_iterations));
   CesMachine m(cfg, sys);
   const size_t machine_bodies = sys.bodies().count();
   size_t prev_count = machine_bodies;
@@ -819,11 +811,7 @@ double relL2(const std::vector<double>& a, const std::vector<double>& b) {
 // the test above (collection plane raised): the particles collected and their masses agree, nothing is lost,
 // every collected body is frozen on the device, and the balance closes at every step.
 TEST_CASE("CES machine on the GPU: device field and charging equal the CPU's, the mass balance closes", "[gpu][ces]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   {
     const CesConfig cfg = configWith({"feed.mass_flow_g_s=8"});  // the industrial feed, 20,000 particles/s
     auto cpu_sys = cesSystem(cfg, false);
@@ -939,10 +927,7 @@ int64_t overlappingSpawns(const CesMachine& m, double slack) {
 // more than `min_spawned` particles were fed and that none of them overlaps another.
 void checkSpawnsApart(const std::vector<std::string>& sets, int steps, int64_t min_spawned) {
   const CesConfig cfg = configWith(sets);
-  SystemConfig sc;
-  sc.step.dt = real(cfg.step.dt);
-  sc.solver.max_iterations = cfg.solver.max_iterations;
-  CheckpointSystem sys(sc);
+  CheckpointSystem sys(systemFor(cfg, cfg.solver.max_iterations));
   CesMachine m(cfg, sys);
   for (int k = 0; k < steps; ++k) m.step();
   const int64_t spawned = int64_t(m.particles().count()) - m.firstParticleBody();
@@ -963,10 +948,7 @@ TEST_CASE("CES feeder: a feed of 1e6 g/s spawns without overlaps, in time linear
   }
   SECTION("1e6 g/s at a 10 us step: ~25,000 particles a step against up to 75,000 recent ones") {
     const CesConfig cfg = configWith({"feed.mass_flow_g_s=1e6", "time_step_s=1e-5", "field.model=\"csm\""});
-    SystemConfig sc;
-    sc.step.dt = real(cfg.step.dt);
-    sc.solver.max_iterations = cfg.solver.max_iterations;
-    CheckpointSystem sys(sc);
+    CheckpointSystem sys(systemFor(cfg, cfg.solver.max_iterations));
     CesMachine m(cfg, sys);
     const auto t0 = std::chrono::steady_clock::now();
     for (int k = 0; k < 3; ++k) m.step();

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_test_util.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 
 using namespace clitest;
@@ -135,11 +136,7 @@ TEST_CASE("Scene checkpoints: SIGINT exits 4 with checkpoint/, and --resume ends
 }
 
 TEST_CASE("Scene checkpoints: a GPU run stopped by SIGINT resumes where the whole run ends", "[checkpoint][cli][gpu]") {
-  std::string why;
-  if (!dvi::gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   const fs::path d = tempDir("ckpt_gpu");
   const auto [resumed, whole] = interruptAndResume(d, "gpu");
   const double diff = largestDifference(resumed, whole);

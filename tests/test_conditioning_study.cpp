@@ -386,6 +386,30 @@ struct Candidate {
   Method run;
 };
 
+// The APGD variants of the study, named by what they add to apgdLocal's defaults: "+gsH" / "+gsA" a Gauss-Seidel
+// polish every 50 iterations of the heavy blocks / of all blocks; "+sub" the two-group subspace step (group: the
+// heavy blocks) every 10 iterations, "+sub0" once on the start; a trailing K: no momentum restart after a polish or
+// subspace step; a trailing C: that, and the periodic subspace step only where the heavy group starts from zero.
+Candidate apgdVariant(const char* name) {
+  const std::string v = std::string(name).substr(std::string(name).find('+') + 1);
+  return {name, [v](const Problem& q, std::vector<real>& g, const Ctx& cx) {
+            ApgdOptions o;
+            if (v.rfind("gs", 0) == 0) {
+              o.polish_every = 50;
+              if (v[2] == 'H') o.polish_blocks = &q.heavy_blocks;
+            } else if (v == "sub0") {
+              o.sub_start = true;
+              o.group = &q.heavy_blocks;
+            } else {
+              o.sub_every = 10;
+              o.group = &q.heavy_blocks;
+              o.sub_cold_only = v.back() == 'C';
+            }
+            o.jump_restart = v.back() != 'K' && v.back() != 'C';
+            return apgdLocal(*q.p, g, cx, o);
+          }};
+}
+
 std::vector<Candidate> candidates() {
   std::vector<Candidate> c;
   c.push_back({"apgd", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
@@ -399,17 +423,8 @@ std::vector<Candidate> candidates() {
                  o.restart = Restart::Function;
                  return apgdLocal(*q.p, g, cx, o);
                }});
-  c.push_back({"apgd+gsH", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.polish_every = 50;
-                 o.polish_blocks = &q.heavy_blocks;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
-  c.push_back({"apgd+gsA", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.polish_every = 50;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
+  c.push_back(apgdVariant("apgd+gsH"));
+  c.push_back(apgdVariant("apgd+gsA"));
   c.push_back({"gs", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
                  return fromStats(q.p->solveGaussSeidel(g.data(), settingsOf(cx)), cx);
                }});
@@ -426,40 +441,11 @@ std::vector<Candidate> candidates() {
                  s.jacobi_omega = real(0.3);
                  return fromStats(solveJacobi(*q.p, g.data(), s), cx);
                }});
-  c.push_back({"apgd+sub", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.sub_every = 10;
-                 o.group = &q.heavy_blocks;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
-  c.push_back({"apgd+subK", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.sub_every = 10;
-                 o.group = &q.heavy_blocks;
-                 o.jump_restart = false;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
-  c.push_back({"apgd+gsHK", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.polish_every = 50;
-                 o.polish_blocks = &q.heavy_blocks;
-                 o.jump_restart = false;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
-  c.push_back({"apgd+subC", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.sub_every = 10;
-                 o.group = &q.heavy_blocks;
-                 o.jump_restart = false;
-                 o.sub_cold_only = true;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
-  c.push_back({"apgd+sub0", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
-                 ApgdOptions o;
-                 o.sub_start = true;
-                 o.group = &q.heavy_blocks;
-                 return apgdLocal(*q.p, g, cx, o);
-               }});
+  c.push_back(apgdVariant("apgd+sub"));
+  c.push_back(apgdVariant("apgd+subK"));
+  c.push_back(apgdVariant("apgd+gsHK"));
+  c.push_back(apgdVariant("apgd+subC"));
+  c.push_back(apgdVariant("apgd+sub0"));
   c.push_back({"bb", [](const Problem& q, std::vector<real>& g, const Ctx& cx) {
                  return fromStats(solveBB(*q.p, g.data(), settingsOf(cx)), cx);
                }});

@@ -14,6 +14,7 @@
 #include "chrono_like/base/errors.h"
 #include "chrono_like/collision/contact.h"
 #include "chrono_like/system.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 
 using namespace dvi;
@@ -101,11 +102,7 @@ TEST_CASE("contact exclusions: an excluded pair passes through, the others still
 }
 
 TEST_CASE("contact exclusions on the GPU backend: as on the CPU", "[exclusions][gpu]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   SystemConfig cfg;
   cfg.step.dt = real(1) / 240;
   for (int c = 0; c < 3; ++c) {

@@ -20,6 +20,7 @@
 #include "chrono_like/bullet/bullet_world.h"
 #include "chrono_like/system.h"
 #include "cli_test_util.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 #include "scaling/scaling_scenes.h"
 
@@ -45,6 +46,26 @@ std::unique_ptr<System> makeSystem(const SystemConfig& cfg, bool gpu) {
   return std::make_unique<System>(cfg);
 }
 
+// Steps sys `steps` times and measures the run; `top` is the body whose height it follows.
+RunResult run(System& sys, int top, int steps) {
+  RunResult r;
+  r.top_y0 = double(sys.bodies().pos[size_t(top)].y);
+  int64_t iters = 0;
+  for (int k = 0; k < steps; ++k) {
+    sys.step();
+    const StepStats& s = sys.lastStats();
+    r.max_pen = std::max(r.max_pen, double(s.max_penetration));
+    iters += s.iterations;
+    r.max_iterations = std::max(r.max_iterations, s.iterations);
+    r.seconds += s.stage_seconds[int(StageType::Solve)];
+  }
+  sys.syncToHost();
+  r.top_y = double(sys.bodies().pos[size_t(top)].y);
+  r.mean_iterations = double(iters) / steps;
+  r.log = sys.convergence();
+  return r;
+}
+
 // A ground plane and n cubes of half size a (1 kg each, the top one `ratio` times heavier), mu = 0.7, the
 // layout of `dvisim bench stability`'s stacks.
 RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig cfg, bool gpu = false) {
@@ -56,23 +77,7 @@ RunResult runStack(int n, double ratio, double dt, double seconds, SystemConfig 
   for (int i = 0; i < n; ++i)
     top = sys->addBody(
         cube(a, i == n - 1 ? real(ratio) : real(1), Vec3{0, real(a * (1.0002 + 2.0002 * i)), 0}, real(0.7)));
-  RunResult r;
-  r.top_y0 = double(sys->bodies().pos[size_t(top)].y);
-  const int steps = int(std::lround(seconds / dt));
-  int64_t iters = 0;
-  for (int k = 0; k < steps; ++k) {
-    sys->step();
-    const StepStats& s = sys->lastStats();
-    r.max_pen = std::max(r.max_pen, double(s.max_penetration));
-    iters += s.iterations;
-    r.max_iterations = std::max(r.max_iterations, s.iterations);
-    r.seconds += s.stage_seconds[int(StageType::Solve)];
-  }
-  sys->syncToHost();
-  r.top_y = double(sys->bodies().pos[size_t(top)].y);
-  r.mean_iterations = double(iters) / steps;
-  r.log = sys->convergence();
-  return r;
+  return run(*sys, top, int(std::lround(seconds / dt)));
 }
 
 // bench stability's particle case: 2x2 spheres (r 1 cm) in a tight box, a fifth `ratio` times heavier on top.
@@ -81,22 +86,7 @@ RunResult runParticles(double ratio, int steps, SystemConfig cfg, bool gpu = fal
   auto sys = makeSystem(cfg, gpu);
   sys->addBody(groundPlane(real(0.7)));
   const int top = testbodies::addParticleBox(*sys, ratio);
-  RunResult res;
-  res.top_y0 = double(sys->bodies().pos[size_t(top)].y);
-  int64_t iters = 0;
-  for (int k = 0; k < steps; ++k) {
-    sys->step();
-    const StepStats& s = sys->lastStats();
-    res.max_pen = std::max(res.max_pen, double(s.max_penetration));
-    iters += s.iterations;
-    res.max_iterations = std::max(res.max_iterations, s.iterations);
-    res.seconds += s.stage_seconds[int(StageType::Solve)];
-  }
-  sys->syncToHost();
-  res.top_y = double(sys->bodies().pos[size_t(top)].y);
-  res.mean_iterations = double(iters) / steps;
-  res.log = sys->convergence();
-  return res;
+  return run(*sys, top, steps);
 }
 
 void report(const char* what, const RunResult& r) {
@@ -436,17 +426,8 @@ TEST_CASE("measure: sphere pile at the default and fixed settings", "[.pile]") {
 
 // ---- the same on the GPU backend (run on a device; skipped with a message where there is none) ----
 
-namespace {
-bool convergeDevice() {
-  std::string why;
-  if (gpuAvailable(&why)) return true;
-  WARN("no CUDA device: skipping (" << why << ")");
-  return false;
-}
-}  // namespace
-
 TEST_CASE("GPU defaults: the 10-box 1e3 stack, the 30-box tower and particles 1e2 hold", "[gpu][convergence]") {
-  if (!convergeDevice()) return;
+  if (!dvi::testing::haveDevice()) return;
   {
     const RunResult r = runStack(10, 1e3, 0.01, 3, SystemConfig{}, true);
     report("GPU stack 10, 1e3, defaults", r);
@@ -472,7 +453,7 @@ TEST_CASE("GPU defaults: the 10-box 1e3 stack, the 30-box tower and particles 1e
 // The tolerance stop is decided by the same ApgdControl on both backends: with real storage the CPU and the GPU
 // take the same number of iterations every step and report the same relative residual (to rounding).
 TEST_CASE("GPU defaults: the tolerance stop takes the CPU's iterations on the stack", "[gpu][convergence]") {
-  if (!convergeDevice()) return;
+  if (!dvi::testing::haveDevice()) return;
   SystemConfig cfg;
   cfg.step.dt = real(0.01);
   cfg.solver.storage = VectorStorage::Real;
@@ -584,6 +565,6 @@ TEST_CASE("defaults: the users' serialized 10-box stack with a 1000x top stands 
 }
 
 TEST_CASE("GPU defaults: the users' serialized 10-box stack with a 1000x top stands for 3 s", "[gpu][convergence]") {
-  if (!convergeDevice()) return;
+  if (!dvi::testing::haveDevice()) return;
   checkUsersStack("gpu");
 }

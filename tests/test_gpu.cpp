@@ -97,6 +97,23 @@ void buildPile(System& sys, int n, unsigned seed, bool mixed = true, double spac
   }
 }
 
+// A CPU system and a GPU system of one configuration, each holding buildPile(n, seed, mixed, spacing).
+struct CpuGpuPile {
+  System cpu;
+  std::unique_ptr<System> gpu;
+  CpuGpuPile(const SystemConfig& cfg, int n, unsigned seed, bool mixed, double spacing)
+      : cpu(cfg), gpu(makeGpuSystem(cfg)) {
+    buildPile(cpu, n, seed, mixed, spacing);
+    buildPile(*gpu, n, seed, mixed, spacing);
+  }
+  // One step of each, the GPU's state then copied to its host arrays.
+  void step() {
+    cpu.step();
+    gpu->step();
+    gpu->syncToHost();
+  }
+};
+
 SystemConfig pileConfig() {
   SystemConfig c;
   c.step.dt = real(1e-3);
@@ -319,14 +336,10 @@ namespace {
 // the new state.
 void compareOneStep(bool mixed) {
   const SystemConfig cfg = pileConfig();
-  System cpu(cfg);
-  auto gpu = makeGpuSystem(cfg);
-  buildPile(cpu, 10000, 7, mixed, 1.7);
-  buildPile(*gpu, 10000, 7, mixed, 1.7);
+  CpuGpuPile pile(cfg, 10000, 7, mixed, 1.7);
+  auto& [cpu, gpu] = pile;
   for (int s = 0; s < 2; ++s) {
-    cpu.step();
-    gpu->step();
-    gpu->syncToHost();
+    pile.step();
     const ContactArrays& cc = cpu.contacts();
     const ContactArrays& gc = gpu->contacts();
     INFO((mixed ? "mixed" : "spheres") << " step " << s << ": contacts CPU " << cc.count() << ", GPU " << gc.count());
@@ -396,18 +409,14 @@ TEST_CASE("frictionless 10,000-sphere pile: the GPU's normal-only CCP equals the
   for (SolverType t : {SolverType::APGD, SolverType::Jacobi, SolverType::BB}) {
     SystemConfig cfg = pileConfig();
     cfg.solver.type = t;
-    System cpu(cfg);
-    auto gpu = makeGpuSystem(cfg);
-    buildPile(cpu, 10000, 7, false, 1.7);
-    buildPile(*gpu, 10000, 7, false, 1.7);
+    CpuGpuPile pile(cfg, 10000, 7, false, 1.7);
+    auto& [cpu, gpu] = pile;
     for (System* s : {&cpu, gpu.get()}) {
       for (real& f : s->mutableBodies().friction) f = 0;
       s->markHostDirty();
     }
     for (int step = 0; step < 3; ++step) {
-      cpu.step();
-      gpu->step();
-      gpu->syncToHost();
+      pile.step();
       INFO(solverName(t) << " step " << step << ": contacts CPU " << cpu.contacts().count() << ", GPU "
                          << gpu->contacts().count());
       REQUIRE(cpu.contacts().count() > 5000);
@@ -446,11 +455,9 @@ TEST_CASE("one second of a 10,000-body mixed pile: GPU and CPU statistics agree 
   if (!haveDevice()) return;
   SystemConfig cfg = pileConfig();
   cfg.solver.storage = VectorStorage::Auto;
-  System cpu(cfg);
-  auto gpu = makeGpuSystem(cfg);
   const int n = 10000;  // the one-step test's pile; 2,000 bodies (one realisation of a chaotic flow) differed by 2.1%
-  buildPile(cpu, n, 7, true, 1.7);
-  buildPile(*gpu, n, 7, true, 1.7);
+  CpuGpuPile pile(cfg, n, 7, true, 1.7);
+  auto& [cpu, gpu] = pile;
   // Under compute-sanitizer (scripts/device/run_device.sh sanitize sets DVISIM_SANITIZER_RUN=1) the kernels run
   // 10-1000x slower (racecheck): the run is cut to 30 steps, which execute every kernel of the step, and the
   // statistics, which need the whole second, are not judged (the sanitizer's report is that run's verdict).
@@ -499,10 +506,8 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
   for (SolverType t : {SolverType::Jacobi, SolverType::APGD, SolverType::BB}) {
     SystemConfig cfg = pileConfig();
     cfg.solver.type = t;
-    System cpu(cfg);
-    auto gpu = makeGpuSystem(cfg);
-    buildPile(cpu, 500, 3, false, 1.8);  // spheres: closed-form narrow phase, so this compares the solvers
-    buildPile(*gpu, 500, 3, false, 1.8);
+    CpuGpuPile pile(cfg, 500, 3, false, 1.8);  // spheres: closed-form narrow phase, so this compares the solvers
+    auto& [cpu, gpu] = pile;
     for (int s = 0; s < 5; ++s) {
       cpu.step();
       gpu->step();
@@ -518,9 +523,7 @@ TEST_CASE("GPU system runs every solver and keeps bodies added between steps", "
     extra.shapes.push_back(makeSphere(real(0.01)));
     cpu.addBody(extra);
     gpu->addBody(extra);
-    cpu.step();
-    gpu->step();
-    gpu->syncToHost();
+    pile.step();
     const double ep = relDiff(flatten(gpu->bodies().pos), flatten(cpu.bodies().pos));
     CHECK(ep < (kDouble ? 1e-6 : 1e-3));
   }

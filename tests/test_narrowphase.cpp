@@ -85,10 +85,22 @@ void checkConsistent(const ContactPoint* c, int n, double envelope) {
   }
 }
 
-// Closest distance of point p to segment [a, b], by golden-section search on the convex function
-// |p - (a + s (b - a))| (independent of the closed forms used by the code under test).
-double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
-  auto f = [&](double s) { return length(p - (a + (b - a) * s)); };
+// The contacts of a pair whose exact distance is `expect`: none when that is beyond the envelope, else one, consistent
+// (checkConsistent), at `expect` within margin. True when there is one, for the caller's checks of its normal.
+bool oneContactAt(const ContactPoint* c, int n, double expect, double envelope, double margin) {
+  if (expect >= envelope) {
+    REQUIRE(n == 0);
+    return false;
+  }
+  REQUIRE(n == 1);
+  checkConsistent(c, n, envelope);
+  CHECK(c[0].dist == Approx(expect).margin(margin));
+  return true;
+}
+
+// The s in [0, 1] that minimises the convex function f: golden-section search, then either end where lower.
+template <class F>
+double argminOnUnitInterval(F f) {
   double lo = 0, hi = 1;
   for (int i = 0; i < 100; ++i) {
     double m1 = lo + (hi - lo) * 0.381966, m2 = hi - (hi - lo) * 0.381966;
@@ -100,20 +112,20 @@ double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
   double s = 0.5 * (lo + hi);
   if (f(0) < f(s)) s = 0;
   if (f(1) < f(s)) s = 1;
+  return s;
+}
+
+// Closest distance of point p to segment [a, b], by golden-section search on the convex function
+// |p - (a + s (b - a))| (independent of the closed forms used by the code under test).
+double pointSegmentDistance(Vec3 p, Vec3 a, Vec3 b, double* s_out = nullptr) {
+  auto f = [&](double s) { return length(p - (a + (b - a) * s)); };
+  const double s = argminOnUnitInterval(f);
   if (s_out) *s_out = s;
   return f(s);
 }
 double segmentSegmentDistance(Vec3 a0, Vec3 a1, Vec3 b0, Vec3 b1) {
   auto f = [&](double s) { return pointSegmentDistance(a0 + (a1 - a0) * s, b0, b1); };
-  double lo = 0, hi = 1;
-  for (int i = 0; i < 100; ++i) {
-    double m1 = lo + (hi - lo) * 0.381966, m2 = hi - (hi - lo) * 0.381966;
-    if (f(m1) < f(m2))
-      hi = m2;
-    else
-      lo = m1;
-  }
-  return std::min({f(0.5 * (lo + hi)), f(0), f(1)});
+  return f(argminOnUnitInterval(f));
 }
 
 }  // namespace
@@ -140,13 +152,7 @@ TEST_CASE("sphere-sphere matches the closed form in both orders", "[narrowphase]
     Vec3 pb = pa + u * (ra + rb + gap);
     Shape A = sphere(ra), B = sphere(rb);
     int n = collideShapes(A, pose(pa, rng.rot()), B, pose(pb, rng.rot()), nullptr, env, c);
-    if (gap >= env) {
-      REQUIRE(n == 0);
-      continue;
-    }
-    REQUIRE(n == 1);
-    checkConsistent(c, n, env);
-    CHECK(c[0].dist == Approx(gap).margin(1e-12));
+    if (!oneContactAt(c, n, gap, env, 1e-12)) continue;
     CHECK(angleDeg(c[0].normal, u) < 1e-6);
     CHECK(length(c[0].pa - (pa + u * ra)) < 1e-12);
     CHECK(length(c[0].pb - (pb - u * rb)) < 1e-12);
@@ -239,13 +245,7 @@ TEST_CASE("sphere-box: face, edge, corner and inside regions", "[narrowphase]") 
     Vec3 nw = rotate(wb.q, nlocal);  // from box toward the sphere centre
     Shape S = sphere(r), B = box(e.x, e.y, e.z);
     int m = collideShapes(S, pose(centre), B, wb, nullptr, env, c);
-    if (expect >= env) {
-      CHECK(m == 0);
-      continue;
-    }
-    REQUIRE(m == 1);
-    checkConsistent(c, m, env);
-    CHECK(c[0].dist == Approx(expect).margin(1e-9));
+    if (!oneContactAt(c, m, expect, env, 1e-9)) continue;
     CHECK(angleDeg(c[0].normal, -nw) < 1e-5);
     m = collideShapes(B, wb, S, pose(centre), nullptr, env, c);
     REQUIRE(m == 1);
@@ -292,13 +292,7 @@ TEST_CASE("sphere-cylinder: side, cap, rim and inside regions", "[narrowphase]")
     Pose wc = pose(Vec3{rng.uni(-1, 1), rng.uni(-1, 1), rng.uni(-1, 1)}, rng.rot());
     Shape S = sphere(r), C = cylinder(R, H);
     int m = collideShapes(C, wc, S, pose(transformPoint(wc, lp)), nullptr, env, c);
-    if (expect >= env) {
-      CHECK(m == 0);
-      continue;
-    }
-    REQUIRE(m == 1);
-    checkConsistent(c, m, env);
-    CHECK(c[0].dist == Approx(expect).margin(1e-9));
+    if (!oneContactAt(c, m, expect, env, 1e-9)) continue;
     CHECK(angleDeg(c[0].normal, rotate(wc.q, nl)) < 1e-5);
   }
 }
@@ -745,6 +739,12 @@ struct Pair {
   std::unique_ptr<btConvexShape> bt;
 };
 
+// b with collision margin 0: its surface is then exactly the shape it twins (ours have no margin).
+btConvexShape* withoutMargin(btConvexShape* b) {
+  b->setMargin(0);
+  return b;
+}
+
 const ShapeType kConvexTypes[] = {ShapeType::Sphere,  ShapeType::Ellipsoid, ShapeType::Box,       ShapeType::Cylinder,
                                   ShapeType::Capsule, ShapeType::Cone,      ShapeType::ConvexHull};
 
@@ -768,17 +768,13 @@ Pair randomShape(ShapeType t, Rng& rng, std::vector<Vec3>& pts, double hull_marg
     case ShapeType::Box: {
       Vec3 e{rng.uni(0.2, 1), rng.uni(0.2, 1), rng.uni(0.2, 1)};
       p.s = box(e.x, e.y, e.z);
-      auto* b = new btBoxShape(btVector3(btScalar(e.x), btScalar(e.y), btScalar(e.z)));
-      b->setMargin(0);
-      p.bt.reset(b);
+      p.bt.reset(withoutMargin(new btBoxShape(btVector3(btScalar(e.x), btScalar(e.y), btScalar(e.z)))));
       break;
     }
     case ShapeType::Cylinder: {
       double r = rng.uni(0.2, 0.8), h = rng.uni(0.2, 1);
       p.s = cylinder(r, h);
-      auto* b = new btCylinderShape(btVector3(btScalar(r), btScalar(h), btScalar(r)));
-      b->setMargin(0);
-      p.bt.reset(b);
+      p.bt.reset(withoutMargin(new btCylinderShape(btVector3(btScalar(r), btScalar(h), btScalar(r)))));
       break;
     }
     case ShapeType::Capsule: {
@@ -790,9 +786,7 @@ Pair randomShape(ShapeType t, Rng& rng, std::vector<Vec3>& pts, double hull_marg
     case ShapeType::Cone: {
       double r = rng.uni(0.3, 0.8), h = rng.uni(0.5, 1.5);
       p.s = cone(r, h);
-      auto* b = new btConeShape(btScalar(r), btScalar(h));
-      b->setMargin(0);
-      p.bt.reset(b);
+      p.bt.reset(withoutMargin(new btConeShape(btScalar(r), btScalar(h))));
       break;
     }
     default: {  // convex hull: points around a random ellipsoid, offset from the origin

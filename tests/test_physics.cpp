@@ -46,6 +46,15 @@ BodyDesc sphere(real r, real mass, Vec3 pos, real friction) {
   return b;
 }
 
+// Settings of the resting tests: h = 1 ms, APGD with at most `iterations` iterations a step.
+SystemConfig apgdConfig(int iterations) {
+  SystemConfig cfg;
+  cfg.step.dt = real(1e-3);
+  cfg.solver.type = SolverType::APGD;
+  cfg.solver.max_iterations = iterations;
+  return cfg;
+}
+
 // Sum of the contact forces acting on body `on` from body `from` (all contacts between the two).
 Vec3 forceBetween(const System& sys, int from, int on) {
   Vec3 f{0, 0, 0};
@@ -76,10 +85,7 @@ TEST_CASE("free fall follows the semi-implicit Euler solution of y'' = -g", "[ph
 }
 
 TEST_CASE("a box resting on a plane carries m g", "[physics]") {
-  SystemConfig cfg;
-  cfg.step.dt = real(1e-3);
-  cfg.solver.type = SolverType::APGD;
-  cfg.solver.max_iterations = 100;
+  SystemConfig cfg = apgdConfig(100);
   System sys(cfg);
   int gr = sys.addBody(ground());
   const real m = 2;
@@ -97,10 +103,7 @@ TEST_CASE("a box resting on a plane carries m g", "[physics]") {
 // collision margin): its bottom face lies m below the corners, so it rests with its centre at h + m, and carries m g.
 TEST_CASE("a cube hull with a margin rests one margin above its points", "[physics][hull]") {
   for (const real margin : {real(0), real(0.0078125), real(0.03125)}) {
-    SystemConfig cfg;
-    cfg.step.dt = real(1e-3);
-    cfg.solver.type = SolverType::APGD;
-    cfg.solver.max_iterations = 100;
+    SystemConfig cfg = apgdConfig(100);
     System sys(cfg);
     const int gr = sys.addBody(ground());
     const real h = real(0.05), m = 2;
@@ -141,11 +144,8 @@ TEST_CASE("a box on a 30 degree incline slides with g(sin - mu cos) and sticks a
   // The incline is the ground plane with gravity tilted by 30 degrees about z: same mechanics.
   const real theta = real(M_PI / 6);
   for (real mu : {real(0.5), real(0.7)}) {
-    SystemConfig cfg;
-    cfg.step.dt = real(1e-3);
+    SystemConfig cfg = apgdConfig(100);
     cfg.step.gravity = Vec3{g * std::sin(theta), -g * std::cos(theta), 0};
-    cfg.solver.type = SolverType::APGD;
-    cfg.solver.max_iterations = 100;
     System sys(cfg);
     sys.addBody(ground());  // friction 1: the product rule gives the box's mu
     int b = sys.addBody(box(Vec3{real(0.1), real(0.05), real(0.1)}, 1, Vec3{0, real(0.05), 0}, mu));
@@ -183,10 +183,7 @@ TEST_CASE("a sphere launched sliding ends rolling at 5/7 of its speed", "[physic
 }
 
 TEST_CASE("the bottom contact of a 10-box stack carries the whole weight", "[physics]") {
-  SystemConfig cfg;
-  cfg.step.dt = real(1e-3);
-  cfg.solver.type = SolverType::APGD;
-  cfg.solver.max_iterations = 200;
+  SystemConfig cfg = apgdConfig(200);
   System sys(cfg);
   int gr = sys.addBody(ground());
   const real m = 1, hh = real(0.05);
@@ -205,12 +202,9 @@ TEST_CASE("the bottom contact of a 10-box stack carries the whole weight", "[phy
 
 TEST_CASE("the final state hashes the same with 1 and 2 OpenMP threads", "[physics][determinism]") {
   auto run = [](int threads) {
-    SystemConfig cfg;
-    cfg.step.dt = real(1e-3);
+    SystemConfig cfg = apgdConfig(30);
     cfg.threads = threads;
     cfg.min_bodies_per_thread = 1;  // force the threads on this small scene
-    cfg.solver.type = SolverType::APGD;
-    cfg.solver.max_iterations = 30;
     System sys(cfg);
     sys.addBody(ground());
     int i = 0;

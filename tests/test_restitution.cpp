@@ -18,6 +18,7 @@
 #include "chrono_like/bullet/bullet_world.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 #include "scene_text.h"
 
@@ -350,11 +351,7 @@ TEST_CASE("restitution: the scene key, and its validation", "[restitution][cli]"
 // pre-step velocities on the device): the ball drop rebounds as on the CPU backend (to float rounding of the device's
 // Jacobians: within 1 mm), and e = 0 does not bounce.
 TEST_CASE("restitution on the GPU backend: the ball drop rebounds as on the CPU", "[restitution][gpu]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   for (real e : {real(0), real(0.5)}) {
     SystemConfig cfg;
     cfg.step.dt = real(1) / 240;

@@ -24,6 +24,7 @@
 #include "chrono_like/io/scene.h"
 #include "chrono_like/solver/contact_problem.h"
 #include "chrono_like/system.h"
+#include "device_check.h"
 #include "gpu/gpu_factory.h"
 #include "scene_text.h"
 
@@ -352,11 +353,7 @@ TEST_CASE("rolling friction: scene keys, validation, pruning and the GPU backend
 
 // The GPU backend refuses it with an InputError naming it (its rolling blocks are built on the host only).
 TEST_CASE("rolling friction: the GPU backend refuses it by name", "[rolling][gpu]") {
-  std::string why;
-  if (!gpuAvailable(&why)) {
-    WARN("no CUDA device: skipping (" << why << ")");
-    return;
-  }
+  if (!dvi::testing::haveDevice()) return;
   auto gpu = makeGpuSystem(SystemConfig{});
   gpu->addBody(plane(Vec3{0, 1, 0}, 1));
   gpu->addBody(ball(Vec3{0, kR, 0}, real(0.5), real(0.01), 0));

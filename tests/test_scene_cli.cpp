@@ -25,6 +25,7 @@
 #include "chrono_like/collision/narrowphase.h"
 #include "chrono_like/io/scene.h"
 #include "cli_test_util.h"
+#include "stock_bullet_world.h"
 
 using namespace dvi;
 namespace fs = std::filesystem;
@@ -47,18 +48,10 @@ const char* kTinyScene = R"({
 // ------------------------------------------------------------------------------------------------
 // Every supported Bullet shape, in a world, serialized by Bullet itself.
 // ------------------------------------------------------------------------------------------------
-struct BulletWorldFixture {
-  btDefaultCollisionConfiguration config;
-  btCollisionDispatcher dispatcher{&config};
-  btDbvtBroadphase broadphase;
-  btSequentialImpulseConstraintSolver solver;
-  btDiscreteDynamicsWorld world{&dispatcher, &broadphase, &solver, &config};
-  std::vector<std::unique_ptr<btCollisionShape>> shapes;
-  std::vector<std::unique_ptr<btRigidBody>> bodies;
+struct BulletWorldFixture : StockBulletWorld {
   std::vector<btRigidBody*> ptrs;
 
   BulletWorldFixture() {
-    world.setGravity(btVector3(0, -9.81f, 0));
     add(keep(new btStaticPlaneShape(btVector3(0, 1, 0), 0)), 0, btVector3(0, 0, 0));
     add(keep(new btSphereShape(0.1f)), 1, btVector3(0, 1, 0));
     add(keep(new btBoxShape(btVector3(0.1f, 0.2f, 0.3f))), 2, btVector3(1, 1, 0),
@@ -115,23 +108,10 @@ struct BulletWorldFixture {
     add(keep(new btSphereShape(0.1f)), 1000, btVector3(-5, 1, 0));
     ptrs.back()->setGravity(btVector3(0, -2, 0));
   }
-  ~BulletWorldFixture() {
-    for (auto& b : bodies) world.removeRigidBody(b.get());
-  }
-  btCollisionShape* keep(btCollisionShape* s) {
-    shapes.emplace_back(s);
-    return s;
-  }
   void add(btCollisionShape* s, btScalar mass, const btVector3& pos,
            const btQuaternion& rot = btQuaternion::getIdentity()) {
-    btVector3 inertia(0, 0, 0);
-    if (mass > 0) s->calculateLocalInertia(mass, inertia);
-    btRigidBody::btRigidBodyConstructionInfo info(mass, nullptr, s, inertia);
-    info.m_startWorldTransform = btTransform(rot, pos);
-    info.m_friction = 0.6f;
-    bodies.emplace_back(new btRigidBody(info));
-    ptrs.push_back(bodies.back().get());
-    world.addRigidBody(bodies.back().get());
+    ptrs.push_back(addBody(s, mass, pos, rot));
+    ptrs.back()->setFriction(0.6f);
   }
   void save(const fs::path& p) {
     btDefaultSerializer ser;

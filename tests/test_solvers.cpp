@@ -607,42 +607,38 @@ TEST_CASE("sphere sliding and sticking on the ground: CCP friction impulse", "[s
   // Sticking (v_t < Ntt mu m g h): g_n = m g h, g_t = -v_t / Ntt.
   const real m = 1.3, R = 0.1, g = 9.81, h = 1e-3, mu = 0.3;
   const real Ntt = 1 / m + R * R / (real(0.4) * m * R * R);
-  {
-    const real vt = 0.2;
-    Scene s = sphereOnGround(m, R, mu, {vt, -g * h, 0});
+  // Every solver on the sphere with velocity v: check(normal impulse, friction impulse in the world frame). The
+  // contact's tangent basis is tangentBasis((0,1,0)), in which the solvers return the friction.
+  auto solveEach = [&](const char* label, Vec3 v, auto check) {
+    Scene s = sphereOnGround(m, R, mu, v);
     ContactProblem cp;
     cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
-    const real gn = (g * h + mu * vt) / (1 / m + mu * mu * Ntt);
-    REQUIRE(vt > Ntt * mu * gn);
-    // the contact's u tangent is tangentBasis((0,1,0)); express the expected friction in it
     Vec3 u, w;
     tangentBasis({0, 1, 0}, u, w);
     for (SolverType t : kAll) {
-      INFO("sliding " << solverName(t));
+      INFO(label << " " << solverName(t));
       std::vector<real> gam(3, 0);
       runSolver(t, cp, gam.data(), tightSettings(t));
-      CHECK(gam[0] == Approx(gn).epsilon(1e-8));
-      const Vec3 ft = u * gam[1] + w * gam[2];
+      check(gam[0], u * gam[1] + w * gam[2]);
+    }
+  };
+  {
+    const real vt = 0.2;
+    const real gn = (g * h + mu * vt) / (1 / m + mu * mu * Ntt);
+    REQUIRE(vt > Ntt * mu * gn);
+    solveEach("sliding", {vt, -g * h, 0}, [&](real g_n, Vec3 ft) {
+      CHECK(g_n == Approx(gn).epsilon(1e-8));
       CHECK(ft.x == Approx(-mu * gn).epsilon(1e-8));
       CHECK(std::fabs(ft.z) < 1e-10);
-    }
+    });
   }
   {
     const real vt = 0.5 * Ntt * mu * m * g * h;
-    Scene s = sphereOnGround(m, R, mu, {0, -g * h, vt});
-    ContactProblem cp;
-    cp.build(s.bodies, s.contacts, s.vf.data(), s.wf.data(), s.step, s.solver, s.ps);
-    Vec3 u, w;
-    tangentBasis({0, 1, 0}, u, w);
-    for (SolverType t : kAll) {
-      INFO("sticking " << solverName(t));
-      std::vector<real> gam(3, 0);
-      runSolver(t, cp, gam.data(), tightSettings(t));
-      CHECK(gam[0] == Approx(m * g * h).epsilon(1e-8));
-      const Vec3 ft = u * gam[1] + w * gam[2];
+    solveEach("sticking", {0, -g * h, vt}, [&](real g_n, Vec3 ft) {
+      CHECK(g_n == Approx(m * g * h).epsilon(1e-8));
       CHECK(ft.z == Approx(-vt / Ntt).epsilon(1e-7));
       CHECK(std::fabs(ft.x) < 1e-12);
-    }
+    });
   }
 }
 

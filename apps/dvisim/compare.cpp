@@ -32,15 +32,15 @@
 #include "chrono_like/bullet/bullet_world.h"
 #include "chrono_like/io/scene.h"
 #include "gpu/gpu_factory.h"
+#include "cli_options.h"
 #include "parse.h"
 
 namespace {
 
 using dvi::InputError;
 
-struct CompareOptions {
+struct CompareOptions : dvi::RunOverrides {
   std::string scene;
-  std::string time, steps, dt, solver, iterations;
   std::vector<std::string> sets;
   std::string out = "dvisim-out";
 };
@@ -259,14 +259,8 @@ std::function<int()> addCompareCommand(CLI::App& app) {
   auto o = std::make_shared<CompareOptions>();
   CLI::App* cmd = app.add_subcommand("compare", "Step a scene with Bullet and our CPU/GPU backends side by side");
   cmd->add_option("scene", o->scene, "Scene file: .json or .bullet")->required();
-  cmd->add_option("--time", o->time, "Simulated time in seconds");
-  cmd->add_option("--steps", o->steps, "Number of steps");
-  cmd->add_option("--dt", o->dt, "Time step in seconds");
-  cmd->add_option("--solver", o->solver, "Our solver: jacobi|gs|apgd|bb");
-  cmd->add_option("--iterations", o->iterations, "Our solver's iterations per step");
-  cmd->add_option("--set", o->sets, "Override a scene value by dotted key (repeatable)")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  dvi::addRunOverrides(cmd, *o);
+  dvi::addRepeatable(cmd, "--set", o->sets, "Override a scene value by dotted key (repeatable)");
   cmd->add_option("--out", o->out, "Output directory for compare.csv (default dvisim-out)");
   return [o] { return runCompare(*o); };
 }

@@ -46,6 +46,7 @@
 #include "chrono_like/io/run_control.h"
 #include "chrono_like/io/scene.h"
 #include "chrono_like/system.h"
+#include "cli_options.h"
 #include "gpu/gpu_factory.h"
 #include "parse.h"
 #include "progress.h"
@@ -567,9 +568,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--steps", o.steps, "Number of steps");
   run_cmd->add_option("--threads", o.threads, "OpenMP threads (0: default)");
   run_cmd->add_option("--frames", o.frames, "Number of VTK frames to write");
-  run_cmd->add_option("--set", o.sets, "Override a scene value by dotted key, e.g. settings.dt=1e-4 (repeatable)")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  dvi::addRepeatable(run_cmd, "--set", o.sets,
+                     "Override a scene value by dotted key, e.g. settings.dt=1e-4 (repeatable)");
   run_cmd->add_option("--out", o.out, "Output directory (default dvisim-out)");
   run_cmd->add_option("--resume", o.resume,
                       "Continue the run checkpointed in DIR (DIR/checkpoint/, or the last periodic checkpoint of a run "

@@ -47,6 +47,7 @@
 #include "chrono_like/io/json_check.h"
 #include "chrono_like/io/output.h"
 #include "chrono_like/io/scene.h"
+#include "cli_options.h"
 #include "gpu/gpu_factory.h"
 
 extern char** environ;
@@ -63,10 +64,10 @@ using dvi::InputError;
 using namespace dvi::sweep;
 using Clock = std::chrono::steady_clock;
 
-struct SweepOptions {
+struct SweepOptions : dvi::RunOverrides {
   std::string scene, list, seeds = "1", seed_key, jobs, out = "dvisim-sweep";
   std::vector<std::string> grids, sets;
-  std::string time, steps, dt, backend = "auto", threads, solver, iterations;
+  std::string backend = "auto", threads;
   bool no_plots = false;
 };
 
@@ -501,17 +502,31 @@ void writeRunsCsv(const SweepOptions& o, const Design& d, const std::vector<Case
   dvi::writeFileAtomic(o.out + "/runs.csv", s.str());
 }
 
+// The header line of a CSV with a row per setting: setting, the swept keys, `fixed`, then NAME<first>,NAME<second>
+// for each metric name.
+std::string perSettingHeader(const Design& d, const std::string& fixed, const std::vector<std::string>& names,
+                             const std::string& first, const std::string& second) {
+  std::string s = "setting";
+  for (const std::string& k : d.keys) s += "," + dvi::benchutil::csvField(k);
+  s += fixed;
+  for (const std::string& n : names)
+    s += "," + dvi::benchutil::csvField(n) + first + "," + dvi::benchutil::csvField(n) + second;
+  return s + "\n";
+}
+
+// The first cells of setting k's row in such a CSV: its index and its levels.
+std::string settingCells(const Design& d, size_t k) {
+  std::string s = std::to_string(k);
+  for (const auto& kv : d.settings[k]) s += "," + dvi::benchutil::csvField(kv.second);
+  return s;
+}
+
 // Per setting: the finished runs' count, then mean and 95% half-width (sweep.h: meanCi) of wall_s and every metric.
 void writeSummaryCsv(const SweepOptions& o, const Design& d, const std::vector<Case>& cases,
                      const std::vector<Row>& rows) {
   const std::vector<std::string> names = metricNames(rows);
   std::ostringstream s;
-  s << "setting";
-  for (const std::string& k : d.keys) s << "," << dvi::benchutil::csvField(k);
-  s << ",n,wall_s.mean,wall_s.ci95";
-  for (const std::string& n : names)
-    s << "," << dvi::benchutil::csvField(n) << ".mean," << dvi::benchutil::csvField(n) << ".ci95";
-  s << "\n";
+  s << perSettingHeader(d, ",n,wall_s.mean,wall_s.ci95", names, ".mean", ".ci95");
   for (size_t k = 0; k < d.settings.size(); ++k) {
     std::vector<double> wall;
     std::map<std::string, std::vector<double>> vals;
@@ -520,8 +535,7 @@ void writeSummaryCsv(const SweepOptions& o, const Design& d, const std::vector<C
       wall.push_back(rows[i].wall);
       for (const auto& kv : rows[i].metrics) vals[kv.first].push_back(kv.second);
     }
-    s << k;
-    for (const auto& kv : d.settings[k]) s << "," << dvi::benchutil::csvField(kv.second);
+    s << settingCells(d, k);
     const MeanCi w = meanCi(wall);
     s << "," << w.n << "," << num(w.mean) << "," << num(w.half);
     for (const std::string& n : names) {
@@ -543,15 +557,9 @@ void writePairedCsv(const SweepOptions& o, const Design& d, const std::vector<Ca
     if (rows[i].ok)
       for (const auto& kv : rows[i].metrics) by[cases[i].setting][kv.first][cases[i].seed] = kv.second;
   std::ostringstream s;
-  s << "setting";
-  for (const std::string& k : d.keys) s << "," << dvi::benchutil::csvField(k);
-  s << ",n";
-  for (const std::string& n : names)
-    s << "," << dvi::benchutil::csvField(n) << ".diff," << dvi::benchutil::csvField(n) << ".ci95";
-  s << "\n";
+  s << perSettingHeader(d, ",n", names, ".diff", ".ci95");
   for (size_t k = 1; k < d.settings.size(); ++k) {
-    s << k;
-    for (const auto& kv : d.settings[k]) s << "," << dvi::benchutil::csvField(kv.second);
+    s << settingCells(d, k);
     size_t n = 0;
     std::ostringstream cols;
     for (const std::string& m : names) {
@@ -654,24 +662,16 @@ std::function<int()> addSweepCommand(CLI::App& app) {
                                      "Design of experiments: run a scene (the CES machine by default) over "
                                      "a grid or list of settings with replicate seeds; statistics and plots");
   cmd->add_option("scene", o->scene, "Scene file (.json, a CES document or a plain scene); default: the CES machine");
-  cmd->add_option("--grid", o->grids, "KEY=v1,v2,... or KEY=lo:hi:n (repeatable: full factorial)")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  dvi::addRepeatable(cmd, "--grid", o->grids, "KEY=v1,v2,... or KEY=lo:hi:n (repeatable: full factorial)");
   cmd->add_option("--list", o->list, "CSV of settings: a header of keys, one row per setting");
   cmd->add_option("--seeds", o->seeds, "Replicates per setting, seeds 1..N (default 1)");
   cmd->add_option("--seed-key", o->seed_key, "Scene key the seed goes to (default: seed for a CES document)");
   cmd->add_option("--jobs", o->jobs, "Runs at a time (default: one per GPU, else one per core)");
   cmd->add_option("--out", o->out, "Output directory (default dvisim-sweep)");
   cmd->add_flag("--no-plots", o->no_plots, "Do not write the sweep_<key>.png plots");
-  cmd->add_option("--time", o->time, "Simulated time of each run (s)");
-  cmd->add_option("--steps", o->steps, "Steps of each run");
-  cmd->add_option("--dt", o->dt, "Time step (s)");
+  dvi::addRunOverrides(cmd, *o, " (each run)");
   cmd->add_option("--backend", o->backend, "auto|cpu|gpu|bullet (default auto)");
   cmd->add_option("--threads", o->threads, "OpenMP threads of each run (default: cores / jobs)");
-  cmd->add_option("--solver", o->solver, "jacobi|gs|apgd|bb");
-  cmd->add_option("--iterations", o->iterations, "Solver iterations per step");
-  cmd->add_option("--set", o->sets, "A fixed override KEY=VALUE for every run (repeatable)")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  dvi::addRepeatable(cmd, "--set", o->sets, "A fixed override KEY=VALUE for every run (repeatable)");
   return [o] { return runSweep(*o); };
 }

@@ -62,16 +62,16 @@
 
 namespace {
 
-using dvi::InputError;
-using dvi::Quat;
-using dvi::real;
-using dvi::Vec3;
 using namespace dvi::benchutil;
-using Clock = std::chrono::steady_clock;
 
 struct AccOptions : BenchBasics {
   std::vector<std::string> scenes, engines;
 };
+
+// `dvisim bench accuracy`: its name, description and the texts of its common options.
+const BenchSpec kBench{
+    "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time",
+    "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)"};
 
 // A scene of the benchmark: its bodies (rebuilt for each run), step, duration and observable.
 struct AccScene {
@@ -102,32 +102,24 @@ Vec3 meanHeight(const Runner& r, const std::vector<btRigidBody*>& b) {
   return Vec3{0, real(n ? s / double(n) : 0), 0};
 }
 
+// Scene `name` of bench scaling (pile or mix, bench/scaling/scaling_scenes.h) of n bodies, h0 = 1 ms: observed by the
+// mean height of its bodies on the scale of its particle size (ref_length).
+AccScene scalingScene(const std::string& name, long n, double ref_length, const std::string& obs_name, bool quick) {
+  AccScene s;
+  s.name = name;
+  s.h0 = 1e-3, s.T = quick ? 0.03 : 0.02, s.ref_length = ref_length;
+  s.build = [name, n](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>& keep) {
+    (void)b;
+    keep = std::make_unique<dvi::bench::BulletScene>(dvi::bench::makeBulletScene(dvi::bench::makeSceneSpec(name, n)));
+  };
+  s.observe = meanHeight, s.obs_scale = ref_length, s.obs_name = obs_name;
+  return s;
+}
+
 std::vector<AccScene> makeScenes(bool quick) {
   std::vector<AccScene> v;
-  {
-    AccScene s;
-    s.name = "pile";
-    const long n = quick ? 400 : 100000;
-    s.h0 = 1e-3, s.T = quick ? 0.03 : 0.02, s.ref_length = 0.01;
-    s.build = [n](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>& keep) {
-      (void)b;
-      keep = std::make_unique<dvi::bench::BulletScene>(dvi::bench::makeBulletScene(dvi::bench::makePileSpec(n)));
-    };
-    s.observe = meanHeight, s.obs_scale = 0.01, s.obs_name = "mean height of the spheres";
-    v.push_back(s);
-  }
-  {
-    AccScene s;
-    s.name = "mix";
-    const long n = quick ? 250 : 20000;
-    s.h0 = 1e-3, s.T = quick ? 0.03 : 0.02, s.ref_length = 0.005;
-    s.build = [n](BtBodies& b, std::unique_ptr<dvi::bench::BulletScene>& keep) {
-      (void)b;
-      keep = std::make_unique<dvi::bench::BulletScene>(dvi::bench::makeBulletScene(dvi::bench::makeMixSpec(n)));
-    };
-    s.observe = meanHeight, s.obs_scale = 0.005, s.obs_name = "mean height of the bodies";
-    v.push_back(s);
-  }
+  v.push_back(scalingScene("pile", quick ? 400 : 100000, 0.01, "mean height of the spheres", quick));
+  v.push_back(scalingScene("mix", quick ? 250 : 20000, 0.005, "mean height of the bodies", quick));
   {
     // The default CES machine, fed for a short time so that a run ends with most particles collected: full
     // 0.15 s of the default feed (0.5 g/s, about 190 particles of 0.5-1 mm) and 1 s of machine time; quick
@@ -609,12 +601,8 @@ int runAccuracy(const AccOptions& o) {
 }  // namespace
 
 void registerBenchAccuracy(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<AccOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "accuracy", "Work-precision: CCP residual, penetration, complementarity and observable error against run time");
-  addBenchBasics(cmd, *o, "accuracy", "accuracy.csv, accuracy.png", "Small scenes and a short sweep (CI smoke test)");
+  auto [cmd, o] = addBench<AccOptions>(app, reg, kBench, runAccuracy);
   cmd->add_option("--scenes", o->scenes,
                   "pile,mix,stack,ces,goal (default all; goal: the APGD/Jacobi time to residual 1e-4)");
   cmd->add_option("--engines", o->engines, "cpu,gpu,bullet (default all; gpu where a device is present)");
-  addBenchRunner(reg, cmd, [o] { return runAccuracy(*o); });
 }

@@ -48,14 +48,13 @@
 #include "ces/machine.h"
 #include "ces_run.h"
 #include "chrono_like/base/errors.h"
+#include "cli_options.h"
 #include "parse.h"
 
 namespace {
 
-using dvi::InputError;
 using namespace dvi::benchutil;
 using nlohmann::json;
-using Clock = std::chrono::steady_clock;
 
 // The goal of the issue.
 constexpr double kGoalDuration = 10.0;   // s of machine time
@@ -66,7 +65,17 @@ constexpr double kRateTolerance = 0.99;  // measured feed >= 99% of the goal rat
 struct CesBenchOptions : BenchBasics {
   std::string backend = "auto", duration, rate, wall_limit;
   std::vector<std::string> sets;
+  CesBenchOptions() { threads.clear(); }  // none given: the machine's own setting
 };
+
+// `dvisim bench ces`: its name, description and the texts of its common options.
+const BenchSpec kBench{
+    "ces",
+    "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)",
+    "ces_bench.json, ces_bench.md",
+    "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close",
+    "md,json",
+    "OpenMP threads of the CPU backend (0: all)"};
 
 double positive(const std::string& opt, const std::string& v) {
   const double x = dvi::parseReal(opt, v);
@@ -296,71 +305,56 @@ std::vector<std::pair<std::string, double>> coreStages(const dvi::ces::CesRunTot
 // ces_bench.json: the run, its target, what it reached, the counts, the stages, the mass balance and the goal.
 json cesBenchJson(const CesBenchOptions& o, const CesBenchPlan& p, const CesBenchLoop& L, const CesBenchResult& R,
                   const dvi::ces::CesMachine& m, const json& goal) {
-  const double duration = p.duration, rate = p.rate, wall_limit = p.wall_limit;
-  const double mean_mass = p.mean_mass, mass_flow = p.mass_flow;
-  const std::string& origin = p.origin;
-  const dvi::ces::CesConfig& cfg = p.cfg;
-  const dvi::ces::CesRunTotals& tot = L.tot;
-  const std::vector<Progress>& progress = L.progress;
-  const int64_t max_in_flight = L.max_in_flight, total = R.total, steps_run = R.steps_run;
-  const double step_wall = L.step_wall, wall_at_goal = L.wall_at_goal, setup_s = R.setup_s, wall = R.wall;
-  const double reached = R.reached, ms_mean = R.ms_mean, ms_last = R.ms_last, fed_rate = R.fed_rate;
-  const double fed_flow_g_s = R.fed_flow_g_s;
-  const std::string &stopped_by = L.stopped_by, &device = R.device, &commit = R.commit, &date = R.date;
-  const std::string& command = R.command;
-  const dvi::ces::MassBalance& bal = R.bal;
-  const std::string& backend = p.backend;
-  const bool counts_agree = R.counts_agree;
   json j;
   j["benchmark"] = "ces";
   j["quick"] = o.quick;
-  j["command"] = command;
-  j["device"] = device;
+  j["command"] = R.command;
+  j["device"] = R.device;
   j["backend"] = m.system().backendName();
-  j["threads"] = backend == "cpu" ? json(m.system().effectiveThreads()) : json(nullptr);
-  j["commit"] = commit;
-  j["date"] = date;
-  j["machine"] = {{"origin", origin},
+  j["threads"] = p.backend == "cpu" ? json(m.system().effectiveThreads()) : json(nullptr);
+  j["commit"] = R.commit;
+  j["date"] = R.date;
+  j["machine"] = {{"origin", p.origin},
                   {"sets", o.sets},
-                  {"dt", cfg.step.dt},
-                  {"solver", dvi::solverName(cfg.solver.type)},
-                  {"iterations", cfg.solver.max_iterations},
+                  {"dt", p.cfg.step.dt},
+                  {"solver", dvi::solverName(p.cfg.solver.type)},
+                  {"iterations", p.cfg.solver.max_iterations},
                   {"drum_drive", m.rheonomicDrive() ? "rheonomic" : "kinematic"},
-                  {"field_model", cfg.field_model},
-                  {"diameter_mm", {cfg.diameter_min * 1e3, cfg.diameter_max * 1e3}},
+                  {"field_model", p.cfg.field_model},
+                  {"diameter_mm", {p.cfg.diameter_min * 1e3, p.cfg.diameter_max * 1e3}},
                   {"forces_on_host", m.system().backendName() != "cpu"}};
   j["target"] = {
-      {"duration_s", duration},           {"rate_particles_per_s", rate}, {"mean_particle_mass_kg", mean_mass},
-      {"mass_flow_g_s", mass_flow * 1e3}, {"wall_limit_s", wall_limit},   {"steps", total}};
-  j["reached"] = {{"sim_time_s", reached}, {"steps", steps_run}, {"stopped_by", stopped_by}};
-  j["wall_s"] = wall;
-  j["wall_at_10s_s"] = wall_at_goal >= 0 ? json(wall_at_goal) : json(nullptr);
-  j["setup_s"] = setup_s;
-  j["step_wall_s"] = step_wall;
-  j["ms_per_step_mean"] = ms_mean;
-  j["ms_per_step_last10pct"] = ms_last;
-  j["fed_particles"] = bal.fed;
-  j["fed_particles_per_s"] = fed_rate;
-  j["fed_mass_flow_g_s"] = fed_flow_g_s;
-  j["bodies_in_flight_max"] = max_in_flight;
-  j["bodies_in_flight_final"] = bal.in_flight;
+      {"duration_s", p.duration},           {"rate_particles_per_s", p.rate}, {"mean_particle_mass_kg", p.mean_mass},
+      {"mass_flow_g_s", p.mass_flow * 1e3}, {"wall_limit_s", p.wall_limit},   {"steps", R.total}};
+  j["reached"] = {{"sim_time_s", R.reached}, {"steps", R.steps_run}, {"stopped_by", L.stopped_by}};
+  j["wall_s"] = R.wall;
+  j["wall_at_10s_s"] = L.wall_at_goal >= 0 ? json(L.wall_at_goal) : json(nullptr);
+  j["setup_s"] = R.setup_s;
+  j["step_wall_s"] = L.step_wall;
+  j["ms_per_step_mean"] = R.ms_mean;
+  j["ms_per_step_last10pct"] = R.ms_last;
+  j["fed_particles"] = R.bal.fed;
+  j["fed_particles_per_s"] = R.fed_rate;
+  j["fed_mass_flow_g_s"] = R.fed_flow_g_s;
+  j["bodies_in_flight_max"] = L.max_in_flight;
+  j["bodies_in_flight_final"] = R.bal.in_flight;
   j["bodies_total"] = m.system().bodies().count();
-  j["contacts_per_step_mean"] = steps_run > 0 ? double(tot.contacts) / double(steps_run) : 0.0;
-  j["contacts_per_step_max"] = tot.max_contacts;
-  j["iterations_mean"] = steps_run > 0 ? double(tot.iterations) / double(steps_run) : 0.0;
-  j["max_penetration_m"] = tot.max_penetration;
-  j["stages"] = tot.stageNames();
-  j["stage_seconds"] = tot.stageSeconds();
-  j["mass_balance"] = dvi::ces::massBalanceJson(bal);
-  j["mass_balance"]["in_flight_count_agrees"] = counts_agree;
+  j["contacts_per_step_mean"] = R.steps_run > 0 ? double(L.tot.contacts) / double(R.steps_run) : 0.0;
+  j["contacts_per_step_max"] = L.tot.max_contacts;
+  j["iterations_mean"] = R.steps_run > 0 ? double(L.tot.iterations) / double(R.steps_run) : 0.0;
+  j["max_penetration_m"] = L.tot.max_penetration;
+  j["stages"] = L.tot.stageNames();
+  j["stage_seconds"] = L.tot.stageSeconds();
+  j["mass_balance"] = dvi::ces::massBalanceJson(R.bal);
+  j["mass_balance"]["in_flight_count_agrees"] = R.counts_agree;
   j["goal"] = goal;
   j["progress"] = json::array();
-  for (const Progress& p : progress)
-    j["progress"].push_back({{"sim_time_s", p.t},
-                             {"wall_s", p.wall},
-                             {"in_flight", p.in_flight},
-                             {"steps", p.steps},
-                             {"ms_per_step", p.ms_per_step}});
+  for (const Progress& q : L.progress)
+    j["progress"].push_back({{"sim_time_s", q.t},
+                             {"wall_s", q.wall},
+                             {"in_flight", q.in_flight},
+                             {"steps", q.steps},
+                             {"ms_per_step", q.ms_per_step}});
 
   return j;
 }
@@ -368,58 +362,45 @@ json cesBenchJson(const CesBenchOptions& o, const CesBenchPlan& p, const CesBenc
 // ces_bench.md: the report for a reader.
 std::string cesBenchMarkdown(const CesBenchOptions& o, const CesBenchPlan& p, const CesBenchLoop& L,
                              const CesBenchResult& R, const json& j, const std::string& verdict) {
-  const double duration = p.duration, rate = p.rate, wall_limit = p.wall_limit;
-  const double mean_mass = p.mean_mass, mass_flow = p.mass_flow;
-  const std::string& origin = p.origin;
-  const dvi::ces::CesConfig& cfg = p.cfg;
-  const dvi::ces::CesRunTotals& tot = L.tot;
-  const std::vector<Progress>& progress = L.progress;
-  const int64_t max_in_flight = L.max_in_flight, total = R.total, steps_run = R.steps_run;
-  const double step_wall = L.step_wall, setup_s = R.setup_s, wall = R.wall;
-  const double reached = R.reached, ms_mean = R.ms_mean, ms_last = R.ms_last, fed_rate = R.fed_rate;
-  const double fed_flow_g_s = R.fed_flow_g_s;
-  const std::string &stopped_by = L.stopped_by, &device = R.device, &commit = R.commit, &date = R.date;
-  const std::string &command = R.command, &where = R.where;
-  const dvi::ces::MassBalance& bal = R.bal;
   std::ostringstream md;
   md << "# CES industrial-feed benchmark" << (o.quick ? " (--quick)" : "") << "\n\n"
      << "Written by `dvisim bench ces" << (o.record ? " --record" : "")
      << "` (bench/ces/bench_ces.cpp); do not edit by hand.\n\n"
-     << "- command: `" << command << "`\n- device: " << device << "\n- backend: " << j["backend"].get<std::string>()
-     << " (" << where << ")\n- commit: " << commit << "\n- date: " << date << "\n- machine: " << origin
-     << (o.sets.empty() ? "" : " with --set") << "; dt " << fmt(cfg.step.dt, "%g") << " s, "
-     << dvi::solverName(cfg.solver.type) << " " << cfg.solver.max_iterations << " iterations, drum "
-     << j["machine"]["drum_drive"].get<std::string>() << ", particles " << fmt(cfg.diameter_min * 1e3, "%g") << "-"
-     << fmt(cfg.diameter_max * 1e3, "%g") << " mm\n"
-     << "- target: " << fmt(duration, "%g") << " s of machine time at " << grouped(rate)
-     << " particles/s (mean particle mass " << fmt(mean_mass * 1e6, "%.4g") << " mg, mass flow "
-     << fmt(mass_flow * 1e3, "%.4g") << " g/s), wall limit " << fmt(wall_limit, "%g") << " s\n\n"
+     << "- command: `" << R.command << "`\n- device: " << R.device << "\n- backend: " << j["backend"].get<std::string>()
+     << " (" << R.where << ")\n- commit: " << R.commit << "\n- date: " << R.date << "\n- machine: " << p.origin
+     << (o.sets.empty() ? "" : " with --set") << "; dt " << fmt(p.cfg.step.dt, "%g") << " s, "
+     << dvi::solverName(p.cfg.solver.type) << " " << p.cfg.solver.max_iterations << " iterations, drum "
+     << j["machine"]["drum_drive"].get<std::string>() << ", particles " << fmt(p.cfg.diameter_min * 1e3, "%g") << "-"
+     << fmt(p.cfg.diameter_max * 1e3, "%g") << " mm\n"
+     << "- target: " << fmt(p.duration, "%g") << " s of machine time at " << grouped(p.rate)
+     << " particles/s (mean particle mass " << fmt(p.mean_mass * 1e6, "%.4g") << " mg, mass flow "
+     << fmt(p.mass_flow * 1e3, "%.4g") << " g/s), wall limit " << fmt(p.wall_limit, "%g") << " s\n\n"
      << "**" << verdict << "**\n\n"
      << "| quantity | value |\n| --- | --- |\n"
-     << "| machine time reached | " << fmt(reached, "%.4g") << " s of " << fmt(duration, "%g") << " s (" << steps_run
-     << " of " << total << " steps; stopped by " << stopped_by << ") |\n"
-     << "| wall time | " << fmt(wall, "%.4g") << " s (setup " << fmt(setup_s, "%.3g") << " s, steps "
-     << fmt(step_wall, "%.4g") << " s) |\n"
-     << "| ms/step | " << fmt(ms_mean, "%.3g") << " mean, " << fmt(ms_last, "%.3g") << " over the last 10% |\n"
-     << "| particles fed | " << grouped(double(bal.fed)) << " (" << grouped(fed_rate) << " particles/s, "
-     << fmt(fed_flow_g_s, "%.4g") << " g/s) |\n"
-     << "| bodies in flight | " << grouped(double(max_in_flight)) << " max, " << grouped(double(bal.in_flight))
+     << "| machine time reached | " << fmt(R.reached, "%.4g") << " s of " << fmt(p.duration, "%g") << " s ("
+     << R.steps_run << " of " << R.total << " steps; stopped by " << L.stopped_by << ") |\n"
+     << "| wall time | " << fmt(R.wall, "%.4g") << " s (setup " << fmt(R.setup_s, "%.3g") << " s, steps "
+     << fmt(L.step_wall, "%.4g") << " s) |\n"
+     << "| ms/step | " << fmt(R.ms_mean, "%.3g") << " mean, " << fmt(R.ms_last, "%.3g") << " over the last 10% |\n"
+     << "| particles fed | " << grouped(double(R.bal.fed)) << " (" << grouped(R.fed_rate) << " particles/s, "
+     << fmt(R.fed_flow_g_s, "%.4g") << " g/s) |\n"
+     << "| bodies in flight | " << grouped(double(L.max_in_flight)) << " max, " << grouped(double(R.bal.in_flight))
      << " at the end |\n"
      << "| contacts per step | " << grouped(j["contacts_per_step_mean"].get<double>()) << " mean, "
-     << grouped(double(tot.max_contacts)) << " max |\n"
+     << grouped(double(L.tot.max_contacts)) << " max |\n"
      << "| solver iterations per step | " << fmt(j["iterations_mean"].get<double>(), "%.3g") << " |\n"
-     << "| mass balance | " << dvi::ces::massBalanceLine(bal) << " |\n\n"
+     << "| mass balance | " << dvi::ces::massBalanceLine(R.bal) << " |\n\n"
      << "Stage split (core stages, summed over the run):\n\n| stage | s | share |\n| --- | --- | --- |\n";
   double stage_total = 0;
-  const std::vector<std::pair<std::string, double>> stages = coreStages(tot, stage_total);
+  const std::vector<std::pair<std::string, double>> stages = coreStages(L.tot, stage_total);
   for (const auto& [name, sec] : stages)
     md << "| " << name << " | " << fmt(sec, "%.3g") << " | "
        << fmt(stage_total > 0 ? 100 * sec / stage_total : 0.0, "%.1f") << "% |\n";
-  md << "| machine (feed, forces, charges; outside the core's stages) | " << fmt(step_wall - stage_total, "%.3g")
+  md << "| machine (feed, forces, charges; outside the core's stages) | " << fmt(L.step_wall - stage_total, "%.3g")
      << " | |\n\nProgress:\n\n| machine time s | wall s | bodies in flight | ms/step |\n| --- | --- | --- | --- |\n";
-  for (const Progress& p : progress)
-    md << "| " << fmt(p.t, "%.4g") << " | " << fmt(p.wall, "%.4g") << " | " << p.in_flight << " | "
-       << fmt(p.ms_per_step, "%.3g") << " |\n";
+  for (const Progress& q : L.progress)
+    md << "| " << fmt(q.t, "%.4g") << " | " << fmt(q.wall, "%.4g") << " | " << q.in_flight << " | "
+       << fmt(q.ms_per_step, "%.3g") << " |\n";
 
   return md.str();
 }
@@ -539,20 +520,11 @@ int runCesBench(const CesBenchOptions& o) {
 }  // namespace
 
 void registerBenchCes(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<CesBenchOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "ces",
-      "CES industrial feed: machine time at a particle rate against wall time (goal: 10 s at 20,000/s in 5 min)");
-  o->threads.clear();  // none given: the machine's own setting
-  addBenchBasics(cmd, *o, "ces", "ces_bench.json, ces_bench.md",
-                 "CI size: 0.02 s at 5,000 particles/s on the CPU; fails if the balance does not close", "md,json",
-                 "OpenMP threads of the CPU backend (0: all)");
+  auto [cmd, o] = addBench<CesBenchOptions>(app, reg, kBench, runCesBench);
   cmd->add_option("--backend", o->backend, "auto|cpu|gpu (default auto; --quick: cpu)");
   cmd->add_option("--duration", o->duration, "Machine time in seconds (default 10; --quick: 0.02)");
   cmd->add_option("--rate", o->rate, "Particles fed per second (default 20000; --quick: 5000)");
   cmd->add_option("--wall-limit", o->wall_limit, "Stop when the wall time exceeds this many seconds (default 300)");
-  cmd->add_option("--set", o->sets, "Override a machine value, KEY relative to ces (e.g. drum.rpm=60; repeatable)")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-  addBenchRunner(reg, cmd, [o] { return runCesBench(*o); });
+  dvi::addRepeatable(cmd, "--set", o->sets,
+                     "Override a machine value, KEY relative to ces (e.g. drum.rpm=60; repeatable)");
 }

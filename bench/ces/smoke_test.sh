@@ -9,8 +9,7 @@ source "$(dirname "$0")/../smoke_common.sh" "$@"
 run_bench ces --quick --threads 2
 json="$work/out/ces_bench.json"
 md="$work/out/ces_bench.md"
-[ -s "$json" ] || fail "no $json"
-[ -s "$md" ] || fail "no $md"
+expect_files "$json" "$md"
 grep -q "do not edit by hand" "$md" || fail "no header in $md"
 grep -q "^mass balance: .*closes exactly" "$work/stdout.txt" || fail "no closing mass balance on stdout"
 grep -q "no verdict: --duration" "$work/stdout.txt" || fail "no goal line (no verdict) on stdout"
@@ -70,7 +69,5 @@ expect2 bench ces --quick --out "$work/e" --set drum.rpm=fast
 expect2 bench ces --quick --out "$work/e" --set no_such_key=1
 expect2 bench ces --quick --out "$work/e" --set feed.mass_flow_g_s=3
 expect2 bench ces --quick --out "$work/e" --set output.frames=5
-expect2 bench ces --quick
-echo plain > "$work/a_file"
-expect2 bench ces --quick --out "$work/a_file/sub"
+expect_basic_refusals ces
 echo "bench_ces_quick: OK"

@@ -49,14 +49,20 @@
 
 namespace {
 
-using dvi::InputError;
 using namespace dvi::benchutil;
-using Clock = std::chrono::steady_clock;
 
 struct DropinOptions : BenchBasics {
   std::string steps, load = "0";
   std::vector<std::string> engines, scenes;
 };
+
+// `dvisim bench dropin`: its name, description and the texts of its common options.
+const BenchSpec kBench{"dropin",
+                       "Bullet's benchmark scenes on stock Bullet and on the drop-in world (CPU, GPU), side by side",
+                       "dropin.csv, dropin.md",
+                       "A quarter of the bodies and few steps (CI smoke test)",
+                       "md,csv",
+                       "OpenMP threads of our CPU drop-in (0: the default)"};
 
 // Everything one world owns: Bullet's collision configuration, dispatcher, broad phase and solver, the world
 // and the bodies, shapes, meshes and constraints of the scene (destroyed in reverse order).
@@ -632,26 +638,15 @@ int runDropin(const DropinOptions& o) {
       << "- deepest: the deepest manifold point over the timed steps; drift: pyramid top box height change, ragdolls "
          "the largest joint violation (ours), else the mean height change over the timed steps (m)\n\n";
   const std::string text = head.str() + md;
-  writeFile(o.out + "/dropin.csv", csv);
-  writeFile(o.out + "/dropin.md", text);
-  std::printf("results: %s/dropin.csv, dropin.md\n", o.out.c_str());
-  if (o.record) {
-    const std::string device =
-        have_gpu && std::find(engines.begin(), engines.end(), "gpu") != engines.end() ? gpu_name : cpu_device;
-    const std::string base = "dropin_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeBenchRecord({results_dir}, base, {{"md", text + "\nRows: " + base + ".csv\n"}, {"csv", csv}}, writeFile);
-  }
+  const bool gpu_ran = have_gpu && std::find(engines.begin(), engines.end(), "gpu") != engines.end();
+  writeCsvMdResults(o, "dropin", gpu_ran ? gpu_name : cpu_device, results_dir, text, csv);
   return 0;
 }
 
 }  // namespace
 
 void registerBenchDropin(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<DropinOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "dropin", "Bullet's benchmark scenes on stock Bullet and on the drop-in world (CPU, GPU), side by side");
-  addBenchBasics(cmd, *o, "dropin", "dropin.csv, dropin.md", "A quarter of the bodies and few steps (CI smoke test)",
-                 "md,csv", "OpenMP threads of our CPU drop-in (0: the default)");
+  auto [cmd, o] = addBench<DropinOptions>(app, reg, kBench, runDropin);
   cmd->add_option(
       "--engines", o->engines,
       "bullet,cpu,cpu-si,cpu-btc,cpu-apgd,gpu (default bullet,cpu,cpu-si,gpu; gpu is skipped without a device; "
@@ -660,5 +655,4 @@ void registerBenchDropin(CLI::App& app, BenchRegistry& reg) {
   cmd->add_option("--steps", o->steps, "Timed steps per engine (default 150; --quick 10)");
   cmd->add_option("--load", o->load,
                   "Runs of our CPU drop-in (pyramid) to start beside the benchmark, sharing the cores (default 0)");
-  addBenchRunner(reg, cmd, [o] { return runDropin(*o); });
 }

@@ -29,11 +29,10 @@ grep -q "Goal: our CPU drop-in (cpu) at <= 1.0x Bullet's time on every scene: " 
 grep -q "Goal: our CPU drop-in (cpu-si) at <= 1.0x Bullet's time on every scene: " "$work/stdout.txt" || fail "no cpu-si goal line"
 grep -q "do not edit by hand" "$work/out/dropin.md" || fail "dropin.md header"
 
-expect2 bench dropin --quick --out "$work/e1" --bogus
-expect2 bench dropin --quick
 expect2 bench dropin --quick --out "$work/e2" --engines tpu
 expect2 bench dropin --quick --out "$work/e3" --scenes moon
 expect2 bench dropin --quick --out "$work/e4" --steps 0
 expect2 bench dropin --quick --out "$work/e5" --threads x
 expect2 bench dropin --quick --out "$work/e6" --load -1
+expect_basic_refusals dropin
 echo "bench_dropin_quick: OK"

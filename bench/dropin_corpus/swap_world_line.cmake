@@ -1,8 +1,8 @@
-# The one-line swap of bench/dropin_corpus, done at build time (cmake -P), so that the examples in the source tree
-# stay Bullet's files unchanged: copies SRC (bullet3_examples/examples) to DST and changes, in every file, the text
-# `new btDiscreteDynamicsWorld(` into `new dvi::DviDynamicsWorld(` (the class and header a user's app would name;
-# the header comes in by the compiler's -include). Nothing else in any file changes; DST/SWAPPED_LINES.txt lists
-# every changed line, and the script fails unless each of the EXPECT files has exactly one.
+# The one-line swap of bench/dropin_corpus, done at build time (cmake -P), so that the examples in the source tree stay
+# Bullet's files unchanged: copies SRC (third_party/bullet3_examples/examples) to DST and changes, in every file, the
+# text `new btDiscreteDynamicsWorld(` into `new dvi::DviDynamicsWorld(` (the class and header a user's app would name;
+# the header comes in by the compiler's -include). Nothing else in any file changes; DST/SWAPPED_LINES.txt lists every
+# changed line, and the script fails unless each of the EXPECT files has exactly one.
 #   cmake -DSRC=... -DDST=... -DEXPECT="a.cpp|b.h" -P swap_world_line.cmake
 string(REPLACE "|" ";" EXPECT "${EXPECT}")
 set(from "new btDiscreteDynamicsWorld(")

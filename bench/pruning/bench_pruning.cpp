@@ -29,13 +29,20 @@
 
 namespace {
 
-using dvi::InputError;
 using namespace dvi::benchutil;
-using Clock = std::chrono::steady_clock;
 
 struct PruneOptions : BenchBasics {
   std::string backend = "auto", n;
 };
+
+// `dvisim bench pruning`: its name, description and the texts of its common options.
+const BenchSpec kBench{
+    "pruning",
+    "Time saved by leaving out the stages a scene does not need (prune on against off, side by side)",
+    "pruning.csv, pruning.md",
+    "A small pile and few steps (CI smoke test)",
+    "md,csv",
+    "OpenMP threads of the CPU backend (0: all)"};
 
 long parseInt(const std::string& s, const char* opt, long lo, long hi) {
   char* end = nullptr;
@@ -195,25 +202,14 @@ int runPruning(const PruneOptions& o) {
        << " spheres r 1 cm (bench/scaling/scaling_scenes.h), APGD 50 iterations, h = 1 ms; " << warmup
        << " warm-up steps, then " << rounds << " alternating rounds of " << per_round << " steps per system\n\n";
   const std::string md_text = head.str() + table;
-  writeFile(o.out + "/pruning.csv", csv);
-  writeFile(o.out + "/pruning.md", md_text);
-  std::printf("results: %s/pruning.csv, pruning.md\n", o.out.c_str());
-  if (o.record) {
-    const std::string base = "pruning_" + slug(device) + "_" + utcNow("%Y%m%d-%H%M%S");
-    writeBenchRecord({results_dir}, base, {{"md", md_text + "\nRows: " + base + ".csv\n"}, {"csv", csv}}, writeFile);
-  }
+  writeCsvMdResults(o, "pruning", device, results_dir, md_text, csv);
   return 0;
 }
 
 }  // namespace
 
 void registerBenchPruning(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<PruneOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "pruning", "Time saved by leaving out the stages a scene does not need (prune on against off, side by side)");
-  addBenchBasics(cmd, *o, "pruning", "pruning.csv, pruning.md", "A small pile and few steps (CI smoke test)", "md,csv",
-                 "OpenMP threads of the CPU backend (0: all)");
+  auto [cmd, o] = addBench<PruneOptions>(app, reg, kBench, runPruning);
   cmd->add_option("--backend", o->backend, "cpu, gpu or auto (gpu when a device is present)");
   cmd->add_option("--n", o->n, "Spheres in the pile (default 10000; --quick 400)");
-  addBenchRunner(reg, cmd, [o] { return runPruning(*o); });
 }

@@ -104,6 +104,11 @@ struct ScalingOptions : BenchBasics {
   std::string mpi_backend = "cpu", mpi_modes = "weak,strong", mpi_baseline = "on";
 };
 
+// `dvisim bench scaling`: its name, description and the texts of its common options.
+const BenchSpec kBench{"scaling",
+                       "Pile and multidisperse mix for N = 10k..4M: GPU, CPU backend and Bullet side by side",
+                       "scaling.csv, scaling.png", "Tiny sizes (1k, 4k) and few steps: a smoke test"};
+
 // How the GPU launches APGD's trials under cfg (GpuTuning::persistent_max_blocks, graphs).
 std::string gpuTrialsLabel(const dvi::SystemConfig& cfg) {
   const std::string single = cfg.gpu.graphs ? "one CUDA graph each" : "kernel by kernel";
@@ -1047,10 +1052,7 @@ int runScaling(const ScalingOptions& o) {
 }  // namespace
 
 void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<ScalingOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "scaling", "Pile and multidisperse mix for N = 10k..4M: GPU, CPU backend and Bullet side by side");
-  addBenchBasics(cmd, *o, "scaling", "scaling.csv, scaling.png", "Tiny sizes (1k, 4k) and few steps: a smoke test");
+  auto [cmd, o] = addBench<ScalingOptions>(app, reg, kBench, runScaling);
   cmd->add_option("--sizes", o->sizes, "Body counts, e.g. 10k,100k,1M,4M (default; --quick: 1k,4k)");
   cmd->add_option("--scenes", o->scenes, "pile,mix (default both)");
   cmd->add_option("--engines", o->engines, "gpu,cpu,bullet,bullet3_opencl (default all)");
@@ -1116,6 +1118,5 @@ void registerBenchScaling(CLI::App& app, BenchRegistry& reg) {
   cmd->add_option("--baseline", o->mpi_baseline,
                   "--mpi: on (the default): each mode's one-process run first; off: the K-process runs alone")
       ->check(CLI::IsMember({"on", "off"}));
-  addBenchRunner(reg, cmd, [o] { return runScaling(*o); });
   registerBenchBullet3Worker(app, reg);
 }

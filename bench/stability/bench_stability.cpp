@@ -40,17 +40,17 @@
 
 namespace {
 
-using dvi::InputError;
-using dvi::Quat;
-using dvi::real;
-using dvi::Vec3;
 using namespace dvi::benchutil;
-using Clock = std::chrono::steady_clock;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDensity = 2500;
 
 struct StabOptions : BenchBasics {};
+
+// `dvisim bench stability`: its name, description and the texts of its common options.
+const BenchSpec kBench{"stability",
+                       "Stiff and extreme cases on our backends and Bullet, each with a criterion and a verdict",
+                       "stability.csv, stability.md", "Shorter runs and smaller scenes (CI smoke test)"};
 
 struct Metrics {
   bool nan = false;
@@ -860,10 +860,5 @@ int runStability(const StabOptions& o) {
 }  // namespace
 
 void registerBenchStability(CLI::App& app, BenchRegistry& reg) {
-  auto o = std::make_shared<StabOptions>();
-  CLI::App* cmd = benchCommand(app)->add_subcommand(
-      "stability", "Stiff and extreme cases on our backends and Bullet, each with a criterion and a verdict");
-  addBenchBasics(cmd, *o, "stability", "stability.csv, stability.md",
-                 "Shorter runs and smaller scenes (CI smoke test)");
-  addBenchRunner(reg, cmd, [o] { return runStability(*o); });
+  addBench<StabOptions>(app, reg, kBench, runStability);
 }

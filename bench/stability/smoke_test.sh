@@ -8,8 +8,7 @@ source "$(dirname "$0")/../smoke_common.sh" "$@"
 run_bench stability --quick --threads 1
 csv="$work/out/stability.csv"
 md="$work/out/stability.md"
-[ -s "$csv" ] || fail "no $csv"
-[ -s "$md" ] || fail "no $md"
+expect_files "$md"
 expected="case,engine,criterion,measured,verdict,max_penetration_rel,late_penetration_rel,energy_growth,max_speed_mps,nan,dt_s,steps,steps_done,bodies,wall_s,device,note"
 expect_header "$csv" "$expected"
 grep -q "| case | engine | criterion | measured | verdict |" "$md" || fail "no table in $md"
@@ -44,8 +43,5 @@ if grep -q ",cpu,.*,FAIL," "$csv"; then
   grep -q "FAILURES of our engine" "$work/stdout.txt" || fail "our failures are not listed in the summary"
 fi
 
-expect2 bench stability --quick --out "$work/e1" --bogus
-expect2 bench stability --quick
-echo plain > "$work/a_file"
-expect2 bench stability --quick --out "$work/a_file/sub"
+expect_basic_refusals stability
 echo "bench_stability_quick: OK"

@@ -75,6 +75,11 @@ def _material(friction, restitution, rolling_friction, spinning_friction):
     return m
 
 
+def _state_view(name, doc):
+    """The read-only System property `name`: the engine's state array of that name (see the property's doc)."""
+    return property(lambda self: getattr(self._s, name), doc=doc)
+
+
 class DeviceArray:
     """A GPU array of the engine's state (N, k) exposed through __cuda_array_interface__ (version 3), so CuPy,
     PyTorch and Numba read it in place: cupy.asarray(a), torch.as_tensor(a, device="cuda"). Valid until the next
@@ -237,23 +242,11 @@ class System:
         return self._s.last_stats()
 
     # ---- state ----
-    @property
-    def positions(self):
-        """Centres of mass (N, 3). On the cpu backend a writable view of the engine's array (no copy)."""
-        return self._s.positions
-
-    @property
-    def rotations(self):
-        """Rotations (N, 4), unit quaternions w, x, y, z (body to world)."""
-        return self._s.rotations
-
-    @property
-    def velocities(self):
-        return self._s.velocities
-
-    @property
-    def angular_velocities(self):
-        return self._s.angular_velocities
+    positions = _state_view("positions", "Centres of mass (N, 3). On the cpu backend a writable view of the engine's "
+                            "array (no copy).")
+    rotations = _state_view("rotations", "Rotations (N, 4), unit quaternions w, x, y, z (body to world).")
+    velocities = _state_view("velocities", "Velocities of the centres of mass (N, 3), m/s.")
+    angular_velocities = _state_view("angular_velocities", "Angular velocities (N, 3), rad/s, in the world frame.")
 
     def set_state(self, positions=None, rotations=None, velocities=None, angular_velocities=None):
         """Writes whole state arrays (N, 3) / (N, 4) on any backend (a device backend re-uploads)."""

@@ -41,6 +41,11 @@ def _positive(value, what):
     return x
 
 
+def _positive3(value, what):
+    """Three finite numbers > 0 (a box's half extents, an ellipsoid's semi-axes) as a list."""
+    return [_positive(x, what) for x in _vector(value, 3, what)]
+
+
 class Shape:
     """A shape: its type, three dimensions and its pose (position, rotation w, x, y, z) in the body frame."""
 
@@ -86,8 +91,7 @@ class Box(Shape):
     type = "box"
 
     def __init__(self, half_extents, position=(0, 0, 0), rotation=_IDENTITY):
-        h = _vector(half_extents, 3, "box half_extents")
-        super().__init__([_positive(x, "box half_extents") for x in h], position, rotation)
+        super().__init__(_positive3(half_extents, "box half_extents"), position, rotation)
 
     def volume(self):
         a, b, c = self.dims
@@ -134,8 +138,7 @@ class Ellipsoid(Shape):
     type = "ellipsoid"
 
     def __init__(self, semi_axes, position=(0, 0, 0), rotation=_IDENTITY):
-        s = _vector(semi_axes, 3, "ellipsoid semi_axes")
-        super().__init__([_positive(x, "ellipsoid semi_axes") for x in s], position, rotation)
+        super().__init__(_positive3(semi_axes, "ellipsoid semi_axes"), position, rotation)
 
     def volume(self):
         a, b, c = self.dims

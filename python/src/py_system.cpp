@@ -263,23 +263,20 @@ py::array stateView(PySystem& s, py::handle self, std::vector<T>& v) {
   return realView(s, self, reinterpret_cast<real*>(v.data()), v.size(), sizeof(T) / sizeof(real), host);
 }
 
+// The read-only property `name`: a view of the state array `member` of the bodies (stateView).
+template <class T>
+void defStateView(py::class_<PySystem>& c, const char* name, std::vector<T> dvi::BodyArrays::*member) {
+  c.def_property_readonly(name, [member](py::object self) {
+    PySystem& s = self.cast<PySystem&>();
+    return stateView(s, self, s.sys->mutableBodies().*member);
+  });
+}
+
 void bindState(py::class_<PySystem>& c) {
-  c.def_property_readonly("positions", [](py::object self) {
-    PySystem& s = self.cast<PySystem&>();
-    return stateView(s, self, s.sys->mutableBodies().pos);
-  });
-  c.def_property_readonly("rotations", [](py::object self) {
-    PySystem& s = self.cast<PySystem&>();
-    return stateView(s, self, s.sys->mutableBodies().rot);
-  });
-  c.def_property_readonly("velocities", [](py::object self) {
-    PySystem& s = self.cast<PySystem&>();
-    return stateView(s, self, s.sys->mutableBodies().vel);
-  });
-  c.def_property_readonly("angular_velocities", [](py::object self) {
-    PySystem& s = self.cast<PySystem&>();
-    return stateView(s, self, s.sys->mutableBodies().omega);
-  });
+  defStateView(c, "positions", &dvi::BodyArrays::pos);
+  defStateView(c, "rotations", &dvi::BodyArrays::rot);
+  defStateView(c, "velocities", &dvi::BodyArrays::vel);
+  defStateView(c, "angular_velocities", &dvi::BodyArrays::omega);
   c.def(
       "set_state",
       [](PySystem& s, py::object pos, py::object rot, py::object vel, py::object omega) {

@@ -8,10 +8,7 @@
 #include "fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  fuzz::init();
-  const std::string bytes(reinterpret_cast<const char*>(data), size);
-  return fuzz::run("fuzz_bullet_file", [&] {
-    const dvi::Scene scene = dvi::Scene::fromBulletBuffer(bytes, "fuzz.bullet");
-    fuzz::checkScene("fuzz_bullet_file", scene);
+  return fuzz::runSceneTarget("fuzz_bullet_file", data, size, [](const std::string& bytes) {
+    return dvi::Scene::fromBulletBuffer(bytes, "fuzz.bullet");
   });
 }

@@ -7,10 +7,6 @@
 #include "fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  fuzz::init();
-  const std::string text(reinterpret_cast<const char*>(data), size);
-  return fuzz::run("fuzz_scene_json", [&] {
-    const dvi::Scene scene = dvi::Scene::fromJsonText(text, "fuzz.json");
-    fuzz::checkScene("fuzz_scene_json", scene);
-  });
+  return fuzz::runSceneTarget("fuzz_scene_json", data, size,
+                              [](const std::string& bytes) { return dvi::Scene::fromJsonText(bytes, "fuzz.json"); });
 }

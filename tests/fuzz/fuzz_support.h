@@ -8,6 +8,8 @@
 // checks every body) without any exception: the loader, not the engine, is where bad input is refused.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -63,6 +65,14 @@ inline void checkScene(const char* target, const dvi::Scene& scene) {
     const std::vector<int> ids = dvi::importBullet(system, scene.bodies());
     if (ids.size() != scene.bodyCount()) finding(target, "importBullet returned a different body count");
   } catch (const std::exception& e) { finding(target, std::string("a loaded scene does not import: ") + e.what()); }
+}
+
+// The whole of a scene target: init, then load(the input as a string) -> a Scene, checked by checkScene, under run.
+template <class Load>
+int runSceneTarget(const char* target, const uint8_t* data, size_t size, Load load) {
+  init();
+  const std::string bytes(reinterpret_cast<const char*>(data), size);
+  return run(target, [&] { checkScene(target, load(bytes)); });
 }
 
 }  // namespace fuzz

@@ -13,37 +13,18 @@
 #include <string>
 #include <vector>
 
+#include "../stock_bullet_world.h"
 #include "fuzz_ces_setup.h"
 
 namespace {
 
-struct World {
-  btDefaultCollisionConfiguration config;
-  btCollisionDispatcher dispatcher{&config};
-  btDbvtBroadphase broadphase;
-  btSequentialImpulseConstraintSolver solver;
-  btDiscreteDynamicsWorld world{&dispatcher, &broadphase, &solver, &config};
-  std::vector<std::unique_ptr<btCollisionShape>> shapes;
-  std::vector<std::unique_ptr<btRigidBody>> bodies;
+// The seed scenes: bodies turned 0.3 rad about y, some of them named in the file.
+struct World : dvi::StockBulletWorld {
   std::vector<std::string> names;
 
-  World() { world.setGravity(btVector3(0, -9.81f, 0)); }
-  ~World() {
-    for (auto& b : bodies) world.removeRigidBody(b.get());
-  }
-  btCollisionShape* keep(btCollisionShape* s) {
-    shapes.emplace_back(s);
-    return s;
-  }
   btRigidBody* add(btCollisionShape* s, btScalar mass, const btVector3& pos, const char* name = nullptr) {
-    btVector3 inertia(0, 0, 0);
-    if (mass > 0) s->calculateLocalInertia(mass, inertia);
-    btRigidBody::btRigidBodyConstructionInfo info(mass, nullptr, s, inertia);
-    info.m_startWorldTransform = btTransform(btQuaternion(btVector3(0, 1, 0), 0.3f), pos);
-    bodies.emplace_back(new btRigidBody(info));
-    world.addRigidBody(bodies.back().get());
     names.push_back(name ? name : "");
-    return bodies.back().get();
+    return addBody(s, mass, pos, btQuaternion(btVector3(0, 1, 0), 0.3f));
   }
   void save(const std::filesystem::path& p) {
     btDefaultSerializer ser;

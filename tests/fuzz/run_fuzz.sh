@@ -22,6 +22,29 @@ if [ -z "$cxx" ] || ! "$cxx" -fsanitize=fuzzer,address,undefined "$probe/p.cpp" 
   exit 77
 fi
 targets=(scene_json ces_config bullet_file ces_checkpoint mpi_checkpoint)
+# The binary of fuzz target $target (bin) and a scratch corpus (work) holding a copy of SEED_DIR.
+prepare_target() {  # SEED_DIR
+  bin="$tree/tests/fuzz/fuzz_$target"
+  [ -x "$bin" ] || { echo "fuzz: $bin is missing (did fuzz_build fail?)"; exit 1; }
+  work="$probe/corpus"
+  mkdir -p "$work"
+  cp -r "$1/." "$work/"
+}
+# Runs the fuzzer command line "$@" (log in $probe/fuzz.log) and prints its summary; a finding (non-zero exit)
+# prints the log's tail and "fuzz: LABEL: FINDING ..." with HINT after where the reproducer is, and exits 1.
+fuzz_and_report() {  # LABEL HINT COMMAND...
+  local label=$1 hint=$2 rc
+  shift 2
+  "$@" > "$probe/fuzz.log" 2>&1
+  rc=$?
+  grep -E "^#[0-9]+ +(DONE|INITED)|stat::|ERROR|FINDING|SUMMARY|Test unit written|^artifact_prefix" "$probe/fuzz.log" | tail -n 30
+  if [ "$rc" -ne 0 ]; then
+    tail -n 60 "$probe/fuzz.log"
+    echo "fuzz: $label: FINDING (exit $rc); reproducer in $art/$hint"
+    exit 1
+  fi
+  echo "fuzz: $label: ${secs} s, no finding"
+}
 case $mode in
 build)
   launcher=()
@@ -37,32 +60,17 @@ build)
   ;;
 run)
   target=$4 secs=$5
-  bin="$tree/tests/fuzz/fuzz_$target"
-  [ -x "$bin" ] || { echo "fuzz: $bin is missing (did fuzz_build fail?)"; exit 1; }
-  work="$probe/corpus"
-  mkdir -p "$work"
-  cp -r "$src/tests/fuzz/corpus/$target/." "$work/"
+  prepare_target "$src/tests/fuzz/corpus/$target"
   art="$tree/fuzz-artifacts/$target"
   mkdir -p "$art"
   regressions="$src/tests/fuzz/regressions/$target"
-  "$bin" -max_total_time="$secs" -timeout=25 -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$art/" \
-    "$work" "$regressions" > "$probe/fuzz.log" 2>&1
-  rc=$?
-  grep -E "^#[0-9]+ +(DONE|INITED)|stat::|ERROR|FINDING|SUMMARY|Test unit written|^artifact_prefix" "$probe/fuzz.log" | tail -n 30
-  if [ "$rc" -ne 0 ]; then
-    tail -n 60 "$probe/fuzz.log"
-    echo "fuzz: $target: FINDING (exit $rc); reproducer in $art/ - replay it with $bin FILE, fix, then add it to $regressions/"
-    exit 1
-  fi
-  echo "fuzz: $target: ${secs} s, no finding"
+  fuzz_and_report "$target" " - replay it with $bin FILE, fix, then add it to $regressions/" \
+    "$bin" -max_total_time="$secs" -timeout=25 -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$art/" \
+    "$work" "$regressions"
   ;;
 large)
   target=$4 secs=$5
-  bin="$tree/tests/fuzz/fuzz_$target"
-  [ -x "$bin" ] || { echo "fuzz: $bin is missing (did fuzz_build fail?)"; exit 1; }
-  work="$probe/corpus"
-  mkdir -p "$work"
-  cp -r "$src/tests/fuzz/regressions/$target/." "$work/"
+  prepare_target "$src/tests/fuzz/regressions/$target"
   # the generator: deep, long and wide inputs libFuzzer's mutations would not reach from small seeds
   python3 - "$work" "$target" <<'PY' || exit 1
 import sys
@@ -86,16 +94,9 @@ put("string.json", '{"name": "%s", "ces": {}}' % ("x" * 900000))
 PY
   art="$tree/fuzz-artifacts/${target}_large"
   mkdir -p "$art"
-  "$bin" -max_total_time="$secs" -max_len=1572864 -len_control=0 -dict="$src/tests/fuzz/json.dict" -timeout=25 \
-    -rss_limit_mb=4096 -print_final_stats=1 -artifact_prefix="$art/" "$work" > "$probe/fuzz.log" 2>&1
-  rc=$?
-  grep -E "^#[0-9]+ +(DONE|INITED)|stat::|ERROR|FINDING|SUMMARY|Test unit written|^artifact_prefix" "$probe/fuzz.log" | tail -n 30
-  if [ "$rc" -ne 0 ]; then
-    tail -n 60 "$probe/fuzz.log"
-    echo "fuzz: $target (large inputs): FINDING (exit $rc); reproducer in $art/"
-    exit 1
-  fi
-  echo "fuzz: $target (large inputs): ${secs} s, no finding"
+  fuzz_and_report "$target (large inputs)" "" \
+    "$bin" -max_total_time="$secs" -max_len=1572864 -len_control=0 -dict="$src/tests/fuzz/json.dict" -timeout=25 \
+    -rss_limit_mb=4096 -print_final_stats=1 -artifact_prefix="$art/" "$work"
   ;;
 *)
   echo "usage: run_fuzz.sh build SRC TREE | run|large SRC TREE TARGET SECONDS"

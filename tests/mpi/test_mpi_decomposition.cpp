@@ -137,6 +137,12 @@ struct Runs {
       many.addBody(b);
     }
   }
+  // One step of both runs; returns the largest difference of a body's position between them after it.
+  real step() {
+    one.step();
+    many.step();
+    return maxPositionDifference(many.gatherState(), oneRankState(one));
+  }
 };
 
 }  // namespace
@@ -164,10 +170,7 @@ TEST_CASE("MPI: a sphere pile split over the processes follows the one-process r
   real worst = 0;
   int64_t contact_mismatch = 0, sum_mismatch = 0, contacts_last = 0;
   for (int s = 0; s < steps; ++s) {
-    r.one.step();
-    r.many.step();
-    const std::vector<MotionState> all = r.many.gatherState();
-    worst = std::max(worst, maxPositionDifference(all, oneRankState(r.one)));
+    worst = std::max(worst, r.step());
     const int64_t owned_contacts = sumOverRanks(int64_t(r.many.local()->contacts().count()));
     contact_mismatch += owned_contacts != r.one.lastStats().contacts ? 1 : 0;
     sum_mismatch += sumOverRanks(int64_t(r.many.ownedIds().size())) != int64_t(r.many.dynamicCount()) ? 1 : 0;
@@ -210,9 +213,7 @@ TEST_CASE("MPI: Jacobi and BB over the processes follow the one-process run", "[
     real worst = 0;
     int64_t contact_mismatch = 0;
     for (int s = 0; s < 100; ++s) {
-      r.one.step();
-      r.many.step();
-      worst = std::max(worst, maxPositionDifference(r.many.gatherState(), oneRankState(r.one)));
+      worst = std::max(worst, r.step());
       contact_mismatch +=
           sumOverRanks(int64_t(r.many.local()->contacts().count())) != r.one.lastStats().contacts ? 1 : 0;
     }
@@ -239,9 +240,7 @@ TEST_CASE("MPI: a frictionless pile solves its normal rows alone over the proces
   real worst = 0;
   int normal_only = 0;
   for (int s = 0; s < 100; ++s) {
-    r.one.step();
-    r.many.step();
-    worst = std::max(worst, maxPositionDifference(r.many.gatherState(), oneRankState(r.one)));
+    worst = std::max(worst, r.step());
     normal_only += r.many.local()->lastStats().normal_only && r.one.lastStats().normal_only ? 1 : 0;
   }
   if (worldRank() == 0)
@@ -265,9 +264,7 @@ TEST_CASE("MPI: bodies cross the split both ways and are owned once", "[mpi]") {
   real worst = 0;
   int64_t sum_mismatch = 0;
   for (int s = 0; s < 200; ++s) {
-    r.one.step();
-    r.many.step();
-    worst = std::max(worst, maxPositionDifference(r.many.gatherState(), oneRankState(r.one)));
+    worst = std::max(worst, r.step());
     sum_mismatch += sumOverRanks(int64_t(r.many.ownedIds().size())) != int64_t(r.many.dynamicCount()) ? 1 : 0;
   }
   const MigrationLog& log = r.many.migrations();
@@ -296,9 +293,7 @@ TEST_CASE("MPI: a drifting pile is re-balanced and still follows the one-process
   real worst = 0;
   int64_t sum_mismatch = 0;
   for (int s = 0; s < 150; ++s) {
-    r.one.step();
-    r.many.step();
-    worst = std::max(worst, maxPositionDifference(r.many.gatherState(), oneRankState(r.one)));
+    worst = std::max(worst, r.step());
     sum_mismatch += sumOverRanks(int64_t(r.many.ownedIds().size())) != int64_t(r.many.dynamicCount()) ? 1 : 0;
   }
   if (worldRank() == 0)

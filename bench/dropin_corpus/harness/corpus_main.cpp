@@ -1,8 +1,8 @@
 // dvisim_dropin_corpus [--examples A,B] [--frames N] [--repeat N] [--threads N] [--check] [--record] [--out FILE]
 //                      [--bodies]
 //
-// Bullet's own example programs (bench/dropin_corpus/bullet3_examples/, bullet3 at 6c888f4, unmodified) run
-// on stock Bullet and on the drop-in world, changed only in the line that constructs the world
+// Bullet's own example programs (bench/dropin_corpus/third_party/bullet3_examples/, bullet3 at 6c888f4, unmodified)
+// run on stock Bullet and on the drop-in world, changed only in the line that constructs the world
 // (docs/DROP_IN.md, "Bullet's example programs"). Each example runs once per world in this process: its
 // CreateFunc, initPhysics and `--frames` calls (300) of its own stepSimulation(1/60), one thread each
 // (OMP_NUM_THREADS=1 for the drop-in; Bullet's world is single-threaded). Printed per example: whether it ran or
@@ -37,9 +37,14 @@
 #include <string>
 #include <vector>
 
+#include "bench_text.h"  // slug, utcNow, writeFile
 #include "corpus_api.h"
 
 namespace {
+
+using dvi::benchutil::slug;
+using dvi::benchutil::utcNow;
+using dvi::benchutil::writeFile;
 
 struct UsageError : std::runtime_error {
   using std::runtime_error::runtime_error;
@@ -300,15 +305,6 @@ std::string commitId() {
   return head;
 }
 
-std::string utc(const char* f) {
-  std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char b[64];
-  std::strftime(b, sizeof b, f, &tm);
-  return b;
-}
-
 std::string outcome(const corpus::RunResult& r) {
   return r.ran ? "runs" : "refused at " + r.stage + ": `" + r.error + "`";
 }
@@ -358,8 +354,9 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
   md << "# Bullet's example programs on the drop-in world (`dvisim_dropin_corpus`)\n\n"
      << "- device: " << cpuName() << " (" << o.threads << " thread each), no GPU used\n"
      << "- host CPU: " << cpuName() << "\n- load average at the start: " << o.load << "\n- commit: " << commitId()
-     << "\n- date: " << utc("%Y-%m-%dT%H:%M:%SZ")
-     << "\n- examples: bullet3 6c888f4 (bench/dropin_corpus/bullet3_examples), unchanged but for the world line\n"
+     << "\n- date: " << utcNow("%Y-%m-%dT%H:%M:%SZ")
+     << "\n- examples: bullet3 6c888f4 (bench/dropin_corpus/third_party/bullet3_examples), unchanged but for the world "
+        "line\n"
      << "- frames: " << o.frames << " calls of each example's stepSimulation(1/60); drop-in at the default "
      << "DviWorldConfig; time: the lowest mean ms per frame of " << o.repeat << " alternating runs\n\n"
      << "Joint errors: the largest error of a locked axis (mm, mrad) over the frames after the first 60, stock / ours, "
@@ -401,24 +398,6 @@ std::string report(const Options& o, const std::vector<Comparison>& all) {
          << c.ours.substeps_not_converged << " of " << c.ours.substeps << " |\n";
   md << jointDetails(all);
   return md.str();
-}
-
-std::string slug(const std::string& s) {
-  std::string o;
-  for (char ch : s) {
-    if (std::isalnum((unsigned char)ch))
-      o += char(std::tolower((unsigned char)ch));
-    else if (!o.empty() && o.back() != '-')
-      o += '-';
-  }
-  while (!o.empty() && o.back() == '-') o.pop_back();
-  return o.substr(0, 48);
-}
-
-void writeFile(const std::string& path, const std::string& text) {
-  std::ofstream f(path);
-  f << text;
-  if (!f) throw std::runtime_error("cannot write " + path);
 }
 
 // --bodies: each body's final position, stock and ours (stderr).
@@ -475,7 +454,7 @@ int run(Options o) {
   if (!o.out.empty()) writeFile(o.out, md);
   if (o.record) {
     const std::string path = std::string(DVISIM_SOURCE_DIR) + "/bench/results/dropincorpus_" + slug(cpuName()) + "-" +
-                             o.threads + "-threads_" + utc("%Y%m%d-%H%M%S") + ".md";
+                             o.threads + "-threads_" + utcNow("%Y%m%d-%H%M%S") + ".md";
     writeFile(path, md);
     std::fprintf(stderr, "recorded %s\n", path.c_str());
   }

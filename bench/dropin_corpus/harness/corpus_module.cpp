@@ -1,10 +1,10 @@
 // The headless host of Bullet's example programs (our code; the examples themselves are Bullet's files,
-// bench/dropin_corpus/bullet3_examples/, unmodified): what Bullet's example browser gives an example (a GUI helper,
-// CommonExampleOptions, the frame loop), without a window. Built twice, into the stock and the drop-in module
-// (bench/dropin_corpus/CMakeLists.txt); the drop-in build compiles copies of the examples whose world line alone
-// was changed. Each run: the example's CreateFunc, initPhysics, `frames` calls of its own stepSimulation(1/60)
-// (timed one by one), the joint errors of every constraint in the world after each frame (outside the timing),
-// and the bodies' final state.
+// bench/dropin_corpus/third_party/bullet3_examples/, unmodified): what Bullet's example browser gives an example (a GUI
+// helper, CommonExampleOptions, the frame loop), without a window. Built twice, into the stock and the drop-in module
+// (bench/dropin_corpus/CMakeLists.txt); the drop-in build compiles copies of the examples whose world line alone was
+// changed. Each run: the example's CreateFunc, initPhysics, `frames` calls of its own stepSimulation(1/60) (timed one
+// by one), the joint errors of every constraint in the world after each frame (outside the timing), and the bodies'
+// final state.
 #include <btBulletDynamicsCommon.h>
 
 #include <algorithm>
