@@ -563,8 +563,8 @@ void System::buildAndSolve() {
 
 // APGD to its stop; then, where some constraint row's velocity error times the step is still above
 // SolverSettings::row_stop, one more APGD from there (warm, so the momentum builds up again at once) to the tighter
-// relative tolerance row_stop_tolerance, within what is left of max_iterations. The iterations reported are both
-// runs', the residual the last one's, judged against `tolerance`.
+// relative tolerance row_stop_tolerance, for at most row_stop_iterations more (and within max_iterations). The
+// iterations reported are both runs', the residual the last one's, judged against `tolerance`.
 SolverStats System::solveApgdRowStop(real* x) const {
   const SolverSettings& cfg = config_.solver;
   SolverStats s = solveApgd(*problem_, x, cfg);
@@ -576,7 +576,7 @@ SolverStats System::solveApgdRowStop(real* x) const {
   SolverSettings more = cfg;
   more.min_iterations = 0;
   more.tolerance = cfg.row_stop_tolerance;
-  more.max_iterations = cfg.max_iterations - s.iterations;
+  more.max_iterations = std::min(cfg.row_stop_iterations, cfg.max_iterations - s.iterations);
   SolverStats t = solveApgd(*problem_, x, more);
   t.iterations += s.iterations;
   t.trials += s.trials;
