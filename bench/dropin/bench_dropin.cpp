@@ -633,7 +633,8 @@ int runDropin(const DropinOptions& o) {
       << " warm-up, then " << steps << " timed per engine in " << rounds
       << " alternating rounds, stepSimulation(1/60, 1, 1/60); cpu and gpu: ours at its defaults; cpu-si: "
          "SolverEffort::BulletIterations (Bullet's 10 Gauss-Seidel sweeps); cpu-btc: BulletThenConverged (10 "
-         "sweeps, then to the tolerance, at most 30); cpu-apgd: Converged (APGD, at least 50 iterations)\n"
+         "sweeps, then to the tolerance, at most 30); cpu-apgd: Converged (APGD, at least 50 iterations, the joint-row "
+         "stop)\n"
       << "- load: " << load << " other runs of our CPU drop-in (pyramid) sharing the cores (--load)\n"
       << "- deepest: the deepest manifold point over the timed steps; drift: pyramid top box height change, ragdolls "
          "the largest joint violation (ours), else the mean height change over the timed steps (m)\n\n";

@@ -548,7 +548,7 @@ void System::buildAndSolve() {
     switch (config_.solver.type) {
       case SolverType::Jacobi: s = solveJacobi(*problem_, x, config_.solver); break;
       case SolverType::GaussSeidel: s = solveGaussSeidelThenApgd(x); break;
-      case SolverType::APGD: s = solveApgd(*problem_, x, config_.solver); break;
+      case SolverType::APGD: s = solveApgdRowStop(x); break;
       case SolverType::BB: s = solveBB(*problem_, x, config_.solver); break;
     }
     if (problem_->normalOnly()) problem_->fromSolverLayout(x, gamma_.data());
@@ -559,6 +559,31 @@ void System::buildAndSolve() {
   for (size_t p = 0, offset = 0; p < row_providers_.size(); offset += provider_rows_[p], ++p)
     row_providers_[p]->impulses(row_lambda_.data() + offset, provider_rows_[p]);
   cacheImpulsesByKey(nc);
+}
+
+// APGD to its stop; then, where some constraint row's velocity error times the step is still above
+// SolverSettings::row_stop, one more APGD from there (warm, so the momentum builds up again at once) to the tighter
+// relative tolerance row_stop_tolerance, for at most row_stop_iterations more (and within max_iterations). The
+// iterations reported are both runs', the residual the last one's, judged against `tolerance`.
+SolverStats System::solveApgdRowStop(real* x) const {
+  const SolverSettings& cfg = config_.solver;
+  SolverStats s = solveApgd(*problem_, x, cfg);
+  if (!(cfg.row_stop > 0) || group_ || !(s.relative_residual > cfg.row_stop_tolerance) ||
+      s.iterations >= cfg.max_iterations)
+    return s;
+  std::vector<real> y(size_t(problem_->size()));
+  if (!(problem_->maxRowVelocityError(x, y.data()) * real(ctx_.dt) > cfg.row_stop)) return s;
+  SolverSettings more = cfg;
+  more.min_iterations = 0;
+  more.tolerance = cfg.row_stop_tolerance;
+  more.max_iterations = std::min(cfg.row_stop_iterations, cfg.max_iterations - s.iterations);
+  SolverStats t = solveApgd(*problem_, x, more);
+  t.iterations += s.iterations;
+  t.trials += s.trials;
+  t.speculated += s.speculated;
+  if (cfg.record_history) t.history.insert(t.history.begin(), s.history.begin(), s.history.end());
+  finishStats(t, cfg);
+  return t;
 }
 
 // Gauss-Seidel, finished by APGD where it reached its cap above the tolerance (SolverSettings::gs_apgd_finish);

@@ -368,6 +368,7 @@ class System {
   virtual void detectCollisions();                      // ComputeAabbs + BroadPhase + NarrowPhase
   virtual void buildAndSolve();                         // BuildRows + WarmStart + Solve
   void buildProblem(int64_t nc);                        // BuildRows after the rows: mu, size, parts, the problem
+  SolverStats solveApgdRowStop(real* x) const;          // Solve with SolverType::APGD (SolverSettings::row_stop)
   SolverStats solveGaussSeidelThenApgd(real* x) const;  // Solve with SolverType::GaussSeidel (gs_apgd_finish)
   void warmStartContacts(int64_t nc, int64_t nroll);    // WarmStart of the contacts and rolling blocks
   virtual void integrate();                             // IntegrateVelocities + IntegratePositions

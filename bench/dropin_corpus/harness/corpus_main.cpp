@@ -53,14 +53,6 @@ struct UsageError : std::runtime_error {
 // Checks of an example that fail today because of the engine (not the harness), each with the reason; --check
 // reports them as XFAIL and does not fail on them (an XPASS says the entry can go). docs/DROP_IN.md lists them.
 const std::map<std::string, std::string> kExpectedFailures = {
-    {"ConstraintDemo: joints",
-     "the door hinge (#6, 12 m from its pivot) drifts 12 mm and 23 mrad (stock 1.9 mm, 0.02 mrad): the solve stops at "
-     "relative tolerance 0.15 of the whole problem's res(0); it holds at 0.01, which costs the piles "
-     "(docs/DROP_IN.md)"},
-    {"Dof6Spring2Setup: joints",
-     "the chain of ten boxes pulled by a constraint re-added 11 m away every 3 s bends up to 77 mm and 141 mrad on "
-     "locked axes where stock's stay at 0: the pull's rows dominate the solve's res(0); it holds at tolerance 0.001 "
-     "(docs/DROP_IN.md)"},
     {"RollingFrictionDemo: pile height",
      "the 125 bodies end 5.0 cm above stock's mean height at frame 300 (bound 5 cm; 4.4 cm at rest after 600 "
      "frames; over four starts 1-3 mm apart our piles rest 3-5 cm above Bullet's, docs/DROP_IN.md)"},

@@ -66,8 +66,10 @@ enum class SolverEffort {
   // where they do not. The GPU backend runs APGD with the same minimum, tolerance and cap. Not the default yet:
   // docs/DROP_IN.md, "Solver effort", lists the checks it still fails.
   BulletThenConverged,
-  // The default. SystemConfig::solver as given (default: APGD to the relative tolerance, at least 50 iterations):
-  // every step converged, far below the tolerance on small problems; Bullet's iteration count is not used.
+  // The default. SystemConfig::solver as given (default: APGD to the relative tolerance 0.15, at least 50
+  // iterations), and on to the relative tolerance 0.003 where a joint row would still move more than 1 mm (1 mrad)
+  // in the step (SolverSettings::row_stop, CPU backend): every step converged, far below the tolerance on small
+  // problems; Bullet's iteration count is not used.
   Converged,
   // Bullet's effort, read from the world's btContactSolverInfo (getSolverInfo()) each sub-step: projected
   // Gauss-Seidel (the method of Bullet's sequential impulses, on our cone-complementarity problem) for
@@ -76,13 +78,17 @@ enum class SolverEffort {
   BulletIterations,
 };
 
-// The System's defaults for the drop-in world: SystemConfig's, but MPR's temporal coherence off
-// (CollisionSettings::mpr_coherence): on Bullet's example scenes, whose bodies sink deeper into each other than a
-// granular flow's, keeping last step's face moved the resting piles of Planar2D and RollingFrictionDemo 3-13 cm
-// further from stock Bullet's than the full search every step does (test_bullet_examples_world.cpp).
+// The System's defaults for the drop-in world: SystemConfig's, but
+//  - MPR's temporal coherence off (CollisionSettings::mpr_coherence): on Bullet's example scenes, whose bodies sink
+//    deeper into each other than a granular flow's, keeping last step's face moved the resting piles of Planar2D and
+//    RollingFrictionDemo 3-13 cm further from stock Bullet's than the full search every step does
+//    (test_bullet_examples_world.cpp);
+//  - the joint-row stop (SolverSettings::row_stop) at 1 mm: the solve goes on where a joint would drift more than
+//    that in the step, as ConstraintDemo's door and Dof6Spring2Setup's pulled chain do at the relative tolerance alone.
 inline SystemConfig dropInSystemDefaults() {
   SystemConfig c;
   c.collision.mpr_coherence = false;
+  c.solver.row_stop = real(1e-3);
   return c;
 }
 

@@ -64,6 +64,7 @@ void ContactProblem::build(const BodyArrays& bodies, const ContactArrays& contac
   }
   const int64_t nrows = rows ? int64_t(rows->size()) : 0;
   nrb_ = (nrows + 2) / 3;
+  nprov_ = nrows - 3 * nroll_;
   normal_only_ = settings.normal_only;
   ncb_ = normal_only_ ? (nc + 2) / 3 : nc;
   const int64_t ncb = ncb_;
@@ -405,6 +406,26 @@ void ContactProblem::schur(const real* x, real* y) const {
     });
   }
   for (int64_t i = 0; i < int64_t(rows_.size()); ++i) y[3 * ncb_ + i] = rowFromDeltas(rows_[size_t(i)], dl);
+}
+
+real ContactProblem::maxRowVelocityError(const real* x, real* y) const {
+  if (nprov_ <= 0) return 0;
+  schur(x, y);
+  real worst = 0;
+  for (int64_t i = 3 * nroll_; i < 3 * nroll_ + nprov_; ++i) {
+    const ConstraintRow& R = rows_[size_t(i)];
+    const int64_t j = 3 * ncb_ + i;
+    const real grad = y[j] + rhs_[size_t(j)];
+    if ((x[j] <= R.lo && grad > 0) || (x[j] >= R.hi && grad < 0)) continue;  // held at a bound
+    real lin = 0, ang = 0;
+    for (const real* J : {R.Ja, R.Jb}) {
+      lin = std::max(lin, std::sqrt(J[0] * J[0] + J[1] * J[1] + J[2] * J[2]));
+      ang = std::max(ang, std::sqrt(J[3] * J[3] + J[4] * J[4] + J[5] * J[5]));
+    }
+    const real unit = lin > 0 ? lin : ang;
+    if (unit > 0) worst = std::max(worst, std::fabs(grad) / unit);
+  }
+  return worst;
 }
 
 void ContactProblem::applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const {

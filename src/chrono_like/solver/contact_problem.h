@@ -115,6 +115,12 @@ class ContactProblem final : public CcpProblem {
   // solveGaussSeidel(gamma), with gamma as it left it, the velocity changes it kept are used (no gather).
   void applyImpulses(const real* gamma, Vec3* dv, Vec3* dw) const;
 
+  // The largest velocity error of a provider row (the rows after the rolling rows) at impulses x: the row's gradient
+  // (N x + r), 0 where its impulse sits at a bound that the gradient pushes against (the residual's projection), per
+  // unit of the row's Jacobian (its linear part, or its angular part for a purely angular row): m/s or rad/s. 0
+  // without provider rows. y: scratch of size() reals.
+  real maxRowVelocityError(const real* x, real* y) const;
+
   // Projected Gauss-Seidel, the sequential CPU reference solver.
   SolverStats solveGaussSeidel(real* gamma, const SolverSettings& s) const;
 
@@ -161,6 +167,7 @@ class ContactProblem final : public CcpProblem {
   bool normal_only_ = false;
   int64_t nrb_ = 0;                      // constraint-row blocks (3 rows each), the rolling blocks first
   int64_t nroll_ = 0;                    // rolling blocks (contacts with rolling or spinning friction)
+  int64_t nprov_ = 0;                    // provider rows (rows_ after the 3 nroll_ rolling rows, before the padding)
   std::vector<int32_t> roll_;            // per contact: its rolling block (nc + q), or -1 (empty when nroll_ == 0)
   std::vector<real> roll_mu_;            // 2 per rolling block: mu_s / l, mu_r / l (l = roll_len_)
   std::vector<real> roll_len_;           // per rolling block: the length l its rows are scaled by [m]

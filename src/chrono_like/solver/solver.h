@@ -126,6 +126,18 @@ struct SolverSettings {
   // against its own res(0) (0: none beyond `tolerance`). A joint's rows are equalities whose unsolved part the next
   // step sees as position error; contacts at rest are bounded by the ground, and stop at `tolerance`.
   real gs_row_tolerance = 0;
+  // APGD on the CPU: a solve that met its stop goes on where some constraint row's velocity error (the projected
+  // residual of the row alone, per unit of its Jacobian's linear part, else its angular part) times the step is above
+  // row_stop [m, or rad for an angular row] (0: no such check): once more, warm from where it stopped, to the relative
+  // tolerance row_stop_tolerance, for at most row_stop_iterations (System::solveApgdRowStop). The relative residual
+  // is the whole problem's: a joint with a long lever arm (badly conditioned rows), or rows next to a large pull that
+  // dominates res(0), can hold its share of it as millimetres of drift per step while the rest is far below the
+  // tolerance.
+  real row_stop = 0;
+  real row_stop_tolerance = real(0.003);
+  // Rows that fight each other or a contact (a ragdoll's limits on the ground) may never reach it: 200 held
+  // ConstraintDemo and Dof6Spring2Setup as an unbounded run did, 100 did not hold the pulled chain (one run each).
+  int row_stop_iterations = 200;
   real residual_alpha = real(1e-4);                   // a in the residual, as a fraction of 1 / max diag(N) (see above)
   bool record_history = false;                        // keep the residual of every iteration
   BlockScaling block_scaling = BlockScaling::Scalar;  // Jacobi and Gauss-Seidel
