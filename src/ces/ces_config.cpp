@@ -540,18 +540,11 @@ CesConfig parseCesDocument(const json& document, const std::vector<std::string>&
   CesConfig cfg;
   // One section at a time, in this order: a section's checks may read the sections before it.
   parseCesRun(c, j, cfg, origin);
-  parseCesSolver(c, j, cfg);
-  parseCesDrum(c, j, cfg);
-  parseCesElectrode(c, j, cfg);
-  parseCesField(c, j, cfg);
-  parseCesCorona(c, j, cfg);
-  parseCesBrush(c, j, cfg);
-  parseCesAir(c, j, cfg);
-  parseCesFriction(c, j, cfg);
-  parseCesFeed(c, j, cfg);
-  parseCesCollection(c, j, cfg);
-  parseCesSplitters(c, j, cfg);
-  parseCesOutput(c, j, cfg);
+  using Section = void (*)(const Checker&, const json&, CesConfig&);
+  for (const Section parse :
+       {parseCesSolver, parseCesDrum, parseCesElectrode, parseCesField, parseCesCorona, parseCesBrush, parseCesAir,
+        parseCesFriction, parseCesFeed, parseCesCollection, parseCesSplitters, parseCesOutput})
+    parse(c, j, cfg);
   checkCesElectrodeGeometry(c, cfg);
   checkCesSparkover(c, cfg);
   return cfg;

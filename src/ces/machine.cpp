@@ -133,6 +133,10 @@ void getVec(std::istream& i, std::vector<T>& v) {
   if (n) i.read(reinterpret_cast<char*>(v.data()), std::streamsize(n * sizeof(T)));
   if (!i) throw InputError("checkpoint: truncated file");
 }
+template <class... T>
+void getVecs(std::istream& i, std::vector<T>&... v) {
+  (getVec(i, v), ...);
+}
 
 // A provider with one row: body 0's x velocity = 1.
 class ProbeRow : public RowProvider {
@@ -779,10 +783,7 @@ void CheckpointSystem::loadCore(std::istream& i, bool with_normals) {
   std::vector<Vec3> normals;
   get(i, time);
   get(i, steps);
-  getVec(i, keys);
-  getVec(i, gamma);
-  getVec(i, rows);
-  getVec(i, lambda);
+  getVecs(i, keys, gamma, rows, lambda);
   if (with_normals) getVec(i, normals);
   if (with_normals && normals.size() != keys.size()) throw InputError("checkpoint: corrupt warm-start normals");
   for (const Vec3& v : normals)
@@ -988,12 +989,7 @@ void CesMachine::loadParticleState(std::istream& in) {
   std::vector<int32_t> material;
   std::vector<real> charge;
   std::vector<uint8_t> pflags;
-  getVec(in, status);
-  getVec(in, material);
-  getVec(in, charge);
-  getVec(in, pflags);
-  getVec(in, collected_);
-  getVec(in, recent_);
+  getVecs(in, status, material, charge, pflags, collected_, recent_);
   if (status.size() != p_.count() || material.size() != p_.count() || charge.size() != p_.count() ||
       pflags.size() != p_.count())
     throw InputError("checkpoint: body count differs from the particle records");

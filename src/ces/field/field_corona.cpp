@@ -985,17 +985,7 @@ class CsmExpansion {
 }  // namespace
 
 GridFieldView GridField::view() const {
-  GridFieldView v{};
-  v.x0 = x0;
-  v.y0 = y0;
-  v.dx = dx;
-  v.dy = dy;
-  v.nx = nx;
-  v.ny = ny;
-  v.Ex = Ex.data();
-  v.Ey = Ey.data();
-  v.phi = phi.data();
-  v.ion_density = ion_density.data();
+  GridFieldView v{x0, y0, dx, dy, nx, ny, Ex.data(), Ey.data(), phi.data(), ion_density.data(), 0, {}};
   v.nConductors = int32_t(std::min<size_t>(3, conductors.size()));
   for (int32_t k = 0; k < v.nConductors; ++k) v.conductors[k] = conductors[k];
   return v;

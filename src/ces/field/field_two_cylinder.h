@@ -60,14 +60,7 @@ struct TwoCylinderField {
 // (the electrode outside the drum, cylinders not touching).
 DVI_HD bool makeTwoCylinderField(real R1, real R2, real L, real alpha, real U, real cx, real cy, TwoCylinderField& f) {
   if (!(R1 > real(0)) || !(R2 > real(0)) || !(L > R1 + R2)) return false;
-  f.cx = cx;
-  f.cy = cy;
-  f.R1 = R1;
-  f.R2 = R2;
-  f.L = L;
-  f.U = U;
-  f.ex = std::cos(alpha);
-  f.ey = std::sin(alpha);
+  f = TwoCylinderField{cx, cy, R1, R2, L, U, std::cos(alpha), std::sin(alpha), real(0), real(0), real(0), real(0)};
   const real h1 = (L * L + R1 * R1 - R2 * R2) / (real(2) * L);
   const real a = std::sqrt((h1 - R1) * (h1 + R1));
   f.x1 = R1 * R1 / (h1 + a);        // = h1 - a, inside the drum

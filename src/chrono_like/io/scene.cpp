@@ -343,12 +343,22 @@ class Builder {
     return b;
   }
 
-  BuiltShape cylinder(const ShapeJson& sj) {
-    BuiltShape b;
+  // A cylinder's or capsule's keys: radius, half height (zero allowed for a capsule: a sphere) and axis.
+  struct RoundKeys {
+    double r, hh;
+    int axis;
+  };
+  RoundKeys roundKeys(const ShapeJson& sj, bool zero_height) {
     c_.keys(sj.j, sj.path, {"type", "radius", "half_height", "axis"});
     const double r = c_.positive(sj.need("radius"), sj.at("radius"));
-    const double hh = c_.positive(sj.need("half_height"), sj.at("half_height"));
-    const int axis = sj.axis();
+    const json& hj = sj.need("half_height");
+    const double hh = zero_height ? c_.nonNegative(hj, sj.at("half_height")) : c_.positive(hj, sj.at("half_height"));
+    return RoundKeys{r, hh, sj.axis()};
+  }
+
+  BuiltShape cylinder(const ShapeJson& sj) {
+    BuiltShape b;
+    const auto [r, hh, axis] = roundKeys(sj, false);
     btCylinderShape* s =
         axis == 0 ? new btCylinderShapeX(btVector3(btScalar(hh), btScalar(r), btScalar(r)))
         : axis == 1
@@ -363,10 +373,7 @@ class Builder {
 
   BuiltShape capsule(const ShapeJson& sj) {
     BuiltShape b;
-    c_.keys(sj.j, sj.path, {"type", "radius", "half_height", "axis"});
-    const double r = c_.positive(sj.need("radius"), sj.at("radius"));
-    const double hh = c_.nonNegative(sj.need("half_height"), sj.at("half_height"));
-    const int axis = sj.axis();
+    const auto [r, hh, axis] = roundKeys(sj, true);
     const btScalar R = btScalar(r), H = btScalar(2 * hh);
     btCapsuleShape* s = axis == 0   ? new btCapsuleShapeX(R, H)
                         : axis == 1 ? new btCapsuleShape(R, H)
