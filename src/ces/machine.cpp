@@ -633,13 +633,17 @@ void CesMachine::postStep() {
 void CesMachine::exchangeContactCharges(real h) {
   const ContactArrays& c = sys_.contacts();
   const int64_t nc = int64_t(c.count());
-  std::vector<uint8_t> held(p_.count(), 0);
+  ExchangeScratch& x = exchange_;
+  x.held.assign(p_.count(), 0);
+  std::vector<uint8_t>& held = x.held;
   for (int64_t k = 0; k < nc; ++k) {
     const int32_t i = heldParticle(p_.status.data(), c.body_a.data(), c.body_b.data(), c.dist.data(), k);
     if (i >= 0) held[size_t(i)] = 1;
   }
-  std::vector<int32_t> partners(p_.count(), 0);
-  std::vector<int64_t> pairs;
+  x.partners.assign(p_.count(), 0);
+  x.pairs.clear();
+  std::vector<int32_t>& partners = x.partners;
+  std::vector<int64_t>& pairs = x.pairs;
   for (int64_t k = 0; k < nc; ++k)
     if (exchangesCharge(p_.status.data(), held.data(), c.body_a.data(), c.body_b.data(), c.dist.data(), k)) {
       pairs.push_back(k);
@@ -647,7 +651,8 @@ void CesMachine::exchangeContactCharges(real h) {
       ++partners[size_t(c.body_b[size_t(k)])];
     }
   if (pairs.empty()) return;
-  std::vector<real> dq(p_.count(), real(0));
+  x.dq.assign(p_.count(), real(0));
+  std::vector<real>& dq = x.dq;
   for (const int64_t k : pairs) {
     const int32_t a = c.body_a[size_t(k)], b = c.body_b[size_t(k)];
     const real f = exchangeFlux(p_.electro.data(), p_.radius.data(), p_.charge.data(), partners.data(), a, b, h);

@@ -235,6 +235,12 @@ class CesMachine {
   void postStep();
   // Touching in-flight particles share their charge (particle_model.h: exchangeFlux), on the host's contacts.
   void exchangeContactCharges(real h);
+  struct ExchangeScratch {  // exchangeContactCharges' per-body and per-pair arrays, kept between steps
+    std::vector<uint8_t> held;
+    std::vector<int32_t> partners;
+    std::vector<int64_t> pairs;
+    std::vector<real> dq;
+  } exchange_;
   void stepDevice();
   void postStepDevice();
   // Status change of particle body i (collected: its crossing point recorded; collected or lost: frozen).
